@@ -1,0 +1,1 @@
+"""The contract every process shares: keys, messages, config, the CLI."""

@@ -1,0 +1,49 @@
+"""The one console script, ``lamps``: dispatches to each package's entry point.
+
+Each subcommand is ``"module:function"``, imported only when chosen, so
+``lamps segment`` does not pay for PyBullet or Zenoh. Every entry point takes
+its own argument list and returns an exit code.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+#: subcommand -> (entry point, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("controller.lamps.cli:demo_main", "the embedded default: synthesize, learn, plot, save a skill"),
+    "demo-data": ("controller.lamps.cli:demo_data_main", "write a synthetic multi-periodic wiping demonstration"),
+    "segment": ("controller.lamps.cli:segment_main", "segment a demonstration into periodic and transitional MPs"),
+    "evaluate-segmentation": (
+        "controller.lamps.cli:evaluate_main",
+        "frame accuracy of a segmentation against hand labels",
+    ),
+    "learn": ("controller.lamps.cli:learn_main", "segment and learn a demonstration into a skill file"),
+    "plan": ("controller.lamps.cli:plan_main", "plan and roll out a skill over given stains"),
+}
+
+
+def _usage() -> str:
+    width = max(len(name) for name in COMMANDS)
+    lines = ["usage: lamps COMMAND [options]   (lamps COMMAND --help for each)", "", "commands:"]
+    lines += [f"  {name:<{width}}  {text}" for name, (_, text) in COMMANDS.items()]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else list(argv)
+    if not args or args[0] in ("-h", "--help", "help"):
+        print(_usage())
+        return 0 if args else 2
+    name, rest = args[0], args[1:]
+    if name not in COMMANDS:
+        print(f"lamps: unknown command {name!r}; valid: {', '.join(COMMANDS)}", file=sys.stderr)
+        return 2
+    module_name, func_name = COMMANDS[name][0].split(":")
+    entry = getattr(importlib.import_module(module_name), func_name)
+    return int(entry(rest) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

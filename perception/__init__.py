@@ -1,0 +1,1 @@
+"""Camera frames in, stains and kappa out (arrives with issue 5)."""

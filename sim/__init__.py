@@ -1,0 +1,1 @@
+"""The robot side: PyBullet whiteboard simulator (arrives with issue 3)."""
