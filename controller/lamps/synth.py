@@ -1,0 +1,378 @@
+"""Synthetic, human-like multi-periodic whiteboard-wiping demonstrations.
+
+The embedded default input of ``lamps`` and the ground truth of the tests.
+A demonstration is built piece by piece in the board frame (x along the
+board, y up the board, z the outward normal, metres) and then placed in the
+world (robot base) frame:
+
+- a short rest, then an *approach* from off the board to the first stain,
+- per stain a *periodic* stroke (circles or zig-zags) whose frequency and
+  amplitude drift slowly, as a person's do (mean frequency exactly ``f0``),
+- between stains a *transition* of varying shape (a minimum-jerk move of
+  the stroke centre, into which the strokes fade out and in, plus a
+  sideways bulge and a small lift that vanish to second order at the ends),
+- a *retreat* off the board and a short rest.
+
+Everything is C2 in time, sampled at 100-200 Hz with timestamp jitter and
+white position noise. The true per-sample labels come with it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .demo import Demonstration
+from .errors import DemoError
+from .rotations import quat_wxyz_from_matrix
+
+#: Board area in which stains are placed, board frame [m] (x range, y range).
+BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))
+
+
+@dataclass(frozen=True)
+class StrokeSpec:
+    """One stain's periodic stroke, in the board frame.
+
+    Attributes
+    ----------
+    centre_m : array, shape (2,)
+        Stroke centre on the board [m].
+    kind : str
+        ``"circle"`` or ``"zigzag"``.
+    freq_hz : float
+        Mean stroke frequency [Hz].
+    amplitude_m : float
+        Stroke amplitude [m] (circle radius, zig-zag half length).
+    angle_rad : float
+        Direction of the zig-zag stroke / start angle of the circle [rad].
+    n_cycles : float
+        Number of cycles wiped.
+    """
+
+    centre_m: np.ndarray
+    kind: str
+    freq_hz: float
+    amplitude_m: float
+    angle_rad: float
+    n_cycles: float
+
+
+@dataclass(frozen=True)
+class SyntheticDemo:
+    """A synthetic demonstration with its ground truth.
+
+    Attributes
+    ----------
+    demo : Demonstration
+        Positions in the world frame [m], orientation constant (pad on board).
+    true_periodic : array of bool, shape (T,)
+        True where the sample belongs to a periodic stroke.
+    true_stain : array of int, shape (T,)
+        Stain index of each periodic sample, -1 on transitional samples.
+    stain_centres_m : array, shape (K, 3)
+        Stroke centres in the world frame [m], in wiping order.
+    strokes : tuple of StrokeSpec
+        The strokes, in the board frame.
+    segments : tuple of (start, end, kind, stain)
+        True ``[start, end)`` segments in time order.
+    T_board_to_world : array, shape (4, 4)
+        Pose of the board frame in the world frame.
+    """
+
+    demo: Demonstration
+    true_periodic: np.ndarray
+    true_stain: np.ndarray
+    stain_centres_m: np.ndarray
+    strokes: tuple[StrokeSpec, ...]
+    segments: tuple[tuple[int, int, str, int], ...]
+    T_board_to_world: np.ndarray = field(repr=False)
+
+
+def synthesize_demo(
+    n_stains: int = 3,
+    seed: int = 0,
+    rate_hz: float | None = None,
+    noise_m: float = 0.0004,
+    revisit_first: bool = False,
+) -> SyntheticDemo:
+    """A human-like wiping demonstration over ``n_stains`` stains.
+
+    Parameters
+    ----------
+    n_stains : int
+        Number of stains wiped, 1 to 8.
+    seed : int
+        Seed of every random choice; the same seed gives the same demo.
+    rate_hz : float, optional
+        Mean sample rate [Hz]; default drawn from [100, 200].
+    noise_m : float
+        Standard deviation of the white position noise [m].
+    revisit_first : bool
+        Wipe the first stain a second time at the end (same board region,
+        two periodic segments at different times; its stain index repeats).
+    """
+    if not 1 <= int(n_stains) <= 8:
+        raise DemoError(f"n_stains must be between 1 and 8, got {n_stains!r}")
+    if rate_hz is not None and not 20.0 <= rate_hz <= 2000.0:
+        raise DemoError(f"rate_hz must be between 20 and 2000 Hz, got {rate_hz!r}")
+    if not 0.0 <= noise_m <= 0.01:
+        raise DemoError(f"noise_m must be between 0 and 0.01 m, got {noise_m!r}")
+    rng = np.random.default_rng(seed)
+    rate = float(rate_hz) if rate_hz is not None else float(rng.uniform(100.0, 200.0))
+    strokes = _draw_strokes(int(n_stains), rng)
+    pieces = _build_pieces(strokes + strokes[:1] if revisit_first else strokes, rng)
+    t_end = sum(p.duration_s for p in pieces)
+    dt = 1.0 / rate
+    n = int(np.floor(t_end / dt))
+    t = np.arange(n) * dt + rng.uniform(-0.15, 0.15, n) * dt  # jitter, strictly increasing
+    t[0] = 0.0
+    t = np.clip(t, 0.0, t_end)
+    pos_board = np.empty((n, 3))
+    periodic = np.zeros(n, dtype=bool)
+    stain = np.full(n, -1, dtype=int)
+    segments = []
+    t0 = 0.0
+    for piece in pieces:
+        t1 = t0 + piece.duration_s
+        idx = np.flatnonzero((t >= t0) & (t < t1)) if piece is not pieces[-1] else np.flatnonzero(t >= t0)
+        pos_board[idx] = piece.evaluate(t[idx] - t0)
+        if piece.stain >= 0:
+            periodic[idx] = True
+            stain[idx] = piece.stain
+        if idx.size:
+            kind = "periodic" if piece.stain >= 0 else "transitional"
+            if segments and segments[-1][2] == kind == "transitional":
+                segments[-1] = (segments[-1][0], int(idx[-1]) + 1, kind, -1)
+            else:
+                segments.append((int(idx[0]), int(idx[-1]) + 1, kind, piece.stain))
+        t0 = t1
+    pos_board += rng.normal(0.0, noise_m, pos_board.shape)
+    T = _board_pose(rng)
+    pos_world = pos_board @ T[:3, :3].T + T[:3, 3]
+    q = np.tile(_quat_wxyz_tool_on_board(T[:3, :3]), (n, 1))
+    centres = np.array([[*s.centre_m, 0.0] for s in strokes]) @ T[:3, :3].T + T[:3, 3]
+    if revisit_first:
+        stain[stain == len(strokes)] = 0
+        segments = [(a, b, k, 0 if s == len(strokes) else s) for a, b, k, s in segments]
+    demo = Demonstration(t, pos_world, q, source=f"synthetic(n_stains={n_stains}, seed={seed})")
+    return SyntheticDemo(demo, periodic, stain, centres, tuple(strokes), tuple(segments), T)
+
+
+# --------------------------------------------------------------------------
+# random scene
+
+
+def _draw_strokes(n: int, rng: np.random.Generator) -> list[StrokeSpec]:
+    strokes: list[StrokeSpec] = []
+    for k in range(n):
+        kind = "circle" if rng.random() < 0.6 else "zigzag"
+        amplitude = float(rng.uniform(0.025, 0.05))
+        for _ in range(2000):
+            c = np.array([rng.uniform(*BOARD_AREA_M[0]), rng.uniform(*BOARD_AREA_M[1])])
+            # separation: two stroke envelopes apart plus a gap a person would leave
+            if all(np.linalg.norm(c - s.centre_m) > amplitude + s.amplitude_m + 0.12 for s in strokes):
+                break
+        else:
+            raise DemoError(f"could not place {n} separated stains on the board")
+        strokes.append(
+            StrokeSpec(
+                centre_m=c,
+                kind=kind,
+                freq_hz=float(rng.uniform(1.0, 2.2)),
+                amplitude_m=amplitude,
+                angle_rad=float(rng.uniform(0, 2 * np.pi)),
+                n_cycles=float(rng.uniform(4.0, 7.0)),
+            )
+        )
+    return strokes
+
+
+def _board_pose(rng: np.random.Generator) -> np.ndarray:
+    """A vertical board in front of the robot, slightly tilted at random."""
+    tilt = rng.uniform(-0.08, 0.08, 2)
+    # board x -> world -y ... chosen so the board faces the robot (normal -x)
+    R = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    R = _rot_x(tilt[0]) @ _rot_z(tilt[1]) @ R
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = [0.75, -0.55, 0.25]
+    return T
+
+
+def _rot_x(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _quat_wxyz_tool_on_board(R_board: np.ndarray) -> np.ndarray:
+    """Tool z axis into the board (along -normal), tool x along board x."""
+    return quat_wxyz_from_matrix(np.column_stack([R_board[:, 0], -R_board[:, 1], -R_board[:, 2]]))
+
+
+# --------------------------------------------------------------------------
+# pieces: each maps local time (K,) -> board positions (K, 3), C2 in time
+
+
+@dataclass
+class _Stroke:
+    spec: StrokeSpec
+    stain: int
+    rng_values: np.ndarray  # fm, phase_m, am_freq, phase_a, phase0, fm_depth, am_depth
+
+    @property
+    def duration_s(self) -> float:
+        return self.spec.n_cycles / self.spec.freq_hz
+
+    def _phase(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        f0 = self.spec.freq_hz
+        fm, pm, _, _, p0, depth, _ = self.rng_values
+        w0, wm = 2 * np.pi * f0, 2 * np.pi * fm
+        phi = p0 + w0 * t + depth * w0 / wm * (np.sin(wm * t + pm) - np.sin(pm))
+        dphi = w0 * (1 + depth * np.cos(wm * t + pm))
+        ddphi = -w0 * depth * wm * np.sin(wm * t + pm)
+        return phi, dphi, ddphi
+
+    def _amp(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        _, _, fa, pa, _, _, depth = self.rng_values
+        wa = 2 * np.pi * fa
+        a0 = self.spec.amplitude_m
+        return (
+            a0 * (1 + depth * np.sin(wa * t + pa)),
+            a0 * depth * wa * np.cos(wa * t + pa),
+            -a0 * depth * wa**2 * np.sin(wa * t + pa),
+        )
+
+    def state(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity, acceleration (K, 3) in the board frame."""
+        phi, dphi, ddphi = self._phase(t)
+        a, da, dda = self._amp(t)
+        # unit shape u(phi) and its phase derivatives, in the stroke's own axes
+        if self.spec.kind == "circle":
+            u = np.stack([np.cos(phi), np.sin(phi)], -1)
+            u1 = np.stack([-np.sin(phi), np.cos(phi)], -1)
+            u2 = -u
+        else:  # zig-zag: fast back and forth with a slight loop at the turns
+            k = 1.0 / 1.12
+            u = np.stack([k * (np.sin(phi) + 0.12 * np.sin(3 * phi)), 0.25 * np.sin(2 * phi)], -1)
+            u1 = np.stack([k * (np.cos(phi) + 0.36 * np.cos(3 * phi)), 0.5 * np.cos(2 * phi)], -1)
+            u2 = np.stack([k * (-np.sin(phi) - 1.08 * np.sin(3 * phi)), -np.sin(2 * phi)], -1)
+        a, da, dda = a[:, None], da[:, None], dda[:, None]
+        dphi, ddphi = dphi[:, None], ddphi[:, None]
+        p = a * u
+        v = da * u + a * u1 * dphi
+        acc = dda * u + 2 * da * u1 * dphi + a * (u2 * dphi**2 + u1 * ddphi)
+        c, s = np.cos(self.spec.angle_rad), np.sin(self.spec.angle_rad)
+        R = np.array([[c, -s], [s, c]])
+        out = []
+        for arr, offset in ((p, self.spec.centre_m), (v, 0.0), (acc, 0.0)):
+            xy = arr @ R.T + offset
+            out.append(np.column_stack([xy, np.zeros(len(xy))]))
+        return out[0], out[1], out[2]
+
+    @property
+    def centre3(self) -> np.ndarray:
+        return np.array([*self.spec.centre_m, 0.0])
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        return self.state(np.asarray(t, dtype=float))[0]
+
+
+@dataclass
+class _Transition:
+    """A move between strokes: a minimum-jerk path of the stroke centre plus fading stroke offsets.
+
+    ``p(t) = c(s) + (1 - w(s/rho)) * o_prev(t) + w((s - 1 + rho)/rho) * o_next(t - T) + bump(s) * bulge``
+    with ``s = t / T``, ``c`` the quintic (rest-to-rest) path between the stroke centres, ``o_prev`` the
+    previous stroke's offset from its centre continued past its end, ``o_next`` the next stroke's offset
+    run back before its start, ``w`` the quintic smoothstep and ``bump = 64 s^3 (1 - s)^3``. Every term
+    other than the stroke offsets has zero velocity and acceleration at both ends, and the fades are flat
+    to second order there, so the demonstration is C2 across each junction, and the eraser spirals out of
+    one stroke and into the next as a person's hand does.
+    """
+
+    start_m: np.ndarray  # (3,) centre (or rest point) at t = 0
+    end_m: np.ndarray  # (3,) centre (or rest point) at t = T
+    duration_s: float
+    bulge_m: np.ndarray  # (3,) peak sideways / lift offset
+    prev: "_Stroke | None" = None
+    next: "_Stroke | None" = None
+    fade: float = 0.4
+    stain: int = -1
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        T = self.duration_s
+        s = np.clip(t / T, 0.0, 1.0)[:, None]
+        p = self.start_m + _smoothstep(s) * (self.end_m - self.start_m) + 64.0 * s**3 * (1 - s) ** 3 * self.bulge_m
+        if self.prev is not None:
+            w = 1.0 - _smoothstep(np.clip(s / self.fade, 0.0, 1.0))
+            p = p + w * (self.prev.evaluate(self.prev.duration_s + t) - self.prev.centre3)
+        if self.next is not None:
+            w = _smoothstep(np.clip((s - 1.0 + self.fade) / self.fade, 0.0, 1.0))
+            p = p + w * (self.next.evaluate(t - T) - self.next.centre3)
+        return p
+
+
+def _smoothstep(s: np.ndarray) -> np.ndarray:
+    """Quintic smoothstep: 0 -> 1 with zero first and second derivatives at both ends."""
+    return 10 * s**3 - 15 * s**4 + 6 * s**5
+
+
+@dataclass
+class _Rest:
+    position_m: np.ndarray
+    duration_s: float
+    stain: int = -1
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        return np.tile(self.position_m, (len(t), 1))
+
+
+def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator) -> list:
+    zero = np.zeros(3)
+    runs = [
+        _Stroke(
+            s,
+            k,  # a revisited stain gets index len(strokes) here; synthesize_demo maps it back
+            np.array(
+                [
+                    rng.uniform(0.12, 0.3),  # frequency modulation rate [Hz]
+                    rng.uniform(0, 2 * np.pi),
+                    rng.uniform(0.1, 0.25),  # amplitude modulation rate [Hz]
+                    rng.uniform(0, 2 * np.pi),
+                    rng.uniform(0, 2 * np.pi),  # start phase
+                    rng.uniform(0.02, 0.05),  # frequency modulation depth
+                    rng.uniform(0.04, 0.10),  # amplitude modulation depth
+                ]
+            ),
+        )
+        for k, s in enumerate(strokes)
+    ]
+    home = np.array([*runs[0].spec.centre_m + rng.uniform(-0.1, 0.1, 2), rng.uniform(0.08, 0.15)])
+    pieces: list = [_Rest(home, float(rng.uniform(0.2, 0.4)))]
+    duration = float(rng.uniform(1.0, 1.6))
+    pieces.append(_Transition(home, runs[0].centre3, duration, zero.copy(), None, runs[0], 0.35 / duration))
+    for k, run in enumerate(runs):
+        pieces.append(run)
+        if k + 1 < len(runs):
+            nxt = runs[k + 1]
+            delta = nxt.centre3 - run.centre3
+            dist = float(np.linalg.norm(delta))
+            duration = max(0.8, dist / rng.uniform(0.25, 0.4))
+            side = np.cross([0.0, 0.0, 1.0], delta) / max(dist, 1e-9)
+            bulge = side * rng.uniform(-0.2, 0.2) * dist + np.array([0, 0, rng.uniform(0.0, 0.01)])
+            fade = min(0.4, 0.35 / duration)
+            pieces.append(_Transition(run.centre3, nxt.centre3, duration, bulge, run, nxt, fade))
+        else:
+            away = np.array([*run.spec.centre_m + rng.uniform(-0.1, 0.1, 2), rng.uniform(0.08, 0.15)])
+            duration = float(rng.uniform(1.0, 1.6))
+            pieces.append(_Transition(run.centre3, away, duration, zero.copy(), run, None, 0.35 / duration))
+            pieces.append(_Rest(away, float(rng.uniform(0.2, 0.4))))
+    return pieces
