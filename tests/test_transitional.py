@@ -93,11 +93,11 @@ def mp(demo):
 
 def run(runner, dt=DT):
     """Step a runner to the end; returns times, states (m, 3, n) while working, and the first finished state."""
-    t, states = [0.0], [np.stack([runner.position, runner.velocity, runner.acceleration]).copy()]
+    t, states = [0.0], [np.stack([runner.position_m, runner.velocity_m_s, runner.acceleration_m_s2]).copy()]
     while runner.update(dt) == TransitionStatus.WORKING:
         t.append(runner.time_s)
-        states.append(np.stack([runner.position, runner.velocity, runner.acceleration]).copy())
-    return np.array(t), np.array(states), np.stack([runner.position, runner.velocity, runner.acceleration]).copy()
+        states.append(np.stack([runner.position_m, runner.velocity_m_s, runner.acceleration_m_s2]).copy())
+    return np.array(t), np.array(states), np.stack([runner.position_m, runner.velocity_m_s, runner.acceleration_m_s2]).copy()
 
 
 def mapped(mp, start, goal):
@@ -312,17 +312,17 @@ def test_runner_status_and_hold_after_the_end(mp):
     start, goal, T = random_case(1)
     runner = TransitionalRunner(mp, start, goal, T)
     assert runner.status == TransitionStatus.WORKING and not runner.finished
-    before = runner.position.copy()
+    before = runner.position_m.copy()
     for bad in (0.0, -1e-3, math.nan, math.inf):
         assert runner.update(bad) == TransitionStatus.ERROR_INVALID_INPUT
-    assert runner.time_s == 0.0 and np.array_equal(runner.position, before)
+    assert runner.time_s == 0.0 and np.array_equal(runner.position_m, before)
     while runner.update(DT) == TransitionStatus.WORKING:
         pass
     assert runner.finished
     assert runner.update(0.05) == TransitionStatus.FINISHED
     u = runner.time_s - T
-    assert np.allclose(runner.position, goal[0] + u * goal[1] + 0.5 * u * u * goal[2], atol=1e-12)
-    assert np.allclose(runner.acceleration, goal[2])
+    assert np.allclose(runner.position_m, goal[0] + u * goal[1] + 0.5 * u * u * goal[2], atol=1e-12)
+    assert np.allclose(runner.acceleration_m_s2, goal[2])
 
 
 @pytest.mark.parametrize(

@@ -50,6 +50,7 @@ Public API: :func:`learn_transitional` -> :class:`TransitionalMP`
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import NamedTuple
@@ -956,9 +957,11 @@ def rollout(
 class TransitionalRunner:
     """Ruckig-style stepper: build once, then :meth:`update` once per control cycle.
 
-    After each call, :attr:`position`, :attr:`velocity`, :attr:`acceleration`
-    (arrays, shape (n_dims,), [m], [m/s], [m/s^2]; updated in place) and
-    :attr:`time_s` describe the reference. From ``t >= T`` on, :meth:`update`
+    After each call, :attr:`position_m`, :attr:`velocity_m_s`,
+    :attr:`acceleration_m_s2` (arrays, shape (n_dims,); updated in place:
+    copy to keep), :attr:`time_s` and :attr:`calculation_duration_us` (wall
+    time of the last update) describe the reference and its cost. From
+    ``t >= T`` on, :meth:`update`
     returns ``FINISHED`` and the state follows the goal's constant-acceleration
     extrapolation (continuous with the transition), so the caller can hand
     over to the next MP ``overrun_s`` into its motion.
@@ -989,8 +992,9 @@ class TransitionalRunner:
         self._m = mp._hermite.shape[1] // 12
         self._coefficients = p.coefficients
         self._state = p.start.copy()
-        self.position, self.velocity, self.acceleration = self._state[0], self._state[1], self._state[2]
+        self.position_m, self.velocity_m_s, self.acceleration_m_s2 = self._state[0], self._state[1], self._state[2]
         self.time_s = 0.0
+        self.calculation_duration_us = 0.0
         self.status = TransitionStatus.WORKING
 
     @property
@@ -1008,6 +1012,12 @@ class TransitionalRunner:
 
     def update(self, dt_s: float) -> TransitionStatus:
         """Advance by ``dt_s`` [s] (> 0, finite); never raises."""
+        t0 = time.perf_counter_ns()
+        status = self._advance(dt_s)
+        self.calculation_duration_us = (time.perf_counter_ns() - t0) * 1e-3
+        return status
+
+    def _advance(self, dt_s: float) -> TransitionStatus:
         if not (dt_s > 0.0 and dt_s < math.inf):
             return TransitionStatus.ERROR_INVALID_INPUT
         t = self.time_s + dt_s
