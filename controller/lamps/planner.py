@@ -1,0 +1,470 @@
+"""Run-time generalisation (paper section II-C): chain the learned MPs across a new board.
+
+Given a skill, the stains a perception reports (centre and size in the
+board plane) and the tool's current state, the planner
+
+1. orders the stains to shorten the travel (exact for up to
+   :data:`EXACT_ORDER_MAX` stains, nearest neighbour + 2-opt above),
+2. picks for each stain the learned periodic MP whose amplitude is closest
+   to the one the stain needs, re-anchored at the stain centre (``y_m``) and
+   scaled to its size (``r = amplitude_fraction * size``, clamped),
+3. builds each transition when it is needed (:func:`plan_transition`), from
+   the state the tool really has at that moment into the next periodic MP
+   at an *entry phase* chosen so the periodic motion continues the
+   transition's direction, with (g1, g2, g3) taken from the periodic MP's
+   closed form at that phase; the learned transitional MP whose
+   demonstrated move is most alike is mapped onto the new move by a
+   rotation and uniform scale of its forcing term.
+
+All positions here are in-plane board coordinates (x, y) [m]; the normal
+direction belongs to the force controller. :func:`rollout` executes a plan
+at a fixed rate with a stand-in for kappa (a number of cycles per stain)
+and is what the plots, tests and benchmarks use; the controller's skill
+executor (issue 4) calls the same :func:`plan_transition` with perception's
+kappa.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import PlanningError
+from .periodic import PeriodicRunner, periodic_state
+from .skill import Skill
+from .transitional import TransitionalRunner, TransitionStatus, similarity_transform
+
+#: Up to this many stains the visiting order is found by exhaustive search.
+EXACT_ORDER_MAX = 7
+#: Demonstrated transitions shorter than this [m] carry no usable direction.
+MIN_DEMO_DISPLACEMENT_M = 0.02
+
+
+@dataclass(frozen=True)
+class Stain:
+    """A stain on the board, as perception reports it.
+
+    Attributes
+    ----------
+    id : int
+        Stable stain id.
+    centre_m : array, shape (2,)
+        Centre in the board plane [m].
+    size_m : float
+        Extent of the stain [m] (its larger side).
+    """
+
+    id: int
+    centre_m: np.ndarray
+    size_m: float
+
+    def __post_init__(self) -> None:
+        c = np.asarray(self.centre_m, dtype=float).reshape(-1)
+        if c.shape != (2,) or not np.all(np.isfinite(c)):
+            raise PlanningError(f"stain {self.id}: centre_m must be 2 finite numbers, got {self.centre_m!r}")
+        if not (np.isfinite(self.size_m) and self.size_m > 0):
+            raise PlanningError(f"stain {self.id}: size_m must be a positive number, got {self.size_m!r}")
+        object.__setattr__(self, "centre_m", c)
+
+
+@dataclass(frozen=True)
+class PlannerParams:
+    """Tunables of the planner (SI units).
+
+    Attributes
+    ----------
+    amplitude_fraction : float
+        Periodic amplitude r as a fraction of the stain size.
+    min_amplitude_m, max_amplitude_m : float
+        Clamp of r [m].
+    transition_speed_m_s : float or None
+        Mean speed of a transition [m/s]; None = as demonstrated.
+    min_transition_s : float
+        Shortest transition [s].
+    order : str
+        ``"shortest"`` (reorder to shorten travel) or ``"given"``.
+    """
+
+    amplitude_fraction: float = 0.5
+    min_amplitude_m: float = 0.01
+    max_amplitude_m: float = 0.15
+    transition_speed_m_s: float | None = None
+    min_transition_s: float = 0.6
+    order: str = "shortest"
+
+    def __post_init__(self) -> None:
+        if not 0 < self.amplitude_fraction <= 2:
+            raise PlanningError(f"amplitude_fraction must be in (0, 2], got {self.amplitude_fraction}")
+        if not 0 < self.min_amplitude_m <= self.max_amplitude_m:
+            raise PlanningError(
+                f"need 0 < min_amplitude_m <= max_amplitude_m, got {self.min_amplitude_m}, {self.max_amplitude_m}"
+            )
+        if self.transition_speed_m_s is not None and not 0.01 <= self.transition_speed_m_s <= 2.0:
+            raise PlanningError(f"transition_speed_m_s must be in [0.01, 2] m/s, got {self.transition_speed_m_s}")
+        if not 0.05 <= self.min_transition_s <= 10:
+            raise PlanningError(f"min_transition_s must be in [0.05, 10] s, got {self.min_transition_s}")
+        if self.order not in ("shortest", "given"):
+            raise PlanningError(f"order must be 'shortest' or 'given', got {self.order!r}")
+
+
+@dataclass(frozen=True)
+class Wipe:
+    """One periodic MP of the plan: which learned MP, where and how big."""
+
+    stain: Stain
+    periodic_index: int
+    anchor_m: np.ndarray
+    amplitude_m: float
+    omega_rad_s: float
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The stains in visiting order with their periodic MPs."""
+
+    wipes: tuple[Wipe, ...]
+    params: PlannerParams = field(default_factory=PlannerParams)
+
+    @property
+    def order(self) -> tuple[int, ...]:
+        return tuple(w.stain.id for w in self.wipes)
+
+
+@dataclass(frozen=True)
+class TransitionSpec:
+    """Everything needed to start one transitional MP (all arrays shape (2,))."""
+
+    transitional_index: int
+    start: tuple[np.ndarray, np.ndarray, np.ndarray]
+    goal: tuple[np.ndarray, np.ndarray, np.ndarray]
+    duration_s: float
+    entry_phase_rad: float
+    forcing_transform: np.ndarray
+
+
+def plan(
+    skill: Skill,
+    stains: Sequence[Stain],
+    start_position_m: np.ndarray,
+    params: PlannerParams | None = None,
+) -> Plan:
+    """Order the stains and assign each a re-anchored, re-scaled periodic MP."""
+    params = params or PlannerParams()
+    if not stains:
+        raise PlanningError("no stains to wipe")
+    ids = [s.id for s in stains]
+    if len(set(ids)) != len(ids):
+        raise PlanningError(f"stain ids must be unique, got {ids}")
+    start = np.asarray(start_position_m, dtype=float).reshape(-1)
+    if start.shape != (2,) or not np.all(np.isfinite(start)):
+        raise PlanningError(f"start_position_m must be 2 finite numbers, got {start_position_m!r}")
+    ordered = list(stains) if params.order == "given" else order_stains(stains, start)
+    amplitudes = np.array([e.mp.amplitude_m for e in skill.periodic])
+    wipes = []
+    for s in ordered:
+        r = float(np.clip(params.amplitude_fraction * s.size_m, params.min_amplitude_m, params.max_amplitude_m))
+        k = int(np.argmin(np.abs(np.log(amplitudes / r))))
+        wipes.append(Wipe(s, k, s.centre_m.copy(), r, skill.periodic[k].mp.omega_rad_s))
+    return Plan(tuple(wipes), params)
+
+
+def order_stains(stains: Sequence[Stain], start_m: np.ndarray) -> list[Stain]:
+    """Visiting order that shortens the path start -> s1 -> s2 -> ... (open path)."""
+    pts = np.array([s.centre_m for s in stains])
+    n = len(pts)
+    if n <= 2:
+        d = np.linalg.norm(pts - start_m, axis=1)
+        return [stains[i] for i in np.argsort(d, kind="stable")]
+
+    def length(order: Sequence[int]) -> float:
+        path = np.vstack([start_m, pts[list(order)]])
+        return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+
+    if n <= EXACT_ORDER_MAX:
+        best = min(itertools.permutations(range(n)), key=length)
+        return [stains[i] for i in best]
+    # nearest neighbour, then 2-opt until no segment reversal shortens the path
+    left, order, here = set(range(n)), [], start_m
+    while left:
+        nxt = min(left, key=lambda i: (np.linalg.norm(pts[i] - here), i))
+        order.append(nxt)
+        left.remove(nxt)
+        here = pts[nxt]
+    improved = True
+    while improved:
+        improved = False
+        for i in range(n - 1):
+            for j in range(i + 1, n):
+                cand = order[:i] + order[i : j + 1][::-1] + order[j + 1 :]
+                if length(cand) < length(order) - 1e-12:
+                    order, improved = cand, True
+    return [stains[i] for i in order]
+
+
+def entry_phase(skill: Skill, wipe: Wipe, from_m: np.ndarray, n_candidates: int = 72) -> float:
+    """Phase [rad] at which a transition coming from ``from_m`` enters the wipe's periodic MP.
+
+    Among the phases on the re-anchored limit cycle, prefer entry points near
+    the incoming tool whose velocity continues the incoming direction, so
+    the transition need not turn back: maximise
+    ``cos(angle(v(phi), p(phi) - from)) - (|p(phi) - from| - d_min) / r``.
+    """
+    mp = skill.periodic[wipe.periodic_index].mp
+    phases = np.linspace(0.0, 2 * np.pi, n_candidates, endpoint=False)
+    pos, vel, _ = periodic_state(mp, phases, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s)
+    to = pos - from_m
+    dist = np.linalg.norm(to, axis=1)
+    align = np.einsum("ij,ij->i", vel, to) / np.maximum(np.linalg.norm(vel, axis=1) * dist, 1e-12)
+    score = align - (dist - dist.min()) / wipe.amplitude_m
+    return float(phases[int(np.argmax(score))])
+
+
+def exit_phase_delay(skill: Skill, wipe: Wipe, phase_rad: float, towards_m: np.ndarray, n_candidates: int = 72) -> float:
+    """Extra phase [rad], in [0, 2 pi), to keep wiping so that the tool leaves towards ``towards_m``.
+
+    Once a stain is clean (kappa = 1) a person finishes the stroke that
+    heads for the next stain rather than reversing mid-stroke; leaving with
+    the velocity already pointing at the next stain keeps the transition's
+    start mismatch small. Among the phases of the coming cycle, pick the
+    one maximising ``cos(angle(v(phi), towards - p(phi)))``, preferring the
+    earliest of the near-best (within 0.05).
+
+    Parameters
+    ----------
+    phase_rad : float
+        Current phase of the wipe's periodic MP [rad].
+    towards_m : array, shape (2,)
+        Where the tool goes next (next stain's centre, or the retreat point) [m].
+    """
+    mp = skill.periodic[wipe.periodic_index].mp
+    delays = np.linspace(0.0, 2 * np.pi, n_candidates, endpoint=False)
+    pos, vel, _ = periodic_state(mp, phase_rad + delays, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s)
+    to = np.asarray(towards_m, dtype=float) - pos
+    align = np.einsum("ij,ij->i", vel, to) / np.maximum(np.linalg.norm(vel, axis=1) * np.linalg.norm(to, axis=1), 1e-12)
+    return float(delays[int(np.argmax(align >= align.max() - 0.05))])
+
+
+def plan_transition(
+    skill: Skill,
+    plan_: Plan,
+    wipe: Wipe,
+    start: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> TransitionSpec:
+    """The transitional MP from the tool's current state into ``wipe``'s periodic MP.
+
+    Parameters
+    ----------
+    start : (position, velocity, acceleration), arrays of shape (2,)
+        The tool's reference state now [m, m/s, m/s^2].
+    """
+    y0, v0, a0 = (np.asarray(x, dtype=float).reshape(2) for x in start)
+    phase = entry_phase(skill, wipe, y0)
+    mp = skill.periodic[wipe.periodic_index].mp
+    goal = periodic_state(mp, phase, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s)
+    move = goal[0] - y0
+    index, transform = _pick_transitional(skill, move)
+    duration = transition_duration(skill, index, move, plan_.params)
+    return TransitionSpec(index, (y0, v0, a0), tuple(np.asarray(g, float) for g in goal), duration, phase, transform)
+
+
+def transition_duration(skill: Skill, index: int, move_m: np.ndarray, params: PlannerParams) -> float:
+    """Duration T [s] of a transition that plays learned transition ``index`` over ``move_m``.
+
+    Mapping a demonstration of duration ``T_d`` and displacement ``d`` onto a
+    move of length ``s |d|`` in time ``T`` multiplies its accelerations by
+    ``s (T_d / T)^2`` (docs/transitional_mp.md, section 2). By default ``T``
+    keeps that factor at 1, ``T = T_d sqrt(s)``, so the transition is as
+    brisk as the human's, no more; a fixed ``transition_speed_m_s`` gives
+    ``T = |move| / speed`` instead. Never shorter than ``min_transition_s``.
+    """
+    dist = float(np.linalg.norm(move_m))
+    if params.transition_speed_m_s is not None:
+        return max(params.min_transition_s, dist / params.transition_speed_m_s)
+    mp = skill.transitional[index].mp
+    d_demo = float(np.linalg.norm(mp.demo_displacement_m))
+    if d_demo <= MIN_DEMO_DISPLACEMENT_M or dist < 1e-3:
+        return max(params.min_transition_s, dist / demonstrated_transition_speed(skill))
+    return max(params.min_transition_s, mp.demo_duration_s * float(np.sqrt(dist / d_demo)))
+
+
+def demonstrated_transition_speed(skill: Skill) -> float:
+    """Median mean speed [m/s] of the demonstrated transitions between stains (0.3 m/s if none)."""
+    speeds = [
+        np.linalg.norm(e.mp.demo_displacement_m) / e.mp.demo_duration_s
+        for e in skill.transitional
+        if np.linalg.norm(e.mp.demo_displacement_m) > MIN_DEMO_DISPLACEMENT_M
+    ]
+    return float(np.clip(np.median(speeds), 0.1, 0.8)) if speeds else 0.3
+
+
+def _pick_transitional(skill: Skill, move_m: np.ndarray) -> tuple[int, np.ndarray]:
+    """Learned transition most alike ``move_m`` and the similarity mapping its forcing onto it.
+
+    Candidates are the transitions demonstrated *between* two periodic MPs
+    (the approach from rest and the final retreat have another shape), or
+    all of them if there are none. Alike = closest demonstrated displacement
+    length (log ratio). The map is ``s R`` with R the rotation taking the
+    demonstrated displacement direction onto the new one and s the length
+    ratio. Without a usable demonstrated transition (none learned, or the
+    move is tiny) the forcing is switched off (a zero map): the transition
+    is then the pure third-order target-crossing system.
+    """
+    if not skill.transitional:
+        raise PlanningError("the skill has no transitional MP to build a transition from")
+    dist = float(np.linalg.norm(move_m))
+    usable = [(i, e) for i, e in enumerate(skill.transitional)
+              if np.linalg.norm(e.mp.demo_displacement_m) > MIN_DEMO_DISPLACEMENT_M]
+    periodic_segments = {e.segment for e in skill.periodic}
+    between = [(i, e) for i, e in usable if {e.segment - 1, e.segment + 1} <= periodic_segments]
+    cands = between or usable
+    if not cands or dist < 1e-3:
+        return 0, np.zeros((2, 2))
+    i, e = min(cands, key=lambda ie: abs(np.log(np.linalg.norm(ie[1].mp.demo_displacement_m) / dist)))
+    return i, similarity_transform(e.mp.demo_displacement_m, move_m)
+
+
+# --------------------------------------------------------------------------
+# offline execution
+
+
+@dataclass(frozen=True)
+class Rollout:
+    """A plan executed at a fixed rate.
+
+    Attributes
+    ----------
+    t_s : array, shape (N,)
+    position_m, velocity_m_s, acceleration_m_s2 : arrays, shape (N, 2)
+        Reference in the board plane.
+    kind : array of str, shape (N,)
+        ``"periodic"`` or ``"transitional"`` per sample.
+    stain : array of int, shape (N,)
+        Stain id being wiped or approached.
+    junctions : tuple of int
+        Sample indices where one MP hands over to the next (first sample of the new MP).
+    transitions : tuple of TransitionSpec
+    """
+
+    t_s: np.ndarray
+    position_m: np.ndarray
+    velocity_m_s: np.ndarray
+    acceleration_m_s2: np.ndarray
+    kind: np.ndarray
+    stain: np.ndarray
+    junctions: tuple[int, ...]
+    transitions: tuple[TransitionSpec, ...]
+
+
+def rollout(
+    skill: Skill,
+    plan_: Plan,
+    start: tuple[np.ndarray, np.ndarray, np.ndarray],
+    *,
+    dt_s: float = 0.001,
+    cycles_per_stain: float | None = None,
+    is_done: Callable[[Wipe, float], bool] | None = None,
+) -> Rollout:
+    """Execute ``plan_`` from ``start`` at ``1/dt_s`` Hz.
+
+    Each stain is wiped until ``is_done(wipe, cycles_done)`` (kappa's stand-in)
+    is true; by default after ``cycles_per_stain`` cycles (default: the mean
+    demonstrated count, at least 2).
+    """
+    if not 1e-4 <= dt_s <= 0.02:
+        raise PlanningError(f"dt_s must be in [0.0001, 0.02] s, got {dt_s}")
+    if is_done is None:
+        n = cycles_per_stain or max(2.0, float(np.mean([e.n_cycles for e in skill.periodic])))
+        is_done = lambda wipe, cycles: cycles >= n  # noqa: E731
+    out_t, out_p, out_v, out_a, out_kind, out_stain = [], [], [], [], [], []
+    junctions, specs = [], []
+    state = tuple(np.asarray(x, dtype=float).reshape(2) for x in start)
+    t = 0.0
+
+    def record(runner, kind: str, stain_id: int) -> None:
+        out_t.append(t)
+        out_p.append(runner.position_m.copy())
+        out_v.append(runner.velocity_m_s.copy())
+        out_a.append(runner.acceleration_m_s2.copy())
+        out_kind.append(kind)
+        out_stain.append(stain_id)
+
+    start_xy = state[0].copy()
+    next_centres = {a.stain.id: b.stain.centre_m for a, b in zip(plan_.wipes, plan_.wipes[1:])}
+    for wipe in plan_.wipes:
+        spec = plan_transition(skill, plan_, wipe, state)
+        specs.append(spec)
+        trans = TransitionalRunner(
+            skill.transitional[spec.transitional_index].mp,
+            spec.start,
+            spec.goal,
+            spec.duration_s,
+            forcing_transform=spec.forcing_transform,
+        )
+        junctions.append(len(out_t))
+        while trans.update(dt_s) == TransitionStatus.WORKING:
+            t += dt_s
+            record(trans, "transitional", wipe.stain.id)
+        t += dt_s
+        # Hand over at the goal (g1, g2) and entry phase, then advance the
+        # periodic MP by the time the last tick went past T.
+        periodic = PeriodicRunner(
+            skill.periodic[wipe.periodic_index].mp,
+            wipe.anchor_m,
+            wipe.amplitude_m,
+            wipe.omega_rad_s,
+            spec.entry_phase_rad,
+            start_position_m=spec.goal[0],
+            start_velocity_m_s=spec.goal[1],
+        )
+        phase0 = periodic.phase_unwrapped_rad
+        if trans.overrun_s > 0.0:
+            periodic.update(trans.overrun_s)
+        junctions.append(len(out_t))
+        record(periodic, "periodic", wipe.stain.id)
+        while not is_done(wipe, (periodic.phase_unwrapped_rad - phase0) / (2 * np.pi)):
+            periodic.update(dt_s)
+            t += dt_s
+            record(periodic, "periodic", wipe.stain.id)
+        towards = next_centres.get(wipe.stain.id, start_xy)
+        leave_at = periodic.phase_unwrapped_rad + exit_phase_delay(skill, wipe, periodic.phase_rad, towards)
+        while periodic.phase_unwrapped_rad < leave_at:
+            periodic.update(dt_s)
+            t += dt_s
+            record(periodic, "periodic", wipe.stain.id)
+        state = (periodic.position_m.copy(), periodic.velocity_m_s.copy(), periodic.acceleration_m_s2.copy())
+    return Rollout(
+        np.array(out_t),
+        np.array(out_p),
+        np.array(out_v),
+        np.array(out_a),
+        np.array(out_kind),
+        np.array(out_stain),
+        tuple(junctions[1:]),
+        tuple(specs),
+    )
+
+
+def junction_step_ratios(ro: Rollout, window: int = 5) -> np.ndarray:
+    """How much each MP junction steps compared with the ordinary ticks around it.
+
+    For every junction ``j`` and each of position, velocity, acceleration:
+    ``|x[j] - x[j-1]|`` divided by the largest ``|x[k] - x[k-1]|`` over the
+    ``window`` ticks before and after (junction excluded). A continuous
+    reference gives ratios near 1 or below; a jump shows as a ratio far
+    above 1 (for a jump of ``J``, ``J / (rate of change * dt)``).
+
+    Returns
+    -------
+    array, shape (n_junctions, 3)
+    """
+    out = np.empty((len(ro.junctions), 3))
+    for col, x in enumerate((ro.position_m, ro.velocity_m_s, ro.acceleration_m_s2)):
+        steps = np.linalg.norm(np.diff(x, axis=0), axis=1)  # steps[k] = x[k+1] - x[k]
+        for row, j in enumerate(ro.junctions):
+            around = np.concatenate([steps[max(j - 1 - window, 0) : j - 1], steps[j : j + window]])
+            out[row, col] = steps[j - 1] / max(float(around.max()) if around.size else 0.0, 1e-12)
+    return out
+

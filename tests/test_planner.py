@@ -1,0 +1,163 @@
+"""Planner (paper section II-C): stain order, re-anchoring, entry/exit phases, 1 kHz rollout."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from controller.lamps.errors import PlanningError
+from controller.lamps.learn import learn_skill
+from controller.lamps.periodic import periodic_state
+from controller.lamps.planner import (
+    PlannerParams,
+    Stain,
+    entry_phase,
+    exit_phase_delay,
+    junction_step_ratios,
+    order_stains,
+    plan,
+    rollout,
+)
+from controller.lamps.synth import synthesize_demo
+
+
+@pytest.fixture(scope="module")
+def skill():
+    return learn_skill(synthesize_demo(4, seed=0).demo)[0]
+
+
+def _board(seed: int, n: int = 3) -> list[Stain]:
+    rng = np.random.default_rng(seed)
+    return [Stain(i, rng.uniform([0.15, 0.15], [0.95, 0.65]), float(rng.uniform(0.04, 0.1))) for i in range(n)]
+
+
+def _path_length(start, stains) -> float:
+    pts = np.vstack([start, [s.centre_m for s in stains]])
+    return float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+
+
+@pytest.mark.parametrize("n", [1, 2, 4, 6])
+def test_order_is_the_shortest_open_path(n):
+    rng = np.random.default_rng(n)
+    stains = [Stain(i, rng.uniform(0, 1, 2), 0.05) for i in range(n)]
+    start = np.zeros(2)
+    best = min(_path_length(start, [stains[i] for i in p]) for p in itertools.permutations(range(n)))
+    assert _path_length(start, order_stains(stains, start)) == pytest.approx(best)
+
+
+def test_large_boards_use_two_opt_and_beat_nearest_neighbour_or_tie():
+    rng = np.random.default_rng(7)
+    stains = [Stain(i, rng.uniform(0, 1, 2), 0.05) for i in range(12)]
+    start = np.zeros(2)
+    ordered = order_stains(stains, start)
+    assert sorted(s.id for s in ordered) == list(range(12))
+    # nearest neighbour, by hand
+    left, here, nn = list(stains), start, []
+    while left:
+        k = int(np.argmin([np.linalg.norm(s.centre_m - here) for s in left]))
+        here = left[k].centre_m
+        nn.append(left.pop(k))
+    assert _path_length(start, ordered) <= _path_length(start, nn) + 1e-12
+
+
+def test_each_wipe_is_reanchored_and_scaled_to_its_stain(skill):
+    stains = _board(3) + [Stain(9, np.array([0.5, 0.5]), 1.0)]  # a huge stain: amplitude clamped
+    params = PlannerParams(order="given")
+    pl = plan(skill, stains, np.zeros(2), params)
+    assert pl.order == (0, 1, 2, 9)
+    for w in pl.wipes:
+        assert np.array_equal(w.anchor_m, w.stain.centre_m)
+        expected = np.clip(params.amplitude_fraction * w.stain.size_m, params.min_amplitude_m, params.max_amplitude_m)
+        assert w.amplitude_m == pytest.approx(expected)
+        assert 0 <= w.periodic_index < len(skill.periodic)
+    assert pl.wipes[-1].amplitude_m == params.max_amplitude_m
+
+
+def test_entry_phase_continues_the_approach_direction(skill):
+    wipe = plan(skill, [Stain(0, np.array([0.5, 0.5]), 0.08)], np.zeros(2)).wipes[0]
+    mp = skill.periodic[wipe.periodic_index].mp
+    for approach in ([0.0, 0.0], [1.0, 1.0], [0.5, 0.0], [0.0, 0.5]):
+        phi = entry_phase(skill, wipe, np.array(approach))
+        pos, vel, _ = periodic_state(mp, phi, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s)
+        to = pos - np.array(approach)
+        assert vel @ to / (np.linalg.norm(vel) * np.linalg.norm(to)) > 0.5
+
+
+def test_exit_phase_leaves_towards_the_next_stain(skill):
+    wipe = plan(skill, [Stain(0, np.array([0.5, 0.5]), 0.08)], np.zeros(2)).wipes[0]
+    mp = skill.periodic[wipe.periodic_index].mp
+    for towards in ([1.0, 0.5], [0.0, 0.5], [0.5, 1.0]):
+        delay = exit_phase_delay(skill, wipe, 0.3, np.array(towards))
+        assert 0.0 <= delay < 2 * np.pi
+        pos, vel, _ = periodic_state(mp, 0.3 + delay, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s)
+        to = np.array(towards) - pos
+        assert vel @ to / (np.linalg.norm(vel) * np.linalg.norm(to)) > 0.5
+
+
+@pytest.mark.parametrize("seed", [1000, 1001, 1002])
+def test_rollout_visits_every_stain_and_is_continuous_at_every_junction(skill, seed):
+    stains = _board(seed)
+    start = np.array([0.05, 0.05])
+    pl = plan(skill, stains, start)
+    ro = rollout(skill, pl, (start, np.zeros(2), np.zeros(2)), cycles_per_stain=2)
+    assert np.allclose(np.diff(ro.t_s), 0.001)
+    assert np.allclose(ro.position_m[0], start, atol=1e-3)
+    # wiping happens at each stain, in plan order, within reach of its centre
+    per = ro.kind == "periodic"
+    visited = [k for k, _ in itertools.groupby(ro.stain[per])]
+    assert tuple(visited) == pl.order
+    for w in pl.wipes:
+        pts = ro.position_m[per & (ro.stain == w.stain.id)]
+        assert np.linalg.norm(pts.mean(axis=0) - w.stain.centre_m) < 0.5 * w.amplitude_m
+        assert np.linalg.norm(pts - w.stain.centre_m, axis=1).max() < 2.5 * w.amplitude_m
+    # 2 junctions per stain but the first (the initial transition starts the rollout)
+    assert len(ro.junctions) == 2 * len(stains) - 1
+    ratios = junction_step_ratios(ro)
+    assert ratios.max() < 1.6, ratios  # no junction steps more than the ticks around it
+    # and the transitions stay as brisk as the wiping, not more
+    acc = np.linalg.norm(ro.acceleration_m_s2, axis=1)
+    assert acc[~per].max() < 2.5 * acc[per].max()
+
+
+def test_junction_ratio_detects_a_real_jump(skill):
+    pl = plan(skill, _board(1000), np.array([0.05, 0.05]))
+    ro = rollout(skill, pl, (np.array([0.05, 0.05]), np.zeros(2), np.zeros(2)), cycles_per_stain=2)
+    j = ro.junctions[1]
+    ro.acceleration_m_s2[j:] += 0.5  # an acceleration step of 0.7 m/s^2
+    assert junction_step_ratios(ro)[1, 2] > 3.0
+
+
+def test_custom_completion_stops_each_wipe(skill):
+    pl = plan(skill, _board(5), np.zeros(2))
+    seen = []
+
+    def done(wipe, cycles):
+        seen.append(wipe.stain.id)
+        return cycles >= 1.0
+
+    ro = rollout(skill, pl, (np.zeros(2), np.zeros(2), np.zeros(2)), is_done=done)
+    assert set(seen) == {0, 1, 2}
+    for w in pl.wipes:
+        n = np.count_nonzero((ro.kind == "periodic") & (ro.stain == w.stain.id))
+        period = 2 * np.pi / w.omega_rad_s
+        assert 1.0 * period <= n * 0.001 <= 2.05 * period  # one cycle plus at most one to leave well
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda sk: plan(sk, [], np.zeros(2)), "no stains"),
+        (lambda sk: plan(sk, [Stain(1, np.zeros(2), 0.1), Stain(1, np.ones(2), 0.1)], np.zeros(2)), "unique"),
+        (lambda sk: plan(sk, [Stain(1, np.zeros(2), 0.1)], np.array([np.nan, 0.0])), "start_position_m"),
+        (lambda sk: Stain(1, np.zeros(3), 0.1), "centre_m"),
+        (lambda sk: Stain(1, np.zeros(2), 0.0), "size_m"),
+        (lambda sk: PlannerParams(order="random"), "order"),
+        (lambda sk: rollout(sk, plan(sk, [Stain(1, np.ones(2), 0.1)], np.zeros(2)),
+                            (np.zeros(2),) * 3, dt_s=0.5), "dt_s"),
+    ],
+)
+def test_bad_planner_input_names_the_problem(skill, call, match):
+    with pytest.raises(PlanningError, match=match):
+        call(skill)
