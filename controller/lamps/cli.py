@@ -1,0 +1,370 @@
+"""Command-line entry points of the skill-learning half (``lamps demo``, ``segment``, ``learn``, ...).
+
+Each ``*_main(argv) -> int`` parses its own arguments. A
+:class:`~controller.lamps.errors.LampsError` becomes one line on stderr
+naming the problem and exit code 1; usage errors exit 2. Output files are
+written only after everything they depend on succeeded, and atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from interfaces.atomic import write_text_atomic
+
+from .errors import LampsError
+
+log = logging.getLogger("lamps")
+
+
+class Progress:
+    """A one-line progress display on stderr: redrawn on a terminal, a few lines otherwise."""
+
+    def __init__(self, stream=None) -> None:
+        self.stream = stream or sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self._last: tuple[str, int] = ("", -1)
+        self._t0 = time.monotonic()
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        pct = int(100 * done / max(total, 1))
+        step = pct if self.tty else pct // 25 * 25
+        if (stage, step) == self._last:
+            return
+        self._last = (stage, step)
+        text = f"{stage}: {pct:3d}% ({done}/{total}) {time.monotonic() - self._t0:5.1f} s"
+        if self.tty:
+            self.stream.write("\r" + text + ("\n" if done >= total else ""))
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+
+def _run(name: str, parser: argparse.ArgumentParser, argv: list[str], body: Callable[[argparse.Namespace], int]) -> int:
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if getattr(args, "verbose", False) else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return body(args)
+    except LampsError as exc:
+        print(f"lamps {name}: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f"lamps {name}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+def _parser(name: str, description: str) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=f"lamps {name}", description=description)
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    return p
+
+
+def _check_out_parent(path: Path) -> None:
+    if not path.parent.is_dir():
+        raise LampsError(f"{path}: the folder {path.parent} does not exist")
+
+
+# --------------------------------------------------------------------------
+# lamps demo-data
+
+
+def demo_data_main(argv: list[str]) -> int:
+    p = _parser("demo-data", "Write a synthetic, human-like multi-periodic wiping demonstration.")
+    p.add_argument("--stains", type=int, default=4, help="number of stains wiped, 1-8 (default 4)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--rate", type=float, default=None, help="sample rate [Hz] (default drawn from 100-200)")
+    p.add_argument("--noise", type=float, default=0.0004, help="position noise std [m] (default 0.0004)")
+    p.add_argument("--revisit", action="store_true", help="wipe the first stain again at the end")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output file (.csv or .npz)")
+    p.add_argument("--labels", type=Path, default=None, help="also write the true per-sample labels (CSV)")
+
+    def body(a: argparse.Namespace) -> int:
+        from .demo_io import write_demo_csv, write_demo_npz, write_labels_csv
+        from .synth import synthesize_demo
+
+        if a.output.suffix.lower() not in (".csv", ".npz"):
+            raise LampsError(f"{a.output}: output must end in .csv or .npz")
+        for path in filter(None, (a.output, a.labels)):
+            _check_out_parent(path)
+        s = synthesize_demo(a.stains, a.seed, a.rate, a.noise, a.revisit)
+        (write_demo_csv if a.output.suffix.lower() == ".csv" else write_demo_npz)(a.output, s.demo)
+        if a.labels:
+            write_labels_csv(a.labels, s.demo.t_s, s.true_periodic, s.true_stain)
+        print(
+            f"wrote {a.output}: {s.demo.n_samples} samples, {s.demo.duration_s:.1f} s at {s.demo.rate_hz:.0f} Hz, "
+            f"{len(s.strokes)} stains" + (f"; labels {a.labels}" if a.labels else "")
+        )
+        return 0
+
+    return _run("demo-data", p, argv, body)
+
+
+# --------------------------------------------------------------------------
+# lamps segment / evaluate-segmentation
+
+
+def _add_segment_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("demo", help="demonstration file (.csv, .npz, QTM .tsv, or dataset.mat#INDEX)")
+    p.add_argument("--method", choices=("optics", "kmeans", "affinity"), default="optics")
+    p.add_argument("--threshold", type=float, default=None, help="reachability threshold [m] (default automatic)")
+    p.add_argument("--min-samples", type=int, default=None, help="OPTICS min_samples (default from the rate)")
+
+
+def _segment(a: argparse.Namespace):
+    from .demo_io import read_demo
+    from .segmentation import segment
+
+    demo = read_demo(a.demo)
+    progress = Progress()
+    seg = segment(
+        demo,
+        method=a.method,
+        threshold=a.threshold,
+        min_samples=a.min_samples,
+        progress=lambda done, total: progress(f"{a.method}", done, total),
+    )
+    return demo, seg
+
+
+def _segment_table(demo, seg) -> str:
+    lines = [f"{'#':>3} {'kind':<12} {'cluster':>7} {'start':>6} {'end':>6} {'t0 [s]':>8} {'t1 [s]':>8}"]
+    for i, s in enumerate(seg.segments):
+        t1 = demo.t_s[s.end - 1]
+        lines.append(
+            f"{i:>3} {s.kind:<12} {s.cluster:>7} {s.start:>6} {s.end:>6} {demo.t_s[s.start]:>8.2f} {t1:>8.2f}"
+        )
+    n_per = sum(s.kind == "periodic" for s in seg.segments)
+    thr = "n/a" if seg.threshold is None else f"{seg.threshold:.4g} m"
+    lines.append(f"{len(seg.segments)} segments, {n_per} periodic; method {seg.method}, threshold {thr}")
+    return "\n".join(lines)
+
+
+def segment_main(argv: list[str]) -> int:
+    p = _parser("segment", "Segment a demonstration into periodic and transitional movement primitives.")
+    _add_segment_options(p)
+    p.add_argument("--json", type=Path, default=None, help="write segments, threshold and reachability as JSON")
+
+    def body(a: argparse.Namespace) -> int:
+        if a.json:
+            _check_out_parent(a.json)
+        demo, seg = _segment(a)
+        print(_segment_table(demo, seg))
+        if a.json:
+            write_text_atomic(a.json, json.dumps(seg.to_dict()) + "\n")
+            print(f"wrote {a.json}")
+        return 0
+
+    return _run("segment", p, argv, body)
+
+
+def evaluate_main(argv: list[str]) -> int:
+    p = _parser(
+        "evaluate-segmentation",
+        "Frame accuracy (periodic vs transitional) of a segmentation against labels; "
+        "the labels are read only after segmenting and never steer it.",
+    )
+    _add_segment_options(p)
+    p.add_argument("--labels", required=True, help="labels file (.csv with 'label', .npz, or dataset.mat#INDEX)")
+    p.add_argument("--json", type=Path, default=None, help="write the scores as JSON")
+
+    def body(a: argparse.Namespace) -> int:
+        from .demo_io import read_labels
+        from .segmentation import frame_accuracy
+
+        if a.json:
+            _check_out_parent(a.json)
+        demo, seg = _segment(a)
+        truth = read_labels(a.labels, demo.n_samples)
+        acc = frame_accuracy(seg, truth)
+        true_runs = int(np.sum(np.diff(np.r_[0, truth.astype(int)]) == 1))
+        found = sum(s.kind == "periodic" for s in seg.segments)
+        print(_segment_table(demo, seg))
+        print(f"frame accuracy {acc:.4f}; periodic segments found {found}, labelled {true_runs}")
+        if a.json:
+            scores = {"demo": str(a.demo), "method": a.method, "frame_accuracy": acc,
+                      "periodic_segments_found": found, "periodic_segments_labelled": true_runs}
+            write_text_atomic(a.json, json.dumps(scores, indent=1) + "\n")
+        return 0
+
+    return _run("evaluate-segmentation", p, argv, body)
+
+
+# --------------------------------------------------------------------------
+# lamps learn
+
+
+def learn_main(argv: list[str]) -> int:
+    p = _parser("learn", "Segment a demonstration, learn its periodic and transitional MPs, save a skill file.")
+    p.add_argument("demo", help="demonstration file (.csv, .npz, QTM .tsv, or dataset.mat#INDEX)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="skill file to write (JSON)")
+    p.add_argument("--method", choices=("optics", "kmeans", "affinity"), default="optics")
+    p.add_argument("--plots", type=Path, default=None, help="folder for the paper's Figs. 4-7 as PNG")
+
+    def body(a: argparse.Namespace) -> int:
+        from .demo_io import read_demo
+        from .learn import learn_skill
+        from .skill import save_skill
+
+        _check_out_parent(a.output)
+        demo = read_demo(a.demo)
+        skill, seg = learn_skill(demo, method=a.method, progress=Progress())
+        if a.plots:
+            from .plots import write_figures
+
+            a.plots.mkdir(parents=True, exist_ok=True)
+            for path in write_figures(demo, skill, seg, a.plots, progress=Progress()):
+                print(f"wrote {path}")
+        save_skill(a.output, skill)
+        print(_skill_summary(skill))
+        print(f"wrote {a.output}")
+        return 0
+
+    return _run("learn", p, argv, body)
+
+
+def _skill_summary(skill) -> str:
+    lines = [f"skill: {len(skill.periodic)} periodic MP(s), {len(skill.transitional)} transitional MP(s)"]
+    for e in skill.periodic:
+        mp = e.mp
+        lines.append(
+            f"  periodic  seg {e.segment:>2}: {mp.omega_rad_s / (2 * np.pi):.3f} Hz, r = {mp.amplitude_m * 100:.1f} cm,"
+            f" {e.n_cycles:.1f} cycles"
+        )
+    for e in skill.transitional:
+        lines.append(
+            f"  transit.  seg {e.segment:>2}: {e.mp.demo_duration_s:.2f} s,"
+            f" {np.linalg.norm(e.mp.demo_displacement_m) * 100:.1f} cm"
+        )
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------
+# lamps plan
+
+
+def _parse_stains(text: str):
+    from .planner import Stain
+
+    stains = []
+    for i, item in enumerate(filter(None, (s.strip() for s in text.split(";")))):
+        try:
+            x, y, size = (float(v) for v in item.split(","))
+        except ValueError:
+            raise LampsError(f"--stains item {i} {item!r}: expected 'x,y,size' in metres") from None
+        stains.append(Stain(i, np.array([x, y]), size))
+    return stains
+
+
+def plan_main(argv: list[str]) -> int:
+    p = _parser("plan", "Plan a learned skill over stains on a board and roll it out at 1 kHz.")
+    p.add_argument("skill", type=Path, help="skill file from 'lamps learn'")
+    p.add_argument("--stains", required=True, help="'x,y,size; x,y,size; ...' in the board frame [m]")
+    p.add_argument("--start", default="0,0", help="start position 'x,y' in the board frame [m] (default 0,0)")
+    p.add_argument("--cycles", type=float, default=None, help="cycles per stain (kappa's stand-in)")
+    p.add_argument("--rate", type=float, default=1000.0, help="rollout rate [Hz] (default 1000)")
+    p.add_argument("--csv", type=Path, default=None, help="write the rolled-out reference as CSV")
+
+    def body(a: argparse.Namespace) -> int:
+        from .planner import plan, rollout
+        from .skill import load_skill
+
+        if a.csv:
+            _check_out_parent(a.csv)
+        skill = load_skill(a.skill)
+        try:
+            start = np.array([float(v) for v in a.start.split(",")])
+        except ValueError:
+            raise LampsError(f"--start {a.start!r}: expected 'x,y' in metres") from None
+        pl = plan(skill, _parse_stains(a.stains), start)
+        ro = rollout(skill, pl, (start, np.zeros(2), np.zeros(2)), dt_s=1.0 / a.rate, cycles_per_stain=a.cycles)
+        print(f"order {list(pl.order)}; {len(ro.t_s)} samples, {ro.t_s[-1]:.2f} s")
+        for w, spec in zip(pl.wipes, ro.transitions):
+            print(
+                f"  stain {w.stain.id}: r = {w.amplitude_m * 100:.1f} cm, transition {spec.duration_s:.2f} s,"
+                f" entry phase {np.degrees(spec.entry_phase_rad):.0f} deg"
+            )
+        if a.csv:
+            data = np.column_stack([ro.t_s, ro.position_m, ro.velocity_m_s, ro.acceleration_m_s2])
+            head = "t,x,y,vx,vy,ax,ay"
+            rows = [",".join(f"{v:.9g}" for v in row) + f",{k},{s}" for row, k, s in zip(data, ro.kind, ro.stain)]
+            write_text_atomic(a.csv, head + ",kind,stain\n" + "\n".join(rows) + "\n")
+            print(f"wrote {a.csv}")
+        return 0
+
+    return _run("plan", p, argv, body)
+
+
+# --------------------------------------------------------------------------
+# lamps demo: the embedded default
+
+
+def demo_main(argv: list[str]) -> int:
+    p = _parser(
+        "demo",
+        "The embedded default: synthesize a wiping demonstration, learn it, write the paper's figures and "
+        "the skill file, then generalise the skill to a new board with other stains.",
+    )
+    p.add_argument("--stains", type=int, default=4, help="stains in the demonstration (default 4)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default runs/demo-<time>)")
+
+    def body(a: argparse.Namespace) -> int:
+        from .demo_io import write_demo_csv, write_labels_csv
+        from .learn import learn_skill
+        from .planner import Stain, junction_step_ratios, plan, rollout
+        from .plots import write_figures, write_generalisation_figure
+        from .segmentation import frame_accuracy
+        from .skill import save_skill
+        from .synth import synthesize_demo
+
+        out = a.out or Path("runs") / time.strftime("demo-%Y%m%d-%H%M%S")
+        out.mkdir(parents=True, exist_ok=True)
+        s = synthesize_demo(a.stains, a.seed)
+        print(f"demonstration: {s.demo.n_samples} samples, {s.demo.duration_s:.1f} s, {len(s.strokes)} stains")
+        skill, seg = learn_skill(s.demo, progress=Progress())
+        acc = frame_accuracy(seg, s.true_periodic)
+        print(_segment_table(s.demo, seg))
+        print(f"segmentation frame accuracy vs truth: {acc:.4f}")
+        print(_skill_summary(skill))
+        rng = np.random.default_rng(a.seed + 1000)
+        new_board = [Stain(i, rng.uniform([0.15, 0.15], [0.95, 0.65]), float(rng.uniform(0.04, 0.1))) for i in range(3)]
+        start = np.array([0.05, 0.05])
+        pl = plan(skill, new_board, start)
+        ro = rollout(skill, pl, (start, np.zeros(2), np.zeros(2)))
+        paths = write_demo_csv(out / "demo.csv", s.demo), write_labels_csv(
+            out / "labels.csv", s.demo.t_s, s.true_periodic, s.true_stain
+        )
+        figs = write_figures(s.demo, skill, seg, out, progress=Progress())
+        figs.append(write_generalisation_figure(skill, pl, ro, out / "generalisation.png"))
+        skill_path = save_skill(out / "skill.json", skill)
+        ratios = junction_step_ratios(ro)
+        summary = {
+            "demo_samples": s.demo.n_samples,
+            "segmentation_frame_accuracy": acc,
+            "periodic_segments": sum(x.kind == "periodic" for x in seg.segments),
+            "true_periodic_segments": len(s.strokes),
+            "new_board_order": list(pl.order),
+            "rollout_duration_s": float(ro.t_s[-1]),
+            "max_junction_accel_step_ratio": float(ratios[:, 2].max()) if len(ratios) else 0.0,
+            "peak_accel_m_s2": float(np.linalg.norm(ro.acceleration_m_s2, axis=1).max()),
+        }
+        write_text_atomic(out / "summary.json", json.dumps(summary, indent=1) + "\n")
+        for path in [*paths, *figs, skill_path, out / "summary.json"]:
+            print(f"wrote {path}")
+        print(
+            f"new board: stains visited {list(pl.order)} in {ro.t_s[-1]:.1f} s; at the MP junctions the acceleration "
+            f"steps at most {summary['max_junction_accel_step_ratio']:.2f}x an ordinary tick's "
+            f"(continuous: <= ~1); peak acceleration {summary['peak_accel_m_s2']:.1f} m/s^2"
+        )
+        return 0
+
+    return _run("demo", p, argv, body)

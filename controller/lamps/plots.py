@@ -1,0 +1,127 @@
+"""PNG figures reproducing the paper's Figs. 4-7, plus the generalisation to a new board.
+
+Only matplotlib's Agg backend is used (no display needed). Every writer
+returns the path it wrote; files are written atomically.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from interfaces.atomic import write_atomic  # noqa: E402
+
+from .demo import Demonstration  # noqa: E402
+from .segmentation import Segmentation, segment  # noqa: E402
+from .skill import Skill  # noqa: E402
+
+TRANSITIONAL_COLOUR = "0.6"
+
+
+def _save(fig, path: Path) -> Path:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return write_atomic(path, lambda f: f.write(buf.getvalue()))
+
+
+def _cluster_colours(labels: np.ndarray) -> list:
+    cmap = plt.get_cmap("tab10")
+    return [TRANSITIONAL_COLOUR if c < 0 else cmap(c % 10) for c in labels]
+
+
+def figure_reachability(seg: Segmentation, path: Path) -> Path:
+    """Fig. 4: reachability distance in OPTICS order, valleys = periodic MPs, with the threshold."""
+    res = seg.optics
+    order = res.ordering
+    reach = res.reachability[order]
+    finite = np.isfinite(reach)
+    top = np.nanmax(reach[finite]) if finite.any() else 1.0
+    labels = seg.labels[order]
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    ax.bar(np.arange(len(order)), np.where(finite, reach, top), width=1.0, color=_cluster_colours(labels), linewidth=0)
+    if seg.threshold is not None:
+        ax.axhline(seg.threshold, color="k", ls="--", lw=1, label=f"threshold {seg.threshold * 1000:.1f} mm")
+        ax.legend(loc="upper right")
+    ax.set_xlabel("OPTICS ordering")
+    ax.set_ylabel("reachability distance [m]")
+    ax.set_title("Ordering-reachability plot (valleys: periodic MPs, peaks: transitional MPs)")
+    return _save(fig, path)
+
+
+def figure_segmentation_comparison(
+    demo: Demonstration, seg: Segmentation, path: Path, others: dict[str, Segmentation] | None = None
+) -> Path:
+    """Fig. 5: segmentation by OPTICS vs K-Means vs Affinity Propagation, in the demonstration's plane."""
+    if others is None:
+        others = {m: segment(demo, method=m) for m in ("kmeans", "affinity")}
+    methods = {"OPTICS (ours)": seg, "K-Means": others["kmeans"], "Affinity Propagation": others["affinity"]}
+    centred = demo.position_m - demo.position_m.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    xy = centred @ vt[:2].T
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.5), sharex=True, sharey=True)
+    for ax, (name, s) in zip(axes, methods.items()):
+        ax.scatter(xy[:, 0], xy[:, 1], c=_cluster_colours(s.labels), s=3)
+        n_per = sum(x.kind == "periodic" for x in s.segments)
+        ax.set_title(f"{name}: {n_per} periodic segment(s)")
+        ax.set_aspect("equal")
+        ax.set_xlabel("principal axis 1 [m]")
+    axes[0].set_ylabel("principal axis 2 [m]")
+    fig.suptitle("Segmentation of the demonstration (grey: transitional)")
+    return _save(fig, path)
+
+
+def figure_generalisation(skill: Skill, plan_, ro, path: Path) -> Path:
+    """The plan rolled out on a new board: path coloured by MP kind, stains drawn to size."""
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    per = ro.kind == "periodic"
+    ax.scatter(ro.position_m[~per, 0], ro.position_m[~per, 1], s=1, c="tab:purple", label="transitional MP")
+    ax.scatter(ro.position_m[per, 0], ro.position_m[per, 1], s=1, c="goldenrod", label="periodic MP")
+    for k, w in enumerate(plan_.wipes):
+        ax.add_patch(plt.Circle(w.stain.centre_m, w.stain.size_m / 2, color="k", alpha=0.15))
+        ax.annotate(f"{k + 1}", w.stain.centre_m, ha="center", va="center")
+    ax.plot(*ro.position_m[0], "ko", ms=4, label="start")
+    ax.set_aspect("equal")
+    ax.set_xlabel("board x [m]")
+    ax.set_ylabel("board y [m]")
+    ax.legend(loc="best", markerscale=6)
+    ax.set_title("Skill generalised to a new board (stains in visiting order)")
+    return _save(fig, path)
+
+
+def write_generalisation_figure(skill: Skill, plan_, ro, path: Path) -> Path:
+    return figure_generalisation(skill, plan_, ro, path)
+
+
+def write_figures(
+    demo: Demonstration,
+    skill: Skill,
+    seg: Segmentation,
+    folder: Path,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> list[Path]:
+    """Write Figs. 4-7 into ``folder``; returns the paths."""
+    from .plots_mp import figure_transition_comparison, figure_transition_phases
+
+    folder = Path(folder)
+    jobs = [
+        lambda: figure_reachability(seg, folder / "fig4_reachability.png"),
+        lambda: figure_segmentation_comparison(demo, seg, folder / "fig5_segmentation_methods.png"),
+        lambda: figure_transition_comparison(demo, skill, seg, folder / "fig6_transition_vs_target_crossing.png"),
+        lambda: figure_transition_phases(skill, folder / "fig7_transition_entry_phases.png"),
+    ]
+    paths = []
+    for k, job in enumerate(jobs):
+        if progress is not None:
+            progress("figures", k, len(jobs))
+        paths.append(job())
+    if progress is not None:
+        progress("figures", len(jobs), len(jobs))
+    return paths
