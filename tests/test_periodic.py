@@ -22,6 +22,7 @@ from controller.lamps.periodic import (
     learn_periodic,
     periodic_state,
     rollout,
+    significant_harmonics,
     step_matrix,
 )
 
@@ -138,6 +139,30 @@ def test_reproduction_within_two_percent_of_amplitude(shape, f_hz, cycles):
     assert mp.amplitude_m == pytest.approx(0.05, rel=0.03)
     assert mp.n_cycles == pytest.approx(cycles, abs=0.05)
     assert reproduce(mp, t, y, truth) <= 0.02 * 0.05
+
+
+@pytest.mark.parametrize("shape, f_hz", [("circle", 2.0), ("zigzag", 1.3)])
+def test_learned_acceleration_is_free_of_ripple(shape, f_hz):
+    """A noisy demo must not leave GMR ripple in the acceleration the robot is fed.
+
+    The true curves hold harmonics 1-3 only; anything above them in the learned
+    limit cycle's acceleration is an artefact (before the significant-harmonic
+    cut: 5-12 % of the fundamental on a circle).
+    """
+    t, y, _, _, _ = synth(shape, f_hz, 6, seed=3)
+    mp = learn_periodic(t, y)
+    _, _, acc = periodic_state(mp, np.linspace(0.0, 2 * np.pi, 512, endpoint=False))
+    spec = np.linalg.norm(np.abs(np.fft.rfft(acc, axis=0)), axis=1)
+    assert spec[4:].max() < 0.01 * spec[1:4].max()
+
+
+def test_significant_harmonics_counts_what_the_shape_holds():
+    phi = np.linspace(0.0, 2 * np.pi, 256, endpoint=False)
+    circle = np.column_stack([np.cos(phi), np.sin(phi)])
+    assert significant_harmonics(circle) == 1
+    triangle = sum(np.sin(k * phi) / k**2 * (-1) ** (k // 2) for k in (1, 3, 5, 7, 9, 11, 13, 15, 17))
+    assert significant_harmonics(triangle[:, None]) == 13  # 1/13^2 = 0.6 %, 1/15^2 = 0.44 %
+    assert significant_harmonics(circle + 1e-4 * np.cos(9 * phi)[:, None]) == 1
 
 
 def test_shape_is_learned_under_drift_when_phase_aligned():

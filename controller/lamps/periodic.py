@@ -46,7 +46,12 @@ Learning (:func:`learn_periodic`)
    per cent in acceleration. A raised-cosine low-pass keeps harmonics
    <= 0.3 K and removes those >= 0.6 K (6 and 12 for K = 20); detail finer
    than the component spacing is beyond the mixture anyway. Raise K to keep
-   more harmonics.
+   more harmonics. Then a second cut follows the data: harmonics above the
+   last one holding at least 0.5 % of the largest harmonic's amplitude
+   (0.25 mm for a 5 cm stroke, below a demonstration's noise and far below
+   the eraser's size) are removed (:func:`significant_harmonics`). A
+   circle keeps its fundamental, a zig-zag its first few odd harmonics;
+   the GMR ripple in between, 0.3-0.9 m/s^2 on a 2 Hz circle, goes.
 4. Anchor ``y_m`` = mean of the template; amplitude ``r`` = max over
    dimensions of half the template's peak-to-peak; normalised shape
    ``s = (template - y_m) / r``. With ``d/dt = Omega d/dphi`` eq. (6) reads
@@ -136,6 +141,8 @@ BASIS_CROSSING = 0.8
 #: Template low-pass band edges, in harmonics per GMM component (see :func:`learn_periodic`).
 TEMPLATE_PASS_PER_COMPONENT = 0.3
 TEMPLATE_STOP_PER_COMPONENT = 0.6
+#: Harmonics below this fraction of the largest one, above the last that is not, are removed.
+SIGNIFICANT_HARMONIC_FRACTION = 0.005
 #: Default time constant tau of the critically damped parameter filters [s]: a step
 #: in a target is 90 % done after 3.9 tau (0.78 s), with no overshoot.
 DEFAULT_RAMP_TIME_CONSTANT_S = 0.2
@@ -794,6 +801,25 @@ def lowpass_periodic(samples: np.ndarray, k_pass: float, k_stop: float) -> np.nd
     return np.fft.irfft(spec * gain[:, None], n=len(samples), axis=0)
 
 
+def significant_harmonics(samples: np.ndarray, fraction: float = SIGNIFICANT_HARMONIC_FRACTION) -> int:
+    """Highest harmonic whose amplitude is at least ``fraction`` of the largest one's.
+
+    Parameters
+    ----------
+    samples : array, shape (M, n_dims)
+        One period on a uniform phase grid.
+    fraction : float
+        In (0, 1).
+
+    Returns
+    -------
+    int
+        Harmonic number k >= 1 (amplitudes taken as the norm over dimensions).
+    """
+    amp = np.linalg.norm(np.abs(np.fft.rfft(samples, axis=0)[1:]), axis=1)
+    return int(np.flatnonzero(amp >= fraction * amp.max())[-1]) + 1
+
+
 def _periodic_derivatives(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """First and second phase derivatives of samples on a uniform periodic grid (M, n)."""
     m = len(s)
@@ -870,6 +896,8 @@ def learn_periodic(
     grid, template, _ = periodic_template(fit.phase(t_u), y_u, n_template, n_comp, seed=seed)
 
     template = lowpass_periodic(template, TEMPLATE_PASS_PER_COMPONENT * n_comp, TEMPLATE_STOP_PER_COMPONENT * n_comp)
+    k_last = significant_harmonics(template)
+    template = lowpass_periodic(template, k_last + 0.5, k_last + 1.5)
     anchor = template.mean(axis=0)
     amplitude = float(0.5 * (template.max(axis=0) - template.min(axis=0)).max())
     if amplitude < MIN_OSCILLATION_M:
