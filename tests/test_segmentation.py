@@ -60,6 +60,19 @@ def test_default_min_samples_follows_the_rate(rate_hz):
     assert frame_accuracy(seg, s.true_periodic) >= 0.95
 
 
+@pytest.mark.parametrize("rate_hz", [400.0, 1000.0])
+def test_fast_recordings_are_thinned_to_the_same_point_density(rate_hz):
+    """Above 200 Hz the kept points are no denser than at 200 Hz: same answer, OPTICS cost bounded."""
+    s = synthesize_demo(3, 7, rate_hz=rate_hz)
+    ref = segment(synthesize_demo(3, 7, rate_hz=200.0).demo)
+    seg = segment(s.demo)
+    assert seg.min_samples == 100 == ref.min_samples
+    assert # kept spacing is step plus up to one raw sample: a little denser at high rates
+    assert len(seg.point_samples) == pytest.approx(len(ref.point_samples), rel=0.25)
+    assert segment_counts(seg)["periodic"] == 3
+    assert frame_accuracy(seg, s.true_periodic) >= 0.95
+
+
 def test_same_region_wiped_twice_gives_two_segments_of_one_cluster():
     s = synthesize_demo(3, 2, revisit_first=True)
     seg = segment(s.demo)

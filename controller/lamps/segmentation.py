@@ -8,13 +8,16 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
 2. **Resample by distance.** Keep a sample whenever the tool has moved at
    least ``step`` from the last kept one; ``step`` is the median distance
    travelled per sample while moving (samples faster than 30 % of the 90th
-   speed percentile). The density of kept points then counts *passes over a
+   speed percentile), scaled up by ``rate / MAX_POINT_RATE_HZ`` for demos
+   recorded faster than :data:`MAX_POINT_RATE_HZ` (a hand's motion holds
+   nothing finer; a 460 Hz demo would otherwise cost OPTICS 5x more for
+   the same answer). The density of kept points then counts *passes over a
    place*, not time spent there: a stroke wiped five times is five times as
    dense as a transition crossing once, and a tool resting before the
    approach (as in the real demonstrations) is one point instead of the
    densest "cluster" of all. Each sample takes the label of the last kept point.
 3. **OPTICS** (:mod:`.optics`, ``max_eps = inf``) on the kept points, with
-   ``min_samples = round(WINDOW_S * rate_hz)`` unless given: the number of
+   ``min_samples = round(WINDOW_S * min(rate_hz, MAX_POINT_RATE_HZ))`` unless given: the number of
    points a tool moving at its typical speed leaves in :data:`WINDOW_S`
    seconds (50 at 100 Hz, 100 at 200 Hz; the same path length at any rate,
    since ``step`` scales with the sample period). Along a straight path
@@ -88,6 +91,8 @@ from .optics import OpticsResult, optics
 METHODS = ("optics", "kmeans", "affinity")
 #: Time window setting the default ``min_samples`` [s].
 WINDOW_S = 0.5
+#: Resampled points are kept no denser than a demo sampled at this rate would give [Hz].
+MAX_POINT_RATE_HZ = 200.0
 #: Savitzky-Golay window of the position smoothing [s].
 SMOOTH_WINDOW_S = 0.05
 #: Default minimum duration of a segment [s].
@@ -426,7 +431,8 @@ def _segment_impl(
 ) -> Segmentation:
     t = demo.t_s
     smooth = _smooth(demo.position_m, demo.rate_hz)
-    step = _resampling_step(smooth, demo.source)
+    point_rate_hz = min(demo.rate_hz, MAX_POINT_RATE_HZ)
+    step = _resampling_step(smooth, demo.source) * demo.rate_hz / point_rate_hz
     keep = _resample_by_distance(smooth, step)
     points = smooth[keep]
     if len(points) < 10:
@@ -437,7 +443,7 @@ def _segment_impl(
     cluster_progress = _scaled(progress, 0, 90)
     result = eps = ms = None
     if method == "optics":
-        ms = params.min_samples if params.min_samples is not None else int(round(WINDOW_S * demo.rate_hz))
+        ms = params.min_samples if params.min_samples is not None else int(round(WINDOW_S * point_rate_hz))
         ms = int(min(max(ms, 2), len(points)))
         result = optics(points, ms, progress=cluster_progress)
         if params.threshold is not None:

@@ -1,0 +1,79 @@
+"""Segmentation quality: frame accuracy and periodic segment counts, OPTICS vs the baselines.
+
+Usage: .venv/bin/python bench/eval_segmentation_accuracy.py [--seeds N] [--json OUT]
+
+- synthetic: ``synthesize_demo(n, seed)`` for n = 2..6 stains and ``--seeds``
+  seeds each (the ground truth comes with the generator);
+- real: the four hand-labelled demonstrations in
+  ``../shared/data/wiping-demos/circular_wiping_dataset.mat`` (skipped when
+  absent; read from there, never copied).
+
+For each method (optics, kmeans, affinity) it prints the frame accuracy
+(periodic vs transitional) and how many demos got exactly the true number
+of periodic segments. Nothing here looks at the labels before scoring.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from controller.lamps.demo_io import read_demo, read_labels  # noqa: E402
+from controller.lamps.segmentation import frame_accuracy, segment, true_segment_count  # noqa: E402
+from controller.lamps.synth import synthesize_demo  # noqa: E402
+
+REAL = ROOT.parent / "shared" / "data" / "wiping-demos" / "circular_wiping_dataset.mat"
+METHODS = ("optics", "kmeans", "affinity")
+
+
+def _score(demo, truth: np.ndarray, method: str) -> tuple[float, int, int]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        seg = segment(demo, method=method)
+    found = sum(s.kind == "periodic" for s in seg.segments)
+    return frame_accuracy(seg, truth), found, true_segment_count(truth)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--json", type=Path, default=None)
+    a = ap.parse_args()
+    cases = [(f"synthetic {n} stains seed {s}", synthesize_demo(n, s)) for n in range(2, 7) for s in range(a.seeds)]
+    rows: dict[str, list] = {m: [] for m in METHODS}
+    real_rows = []
+    for name, syn in cases:
+        for m in METHODS:
+            rows[m].append(_score(syn.demo, syn.true_periodic, m))
+    if REAL.is_file():
+        for i in range(4):
+            demo = read_demo(f"{REAL}#{i}")
+            truth = read_labels(f"{REAL}#{i}", demo.n_samples)
+            real_rows.append({m: _score(demo, truth, m) for m in METHODS})
+    print(f"| method | synthetic: mean / min frame accuracy | synthetic: exact periodic count | "
+          f"real demos 0-3: frame accuracy | real: exact count |")
+    print("|---|---|---|---|---|")
+    out = {}
+    for m in METHODS:
+        acc = np.array([r[0] for r in rows[m]])
+        exact = sum(r[1] == r[2] for r in rows[m])
+        real = " / ".join(f"{r[m][0]:.3f}" for r in real_rows) or "absent"
+        real_exact = f"{sum(r[m][1] == r[m][2] for r in real_rows)}/{len(real_rows)}" if real_rows else "-"
+        print(f"| {m} | {acc.mean():.3f} / {acc.min():.3f} | {exact}/{len(acc)} | {real} | {real_exact} |")
+        out[m] = {"synthetic_accuracy": acc.tolist(), "synthetic_exact": exact,
+                  "real": [r[m] for r in real_rows]}
+    if a.json:
+        a.json.write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
