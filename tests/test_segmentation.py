@@ -67,7 +67,7 @@ def test_fast_recordings_are_thinned_to_the_same_point_density(rate_hz):
     ref = segment(synthesize_demo(3, 7, rate_hz=200.0).demo)
     seg = segment(s.demo)
     assert seg.min_samples == 100 == ref.min_samples
-    assert # kept spacing is step plus up to one raw sample: a little denser at high rates
+    # kept spacing is step plus up to one raw sample: a little denser at high rates
     assert len(seg.point_samples) == pytest.approx(len(ref.point_samples), rel=0.25)
     assert segment_counts(seg)["periodic"] == 3
     assert frame_accuracy(seg, s.true_periodic) >= 0.95
