@@ -31,7 +31,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from controller.lamps.periodic import PeriodicRunner, forcing, learn_periodic, periodic_state  # noqa: E402
+from controller.lamps.periodic import forcing, learn_periodic, periodic_state  # noqa: E402
+from controller.lamps.periodic_runner import PeriodicRunner  # noqa: E402
 
 DT_S = 1e-3
 

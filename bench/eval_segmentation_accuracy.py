@@ -58,8 +58,8 @@ def main() -> int:
             demo = read_demo(f"{REAL}#{i}")
             truth = read_labels(f"{REAL}#{i}", demo.n_samples)
             real_rows.append({m: _score(demo, truth, m) for m in METHODS})
-    print(f"| method | synthetic: mean / min frame accuracy | synthetic: exact periodic count | "
-          f"real demos 0-3: frame accuracy | real: exact count |")
+    print("| method | synthetic: mean / min frame accuracy | synthetic: exact periodic count | "
+          "real demos 0-3: frame accuracy | real: exact count |")
     print("|---|---|---|---|---|")
     out = {}
     for m in METHODS:

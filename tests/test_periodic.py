@@ -13,18 +13,14 @@ from scipy.linalg import expm
 from controller.lamps.errors import LearningError, PlanningError, SkillFileError
 from controller.lamps.periodic import (
     PeriodicMP,
-    PeriodicRunner,
-    PeriodicStatus,
-    assign_phase,
-    estimate_frequency,
     forcing,
     forcing_target,
     learn_periodic,
     periodic_state,
-    rollout,
     significant_harmonics,
-    step_matrix,
 )
+from controller.lamps.periodic_phase import assign_phase, estimate_frequency
+from controller.lamps.periodic_runner import PeriodicRunner, PeriodicStatus, rollout, step_matrix
 
 from .conftest import REAL_DEMOS
 

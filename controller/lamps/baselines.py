@@ -84,7 +84,7 @@ class TargetCrossingDMP:
         if w.ndim != 2 or not np.all(np.isfinite(w)):
             raise LearningError(f"TargetCrossingDMP.weights must be a finite (N, n) array, got shape {w.shape}")
         if not (1.0 <= self.q <= 60.0 and 0.1 <= self.lambda_ <= 30.0 and self.demo_duration_s > 0):
-            raise LearningError(f"TargetCrossingDMP: need q in [1, 60], lambda_ in [0.1, 30], duration > 0")
+            raise LearningError("TargetCrossingDMP: need q in [1, 60], lambda_ in [0.1, 30], duration > 0")
 
 
 def learn_target_crossing_dmp(

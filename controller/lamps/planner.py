@@ -33,7 +33,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import PlanningError
-from .periodic import PeriodicRunner, periodic_state
+from .periodic import periodic_state
+from .periodic_runner import PeriodicRunner
 from .skill import Skill
 from .transitional import TransitionalRunner, TransitionStatus, similarity_transform
 

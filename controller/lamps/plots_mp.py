@@ -18,7 +18,7 @@ from .baselines import learn_target_crossing_dmp, rollout_target_crossing_dmp, r
 from .demo import Demonstration
 from .errors import PlanningError
 from .periodic import periodic_state
-from .periodic import rollout as periodic_rollout
+from .periodic_runner import rollout as periodic_rollout
 from .planner import demonstrated_transition_speed
 from .plots import _save, plt
 from .segmentation import Segmentation

@@ -894,7 +894,7 @@ def evaluate(plan: TransitionPlan, t_s: np.ndarray) -> TrajectorySamples:
         Arrays of shape (m,) and (m, n_dims).
     """
     t = np.maximum(np.asarray(t_s, dtype=float).reshape(-1), 0.0)
-    T, n = plan.duration_s, plan.mp.n_dims
+    T = plan.duration_s
     rows = _rows_at(plan.mp._hermite, t / T)
     e = rows @ plan.coefficients * np.array([[1.0], [1.0 / T], [1.0 / T**2]])
     e[t >= T] = 0.0
