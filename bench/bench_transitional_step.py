@@ -28,12 +28,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from controller.lamps.baselines import limits_from_states  # noqa: E402
-from controller.lamps.transitional import (  # noqa: E402
-    TransitionalRunner,
-    TransitionStatus,
-    learn_transitional,
-    similarity_transform,
-)
+from controller.lamps.transitional import TransitionStatus, similarity_transform  # noqa: E402
+from controller.lamps.transitional_learn import learn_transitional  # noqa: E402
+from controller.lamps.transitional_runner import TransitionalRunner  # noqa: E402
 
 DT_S = 0.001
 

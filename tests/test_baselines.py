@@ -13,7 +13,8 @@ from controller.lamps.baselines import (
     ruckig_transition,
 )
 from controller.lamps.errors import PlanningError
-from controller.lamps.transitional import TrajectorySamples, learn_transitional, rollout, similarity_transform
+from controller.lamps.transitional import TrajectorySamples, rollout, similarity_transform
+from controller.lamps.transitional_learn import learn_transitional
 
 from .test_transitional import human_demo, random_case
 

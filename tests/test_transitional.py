@@ -13,7 +13,6 @@ from controller.lamps.errors import LearningError, PlanningError, SkillFileError
 from controller.lamps.transitional import (
     N_TABLE,
     TransitionalMP,
-    TransitionalRunner,
     TransitionStatus,
     crossing_target_coefficients,
     crossing_window_s,
@@ -21,12 +20,13 @@ from controller.lamps.transitional import (
     forcing_term,
     fundamental_tables,
     gate_and_gains,
-    learn_transitional,
     phase,
     plan_transition,
     rollout,
     similarity_transform,
 )
+from controller.lamps.transitional_learn import learn_transitional
+from controller.lamps.transitional_runner import TransitionalRunner
 
 DT = 0.001
 

@@ -17,7 +17,7 @@ from .periodic import learn_periodic
 from .segmentation import Segmentation, segment
 from .skill import PeriodicEntry, Skill, TransitionalEntry
 from .surface import fit_surface_frame
-from .transitional import learn_transitional
+from .transitional_learn import learn_transitional
 
 log = logging.getLogger(__name__)
 

@@ -36,7 +36,8 @@ from .errors import PlanningError
 from .periodic import periodic_state
 from .periodic_runner import PeriodicRunner
 from .skill import Skill
-from .transitional import TransitionalRunner, TransitionStatus, similarity_transform
+from .transitional import TransitionStatus, similarity_transform
+from .transitional_runner import TransitionalRunner
 
 #: Up to this many stains the visiting order is found by exhaustive search.
 EXACT_ORDER_MAX = 7

@@ -40,17 +40,18 @@ generated transition replays the demonstrated positions (least squares, the
 default) or, classically, fits the forcing target of eq. (13) by locally
 weighted regression.
 
-Public API: :func:`learn_transitional` -> :class:`TransitionalMP`
-(``to_dict`` / ``from_dict``); :func:`plan_transition` -> :class:`TransitionPlan`,
-:func:`evaluate`, :func:`rollout` -> :class:`TrajectorySamples`;
-:class:`TransitionalRunner` (``update(dt_s) -> TransitionStatus``);
-:func:`similarity_transform` for the ``forcing_transform``.
+Public API: :class:`TransitionalMP` (``to_dict`` / ``from_dict``);
+:func:`plan_transition` -> :class:`TransitionPlan`, :func:`evaluate`,
+:func:`rollout` -> :class:`TrajectorySamples`; :func:`similarity_transform`
+for the ``forcing_transform``. Learning is in :mod:`.transitional_learn`
+(:func:`learn_transitional`), the 1 kHz step API in
+:mod:`.transitional_runner` (:class:`TransitionalRunner`,
+``update(dt_s) -> TransitionStatus``).
 """
 
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import NamedTuple
@@ -58,8 +59,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.interpolate import make_lsq_spline
 
-from .derivatives import resample_uniform, smooth_derivatives
-from .errors import LampsError, LearningError, PlanningError, SkillFileError
+from .errors import PlanningError, SkillFileError
 
 #: Steps of the tabulated fundamental solutions over the normalised duration.
 N_TABLE = 2048
@@ -675,107 +675,6 @@ def _array_field(name: str, value: object, ndim: int, shape: tuple[int, ...] | N
 
 
 # --------------------------------------------------------------------------
-# learning
-
-
-def learn_transitional(
-    t_s: np.ndarray,
-    y: np.ndarray,
-    *,
-    n_basis: int = DEFAULT_N_BASIS,
-    p: float = DEFAULT_P,
-    lambda_: float = DEFAULT_LAMBDA,
-    crossing_reach_m: float = DEFAULT_REACH_M,
-    smoothing_window_s: float = 0.08,
-    rate_hz: float | None = None,
-    regression: str = "path",
-) -> TransitionalMP:
-    """Learn a transitional MP from one demonstrated segment.
-
-    The segment is resampled uniformly; its start and end states (the MP's
-    ``demo_start`` / ``demo_goal``) come from smoothed derivatives. The
-    weights are then fitted (default ``regression="path"``) so that the
-    transition generated with those boundary states and the demonstrated
-    duration is closest to the demonstrated positions; or, classically
-    (``"lwr"``), the demonstration is rolled through the error form of
-    eq. (13) to a forcing target that locally weighted regression fits.
-    ``demo_rmse_m`` records how well the result replays the segment.
-
-    Parameters
-    ----------
-    t_s : array, shape (T,)
-        Sample times [s], strictly increasing.
-    y : array, shape (T, n_dims)
-        Positions [m].
-    n_basis : int
-        Number of basis functions N (>= 2).
-    p, lambda_, crossing_reach_m : float
-        See :class:`TransitionalMP`.
-    smoothing_window_s : float
-        ``"path"``: Savitzky-Golay window [s] for the boundary states
-        (:func:`smooth_derivatives`); ``"lwr"``: knot spacing [s] of the
-        quintic spline all four channels come from (:func:`smooth_kinematics`).
-    rate_hz : float, optional
-        Resampling rate [Hz]; default the segment's mean rate.
-    regression : {"path", "lwr"}
-        ``"path"``: least squares on the generated positions
-        (:func:`fit_forcing_to_path`); ``"lwr"``: the classic forcing target of
-        eq. (13) fitted by locally weighted regression (:func:`fit_forcing_lwr`).
-
-    Raises
-    ------
-    LearningError
-        Fewer than :data:`MIN_SAMPLES` samples, shorter than
-        :data:`MIN_DURATION_S`, non-finite or non-increasing samples, or bad parameters.
-    """
-    t = np.asarray(t_s, dtype=float).reshape(-1)
-    y = np.asarray(y, dtype=float)
-    if y.ndim == 1:
-        y = y[:, None]
-    if y.ndim != 2 or len(y) != len(t):
-        raise LearningError(f"transitional segment: y must have shape ({len(t)}, n_dims), got {y.shape}")
-    if len(t) < MIN_SAMPLES:
-        raise LearningError(f"transitional segment too short: {len(t)} samples, need at least {MIN_SAMPLES}")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(y))):
-        raise LearningError("transitional segment contains NaN or inf; every sample must be finite")
-    if np.any(np.diff(t) <= 0):
-        raise LearningError("transitional segment: timestamps must increase strictly")
-    duration = float(t[-1] - t[0])
-    if duration < MIN_DURATION_S:
-        raise LearningError(f"transitional segment too short: {duration:.3f} s, need at least {MIN_DURATION_S} s")
-    if regression not in ("path", "lwr"):
-        raise LearningError(f"regression must be 'path' or 'lwr', got {regression!r}")
-    if not (isinstance(n_basis, int) and n_basis >= 2):
-        raise LearningError(f"n_basis must be an integer >= 2, got {n_basis!r}")
-    if not 1.0 <= p <= 60.0 or not 0.1 <= lambda_ <= 30.0 or not crossing_reach_m > 0:
-        raise LearningError(
-            f"need p in [1, 60], lambda_ in [0.1, 30], crossing_reach_m > 0; got {p}, {lambda_}, {crossing_reach_m}"
-        )
-    tu, yu = resample_uniform(t, y, rate_hz)
-    T = float(tu[-1] - tu[0])
-    s = (tu - tu[0]) / T
-    centres, widths = basis_centres_widths(n_basis, lambda_)
-    if regression == "lwr":
-        kin = np.stack(smooth_kinematics(tu - tu[0], yu, smoothing_window_s), axis=1)  # (m, 4, n)
-        start, goal = kin[0, :3], kin[-1, :3]
-        sigma = crossing_window_s(goal, T, crossing_reach_m)
-        weights = fit_forcing_lwr(s, forcing_target(s, kin, goal, T, p, lambda_, sigma), centres, widths, lambda_)
-    else:
-        try:
-            pos, vel, acc = smooth_derivatives(yu, float(tu[1] - tu[0]), smoothing_window_s)
-        except LampsError as exc:
-            raise LearningError(f"transitional segment: {exc}") from None
-        start, goal = np.stack([pos[0], vel[0], acc[0]]), np.stack([pos[-1], vel[-1], acc[-1]])
-        sigma = crossing_window_s(goal, T, crossing_reach_m)
-        weights = fit_forcing_to_path(s, yu, start, goal, T, p, lambda_, sigma, centres, widths)
-    mp = TransitionalMP(weights, centres, widths, p, lambda_, crossing_reach_m, T, start, goal, goal[0] - start[0])
-    replay = evaluate(plan_transition(mp, start, goal, T), t - t[0])
-    rmse = float(np.sqrt(np.mean(np.sum((replay.position_m - y) ** 2, axis=1))))
-    object.__setattr__(mp, "demo_rmse_m", rmse)  # not yet shared: cheaper than rebuilding the tables
-    return mp
-
-
-# --------------------------------------------------------------------------
 # generalisation: one transition
 
 
@@ -948,108 +847,3 @@ def rollout(
     plan = plan_transition(mp, start, goal, duration_s, forcing_transform)
     k = int(math.ceil(plan.duration_s / dt_s - 1e-9))
     return evaluate(plan, np.arange(k + 1) * dt_s)
-
-
-# --------------------------------------------------------------------------
-# step API
-
-
-class TransitionalRunner:
-    """Ruckig-style stepper: build once, then :meth:`update` once per control cycle.
-
-    After each call, :attr:`position_m`, :attr:`velocity_m_s`,
-    :attr:`acceleration_m_s2` (arrays, shape (n_dims,); updated in place:
-    copy to keep), :attr:`time_s` and :attr:`calculation_duration_us` (wall
-    time of the last update) describe the reference and its cost. From
-    ``t >= T`` on, :meth:`update`
-    returns ``FINISHED`` and the state follows the goal's constant-acceleration
-    extrapolation (continuous with the transition), so the caller can hand
-    over to the next MP ``overrun_s`` into its motion.
-
-    Parameters
-    ----------
-    mp, start, goal, duration_s, forcing_transform
-        As :func:`plan_transition` (which validates them and may raise
-        :class:`PlanningError`).
-    """
-
-    def __init__(
-        self,
-        mp: TransitionalMP,
-        start: object,
-        goal: object,
-        duration_s: float,
-        forcing_transform: np.ndarray | None = None,
-    ) -> None:
-        self.plan = plan_transition(mp, start, goal, duration_s, forcing_transform)
-        p = self.plan
-        self._T = p.duration_s
-        self._n = mp.n_dims
-        self._goal = p.goal
-        self._a = 0.0 if math.isinf(p.sigma_s) else -1.0 / p.sigma_s**2
-        self._scale = np.array([[1.0], [1.0 / self._T], [1.0 / self._T**2]])
-        self._hermite = mp._hermite
-        self._m = mp._hermite.shape[1] // 12
-        self._coefficients = p.coefficients
-        self._state = p.start.copy()
-        self.position_m, self.velocity_m_s, self.acceleration_m_s2 = self._state[0], self._state[1], self._state[2]
-        self.time_s = 0.0
-        self.calculation_duration_us = 0.0
-        self.status = TransitionStatus.WORKING
-
-    @property
-    def duration_s(self) -> float:
-        return self._T
-
-    @property
-    def finished(self) -> bool:
-        return self.status == TransitionStatus.FINISHED
-
-    @property
-    def overrun_s(self) -> float:
-        """Time past the end of the transition [s] (0 while working)."""
-        return max(0.0, self.time_s - self._T)
-
-    def update(self, dt_s: float) -> TransitionStatus:
-        """Advance by ``dt_s`` [s] (> 0, finite); never raises."""
-        t0 = time.perf_counter_ns()
-        status = self._advance(dt_s)
-        self.calculation_duration_us = (time.perf_counter_ns() - t0) * 1e-3
-        return status
-
-    def _advance(self, dt_s: float) -> TransitionStatus:
-        if not (dt_s > 0.0 and dt_s < math.inf):
-            return TransitionStatus.ERROR_INVALID_INPUT
-        t = self.time_s + dt_s
-        self.time_s = t
-        T = self._T
-        u = t - T
-        g = self._goal
-        st = self._state
-        if u >= -1e-9 * T:
-            st[0] = g[0] + u * g[1] + 0.5 * u * u * g[2]
-            st[1] = g[1] + u * g[2]
-            st[2] = g[2]
-            self.status = TransitionStatus.FINISHED
-            return self.status
-        z = t / T * N_TABLE
-        i = int(z)
-        if i >= N_TABLE:
-            i = N_TABLE - 1
-        a = z - i
-        a2 = a * a
-        a3 = a2 * a
-        w = np.array((2 * a3 - 3 * a2 + 1, a3 - 2 * a2 + a, -2 * a3 + 3 * a2, a3 - a2))
-        e = (w @ self._hermite[i].reshape(4, -1)).reshape(3, self._m) @ self._coefficients
-        # crossing target, inline version of crossing_target_coefficients for one time
-        ca = self._a
-        w0 = math.exp(0.5 * ca * u * u)
-        w1 = ca * u * w0
-        w2 = (ca + ca * ca * u * u) * w0
-        coef = np.array(
-            ((1.0, w0 * u, 0.5 * w0 * u * u),
-             (0.0, w1 * u + w0, 0.5 * w1 * u * u + w0 * u),
-             (0.0, w2 * u + 2.0 * w1, 0.5 * w2 * u * u + 2.0 * w1 * u + w0))
-        )
-        np.add(coef @ g, e * self._scale, out=st)
-        return self.status
