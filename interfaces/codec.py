@@ -1,0 +1,65 @@
+"""Bytes <-> messages. One exception for everything that is not a valid message.
+
+``encode(msg) -> bytes`` and ``decode(data, RobotState) -> RobotState``;
+:class:`Decoder` is the reusable form for a hot loop (one msgspec decoder
+built once). Any failure, garbage, truncation, another message type, another
+schema version, a value out of range, raises
+:class:`~interfaces.errors.MessageDecodeError` whose text names the problem.
+"""
+
+from __future__ import annotations
+
+from typing import Generic, TypeVar
+
+import msgspec
+
+from .errors import MessageDecodeError
+from .messages import SCHEMA_VERSION, Message
+
+M = TypeVar("M", bound=Message)
+
+_encoder = msgspec.msgpack.Encoder()
+
+
+def encode(msg: Message) -> bytes:
+    """The msgpack bytes of ``msg``."""
+    return _encoder.encode(msg)
+
+
+class Decoder(Generic[M]):
+    """Decodes payloads of one message type; build once, call per sample."""
+
+    def __init__(self, msg_type: type[M]) -> None:
+        self.msg_type = msg_type
+        self._decoder = msgspec.msgpack.Decoder(msg_type)
+
+    def __call__(self, data: bytes | bytearray | memoryview) -> M:
+        try:
+            msg = self._decoder.decode(data)
+        except (msgspec.DecodeError, ValueError, TypeError) as exc:
+            raise MessageDecodeError(self._explain(data, exc)) from None
+        if msg.version != SCHEMA_VERSION:
+            raise MessageDecodeError(
+                f"{self.msg_type.__name__}: schema version {msg.version}, this build reads {SCHEMA_VERSION}"
+            )
+        return msg
+
+    def _explain(self, data, exc: Exception) -> str:
+        """Say *why* the bytes are not a valid message: other type, other version, or the decoder's reason."""
+        name = self.msg_type.__name__
+        try:
+            raw = msgspec.msgpack.decode(data)
+        except (msgspec.DecodeError, ValueError, TypeError):
+            return f"{name}: not a msgpack message ({exc})"
+        # wire layout: [type tag, fields..., version] (msgspec puts the base's default field last)
+        if isinstance(raw, list) and len(raw) >= 2 and isinstance(raw[0], str):
+            if raw[0] != name:
+                return f"expected a {name}, got a {raw[0]}"
+            if raw[-1] != SCHEMA_VERSION:
+                return f"{name}: schema version {raw[-1]!r}, this build reads {SCHEMA_VERSION}"
+        return f"{name}: {exc}"
+
+
+def decode(data: bytes | bytearray | memoryview, msg_type: type[M]) -> M:
+    """Decode one payload as ``msg_type`` (builds a decoder; use :class:`Decoder` in loops)."""
+    return Decoder(msg_type)(data)

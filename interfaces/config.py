@@ -1,0 +1,146 @@
+"""One configuration loader for every service: a TOML file plus environment overrides.
+
+The file has one table per concern (``[zenoh]``, ``[sim]``, ``[controller]``,
+``[perception]``); each service turns its table into its own frozen
+dataclass. Environment variables override single values without editing the
+file (what compose and tests use):
+
+* ``LAMPS__<SECTION>__<KEY>=<value>`` sets ``[section] key`` (lower-cased);
+  the value is parsed as a TOML value (``500``, ``true``, ``"x"``,
+  ``["tcp/127.0.0.1:7447"]``) and taken as a plain string if it is not one.
+* Shorthands: ``LAMPS_ROBOT_ID``, ``LAMPS_KEY_PREFIX``, ``LAMPS_ZENOH_LISTEN``
+  and ``LAMPS_ZENOH_CONNECT`` (comma-separated endpoints), ``LAMPS_ZENOH_MODE``,
+  ``LAMPS_ZENOH_MULTICAST`` (``true``/``false``).
+
+``[zenoh]`` keys: ``mode`` (``peer`` | ``client`` | ``router``), ``listen``
+and ``connect`` (lists of endpoints such as ``tcp/127.0.0.1:7447``),
+``multicast_scouting`` (default false: it fails in containers and CI),
+``robot_id``, ``key_prefix`` (default ``lamps/<robot_id>``).
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .errors import ConfigError
+from .keys import DEFAULT_ROBOT_ID, Keys
+
+ZENOH_MODES = ("peer", "client", "router")
+_SHORTHANDS = {
+    "LAMPS_ROBOT_ID": ("zenoh", "robot_id"),
+    "LAMPS_KEY_PREFIX": ("zenoh", "key_prefix"),
+    "LAMPS_ZENOH_LISTEN": ("zenoh", "listen"),
+    "LAMPS_ZENOH_CONNECT": ("zenoh", "connect"),
+    "LAMPS_ZENOH_MODE": ("zenoh", "mode"),
+    "LAMPS_ZENOH_MULTICAST": ("zenoh", "multicast_scouting"),
+}
+
+
+@dataclass(frozen=True)
+class ZenohSettings:
+    """How a service joins the Zenoh network and which keys it uses."""
+
+    mode: str = "peer"
+    listen: tuple[str, ...] = ()
+    connect: tuple[str, ...] = ()
+    multicast_scouting: bool = False
+    robot_id: str = DEFAULT_ROBOT_ID
+    key_prefix: str = ""
+
+    def __post_init__(self) -> None:
+        if self.mode not in ZENOH_MODES:
+            raise ConfigError(f"[zenoh] mode must be one of {ZENOH_MODES}, got {self.mode!r}")
+        for name in ("listen", "connect"):
+            value = getattr(self, name)
+            if isinstance(value, str) or not all(isinstance(e, str) and "/" in e for e in value):
+                raise ConfigError(f"[zenoh] {name} must be a list of endpoints like 'tcp/127.0.0.1:7447', got {value!r}")
+            object.__setattr__(self, name, tuple(value))
+        if not isinstance(self.multicast_scouting, bool):
+            raise ConfigError(f"[zenoh] multicast_scouting must be true or false, got {self.multicast_scouting!r}")
+        self.keys  # validates robot_id and key_prefix
+
+    @property
+    def keys(self) -> Keys:
+        return Keys(self.key_prefix) if self.key_prefix else Keys.for_robot(self.robot_id)
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> "ZenohSettings":
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ConfigError(f"[zenoh] unknown key(s) {unknown}; valid: {sorted(known)}")
+        return cls(**dict(table))
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration: ``zenoh`` parsed, every other table raw for its service."""
+
+    zenoh: ZenohSettings = field(default_factory=ZenohSettings)
+    tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    source: str = "defaults"
+
+    def table(self, name: str) -> Mapping[str, Any]:
+        """The ``[name]`` table (empty if absent)."""
+        return self.tables.get(name, {})
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _env_overrides(env: Mapping[str, str]) -> list[tuple[str, str, Any]]:
+    out = []
+    for name, (section, key) in _SHORTHANDS.items():
+        if name in env:
+            raw = env[name]
+            if key in ("listen", "connect"):
+                value: Any = [e.strip() for e in raw.split(",") if e.strip()]
+            else:
+                value = _parse_value(raw)
+            out.append((section, key, value))
+    for name, raw in env.items():
+        if name.startswith("LAMPS__"):
+            parts = name[len("LAMPS__"):].lower().split("__")
+            if len(parts) != 2 or not all(parts):
+                raise ConfigError(f"environment variable {name}: expected LAMPS__<SECTION>__<KEY>")
+            out.append((parts[0], parts[1], _parse_value(raw)))
+    return out
+
+
+def load_config(path: str | os.PathLike | None = None, env: Mapping[str, str] | None = None) -> Config:
+    """Read ``path`` (TOML; None = defaults only), apply ``env`` overrides (default ``os.environ``).
+
+    Raises
+    ------
+    ConfigError
+        Missing or unreadable file, invalid TOML, a table that is not a
+        table, an invalid ``[zenoh]`` value, a malformed override.
+    """
+    env = os.environ if env is None else env
+    data: dict[str, Any] = {}
+    source = "defaults"
+    if path is not None:
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"{p}: no such config file")
+        try:
+            data = tomllib.loads(p.read_text(encoding="utf-8"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+        source = str(p)
+    for name, table in data.items():
+        if not isinstance(table, dict):
+            raise ConfigError(f"{source}: top-level key {name!r} must be a [table], got {type(table).__name__}")
+    for section, key, value in _env_overrides(env):
+        data.setdefault(section, {})[key] = value
+    zenoh = ZenohSettings.from_table(data.pop("zenoh", {}))
+    return Config(zenoh, data, source)

@@ -1,0 +1,312 @@
+"""Typed messages of the LAMPS cell (msgspec Structs, msgpack on the wire).
+
+Every message carries ``version`` (:data:`SCHEMA_VERSION`) and a type tag,
+so a payload of the wrong type or version is rejected on decode
+(:func:`interfaces.codec.decode`), never misread. Structs are encoded as
+msgpack arrays (``array_like``): compact, and floats are IEEE doubles, so
+float vectors round-trip bit-exactly. ``__post_init__`` checks what the
+types cannot: vector lengths, finiteness, ranges. It runs on decode too.
+
+Units are SI; stamps are ``time.monotonic_ns()`` of the sender
+(``stamp_ns``) plus ``time.time_ns()`` (``wall_ns``) where logs need it.
+Poses are ``position_m`` (3,) in the parent frame and ``quat_wxyz`` (4,),
+scalar first (PyBullet's scalar-last order is converted at the sim's edge).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import msgspec
+
+#: Bump when a change could make an old reader misread a new message.
+SCHEMA_VERSION = 1
+
+#: Commands the robot side understands.
+COMMAND_MODES = ("torque", "hold")
+#: Controller phases (DESIGN.md, "Controller phases").
+PHASES = ("INIT", "WAIT_PEERS", "APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE", "PAUSED", "FAULT", "ESTOP")
+#: Image encodings a CameraFrame may carry.
+ENCODINGS = ("rgb8", "bgr8", "mono8", "jpeg", "png")
+_BYTES_PER_PIXEL = {"rgb8": 3, "bgr8": 3, "mono8": 1}
+
+
+def _finite(name: str, values: Sequence[float], length: int | None = None) -> None:
+    if length is not None and len(values) != length:
+        raise ValueError(f"{name} must hold {length} numbers, got {len(values)}")
+    for v in values:
+        if not math.isfinite(v):
+            raise ValueError(f"{name} must be finite, got {v!r}")
+
+
+def _same_length(names: Sequence[str], vectors: Sequence[Sequence[float]]) -> None:
+    n = len(vectors[0])
+    for name, v in zip(names, vectors):
+        if len(v) != n:
+            raise ValueError(f"{name} has {len(v)} entries but {names[0]} has {n}")
+
+
+class Message(msgspec.Struct, frozen=True, kw_only=True, array_like=True, tag=True):
+    """Base of every message. Wire layout: ``[type tag, fields..., version]``."""
+
+    version: int = SCHEMA_VERSION
+
+
+class Pose(msgspec.Struct, frozen=True, array_like=True):
+    """A frame in its parent: ``position_m`` (3,) [m], ``quat_wxyz`` (4,), unit norm."""
+
+    position_m: list[float]
+    quat_wxyz: list[float]
+
+    def __post_init__(self) -> None:
+        _finite("position_m", self.position_m, 3)
+        _finite("quat_wxyz", self.quat_wxyz, 4)
+        norm = math.sqrt(sum(q * q for q in self.quat_wxyz))
+        if abs(norm - 1.0) > 1e-6:
+            raise ValueError(f"quat_wxyz must have unit norm, got {norm:.9g}")
+
+
+class Capabilities(msgspec.Struct, frozen=True, array_like=True):
+    """What the robot side does by itself.
+
+    gravity_compensated : the robot adds gravity torques itself (the real iiwa
+    does); the controller must not add them again. torque_limits_nm : (n,)
+    absolute joint torque limits [Nm]. backend : ``"sim"`` or ``"real"`` (for
+    logs only; controllers must not branch on it).
+    """
+
+    gravity_compensated: bool
+    torque_limits_nm: list[float]
+    backend: str = "sim"
+
+    def __post_init__(self) -> None:
+        _finite("torque_limits_nm", self.torque_limits_nm)
+        if any(v <= 0 for v in self.torque_limits_nm):
+            raise ValueError("torque_limits_nm must be positive")
+
+
+class RobotState(Message, frozen=True):
+    """Robot side -> controller, every step.
+
+    q_rad, dq_rad_s, tau_nm : (n,) joint positions [rad], velocities [rad/s],
+    applied torques [Nm]. wrench_world : (6,) eraser contact force [N] then
+    torque [Nm] in the world frame, acting on the tool. ``seq`` counts steps.
+    """
+
+    seq: int
+    stamp_ns: int
+    q_rad: list[float]
+    dq_rad_s: list[float]
+    tau_nm: list[float]
+    wrench_world: list[float]
+    capabilities: Capabilities
+    wall_ns: int = 0
+
+    def __post_init__(self) -> None:
+        names = ("q_rad", "dq_rad_s", "tau_nm")
+        vectors = (self.q_rad, self.dq_rad_s, self.tau_nm)
+        _same_length(names, vectors)
+        for name, v in zip(names, vectors):
+            _finite(name, v)
+        _finite("wrench_world", self.wrench_world, 6)
+        if len(self.capabilities.torque_limits_nm) != len(self.q_rad):
+            raise ValueError("capabilities.torque_limits_nm must have one entry per joint")
+        if self.seq < 0:
+            raise ValueError(f"seq must be >= 0, got {self.seq}")
+
+
+class TorqueCommand(Message, frozen=True):
+    """Controller -> robot side, answering state ``seq``.
+
+    tau_nm : (n,) joint torques [Nm] (without gravity when the robot
+    compensates it). mode ``"hold"``: brake and hold position, torques ignored.
+    """
+
+    seq: int
+    stamp_ns: int
+    tau_nm: list[float]
+    mode: str = "torque"
+
+    def __post_init__(self) -> None:
+        _finite("tau_nm", self.tau_nm)
+        if self.mode not in COMMAND_MODES:
+            raise ValueError(f"mode must be one of {COMMAND_MODES}, got {self.mode!r}")
+
+
+class CameraIntrinsics(msgspec.Struct, frozen=True, array_like=True):
+    """Pinhole intrinsics [px]: focal lengths, principal point, image size; no distortion."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        _finite("intrinsics", (self.fx, self.fy, self.cx, self.cy))
+        if self.fx <= 0 or self.fy <= 0 or self.width <= 0 or self.height <= 0:
+            raise ValueError("focal lengths and image size must be positive")
+
+
+class CameraFrame(Message, frozen=True):
+    """A camera image with what is needed to use it.
+
+    data : raw pixels row-major (``rgb8``/``bgr8``/``mono8``, size
+    width * height * channels) or a compressed image (``jpeg``/``png``).
+    T_camera_to_world : camera pose (optical frame: x right, y down, z forward).
+    """
+
+    seq: int
+    stamp_ns: int
+    camera: str
+    encoding: str
+    data: bytes
+    intrinsics: CameraIntrinsics
+    T_camera_to_world: Pose
+
+    def __post_init__(self) -> None:
+        if self.encoding not in ENCODINGS:
+            raise ValueError(f"encoding must be one of {ENCODINGS}, got {self.encoding!r}")
+        per_px = _BYTES_PER_PIXEL.get(self.encoding)
+        size = self.intrinsics.width * self.intrinsics.height * (per_px or 0)
+        if per_px is not None and len(self.data) != size:
+            raise ValueError(f"{self.encoding} image of {self.intrinsics.width}x{self.intrinsics.height} "
+                             f"needs {size} bytes, got {len(self.data)}")
+
+
+class StainObservation(msgspec.Struct, frozen=True, array_like=True):
+    """One stain as perception sees it.
+
+    centre_board_m (2,) in the board frame; centre_world_m (3,) in the world
+    (robot base) frame; size_m: larger extent [m]; extent_board_m (2,) along
+    board x and y [m]; remaining: dirt left relative to the first sighting,
+    visible: fraction of the stain not occluded, both in [0, 1]; kappa:
+    wiping of this stain is complete.
+    """
+
+    id: int
+    centre_board_m: list[float]
+    centre_world_m: list[float]
+    size_m: float
+    extent_board_m: list[float]
+    remaining: float
+    visible: float
+    kappa: bool
+
+    def __post_init__(self) -> None:
+        _finite("centre_board_m", self.centre_board_m, 2)
+        _finite("centre_world_m", self.centre_world_m, 3)
+        _finite("extent_board_m", self.extent_board_m, 2)
+        _finite("size_m", (self.size_m,))
+        if self.size_m <= 0:
+            raise ValueError(f"size_m must be positive, got {self.size_m}")
+        for name, v in (("remaining", self.remaining), ("visible", self.visible)):
+            if not 0.0 <= v <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {v!r}")
+
+
+class Stains(Message, frozen=True):
+    """Perception -> controller: the board and its stains.
+
+    T_board_to_world : board frame (origin at a corner, x along the width, y
+    along the height, z out of the board). board_size_m : (2,) width, height.
+    """
+
+    seq: int
+    stamp_ns: int
+    T_board_to_world: Pose
+    board_size_m: list[float]
+    stains: list[StainObservation]
+
+    def __post_init__(self) -> None:
+        _finite("board_size_m", self.board_size_m, 2)
+        ids = [s.id for s in self.stains]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"stain ids must be unique, got {ids}")
+
+
+class LoopTiming(msgspec.Struct, frozen=True, array_like=True):
+    """Statistics of a fixed-rate loop over its last window [us]; counters since start."""
+
+    period_p50_us: float = 0.0
+    period_p99_us: float = 0.0
+    period_max_us: float = 0.0
+    read_p99_us: float = 0.0
+    update_p99_us: float = 0.0
+    write_p99_us: float = 0.0
+    ticks: int = 0
+    overruns: int = 0
+
+
+class ControllerStatus(Message, frozen=True):
+    """Controller -> anyone: phase, what runs, force, timing and counters.
+
+    phase : one of :data:`PHASES`; reason : why (always set in PAUSED, FAULT,
+    ESTOP); current_mp : e.g. ``"periodic 3"``; normal_force_n : measured
+    contact force along the board normal [N]; counters : e.g. dropped samples
+    per key.
+    """
+
+    seq: int
+    stamp_ns: int
+    phase: str
+    reason: str = ""
+    current_mp: str = ""
+    stain_id: int = -1
+    normal_force_n: float = 0.0
+    timing: LoopTiming = msgspec.field(default_factory=LoopTiming)
+    counters: dict[str, int] = msgspec.field(default_factory=dict)
+    wall_ns: int = 0
+
+    def __post_init__(self) -> None:
+        if self.phase not in PHASES:
+            raise ValueError(f"phase must be one of {PHASES}, got {self.phase!r}")
+
+
+class ServiceStatus(Message, frozen=True):
+    """A service's health: what it processed, dropped and why (counters by reason)."""
+
+    service: str
+    seq: int
+    stamp_ns: int
+    counters: dict[str, int] = msgspec.field(default_factory=dict)
+    detail: str = ""
+
+
+class Estop(Message, frozen=True):
+    """Emergency stop (``engaged=True``) or its release (``engaged=False``), with who and why."""
+
+    stamp_ns: int
+    engaged: bool
+    reason: str
+    source: str = ""
+
+
+class SimTruth(Message, frozen=True):
+    """Sim -> tests and reports: the true dirt per stain and the contact force.
+
+    stain_ids and remaining: (k,) stain ids and remaining dirt fraction in
+    [0, 1]; total_dirt: sum of the dirt grid [cell units]; contact_force_n:
+    normal force of the eraser on the board [N].
+    """
+
+    seq: int
+    stamp_ns: int
+    stain_ids: list[int]
+    remaining: list[float]
+    total_dirt: float
+    contact_force_n: float
+
+    def __post_init__(self) -> None:
+        if len(self.stain_ids) != len(self.remaining):
+            raise ValueError(f"{len(self.stain_ids)} stain_ids but {len(self.remaining)} remaining values")
+        _finite("remaining", self.remaining)
+        _finite("total_dirt/contact_force_n", (self.total_dirt, self.contact_force_n))
+
+
+#: Every message type, for decoders and tests.
+MESSAGE_TYPES: tuple[type[Message], ...] = (
+    RobotState, TorqueCommand, CameraFrame, Stains, ControllerStatus, ServiceStatus, Estop, SimTruth,
+)

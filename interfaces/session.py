@@ -1,0 +1,146 @@
+"""Open a Zenoh session from :class:`~interfaces.config.ZenohSettings`, announce the service, read newest samples.
+
+* :func:`zenoh_config` builds the ``zenoh.Config`` (peer mode, explicit
+  endpoints, multicast scouting off unless asked for).
+* :class:`ServiceNode` is a context manager: the session plus the liveliness
+  token ``<prefix>/alive/<service>``; closing it undeclares both.
+* :class:`Latest` is a subscription that keeps only the newest sample (a
+  one-slot ring channel): the Zenoh thread never waits for the loop, and
+  :meth:`Latest.take` never blocks. Bad payloads are counted per reason,
+  logged (rate-limited) and dropped; the caller never sees an exception.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections import Counter
+from typing import Generic, TypeVar
+
+import zenoh
+
+from .codec import Decoder, encode
+from .config import ZenohSettings
+from .errors import MessageDecodeError
+from .keys import Keys
+from .messages import Message
+
+log = logging.getLogger(__name__)
+M = TypeVar("M", bound=Message)
+
+#: At most one log line per key and this many seconds about bad samples.
+BAD_SAMPLE_LOG_PERIOD_S = 5.0
+
+
+def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
+    """The ``zenoh.Config`` for ``settings``."""
+    cfg = zenoh.Config()
+    cfg.insert_json5("mode", json.dumps(settings.mode))
+    cfg.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
+    cfg.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
+    cfg.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
+    return cfg
+
+
+class Latest(Generic[M]):
+    """Newest decoded sample of one key; :meth:`take` returns it once, or None.
+
+    Attributes
+    ----------
+    received : int
+        Payloads taken from the channel (good or bad).
+    bad : collections.Counter
+        Dropped payloads by reason (the decode error's first words).
+    """
+
+    def __init__(self, session: zenoh.Session, key: str, msg_type: type[M]) -> None:
+        self.key = key
+        self._decode = Decoder(msg_type)
+        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
+        self.received = 0
+        self.bad: Counter[str] = Counter()
+        self._last_log = -float("inf")
+
+    def take(self) -> M | None:
+        """The newest valid message not yet taken, or None; never blocks, never raises on bad data."""
+        sample = self._sub.try_recv()
+        if sample is None:
+            return None
+        self.received += 1
+        try:
+            return self._decode(sample.payload.to_bytes())
+        except MessageDecodeError as exc:
+            self._count_bad(str(exc))
+            return None
+
+    def _count_bad(self, reason: str) -> None:
+        self.bad[reason.split(":")[0][:60]] += 1
+        now = time.monotonic()
+        if now - self._last_log >= BAD_SAMPLE_LOG_PERIOD_S:
+            self._last_log = now
+            log.warning("dropped a bad sample on %s (%d so far): %s", self.key, sum(self.bad.values()), reason)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class ServiceNode:
+    """A service's presence on the network: session, liveliness token, publishers, newest-sample readers.
+
+    Use as ``with ServiceNode("sim", settings) as node: ...``.
+    """
+
+    def __init__(self, service: str, settings: ZenohSettings) -> None:
+        self.service = service
+        self.settings = settings
+        self.keys: Keys = settings.keys
+        self._session: zenoh.Session | None = None
+        self._token = None
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._readers: list[Latest] = []
+
+    def __enter__(self) -> "ServiceNode":
+        self._session = zenoh.open(zenoh_config(self.settings))
+        self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def session(self) -> zenoh.Session:
+        if self._session is None:
+            raise RuntimeError(f"ServiceNode {self.service!r} is not open (use it as a context manager)")
+        return self._session
+
+    def publish(self, key: str, msg: Message) -> None:
+        """Encode and put ``msg`` on ``key`` (publisher declared on first use, then reused)."""
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self._publishers[key] = self.session.declare_publisher(key)
+        pub.put(encode(msg))
+
+    def latest(self, key: str, msg_type: type[M]) -> Latest[M]:
+        """A newest-sample reader of ``key`` decoding ``msg_type``."""
+        reader = Latest(self.session, key, msg_type)
+        self._readers.append(reader)
+        return reader
+
+    def alive_services(self, timeout_s: float = 1.0) -> set[str]:
+        """Names of the services whose liveliness tokens are visible now."""
+        prefix = self.keys.alive("x")[:-1]
+        replies = self.session.liveliness().get(self.keys.alive_any, timeout=timeout_s)
+        return {str(r.ok.key_expr)[len(prefix):] for r in replies if r.ok is not None}
+
+    def close(self) -> None:
+        if self._session is None:
+            return
+        for reader in self._readers:
+            reader.close()
+        for pub in self._publishers.values():
+            pub.undeclare()
+        if self._token is not None:
+            self._token.undeclare()
+        self._session.close()
+        self._session = None

@@ -1,0 +1,204 @@
+"""The message contract: exact round trips, one exception for every bad payload, keys, config."""
+
+from __future__ import annotations
+
+import math
+
+import msgspec
+import numpy as np
+import pytest
+
+from interfaces.codec import Decoder, decode, encode
+from interfaces.config import ZenohSettings, load_config
+from interfaces.errors import ConfigError, MessageDecodeError
+from interfaces.keys import Keys
+from interfaces.messages import (
+    MESSAGE_TYPES,
+    SCHEMA_VERSION,
+    CameraFrame,
+    CameraIntrinsics,
+    Capabilities,
+    ControllerStatus,
+    Estop,
+    LoopTiming,
+    Pose,
+    RobotState,
+    ServiceStatus,
+    SimTruth,
+    StainObservation,
+    Stains,
+    TorqueCommand,
+)
+
+RNG = np.random.default_rng(0)
+IDENTITY = Pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])
+
+
+def _floats(n):
+    """Awkward doubles: tiny, huge, negative zero, not representable in float32."""
+    v = RNG.normal(size=n) * 10.0 ** RNG.integers(-300, 300, n)
+    v[0] = -0.0
+    return v.tolist()
+
+
+def samples():
+    cam_int = CameraIntrinsics(615.0, 615.0, 319.5, 239.5, 4, 2)
+    return [
+        RobotState(seq=7, stamp_ns=123, q_rad=_floats(7), dq_rad_s=_floats(7), tau_nm=_floats(7),
+                   wrench_world=_floats(6), capabilities=Capabilities(True, [320.0, 320, 176, 176, 110, 40, 40], "real"),
+                   wall_ns=1_700_000_000_000_000_000),
+        TorqueCommand(seq=7, stamp_ns=124, tau_nm=_floats(7), mode="torque"),
+        CameraFrame(seq=1, stamp_ns=2, camera="board", encoding="rgb8", data=bytes(range(24)), intrinsics=cam_int,
+                    T_camera_to_world=Pose([1.0, 0.2, 0.9], [0.5, 0.5, -0.5, 0.5])),
+        Stains(seq=3, stamp_ns=4, T_board_to_world=IDENTITY, board_size_m=[1.2, 0.9],
+               stains=[StainObservation(2, [0.3, 0.4], [0.8, 0.1, 0.9], 0.07, [0.07, 0.05], 0.4, 0.9, False),
+                       StainObservation(5, [0.9, 0.2], [0.8, -0.5, 0.7], 0.05, [0.05, 0.05], 0.0, 1.0, True)]),
+        ControllerStatus(seq=9, stamp_ns=10, phase="WIPE", current_mp="periodic 1", stain_id=2, normal_force_n=9.8,
+                         timing=LoopTiming(1000.0, 1012.5, 1100.0, 3.0, 40.0, 5.0, 10000, 2),
+                         counters={"bad_state": 1}),
+        ServiceStatus(service="perception", seq=1, stamp_ns=2, counters={"frames": 10, "dropped": 1}, detail="ok"),
+        Estop(stamp_ns=11, engaged=True, reason="operator", source="pendant"),
+        SimTruth(seq=4, stamp_ns=5, stain_ids=[0, 1], remaining=[0.25, 1.0], total_dirt=1234.5, contact_force_n=10.1),
+    ]
+
+
+def test_every_message_type_has_a_sample():
+    assert {type(m) for m in samples()} == set(MESSAGE_TYPES)
+
+
+@pytest.mark.parametrize("msg", samples(), ids=lambda m: type(m).__name__)
+def test_round_trip_is_exact(msg):
+    back = decode(encode(msg), type(msg))
+    assert back == msg
+    for name in msg.__struct_fields__:
+        a, b = getattr(msg, name), getattr(back, name)
+        if isinstance(a, list) and a and isinstance(a[0], float):
+            assert [math.copysign(1, x) for x in a] == [math.copysign(1, x) for x in b]  # -0.0 kept
+            assert np.array_equal(np.array(a).view(np.int64), np.array(b).view(np.int64))  # bit-exact
+
+
+@pytest.mark.parametrize("msg", samples(), ids=lambda m: type(m).__name__)
+def test_wire_layout_is_tag_first_version_last(msg):
+    raw = msgspec.msgpack.decode(encode(msg))
+    assert raw[0] == type(msg).__name__ and raw[-1] == SCHEMA_VERSION
+
+
+@pytest.mark.parametrize("msg", samples(), ids=lambda m: type(m).__name__)
+def test_garbage_and_truncated_payloads_raise_the_one_exception(msg):
+    data = encode(msg)
+    dec = Decoder(type(msg))
+    for bad in (b"", b"\xc1", b"garbage!", bytes(RNG.integers(0, 256, 64, dtype=np.uint8)), data[: len(data) // 2],
+                data[:-1]):
+        with pytest.raises(MessageDecodeError):
+            dec(bad)
+
+
+@pytest.mark.parametrize("msg", samples(), ids=lambda m: type(m).__name__)
+def test_wrong_version_is_rejected_and_named(msg):
+    raw = msgspec.msgpack.decode(encode(msg))
+    raw[-1] = SCHEMA_VERSION + 1
+    with pytest.raises(MessageDecodeError, match=f"schema version {SCHEMA_VERSION + 1}, this build reads"):
+        decode(msgspec.msgpack.encode(raw), type(msg))
+
+
+def test_another_message_type_is_rejected_and_named():
+    cmd = encode(TorqueCommand(seq=1, stamp_ns=1, tau_nm=[0.0] * 7))
+    with pytest.raises(MessageDecodeError, match="expected a RobotState, got a TorqueCommand"):
+        decode(cmd, RobotState)
+
+
+def _patched(msg, index, value):
+    raw = msgspec.msgpack.decode(encode(msg))
+    raw[index] = value
+    return msgspec.msgpack.encode(raw)
+
+
+@pytest.mark.parametrize(
+    "index, value, match",
+    [
+        (3, [0.0, float("nan"), 0.0, 0.0, 0.0, 0.0, 0.0], "tau_nm must be finite"),
+        (3, [0.0, float("inf")] + [0.0] * 5, "tau_nm must be finite"),
+        (4, "position", "mode must be one of"),
+        (3, "seven", "Expected `array`"),
+    ],
+)
+def test_invalid_torque_commands_are_rejected(index, value, match):
+    cmd = TorqueCommand(seq=1, stamp_ns=1, tau_nm=[0.0] * 7)
+    with pytest.raises(MessageDecodeError, match=match):
+        decode(_patched(cmd, index, value), TorqueCommand)
+
+
+def test_inconsistent_robot_state_is_rejected():
+    state = samples()[0]
+    with pytest.raises(MessageDecodeError, match="dq_rad_s has 6 entries but q_rad has 7"):
+        decode(_patched(state, 4, [0.0] * 6), RobotState)
+    with pytest.raises(MessageDecodeError, match="wrench_world must hold 6"):
+        decode(_patched(state, 6, [0.0] * 3), RobotState)
+
+
+def test_constructors_validate_too():
+    with pytest.raises(ValueError, match="unit norm"):
+        Pose([0, 0, 0], [1.0, 1.0, 0, 0])
+    with pytest.raises(ValueError, match="needs 24 bytes"):
+        CameraFrame(seq=0, stamp_ns=0, camera="c", encoding="rgb8", data=b"123",
+                    intrinsics=CameraIntrinsics(1.0, 1.0, 0.0, 0.0, 4, 2), T_camera_to_world=IDENTITY)
+    with pytest.raises(ValueError, match="phase must be one of"):
+        ControllerStatus(seq=0, stamp_ns=0, phase="DANCING")
+    with pytest.raises(ValueError, match="unique"):
+        Stains(seq=0, stamp_ns=0, T_board_to_world=IDENTITY, board_size_m=[1, 1],
+               stains=[samples()[3].stains[0]] * 2)
+
+
+# -------------------------------------------------------------------------- keys and config
+
+
+def test_keys_under_the_prefix():
+    k = Keys.for_robot("cell2")
+    assert k.robot_state == "lamps/cell2/robot/state"
+    assert k.camera_frame("board") == "lamps/cell2/camera/board/frame"
+    assert k.alive("sim") == "lamps/cell2/alive/sim"
+    assert Keys("lab/a").sim_truth == "lab/a/sim/truth"
+    for bad in ("lamps/*", "", "a//b", "lamps/x y"):
+        with pytest.raises(ConfigError, match="chunks"):
+            Keys(bad)
+
+
+def test_config_file_and_environment_overrides(tmp_path):
+    path = tmp_path / "lamps.toml"
+    path.write_text('[zenoh]\nrobot_id = "lab"\nlisten = ["tcp/127.0.0.1:7447"]\n[sim]\nrate_hz = 1000\n')
+    cfg = load_config(path, env={})
+    assert cfg.zenoh.keys.prefix == "lamps/lab" and cfg.zenoh.listen == ("tcp/127.0.0.1:7447",)
+    assert cfg.zenoh.mode == "peer" and cfg.zenoh.multicast_scouting is False
+    assert cfg.table("sim") == {"rate_hz": 1000} and cfg.table("controller") == {}
+    env = {"LAMPS_ZENOH_CONNECT": "tcp/127.0.0.1:1, tcp/127.0.0.1:2", "LAMPS__SIM__RATE_HZ": "500",
+           "LAMPS__SIM__MODE": "lock-step", "LAMPS_KEY_PREFIX": "x/y"}
+    cfg = load_config(path, env=env)
+    assert cfg.zenoh.connect == ("tcp/127.0.0.1:1", "tcp/127.0.0.1:2")
+    assert cfg.table("sim") == {"rate_hz": 500, "mode": "lock-step"}
+    assert cfg.zenoh.keys.prefix == "x/y"
+    assert load_config(None, env={}).zenoh == ZenohSettings()
+
+
+@pytest.mark.parametrize(
+    "text, env, match",
+    [
+        ("[zenoh\n", {}, "not valid TOML"),
+        ("zenoh = 3\n", {}, "must be a \\[table\\]"),
+        ('[zenoh]\nmode = "mesh"\n', {}, "mode must be one of"),
+        ('[zenoh]\nlisten = "tcp/1.2.3.4:1"\n', {}, "list of endpoints"),
+        ("[zenoh]\nport = 1\n", {}, "unknown key"),
+        ("", {"LAMPS_ZENOH_MULTICAST": "maybe"}, "multicast_scouting must be true or false"),
+        ("", {"LAMPS__SIM": "1"}, "LAMPS__<SECTION>__<KEY>"),
+        ("", {"LAMPS_ROBOT_ID": "a b"}, "robot id"),
+    ],
+)
+def test_bad_config_names_the_problem(tmp_path, text, env, match):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=match):
+        load_config(path, env=env)
+
+
+def test_missing_config_file(tmp_path):
+    with pytest.raises(ConfigError, match="no such config file"):
+        load_config(tmp_path / "nope.toml", env={})

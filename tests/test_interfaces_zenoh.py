@@ -1,0 +1,118 @@
+"""Two real Zenoh peers on loopback (multicast off, explicit endpoints, free ports)."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from interfaces.codec import encode
+from interfaces.config import ZenohSettings
+from interfaces.messages import Capabilities, Estop, RobotState, TorqueCommand
+from interfaces.session import ServiceNode
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(predicate, timeout_s: float = 5.0):
+    """Poll ``predicate`` until it returns something truthy (bounded: fails the test after the timeout)."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.01)
+    raise AssertionError(f"condition not met within {timeout_s} s")
+
+
+@pytest.fixture()
+def peers():
+    port = free_port()
+    robot = f"t{port}"
+    a = ServiceNode("sim", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=robot))
+    b = ServiceNode("controller", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=robot))
+    with a, b:
+        wait_for(lambda: "sim" in b.alive_services(0.5))
+        yield a, b
+
+
+def state(seq: int) -> RobotState:
+    return RobotState(seq=seq, stamp_ns=time.monotonic_ns(), q_rad=[0.1 * seq] * 7, dq_rad_s=[0.0] * 7,
+                      tau_nm=[0.0] * 7, wrench_world=[0.0] * 6, capabilities=Capabilities(False, [100.0] * 7))
+
+
+def test_messages_cross_between_two_peers(peers):
+    sim, ctrl = peers
+    states = ctrl.latest(ctrl.keys.robot_state, RobotState)
+    commands = sim.latest(sim.keys.robot_command, TorqueCommand)
+    time.sleep(0.2)  # let the subscriptions propagate
+    sim.publish(sim.keys.robot_state, state(1))
+    got = wait_for(states.take)
+    assert got.seq == 1 and got.q_rad == state(1).q_rad and got.capabilities == state(1).capabilities
+    ctrl.publish(ctrl.keys.robot_command, TorqueCommand(seq=got.seq, stamp_ns=1, tau_nm=[0.5] * 7))
+    cmd = wait_for(commands.take)
+    assert cmd.seq == 1 and cmd.tau_nm == [0.5] * 7
+    assert states.take() is None  # taken once
+
+
+def test_the_reader_keeps_only_the_newest_sample(peers):
+    sim, ctrl = peers
+    states = ctrl.latest(ctrl.keys.robot_state, RobotState)
+    time.sleep(0.2)
+    for seq in range(1, 51):
+        sim.publish(sim.keys.robot_state, state(seq))
+    seen = []
+
+    def newest_is_last():
+        msg = states.take()
+        if msg is not None:
+            seen.append(msg.seq)
+        return seen and seen[-1] == 50
+
+    wait_for(newest_is_last)
+    assert seen == sorted(seen) and len(seen) < 50  # older samples were overwritten, never queued
+    assert states.take() is None
+
+
+def test_bad_samples_are_counted_and_dropped_and_the_reader_goes_on(peers):
+    sim, ctrl = peers
+    states = ctrl.latest(ctrl.keys.robot_state, RobotState)
+    time.sleep(0.2)
+    raw = sim.session.declare_publisher(sim.keys.robot_state)
+    bad_payloads = [b"garbage", encode(state(1))[:-3], encode(Estop(stamp_ns=1, engaged=True, reason="x"))]
+    for payload in bad_payloads:
+        raw.put(payload)
+        time.sleep(0.15)
+        assert states.take() is None
+    assert sum(states.bad.values()) == 3 and states.received == 3
+    assert any("expected a RobotState, got a Estop" in reason for reason in states.bad)
+    sim.publish(sim.keys.robot_state, state(2))
+    assert wait_for(states.take).seq == 2
+    raw.undeclare()
+
+
+def test_liveliness_follows_the_service():
+    port = free_port()
+    robot = f"t{port}"
+    watcher = ServiceNode("tests", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=robot))
+    with watcher:
+        with ServiceNode("perception", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=robot)):
+            wait_for(lambda: "perception" in watcher.alive_services(0.5))
+        wait_for(lambda: "perception" not in watcher.alive_services(0.5))
+
+
+def test_other_prefixes_are_not_heard():
+    port = free_port()
+    a = ServiceNode("sim", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id="cell-a"))
+    b = ServiceNode("controller", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id="cell-b"))
+    with a, b:
+        states = b.latest(b.keys.robot_state, RobotState)
+        time.sleep(0.3)
+        a.publish(a.keys.robot_state, state(1))
+        time.sleep(0.3)
+        assert states.take() is None and states.received == 0
