@@ -153,6 +153,39 @@ def test_missing_output_folder_and_bad_skill(tmp_path, capsys, demo_files):
     assert code == 1 and "not valid JSON" in err
 
 
+@pytest.mark.parametrize(
+    "extra, match",
+    [(["--rate", "0"], "--rate"), (["--rate", "inf"], "--rate"), (["--cycles", "nan"], "cycles_per_stain"),
+     (["--cycles", "-1"], "cycles_per_stain")],
+)
+def test_bad_plan_options_fail_cleanly(skill_file, tmp_path, capsys, extra, match):
+    csv = tmp_path / "ref.csv"
+    code, _, err = run(["plan", str(skill_file), "--stains", "0.3,0.3,0.05", "--csv", str(csv), *extra], capsys)
+    assert code == 1 and match in err and err.startswith("lamps plan: error:")
+    assert not csv.exists()
+
+
+def test_bad_seed_and_stain_count_fail_before_writing(tmp_path, capsys):
+    code, _, err = run(["demo-data", "--seed", "-1", "-o", str(tmp_path / "d.csv")], capsys)
+    assert code == 1 and "seed must be a non-negative integer" in err
+    code, _, err = run(["demo", "--stains", "0", "--out", str(tmp_path / "run")], capsys)
+    assert code == 1 and "n_stains" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_learn_with_plots_on_a_demo_without_transitions(tmp_path, capsys):
+    t = np.arange(800) / 100.0
+    rows = "".join(f"{ti},{0.5 + 0.05 * np.cos(2 * np.pi * ti)},{0.4 + 0.05 * np.sin(2 * np.pi * ti)},0.3\n"
+                   for ti in t)
+    demo = _bad(tmp_path, "circle.csv", "t,x,y,z\n" + rows)
+    code, out, err = run(["learn", demo, "-o", str(tmp_path / "skill.json"), "--plots", str(tmp_path / "fig")],
+                         capsys)
+    assert code == 0, err
+    assert (tmp_path / "skill.json").is_file()
+    assert sorted(p.name for p in (tmp_path / "fig").iterdir()) == ["fig4_reachability.png",
+                                                                     "fig5_segmentation_methods.png"]
+
+
 def test_bad_stains_argument(skill_file, capsys):
     code, _, err = run(["plan", str(skill_file), "--stains", "0.3,0.3"], capsys)
     assert code == 1 and "expected 'x,y,size'" in err

@@ -217,15 +217,15 @@ def learn_main(argv: list[str]) -> int:
         _check_out_parent(a.output)
         demo = read_demo(a.demo)
         skill, seg = learn_skill(demo, method=a.method, progress=Progress())
+        save_skill(a.output, skill)
+        print(_skill_summary(skill))
+        print(f"wrote {a.output}")
         if a.plots:
             from .plots import write_figures
 
             a.plots.mkdir(parents=True, exist_ok=True)
             for path in write_figures(demo, skill, seg, a.plots, progress=Progress()):
                 print(f"wrote {path}")
-        save_skill(a.output, skill)
-        print(_skill_summary(skill))
-        print(f"wrote {a.output}")
         return 0
 
     return _run("learn", p, argv, body)
@@ -279,6 +279,8 @@ def plan_main(argv: list[str]) -> int:
 
         if a.csv:
             _check_out_parent(a.csv)
+        if not 50.0 <= a.rate <= 10000.0:
+            raise LampsError(f"--rate {a.rate!r}: must be between 50 and 10000 Hz")
         skill = load_skill(a.skill)
         try:
             start = np.array([float(v) for v in a.start.split(",")])
@@ -327,8 +329,8 @@ def demo_main(argv: list[str]) -> int:
         from .synth import synthesize_demo
 
         out = a.out or Path("runs") / time.strftime("demo-%Y%m%d-%H%M%S")
-        out.mkdir(parents=True, exist_ok=True)
         s = synthesize_demo(a.stains, a.seed)
+        out.mkdir(parents=True, exist_ok=True)
         print(f"demonstration: {s.demo.n_samples} samples, {s.demo.duration_s:.1f} s, {len(s.strokes)} stains")
         skill, seg = learn_skill(s.demo, progress=Progress())
         acc = frame_accuracy(seg, s.true_periodic)

@@ -86,6 +86,9 @@ class PlannerParams:
         Mean speed of a transition [m/s]; None = as demonstrated.
     min_transition_s : float
         Shortest transition [s].
+    max_transition_speed_m_s : float
+        Cap on a transition's mean speed [m/s]: far stains get longer
+        transitions rather than faster ones.
     order : str
         ``"shortest"`` (reorder to shorten travel) or ``"given"``.
     """
@@ -95,6 +98,7 @@ class PlannerParams:
     max_amplitude_m: float = 0.15
     transition_speed_m_s: float | None = None
     min_transition_s: float = 0.6
+    max_transition_speed_m_s: float = 0.8
     order: str = "shortest"
 
     def __post_init__(self) -> None:
@@ -108,6 +112,8 @@ class PlannerParams:
             raise PlanningError(f"transition_speed_m_s must be in [0.01, 2] m/s, got {self.transition_speed_m_s}")
         if not 0.05 <= self.min_transition_s <= 10:
             raise PlanningError(f"min_transition_s must be in [0.05, 10] s, got {self.min_transition_s}")
+        if not 0.01 <= self.max_transition_speed_m_s <= 2.0:
+            raise PlanningError(f"max_transition_speed_m_s must be in [0.01, 2] m/s, got {self.max_transition_speed_m_s}")
         if self.order not in ("shortest", "given"):
             raise PlanningError(f"order must be 'shortest' or 'given', got {self.order!r}")
 
@@ -280,16 +286,18 @@ def transition_duration(skill: Skill, index: int, move_m: np.ndarray, params: Pl
     ``s (T_d / T)^2`` (docs/transitional_mp.md, section 2). By default ``T``
     keeps that factor at 1, ``T = T_d sqrt(s)``, so the transition is as
     brisk as the human's, no more; a fixed ``transition_speed_m_s`` gives
-    ``T = |move| / speed`` instead. Never shorter than ``min_transition_s``.
+    ``T = |move| / speed`` instead. Never shorter than ``min_transition_s``,
+    never faster on average than ``max_transition_speed_m_s``.
     """
     dist = float(np.linalg.norm(move_m))
+    floor = max(params.min_transition_s, dist / params.max_transition_speed_m_s)
     if params.transition_speed_m_s is not None:
-        return max(params.min_transition_s, dist / params.transition_speed_m_s)
+        return max(floor, dist / params.transition_speed_m_s)
     mp = skill.transitional[index].mp
     d_demo = float(np.linalg.norm(mp.demo_displacement_m))
     if d_demo <= MIN_DEMO_DISPLACEMENT_M or dist < 1e-3:
-        return max(params.min_transition_s, dist / demonstrated_transition_speed(skill))
-    return max(params.min_transition_s, mp.demo_duration_s * float(np.sqrt(dist / d_demo)))
+        return max(floor, dist / demonstrated_transition_speed(skill))
+    return max(floor, mp.demo_duration_s * float(np.sqrt(dist / d_demo)))
 
 
 def demonstrated_transition_speed(skill: Skill) -> float:
@@ -310,9 +318,11 @@ def _pick_transitional(skill: Skill, move_m: np.ndarray) -> tuple[int, np.ndarra
     all of them if there are none. Alike = closest demonstrated displacement
     length (log ratio). The map is ``s R`` with R the rotation taking the
     demonstrated displacement direction onto the new one and s the length
-    ratio. Without a usable demonstrated transition (none learned, or the
-    move is tiny) the forcing is switched off (a zero map): the transition
-    is then the pure third-order target-crossing system.
+    ratio. When no demonstrated transition has a usable direction (all
+    shorter than :data:`MIN_DEMO_DISPLACEMENT_M`) or the move is tiny, the
+    forcing is switched off (a zero map): the transition is then the pure
+    third-order target-crossing system. A skill with no transitional MP at
+    all cannot be planned (PlanningError).
     """
     if not skill.transitional:
         raise PlanningError("the skill has no transitional MP to build a transition from")
@@ -373,12 +383,20 @@ def rollout(
 
     Each stain is wiped until ``is_done(wipe, cycles_done)`` (kappa's stand-in)
     is true; by default after ``cycles_per_stain`` cycles (default: the mean
-    demonstrated count, at least 2).
+    demonstrated count, at least 2); then, unless it is the last, until the
+    phase heads for the next stain (:func:`exit_phase_delay`). The first
+    sample is ``start`` at t = 0; the rollout ends on the last stain's
+    periodic MP (lifting off and retreating are the controller's).
     """
     if not 1e-4 <= dt_s <= 0.02:
         raise PlanningError(f"dt_s must be in [0.0001, 0.02] s, got {dt_s}")
     if is_done is None:
-        n = cycles_per_stain or max(2.0, float(np.mean([e.n_cycles for e in skill.periodic])))
+        if cycles_per_stain is None:
+            n = max(2.0, float(np.mean([e.n_cycles for e in skill.periodic])))
+        elif np.isfinite(cycles_per_stain) and 0 < cycles_per_stain <= 1000:
+            n = float(cycles_per_stain)
+        else:
+            raise PlanningError(f"cycles_per_stain must be in (0, 1000], got {cycles_per_stain!r}")
         is_done = lambda wipe, cycles: cycles >= n  # noqa: E731
     out_t, out_p, out_v, out_a, out_kind, out_stain = [], [], [], [], [], []
     junctions, specs = [], []
@@ -393,7 +411,6 @@ def rollout(
         out_kind.append(kind)
         out_stain.append(stain_id)
 
-    start_xy = state[0].copy()
     next_centres = {a.stain.id: b.stain.centre_m for a, b in zip(plan_.wipes, plan_.wipes[1:])}
     for wipe in plan_.wipes:
         spec = plan_transition(skill, plan_, wipe, state)
@@ -406,6 +423,8 @@ def rollout(
             forcing_transform=spec.forcing_transform,
         )
         junctions.append(len(out_t))
+        if not out_t:
+            record(trans, "transitional", wipe.stain.id)  # the start state, t = 0
         while trans.update(dt_s) == TransitionStatus.WORKING:
             t += dt_s
             record(trans, "transitional", wipe.stain.id)
@@ -430,8 +449,9 @@ def rollout(
             periodic.update(dt_s)
             t += dt_s
             record(periodic, "periodic", wipe.stain.id)
-        towards = next_centres.get(wipe.stain.id, start_xy)
-        leave_at = periodic.phase_unwrapped_rad + exit_phase_delay(skill, wipe, periodic.phase_rad, towards)
+        towards = next_centres.get(wipe.stain.id)
+        delay = 0.0 if towards is None else exit_phase_delay(skill, wipe, periodic.phase_rad, towards)
+        leave_at = periodic.phase_unwrapped_rad + delay
         while periodic.phase_unwrapped_rad < leave_at:
             periodic.update(dt_s)
             t += dt_s

@@ -7,6 +7,7 @@ returns the path it wrote; files are written atomically.
 from __future__ import annotations
 
 import io
+import logging
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,6 +24,7 @@ from .segmentation import Segmentation, segment  # noqa: E402
 from .skill import Skill  # noqa: E402
 
 TRANSITIONAL_COLOUR = "0.6"
+log = logging.getLogger(__name__)
 
 
 def _save(fig, path: Path) -> Path:
@@ -107,16 +109,25 @@ def write_figures(
     folder: Path,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> list[Path]:
-    """Write Figs. 4-7 into ``folder``; returns the paths."""
+    """Write Figs. 4-7 into ``folder``; returns the paths.
+
+    Figs. 6 and 7 need a learned transitional MP; without one they are
+    skipped (logged), the others are still written.
+    """
     from .plots_mp import figure_transition_comparison, figure_transition_phases
 
     folder = Path(folder)
     jobs = [
         lambda: figure_reachability(seg, folder / "fig4_reachability.png"),
         lambda: figure_segmentation_comparison(demo, seg, folder / "fig5_segmentation_methods.png"),
-        lambda: figure_transition_comparison(demo, skill, seg, folder / "fig6_transition_vs_target_crossing.png"),
-        lambda: figure_transition_phases(skill, folder / "fig7_transition_entry_phases.png"),
     ]
+    if skill.transitional:
+        jobs += [
+            lambda: figure_transition_comparison(demo, skill, seg, folder / "fig6_transition_vs_target_crossing.png"),
+            lambda: figure_transition_phases(skill, folder / "fig7_transition_entry_phases.png"),
+        ]
+    else:
+        log.warning("the skill has no transitional MP: Figs. 6 and 7 are not drawn")
     paths = []
     for k, job in enumerate(jobs):
         if progress is not None:

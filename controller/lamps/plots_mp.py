@@ -19,7 +19,7 @@ from .demo import Demonstration
 from .errors import PlanningError
 from .periodic import periodic_state
 from .periodic_runner import rollout as periodic_rollout
-from .planner import demonstrated_transition_speed
+from .planner import PlannerParams, transition_duration
 from .plots import _save, plt
 from .segmentation import Segmentation
 from .skill import PeriodicEntry, Skill, TransitionalEntry
@@ -31,16 +31,23 @@ DT_S = 0.001
 CONTEXT_S = 0.6
 
 
-def _neighbours(skill: Skill) -> tuple[PeriodicEntry, TransitionalEntry, PeriodicEntry]:
-    """The first learned transition that joins two periodic MPs, with those two MPs."""
+def _neighbours(skill: Skill) -> tuple[PeriodicEntry, TransitionalEntry, PeriodicEntry, str]:
+    """The first learned transition that joins two periodic MPs, with those two MPs and a caption note.
+
+    Without such a transition (one stain, or transitions only at the ends),
+    the first learned transition is mapped between the first and the last
+    periodic MP, and the note says so.
+    """
     by_segment = {e.segment: e for e in skill.periodic}
     for tr in skill.transitional:
         before, after = by_segment.get(tr.segment - 1), by_segment.get(tr.segment + 1)
         if before is not None and after is not None:
-            return before, tr, after
-    if len(skill.periodic) >= 1 and skill.transitional:
-        return skill.periodic[0], skill.transitional[0], skill.periodic[-1]
-    raise PlanningError("the skill has no transitional MP to plot")
+            return before, tr, after, f"demonstrated segment {tr.segment}"
+    if not skill.transitional:
+        raise PlanningError("the skill has no transitional MP to plot")
+    tr = skill.transitional[0]
+    note = f"no transition between two stains was demonstrated: segment {tr.segment} mapped onto this move"
+    return skill.periodic[0], tr, skill.periodic[-1], note
 
 
 def _leaving_state(entry: PeriodicEntry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -52,8 +59,9 @@ def _entering_state(entry: PeriodicEntry) -> tuple[np.ndarray, np.ndarray, np.nd
     return periodic_state(entry.mp, entry.mp.phase_start_rad)
 
 
-def _duration(skill: Skill, start: np.ndarray, goal: np.ndarray) -> float:
-    return max(0.6, float(np.linalg.norm(goal - start)) / demonstrated_transition_speed(skill))
+def _duration(skill: Skill, tr: TransitionalEntry, start: np.ndarray, goal: np.ndarray) -> float:
+    """The duration the planner would give this transition [s]."""
+    return transition_duration(skill, skill.transitional.index(tr), goal - start, PlannerParams())
 
 
 def _with_context(before: PeriodicEntry, after: PeriodicEntry, entry_phase: float, tr: TrajectorySamples):
@@ -78,9 +86,9 @@ def figure_transition_comparison(demo: Demonstration, skill: Skill, seg: Segment
     second-order baseline starts from (y0, v0) only, so its acceleration
     jumps at t = 0 and again at t = T; the transitional MP does not.
     """
-    before, tr_entry, after = _neighbours(skill)
+    before, tr_entry, after, note = _neighbours(skill)
     start, goal = _leaving_state(before), _entering_state(after)
-    T = _duration(skill, start[0], goal[0])
+    T = _duration(skill, tr_entry, start[0], goal[0])
     s = seg.segments[tr_entry.segment]
     y_demo = skill.surface.surface_from_world(demo.position_m[s.start : s.end])[:, :2]
     tc_mp = learn_target_crossing_dmp(demo.t_s[s.start : s.end], y_demo)
@@ -117,7 +125,7 @@ def figure_transition_comparison(demo: Demonstration, skill: Skill, seg: Segment
             axes[r, d].axvline(0.0, color="k", lw=0.5)
             axes[r, d].axvline(T, color="k", lw=0.5)
     axes[0, 0].legend(loc="best", fontsize=8)
-    fig.suptitle("Transition between two periodic MPs (green: previous, gold: next)")
+    fig.suptitle(f"Transition between two periodic MPs (green: previous, gold: next; {note})")
     return _save(fig, path)
 
 
@@ -126,7 +134,7 @@ def figure_transition_phases(skill: Skill, path: Path, n_phases: int = 4) -> Pat
 
     Top: paths in the surface plane; bottom: acceleration magnitude over time.
     """
-    before, tr_entry, after = _neighbours(skill)
+    before, tr_entry, after, note = _neighbours(skill)
     start = _leaving_state(before)
     mp = after.mp
     phases = mp.phase_start_rad + np.arange(n_phases) * 2 * np.pi / n_phases
@@ -134,7 +142,7 @@ def figure_transition_phases(skill: Skill, path: Path, n_phases: int = 4) -> Pat
     fig, axes = plt.subplots(2, n_phases, figsize=(4 * n_phases, 7))
     for k, phi in enumerate(phases):
         goal = periodic_state(mp, phi)
-        T = _duration(skill, start[0], goal[0])
+        T = _duration(skill, tr_entry, start[0], goal[0])
         M = similarity_transform(tr_entry.mp.demo_displacement_m, goal[0] - start[0])
         tr = transitional_rollout(tr_entry.mp, start, goal, T, dt_s=DT_S, forcing_transform=M)
         t, rows = _with_context(before, after, phi, tr)
@@ -154,5 +162,5 @@ def figure_transition_phases(skill: Skill, path: Path, n_phases: int = 4) -> Pat
     axes[0, 0].set_ylabel("surface y [m]")
     axes[1, 0].set_ylabel("|acceleration| [m/s²]")
     axes[0, 0].legend(loc="best", fontsize=8)
-    fig.suptitle("Transitional MP into the next periodic MP at different entry phases")
+    fig.suptitle(f"Transitional MP into the next periodic MP at different entry phases ({note})")
     return _save(fig, path)

@@ -119,6 +119,8 @@ def synthesize_demo(
         raise DemoError(f"rate_hz must be between 20 and 2000 Hz, got {rate_hz!r}")
     if not 0.0 <= noise_m <= 0.01:
         raise DemoError(f"noise_m must be between 0 and 0.01 m, got {noise_m!r}")
+    if not (isinstance(seed, (int, np.integer)) and seed >= 0):
+        raise DemoError(f"seed must be a non-negative integer, got {seed!r}")
     rng = np.random.default_rng(seed)
     rate = float(rate_hz) if rate_hz is not None else float(rng.uniform(100.0, 200.0))
     strokes = _draw_strokes(int(n_stains), rng)
