@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "learn": ("controller.lamps.cli:learn_main", "segment and learn a demonstration into a skill file"),
     "plan": ("controller.lamps.cli:plan_main", "plan and roll out a skill over given stains"),
+    "sim": ("sim.cli:main", "the simulated robot, board and camera as a Zenoh service"),
 }
 
 

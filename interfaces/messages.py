@@ -90,8 +90,12 @@ class RobotState(Message, frozen=True):
     """Robot side -> controller, every step.
 
     q_rad, dq_rad_s, tau_nm : (n,) joint positions [rad], velocities [rad/s],
-    applied torques [Nm]. wrench_world : (6,) eraser contact force [N] then
-    torque [Nm] in the world frame, acting on the tool. ``seq`` counts steps.
+    applied joint torques [Nm] (everything the joints exert, including the
+    robot's own gravity compensation when it has one). wrench_world : (6,)
+    contact force [N] then torque [Nm] about the pad centre (TCP) that the
+    board exerts on the eraser, world axes. ``seq`` counts steps;
+    ``robot_time_ns`` is the robot side's own clock (simulated time in the
+    sim), which a lock-step controller uses as its time base.
     """
 
     seq: int
@@ -101,6 +105,7 @@ class RobotState(Message, frozen=True):
     tau_nm: list[float]
     wrench_world: list[float]
     capabilities: Capabilities
+    robot_time_ns: int = 0
     wall_ns: int = 0
 
     def __post_init__(self) -> None:
@@ -156,6 +161,8 @@ class CameraFrame(Message, frozen=True):
     data : raw pixels row-major (``rgb8``/``bgr8``/``mono8``, size
     width * height * channels) or a compressed image (``jpeg``/``png``).
     T_camera_to_world : camera pose (optical frame: x right, y down, z forward).
+    robot_time_ns : the robot side's clock at the moment shown (sim time for
+    simulated frames, 0 when unknown).
     """
 
     seq: int
@@ -165,6 +172,7 @@ class CameraFrame(Message, frozen=True):
     data: bytes
     intrinsics: CameraIntrinsics
     T_camera_to_world: Pose
+    robot_time_ns: int = 0
 
     def __post_init__(self) -> None:
         if self.encoding not in ENCODINGS:
@@ -266,13 +274,14 @@ class ControllerStatus(Message, frozen=True):
 
 
 class ServiceStatus(Message, frozen=True):
-    """A service's health: what it processed, dropped and why (counters by reason)."""
+    """A service's health: what it processed, dropped and why (counters by reason), its loop timing."""
 
     service: str
     seq: int
     stamp_ns: int
     counters: dict[str, int] = msgspec.field(default_factory=dict)
     detail: str = ""
+    timing: LoopTiming = msgspec.field(default_factory=LoopTiming)
 
 
 class Estop(Message, frozen=True):
@@ -289,7 +298,10 @@ class SimTruth(Message, frozen=True):
 
     stain_ids and remaining: (k,) stain ids and remaining dirt fraction in
     [0, 1]; total_dirt: sum of the dirt grid [cell units]; contact_force_n:
-    normal force of the eraser on the board [N].
+    normal force of the eraser on the board [N]. centres_board_m and
+    sizes_m: (k, 2) true stain centres in the board frame and (k,) their
+    larger extents [m]; T_board_to_world: the board pose (tests compare
+    perception against these).
     """
 
     seq: int
@@ -298,6 +310,10 @@ class SimTruth(Message, frozen=True):
     remaining: list[float]
     total_dirt: float
     contact_force_n: float
+    robot_time_ns: int = 0
+    centres_board_m: list[list[float]] = msgspec.field(default_factory=list)
+    sizes_m: list[float] = msgspec.field(default_factory=list)
+    T_board_to_world: Pose | None = None
 
     def __post_init__(self) -> None:
         if len(self.stain_ids) != len(self.remaining):

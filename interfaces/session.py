@@ -8,14 +8,17 @@
   one-slot ring channel): the Zenoh thread never waits for the loop, and
   :meth:`Latest.take` never blocks. Bad payloads are counted per reason,
   logged (rate-limited) and dropped; the caller never sees an exception.
+* :class:`Inbox` keeps every sample in arrival order (bounded) and lets a
+  loop *wait* for the next one with a timeout: what a lock-step peer needs.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from typing import Generic, TypeVar
 
 import zenoh
@@ -59,8 +62,8 @@ class Latest(Generic[M]):
         self._decode = Decoder(msg_type)
         self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
         self.received = 0
-        self.bad: Counter[str] = Counter()
-        self._last_log = -float("inf")
+        self._bad = _BadSamples(key)
+        self.bad = self._bad.bad
 
     def take(self) -> M | None:
         """The newest valid message not yet taken, or None; never blocks, never raises on bad data."""
@@ -71,18 +74,72 @@ class Latest(Generic[M]):
         try:
             return self._decode(sample.payload.to_bytes())
         except MessageDecodeError as exc:
-            self._count_bad(str(exc))
+            self._bad.count(str(exc))
             return None
 
-    def _count_bad(self, reason: str) -> None:
+    def close(self) -> None:
+        if self._sub is not None:
+            self._sub.undeclare()
+            self._sub = None
+
+
+class _BadSamples:
+    """Counts dropped payloads by reason and logs at most every few seconds."""
+
+    def __init__(self, key: str) -> None:
+        self.key = key
+        self.bad: Counter[str] = Counter()
+        self._last_log = -float("inf")
+
+    def count(self, reason: str) -> None:
         self.bad[reason.split(":")[0][:60]] += 1
         now = time.monotonic()
         if now - self._last_log >= BAD_SAMPLE_LOG_PERIOD_S:
             self._last_log = now
             log.warning("dropped a bad sample on %s (%d so far): %s", self.key, sum(self.bad.values()), reason)
 
+
+class Inbox(Generic[M]):
+    """Decoded samples of one key in arrival order (the oldest dropped beyond ``maxlen``); :meth:`get` waits.
+
+    Decoding happens in Zenoh's callback thread; bad payloads are counted in
+    :attr:`bad` and dropped there.
+    """
+
+    def __init__(self, session: zenoh.Session, key: str, msg_type: type[M], maxlen: int = 64) -> None:
+        self.key = key
+        self._decode = Decoder(msg_type)
+        self._queue: deque[M] = deque(maxlen=maxlen)
+        self._ready = threading.Condition()
+        self._bad = _BadSamples(key)
+        self.bad = self._bad.bad
+        self.received = 0
+        self._sub = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            msg = self._decode(sample.payload.to_bytes())
+        except MessageDecodeError as exc:
+            with self._ready:
+                self.received += 1
+            self._bad.count(str(exc))
+            return
+        with self._ready:
+            self.received += 1
+            self._queue.append(msg)
+            self._ready.notify()
+
+    def get(self, timeout_s: float) -> M | None:
+        """The oldest sample not yet taken, waiting up to ``timeout_s``; None on timeout."""
+        with self._ready:
+            if not self._queue and not self._ready.wait_for(lambda: bool(self._queue), timeout_s):
+                return None
+            return self._queue.popleft()
+
     def close(self) -> None:
-        self._sub.undeclare()
+        if self._sub is not None:
+            self._sub.undeclare()
+            self._sub = None
 
 
 class ServiceNode:
@@ -98,7 +155,7 @@ class ServiceNode:
         self._session: zenoh.Session | None = None
         self._token = None
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._readers: list[Latest] = []
+        self._readers: list[Latest | Inbox] = []
 
     def __enter__(self) -> "ServiceNode":
         self._session = zenoh.open(zenoh_config(self.settings))
@@ -124,6 +181,12 @@ class ServiceNode:
     def latest(self, key: str, msg_type: type[M]) -> Latest[M]:
         """A newest-sample reader of ``key`` decoding ``msg_type``."""
         reader = Latest(self.session, key, msg_type)
+        self._readers.append(reader)
+        return reader
+
+    def inbox(self, key: str, msg_type: type[M], maxlen: int = 64) -> Inbox[M]:
+        """An in-order reader of ``key`` that can wait for the next sample."""
+        reader = Inbox(self.session, key, msg_type, maxlen)
         self._readers.append(reader)
         return reader
 

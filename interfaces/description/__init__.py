@@ -1,0 +1,23 @@
+"""The robot description shared by the simulator and the controller.
+
+``iiwa14_eraser.urdf`` (next to this file) is the only description of the
+arm: PyBullet and Pinocchio load the same file, so the sim and the
+controller agree on kinematics, limits and inertia. See the file's header
+for where each number comes from.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+#: The KUKA LBR iiwa 14 R820 with the eraser on its flange.
+URDF_PATH: Path = Path(__file__).with_name("iiwa14_eraser.urdf")
+
+#: Actuated joints, base to flange.
+JOINT_NAMES: tuple[str, ...] = tuple(f"iiwa_joint_{i}" for i in range(1, 8))
+#: Link carrying the eraser's collision box (the part that touches the board).
+ERASER_LINK = "eraser"
+#: Frame at the centre of the felt pad surface, z out of the pad.
+TCP_FRAME = "eraser_tcp"
+#: Felt pad size [m]: along the tool x axis, along the tool y axis.
+PAD_SIZE_M: tuple[float, float] = (0.12, 0.05)

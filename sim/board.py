@@ -1,0 +1,127 @@
+"""The whiteboard's pose and size, and the check that the arm can wipe it.
+
+Board frame (DESIGN.md): origin at a corner, x along the width, y along the
+height, z the outward normal; the board's front face is z = 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from interfaces.errors import ConfigError
+from interfaces.robot_model import IkError, RobotModel
+from interfaces.transforms import matrix_from_quat_wxyz, transform
+
+from .params import BoardParams
+
+#: Shoulder (joint 2 axis) of the iiwa 14 in the world frame [m].
+SHOULDER_M = np.array([0.0, 0.0, 0.36])
+#: The robot must be at least this far in front of the board plane [m].
+MIN_SHOULDER_CLEARANCE_M = 0.1
+#: Seed posture for inverse kinematics (elbow up, wrist bent).
+SEED_Q_RAD = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0])
+
+_PRESETS = {
+    # vertical board 0.68 m in front of the robot, x_board = -y_world, y_board = +z_world, z_board = -x_world
+    "wall": dict(size_m=(0.8, 0.6), origin_m=(0.68, 0.4, 0.25),
+                 R=np.column_stack([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])),
+    # horizontal board 0.15 m above the base, x_board = -y_world, y_board = +x_world, z_board = +z_world
+    "table": dict(size_m=(0.7, 0.5), origin_m=(0.30, 0.35, 0.15),
+                  R=np.column_stack([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])),
+}
+
+
+@dataclass(frozen=True)
+class Board:
+    """A board: ``T_board_to_world`` (4, 4), ``size_m`` (2,) width and height, ``thickness_m``."""
+
+    T_board_to_world: np.ndarray
+    size_m: np.ndarray
+    thickness_m: float
+
+    @property
+    def R(self) -> np.ndarray:
+        return self.T_board_to_world[:3, :3]
+
+    @property
+    def origin_m(self) -> np.ndarray:
+        return self.T_board_to_world[:3, 3]
+
+    @property
+    def normal_world(self) -> np.ndarray:
+        """(3,) outward unit normal."""
+        return self.R[:, 2]
+
+    @property
+    def centre_world_m(self) -> np.ndarray:
+        return self.world_from_board(self.size_m / 2.0)
+
+    def world_from_board(self, xy: np.ndarray) -> np.ndarray:
+        """World points (..., 3) of board-plane points ``xy`` (..., 2) [m]."""
+        xy = np.asarray(xy, float)
+        return self.origin_m + xy[..., :1] * self.R[:, 0] + xy[..., 1:2] * self.R[:, 1]
+
+    def board_from_world(self, p: np.ndarray) -> np.ndarray:
+        """Board-frame coordinates (..., 3) of world points ``p`` (..., 3)."""
+        return (np.asarray(p, float) - self.origin_m) @ self.R
+
+    def tool_rotation(self) -> np.ndarray:
+        """(3, 3) tool orientation facing the board: tool z into the board, pad's long side along board x."""
+        return np.column_stack([self.R[:, 0], -self.R[:, 1], -self.R[:, 2]])
+
+
+def board_from_params(params: BoardParams) -> Board:
+    """The board of a preset or a custom pose (no reachability check; see :func:`check_board`)."""
+    if params.preset == "custom":
+        R = matrix_from_quat_wxyz(np.array(params.quat_wxyz))
+        origin, size = np.array(params.origin_m), np.array(params.size_m)
+    else:
+        preset = _PRESETS[params.preset]
+        R, origin = preset["R"], np.array(preset["origin_m"])
+        size = np.array(params.size_m if params.size_m is not None else preset["size_m"])
+    return Board(transform(R, origin), size, params.thickness_m)
+
+
+def wipe_region(board: Board, margin_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` (2,) board-frame corners of the area where stains may lie."""
+    lo, hi = np.full(2, margin_m), board.size_m - margin_m
+    if np.any(hi <= lo):
+        raise ConfigError(f"board {board.size_m.tolist()} m leaves no room for stains with a margin of {margin_m} m")
+    return lo, hi
+
+
+def check_board(board: Board, margin_m: float, model: RobotModel | None = None) -> None:
+    """Raise :class:`ConfigError` if the arm cannot wipe the board.
+
+    The robot's shoulder must be at least 0.1 m in front of the board, and
+    the pad must reach the centre and the four corners of the stain region
+    flat on the board within the joint limits.
+    """
+    clearance = float((SHOULDER_M - board.origin_m) @ board.normal_world)
+    if clearance < MIN_SHOULDER_CLEARANCE_M:
+        raise ConfigError(
+            f"impossible board pose: the robot's shoulder is {clearance:.2f} m in front of the board "
+            f"(needs >= {MIN_SHOULDER_CLEARANCE_M} m; is the board behind the robot or facing away?)")
+    model = model or RobotModel()
+    lo, hi = wipe_region(board, margin_m)
+    R = board.tool_rotation()
+    for name, xy in (("centre", (lo + hi) / 2), ("corner lo-lo", lo), ("corner hi-lo", (hi[0], lo[1])),
+                     ("corner hi-hi", hi), ("corner lo-hi", (lo[0], hi[1]))):
+        p = board.world_from_board(np.array(xy))
+        try:
+            model.solve_ik(p, R, SEED_Q_RAD, tol_m=1e-3)
+        except IkError as exc:
+            raise ConfigError(f"impossible board pose: the eraser cannot reach the stain region's {name} "
+                              f"at {np.round(p, 3).tolist()} m ({exc})") from None
+
+
+def start_configuration(board: Board, standoff_m: float, model: RobotModel | None = None) -> np.ndarray:
+    """(7,) joint positions with the pad facing the board centre ``standoff_m`` off its surface."""
+    model = model or RobotModel()
+    p = board.centre_world_m + standoff_m * board.normal_world
+    try:
+        return model.solve_ik(p, board.tool_rotation(), SEED_Q_RAD)
+    except IkError as exc:
+        raise ConfigError(f"impossible board pose: no start pose facing the board centre ({exc})") from None

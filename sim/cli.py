@@ -1,0 +1,146 @@
+"""``lamps sim``: the simulated robot side of the cell as a Zenoh service.
+
+Configuration comes from ``--config FILE`` (TOML, ``[zenoh]`` and ``[sim]``
+tables, see :mod:`sim.params`), then ``LAMPS_*`` environment variables
+(:mod:`interfaces.config`), then the options below (highest priority).
+A broken config file or an impossible board pose is a one-line error and
+exit code 1 before anything starts; Ctrl-C or SIGTERM stops it cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+
+from interfaces.config import load_config
+from interfaces.errors import InterfaceError
+
+SERVICE = "sim"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="lamps sim",
+        description="PyBullet iiwa 14 with an eraser, a whiteboard with dirt and a camera, served over Zenoh. "
+                    "Options override the config file, which overrides the defaults.")
+    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh] and [sim] tables")
+    p.add_argument("--mode", choices=("lockstep", "realtime"),
+                   help="lockstep: step after each answering command (deterministic); realtime: 1 kHz wall clock")
+    p.add_argument("--seed", type=int, help="seed of the stains (count, places, shapes)")
+    p.add_argument("--stains", type=int, metavar="K", help="number of random stains")
+    p.add_argument("--board", choices=("wall", "table"), help="board preset: vertical wall or horizontal table")
+    p.add_argument("--gravity-compensated", action="store_true", default=None,
+                   help="the robot adds gravity torques itself (like the real iiwa); declared in robot/state")
+    p.add_argument("--stale-limit", type=float, metavar="S",
+                   help="realtime: brake when the newest command is older than this [s] (default 0.02)")
+    p.add_argument("--max-steps", type=int, metavar="N", help="stop after N physics steps (default: run until stopped)")
+    p.add_argument("--no-camera", action="store_true", help="do not render camera frames")
+    p.add_argument("--camera-size", metavar="WxH", help="camera resolution, e.g. 320x240 (default 640x480)")
+    p.add_argument("--camera-rate", type=float, metavar="HZ", help="camera frame rate (default 10)")
+    p.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (repeatable)")
+    p.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint to connect to (repeatable)")
+    p.add_argument("--robot-id", help="key prefix becomes lamps/<robot-id>")
+    p.add_argument("--check", action="store_true", help="validate the configuration and the board pose, then exit")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    return p
+
+
+def _overrides(a: argparse.Namespace) -> tuple[dict, dict, dict]:
+    sim: dict = {}
+    camera: dict = {}
+    zenoh: dict = {}
+    for key, value in (("mode", a.mode), ("seed", a.seed), ("gravity_compensated", a.gravity_compensated),
+                       ("stale_limit_s", a.stale_limit), ("max_steps", a.max_steps)):
+        if value is not None:
+            sim[key] = value
+    if a.stains is not None:
+        sim.setdefault("dirt", {})["stains"] = a.stains
+    if a.board is not None:
+        sim["board"] = {"preset": a.board}
+    if a.no_camera:
+        camera["enabled"] = False
+    if a.camera_size is not None:
+        try:
+            w, h = (int(v) for v in a.camera_size.lower().split("x"))
+        except ValueError:
+            raise InterfaceError(f"--camera-size must look like 640x480, got {a.camera_size!r}") from None
+        camera.update(width=w, height=h)
+    if a.camera_rate is not None:
+        camera["rate_hz"] = a.camera_rate
+    for key, value in (("listen", a.listen), ("connect", a.connect), ("robot_id", a.robot_id)):
+        if value is not None:
+            zenoh[key] = value
+    return sim, camera, zenoh
+
+
+def _merge(base: dict, extra: dict) -> dict:
+    out = dict(base)
+    for k, v in extra.items():
+        out[k] = _merge(out.get(k, {}), v) if isinstance(v, dict) and isinstance(out.get(k, {}), dict) else v
+    return out
+
+
+def load(a: argparse.Namespace):
+    """(ZenohSettings, SimParams) from file, environment and options."""
+    from interfaces.config import ZenohSettings
+
+    from .params import SimParams
+
+    cfg = load_config(a.config)
+    sim_over, cam_over, zenoh_over = _overrides(a)
+    table = _merge(dict(cfg.table("sim")), sim_over)
+    if cam_over:
+        table = _merge(table, {"camera": cam_over})
+    zenoh = cfg.zenoh
+    if zenoh_over:
+        fields = {f: getattr(zenoh, f) for f in zenoh.__dataclass_fields__}
+        zenoh = ZenohSettings(**{**fields, **zenoh_over})
+    return zenoh, SimParams.from_table(table)
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="%(asctime)s sim %(levelname)s %(name)s: %(message)s")
+    try:
+        zenoh_settings, params = load(a)
+        from .core import SimCore
+
+        core = SimCore(params)
+    except InterfaceError as exc:
+        print(f"lamps sim: error: {exc}", file=sys.stderr)
+        return 1
+    if a.check:
+        d = core.dirt
+        print(f"ok: {params.board.preset} board {core.board.size_m.tolist()} m, {len(d.stains)} stains, "
+              f"mode {params.mode}, keys under {zenoh_settings.keys.prefix}")
+        core.close()
+        return 0
+    from interfaces.session import ServiceNode
+
+    from .service import SimService
+
+    try:
+        node = ServiceNode(SERVICE, zenoh_settings).__enter__()
+    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
+        core.close()
+        print(f"lamps sim: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return 1
+    service = SimService(params, node, core)
+    signal.signal(signal.SIGTERM, lambda *_: service.stop.set())
+    signal.signal(signal.SIGINT, lambda *_: service.stop.set())
+    try:
+        steps = service.run()
+    except RuntimeError as exc:
+        print(f"lamps sim: error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        node.close()
+    logging.getLogger("sim").info("stopped after %d steps", steps)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

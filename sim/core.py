@@ -1,0 +1,120 @@
+"""The simulated cell without any networking: board, dirt, arm, one step at a time.
+
+:class:`SimCore` is what the service shell (:mod:`sim.service`) drives and
+what benchmarks time alone: ``step(torques or "hold")`` advances physics by
+one period, reads the arm back and lets the pad wipe the dirt under it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pybullet as pb
+
+from interfaces.errors import ConfigError
+from interfaces.robot_model import RobotModel
+
+from .board import Board, board_from_params, check_board, start_configuration, wipe_region
+from .commands import HOLD
+from .dirt import DirtGrid, random_stains, stains_from_specs
+from .params import SimParams
+from .robot import Readout, SimRobot
+from .world import build_world
+
+from interfaces.description import PAD_SIZE_M
+
+
+def make_stains(params: SimParams, board: Board):
+    """The stains of the config: explicit ``[[sim.dirt.stain]]`` tables, else random from the seed."""
+    lo, hi = wipe_region(board, params.dirt.margin_m)
+    if params.dirt.stain:
+        return stains_from_specs(params.dirt.stain, lo, hi)
+    rng = np.random.default_rng(params.seed)
+    return random_stains(rng, params.dirt.stains, params.dirt.stain_size_m, lo, hi)
+
+
+class SimCore:
+    """Physics, dirt and robot of one cell. Raises :class:`ConfigError` for an impossible set-up.
+
+    Attributes
+    ----------
+    board : Board
+    dirt : DirtGrid
+    robot : SimRobot
+    q_start : (7,) start joint positions [rad]
+    steps : physics steps taken
+    """
+
+    def __init__(self, params: SimParams, model: RobotModel | None = None) -> None:
+        self.params = params
+        model = model or RobotModel()
+        self.tau_max = model.limits.tau_max.copy()
+        self.board = board_from_params(params.board)
+        check_board(self.board, params.dirt.margin_m, model)
+        self.dirt = DirtGrid(self.board.size_m, params.dirt.cell_m, make_stains(params, self.board), params.seed)
+        if params.start_q_rad is not None:
+            self.q_start = np.array(params.start_q_rad)
+        else:
+            self.q_start = start_configuration(self.board, params.start_standoff_m, model)
+        self.client = pb.connect(pb.DIRECT)
+        try:
+            self.world = build_world(self.client, self.board, params.contact, self.q_start, params.dt_s,
+                                     params.joint_damping_nm_s_rad)
+            self._check_start_clear()
+        except Exception:
+            pb.disconnect(self.client)
+            raise
+        self.robot = SimRobot(self.world, self.tau_max, self.board.normal_world, params.gravity_compensated)
+        self.steps = 0
+        self._cos_tilt = math.cos(math.radians(params.dirt.max_tilt_deg))
+        self._half_pad = (PAD_SIZE_M[0] / 2, PAD_SIZE_M[1] / 2)
+
+    def _check_start_clear(self) -> None:
+        hits = pb.getClosestPoints(self.world.robot, self.world.board, 0.0, physicsClientId=self.client)
+        if any(h[8] < -1e-4 for h in hits):
+            raise ConfigError("impossible start: the arm's start pose penetrates the board "
+                              "(check [sim] start_q_rad or the board pose)")
+
+    @property
+    def out(self) -> Readout:
+        return self.robot.out
+
+    @property
+    def time_ns(self) -> int:
+        """Simulated time [ns] of the current state."""
+        return int(round(self.steps * 1e9 / self.params.rate_hz))
+
+    def step(self, command: np.ndarray | str) -> Readout:
+        """Apply torques (7,) [Nm] (validated) or ``"hold"`` (brake), step once, read, wipe."""
+        if isinstance(command, str):
+            if command != HOLD:
+                raise ValueError(f"command must be torques or {HOLD!r}, got {command!r}")
+            self.robot.brake()
+        else:
+            self.robot.write(command)
+        self.robot.step()
+        self.steps += 1
+        out = self.robot.read()
+        self._wipe(out)
+        return out
+
+    def _wipe(self, o: Readout) -> None:
+        if o.normal_force_n <= self.params.dirt.threshold_force_n:
+            return
+        R = self.board.R
+        tool_z = o.tcp_R[:, 2]
+        if -(tool_z @ self.board.normal_world) < self._cos_tilt:
+            return  # tilted: only an edge touches
+        centre = (o.tcp_p - self.board.origin_m) @ R
+        axis = o.tcp_R[:, 0] @ R[:, :2]
+        norm = math.hypot(axis[0], axis[1])
+        vel = o.tcp_v @ R[:, :2]
+        spin = float(o.tcp_w @ R[:, 2])
+        self.dirt.wipe(centre[:2], axis / norm, self._half_pad, vel, spin, o.normal_force_n,
+                       self.params.dt_s, self.params.dirt.threshold_force_n, self.params.dirt.rate_per_n_m)
+
+    def close(self) -> None:
+        if self.client is not None:
+            pb.disconnect(self.client)
+            self.client = None

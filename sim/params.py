@@ -1,0 +1,278 @@
+"""Parameters of the simulator, one frozen dataclass per concern, read from the ``[sim]`` config table.
+
+Layout of the table (every key optional; the defaults are a vertical
+whiteboard in front of the robot, three seeded stains, a D435i-like camera)::
+
+    [sim]
+    mode = "lockstep"            # or "realtime"
+    seed = 0
+    gravity_compensated = false  # act like a robot that adds gravity torques itself
+    [sim.board]    preset = "wall" | "table" | "custom"; size_m, origin_m, quat_wxyz, ...
+    [sim.contact]  friction, stiffness_n_m, damping_n_s_m
+    [sim.dirt]     cell_m, stains (count), stain_size_m, threshold_force_n, rate_per_n_m, stain = [...]
+    [sim.camera]   enabled, name, width, height, rate_hz, fx, fy, distance_m, elevation_deg, ...
+
+Every value is checked in ``__post_init__``; an unknown key or a value out
+of range raises :class:`~interfaces.errors.ConfigError` naming the key and
+its valid range.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from interfaces.errors import ConfigError
+
+MODES = ("lockstep", "realtime")
+BOARD_PRESETS = ("wall", "table", "custom")
+
+
+def _range(section: str, name: str, value: float, lo: float, hi: float) -> None:
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not (lo <= value <= hi):
+        raise ConfigError(f"[{section}] {name} must be a number in [{lo}, {hi}], got {value!r}")
+
+
+def _vector(section: str, name: str, value: Any, n: int) -> tuple[float, ...]:
+    ok = (isinstance(value, (list, tuple)) and len(value) == n
+          and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
+    if not ok:
+        raise ConfigError(f"[{section}] {name} must be a list of {n} finite numbers, got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def _from_table(cls, section: str, table: Mapping[str, Any], **extra):
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"[{section}] must be a table, got {type(table).__name__}")
+    known = {f.name for f in fields(cls)} - set(extra)
+    unknown = sorted(set(table) - known)
+    if unknown:
+        raise ConfigError(f"[{section}] unknown key(s) {unknown}; valid: {sorted(known)}")
+    return cls(**dict(table), **extra)
+
+
+@dataclass(frozen=True)
+class BoardParams:
+    """The whiteboard: a thin box whose front face is the board frame's z = 0 plane.
+
+    preset ``wall``: vertical, 0.8 x 0.6 m, front face 0.68 m in front of the
+    robot (world x), bottom edge 0.25 m high. ``table``: horizontal,
+    0.7 x 0.5 m, 0.15 m above the robot base, from 0.30 to 0.80 m in front.
+    ``custom``: ``origin_m`` (3,) world position of the board frame's origin
+    (a corner), ``quat_wxyz`` (4,) its orientation (x along the width, y
+    along the height, z out of the board) and ``size_m`` (2,) width, height.
+    """
+
+    preset: str = "wall"
+    size_m: tuple[float, float] | None = None
+    origin_m: tuple[float, float, float] | None = None
+    quat_wxyz: tuple[float, float, float, float] | None = None
+    thickness_m: float = 0.02
+
+    def __post_init__(self) -> None:
+        s = "sim.board"
+        if self.preset not in BOARD_PRESETS:
+            raise ConfigError(f"[{s}] preset must be one of {BOARD_PRESETS}, got {self.preset!r}")
+        if self.preset == "custom" and (self.origin_m is None or self.quat_wxyz is None or self.size_m is None):
+            raise ConfigError(f"[{s}] preset = 'custom' needs origin_m, quat_wxyz and size_m")
+        if self.preset != "custom" and (self.origin_m is not None or self.quat_wxyz is not None):
+            raise ConfigError(f"[{s}] origin_m and quat_wxyz need preset = 'custom' (got preset {self.preset!r})")
+        if self.size_m is not None:
+            object.__setattr__(self, "size_m", _vector(s, "size_m", self.size_m, 2))
+            for v in self.size_m:
+                _range(s, "size_m", v, 0.3, 3.0)
+        if self.origin_m is not None:
+            object.__setattr__(self, "origin_m", _vector(s, "origin_m", self.origin_m, 3))
+        if self.quat_wxyz is not None:
+            q = _vector(s, "quat_wxyz", self.quat_wxyz, 4)
+            norm = math.sqrt(sum(v * v for v in q))
+            if abs(norm - 1.0) > 1e-3:
+                raise ConfigError(f"[{s}] quat_wxyz must be a unit quaternion, got norm {norm:.4f}")
+            object.__setattr__(self, "quat_wxyz", tuple(v / norm for v in q))
+        _range(s, "thickness_m", self.thickness_m, 0.005, 0.1)
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Felt pad on a whiteboard.
+
+    friction : Coulomb coefficient of felt sliding on a melamine/lacquered
+    board (0.3-0.4 is typical). stiffness_n_m, damping_n_s_m : the felt's
+    compliance along the normal (10 N presses 0.5 mm at 2e4 N/m).
+    """
+
+    friction: float = 0.35
+    stiffness_n_m: float = 2.0e4
+    damping_n_s_m: float = 300.0
+
+    def __post_init__(self) -> None:
+        _range("sim.contact", "friction", self.friction, 0.0, 2.0)
+        _range("sim.contact", "stiffness_n_m", self.stiffness_n_m, 1e3, 1e7)
+        _range("sim.contact", "damping_n_s_m", self.damping_n_s_m, 0.0, 1e5)
+
+
+@dataclass(frozen=True)
+class DirtParams:
+    """Dirt on the board and how the eraser removes it.
+
+    cell_m : grid cell [m] (<= 2 mm). Stains: ``stains`` random ones from the
+    seed with their larger extent in ``stain_size_m`` (min, max) [m], kept
+    ``margin_m`` from the board edges; or an explicit list ``stain`` of
+    tables ``{centre_m = [x, y], size_m = s, aspect = a, angle_deg = t}``
+    in the board frame. Removal: a covered cell loses dirt as
+    ``d <- d exp(-rate_per_n_m (F - threshold_force_n) ds)`` for a normal
+    force F above the threshold and a slide ds [m] of the pad over it.
+    """
+
+    cell_m: float = 0.002
+    stains: int = 3
+    stain_size_m: tuple[float, float] = (0.04, 0.08)
+    margin_m: float = 0.12
+    stain: tuple[Mapping[str, Any], ...] = ()
+    threshold_force_n: float = 2.0
+    rate_per_n_m: float = 2.0
+    max_tilt_deg: float = 10.0
+
+    def __post_init__(self) -> None:
+        s = "sim.dirt"
+        _range(s, "cell_m", self.cell_m, 0.0005, 0.002)
+        if not isinstance(self.stains, int) or isinstance(self.stains, bool) or not 0 <= self.stains <= 12:
+            raise ConfigError(f"[{s}] stains must be an integer count in [0, 12], got {self.stains!r}")
+        lo, hi = _vector(s, "stain_size_m", self.stain_size_m, 2)
+        if not 0.01 <= lo <= hi <= 0.3:
+            raise ConfigError(f"[{s}] stain_size_m must be (min, max) with 0.01 <= min <= max <= 0.3, got {self.stain_size_m!r}")
+        object.__setattr__(self, "stain_size_m", (lo, hi))
+        _range(s, "margin_m", self.margin_m, 0.0, 0.5)
+        if not isinstance(self.stain, (list, tuple)) or not all(isinstance(t, Mapping) for t in self.stain):
+            raise ConfigError(f"[{s}] stain must be a list of tables, got {self.stain!r}")
+        object.__setattr__(self, "stain", tuple(self.stain))
+        _range(s, "threshold_force_n", self.threshold_force_n, 0.0, 100.0)
+        _range(s, "rate_per_n_m", self.rate_per_n_m, 0.0, 1e3)
+        _range(s, "max_tilt_deg", self.max_tilt_deg, 0.0, 45.0)
+
+
+@dataclass(frozen=True)
+class CameraParams:
+    """A fixed RGB camera facing the board, intrinsics like a RealSense D435i colour stream.
+
+    fx, fy, cx, cy [px]: default 615 px focal length at 640 px width
+    (scaled with the width), principal point at the centre. The pose is
+    ``position_m`` / ``look_at_m`` in the world, or automatic: on the board's
+    normal through its centre turned ``azimuth_deg`` towards the board's +x
+    and ``elevation_deg`` towards its +y (off the arm's line of sight), at
+    the distance that fits the board with ``margin`` (fraction).
+    """
+
+    enabled: bool = True
+    name: str = "board"
+    width: int = 640
+    height: int = 480
+    rate_hz: float = 10.0
+    fx: float | None = None
+    fy: float | None = None
+    cx: float | None = None
+    cy: float | None = None
+    position_m: tuple[float, float, float] | None = None
+    look_at_m: tuple[float, float, float] | None = None
+    elevation_deg: float = 30.0
+    azimuth_deg: float = 20.0
+    margin: float = 0.15
+    shadow: bool = True
+    light_direction: tuple[float, float, float] = (-0.3, 0.3, 1.0)
+
+    def __post_init__(self) -> None:
+        s = "sim.camera"
+        if not isinstance(self.enabled, bool) or not isinstance(self.shadow, bool):
+            raise ConfigError(f"[{s}] enabled and shadow must be true or false")
+        for name, lo, hi in (("width", 64, 1920), ("height", 48, 1080)):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
+                raise ConfigError(f"[{s}] {name} must be an integer in [{lo}, {hi}], got {v!r}")
+        _range(s, "rate_hz", self.rate_hz, 0.5, 60.0)
+        scale = self.width / 640.0
+        for name, default in (("fx", 615.0 * scale), ("fy", 615.0 * scale),
+                              ("cx", self.width / 2.0), ("cy", self.height / 2.0)):
+            v = getattr(self, name)
+            object.__setattr__(self, name, float(default if v is None else v))
+            _range(s, name, getattr(self, name), 1.0, 1e4)
+        if (self.position_m is None) != (self.look_at_m is None):
+            raise ConfigError(f"[{s}] give both position_m and look_at_m, or neither (automatic pose)")
+        if self.position_m is not None:
+            object.__setattr__(self, "position_m", _vector(s, "position_m", self.position_m, 3))
+            object.__setattr__(self, "look_at_m", _vector(s, "look_at_m", self.look_at_m, 3))
+            if math.dist(self.position_m, self.look_at_m) < 0.1:
+                raise ConfigError(f"[{s}] position_m and look_at_m must be at least 0.1 m apart")
+        _range(s, "elevation_deg", self.elevation_deg, 0.0, 70.0)
+        _range(s, "azimuth_deg", self.azimuth_deg, -70.0, 70.0)
+        _range(s, "margin", self.margin, 0.0, 1.0)
+        object.__setattr__(self, "light_direction", _vector(s, "light_direction", self.light_direction, 3))
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """The whole simulator.
+
+    mode : ``lockstep`` (step only after the command answering the last
+    state; deterministic) or ``realtime`` (wall-clock steps, newest command
+    held). rate_hz : physics and state rate. stale_limit_s : in real time, a
+    command older than this makes the robot brake and hold.
+    gravity_compensated : add gravity torques like the real iiwa's own
+    controller does (declared in RobotState.capabilities).
+    joint_damping_nm_s_rad : viscous joint friction. start_q_rad : start
+    joint positions, or None for an automatic pose facing the board centre
+    ``start_standoff_m`` off its surface. max_steps : stop after this many
+    steps (0 = run until stopped).
+    """
+
+    mode: str = "lockstep"
+    seed: int = 0
+    rate_hz: float = 1000.0
+    stale_limit_s: float = 0.02
+    gravity_compensated: bool = False
+    joint_damping_nm_s_rad: float = 0.2
+    start_q_rad: tuple[float, ...] | None = None
+    start_standoff_m: float = 0.08
+    truth_rate_hz: float = 10.0
+    status_rate_hz: float = 2.0
+    lockstep_republish_s: float = 0.1
+    lockstep_camera_sync: bool = True
+    max_steps: int = 0
+    board: BoardParams = field(default_factory=BoardParams)
+    contact: ContactParams = field(default_factory=ContactParams)
+    dirt: DirtParams = field(default_factory=DirtParams)
+    camera: CameraParams = field(default_factory=CameraParams)
+
+    def __post_init__(self) -> None:
+        s = "sim"
+        if self.mode not in MODES:
+            raise ConfigError(f"[{s}] mode must be one of {MODES}, got {self.mode!r}")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ConfigError(f"[{s}] seed must be a non-negative integer, got {self.seed!r}")
+        _range(s, "rate_hz", self.rate_hz, 100.0, 5000.0)
+        _range(s, "stale_limit_s", self.stale_limit_s, 2.0 / self.rate_hz, 1.0)
+        for name in ("gravity_compensated", "lockstep_camera_sync"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"[{s}] {name} must be true or false, got {getattr(self, name)!r}")
+        _range(s, "joint_damping_nm_s_rad", self.joint_damping_nm_s_rad, 0.0, 50.0)
+        if self.start_q_rad is not None:
+            object.__setattr__(self, "start_q_rad", _vector(s, "start_q_rad", self.start_q_rad, 7))
+        _range(s, "start_standoff_m", self.start_standoff_m, 0.01, 0.5)
+        _range(s, "truth_rate_hz", self.truth_rate_hz, 0.1, self.rate_hz)
+        _range(s, "status_rate_hz", self.status_rate_hz, 0.1, 100.0)
+        _range(s, "lockstep_republish_s", self.lockstep_republish_s, 0.001, 10.0)
+        if not isinstance(self.max_steps, int) or isinstance(self.max_steps, bool) or self.max_steps < 0:
+            raise ConfigError(f"[{s}] max_steps must be a non-negative integer, got {self.max_steps!r}")
+
+    @property
+    def dt_s(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> "SimParams":
+        """The ``[sim]`` table (with its sub-tables) as parameters."""
+        table = dict(table)
+        subs = {"board": BoardParams, "contact": ContactParams, "dirt": DirtParams, "camera": CameraParams}
+        parts = {name: _from_table(kind, f"sim.{name}", table.pop(name, {})) for name, kind in subs.items()}
+        return _from_table(cls, "sim", table, **parts)

@@ -1,0 +1,194 @@
+"""The camera renders in its own process, on a mirrored scene, so the 1 kHz physics never waits for it.
+
+The sim process owns a :class:`CameraProcess`. When the renderer is idle,
+:meth:`CameraProcess.request` copies the dirt grid into shared memory and
+sends the joint positions of the state to show; the renderer process
+(``_render_main``, its own PyBullet client with the same robot and board)
+poses the arm, refreshes the board texture if the dirt changed, renders
+with TinyRenderer and writes the RGB image into a second shared-memory
+buffer. A thread of the sim process (:class:`FramePublisher`) waits for the
+renderer's answer, wraps the image in a :class:`~interfaces.messages.CameraFrame`
+and publishes it, so neither rendering nor a megabyte-sized put sits in
+the physics loop.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from multiprocessing import shared_memory
+from typing import Callable
+
+import cv2
+import numpy as np
+
+from interfaces.messages import CameraFrame
+from interfaces.transforms import pose_from_transform
+
+from .board import Board
+from .camera import board_texture, camera_pose, intrinsics_of, marker_layer, projection_matrix, view_matrix
+from .params import SimParams
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class _Setup:
+    params: SimParams
+    board: Board
+    q_start: np.ndarray
+    dirt_shape: tuple[int, int]
+    cell_m: float
+    dirt_shm: str
+    image_shm: str
+
+
+def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
+    import pybullet as pb
+
+    from .world import build_world
+
+    cam = setup.params.camera
+    dirt_shm = shared_memory.SharedMemory(setup.dirt_shm)
+    image_shm = shared_memory.SharedMemory(setup.image_shm)
+    try:
+        dirt = np.ndarray(setup.dirt_shape, np.float32, dirt_shm.buf)
+        image = np.ndarray((cam.height, cam.width, 3), np.uint8, image_shm.buf)
+        client = pb.connect(pb.DIRECT)
+        world = build_world(client, setup.board, setup.params.contact, setup.q_start, visual=True)
+        markers = marker_layer(setup.board.size_m)
+        texture = board_texture(dirt, setup.cell_m, markers)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "board.png")
+            cv2.imwrite(path, texture[..., ::-1])
+            tex_id = pb.loadTexture(path, physicsClientId=client)
+        pb.changeVisualShape(world.board, -1, textureUniqueId=tex_id, physicsClientId=client)
+        view = view_matrix(camera_pose(cam, setup.board))
+        proj = projection_matrix(intrinsics_of(cam))
+        texture_version = 0
+        conn.send(("ready", 0.0))
+        while True:
+            request = conn.recv()
+            if request is None:
+                break
+            q, dirt_version = request
+            t0 = time.perf_counter()
+            for j, qj in zip(world.joints, q):
+                pb.resetJointState(world.robot, j, float(qj), physicsClientId=client)
+            if dirt_version != texture_version:
+                texture = board_texture(dirt, setup.cell_m, markers)
+                pb.changeTexture(tex_id, texture.reshape(-1), texture.shape[1], texture.shape[0],
+                                 physicsClientId=client)
+                texture_version = dirt_version
+            out = pb.getCameraImage(cam.width, cam.height, view, proj, renderer=pb.ER_TINY_RENDERER,
+                                    shadow=int(cam.shadow), lightDirection=list(cam.light_direction),
+                                    physicsClientId=client)
+            image[...] = np.asarray(out[2], np.uint8).reshape(cam.height, cam.width, 4)[..., :3]
+            conn.send(("frame", time.perf_counter() - t0))
+    except (EOFError, KeyboardInterrupt, BrokenPipeError):
+        pass
+    finally:
+        dirt_shm.close()
+        image_shm.close()
+
+
+class CameraProcess:
+    """The renderer process and its shared buffers; the sim's side of the camera.
+
+    Attributes
+    ----------
+    requested, rendered, skipped : int
+        Frames asked for, delivered, and camera ticks skipped because the
+        renderer was still busy (real-time mode).
+    render_s : list of float
+        Render durations [s] of the last frames (for benchmarks).
+    """
+
+    def __init__(self, params: SimParams, board: Board, q_start: np.ndarray, dirt_shape: tuple[int, int]) -> None:
+        cam = params.camera
+        self.params = params
+        self.intrinsics = intrinsics_of(cam)
+        self.T_camera_to_world = camera_pose(cam, board)
+        self._dirt_shm = shared_memory.SharedMemory(create=True, size=int(np.prod(dirt_shape)) * 4)
+        self._image_shm = shared_memory.SharedMemory(create=True, size=cam.width * cam.height * 3)
+        self.dirt = np.ndarray(dirt_shape, np.float32, self._dirt_shm.buf)
+        self.image = np.ndarray((cam.height, cam.width, 3), np.uint8, self._image_shm.buf)
+        setup = _Setup(params, board, np.asarray(q_start, float), dirt_shape, params.dirt.cell_m,
+                       self._dirt_shm.name, self._image_shm.name)
+        ctx = mp.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_render_main, args=(child, setup), name="lamps-sim-renderer", daemon=True)
+        self._idle = threading.Event()
+        self._pending: tuple[int, int, int] | None = None
+        self.requested = self.rendered = self.skipped = 0
+        self.render_s: list[float] = []
+
+    def start(self, timeout_s: float = 60.0) -> None:
+        """Start the renderer and wait until its scene is built."""
+        self._proc.start()
+        if not self._conn.poll(timeout_s):
+            self.close()
+            raise RuntimeError(f"camera renderer did not start within {timeout_s} s")
+        self._conn.recv()
+        self._idle.set()
+
+    @property
+    def idle(self) -> bool:
+        return self._idle.is_set()
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        return self._idle.wait(timeout_s)
+
+    def request(self, seq: int, stamp_ns: int, robot_time_ns: int, q: np.ndarray,
+                dirt: np.ndarray, dirt_version: int) -> bool:
+        """Ask for a frame of state ``seq``; False (and counted) if the renderer is still busy."""
+        if not self._idle.is_set():
+            self.skipped += 1
+            return False
+        self._idle.clear()
+        self.dirt[...] = dirt
+        self._pending = (seq, stamp_ns, robot_time_ns)
+        self._conn.send((np.asarray(q, float), dirt_version))
+        self.requested += 1
+        return True
+
+    def serve(self, publish: Callable[[CameraFrame], None], stop: threading.Event) -> None:
+        """Publish frames as the renderer finishes them until ``stop`` is set (run in a thread)."""
+        cam = self.params.camera
+        pose = pose_from_transform(self.T_camera_to_world)
+        while not stop.is_set():
+            try:
+                if not self._conn.poll(0.05):
+                    continue
+                _, render_s = self._conn.recv()
+            except (EOFError, OSError):
+                log.error("camera renderer process ended; no more frames")
+                return
+            seq, stamp_ns, robot_time_ns = self._pending
+            data = self.image.tobytes()
+            self._idle.set()
+            self.render_s.append(render_s)
+            del self.render_s[:-1000]
+            self.rendered += 1
+            publish(CameraFrame(seq=seq, stamp_ns=stamp_ns, camera=cam.name, encoding="rgb8", data=data,
+                                intrinsics=self.intrinsics, T_camera_to_world=pose, robot_time_ns=robot_time_ns))
+
+    def close(self) -> None:
+        try:
+            if self._proc.is_alive():
+                self._conn.send(None)
+                self._proc.join(5.0)
+            if self._proc.is_alive():
+                self._proc.terminate()
+                self._proc.join(2.0)
+        except (OSError, ValueError, AssertionError):
+            pass
+        self._conn.close()
+        for shm in (self._dirt_shm, self._image_shm):
+            shm.close()
+            shm.unlink()

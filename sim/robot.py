@@ -1,0 +1,126 @@
+"""The simulated arm in the physics client: apply torques or brake, step, read back what a real arm reports.
+
+:class:`SimRobot` is the sim's hardware: ``write`` torques (or ``brake``),
+``step`` the physics, ``read`` joint state, applied torques and the
+eraser's contact with the board. Readouts land in one preallocated
+:class:`Readout`, so a step allocates little.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as pb
+
+from .world import World
+
+
+@dataclass
+class Readout:
+    """What the arm reports after a step (world frame, SI units).
+
+    q, dq, tau : (7,) joint positions [rad], velocities [rad/s], applied torques [Nm].
+    wrench : (6,) force [N] and torque about the TCP [Nm] the board exerts on the eraser.
+    normal_force_n : that force along the board normal (pressing) [N].
+    tcp_p, tcp_v, tcp_w : (3,) pad centre position [m], velocity [m/s], angular velocity [rad/s].
+    tcp_R : (3, 3) pad orientation. arm_contact : a link other than the eraser touches the board.
+    """
+
+    q: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    dq: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    tau: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    wrench: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    normal_force_n: float = 0.0
+    tcp_p: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tcp_R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    tcp_v: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tcp_w: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    arm_contact: bool = False
+
+
+class SimRobot:
+    """Torque-controlled arm with brakes, in a built :class:`~sim.world.World`.
+
+    Parameters
+    ----------
+    tau_max : (7,) joint torque limits [Nm]; the brakes hold up to these.
+    board_normal : (3,) outward normal of the board (pressing force is along -normal).
+    gravity_compensated : add gravity torques to every command, like the real iiwa.
+    """
+
+    def __init__(self, world: World, tau_max: np.ndarray, board_normal: np.ndarray,
+                 gravity_compensated: bool = False) -> None:
+        self.w = world
+        self.c = world.client
+        self.tau_max = np.asarray(tau_max, float)
+        self.normal = np.asarray(board_normal, float)
+        self.gravity_compensated = gravity_compensated
+        self.braked = False
+        self.out = Readout()
+        self._joints = list(world.joints)
+        self._zeros = [0.0] * len(self._joints)
+        self._tau_cmd = np.zeros(len(self._joints))
+        self.read()
+
+    def write(self, tau_nm: np.ndarray) -> None:
+        """Torques [Nm] (7,) for the next step (already validated and clipped); releases the brakes."""
+        if self.braked:
+            pb.setJointMotorControlArray(self.w.robot, self._joints, pb.VELOCITY_CONTROL, forces=self._zeros,
+                                         physicsClientId=self.c)
+            self.braked = False
+        tau = np.asarray(tau_nm, float)
+        if self.gravity_compensated:
+            tau = tau + self.gravity()
+        np.clip(tau, -self.tau_max, self.tau_max, out=self._tau_cmd)
+        pb.setJointMotorControlArray(self.w.robot, self._joints, pb.TORQUE_CONTROL, forces=self._tau_cmd.tolist(),
+                                     physicsClientId=self.c)
+
+    def brake(self) -> None:
+        """Engage the brakes: every joint held at zero speed with up to its torque limit."""
+        if not self.braked:
+            pb.setJointMotorControlArray(self.w.robot, self._joints, pb.VELOCITY_CONTROL,
+                                         targetVelocities=self._zeros, forces=self.tau_max.tolist(),
+                                         physicsClientId=self.c)
+            self.braked = True
+
+    def gravity(self) -> np.ndarray:
+        """(7,) gravity torques [Nm] at the current joint positions (arm and eraser)."""
+        return np.array(pb.calculateInverseDynamics(self.w.robot, self.out.q.tolist(), self._zeros, self._zeros,
+                                                    physicsClientId=self.c))
+
+    def step(self) -> None:
+        pb.stepSimulation(physicsClientId=self.c)
+
+    def read(self) -> Readout:
+        """Refresh and return :attr:`out`."""
+        o, c, robot = self.out, self.c, self.w.robot
+        states = pb.getJointStates(robot, self._joints, physicsClientId=c)
+        for i, s in enumerate(states):
+            o.q[i], o.dq[i] = s[0], s[1]
+            o.tau[i] = s[3] if self.braked else self._tau_cmd[i]
+        link = pb.getLinkState(robot, self.w.tcp_link, computeLinkVelocity=1, computeForwardKinematics=1,
+                               physicsClientId=c)
+        o.tcp_p[:] = link[4]
+        o.tcp_R[:] = np.array(pb.getMatrixFromQuaternion(link[5])).reshape(3, 3)
+        o.tcp_v[:] = link[6]
+        o.tcp_w[:] = link[7]
+        self._read_contacts()
+        return o
+
+    def _read_contacts(self) -> None:
+        o = self.out
+        o.wrench[:] = 0.0
+        o.arm_contact = False
+        contacts = pb.getContactPoints(self.w.robot, self.w.board, physicsClientId=self.c)
+        for cp in contacts:
+            if cp[9] <= 0.0:
+                continue  # a point within the contact margin that carries no load
+            if cp[3] not in (self.w.eraser_link, self.w.tcp_link):
+                o.arm_contact = True
+            n = np.array(cp[7])  # normal on the board, pointing towards the robot
+            # PyBullet reports friction as acting on the board (B); the eraser (A) feels the opposite.
+            f = cp[9] * n - cp[10] * np.array(cp[11]) - cp[12] * np.array(cp[13])
+            o.wrench[:3] += f
+            o.wrench[3:] += np.cross(np.array(cp[5]) - o.tcp_p, f)
+        o.normal_force_n = float(o.wrench[:3] @ self.normal)

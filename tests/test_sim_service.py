@@ -1,0 +1,222 @@
+"""``lamps sim`` as a real process, driven over real Zenoh on loopback by scripted torque clients."""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+import msgspec
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from interfaces.board_markers import marker_corners_board
+from interfaces.codec import encode
+from interfaces.messages import CameraFrame, RobotState, SimTruth, TorqueCommand
+from interfaces.robot_model import RobotModel
+from interfaces.transforms import transform_from_pose
+from sim.board import board_from_params
+from sim.camera import project
+from sim.params import BoardParams
+
+from .zenoh_helpers import SimProcess, latest_status, run_lockstep, wait_for
+
+pytestmark = pytest.mark.slow
+NO_CAMERA = {"enabled": False}
+
+
+@pytest.fixture(scope="module")
+def model() -> RobotModel:
+    return RobotModel()
+
+
+def tcp_positions(model: RobotModel, states) -> np.ndarray:
+    return np.array([model.tcp_pose(np.array(s.q_rad))[0] for s in states])
+
+
+def test_gravity_compensation_from_pinocchio_holds_the_arm_within_1mm_for_2s(tmp_path, model):
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim:
+        states = run_lockstep(sim, 2000, lambda s: model.gravity(np.array(s.q_rad)))
+    p = tcp_positions(model, states)
+    assert states[-1].robot_time_ns == 2_000_000_000
+    assert np.linalg.norm(p - p[0], axis=1).max() < 1e-3
+    assert not states[0].capabilities.gravity_compensated
+
+
+def test_without_gravity_torques_the_arm_falls(tmp_path, model):
+    """The control for the test above: the same client sending zeros sees the arm sag."""
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim:
+        states = run_lockstep(sim, 300, lambda s: np.zeros(7))
+    p = tcp_positions(model, states)
+    assert np.linalg.norm(p[-1] - p[0]) > 0.01
+
+
+def test_gravity_compensated_robot_holds_with_zero_torques(tmp_path, model):
+    with SimProcess(tmp_path, {"mode": "lockstep", "gravity_compensated": True, "camera": NO_CAMERA}) as sim:
+        states = run_lockstep(sim, 1000, lambda s: np.zeros(7))
+    assert states[0].capabilities.gravity_compensated
+    p = tcp_positions(model, states)
+    assert np.linalg.norm(p - p[0], axis=1).max() < 1e-3
+    # the reported torque is what the joints exert: the robot's own gravity torques
+    np.testing.assert_allclose(states[-1].tau_nm, model.gravity(np.array(states[-2].q_rad)), atol=0.05)
+
+
+class PressAndSlide:
+    """A scripted Cartesian client: press the pad on the board with ``force_n`` and slide it along board x.
+
+    tau = J^T (K e - D v - F n) + g(q) - d dq: tangential PD to a sinusoid
+    of ``amplitude_m`` at ``freq_hz`` about ``centre_board`` (2,), no
+    position control along the normal, where a constant force presses.
+    """
+
+    def __init__(self, model: RobotModel, board, centre_board, force_n=10.0, amplitude_m=0.03, freq_hz=1.0):
+        self.m, self.b = model, board
+        self.centre = board.world_from_board(np.asarray(centre_board, float))
+        self.force_n, self.amp, self.freq = force_n, amplitude_m, freq_hz
+        self.R_goal = board.tool_rotation()
+        self.n = board.normal_world
+
+    def __call__(self, s: RobotState) -> np.ndarray:
+        q, dq, t = np.array(s.q_rad), np.array(s.dq_rad_s), s.robot_time_ns * 1e-9
+        J = self.m.tcp_jacobian(q)
+        p, R = self.m.tcp_pose(q)
+        v = J @ dq
+        phase = 2 * np.pi * self.freq * max(t - 1.0, 0.0)
+        goal = self.centre + self.b.R[:, 0] * self.amp * np.sin(phase)
+        goal_v = self.b.R[:, 0] * self.amp * 2 * np.pi * self.freq * np.cos(phase) * (t > 1.0)
+        e = goal - p
+        e -= (e @ self.n) * self.n
+        dv = goal_v - v[:3]
+        dv -= (dv @ self.n) * self.n
+        f = 1500.0 * e + 60.0 * dv - self.force_n * self.n - 40.0 * (v[:3] @ self.n) * self.n
+        m = 80.0 * pin.log3(self.R_goal @ R.T) - 3.0 * v[3:]
+        return J.T @ np.concatenate([f, m]) + self.m.gravity(q) - 1.0 * dq
+
+
+def test_pressing_and_sliding_wipes_the_stain_under_the_pad_and_leaves_the_next_one(tmp_path, model):
+    board = board_from_params(BoardParams())
+    under = {"centre_m": [0.4, 0.3], "size_m": 0.06, "aspect": 2.5, "angle_deg": 0.0}  # 6 x 2.4 cm on the path
+    beside = {"centre_m": [0.4, 0.37], "size_m": 0.04, "aspect": 2.0, "angle_deg": 0.0}  # 2.5 cm beyond the pad
+    sim_cfg = {"mode": "lockstep", "camera": NO_CAMERA, "dirt": {"stain": [under, beside]}}
+    client = PressAndSlide(model, board, (0.4, 0.3), force_n=10.0)
+    with SimProcess(tmp_path, sim_cfg) as sim:
+        truth = sim.node.latest(sim.keys.sim_truth, SimTruth)
+        states = run_lockstep(sim, 4000, client)
+        final = wait_for(truth.take, 5.0, "sim truth")
+    forces = np.array([-np.array(s.wrench_world[:3]) @ board.normal_world * -1 for s in states])
+    sliding = forces[1500:]
+    assert 7.0 < sliding.mean() < 13.0, f"mean normal force {sliding.mean():.1f} N"
+    assert final.seq == 4000 and final.stain_ids == [0, 1]
+    assert final.remaining[0] < 0.2, final.remaining
+    assert final.remaining[1] == 1.0
+    assert final.contact_force_n > 2.0
+    assert final.T_board_to_world is not None and final.centres_board_m[0] == [0.4, 0.3]
+
+
+def test_lockstep_runs_are_bit_identical_for_a_seed(tmp_path, model):
+    def policy(s: RobotState) -> np.ndarray:
+        t = s.robot_time_ns * 1e-9
+        return model.gravity(np.array(s.q_rad)) + 3.0 * np.sin(2 * np.pi * np.arange(1, 8) * t)
+
+    runs = []
+    for i in range(2):
+        with SimProcess(tmp_path, {"mode": "lockstep", "seed": 7, "camera": NO_CAMERA}, name=f"sim{i}") as sim:
+            states = run_lockstep(sim, 1500, policy)
+        runs.append(np.array([s.q_rad + s.dq_rad_s + s.wrench_world for s in states]))
+    assert runs[0].shape == (1501, 20)
+    assert np.abs(runs[0][-1, :7] - runs[0][0, :7]).max() > 0.01  # it did move
+    assert runs[0].tobytes() == runs[1].tobytes()
+
+
+@pytest.mark.parametrize("stale_limit_s, should_brake", [(0.02, True), (1.0, False)])
+def test_realtime_stale_command_makes_the_arm_brake_and_hold(tmp_path, model, stale_limit_s, should_brake):
+    cfg = {"mode": "realtime", "stale_limit_s": stale_limit_s, "camera": NO_CAMERA}
+    with SimProcess(tmp_path, cfg) as sim:
+        states = sim.node.latest(sim.keys.robot_state, RobotState)
+        first = wait_for(states.take, 10.0, "a robot state")
+        end = time.monotonic() + 0.5
+        last = first
+        while time.monotonic() < end:  # hold the arm with gravity torques, answering each state
+            s = states.take()
+            if s is None:
+                time.sleep(0.0005)
+                continue
+            last = s
+            sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=s.seq, stamp_ns=time.monotonic_ns(),
+                                                                   tau_nm=model.gravity(np.array(s.q_rad)).tolist()))
+        # the last command would spin joint 1 if it were held for long (about 30 rad/s^2 here)
+        push = model.gravity(np.array(last.q_rad)) + np.array([5.0, 0, 0, 0, 0, 0, 0])
+        sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=last.seq, stamp_ns=time.monotonic_ns(),
+                                                               tau_nm=push.tolist()))
+        q_push = np.array(last.q_rad)
+        time.sleep(0.4)
+        after = wait_for(states.take, 5.0, "a robot state")
+        time.sleep(0.3)
+        later = wait_for(states.take, 5.0, "a robot state")
+        status = latest_status(sim)
+    moved = abs(after.q_rad[0] - q_push[0])
+    if should_brake:
+        # 20 ms of the push moves joint 1 by about 6 mrad; held for 0.4 s it would move radians
+        assert moved < 0.05, f"joint 1 moved {moved:.4f} rad after the commands stopped"
+        assert max(abs(v) for v in later.dq_rad_s) < 0.01
+        assert np.abs(np.subtract(later.q_rad, after.q_rad)).max() < 1e-3, "brakes hold the pose"
+        assert status.counters.get("stale_command_brakes", 0) >= 1
+        assert "braked=True" in status.detail
+    else:
+        assert moved > 0.5, "the control case: a held command keeps driving the arm"
+    assert status.timing.ticks > 400
+
+
+def _raw_command(seq: int, tau) -> bytes:
+    """A TorqueCommand's bytes with any values (bypassing the constructor's checks)."""
+    wire = msgspec.msgpack.decode(encode(TorqueCommand(seq=seq, stamp_ns=1, tau_nm=[0.0] * 7)))
+    wire[3] = list(tau)
+    return msgspec.msgpack.encode(wire)
+
+
+def test_bad_commands_are_counted_and_never_reach_the_physics(tmp_path, model):
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim:
+        states = sim.node.inbox(sim.keys.robot_state, RobotState)
+        s0 = wait_for(lambda: states.get(1.0), 10.0, "state 0")
+        pub = sim.node.session.declare_publisher(sim.keys.robot_command)
+        for payload in (b"\x00garbage", encode(TorqueCommand(seq=0, stamp_ns=1, tau_nm=[0.0] * 7))[:-3],
+                        _raw_command(0, [float("nan")] * 7), _raw_command(0, [float("inf")] + [0.0] * 6)):
+            pub.put(payload)
+        sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=0, stamp_ns=1, tau_nm=[0.0] * 6))  # wrong length
+        time.sleep(0.3)
+        status = latest_status(sim)
+        assert status.seq == 0, "no bad command may step the physics"
+        over = model.gravity(np.array(s0.q_rad)) + np.array([0, 0, 0, 0, 0, 500.0, 0])
+        sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=0, stamp_ns=1, tau_nm=over.tolist()))
+        s1 = wait_for(lambda: (lambda s: s if s is not None and s.seq == 1 else None)(states.get(1.0)), 10.0, "state 1")
+        time.sleep(0.6)
+        status = latest_status(sim)
+        pub.undeclare()
+    assert s1.tau_nm[5] == pytest.approx(40.0)  # clipped to joint 6's limit
+    c = status.counters
+    bad = sum(v for k, v in c.items() if k.startswith("commands_dropped_bad_payload"))
+    assert bad == 4, c
+    assert c["commands_dropped_wrong_length"] == 1
+    assert c["commands_clipped"] == 1 and c["commands_applied"] == 1
+
+
+def test_camera_frames_show_the_board_markers_where_the_camera_model_says(tmp_path, model):
+    cfg = {"mode": "lockstep", "camera": {"width": 320, "height": 240, "rate_hz": 10.0}}
+    with SimProcess(tmp_path, cfg) as sim:
+        frames = sim.node.latest(sim.keys.camera_frame("board"), CameraFrame)
+        truth = sim.node.latest(sim.keys.sim_truth, SimTruth)
+        run_lockstep(sim, 250, lambda s: model.gravity(np.array(s.q_rad)))
+        frame = wait_for(frames.take, 20.0, "a camera frame")
+        board_truth = wait_for(truth.take, 5.0, "sim truth")
+    assert frame.encoding == "rgb8" and frame.intrinsics.width == 320
+    assert frame.robot_time_ns % 100_000_000 == 0 and frame.robot_time_ns > 0
+    rgb = np.frombuffer(frame.data, np.uint8).reshape(240, 320, 3)
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+    corners, ids, _ = detector.detectMarkers(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))
+    assert ids is not None and len(ids) >= 3, "the arm may hide one marker, not more"
+    T_board = transform_from_pose(board_truth.T_board_to_world)
+    T_cam = transform_from_pose(frame.T_camera_to_world)
+    expected = marker_corners_board((0.8, 0.6))
+    for c, i in zip(corners, ids.ravel()):
+        world = expected[int(i)] @ T_board[:3, :2].T + T_board[:3, 3]
+        assert np.abs(c[0] - project(frame.intrinsics, T_cam, world)).max() < 2.0
