@@ -21,8 +21,8 @@ from .params import CameraParams
 #: Board colour (clean) and marker ink colour, RGB.
 BOARD_RGB = np.array([242, 243, 238], np.float32)
 INK_RGB = np.array([28, 38, 96], np.float32)
-#: Texture resolution [texels per metre].
-TEXELS_PER_M = 1000.0
+#: Texture resolution [texels per metre]: 2 mm texels, like the dirt grid (a 6 cm marker is 30 texels).
+TEXELS_PER_M = 500.0
 NEAR_M, FAR_M = 0.05, 5.0
 
 
@@ -53,15 +53,32 @@ def camera_pose(params: CameraParams, board: Board) -> np.ndarray:
     up = board.R[:, 1]
     if params.position_m is not None:
         return look_at(np.array(params.position_m), np.array(params.look_at_m), up)
-    half_fov_x = math.atan(params.width / 2 / params.fx)
-    half_fov_y = math.atan(params.height / 2 / params.fy)
-    w, h = board.size_m * (1.0 + params.margin)
-    elev = math.radians(params.elevation_deg)
-    distance = max(w / 2 / math.tan(half_fov_x), h / 2 / math.tan(half_fov_y)) + 0.1
-    azim = math.radians(params.azimuth_deg)
+    k = intrinsics_of(params)
+    elev, azim = math.radians(params.elevation_deg), math.radians(params.azimuth_deg)
     direction = (math.cos(elev) * (math.cos(azim) * board.normal_world + math.sin(azim) * board.R[:, 0])
                  + math.sin(elev) * up)
-    return look_at(board.centre_world_m + distance * direction, board.centre_world_m, up)
+    w, h = board.size_m
+    corners = board.world_from_board(np.array([[0, 0], [w, 0], [w, h], [0, h]], float))
+    centre = board.centre_world_m
+    # seen at an angle, the near corners loom larger: back off until every corner is inside the margin
+    distance = max(w / 2 * k.fx / k.cx, h / 2 * k.fy / k.cy)
+    border = np.array([k.width, k.height]) * params.margin / 2
+    for _ in range(200):
+        T = look_at(centre + distance * direction, centre, up)
+        px = project(k, T, corners)
+        if np.all(px >= border) and np.all(px <= np.array([k.width, k.height]) - border):
+            return T
+        distance *= 1.03
+    raise ValueError(f"no camera distance shows the whole board at elevation {params.elevation_deg} deg "
+                     f"and azimuth {params.azimuth_deg} deg")
+
+
+def light_towards(params: CameraParams, board: Board) -> list[float]:
+    """Direction (3,) towards the light: configured, or from in front of the board and above it."""
+    if params.light_direction is not None:
+        return list(params.light_direction)
+    d = board.normal_world + 0.5 * board.R[:, 1] + np.array([0.0, 0.0, 0.5])
+    return (d / np.linalg.norm(d)).tolist()
 
 
 def view_matrix(T_camera_to_world: np.ndarray) -> list[float]:
@@ -90,32 +107,36 @@ def project(k: CameraIntrinsics, T_camera_to_world: np.ndarray, p_world: np.ndar
     return np.stack([k.fx * pc[..., 0] / pc[..., 2] + k.cx, k.fy * pc[..., 1] / pc[..., 2] + k.cy], -1)
 
 
-def marker_layer(board_size_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(ink, mask)`` texture-sized (H, W) uint8 images of the corner markers, row 0 at the board's top."""
-    W = int(round(board_size_m[0] * TEXELS_PER_M))
+def marker_layer(board_size_m: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+    """The corner markers as texture patches ``(row, col, rgb (side, side, 3) uint8)``, row 0 at the board's top."""
     H = int(round(board_size_m[1] * TEXELS_PER_M))
-    ink = np.zeros((H, W), np.uint8)
-    mask = np.zeros((H, W), bool)
     side = int(round(MARKER_SIDE_M * TEXELS_PER_M))
     side -= side % MARKER_CELLS
     dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ARUCO_DICTIONARY))
+    patches = []
     for mid, (x0, y0) in marker_origins_board(board_size_m).items():
-        img = cv2.aruco.generateImageMarker(dictionary, mid, side)
-        c0 = int(round(x0 * TEXELS_PER_M))
-        r0 = H - int(round(y0 * TEXELS_PER_M)) - side
-        ink[r0:r0 + side, c0:c0 + side] = img < 128
-        mask[r0:r0 + side, c0:c0 + side] = True
-    return ink, mask
+        ink = cv2.aruco.generateImageMarker(dictionary, mid, side) < 128
+        rgb = np.where(ink[..., None], np.uint8(15), BOARD_RGB.astype(np.uint8)).astype(np.uint8)
+        patches.append((H - int(round(y0 * TEXELS_PER_M)) - side, int(round(x0 * TEXELS_PER_M)), rgb))
+    return patches
 
 
-def board_texture(dirt: np.ndarray, cell_m: float, markers: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """(H, W, 3) uint8 RGB texture of the board: dirt in ink colour over white, black markers; row 0 = top."""
-    ink, mask = markers
-    H, W = ink.shape
-    rep = max(int(round(cell_m * TEXELS_PER_M)), 1)
-    d = np.repeat(np.repeat(dirt[::-1], rep, axis=0), rep, axis=1)[:H, :W]
-    if d.shape != (H, W):
-        d = np.pad(d, ((0, H - d.shape[0]), (0, W - d.shape[1])))
-    rgb = BOARD_RGB + (INK_RGB - BOARD_RGB) * d[..., None]
-    rgb[mask] = np.where(ink[mask, None], 15.0, BOARD_RGB)
-    return rgb.astype(np.uint8)
+#: Colour of each quantized dirt level (256, 3) uint8.
+_DIRT_LUT = (BOARD_RGB + (INK_RGB - BOARD_RGB) * np.linspace(0.0, 1.0, 256)[:, None]).round().astype(np.uint8)
+
+
+def board_texture(dirt: np.ndarray, cell_m: float, markers: list[tuple[int, int, np.ndarray]],
+                  board_size_m: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 RGB texture of the board: dirt in ink colour over white, markers on top; row 0 = top.
+
+    Dirt cells map to texels by nearest neighbour (cell and texel sizes need not match).
+    """
+    W = int(round(board_size_m[0] * TEXELS_PER_M))
+    H = int(round(board_size_m[1] * TEXELS_PER_M))
+    levels = (np.clip(dirt[::-1], 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    rows = np.minimum((np.arange(H) + 0.5) / TEXELS_PER_M / cell_m, dirt.shape[0] - 1).astype(int)
+    cols = np.minimum((np.arange(W) + 0.5) / TEXELS_PER_M / cell_m, dirt.shape[1] - 1).astype(int)
+    rgb = _DIRT_LUT[levels[rows[:, None], cols[None, :]]]
+    for r0, c0, patch in markers:
+        rgb[r0:r0 + patch.shape[0], c0:c0 + patch.shape[1]] = patch
+    return rgb

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pybullet as pb
 
+from interfaces.description import PAD_SIZE_M
 from interfaces.errors import ConfigError
 from interfaces.robot_model import RobotModel
 
@@ -21,8 +22,6 @@ from .dirt import DirtGrid, random_stains, stains_from_specs
 from .params import SimParams
 from .robot import Readout, SimRobot
 from .world import build_world
-
-from interfaces.description import PAD_SIZE_M
 
 
 def make_stains(params: SimParams, board: Board):
@@ -69,6 +68,8 @@ class SimCore:
         self.steps = 0
         self._cos_tilt = math.cos(math.radians(params.dirt.max_tilt_deg))
         self._half_pad = (PAD_SIZE_M[0] / 2, PAD_SIZE_M[1] / 2)
+        self._wipe_every = params.dirt.wipe_every_steps
+        self._wipe_dt_s = params.dt_s * self._wipe_every
 
     def _check_start_clear(self) -> None:
         hits = pb.getClosestPoints(self.world.robot, self.world.board, 0.0, physicsClientId=self.client)
@@ -96,7 +97,8 @@ class SimCore:
         self.robot.step()
         self.steps += 1
         out = self.robot.read()
-        self._wipe(out)
+        if self.steps % self._wipe_every == 0:
+            self._wipe(out)
         return out
 
     def _wipe(self, o: Readout) -> None:
@@ -112,7 +114,7 @@ class SimCore:
         vel = o.tcp_v @ R[:, :2]
         spin = float(o.tcp_w @ R[:, 2])
         self.dirt.wipe(centre[:2], axis / norm, self._half_pad, vel, spin, o.normal_force_n,
-                       self.params.dt_s, self.params.dirt.threshold_force_n, self.params.dirt.rate_per_n_m)
+                       self._wipe_dt_s, self.params.dirt.threshold_force_n, self.params.dirt.rate_per_n_m)
 
     def close(self) -> None:
         if self.client is not None:

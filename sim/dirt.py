@@ -157,11 +157,13 @@ class DirtGrid:
         if excess <= 0.0:
             return 0
         c = self.cell_m
-        reach = math.hypot(*half_size_m)
-        ix0 = max(int((centre_m[0] - reach) / c), 0)
-        ix1 = min(int((centre_m[0] + reach) / c) + 1, self.nx)
-        iy0 = max(int((centre_m[1] - reach) / c), 0)
-        iy1 = min(int((centre_m[1] + reach) / c) + 1, self.ny)
+        a, b = half_size_m
+        reach_x = abs(a * axis[0]) + abs(b * axis[1])  # half extents of the pad's bounding box
+        reach_y = abs(a * axis[1]) + abs(b * axis[0])
+        ix0 = max(int((centre_m[0] - reach_x) / c), 0)
+        ix1 = min(int((centre_m[0] + reach_x) / c) + 1, self.nx)
+        iy0 = max(int((centre_m[1] - reach_y) / c), 0)
+        iy1 = min(int((centre_m[1] + reach_y) / c) + 1, self.ny)
         if ix0 >= ix1 or iy0 >= iy1:
             return 0
         rx = (np.arange(ix0, ix1) + 0.5) * c - centre_m[0]

@@ -31,7 +31,8 @@ from interfaces.messages import CameraFrame
 from interfaces.transforms import pose_from_transform
 
 from .board import Board
-from .camera import board_texture, camera_pose, intrinsics_of, marker_layer, projection_matrix, view_matrix
+from .camera import (board_texture, camera_pose, intrinsics_of, light_towards, marker_layer, projection_matrix,
+                     view_matrix)
 from .params import SimParams
 
 log = logging.getLogger(__name__)
@@ -62,7 +63,7 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
         client = pb.connect(pb.DIRECT)
         world = build_world(client, setup.board, setup.params.contact, setup.q_start, visual=True)
         markers = marker_layer(setup.board.size_m)
-        texture = board_texture(dirt, setup.cell_m, markers)
+        texture = board_texture(dirt, setup.cell_m, markers, setup.board.size_m)
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp, "board.png")
             cv2.imwrite(path, texture[..., ::-1])
@@ -70,6 +71,7 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
         pb.changeVisualShape(world.board, -1, textureUniqueId=tex_id, physicsClientId=client)
         view = view_matrix(camera_pose(cam, setup.board))
         proj = projection_matrix(intrinsics_of(cam))
+        light = light_towards(cam, setup.board)
         texture_version = 0
         conn.send(("ready", 0.0))
         while True:
@@ -81,12 +83,12 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
             for j, qj in zip(world.joints, q):
                 pb.resetJointState(world.robot, j, float(qj), physicsClientId=client)
             if dirt_version != texture_version:
-                texture = board_texture(dirt, setup.cell_m, markers)
-                pb.changeTexture(tex_id, texture.reshape(-1), texture.shape[1], texture.shape[0],
+                texture = board_texture(dirt, setup.cell_m, markers, setup.board.size_m)
+                pb.changeTexture(tex_id, texture.tobytes(), texture.shape[1], texture.shape[0],
                                  physicsClientId=client)
                 texture_version = dirt_version
             out = pb.getCameraImage(cam.width, cam.height, view, proj, renderer=pb.ER_TINY_RENDERER,
-                                    shadow=int(cam.shadow), lightDirection=list(cam.light_direction),
+                                    shadow=int(cam.shadow), lightDirection=light,
                                     physicsClientId=client)
             image[...] = np.asarray(out[2], np.uint8).reshape(cam.height, cam.width, 4)[..., :3]
             conn.send(("frame", time.perf_counter() - t0))

@@ -110,17 +110,21 @@ class SimRobot:
 
     def _read_contacts(self) -> None:
         o = self.out
-        o.wrench[:] = 0.0
         o.arm_contact = False
         contacts = pb.getContactPoints(self.w.robot, self.w.board, physicsClientId=self.c)
+        px, py, pz = o.tcp_p
+        fx = fy = fz = mx = my = mz = 0.0
         for cp in contacts:
-            if cp[9] <= 0.0:
+            fn, f1, f2 = cp[9], cp[10], cp[12]
+            if fn <= 0.0:
                 continue  # a point within the contact margin that carries no load
             if cp[3] not in (self.w.eraser_link, self.w.tcp_link):
                 o.arm_contact = True
-            n = np.array(cp[7])  # normal on the board, pointing towards the robot
+            n, d1, d2 = cp[7], cp[11], cp[13]  # normal on the board, pointing towards the robot
             # PyBullet reports friction as acting on the board (B); the eraser (A) feels the opposite.
-            f = cp[9] * n - cp[10] * np.array(cp[11]) - cp[12] * np.array(cp[13])
-            o.wrench[:3] += f
-            o.wrench[3:] += np.cross(np.array(cp[5]) - o.tcp_p, f)
-        o.normal_force_n = float(o.wrench[:3] @ self.normal)
+            cx, cy, cz = (fn * n[i] - f1 * d1[i] - f2 * d2[i] for i in range(3))
+            rx, ry, rz = cp[5][0] - px, cp[5][1] - py, cp[5][2] - pz
+            fx, fy, fz = fx + cx, fy + cy, fz + cz
+            mx, my, mz = mx + ry * cz - rz * cy, my + rz * cx - rx * cz, mz + rx * cy - ry * cx
+        o.wrench[:] = (fx, fy, fz, mx, my, mz)
+        o.normal_force_n = float(fx * self.normal[0] + fy * self.normal[1] + fz * self.normal[2])

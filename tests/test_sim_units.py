@@ -1,0 +1,250 @@
+"""The simulator's parts without networking: parameters, board, dirt law, commands, camera model, description."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+import numpy as np
+import pybullet as pb
+import pytest
+
+from interfaces.errors import ConfigError
+from interfaces.messages import TorqueCommand
+from interfaces.robot_model import RobotModel
+from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from sim import cli
+from sim.board import board_from_params, check_board, start_configuration
+from sim.camera import camera_pose, intrinsics_of, look_at, project
+from sim.commands import HOLD, CommandGate
+from sim.dirt import DirtGrid, StainShape, random_stains, stains_from_specs
+from sim.params import BoardParams, CameraParams, SimParams
+from sim.world import build_world
+
+
+@pytest.fixture(scope="module")
+def model() -> RobotModel:
+    return RobotModel()
+
+
+# -- parameters ---------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("table, match", [
+    ({"mode": "fast"}, r"mode must be one of \('lockstep', 'realtime'\)"),
+    ({"rate_hz": 10}, r"rate_hz must be a number in \[100.0, 5000.0\]"),
+    ({"board": {"preset": "ceiling"}}, "preset must be one of"),
+    ({"board": {"preset": "custom", "origin_m": [1, 0, 0]}}, "needs origin_m, quat_wxyz and size_m"),
+    ({"board": {"preset": "custom", "origin_m": [1, 0, 0], "quat_wxyz": [1, 1, 0, 0], "size_m": [0.8, 0.6]}},
+     "unit quaternion"),
+    ({"dirt": {"cell_m": 0.005}}, r"cell_m must be a number in \[0.0005, 0.002\]"),
+    ({"dirt": {"stains": -1}}, r"stains must be an integer count in \[0, 12\]"),
+    ({"camera": {"width": 10}}, r"width must be an integer in \[64, 1920\]"),
+    ({"camera": {"position_m": [1, 0, 1]}}, "give both position_m and look_at_m"),
+    ({"colour": "red"}, r"\[sim\] unknown key\(s\) \['colour'\]"),
+    ({"contact": {"friction": "high"}}, "friction must be a number"),
+])
+def test_bad_parameters_name_the_key_and_the_valid_range(table, match):
+    with pytest.raises(ConfigError, match=match):
+        SimParams.from_table(table)
+
+
+def test_camera_defaults_are_a_d435i_colour_stream_scaled_to_the_resolution():
+    cam = CameraParams(width=320, height=240)
+    assert (cam.fx, cam.fy, cam.cx, cam.cy) == (307.5, 307.5, 160.0, 120.0)
+
+
+# -- board ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("preset", ["wall", "table"])
+def test_board_presets_are_wipeable_and_frames_round_trip(preset, model):
+    board = board_from_params(BoardParams(preset=preset))
+    check_board(board, 0.12, model)
+    xy = np.array([[0.1, 0.2], [0.5, 0.4]])
+    back = board.board_from_world(board.world_from_board(xy))
+    np.testing.assert_allclose(back[:, :2], xy, atol=1e-12)
+    np.testing.assert_allclose(back[:, 2], 0.0, atol=1e-12)
+    q = start_configuration(board, 0.08, model)
+    p, R = model.tcp_pose(q)
+    np.testing.assert_allclose(p, board.centre_world_m + 0.08 * board.normal_world, atol=2e-4)
+    assert R[:, 2] @ board.normal_world == pytest.approx(-1.0, abs=1e-3)  # the pad faces the board
+
+
+@pytest.mark.parametrize("origin, quat, match", [
+    ((-0.5, 0.4, 0.25), (0.5, -0.5, -0.5, 0.5), "the robot.s shoulder is .* in front of the board"),  # board behind the robot
+    ((1.6, 0.4, 0.25), (0.5, 0.5, -0.5, -0.5), "the eraser cannot reach"),  # a wall board 1.6 m away
+])
+def test_impossible_board_poses_are_refused_with_a_reason(origin, quat, match, model):
+    board = board_from_params(BoardParams(preset="custom", origin_m=origin, quat_wxyz=quat, size_m=(0.8, 0.6)))
+    with pytest.raises(ConfigError, match="impossible board pose: " + match):
+        check_board(board, 0.12, model)
+
+
+# -- dirt ----------------------------------------------------------------------------------------------
+
+def _grid_full_of_dirt() -> DirtGrid:
+    g = DirtGrid(np.array([0.4, 0.3]), 0.002, [], 0)
+    g.dirt[:] = 1.0
+    return g
+
+
+def test_wiping_removes_dirt_only_under_the_pad():
+    g = _grid_full_of_dirt()
+    centre, axis = np.array([0.2, 0.15]), np.array([math.cos(0.5), math.sin(0.5)])
+    n = g.wipe(centre, axis, (0.06, 0.025), np.array([0.2, 0.0]), 0.0, 10.0, 0.01, 2.0, 2.0)
+    xs = (np.arange(g.nx) + 0.5) * 0.002 - centre[0]
+    ys = (np.arange(g.ny) + 0.5) * 0.002 - centre[1]
+    along = axis[0] * xs[None, :] + axis[1] * ys[:, None]
+    across = -axis[1] * xs[None, :] + axis[0] * ys[:, None]
+    under = (np.abs(along) <= 0.06) & (np.abs(across) <= 0.025)
+    assert n == under.sum() == np.count_nonzero(g.dirt < 1.0)
+    assert np.all(g.dirt[~under] == 1.0)
+    np.testing.assert_allclose(g.dirt[under], math.exp(-2.0 * 8.0 * 0.2 * 0.01), rtol=1e-6)
+
+
+def test_removal_needs_force_above_the_threshold_and_sliding_and_grows_with_both():
+    def left(force, speed):
+        g = _grid_full_of_dirt()
+        g.wipe(np.array([0.2, 0.15]), np.array([1.0, 0.0]), (0.06, 0.025), np.array([speed, 0.0]), 0.0,
+               force, 0.01, 2.0, 2.0)
+        return g.dirt.min()
+
+    assert left(1.9, 0.2) == 1.0 and left(10.0, 0.0) == 1.0
+    assert left(20.0, 0.2) < left(10.0, 0.2) < 1.0
+    assert left(10.0, 0.4) < left(10.0, 0.2)
+
+
+def test_spinning_in_place_wipes_the_ends_of_the_pad_more_than_its_middle():
+    g = _grid_full_of_dirt()
+    g.wipe(np.array([0.2, 0.15]), np.array([1.0, 0.0]), (0.06, 0.025), np.zeros(2), 5.0, 10.0, 0.01, 2.0, 2.0)
+    row = g.dirt[int(0.15 / 0.002)]
+    assert row[int(0.255 / 0.002)] < row[int(0.205 / 0.002)] < 1.0
+
+
+def test_random_stains_are_seeded_separate_and_inside_the_region():
+    lo, hi = np.array([0.12, 0.12]), np.array([0.68, 0.48])
+    a = random_stains(np.random.default_rng(3), 5, (0.04, 0.08), lo, hi)
+    b = random_stains(np.random.default_rng(3), 5, (0.04, 0.08), lo, hi)
+    assert a == b and len(a) == 5
+    for s in a:
+        assert np.all(np.array(s.centre_m) - s.size_m / 2 >= lo) and np.all(np.array(s.centre_m) + s.size_m / 2 <= hi)
+    for i, s in enumerate(a):
+        for t in a[i + 1:]:
+            assert math.dist(s.centre_m, t.centre_m) > (s.size_m + t.size_m) / 2 + 0.03
+    with pytest.raises(ConfigError, match="do not fit"):
+        random_stains(np.random.default_rng(0), 12, (0.2, 0.3), lo, hi)
+
+
+def test_stains_have_their_size_and_remaining_dirt_is_tracked():
+    shape = StainShape(0, (0.2, 0.15), 0.08, aspect=2.0, angle_rad=0.0, wobble_seed=1)
+    g = DirtGrid(np.array([0.4, 0.3]), 0.002, [shape], 0)
+    ys, xs = np.nonzero(g.labels == 0)
+    extent_x = (xs.max() - xs.min() + 1) * 0.002
+    assert 0.06 < extent_x <= 0.09  # the wobbly edge stays within about 10 % of the nominal size
+    assert g.remaining().tolist() == [1.0]
+    g.dirt[g.labels == 0] *= 0.5
+    assert g.remaining()[0] == pytest.approx(0.5)
+
+
+def test_stain_specs_are_checked():
+    lo, hi = np.array([0.1, 0.1]), np.array([0.7, 0.5])
+    assert stains_from_specs([{"centre_m": [0.3, 0.3], "size_m": 0.05}], lo, hi)[0].centre_m == (0.3, 0.3)
+    with pytest.raises(ConfigError, match="outside the stain region"):
+        stains_from_specs([{"centre_m": [0.05, 0.3], "size_m": 0.05}], lo, hi)
+    with pytest.raises(ConfigError, match="unknown key"):
+        stains_from_specs([{"centre_m": [0.3, 0.3], "size_m": 0.05, "colour": 1}], lo, hi)
+    with pytest.raises(ConfigError, match="needs centre_m"):
+        stains_from_specs([{"size_m": 0.05}], lo, hi)
+
+
+# -- commands ---------------------------------------------------------------------------------------------
+
+def test_command_gate_clips_drops_and_counts():
+    counters: Counter = Counter()
+    gate = CommandGate(np.array([10.0, 5.0]), counters)
+    np.testing.assert_array_equal(gate.accept(TorqueCommand(seq=0, stamp_ns=0, tau_nm=[20.0, -1.0])), [10.0, -1.0])
+    assert gate.accept(TorqueCommand(seq=0, stamp_ns=0, tau_nm=[1.0])) is None
+    assert gate.accept(TorqueCommand(seq=0, stamp_ns=0, tau_nm=[], mode="hold")) == HOLD
+    assert counters == Counter(commands_clipped=1, commands_applied=1, commands_dropped_wrong_length=1,
+                               commands_hold=1)
+
+
+# -- camera model ------------------------------------------------------------------------------------------
+
+def test_look_at_gives_an_optical_frame_looking_at_the_target():
+    T = look_at(np.array([0.0, 0.0, 2.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0]))
+    R = T[:3, :3]
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+    np.testing.assert_allclose(R[:, 2], np.array([1.0, 0.0, -2.0]) / math.sqrt(5.0))
+    assert R[:, 1] @ np.array([0.0, 0.0, 1.0]) < 0  # image y (down) points away from "up"
+
+
+@pytest.mark.parametrize("preset", ["wall", "table"])
+def test_automatic_camera_sees_the_whole_board(preset):
+    cam = CameraParams()
+    board = board_from_params(BoardParams(preset=preset))
+    k, T = intrinsics_of(cam), camera_pose(cam, board)
+    corners = board.world_from_board(np.array([[0, 0], [0.8, 0], [0.8, 0.6], [0, 0.6]]) * board.size_m / [0.8, 0.6])
+    px = project(k, T, corners)
+    assert np.all(px > 0) and np.all(px[:, 0] < cam.width) and np.all(px[:, 1] < cam.height)
+    np.testing.assert_allclose(project(k, T, board.centre_world_m), [cam.cx, cam.cy], atol=1e-6)
+
+
+def test_quaternion_matrix_round_trip():
+    rng = np.random.default_rng(0)
+    for q in rng.normal(size=(50, 4)):
+        q /= np.linalg.norm(q)
+        q = q if q[0] >= 0 else -q
+        np.testing.assert_allclose(quat_wxyz_from_matrix(matrix_from_quat_wxyz(q)), q, atol=1e-12)
+
+
+# -- one description for PyBullet and Pinocchio ----------------------------------------------------------
+
+def test_pybullet_and_pinocchio_agree_on_the_description(model):
+    board = board_from_params(BoardParams())
+    client = pb.connect(pb.DIRECT)
+    try:
+        q = np.array([0.3, 0.5, -0.2, -1.2, 0.4, 0.8, 0.1])
+        world = build_world(client, board, SimParams().contact, q)
+        tcp = pb.getLinkState(world.robot, world.tcp_link, computeForwardKinematics=1, physicsClientId=client)
+        np.testing.assert_allclose(tcp[4], model.tcp_pose(q)[0], atol=1e-6)
+        g = pb.calculateInverseDynamics(world.robot, q.tolist(), [0.0] * 7, [0.0] * 7, physicsClientId=client)
+        np.testing.assert_allclose(g, model.gravity(q), atol=1e-6)
+        limits = [pb.getJointInfo(world.robot, j, physicsClientId=client)[10] for j in world.joints]
+        np.testing.assert_allclose(limits, model.limits.tau_max)
+    finally:
+        pb.disconnect(client)
+    np.testing.assert_allclose(model.limits.tau_max, [320, 320, 176, 176, 110, 40, 40])
+    np.testing.assert_allclose(np.degrees(model.limits.q_max), [170, 120, 170, 120, 170, 120, 175], atol=1e-3)
+    assert model.tcp_pose(np.zeros(7))[0][2] == pytest.approx(0.36 + 0.42 + 0.40 + 0.126 + 0.035)
+
+
+def test_tcp_jacobian_matches_finite_differences(model):
+    q = np.array([0.2, 0.4, -0.3, -1.1, 0.5, 0.7, -0.2])
+    J = model.tcp_jacobian(q)
+    eps = 1e-7
+    for i in range(7):
+        dq = np.zeros(7)
+        dq[i] = eps
+        dp = (model.tcp_pose(q + dq)[0] - model.tcp_pose(q - dq)[0]) / (2 * eps)
+        np.testing.assert_allclose(J[:3, i], dp, atol=1e-6)
+
+
+# -- the command line ---------------------------------------------------------------------------------------
+
+def test_sim_cli_checks_config_and_board_at_start(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[sim\nmode = 1")
+    assert cli.main(["--config", str(bad)]) == 1
+    assert "not valid TOML" in capsys.readouterr().err
+    behind = tmp_path / "behind.toml"
+    behind.write_text('[sim.board]\npreset = "custom"\norigin_m = [-0.5, 0.4, 0.25]\n'
+                      'quat_wxyz = [0.5, -0.5, -0.5, 0.5]\nsize_m = [0.8, 0.6]\n')
+    assert cli.main(["--config", str(behind), "--check"]) == 1
+    assert "impossible board pose" in capsys.readouterr().err
+    assert cli.main(["--board", "table", "--stains", "4", "--check"]) == 0
+    assert "table board" in capsys.readouterr().out
+    assert cli.main(["--camera-size", "big", "--check"]) == 1
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--mode", "warp"])
+    assert exc.value.code == 2
