@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pybullet as pb
@@ -248,3 +249,11 @@ def test_sim_cli_checks_config_and_board_at_start(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         cli.main(["--mode", "warp"])
     assert exc.value.code == 2
+
+
+def test_the_example_config_loads_and_says_the_defaults():
+    from interfaces.config import load_config
+
+    cfg = load_config(Path(__file__).resolve().parent.parent / "config" / "example.toml", env={})
+    assert SimParams.from_table(cfg.table("sim")) == SimParams()
+    assert cfg.zenoh.listen == ("tcp/127.0.0.1:7447",)
