@@ -255,8 +255,4 @@ class SimService:
         if not force and now < self._next_status:
             return
         self._next_status = now + self._status_period_s
-        try:
-            self.node.publish(self.keys.sim_status, self.status())
-        except Exception:  # the session may already be closing at shutdown
-            if not force:
-                raise
+        self.node.publish(self.keys.sim_status, self.status())
