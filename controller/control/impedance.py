@@ -1,0 +1,123 @@
+"""Cartesian impedance with task-space inertia, reference feed-forward and a consistent nullspace.
+
+For the pad centre x (position p, orientation R) with Jacobian J (6, 7),
+joint-space inertia M, task-space inertia Lambda = (J M^-1 J^T)^-1 and
+dynamically consistent generalised inverse Jbar = M^-1 J^T Lambda::
+
+    e      = [p_ref - p ; log(R_ref R^T)]          pose error, world axes
+    de     = v_ref - J dq                          twist error
+    F      = Lambda (a_ref - dJ dq) + K e + D de   (6,) task wrench
+    D      = 2 zeta sqrt(K Lambda)                 per axis, on the diagonal of Lambda
+    tau    = J^T F + N^T tau_0 + C(q, dq) dq [+ g(q)]
+    N^T    = I - J^T Jbar^T                        consistent nullspace projector
+    tau_0  = M (K_n (q_rest - q) - 2 sqrt(K_n) dq) posture
+
+The feed-forward Lambda (a_ref - dJ dq) cancels the inertia of the
+tracked motion (dJ dq is the pad's acceleration at zero joint acceleration,
+the velocity-product part); without it a 1 Hz circle of 5 cm radius is
+tracked 3-4x worse at the same stiffness. The projector keeps
+the posture term from pushing the pad (a plain pseudo-inverse projector
+does). Gravity is added only when the robot does not compensate it itself.
+Orientation errors use the rotation matrix logarithm, which takes the
+shorter way and has no quaternion sign ambiguity.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from interfaces.robot_model import RobotModel
+
+from .params import ImpedanceParams
+
+
+@dataclass
+class Reference:
+    """Where the pad should be: position (3,) [m], orientation (3, 3), twist (6,) [m/s, rad/s], acceleration (6,)."""
+
+    p_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    twist: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    accel: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+
+@dataclass
+class ImpedanceTerms:
+    """The parts of one evaluation, for logs and tests (all world axes)."""
+
+    tau_nm: np.ndarray
+    wrench_task: np.ndarray
+    pose_error: np.ndarray
+    twist_error: np.ndarray
+    tau_nullspace: np.ndarray
+    p_m: np.ndarray
+    R: np.ndarray
+    twist: np.ndarray
+    Lambda: np.ndarray
+    J: np.ndarray
+
+
+def pose_error(p_ref: np.ndarray, R_ref: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """(6,) ``[p_ref - p ; log(R_ref R^T)]``: the world-frame rotation vector taking R to R_ref."""
+    return np.concatenate([p_ref - p, pin.log3(R_ref @ R.T)])
+
+
+def drift_acceleration(model: RobotModel, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """(6,) dJ dq: the pad's classical acceleration [m/s^2, rad/s^2] (world axes) at zero joint acceleration."""
+    m, d = model.model, model.data
+    pin.forwardKinematics(m, d, q, dq, np.zeros_like(q))
+    acc = pin.getFrameClassicalAcceleration(m, d, model.tcp_id, pin.LOCAL_WORLD_ALIGNED)
+    return np.concatenate([acc.linear, acc.angular])
+
+
+def task_inertia(J: np.ndarray, M_inv: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """(6, 6) Lambda = (J M^-1 J^T + eps I)^-1 (eps keeps it finite at singularities)."""
+    return np.linalg.inv(J @ M_inv @ J.T + eps * np.eye(J.shape[0]))
+
+
+def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Reference, params: ImpedanceParams,
+                     q_rest: np.ndarray, add_gravity: bool, extra_wrench: np.ndarray | None = None,
+                     selection: np.ndarray | None = None) -> ImpedanceTerms:
+    """Joint torques (7,) [Nm] of the impedance law at state ``q``, ``dq``.
+
+    extra_wrench : (6,) added to the task wrench unchanged (e.g. the
+    regulated contact force along the board normal). selection : (3, 3)
+    projector onto the translational directions under impedance (e.g.
+    ``I - n n^T`` while a force is regulated along n); None = all.
+    """
+    m, d = model.model, model.data
+    M = pin.crba(m, d, q)
+    M = np.triu(M) + np.triu(M, 1).T
+    M_inv = np.linalg.inv(M)
+    J = model.tcp_jacobian(q)
+    p, R = model.tcp_pose(q)
+    twist = J @ dq
+    Lam = task_inertia(J, M_inv)
+    e = pose_error(ref.p_m, ref.R, p, R)
+    de = ref.twist - twist
+    a = ref.accel - drift_acceleration(model, q, dq)
+    if selection is not None:
+        e[:3] = selection @ e[:3]
+        de[:3] = selection @ de[:3]
+        a[:3] = selection @ a[:3]
+    K = np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
+    D = 2.0 * params.damping_factor * np.sqrt(K * np.clip(np.diag(Lam), 1e-6, None))
+    F = Lam @ a + K * e + D * de
+    if selection is not None:
+        # damp motion along the force-controlled direction too (contact is stiff; keep it quiet)
+        n_part = twist[:3] - selection @ twist[:3]
+        F[:3] -= 2.0 * params.damping_factor * np.sqrt(params.stiffness_n_m * Lam[0, 0]) * n_part * 0.5
+    if extra_wrench is not None:
+        F = F + extra_wrench
+    Jbar = M_inv @ J.T @ Lam
+    kn = params.nullspace_stiffness_nm_rad
+    tau0 = M @ (kn * (q_rest - q) - 2.0 * np.sqrt(kn) * dq)
+    tau_null = tau0 - J.T @ (Jbar.T @ tau0)
+    nle = pin.rnea(m, d, q, dq, np.zeros_like(q))  # C(q, dq) dq + g(q)
+    if not add_gravity:
+        nle = nle - pin.computeGeneralizedGravity(m, d, q)
+    tau = J.T @ F + tau_null + nle
+    return ImpedanceTerms(tau, F, e, de, tau_null, p, R, twist, Lam, J)

@@ -1,0 +1,41 @@
+"""Gains and limits of the Cartesian impedance law, checked at construction."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from controller.lamps.errors import LampsError
+
+
+class ControlConfigError(LampsError, ValueError):
+    """An impedance parameter is out of its valid range."""
+
+
+def _positive(name: str, value: float, hi: float = float("inf"), zero_ok: bool = False) -> None:
+    ok = (value >= 0 if zero_ok else value > 0) and value <= hi
+    if not ok:
+        lo = "0 <=" if zero_ok else "0 <"
+        raise ControlConfigError(f"{name} must satisfy {lo} {name} <= {hi}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ImpedanceParams:
+    """Cartesian impedance at the pad centre (world axes).
+
+    stiffness_n_m : translational stiffness K_t [N/m]; stiffness_nm_rad :
+    rotational K_r [Nm/rad]. damping_factor : zeta in D = 2 zeta sqrt(K Lambda)
+    per axis (1 = critical damping of the task-space mass Lambda).
+    nullspace_stiffness_nm_rad : posture spring K_n [Nm/rad] (its damping
+    is critical for a unit inertia, scaled by M) pulling towards the rest posture.
+    """
+
+    stiffness_n_m: float = 1500.0
+    stiffness_nm_rad: float = 150.0
+    damping_factor: float = 1.0
+    nullspace_stiffness_nm_rad: float = 10.0
+
+    def __post_init__(self) -> None:
+        _positive("stiffness_n_m", self.stiffness_n_m, 1e5)
+        _positive("stiffness_nm_rad", self.stiffness_nm_rad, 1e4)
+        _positive("damping_factor", self.damping_factor, 5.0)
+        _positive("nullspace_stiffness_nm_rad", self.nullspace_stiffness_nm_rad, 1e3, zero_ok=True)

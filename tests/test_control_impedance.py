@@ -1,0 +1,107 @@
+"""The Cartesian impedance law: its identities, and tracking on the simulated arm (PyBullet, no network)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from controller.control.impedance import Reference, drift_acceleration, impedance_torque, pose_error
+from controller.control.params import ControlConfigError, ImpedanceParams
+from interfaces.robot_model import RobotModel
+from sim.core import SimCore
+from sim.params import SimParams
+
+Q = np.array([0.2, 0.5, -0.3, -1.3, 0.4, 0.8, -0.2])
+DQ = np.array([0.3, -0.2, 0.4, 0.5, -0.6, 0.2, 0.7])
+
+
+@pytest.fixture(scope="module")
+def model() -> RobotModel:
+    return RobotModel()
+
+
+def test_drift_acceleration_is_the_time_derivative_of_J_along_the_motion(model):
+    h = 1e-6
+    fd = (model.tcp_jacobian(Q + h * DQ) @ DQ - model.tcp_jacobian(Q - h * DQ) @ DQ) / (2 * h)
+    np.testing.assert_allclose(drift_acceleration(model, Q, DQ), fd, atol=1e-6)
+
+
+def test_nullspace_torque_causes_no_task_acceleration(model):
+    ref = Reference(*model.tcp_pose(Q))
+    terms = impedance_torque(model, Q, DQ, ref, ImpedanceParams(nullspace_stiffness_nm_rad=50.0), Q + 0.3, True)
+    M = pin.crba(model.model, model.data, Q)
+    M = np.triu(M) + np.triu(M, 1).T
+    tau0 = M @ (50.0 * 0.3 - 2.0 * np.sqrt(50.0) * DQ)  # the posture torque before projection
+    unprojected = np.linalg.norm(terms.J @ np.linalg.solve(M, tau0))
+    leaked = np.linalg.norm(terms.J @ np.linalg.solve(M, terms.tau_nullspace))
+    assert unprojected > 1.0
+    assert leaked < 1e-4 * unprojected  # only the 1e-6 regularisation of Lambda leaks
+
+
+@pytest.mark.parametrize("add_gravity", [True, False])
+def test_at_rest_on_the_reference_only_gravity_is_commanded_when_the_robot_lacks_it(model, add_gravity):
+    p, R = model.tcp_pose(Q)
+    terms = impedance_torque(model, Q, np.zeros(7), Reference(p, R), ImpedanceParams(), Q, add_gravity)
+    expected = model.gravity(Q) if add_gravity else np.zeros(7)
+    np.testing.assert_allclose(terms.tau_nm, expected, atol=1e-9)
+
+
+def test_pose_error_is_the_rotation_vector_towards_the_reference():
+    axis = np.array([0.3, -0.4, 0.866])
+    axis /= np.linalg.norm(axis)
+    R = pin.exp3(np.array([0.1, 0.2, -0.3]))
+    R_ref = pin.exp3(0.25 * axis) @ R
+    e = pose_error(np.ones(3), R_ref, np.zeros(3), R)
+    np.testing.assert_allclose(e, np.concatenate([np.ones(3), 0.25 * axis]), atol=1e-12)
+    # past 180 deg the log takes the shorter way (the sign a quaternion double cover would flip)
+    e_far = pose_error(np.zeros(3), pin.exp3(np.array([0.0, 0.0, 3.5])), np.zeros(3), np.eye(3))
+    np.testing.assert_allclose(e_far[3:], [0.0, 0.0, 3.5 - 2 * np.pi], atol=1e-9)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"stiffness_n_m": -10.0}, "stiffness_n_m must satisfy"),
+    ({"damping_factor": 0.0}, "damping_factor must satisfy"),
+    ({"nullspace_stiffness_nm_rad": -1.0}, "nullspace_stiffness_nm_rad must satisfy"),
+])
+def test_bad_gains_are_refused(kwargs, match):
+    with pytest.raises(ControlConfigError, match=match):
+        ImpedanceParams(**kwargs)
+
+
+def _track_circle(model: RobotModel, feed_forward: bool, radius_m=0.05, freq_hz=1.0) -> float:
+    """RMS position error [m] over 2-4 s of a circle in the board plane, in free space, 1 kHz."""
+    core = SimCore(SimParams.from_table({"camera": {"enabled": False}}))
+    try:
+        ex, ey = core.board.R[:, 0], core.board.R[:, 1]
+        q_rest = core.out.q.copy()
+        p0, R0 = model.tcp_pose(q_rest)
+        centre = p0 - radius_m * ex
+        ref = Reference(p0.copy(), R0.copy())
+        w, phase, errors = 2 * np.pi * freq_hz, 0.0, []
+        for k in range(4000):
+            t = k * 1e-3
+            s = min(t, 1.0)  # quintic ramp of the phase rate over the first second
+            rate = w * (10 * s**3 - 15 * s**4 + 6 * s**5)
+            rate_dot = w * (30 * s**2 - 60 * s**3 + 30 * s**4) if t < 1.0 else 0.0
+            c, sn = np.cos(phase), np.sin(phase)
+            ref.p_m = centre + radius_m * (c * ex + sn * ey)
+            ref.twist = np.concatenate([radius_m * rate * (-sn * ex + c * ey), np.zeros(3)])
+            acc = radius_m * rate_dot * (-sn * ex + c * ey) - radius_m * rate**2 * (c * ex + sn * ey)
+            ref.accel = np.concatenate([acc if feed_forward else np.zeros(3), np.zeros(3)])
+            if t >= 2.0:
+                errors.append(np.linalg.norm(model.tcp_pose(core.out.q)[0] - ref.p_m))
+            terms = impedance_torque(model, core.out.q, core.out.dq, ref, ImpedanceParams(), q_rest, True)
+            core.step(np.clip(terms.tau_nm, -core.tau_max, core.tau_max))
+            phase += rate * 1e-3
+        return float(np.sqrt(np.mean(np.square(errors))))
+    finally:
+        core.close()
+
+
+@pytest.mark.slow
+def test_reference_acceleration_feed_forward_tracks_a_1hz_5cm_circle_within_2mm(model):
+    with_ff = _track_circle(model, True)
+    without = _track_circle(model, False)
+    assert with_ff <= 2e-3, f"RMS {with_ff * 1e3:.2f} mm"
+    assert without > 3 * with_ff, f"without feed-forward {without * 1e3:.2f} mm"
