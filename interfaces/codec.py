@@ -36,7 +36,7 @@ class Decoder(Generic[M]):
     def __call__(self, data: bytes | bytearray | memoryview) -> M:
         try:
             msg = self._decoder.decode(data)
-        except (msgspec.DecodeError, ValueError, TypeError) as exc:
+        except Exception as exc:  # any failure (incl. RecursionError on absurd nesting) is a bad payload
             raise MessageDecodeError(self._explain(data, exc)) from None
         if msg.version != SCHEMA_VERSION:
             raise MessageDecodeError(
@@ -49,8 +49,8 @@ class Decoder(Generic[M]):
         name = self.msg_type.__name__
         try:
             raw = msgspec.msgpack.decode(data)
-        except (msgspec.DecodeError, ValueError, TypeError):
-            return f"{name}: not a msgpack message ({exc})"
+        except Exception:
+            return f"{name}: not a msgpack message ({type(exc).__name__}: {str(exc)[:120]})"
         # wire layout: [type tag, fields..., version] (msgspec puts the base's default field last)
         if isinstance(raw, list) and len(raw) >= 2 and isinstance(raw[0], str):
             if raw[0] != name:

@@ -1,8 +1,17 @@
-"""The fixed board camera: its pose, its pinhole model in OpenGL form, and the board's texture.
+"""The fixed board camera: its pose, its pinhole model in OpenGL form, the board's texture and its dirt.
 
 Pure numpy and OpenCV; the PyBullet call that renders lives in
 :mod:`sim.renderer`. The camera frame is the optical frame (x right, y down,
 z forward), like a RealSense colour stream.
+
+The board's texture (white with the corner markers) is loaded once: PyBullet's
+``changeTexture`` does not reach its TinyRenderer, and reloading a texture
+per frame leaks its memory. The dirt is drawn in image space instead: the
+camera and the board are fixed, so every pixel's ray meets the board plane
+at a fixed cell (:func:`board_cell_index`); where the rendered segmentation
+says the board is visible, :func:`composite_dirt` tints the pixel with the
+ink colour by that cell's dirt, keeping the rendered shading (and the
+arm's shadow).
 """
 
 from __future__ import annotations
@@ -140,3 +149,43 @@ def board_texture(dirt: np.ndarray, cell_m: float, markers: list[tuple[int, int,
     for r0, c0, patch in markers:
         rgb[r0:r0 + patch.shape[0], c0:c0 + patch.shape[1]] = patch
     return rgb
+
+
+def board_cell_index(k: CameraIntrinsics, T_camera_to_world: np.ndarray, board: Board, cell_m: float,
+                     grid_shape: tuple[int, int]) -> np.ndarray:
+    """(H * W,) flat index into the dirt grid of the board cell each pixel's ray meets, or -1 off the board."""
+    u, v = np.meshgrid(np.arange(k.width, dtype=float), np.arange(k.height, dtype=float))
+    rays_cam = np.stack([(u - k.cx) / k.fx, (v - k.cy) / k.fy, np.ones_like(u)], -1).reshape(-1, 3)
+    rays = rays_cam @ T_camera_to_world[:3, :3].T
+    origin = T_camera_to_world[:3, 3]
+    n = board.normal_world
+    denom = rays @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((board.origin_m - origin) @ n) / denom
+    hit = origin + t[:, None] * rays
+    xy = (hit - board.origin_m) @ board.R[:, :2]
+    ny, nx = grid_shape
+    ix = np.floor(xy[:, 0] / cell_m)
+    iy = np.floor(xy[:, 1] / cell_m)
+    ok = (t > 0) & np.isfinite(t) & (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+    index = np.full(u.size, -1, np.int64)
+    index[ok] = (iy[ok] * nx + ix[ok]).astype(np.int64)
+    return index
+
+
+def composite_dirt(rgb: np.ndarray, visible: np.ndarray, cell_index: np.ndarray, dirt: np.ndarray) -> None:
+    """Tint, in place, the pixels of ``rgb`` (H, W, 3) uint8 where ``visible`` (H * W,) bool shows the board.
+
+    A pixel's colour becomes ``(1 - d) c + d ink s`` with d its cell's dirt and
+    s the rendered brightness relative to the clean board (light and shadow).
+    """
+    flat = rgb.reshape(-1, 3)
+    sel = np.flatnonzero(visible & (cell_index >= 0))
+    d = dirt.reshape(-1)[cell_index[sel]]
+    keep = d > 1e-3
+    sel, d = sel[keep], d[keep, None]
+    if sel.size == 0:
+        return
+    c = flat[sel].astype(np.float32)
+    shade = c.mean(axis=1, keepdims=True) / float(BOARD_RGB.mean())
+    flat[sel] = np.clip((1.0 - d) * c + d * INK_RGB * shade, 0, 255).astype(np.uint8)

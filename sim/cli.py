@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: service.stop.set())
     try:
         steps = service.run()
-    except RuntimeError as exc:
+    except (RuntimeError, OSError) as exc:
         print(f"lamps sim: error: {exc}", file=sys.stderr)
         return 1
     finally:

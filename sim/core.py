@@ -17,6 +17,7 @@ from interfaces.errors import ConfigError
 from interfaces.robot_model import RobotModel
 
 from .board import Board, board_from_params, check_board, start_configuration, wipe_region
+from .camera import camera_pose
 from .commands import HOLD
 from .dirt import DirtGrid, random_stains, stains_from_specs
 from .params import SimParams
@@ -54,8 +55,19 @@ class SimCore:
         self.dirt = DirtGrid(self.board.size_m, params.dirt.cell_m, make_stains(params, self.board), params.seed)
         if params.start_q_rad is not None:
             self.q_start = np.array(params.start_q_rad)
+            lo, hi = model.limits.q_min, model.limits.q_max
+            bad = [i + 1 for i in range(7) if not lo[i] <= self.q_start[i] <= hi[i]]
+            if bad:
+                raise ConfigError(f"[sim] start_q_rad: joint(s) {bad} outside the description's limits "
+                                  f"{np.round(lo, 3).tolist()} .. {np.round(hi, 3).tolist()} rad")
         else:
             self.q_start = start_configuration(self.board, params.start_standoff_m, model)
+        self.T_camera_to_world = None
+        if params.camera.enabled:
+            try:
+                self.T_camera_to_world = camera_pose(params.camera, self.board)
+            except ValueError as exc:
+                raise ConfigError(f"[sim.camera] {exc}") from None
         self.client = pb.connect(pb.DIRECT)
         try:
             self.world = build_world(self.client, self.board, params.contact, self.q_start, params.dt_s,

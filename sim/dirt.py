@@ -77,10 +77,11 @@ def stains_from_specs(specs: Sequence[Mapping[str, Any]], lo: np.ndarray, hi: np
             size = float(spec["size_m"])
             aspect = float(spec.get("aspect", 1.3))
             angle = math.radians(float(spec.get("angle_deg", 0.0)))
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise ConfigError(f"[sim.dirt] stain {i} needs centre_m = [x, y] and size_m (numbers): {exc}") from None
-        if not (0.01 <= size <= 0.3 and 1.0 <= aspect <= 4.0 and np.all(np.isfinite(centre))):
-            raise ConfigError(f"[sim.dirt] stain {i}: size_m must be in [0.01, 0.3] and aspect in [1, 4]")
+        if not (0.01 <= size <= 0.3 and 1.0 <= aspect <= 4.0 and np.all(np.isfinite(centre)) and math.isfinite(angle)):
+            raise ConfigError(f"[sim.dirt] stain {i}: size_m must be in [0.01, 0.3], aspect in [1, 4], "
+                              "centre_m and angle_deg finite")
         if np.any(centre < lo) or np.any(centre > hi):
             raise ConfigError(f"[sim.dirt] stain {i}: centre {centre.tolist()} m is outside the stain region "
                               f"{np.round(lo, 3).tolist()}-{np.round(hi, 3).tolist()} m")

@@ -20,6 +20,7 @@ its valid range.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -100,7 +101,9 @@ class ContactParams:
 
     friction : Coulomb coefficient of felt sliding on a melamine/lacquered
     board (0.3-0.4 is typical). stiffness_n_m, damping_n_s_m : the felt's
-    compliance along the normal (10 N presses 0.5 mm at 2e4 N/m).
+    compliance along the normal, per contact point (PyBullet applies them
+    at each of the pad's corner contacts: a flat pad is four springs, 8e4
+    N/m in all, so 10 N presses about 0.13 mm).
     """
 
     friction: float = 0.35
@@ -200,6 +203,8 @@ class CameraParams:
             if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
                 raise ConfigError(f"[{s}] {name} must be an integer in [{lo}, {hi}], got {v!r}")
         _range(s, "rate_hz", self.rate_hz, 0.5, 60.0)
+        if not isinstance(self.name, str) or not re.fullmatch(r"[A-Za-z0-9_\-.]+", self.name):
+            raise ConfigError(f"[{s}] name must be letters, digits, '_', '-' or '.', got {self.name!r}")
         scale = self.width / 640.0
         for name, default in (("fx", 615.0 * scale), ("fy", 615.0 * scale),
                               ("cx", self.width / 2.0), ("cy", self.height / 2.0)):

@@ -4,9 +4,9 @@ The sim process owns a :class:`CameraProcess`. When the renderer is idle,
 :meth:`CameraProcess.request` copies the dirt grid into shared memory and
 sends the joint positions of the state to show; the renderer process
 (``_render_main``, its own PyBullet client with the same robot and board)
-poses the arm, refreshes the board texture if the dirt changed, renders
-with TinyRenderer and writes the RGB image into a second shared-memory
-buffer. A thread of the sim process (:class:`FramePublisher`) waits for the
+poses the arm, renders with TinyRenderer, draws the dirt where the board is
+visible (:func:`~sim.camera.composite_dirt`) and writes the RGB image into a
+second shared-memory buffer. A thread of the sim process (:class:`FramePublisher`) waits for the
 renderer's answer, wraps the image in a :class:`~interfaces.messages.CameraFrame`
 and publishes it, so neither rendering nor a megabyte-sized put sits in
 the physics loop.
@@ -31,8 +31,8 @@ from interfaces.messages import CameraFrame
 from interfaces.transforms import pose_from_transform
 
 from .board import Board
-from .camera import (board_texture, camera_pose, intrinsics_of, light_towards, marker_layer, projection_matrix,
-                     view_matrix)
+from .camera import (board_cell_index, board_texture, camera_pose, composite_dirt, intrinsics_of, light_towards,
+                     marker_layer, projection_matrix, view_matrix)
 from .params import SimParams
 
 log = logging.getLogger(__name__)
@@ -54,6 +54,9 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
 
     from .world import build_world
 
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the sim, which then stops us in order
     cam = setup.params.camera
     dirt_shm = shared_memory.SharedMemory(setup.dirt_shm)
     image_shm = shared_memory.SharedMemory(setup.image_shm)
@@ -63,34 +66,31 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
         client = pb.connect(pb.DIRECT)
         world = build_world(client, setup.board, setup.params.contact, setup.q_start, visual=True)
         markers = marker_layer(setup.board.size_m)
-        texture = board_texture(dirt, setup.cell_m, markers, setup.board.size_m)
+        texture = board_texture(np.zeros_like(dirt), setup.cell_m, markers, setup.board.size_m)
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp, "board.png")
             cv2.imwrite(path, texture[..., ::-1])
             tex_id = pb.loadTexture(path, physicsClientId=client)
         pb.changeVisualShape(world.board, -1, textureUniqueId=tex_id, physicsClientId=client)
-        view = view_matrix(camera_pose(cam, setup.board))
+        T_camera = camera_pose(cam, setup.board)
+        view = view_matrix(T_camera)
         proj = projection_matrix(intrinsics_of(cam))
         light = light_towards(cam, setup.board)
-        texture_version = 0
+        cells = board_cell_index(intrinsics_of(cam), T_camera, setup.board, setup.cell_m, setup.dirt_shape)
         conn.send(("ready", 0.0))
         while True:
             request = conn.recv()
             if request is None:
                 break
-            q, dirt_version = request
+            q, _dirt_version = request
             t0 = time.perf_counter()
             for j, qj in zip(world.joints, q):
                 pb.resetJointState(world.robot, j, float(qj), physicsClientId=client)
-            if dirt_version != texture_version:
-                texture = board_texture(dirt, setup.cell_m, markers, setup.board.size_m)
-                pb.changeTexture(tex_id, texture.tobytes(), texture.shape[1], texture.shape[0],
-                                 physicsClientId=client)
-                texture_version = dirt_version
             out = pb.getCameraImage(cam.width, cam.height, view, proj, renderer=pb.ER_TINY_RENDERER,
                                     shadow=int(cam.shadow), lightDirection=light,
                                     physicsClientId=client)
             image[...] = np.asarray(out[2], np.uint8).reshape(cam.height, cam.width, 4)[..., :3]
+            composite_dirt(image, np.asarray(out[4]).reshape(-1) == world.board, cells, dirt)
             conn.send(("frame", time.perf_counter() - t0))
     except (EOFError, KeyboardInterrupt, BrokenPipeError):
         pass
@@ -126,6 +126,8 @@ class CameraProcess:
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_render_main, args=(child, setup), name="lamps-sim-renderer", daemon=True)
         self._idle = threading.Event()
+        self._closed = False
+        self.dead = False
         self._pending: tuple[int, int, int] | None = None
         self.requested = self.rendered = self.skipped = 0
         self.render_s: list[float] = []
@@ -133,10 +135,16 @@ class CameraProcess:
     def start(self, timeout_s: float = 60.0) -> None:
         """Start the renderer and wait until its scene is built."""
         self._proc.start()
-        if not self._conn.poll(timeout_s):
+        try:
+            if not self._conn.poll(timeout_s):
+                raise RuntimeError(f"camera renderer did not start within {timeout_s} s")
+            self._conn.recv()
+        except (EOFError, OSError):
             self.close()
-            raise RuntimeError(f"camera renderer did not start within {timeout_s} s")
-        self._conn.recv()
+            raise RuntimeError(f"camera renderer failed while building its scene (exit code {self._proc.exitcode})")
+        except RuntimeError:
+            self.close()
+            raise
         self._idle.set()
 
     @property
@@ -149,15 +157,25 @@ class CameraProcess:
     def request(self, seq: int, stamp_ns: int, robot_time_ns: int, q: np.ndarray,
                 dirt: np.ndarray, dirt_version: int) -> bool:
         """Ask for a frame of state ``seq``; False (and counted) if the renderer is still busy."""
+        if self.dead:
+            return False
         if not self._idle.is_set():
             self.skipped += 1
             return False
         self._idle.clear()
         self.dirt[...] = dirt
         self._pending = (seq, stamp_ns, robot_time_ns)
-        self._conn.send((np.asarray(q, float), dirt_version))
+        try:
+            self._conn.send((np.asarray(q, float), dirt_version))
+        except (OSError, ValueError):
+            self._mark_dead()
+            return False
         self.requested += 1
         return True
+
+    def _mark_dead(self) -> None:
+        self.dead = True
+        self._idle.set()  # nobody may wait for a frame that will never come
 
     def serve(self, publish: Callable[[CameraFrame], None], stop: threading.Event) -> None:
         """Publish frames as the renderer finishes them until ``stop`` is set (run in a thread)."""
@@ -169,7 +187,8 @@ class CameraProcess:
                     continue
                 _, render_s = self._conn.recv()
             except (EOFError, OSError):
-                log.error("camera renderer process ended; no more frames")
+                if not stop.is_set():
+                    self._mark_dead()
                 return
             seq, stamp_ns, robot_time_ns = self._pending
             data = self.image.tobytes()
@@ -181,6 +200,11 @@ class CameraProcess:
                                 intrinsics=self.intrinsics, T_camera_to_world=pose, robot_time_ns=robot_time_ns))
 
     def close(self) -> None:
+        """Stop the renderer and free the shared memory (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._mark_dead()
         try:
             if self._proc.is_alive():
                 self._conn.send(None)

@@ -21,7 +21,7 @@ class Readout:
     """What the arm reports after a step (world frame, SI units).
 
     q, dq, tau : (7,) joint positions [rad], velocities [rad/s], applied torques [Nm].
-    wrench : (6,) force [N] and torque about the TCP [Nm] the board exerts on the eraser.
+    wrench : (6,) force [N] and torque about the TCP [Nm] the board exerts on the eraser (its links only).
     normal_force_n : that force along the board normal (pressing) [N].
     tcp_p, tcp_v, tcp_w : (3,) pad centre position [m], velocity [m/s], angular velocity [rad/s].
     tcp_R : (3, 3) pad orientation. arm_contact : a link other than the eraser touches the board.
@@ -119,7 +119,8 @@ class SimRobot:
             if fn <= 0.0:
                 continue  # a point within the contact margin that carries no load
             if cp[3] not in (self.w.eraser_link, self.w.tcp_link):
-                o.arm_contact = True
+                o.arm_contact = True  # an arm link leans on the board: flagged, not the eraser's force
+                continue
             n, d1, d2 = cp[7], cp[11], cp[13]  # normal on the board, pointing towards the robot
             # PyBullet reports friction as acting on the board (B); the eraser (A) feels the opposite.
             cx, cy, cz = (fn * n[i] - f1 * d1[i] - f2 * d2[i] for i in range(3))

@@ -111,8 +111,9 @@ class SimService:
     def _start_camera(self) -> None:
         if not self.p.camera.enabled:
             return
-        self.camera = CameraProcess(self.p, self.core.board, self.core.q_start, self.core.dirt.dirt.shape)
-        self.camera.start()
+        camera = CameraProcess(self.p, self.core.board, self.core.q_start, self.core.dirt.dirt.shape)
+        camera.start()  # closes itself and raises RuntimeError if the renderer does not come up
+        self.camera = camera
         key = self.keys.camera_frame(self.p.camera.name)
         self._camera_stop = threading.Event()
         self._camera_thread = threading.Thread(target=self.camera.serve, name="sim-camera-publisher",
@@ -143,11 +144,11 @@ class SimService:
             cmd = inbox.get(min(republish, 0.05))
             now = time.monotonic()
             self._publish_status()
+            if now - last_pub >= republish:  # on every pass: stale-seq chatter must not starve a late peer
+                self._publish_state()
+                self.counters["states_republished"] += 1
+                last_pub = now
             if cmd is None:
-                if now - last_pub >= republish:
-                    self._publish_state()
-                    self.counters["states_republished"] += 1
-                    last_pub = now
                 continue
             if cmd.seq != self.core.steps:
                 self.counters["commands_out_of_sequence"] += 1
@@ -216,6 +217,12 @@ class SimService:
         if k % self._truth_every == 0:
             self._publish_truth()
         if self.camera is not None and k % self._camera_every == 0:
+            if self.camera.dead:
+                log.error("camera renderer process ended; the sim goes on without frames")
+                self.counters["camera_renderer_died"] += 1
+                self.camera.close()
+                self.camera = None
+                return
             if wait_for_camera and not self.camera.wait_idle(10.0):
                 self.counters["camera_timeouts"] += 1
             self.camera.request(k, time.monotonic_ns(), self.core.time_ns, self.core.out.q,

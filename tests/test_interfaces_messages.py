@@ -87,8 +87,9 @@ def test_wire_layout_is_tag_first_version_last(msg):
 def test_garbage_and_truncated_payloads_raise_the_one_exception(msg):
     data = encode(msg)
     dec = Decoder(type(msg))
+    nested = b"\x91" * 200_000  # absurdly nested arrays: must not escape as RecursionError
     for bad in (b"", b"\xc1", b"garbage!", bytes(RNG.integers(0, 256, 64, dtype=np.uint8)), data[: len(data) // 2],
-                data[:-1]):
+                data[:-1], nested, data[:1] + nested):
         with pytest.raises(MessageDecodeError):
             dec(bad)
 

@@ -134,18 +134,23 @@ def test_pressing_and_sliding_wipes_the_stain_under_the_pad_and_leaves_the_next_
 
 
 def test_lockstep_runs_are_bit_identical_for_a_seed(tmp_path, model):
-    def policy(s: RobotState) -> np.ndarray:
-        t = s.robot_time_ns * 1e-9
-        return model.gravity(np.array(s.q_rad)) + 3.0 * np.sin(2 * np.pi * np.arange(1, 8) * t)
-
-    runs = []
+    """Contact, friction and dirt removal included: the pad lands on a seeded stain and slides."""
+    board = board_from_params(BoardParams())
+    runs, truths = [], []
     for i in range(2):
-        with SimProcess(tmp_path, {"mode": "lockstep", "seed": 7, "camera": NO_CAMERA}, name=f"sim{i}") as sim:
-            states = run_lockstep(sim, 1500, policy)
-        runs.append(np.array([s.q_rad + s.dq_rad_s + s.wrench_world for s in states]))
-    assert runs[0].shape == (1501, 20)
-    assert np.abs(runs[0][-1, :7] - runs[0][0, :7]).max() > 0.01  # it did move
+        cfg = {"mode": "lockstep", "seed": 7, "camera": NO_CAMERA,
+               "dirt": {"stain": [{"centre_m": [0.4, 0.3], "size_m": 0.06, "aspect": 2.5}]}}
+        client = PressAndSlide(model, board, (0.4, 0.3))
+        with SimProcess(tmp_path, cfg, name=f"sim{i}") as sim:
+            truth = sim.node.latest(sim.keys.sim_truth, SimTruth)
+            states = run_lockstep(sim, 3000, client)  # the pad lands after about 2.2 s
+            truths.append(wait_for(truth.take, 5.0, "sim truth").remaining)
+        runs.append(np.array([s.q_rad + s.dq_rad_s + s.tau_nm + s.wrench_world for s in states]))
+    assert runs[0].shape == (3001, 27)
+    assert np.abs(runs[0][:, 21:24]).max() > 5.0  # it pressed on the board
+    assert truths[0][0] < 1.0  # and wiped
     assert runs[0].tobytes() == runs[1].tobytes()
+    assert truths[0] == truths[1]
 
 
 @pytest.mark.parametrize("stale_limit_s, should_brake", [(0.02, True), (1.0, False)])
@@ -203,9 +208,12 @@ def test_bad_commands_are_counted_and_never_reach_the_physics(tmp_path, model):
                         _raw_command(0, [float("nan")] * 7), _raw_command(0, [float("inf")] + [0.0] * 6)):
             pub.put(payload)
         sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=0, stamp_ns=1, tau_nm=[0.0] * 6))  # wrong length
-        time.sleep(0.3)
+        for _ in range(25):  # out-of-sequence chatter every 20 ms must not stop state 0 being re-sent
+            sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=5, stamp_ns=1, tau_nm=[0.0] * 7))
+            time.sleep(0.02)
         status = latest_status(sim)
         assert status.seq == 0, "no bad command may step the physics"
+        assert status.counters["states_republished"] >= 3 and status.counters["commands_out_of_sequence"] >= 20
         over = model.gravity(np.array(s0.q_rad)) + np.array([0, 0, 0, 0, 0, 500.0, 0])
         sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=0, stamp_ns=1, tau_nm=over.tolist()))
         s1 = wait_for(lambda: (lambda s: s if s is not None and s.seq == 1 else None)(states.get(1.0)), 10.0, "state 1")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -246,6 +247,17 @@ def test_sim_cli_checks_config_and_board_at_start(tmp_path, capsys):
     assert cli.main(["--board", "table", "--stains", "4", "--check"]) == 0
     assert "table board" in capsys.readouterr().out
     assert cli.main(["--camera-size", "big", "--check"]) == 1
+    for name, text, message in (
+            ("cam", "[sim.camera]\nelevation_deg = 70.0\nazimuth_deg = 70.0\nmargin = 1.0\n", "no camera distance"),
+            ("camname", '[sim.camera]\nname = "a*b"\n', "name must be letters"),
+            ("camup", "[sim.camera]\nposition_m = [0.68, 0.0, 1.5]\nlook_at_m = [0.68, 0.0, 0.5]\n", "parallel"),
+            ("q", "[sim]\nstart_q_rad = [10.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0]\n", "outside the description's limits"),
+            ("angle", "[sim.dirt]\nstain = [{centre_m = [0.3, 0.3], size_m = 0.05, angle_deg = inf}]\n",
+             "angle_deg finite")):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(text)
+        assert cli.main(["--config", str(path), "--check"]) == 1, name
+        assert message in capsys.readouterr().err, name
     with pytest.raises(SystemExit) as exc:
         cli.main(["--mode", "warp"])
     assert exc.value.code == 2
@@ -257,3 +269,46 @@ def test_the_example_config_loads_and_says_the_defaults():
     cfg = load_config(Path(__file__).resolve().parent.parent / "config" / "example.toml", env={})
     assert SimParams.from_table(cfg.table("sim")) == SimParams()
     assert cfg.zenoh.listen == ("tcp/127.0.0.1:7447",)
+
+
+# -- the renderer process ---------------------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_renderer_shows_wiped_dirt_and_survives_its_own_death():
+    import threading
+
+    from sim.core import SimCore
+    from sim.renderer import CameraProcess
+
+    params = SimParams.from_table({"camera": {"width": 320, "height": 240}, "dirt": {"stain": [
+        {"centre_m": [0.62, 0.42], "size_m": 0.1, "aspect": 1.0}]}})  # upper right: clear of the arm
+    core = SimCore(params)
+    cam = CameraProcess(params, core.board, core.q_start, core.dirt.dirt.shape)
+    frames = []
+    stop = threading.Event()
+    try:
+        cam.start()
+        thread = threading.Thread(target=cam.serve, args=(frames.append, stop), daemon=True)
+        thread.start()
+        pixel = np.round(project(intrinsics_of(params.camera), core.T_camera_to_world,
+                                 core.board.world_from_board(np.array([0.62, 0.42])))).astype(int)
+        for version, dirt in ((1, core.dirt.dirt), (2, np.zeros_like(core.dirt.dirt))):
+            assert cam.request(version, 0, 0, core.q_start, dirt, version)
+            assert cam.wait_idle(30.0)
+        assert [f.seq for f in frames] == [1, 2]
+        images = [np.frombuffer(f.data, np.uint8).reshape(240, 320, 3).astype(int) for f in frames]
+        stained, clean = (img[pixel[1], pixel[0]] for img in images)
+        assert stained[2] > stained[0] + 30 and clean.min() > 150, (stained, clean)  # blue ink, then white board
+        cam._proc.kill()
+        cam._proc.join(5.0)
+        assert cam.wait_idle(5.0)
+        deadline = time.monotonic() + 5.0
+        while not cam.dead and time.monotonic() < deadline:
+            cam.request(3, 0, 0, core.q_start, core.dirt.dirt, 3)
+            time.sleep(0.05)
+        assert cam.dead and not cam.request(4, 0, 0, core.q_start, core.dirt.dirt, 4)
+    finally:
+        stop.set()
+        cam.close()
+        cam.close()  # idempotent
+        core.close()
