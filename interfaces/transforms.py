@@ -23,7 +23,11 @@ def matrix_from_quat_wxyz(q: np.ndarray) -> np.ndarray:
 
 
 def quat_wxyz_from_matrix(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (4,) = (w, x, y, z) of the rotation matrix ``R`` (3, 3), with w >= 0."""
+    """Unit quaternion (4,) = (w, x, y, z) of the rotation matrix ``R`` (3, 3), with w >= 0.
+
+    Shepperd's method: divide by the largest of the four candidate diagonals,
+    so it is accurate for every rotation, including half turns.
+    """
     R = np.asarray(R, float)
     t = np.trace(R)
     if t > 0:

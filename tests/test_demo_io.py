@@ -8,8 +8,8 @@ import pytest
 from controller.lamps import demo_io
 from controller.lamps.demo import Demonstration
 from controller.lamps.errors import DemoError
-from controller.lamps.rotations import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 from controller.lamps.synth import synthesize_demo
+from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 
 from .conftest import REAL_DEMOS
 

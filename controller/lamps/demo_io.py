@@ -30,10 +30,10 @@ from pathlib import Path
 import numpy as np
 
 from interfaces.atomic import write_atomic, write_text_atomic
+from interfaces.transforms import quat_wxyz_from_matrix
 
 from .demo import Demonstration
 from .errors import DemoError
-from .rotations import quat_wxyz_from_matrix
 
 #: Longest marker gap [s] that is bridged by interpolation in a QTM export.
 MAX_MARKER_GAP_S = 0.1

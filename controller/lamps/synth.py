@@ -23,9 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from interfaces.transforms import quat_wxyz_from_matrix
+
 from .demo import Demonstration
 from .errors import DemoError
-from .rotations import quat_wxyz_from_matrix
 
 #: Board area in which stains are placed, board frame [m] (x range, y range).
 BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))
