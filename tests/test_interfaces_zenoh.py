@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import time
 
 import pytest
@@ -12,22 +11,7 @@ from interfaces.config import ZenohSettings
 from interfaces.messages import Capabilities, Estop, RobotState, TorqueCommand
 from interfaces.session import ServiceNode
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def wait_for(predicate, timeout_s: float = 5.0):
-    """Poll ``predicate`` until it returns something truthy (bounded: fails the test after the timeout)."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.01)
-    raise AssertionError(f"condition not met within {timeout_s} s")
+from .zenoh_helpers import free_port, wait_for
 
 
 @pytest.fixture()
