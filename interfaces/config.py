@@ -20,10 +20,11 @@ and ``connect`` (lists of endpoints such as ``tcp/127.0.0.1:7447``),
 
 from __future__ import annotations
 
+import math
 import os
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -144,3 +145,33 @@ def load_config(path: str | os.PathLike | None = None, env: Mapping[str, str] | 
         data.setdefault(section, {})[key] = value
     zenoh = ZenohSettings.from_table(data.pop("zenoh", {}))
     return Config(zenoh, data, source)
+
+
+# --------------------------------------------------------------------------
+# checks every service's parameter dataclasses share
+
+
+def check_range(section: str, name: str, value: Any, lo: float, hi: float) -> None:
+    """Raise ConfigError unless ``value`` is a number (not a bool) in ``[lo, hi]``."""
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not (lo <= value <= hi):
+        raise ConfigError(f"[{section}] {name} must be a number in [{lo}, {hi}], got {value!r}")
+
+
+def check_vector(section: str, name: str, value: Any, n: int) -> tuple[float, ...]:
+    """``value`` as a tuple of ``n`` finite floats, or ConfigError."""
+    ok = (isinstance(value, (list, tuple)) and len(value) == n
+          and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
+    if not ok:
+        raise ConfigError(f"[{section}] {name} must be a list of {n} finite numbers, got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def dataclass_from_table(cls, section: str, table: Mapping[str, Any], **extra):
+    """``cls(**table, **extra)``, refusing a non-table or an unknown key with the valid ones named."""
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"[{section}] must be a table, got {type(table).__name__}")
+    known = {f.name for f in fields(cls)} - set(extra)
+    unknown = sorted(set(table) - known)
+    if unknown:
+        raise ConfigError(f"[{section}] unknown key(s) {unknown}; valid: {sorted(known)}")
+    return cls(**dict(table), **extra)

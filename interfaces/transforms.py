@@ -72,3 +72,14 @@ def pose_from_transform(T: np.ndarray) -> Pose:
 def transform_from_pose(pose: Pose) -> np.ndarray:
     """(4, 4) transform of a wire :class:`~interfaces.messages.Pose`."""
     return transform(matrix_from_quat_wxyz(np.array(pose.quat_wxyz)), np.array(pose.position_m))
+
+
+def tool_rotation_on_board(R_board_to_world: np.ndarray) -> np.ndarray:
+    """(3, 3) eraser orientation flat on a board: tool z into the board, the pad's long side along board x.
+
+    The one convention the sim (start pose, reachability check) and the
+    controller (wiping orientation) share. ``R_board_to_world`` (3, 3):
+    board axes in the world (x along the width, y up the height, z out).
+    """
+    R = np.asarray(R_board_to_world, float)
+    return np.column_stack([R[:, 0], -R[:, 1], -R[:, 2]])

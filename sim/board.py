@@ -12,7 +12,7 @@ import numpy as np
 
 from interfaces.errors import ConfigError
 from interfaces.robot_model import IkError, RobotModel
-from interfaces.transforms import matrix_from_quat_wxyz, transform
+from interfaces.transforms import matrix_from_quat_wxyz, tool_rotation_on_board, transform
 
 from .params import BoardParams
 
@@ -69,7 +69,7 @@ class Board:
 
     def tool_rotation(self) -> np.ndarray:
         """(3, 3) tool orientation facing the board: tool z into the board, pad's long side along board x."""
-        return np.column_stack([self.R[:, 0], -self.R[:, 1], -self.R[:, 2]])
+        return tool_rotation_on_board(self.R)
 
 
 def board_from_params(params: BoardParams) -> Board:

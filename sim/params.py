@@ -22,36 +22,16 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any
 
+from interfaces.config import check_range as _range
+from interfaces.config import check_vector as _vector
+from interfaces.config import dataclass_from_table as _from_table
 from interfaces.errors import ConfigError
 
 MODES = ("lockstep", "realtime")
 BOARD_PRESETS = ("wall", "table", "custom")
-
-
-def _range(section: str, name: str, value: float, lo: float, hi: float) -> None:
-    if not isinstance(value, (int, float)) or isinstance(value, bool) or not (lo <= value <= hi):
-        raise ConfigError(f"[{section}] {name} must be a number in [{lo}, {hi}], got {value!r}")
-
-
-def _vector(section: str, name: str, value: Any, n: int) -> tuple[float, ...]:
-    ok = (isinstance(value, (list, tuple)) and len(value) == n
-          and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
-    if not ok:
-        raise ConfigError(f"[{section}] {name} must be a list of {n} finite numbers, got {value!r}")
-    return tuple(float(v) for v in value)
-
-
-def _from_table(cls, section: str, table: Mapping[str, Any], **extra):
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"[{section}] must be a table, got {type(table).__name__}")
-    known = {f.name for f in fields(cls)} - set(extra)
-    unknown = sorted(set(table) - known)
-    if unknown:
-        raise ConfigError(f"[{section}] unknown key(s) {unknown}; valid: {sorted(known)}")
-    return cls(**dict(table), **extra)
 
 
 @dataclass(frozen=True)
