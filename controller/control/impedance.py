@@ -78,15 +78,46 @@ def task_inertia(J: np.ndarray, M_inv: np.ndarray, eps: float = 1e-6) -> np.ndar
     return np.linalg.inv(J @ M_inv @ J.T + eps * np.eye(J.shape[0]))
 
 
-def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Reference, params: ImpedanceParams,
-                     q_rest: np.ndarray, add_gravity: bool, extra_wrench: np.ndarray | None = None,
-                     selection: np.ndarray | None = None) -> ImpedanceTerms:
-    """Joint torques (7,) [Nm] of the impedance law at state ``q``, ``dq``.
+@dataclass
+class TaskShaping:
+    """Per-tick modifiers of the impedance law (defaults: the plain law).
 
-    extra_wrench : (6,) added to the task wrench unchanged (e.g. the
-    regulated contact force along the board normal). selection : (3, 3)
-    projector onto the translational directions under impedance (e.g.
-    ``I - n n^T`` while a force is regulated along n); None = all.
+    force_axis : (3,) unit vector (world) along which the force is
+    regulated instead of the position (the board's outward normal); None =
+    full pose impedance. press_n : force [N] the pad exerts along
+    ``-force_axis`` (into the board). normal_damping_1_s : damping of the
+    pad's speed along ``force_axis`` [1/s], scaled by the task inertia
+    along it. stiffness_scale : factor on K (and D by sqrt) for gain ramps.
+    max_position_error_m, max_rotation_error_rad : the pose error is
+    clipped to these lengths. extra_force_n : (3,) more force on the pad
+    [N] (world; e.g. a speed-limit brake).
+    """
+
+    force_axis: np.ndarray | None = None
+    press_n: float = 0.0
+    normal_damping_1_s: float = 0.0
+    stiffness_scale: float = 1.0
+    max_position_error_m: float = np.inf
+    max_rotation_error_rad: float = np.inf
+    extra_force_n: np.ndarray | None = None
+
+
+_PLAIN = TaskShaping()
+
+
+def _clip_norm(v: np.ndarray, limit: float) -> None:
+    n = float(np.linalg.norm(v))
+    if n > limit:
+        v *= limit / n
+
+
+def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Reference, params: ImpedanceParams,
+                     q_rest: np.ndarray, add_gravity: bool, shaping: TaskShaping = _PLAIN) -> ImpedanceTerms:
+    """Joint torques (7,) [Nm] of the impedance law at state ``q``, ``dq`` (see the module docstring).
+
+    With ``shaping.force_axis = n`` the translational error, twist error
+    and reference acceleration lose their component along n, which instead
+    gets ``-press_n`` of force and a damping ``-Lambda_nn c v_n``.
     """
     m, d = model.model, model.data
     M = pin.crba(m, d, q)
@@ -97,21 +128,23 @@ def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Refe
     twist = J @ dq
     Lam = task_inertia(J, M_inv)
     e = pose_error(ref.p_m, ref.R, p, R)
+    _clip_norm(e[:3], shaping.max_position_error_m)
+    _clip_norm(e[3:], shaping.max_rotation_error_rad)
     de = ref.twist - twist
     a = ref.accel - drift_acceleration(model, q, dq)
-    if selection is not None:
-        e[:3] = selection @ e[:3]
-        de[:3] = selection @ de[:3]
-        a[:3] = selection @ a[:3]
-    K = np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
+    n = shaping.force_axis
+    if n is not None:
+        for v in (e, de, a):
+            v[:3] -= (v[:3] @ n) * n
+    k = shaping.stiffness_scale
+    K = k * np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
     D = 2.0 * params.damping_factor * np.sqrt(K * np.clip(np.diag(Lam), 1e-6, None))
     F = Lam @ a + K * e + D * de
-    if selection is not None:
-        # damp motion along the force-controlled direction too (contact is stiff; keep it quiet)
-        n_part = twist[:3] - selection @ twist[:3]
-        F[:3] -= 2.0 * params.damping_factor * np.sqrt(params.stiffness_n_m * Lam[0, 0]) * n_part * 0.5
-    if extra_wrench is not None:
-        F = F + extra_wrench
+    if n is not None:
+        lam_n = float(n @ Lam[:3, :3] @ n)
+        F[:3] -= (shaping.press_n + lam_n * shaping.normal_damping_1_s * float(twist[:3] @ n)) * n
+    if shaping.extra_force_n is not None:
+        F[:3] += shaping.extra_force_n
     Jbar = M_inv @ J.T @ Lam
     kn = params.nullspace_stiffness_nm_rad
     tau0 = M @ (kn * (q_rest - q) - 2.0 * np.sqrt(kn) * dq)

@@ -1,0 +1,193 @@
+"""One control tick, without I/O: measured joints in, joint torques out.
+
+:class:`ControllerCore` ties the skill executor (board-frame setpoints), the
+normal force regulator, the Cartesian impedance law and the torque shaping
+together. The service (:mod:`controller.service`) feeds it robot states on
+its clock; tests and benchmarks can call it directly against an in-process
+simulator.
+
+Per tick:
+
+1. pad pose and twist from Pinocchio; in the board frame: (x, y, h),
+   in-plane speed, normal force from the measured contact wrench;
+2. force cap watch (filtered force above the cap -> executor fault: lift off);
+3. executor setpoint -> world reference (position, orientation, twist,
+   acceleration); in contact the normal is force-regulated (PI + feed-forward);
+4. impedance torque with the pose error clipped, the stiffness ramped in
+   after (re)starts, a brake above the Cartesian speed limit, plus a
+   repulsion near joint limits; then absolute and rate torque limits (the
+   model gravity, when the robot lacks its own, is outside the rate limit).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controller.lamps.skill import Skill
+from interfaces.robot_model import RobotModel
+
+from .control.force import NormalForceRegulator
+from .control.impedance import Reference, TaskShaping, impedance_torque
+from .control.limits import TorqueShaper, joint_margin_torque, speed_excess_force
+from .executor import SkillExecutor, ToolState
+from .params import ControllerParams
+
+#: Columns of the trace (see :class:`Trace`).
+TRACE_COLUMNS = ("t_s", "phase", "ref_x", "ref_y", "ref_vx", "ref_vy", "ref_ax", "ref_ay", "x", "y", "h",
+                 "ref_p_x", "ref_p_y", "ref_p_z", "p_x", "p_y", "p_z", "force_n", "press_n", "contact")
+PHASE_CODES = {name: i for i, name in enumerate(
+    ("INIT", "WAIT_PEERS", "APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE", "PAUSED", "FAULT", "ESTOP"))}
+
+
+class Trace:
+    """The last ``n`` ticks of reference and measurement, preallocated (no allocation per tick).
+
+    Columns :data:`TRACE_COLUMNS`: time [s], phase code (:data:`PHASE_CODES`),
+    in-plane reference (board frame) position/velocity/acceleration, measured
+    board-frame pad position, world reference and measured positions [m],
+    measured normal force and commanded press force [N], contact flag.
+    """
+
+    def __init__(self, n: int) -> None:
+        self.data = np.zeros((n, len(TRACE_COLUMNS)))
+        self.n = 0
+
+    def row(self) -> np.ndarray:
+        r = self.data[self.n % len(self.data)]
+        self.n += 1
+        return r
+
+    def array(self) -> np.ndarray:
+        """(m, len(TRACE_COLUMNS)) in time order."""
+        m = len(self.data)
+        if self.n <= m:
+            return self.data[: self.n].copy()
+        i = self.n % m
+        return np.vstack([self.data[i:], self.data[:i]])
+
+
+class ControllerCore:
+    """The controller's per-tick computation. See the module docstring.
+
+    Attributes
+    ----------
+    executor : SkillExecutor
+    normal_force_n : float
+        Last measured normal force [N] (0 before a board is known).
+    last_terms : ImpedanceTerms or None
+    """
+
+    def __init__(self, params: ControllerParams, skill: Skill, model: RobotModel | None = None) -> None:
+        self.p = params
+        self.model = model or RobotModel()
+        self.executor = SkillExecutor(skill, params.executor, params.force, params.planner)
+        f = params.force
+        self.force = NormalForceRegulator(f.kp, f.ki, f.integral_limit_n, f.cap_n, f.filter_s)
+        lim = self.model.limits
+        self.shaper = TorqueShaper(lim.tau_max, params.limits.torque_rate_nm_per_ms * 1000.0)
+        self.ref = Reference()
+        self.shaping = TaskShaping(normal_damping_1_s=f.normal_damping_1_s,
+                                   max_position_error_m=params.limits.max_position_error_m,
+                                   max_rotation_error_rad=params.limits.max_rotation_error_rad)
+        self.q_rest: np.ndarray | None = None
+        self._hold: tuple[np.ndarray, np.ndarray] | None = None
+        self._since_start_s = 0.0
+        self.normal_force_n = 0.0
+        self.press_n = 0.0
+        self.last_terms = None
+        self.time_s = 0.0
+        self.trace = Trace(params.trace_ticks) if params.trace_ticks else None
+        self._tau = np.zeros(self.model.nq)
+
+    def restart(self) -> None:
+        """The robot came back after a loss: hold where it is, ramp the gains in again, re-approach."""
+        self._hold = None
+        self.q_rest = None
+        self._since_start_s = 0.0
+        self.force.reset()
+        self.executor.restart()
+
+    def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
+             dt_s: float, tau_max_nm: np.ndarray | None = None) -> np.ndarray:
+        """Torques (7,) [Nm] to send for the measured state (an internal buffer: copy to keep).
+
+        q, dq : (7,) [rad], [rad/s]; wrench : (6,) contact wrench on the pad
+        (world axes, force first) [N, Nm]; gravity_compensated : the robot
+        adds gravity itself; dt_s : time since the last tick [s];
+        tau_max_nm : (7,) the robot's declared torque limits (the tighter
+        of these and the description's apply).
+        """
+        self.time_s += dt_s
+        ex, model = self.executor, self.model
+        if self.q_rest is None:
+            self.q_rest = q.copy()
+            self.shaper.reset(None)
+        if tau_max_nm is not None:
+            np.minimum(model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
+        p, R = model.tcp_pose(q)
+        v = model.tcp_jacobian(q) @ dq
+        shaping, ref = self.shaping, self.ref
+        board = ex.board
+        if board is None:
+            ex.wait()
+            if self._hold is None:
+                self._hold = (p.copy(), R.copy())
+            ref.p_m[:], ref.R[:] = self._hold
+            ref.twist[:] = 0.0
+            ref.accel[:] = 0.0
+            shaping.force_axis = None
+            self.normal_force_n = 0.0
+            sp = None
+        else:
+            n = board.normal
+            xyh = board.to_board(p)
+            vb = board.R.T @ v[:3]
+            self.normal_force_n = float(wrench[:3] @ n)
+            self.force.measure(self.normal_force_n, dt_s)
+            if self.force.over_cap and ex.phase not in ("FAULT", "ESTOP"):
+                ex.fault(f"normal force {self.force.filtered_n:.1f} N above the cap {self.p.force.cap_n:.0f} N")
+            tool = ToolState(xyh[:2], float(xyh[2]), vb[:2], float(vb[2]), R, self.normal_force_n)
+            sp = ex.step(dt_s, tool)
+            h = xyh[2] if sp.contact else sp.h
+            ref.p_m[:] = board.origin_m + board.R[:, 0] * sp.xy[0] + board.R[:, 1] * sp.xy[1] + n * h
+            ref.R[:] = sp.R
+            ref.twist[:3] = board.R[:, :2] @ sp.v_xy + n * (0.0 if sp.contact else sp.v_h)
+            ref.twist[3:] = sp.omega
+            ref.accel[:3] = board.R[:, :2] @ sp.a_xy + n * (0.0 if sp.contact else sp.a_h)
+            ref.accel[3:] = sp.domega
+            if sp.contact:
+                shaping.force_axis = n
+                in_contact = self.normal_force_n > self.p.force.contact_threshold_n
+                self.press_n = self.force.command(sp.force_n, self.normal_force_n, dt_s, in_contact)
+                shaping.press_n = self.press_n
+            else:
+                shaping.force_axis = None
+                self.press_n = 0.0
+                self.force.reset()
+        self._since_start_s += dt_s
+        ramp = self.p.limits.gain_ramp_s
+        s = 1.0 if ramp <= 0 else min(self._since_start_s / ramp, 1.0)
+        shaping.stiffness_scale = 0.2 + 0.8 * s * s * (3.0 - 2.0 * s)
+        lim = self.p.limits
+        shaping.extra_force_n = speed_excess_force(v[:3], lim.max_speed_m_s, lim.speed_brake_gain_n_s_m)
+        terms = impedance_torque(model, q, dq, ref, self.p.impedance, self.q_rest, not gravity_compensated, shaping)
+        self.last_terms = terms
+        tau = self._tau
+        tau[:] = terms.tau_nm
+        tau += joint_margin_torque(q, dq, model.limits.q_min, model.limits.q_max, lim.joint_margin_rad,
+                                   lim.joint_margin_stiffness_nm_rad, lim.joint_margin_damping_nm_s_rad)
+        gravity = None if gravity_compensated else model.gravity(q)
+        self.shaper(tau, dt_s, gravity)
+        if self.trace is not None:
+            self._record(sp, p, board)
+        return tau
+
+    def _record(self, sp, p: np.ndarray, board) -> None:
+        r = self.trace.row()
+        r[0], r[1] = self.time_s, PHASE_CODES.get(self.executor.phase, -1)
+        if sp is not None:
+            r[2:4], r[4:6], r[6:8] = sp.xy, sp.v_xy, sp.a_xy
+            r[8:11] = board.to_board(p)
+            r[19] = float(sp.contact)
+        r[11:14], r[14:17] = self.ref.p_m, p
+        r[17], r[18] = self.normal_force_n, self.press_n

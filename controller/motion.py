@@ -1,0 +1,118 @@
+"""Smooth free motions of the skill executor: quintic segments and orientation blends (pure maths).
+
+The learned MPs move the pad *in* the board plane. Everything else the
+executor does (fly to a hover point, descend, lift off, brake an in-plane
+motion to rest) is a :class:`Quintic`: the unique fifth-order polynomial
+meeting given position, velocity and acceleration at both ends, so a
+motion that starts where the last one left off is continuous in
+acceleration (C2) at the hand-over. :class:`OrientationBlend` turns the pad
+from one orientation to another along the geodesic with a quintic time law.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+
+class Quintic:
+    """x(t) for t in [0, T] with x, dx, ddx given at both ends; held (at rest or constant acceleration) after T.
+
+    Parameters
+    ----------
+    start, goal : (position, velocity, acceleration), arrays of shape (n,)
+    duration_s : float
+        T [s], > 0.
+    """
+
+    def __init__(self, start, goal, duration_s: float) -> None:
+        if not (math.isfinite(duration_s) and duration_s > 0):
+            raise ValueError(f"duration_s must be finite and > 0, got {duration_s!r}")
+        p0, v0, a0 = (np.asarray(x, float).reshape(-1) for x in start)
+        p1, v1, a1 = (np.asarray(x, float).reshape(-1) for x in goal)
+        T = float(duration_s)
+        self.T = T
+        self.goal = (p1.copy(), v1.copy(), a1.copy())
+        # x(t) = c0 + c1 t + ... + c5 t^5
+        d = p1 - p0 - v0 * T - 0.5 * a0 * T * T
+        dv = v1 - v0 - a0 * T
+        da = a1 - a0
+        c3 = (10 * d - 4 * dv * T + 0.5 * da * T * T) / T**3
+        c4 = (-15 * d + 7 * dv * T - da * T * T) / T**4
+        c5 = (6 * d - 3 * dv * T + 0.5 * da * T * T) / T**5
+        self._c = np.stack([p0, v0, 0.5 * a0, c3, c4, c5])  # (6, n)
+        self.position = p0.copy()
+        self.velocity = v0.copy()
+        self.acceleration = a0.copy()
+        self.time_s = 0.0
+
+    @property
+    def finished(self) -> bool:
+        return self.time_s >= self.T - 1e-12
+
+    def update(self, dt_s: float) -> None:
+        """Advance by ``dt_s`` [s] and refresh position, velocity, acceleration."""
+        self.time_s += dt_s
+        t = self.time_s
+        if t >= self.T:
+            u = t - self.T
+            p1, v1, a1 = self.goal
+            self.position[:] = p1 + v1 * u + 0.5 * a1 * u * u
+            self.velocity[:] = v1 + a1 * u
+            self.acceleration[:] = a1
+            return
+        c = self._c
+        self.position[:] = c[0] + t * (c[1] + t * (c[2] + t * (c[3] + t * (c[4] + t * c[5]))))
+        self.velocity[:] = c[1] + t * (2 * c[2] + t * (3 * c[3] + t * (4 * c[4] + t * 5 * c[5])))
+        self.acceleration[:] = 2 * c[2] + t * (6 * c[3] + t * (12 * c[4] + t * 20 * c[5]))
+
+
+def rest_to_rest(p0: np.ndarray, p1: np.ndarray, mean_speed_m_s: float, min_duration_s: float = 0.2) -> Quintic:
+    """A quintic from rest at ``p0`` to rest at ``p1`` with the given mean speed (never shorter than the floor)."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    z = np.zeros_like(p0)
+    T = max(float(np.linalg.norm(p1 - p0)) / mean_speed_m_s, min_duration_s)
+    return Quintic((p0, z, z), (p1, z, z), T)
+
+
+def brake_to_rest(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, duration_s: float) -> Quintic:
+    """Bring a moving point to rest C2-continuously, stopping ``v0 T / 2`` ahead (about where it would coast to)."""
+    p0, v0, a0 = (np.asarray(x, float) for x in (p0, v0, a0))
+    z = np.zeros_like(p0)
+    return Quintic((p0, v0, a0), (p0 + 0.5 * v0 * duration_s, z, z), duration_s)
+
+
+class OrientationBlend:
+    """R(t) = R0 exp(s(t) log(R0^T R1)) with s a rest-to-rest quintic from 0 to 1 over ``duration_s``.
+
+    Attributes after :meth:`update`: ``R`` (3, 3), ``omega`` (3,) [rad/s]
+    and ``domega`` (3,) [rad/s^2], world axes.
+    """
+
+    def __init__(self, R0: np.ndarray, R1: np.ndarray, duration_s: float) -> None:
+        self.R0 = np.asarray(R0, float).copy()
+        self.theta = pin.log3(self.R0.T @ np.asarray(R1, float))  # body axis-angle
+        self._s = Quintic((np.zeros(1), np.zeros(1), np.zeros(1)), (np.ones(1), np.zeros(1), np.zeros(1)), duration_s)
+        self.R = self.R0.copy()
+        self.omega = np.zeros(3)
+        self.domega = np.zeros(3)
+
+    @property
+    def finished(self) -> bool:
+        return self._s.finished
+
+    def update(self, dt_s: float) -> None:
+        self._s.update(dt_s)
+        s, ds, dds = float(self._s.position[0]), float(self._s.velocity[0]), float(self._s.acceleration[0])
+        s = min(max(s, 0.0), 1.0)
+        self.R[:] = self.R0 @ pin.exp3(s * self.theta)
+        # the axis is fixed, so body and world angular rates differ only by R0
+        self.omega[:] = self.R0 @ (ds * self.theta)
+        self.domega[:] = self.R0 @ (dds * self.theta)
+
+
+def orientation_duration(R0: np.ndarray, R1: np.ndarray, mean_rate_rad_s: float) -> float:
+    """Time [s] to turn from R0 to R1 at a mean angular speed."""
+    return float(np.linalg.norm(pin.log3(np.asarray(R0).T @ np.asarray(R1)))) / mean_rate_rad_s

@@ -1,0 +1,231 @@
+"""Parameters of ``lamps controller``, one frozen dataclass per concern, from the ``[controller]`` config table.
+
+Layout (every key optional)::
+
+    [controller]
+    mode = "lockstep"          # answer each robot state; or "realtime": own 1 kHz clock
+    rate_hz = 1000.0
+    skill = ""                 # skill file; "" = learn the bundled synthetic demo at start-up
+    stains_from = "perception" # or "truth": take stains from sim/truth (tests, before perception exists)
+    [controller.impedance]  stiffness_n_m, stiffness_nm_rad, damping_factor, nullspace_stiffness_nm_rad
+    [controller.force]      target_n, cap_n, kp, ki, integral_limit_n, contact_threshold_n, ...
+    [controller.limits]     torque_rate_nm_per_ms, joint_margin_rad, max_speed_m_s, max_position_error_m, ...
+    [controller.executor]   standoff_m, approach_speed_m_s, wipe_timeout_s, kappa_remaining, air, ...
+    [controller.planner]    amplitude_fraction, min_amplitude_m, max_amplitude_m, order, ...
+
+Every value is checked when built; an unknown key or a value out of range
+raises :class:`~interfaces.errors.ConfigError` naming the key and its range.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from controller.control.params import ControlConfigError, ImpedanceParams
+from controller.lamps.errors import PlanningError
+from controller.lamps.planner import PlannerParams
+from interfaces.config import check_range as _range
+from interfaces.config import dataclass_from_table
+from interfaces.errors import ConfigError
+
+MODES = ("lockstep", "realtime")
+STAIN_SOURCES = ("perception", "truth")
+
+
+@dataclass(frozen=True)
+class ForceParams:
+    """Normal force regulation.
+
+    target_n : force pressed on the board while wiping [N]; cap_n : above
+    this (filtered) the controller lifts off and faults [N]; kp [N/N], ki
+    [1/s], integral_limit_n [N]: the PI regulator; contact_threshold_n :
+    force that counts as touching the board while descending [N];
+    normal_damping_1_s : damping of motion along the normal while
+    force-controlled [1/s, times the task inertia]; ramp_s : time the target
+    ramps in and out over [s].
+    """
+
+    target_n: float = 10.0
+    cap_n: float = 40.0
+    kp: float = 0.3
+    ki: float = 8.0
+    integral_limit_n: float = 8.0
+    contact_threshold_n: float = 2.0
+    normal_damping_1_s: float = 40.0
+    ramp_s: float = 0.3
+    filter_s: float = 0.005
+
+    def __post_init__(self) -> None:
+        s = "controller.force"
+        _range(s, "cap_n", self.cap_n, 1.0, 150.0)
+        _range(s, "target_n", self.target_n, 0.5, 150.0)
+        if self.target_n >= self.cap_n:
+            raise ConfigError(f"[{s}] target_n ({self.target_n} N) must be below cap_n ({self.cap_n} N)")
+        _range(s, "kp", self.kp, 0.0, 5.0)
+        _range(s, "ki", self.ki, 0.0, 100.0)
+        _range(s, "integral_limit_n", self.integral_limit_n, 0.0, 100.0)
+        _range(s, "contact_threshold_n", self.contact_threshold_n, 0.1, self.target_n)
+        _range(s, "normal_damping_1_s", self.normal_damping_1_s, 0.0, 500.0)
+        _range(s, "ramp_s", self.ramp_s, 0.01, 5.0)
+        _range(s, "filter_s", self.filter_s, 0.0, 0.1)
+
+
+@dataclass(frozen=True)
+class LimitParams:
+    """Limits beyond the description's absolute torques.
+
+    torque_rate_nm_per_ms : largest change of a joint torque per ms [Nm/ms];
+    joint_margin_rad : repulsion starts this close to a position limit
+    [rad], with joint_margin_stiffness_nm_rad and joint_margin_damping_nm_s_rad;
+    max_speed_m_s : the pad is braked above this Cartesian speed [m/s];
+    max_position_error_m, max_rotation_error_rad : the pose error is clipped
+    to these (bounded pull towards a far reference); gain_ramp_s : the
+    stiffness ramps up over this long after (re)starting [s].
+    """
+
+    torque_rate_nm_per_ms: float = 1.0
+    joint_margin_rad: float = 0.12
+    joint_margin_stiffness_nm_rad: float = 300.0
+    joint_margin_damping_nm_s_rad: float = 10.0
+    max_speed_m_s: float = 0.6
+    speed_brake_gain_n_s_m: float = 200.0
+    max_position_error_m: float = 0.05
+    max_rotation_error_rad: float = 0.3
+    gain_ramp_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        s = "controller.limits"
+        _range(s, "torque_rate_nm_per_ms", self.torque_rate_nm_per_ms, 0.01, 50.0)
+        _range(s, "joint_margin_rad", self.joint_margin_rad, 0.01, 0.5)
+        _range(s, "joint_margin_stiffness_nm_rad", self.joint_margin_stiffness_nm_rad, 0.0, 5000.0)
+        _range(s, "joint_margin_damping_nm_s_rad", self.joint_margin_damping_nm_s_rad, 0.0, 500.0)
+        _range(s, "max_speed_m_s", self.max_speed_m_s, 0.05, 2.0)
+        _range(s, "speed_brake_gain_n_s_m", self.speed_brake_gain_n_s_m, 0.0, 5000.0)
+        _range(s, "max_position_error_m", self.max_position_error_m, 0.005, 0.5)
+        _range(s, "max_rotation_error_rad", self.max_rotation_error_rad, 0.05, 3.2)
+        _range(s, "gain_ramp_s", self.gain_ramp_s, 0.0, 10.0)
+
+
+@dataclass(frozen=True)
+class ExecutorParams:
+    """The skill executor (paper section II-C) around the learned MPs.
+
+    standoff_m : hover height over the board for approach, retreat, pause
+    [m]; approach_speed_m_s : mean speed of free moves [m/s];
+    descend_speed_m_s : speed towards the board until contact [m/s];
+    turn_rate_rad_s : mean angular speed of free moves [rad/s];
+    wipe_timeout_s : leave a stain after this long even without kappa [s];
+    kappa_remaining : with ``stains_from = "truth"``, a stain is done when
+    its remaining dirt is at most this fraction; air : wipe ``air_height_m``
+    above the board without touching it (a dry run); stop_s : time to brake
+    an in-plane motion to rest on a pause, fault or e-stop [s];
+    estop_ramp_s : force ramp-down on an e-stop [s]; contact_search_m : how
+    far below the expected surface the descent goes before it gives up [m];
+    creep_height_m : height above the board from which the descent slows
+    to ``descend_speed_m_s`` (peak) to touch softly [m].
+    """
+
+    standoff_m: float = 0.04
+    approach_speed_m_s: float = 0.15
+    descend_speed_m_s: float = 0.02
+    creep_height_m: float = 0.008
+    turn_rate_rad_s: float = 0.6
+    wipe_timeout_s: float = 30.0
+    kappa_remaining: float = 0.03
+    air: bool = False
+    air_height_m: float = 0.03
+    stop_s: float = 0.3
+    estop_ramp_s: float = 0.1
+    contact_search_m: float = 0.03
+
+    def __post_init__(self) -> None:
+        s = "controller.executor"
+        _range(s, "standoff_m", self.standoff_m, 0.005, 0.3)
+        _range(s, "approach_speed_m_s", self.approach_speed_m_s, 0.01, 1.0)
+        _range(s, "descend_speed_m_s", self.descend_speed_m_s, 0.005, 0.3)
+        _range(s, "turn_rate_rad_s", self.turn_rate_rad_s, 0.05, 3.0)
+        _range(s, "wipe_timeout_s", self.wipe_timeout_s, 0.5, 3600.0)
+        _range(s, "kappa_remaining", self.kappa_remaining, 0.0, 1.0)
+        if not isinstance(self.air, bool):
+            raise ConfigError(f"[{s}] air must be true or false, got {self.air!r}")
+        _range(s, "air_height_m", self.air_height_m, 0.005, 0.3)
+        _range(s, "stop_s", self.stop_s, 0.05, 3.0)
+        _range(s, "estop_ramp_s", self.estop_ramp_s, 0.01, 1.0)
+        _range(s, "contact_search_m", self.contact_search_m, 0.005, 0.2)
+        _range(s, "creep_height_m", self.creep_height_m, 0.001, self.standoff_m)
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """The whole controller.
+
+    mode : ``lockstep`` (answer each robot state, time from the robot's
+    clock) or ``realtime`` (own fixed-rate clock, newest state).
+    rate_hz : control rate. skill : skill file path ("" = learn the bundled
+    demo at start-up). stains_from : ``perception`` or ``truth``.
+    state_timeout_s : real time: no robot state this long -> nothing new is
+    sent and the controller faults. lockstep_state_timeout_s : the same in
+    lock-step, wall time (the sim re-sends its state every 0.1 s while
+    waiting). stains_timeout_s : no stains update this long -> PAUSED.
+    status_rate_hz : ControllerStatus rate. max_ticks : stop after this many
+    ticks (0 = run until stopped). trace_ticks : keep this many ticks of
+    reference/measurement trace in memory (0 = none).
+    """
+
+    mode: str = "lockstep"
+    rate_hz: float = 1000.0
+    skill: str = ""
+    stains_from: str = "perception"
+    state_timeout_s: float = 0.005
+    lockstep_state_timeout_s: float = 0.5
+    stains_timeout_s: float = 1.0
+    status_rate_hz: float = 20.0
+    max_ticks: int = 0
+    trace_ticks: int = 0
+    impedance: ImpedanceParams = field(default_factory=ImpedanceParams)
+    force: ForceParams = field(default_factory=ForceParams)
+    limits: LimitParams = field(default_factory=LimitParams)
+    executor: ExecutorParams = field(default_factory=ExecutorParams)
+    planner: PlannerParams = field(default_factory=PlannerParams)
+
+    def __post_init__(self) -> None:
+        s = "controller"
+        if self.mode not in MODES:
+            raise ConfigError(f"[{s}] mode must be one of {MODES}, got {self.mode!r}")
+        _range(s, "rate_hz", self.rate_hz, 100.0, 5000.0)
+        if not isinstance(self.skill, str):
+            raise ConfigError(f"[{s}] skill must be a file path (string), got {self.skill!r}")
+        if self.stains_from not in STAIN_SOURCES:
+            raise ConfigError(f"[{s}] stains_from must be one of {STAIN_SOURCES}, got {self.stains_from!r}")
+        _range(s, "state_timeout_s", self.state_timeout_s, 1.5 / self.rate_hz, 1.0)
+        _range(s, "lockstep_state_timeout_s", self.lockstep_state_timeout_s, 0.15, 60.0)
+        _range(s, "stains_timeout_s", self.stains_timeout_s, 0.05, 3600.0)
+        _range(s, "status_rate_hz", self.status_rate_hz, 0.5, 200.0)
+        for name in ("max_ticks", "trace_ticks"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= 10**8:
+                raise ConfigError(f"[{s}] {name} must be an integer in [0, 1e8], got {v!r}")
+
+    @property
+    def dt_s(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> "ControllerParams":
+        """The ``[controller]`` table (with its sub-tables) as parameters."""
+        if not isinstance(table, Mapping):
+            raise ConfigError(f"[controller] must be a table, got {type(table).__name__}")
+        table = dict(table)
+        subs = {"impedance": ImpedanceParams, "force": ForceParams, "limits": LimitParams,
+                "executor": ExecutorParams, "planner": PlannerParams}
+        parts = {}
+        for name, kind in subs.items():
+            try:
+                parts[name] = dataclass_from_table(kind, f"controller.{name}", table.pop(name, {}))
+            except (ControlConfigError, PlanningError) as exc:  # the learning side's own checks
+                raise ConfigError(f"[controller.{name}] {exc}") from None
+            except TypeError as exc:
+                raise ConfigError(f"[controller.{name}] {exc}") from None
+        return dataclass_from_table(cls, "controller", table, **parts)
