@@ -27,7 +27,7 @@ from controller.lamps.skill import Skill
 from interfaces.robot_model import RobotModel
 
 from .control.force import NormalForceRegulator
-from .control.impedance import Reference, TaskShaping, impedance_torque
+from .control.impedance import Kinematics, Reference, TaskShaping, impedance_torque
 from .control.limits import TorqueShaper, joint_margin_torque, speed_excess_force
 from .executor import SkillExecutor, ToolState
 from .params import ControllerParams
@@ -98,6 +98,7 @@ class ControllerCore:
         self.time_s = 0.0
         self.trace = Trace(params.trace_ticks) if params.trace_ticks else None
         self._tau = np.zeros(self.model.nq)
+        self.kin = Kinematics(self.model)
 
     def restart(self) -> None:
         """The robot came back after a loss: hold where it is, ramp the gains in again, re-approach."""
@@ -124,8 +125,8 @@ class ControllerCore:
             self.shaper.reset(None)
         if tau_max_nm is not None:
             np.minimum(model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
-        p, R = model.tcp_pose(q)
-        v = model.tcp_jacobian(q) @ dq
+        kin = self.kin.update(q, dq)
+        p, R, v = kin.p, kin.R, kin.twist
         shaping, ref = self.shaping, self.ref
         board = ex.board
         if board is None:
@@ -170,13 +171,14 @@ class ControllerCore:
         shaping.stiffness_scale = 0.2 + 0.8 * s * s * (3.0 - 2.0 * s)
         lim = self.p.limits
         shaping.extra_force_n = speed_excess_force(v[:3], lim.max_speed_m_s, lim.speed_brake_gain_n_s_m)
-        terms = impedance_torque(model, q, dq, ref, self.p.impedance, self.q_rest, not gravity_compensated, shaping)
+        terms = impedance_torque(model, q, dq, ref, self.p.impedance, self.q_rest, not gravity_compensated, shaping,
+                                 kin)
         self.last_terms = terms
         tau = self._tau
         tau[:] = terms.tau_nm
         tau += joint_margin_torque(q, dq, model.limits.q_min, model.limits.q_max, lim.joint_margin_rad,
                                    lim.joint_margin_stiffness_nm_rad, lim.joint_margin_damping_nm_s_rad)
-        gravity = None if gravity_compensated else model.gravity(q)
+        gravity = None if gravity_compensated else kin.g
         self.shaper(tau, dt_s, gravity)
         if self.trace is not None:
             self._record(sp, p, board)

@@ -244,6 +244,15 @@ class SkillExecutor:
             if self._stage == _HOLD:
                 self._start_approach_or_done()
 
+    def robot_lost(self, reason: str) -> None:
+        """No robot to command: FAULT at once, no motion (nothing would execute it)."""
+        if self.phase != "FAULT" or self.reason != reason:
+            self.counters["faults"] += 1
+            log.error("FAULT: %s", reason)
+        self._set_phase("FAULT", reason)
+        self._stage = _HOLD
+        self._turn = None
+
     def restart(self) -> None:
         """The robot came back after a loss: start over from WAIT_PEERS at the measured pose on the next step."""
         self._restart_pending = True

@@ -165,10 +165,11 @@ class ControllerParams:
     clock) or ``realtime`` (own fixed-rate clock, newest state).
     rate_hz : control rate. skill : skill file path ("" = learn the bundled
     demo at start-up). stains_from : ``perception`` or ``truth``.
-    state_timeout_s : real time: no robot state this long -> nothing new is
-    sent and the controller faults. lockstep_state_timeout_s : the same in
-    lock-step, wall time (the sim re-sends its state every 0.1 s while
-    waiting). stains_timeout_s : no stains update this long -> PAUSED.
+    state_timeout_s : real time: a robot state older than this is not
+    answered (nothing new is sent; counted). robot_lost_s : no robot state
+    for this long (wall time, both modes; the lock-step sim re-sends its
+    state every 0.1 s while it waits) -> FAULT, and a restart from the
+    measured pose when states come back. stains_timeout_s : no stains update this long -> PAUSED.
     status_rate_hz : ControllerStatus rate. max_ticks : stop after this many
     ticks (0 = run until stopped). trace_ticks : keep this many ticks of
     reference/measurement trace in memory (0 = none).
@@ -179,7 +180,7 @@ class ControllerParams:
     skill: str = ""
     stains_from: str = "perception"
     state_timeout_s: float = 0.005
-    lockstep_state_timeout_s: float = 0.5
+    robot_lost_s: float = 0.5
     stains_timeout_s: float = 1.0
     status_rate_hz: float = 20.0
     max_ticks: int = 0
@@ -200,7 +201,7 @@ class ControllerParams:
         if self.stains_from not in STAIN_SOURCES:
             raise ConfigError(f"[{s}] stains_from must be one of {STAIN_SOURCES}, got {self.stains_from!r}")
         _range(s, "state_timeout_s", self.state_timeout_s, 1.5 / self.rate_hz, 1.0)
-        _range(s, "lockstep_state_timeout_s", self.lockstep_state_timeout_s, 0.15, 60.0)
+        _range(s, "robot_lost_s", self.robot_lost_s, 0.15, 60.0)
         _range(s, "stains_timeout_s", self.stains_timeout_s, 0.05, 3600.0)
         _range(s, "status_rate_hz", self.status_rate_hz, 0.5, 200.0)
         for name in ("max_ticks", "trace_ticks"):

@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "learn": ("controller.lamps.cli:learn_main", "segment and learn a demonstration into a skill file"),
     "plan": ("controller.lamps.cli:plan_main", "plan and roll out a skill over given stains"),
     "sim": ("sim.cli:main", "the simulated robot, board and camera as a Zenoh service"),
+    "controller": ("controller.cli:main", "run a skill on the robot: impedance control and the skill executor"),
 }
 
 

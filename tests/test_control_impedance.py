@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from controller.control.impedance import Reference, drift_acceleration, impedance_torque, pose_error
+from controller.control.impedance import Kinematics, Reference, impedance_torque, pose_error
 from controller.control.params import ControlConfigError, ImpedanceParams
 from interfaces.robot_model import RobotModel
 from sim.core import SimCore
@@ -24,7 +24,22 @@ def model() -> RobotModel:
 def test_drift_acceleration_is_the_time_derivative_of_J_along_the_motion(model):
     h = 1e-6
     fd = (model.tcp_jacobian(Q + h * DQ) @ DQ - model.tcp_jacobian(Q - h * DQ) @ DQ) / (2 * h)
-    np.testing.assert_allclose(drift_acceleration(model, Q, DQ), fd, atol=1e-6)
+    np.testing.assert_allclose(Kinematics(model).update(Q, DQ).drift, fd, atol=1e-6)
+
+
+def test_one_kinematics_pass_matches_the_separate_pinocchio_calls(model):
+    kin = Kinematics(model).update(Q, DQ)
+    M = pin.crba(model.model, model.data, Q)
+    M = np.triu(M) + np.triu(M, 1).T
+    np.testing.assert_allclose(kin.M, M, atol=1e-12)
+    np.testing.assert_allclose(kin.M_inv @ M, np.eye(7), atol=1e-9)
+    np.testing.assert_allclose(kin.J, model.tcp_jacobian(Q), atol=1e-12)
+    p, R = model.tcp_pose(Q)
+    np.testing.assert_allclose(kin.p, p, atol=1e-12)
+    np.testing.assert_allclose(kin.R, R, atol=1e-12)
+    np.testing.assert_allclose(kin.g, model.gravity(Q), atol=1e-9)
+    np.testing.assert_allclose(kin.nle, pin.rnea(model.model, model.data, Q, DQ, np.zeros(7)), atol=1e-9)
+    np.testing.assert_allclose(kin.Lambda, np.linalg.inv(kin.J @ np.linalg.inv(M) @ kin.J.T), rtol=1e-4)
 
 
 def test_nullspace_torque_causes_no_task_acceleration(model):

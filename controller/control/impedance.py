@@ -44,6 +44,54 @@ class Reference:
     accel: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
 
+class Kinematics:
+    """Everything the law needs about the arm at (q, dq), from one Pinocchio pass per tick.
+
+    Call :meth:`update`; then ``M`` (7, 7) inertia, ``M_inv``, ``J`` (6, 7)
+    pad Jacobian (world-aligned, linear rows first), ``p`` (3,) [m], ``R``
+    (3, 3), ``twist`` (6,) = J dq, ``nle`` (7,) = C dq + g, ``g`` (7,)
+    gravity, ``drift`` (6,) = dJ dq, ``Lambda`` (6, 6) task inertia. The
+    arrays are refreshed in place.
+    """
+
+    def __init__(self, model: RobotModel) -> None:
+        self.model = model
+        self._lower = np.tril_indices(model.nq, -1)
+        self._zeros = np.zeros(model.nq)
+        self._eps = 1e-6 * np.eye(6)
+        self.M = self.M_inv = self.J = self.Lambda = None
+        self.p = np.zeros(3)
+        self.R = np.eye(3)
+        self.twist = np.zeros(6)
+        self.nle = np.zeros(model.nq)
+        self.g = np.zeros(model.nq)
+        self.drift = np.zeros(6)
+
+    def update(self, q: np.ndarray, dq: np.ndarray) -> "Kinematics":
+        m, d, f = self.model.model, self.model.data, self.model.tcp_id
+        pin.computeAllTerms(m, d, q, dq)  # M, nle, g, joint Jacobians, placements
+        M = d.M.copy()
+        M[self._lower] = M.T[self._lower]  # older Pinocchio fills the upper triangle only
+        self.M = M
+        M_inv = pin.computeMinverse(m, d, q).copy()
+        M_inv[self._lower] = M_inv.T[self._lower]
+        self.M_inv = M_inv
+        pin.updateFramePlacements(m, d)
+        oMf = d.oMf[f]
+        self.p[:] = oMf.translation
+        self.R[:] = oMf.rotation
+        self.J = J = pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED)
+        np.matmul(J, dq, out=self.twist)
+        self.nle[:] = d.nle
+        self.g[:] = d.g
+        pin.forwardKinematics(m, d, q, dq, self._zeros)
+        acc = pin.getFrameClassicalAcceleration(m, d, f, pin.LOCAL_WORLD_ALIGNED)
+        self.drift[:3] = acc.linear
+        self.drift[3:] = acc.angular
+        self.Lambda = np.linalg.inv(J @ M_inv @ J.T + self._eps)
+        return self
+
+
 @dataclass
 class ImpedanceTerms:
     """The parts of one evaluation, for logs and tests (all world axes)."""
@@ -63,19 +111,6 @@ class ImpedanceTerms:
 def pose_error(p_ref: np.ndarray, R_ref: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
     """(6,) ``[p_ref - p ; log(R_ref R^T)]``: the world-frame rotation vector taking R to R_ref."""
     return np.concatenate([p_ref - p, pin.log3(R_ref @ R.T)])
-
-
-def drift_acceleration(model: RobotModel, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-    """(6,) dJ dq: the pad's classical acceleration [m/s^2, rad/s^2] (world axes) at zero joint acceleration."""
-    m, d = model.model, model.data
-    pin.forwardKinematics(m, d, q, dq, np.zeros_like(q))
-    acc = pin.getFrameClassicalAcceleration(m, d, model.tcp_id, pin.LOCAL_WORLD_ALIGNED)
-    return np.concatenate([acc.linear, acc.angular])
-
-
-def task_inertia(J: np.ndarray, M_inv: np.ndarray, eps: float = 1e-6) -> np.ndarray:
-    """(6, 6) Lambda = (J M^-1 J^T + eps I)^-1 (eps keeps it finite at singularities)."""
-    return np.linalg.inv(J @ M_inv @ J.T + eps * np.eye(J.shape[0]))
 
 
 @dataclass
@@ -112,32 +147,29 @@ def _clip_norm(v: np.ndarray, limit: float) -> None:
 
 
 def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Reference, params: ImpedanceParams,
-                     q_rest: np.ndarray, add_gravity: bool, shaping: TaskShaping = _PLAIN) -> ImpedanceTerms:
+                     q_rest: np.ndarray, add_gravity: bool, shaping: TaskShaping = _PLAIN,
+                     kin: Kinematics | None = None) -> ImpedanceTerms:
     """Joint torques (7,) [Nm] of the impedance law at state ``q``, ``dq`` (see the module docstring).
 
     With ``shaping.force_axis = n`` the translational error, twist error
     and reference acceleration lose their component along n, which instead
     gets ``-press_n`` of force and a damping ``-Lambda_nn c v_n``.
+    kin : the arm's :class:`Kinematics` already updated at (q, dq) this
+    tick (computed here when None).
     """
-    m, d = model.model, model.data
-    M = pin.crba(m, d, q)
-    M = np.triu(M) + np.triu(M, 1).T
-    M_inv = np.linalg.inv(M)
-    J = model.tcp_jacobian(q)
-    p, R = model.tcp_pose(q)
-    twist = J @ dq
-    Lam = task_inertia(J, M_inv)
-    e = pose_error(ref.p_m, ref.R, p, R)
+    if kin is None:
+        kin = Kinematics(model).update(q, dq)
+    M, M_inv, J, Lam, twist = kin.M, kin.M_inv, kin.J, kin.Lambda, kin.twist
+    e = pose_error(ref.p_m, ref.R, kin.p, kin.R)
     _clip_norm(e[:3], shaping.max_position_error_m)
     _clip_norm(e[3:], shaping.max_rotation_error_rad)
     de = ref.twist - twist
-    a = ref.accel - drift_acceleration(model, q, dq)
+    a = ref.accel - kin.drift
     n = shaping.force_axis
     if n is not None:
         for v in (e, de, a):
             v[:3] -= (v[:3] @ n) * n
-    k = shaping.stiffness_scale
-    K = k * np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
+    K = shaping.stiffness_scale * np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
     D = 2.0 * params.damping_factor * np.sqrt(K * np.clip(np.diag(Lam), 1e-6, None))
     F = Lam @ a + K * e + D * de
     if n is not None:
@@ -145,12 +177,11 @@ def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Refe
         F[:3] -= (shaping.press_n + lam_n * shaping.normal_damping_1_s * float(twist[:3] @ n)) * n
     if shaping.extra_force_n is not None:
         F[:3] += shaping.extra_force_n
-    Jbar = M_inv @ J.T @ Lam
     kn = params.nullspace_stiffness_nm_rad
     tau0 = M @ (kn * (q_rest - q) - 2.0 * np.sqrt(kn) * dq)
-    tau_null = tau0 - J.T @ (Jbar.T @ tau0)
-    nle = pin.rnea(m, d, q, dq, np.zeros_like(q))  # C(q, dq) dq + g(q)
+    # N^T tau0 = tau0 - J^T Jbar^T tau0 with Jbar^T = Lambda J M^-1
+    tau_null = tau0 - J.T @ (Lam @ (J @ (M_inv @ tau0)))
+    tau = J.T @ F + tau_null + kin.nle
     if not add_gravity:
-        nle = nle - pin.computeGeneralizedGravity(m, d, q)
-    tau = J.T @ F + tau_null + nle
-    return ImpedanceTerms(tau, F, e, de, tau_null, p, R, twist, Lam, J)
+        tau -= kin.g
+    return ImpedanceTerms(tau, F, e, de, tau_null, kin.p.copy(), kin.R.copy(), twist.copy(), Lam, J)

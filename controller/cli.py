@@ -1,0 +1,175 @@
+"""``lamps controller``: the LAMPS skill executor and Cartesian impedance controller as a Zenoh service.
+
+Configuration comes from ``--config FILE`` (TOML, ``[zenoh]`` and
+``[controller]`` tables, see :mod:`controller.params`), then ``LAMPS_*``
+environment variables, then the options below (highest priority). A bad
+config, a skill file that does not load, or a rate this machine cannot
+hold is a one-line error and exit code 1 before anything starts; Ctrl-C or
+SIGTERM stops it cleanly (and ``--trace`` is written then).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import time
+
+import numpy as np
+
+from controller.lamps.errors import LampsError
+from interfaces.config import ZenohSettings, load_config
+from interfaces.errors import InterfaceError
+
+SERVICE = "controller"
+#: A real-time rate is refused when the control law's p99 takes more than this share of the period.
+MAX_TICK_SHARE = 0.7
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="lamps controller",
+        description="Runs a learned LAMPS skill on the robot over Zenoh: fixed-rate Cartesian impedance "
+                    "(Pinocchio) with normal force regulation. Options override the config file.")
+    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh] and [controller] tables")
+    p.add_argument("--mode", choices=("lockstep", "realtime"),
+                   help="lockstep: answer each robot state (deterministic); realtime: own fixed-rate clock")
+    p.add_argument("--rate", type=float, metavar="HZ", help="control rate (default 1000)")
+    p.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' (default: learn the bundled demo)")
+    p.add_argument("--stains-from", choices=("perception", "truth"),
+                   help="where stains come from: perception/stains, or sim/truth (tests, no perception)")
+    p.add_argument("--air", action="store_true", default=None, help="dry run: wipe in the air above the board")
+    p.add_argument("--force", type=float, metavar="N", help="normal force to wipe with (default 10 N)")
+    p.add_argument("--max-ticks", type=int, metavar="N", help="stop after N ticks (default: run until stopped)")
+    p.add_argument("--trace", metavar="FILE.npz", help="record reference and measurement; written on exit")
+    p.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (repeatable)")
+    p.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint to connect to (repeatable)")
+    p.add_argument("--robot-id", help="key prefix becomes lamps/<robot-id>")
+    p.add_argument("--check", action="store_true", help="validate config, skill and rate, then exit")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    return p
+
+
+def load(a: argparse.Namespace):
+    """(ZenohSettings, ControllerParams) from file, environment and options."""
+    from .params import ControllerParams
+
+    cfg = load_config(a.config)
+    table = {k: (dict(v) if isinstance(v, dict) else v) for k, v in cfg.table("controller").items()}
+    for key, value in (("mode", a.mode), ("rate_hz", a.rate), ("skill", a.skill), ("stains_from", a.stains_from),
+                       ("max_ticks", a.max_ticks)):
+        if value is not None:
+            table[key] = value
+    if a.trace and not table.get("trace_ticks"):
+        table["trace_ticks"] = 600_000  # 10 min at 1 kHz
+    if a.air is not None:
+        table.setdefault("executor", {})["air"] = a.air
+    if a.force is not None:
+        table.setdefault("force", {})["target_n"] = a.force
+    zenoh = cfg.zenoh
+    over = {k: v for k, v in (("listen", a.listen), ("connect", a.connect), ("robot_id", a.robot_id)) if v is not None}
+    if over:
+        zenoh = ZenohSettings(**{**{f: getattr(zenoh, f) for f in zenoh.__dataclass_fields__}, **over})
+    return zenoh, ControllerParams.from_table(table)
+
+
+def load_or_learn_skill(path: str):
+    """The skill file at ``path``, or (empty path) the skill learned from the bundled synthetic demonstration."""
+    from controller.lamps.skill import load_skill
+
+    if path:
+        return load_skill(path)
+    from controller.lamps.learn import learn_skill
+    from controller.lamps.synth import synthesize_demo
+
+    log = logging.getLogger("controller")
+    t0 = time.monotonic()
+    skill, _ = learn_skill(synthesize_demo(3, 0).demo)
+    log.info("no skill file given: learned the bundled demo in %.1f s", time.monotonic() - t0)
+    return skill
+
+
+def tick_cost_us(params, skill, model, n: int = 300) -> np.ndarray:
+    """(n,) wall time [us] of the control tick on a representative posture (holding, no board)."""
+    from .core import ControllerCore
+
+    core = ControllerCore(params, skill, model)
+    q = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0])
+    dq = np.full(7, 0.05)
+    w = np.zeros(6)
+    out = np.empty(n)
+    for i in range(n):
+        t0 = time.perf_counter_ns()
+        core.tick(q, dq, w, False, params.dt_s)
+        out[i] = (time.perf_counter_ns() - t0) / 1e3
+    return out
+
+
+def check_rate(params, skill, model) -> str:
+    """Refuse a real-time rate whose period the control law cannot fit on this machine (ConfigError)."""
+    costs = tick_cost_us(params, skill, model)
+    p99 = float(np.percentile(costs[50:], 99))
+    period_us = 1e6 / params.rate_hz
+    text = f"control tick p50 {np.median(costs[50:]):.0f} us, p99 {p99:.0f} us; period {period_us:.0f} us"
+    if params.mode == "realtime" and p99 > MAX_TICK_SHARE * period_us:
+        raise InterfaceError(
+            f"[controller] rate_hz = {params.rate_hz:g} cannot be held on this machine: a tick must fit in "
+            f"{period_us:.0f} us but the control law alone takes {p99:.0f} us (p99; limit "
+            f"{MAX_TICK_SHARE:.0%} of the period). Lower rate_hz.")
+    return text
+
+
+def write_trace(path: str, core) -> None:
+    from controller.core import TRACE_COLUMNS
+    from interfaces.atomic import write_atomic
+
+    write_atomic(path, lambda f: np.savez(f, trace=core.trace.array(), columns=np.array(TRACE_COLUMNS),
+                                          junction_ticks=np.array(core.executor.junction_ticks)))
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="%(asctime)s controller %(levelname)s %(name)s: %(message)s")
+    try:
+        zenoh_settings, params = load(a)
+        from interfaces.robot_model import RobotModel
+
+        skill = load_or_learn_skill(params.skill)
+        model = RobotModel()
+        timing = check_rate(params, skill, model)
+    except (InterfaceError, LampsError, OSError) as exc:
+        print(f"lamps controller: error: {exc}", file=sys.stderr)
+        return 1
+    if a.check:
+        print(f"ok: skill with {len(skill.periodic)} periodic and {len(skill.transitional)} transitional MPs, "
+              f"mode {params.mode} at {params.rate_hz:g} Hz ({timing}), stains from {params.stains_from}, "
+              f"keys under {zenoh_settings.keys.prefix}")
+        return 0
+    from interfaces.session import ServiceNode
+
+    from .core import ControllerCore
+    from .service import ControllerService
+
+    try:
+        node = ServiceNode(SERVICE, zenoh_settings).__enter__()
+    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
+        print(f"lamps controller: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return 1
+    core = ControllerCore(params, skill, model)
+    service = ControllerService(params, node, core)
+    signal.signal(signal.SIGTERM, lambda *_: service.stop.set())
+    signal.signal(signal.SIGINT, lambda *_: service.stop.set())
+    try:
+        ticks = service.run()
+    finally:
+        node.close()
+        if a.trace and core.trace is not None:
+            write_trace(a.trace, core)
+    logging.getLogger("controller").info("stopped after %d ticks in phase %s", ticks, core.executor.phase)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,305 @@
+"""The controller as a Zenoh service: lock-step and real-time loops around :class:`~controller.core.ControllerCore`.
+
+Reads ``robot/state``, the stains (``perception/stains``, or ``sim/truth``
+with ``stains_from = "truth"``) and ``controller/estop``; writes
+``robot/command`` and ``controller/status``.
+
+* lock-step: every new robot state is answered with one command (a state
+  re-sent by a waiting sim gets the same command again); time comes from
+  the robot's clock (``robot_time_ns``), so a run is deterministic.
+* real-time: ticks on absolute deadlines of its own monotonic clock; each
+  tick reads the newest state (never waits for it). A state older than
+  ``state_timeout_s`` is not answered (counted). Overruns are counted and
+  the missed periods skipped, never caught up in a burst.
+
+In both, no state for ``robot_lost_s`` is a FAULT with its reason, and the
+controller restarts from the measured pose when states come back (a new
+sim starts its ``seq`` again from 0). Zenoh callbacks only hand samples to
+one-slot channels or short queues; the loop never blocks on the network.
+Cyclic garbage collection is frozen while the loop runs. Malformed samples
+on any key are counted (by key and reason, in the status) and dropped.
+"""
+
+from __future__ import annotations
+
+import gc
+import logging
+import threading
+import time
+from collections import Counter
+
+import numpy as np
+
+from interfaces.messages import ControllerStatus, Estop, LoopTiming, RobotState, SimTruth, Stains, TorqueCommand
+from interfaces.session import ServiceNode
+from interfaces.transforms import transform_from_pose
+
+from .core import ControllerCore
+from .executor import BoardPose, StainState
+from .params import ControllerParams
+
+log = logging.getLogger(__name__)
+
+SERVICE = "controller"
+_TIMING_WINDOW = 2000
+
+
+class LoopStats:
+    """Ring buffers of the loop period and its read / update / write parts [us], and the overrun count."""
+
+    def __init__(self, window: int = _TIMING_WINDOW) -> None:
+        self.buf = np.zeros((4, window))
+        self.n = 0
+        self.overruns = 0
+
+    def add(self, period_us: float, read_us: float, update_us: float, write_us: float) -> None:
+        i = self.n % self.buf.shape[1]
+        b = self.buf
+        b[0, i], b[1, i], b[2, i], b[3, i] = period_us, read_us, update_us, write_us
+        self.n += 1
+
+    def summary(self) -> LoopTiming:
+        m = min(self.n, self.buf.shape[1])
+        if m == 0:
+            return LoopTiming(overruns=self.overruns)
+        b = self.buf[:, :m]
+        p99 = np.percentile(b, 99, axis=1)  # one call: this runs inside the loop
+        return LoopTiming(float(np.median(b[0])), float(p99[0]), float(b[0].max()), float(p99[1]), float(p99[2]),
+                          float(p99[3]), self.n, self.overruns)
+
+
+class ControllerService:
+    """One controller on the network. ``run()`` blocks until :attr:`stop` is set or ``max_ticks``."""
+
+    def __init__(self, params: ControllerParams, node: ServiceNode, core: ControllerCore) -> None:
+        self.p = params
+        self.node = node
+        self.keys = node.keys
+        self.core = core
+        self.counters: Counter[str] = Counter()
+        self.stop = threading.Event()
+        self.stats = LoopStats()
+        self.ticks = 0
+        self._status_period_s = 1.0 / params.status_rate_hz
+        self._next_status = 0.0
+        self._status_seq = 0
+        self._last_seq = -1
+        self._last_robot_ns: int | None = None
+        self._last_command: TorqueCommand | None = None
+        self._stains_clock = None
+        self._lost = False
+        self._ever_state = False
+        if params.stains_from == "truth":
+            self._stains = node.latest(self.keys.sim_truth, SimTruth)
+        else:
+            self._stains = node.latest(self.keys.perception_stains, Stains)
+        self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
+
+    # ------------------------------------------------------------------ loops
+    def run(self) -> int:
+        """Serve until stopped; returns the number of ticks answered."""
+        gc.collect()
+        gc.freeze()
+        gc.disable()
+        try:
+            if self.p.mode == "lockstep":
+                self._run_lockstep()
+            else:
+                self._run_realtime()
+        finally:
+            gc.enable()
+            gc.unfreeze()
+            self._publish_status(force=True)
+        return self.ticks
+
+    def _run_lockstep(self) -> None:
+        states = self.node.inbox(self.keys.robot_state, RobotState, maxlen=8)
+        self._state_reader = states
+        last_state_wall = time.monotonic()
+        t_prev = time.perf_counter_ns()
+        while not self.stop.is_set():
+            t0 = time.perf_counter_ns()
+            state = states.get(0.02)
+            now = time.monotonic()
+            self._poll_estop()
+            if state is None:
+                self._check_lost(now - last_state_wall)
+                self._publish_status()
+                continue
+            last_state_wall = now
+            if state.seq == self._last_seq and self._last_command is not None and not self._lost:
+                self.node.publish(self.keys.robot_command, self._last_command)  # a re-sent state: same answer
+                self.counters["states_answered_again"] += 1
+                continue
+            if state.seq < self._last_seq or self._lost:
+                self._robot_back(state)
+            elif self._last_seq >= 0 and state.seq != self._last_seq + 1:
+                self.counters["states_skipped"] += state.seq - self._last_seq - 1
+            dt = self._dt_from_robot_clock(state)
+            self._poll_stains(state.robot_time_ns * 1e-9)
+            t1 = time.perf_counter_ns()
+            tau = self._control(state, dt)
+            t2 = time.perf_counter_ns()
+            self._send(state.seq, tau)
+            self._publish_status()
+            t3 = time.perf_counter_ns()
+            self.stats.add((t3 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+            t_prev = t3
+            if self.p.max_ticks and self.ticks >= self.p.max_ticks:
+                break
+
+    def _run_realtime(self) -> None:
+        states = self.node.latest(self.keys.robot_state, RobotState)
+        self._state_reader = states
+        period_ns = int(round(1e9 / self.p.rate_hz))
+        timeout_ns = int(self.p.state_timeout_s * 1e9)
+        state: RobotState | None = None
+        state_ns = 0
+        answered_seq = -1
+        next_ns = time.monotonic_ns()
+        t_prev = next_ns
+        dt = 1.0 / self.p.rate_hz
+        while not self.stop.is_set():
+            t0 = time.monotonic_ns()
+            new = states.take()
+            if new is not None:
+                if state is not None and new.seq < state.seq or self._lost:
+                    self._robot_back(new)
+                state, state_ns = new, t0
+            self._poll_estop()
+            age_ns = t0 - state_ns
+            t1 = t2 = time.monotonic_ns()
+            if state is None or age_ns > timeout_ns:
+                if state is not None:
+                    self.counters["ticks_without_fresh_state"] += 1
+                    self._check_lost(age_ns / 1e9)
+            else:
+                if state.seq == answered_seq:
+                    self.counters["ticks_on_held_state"] += 1
+                self._poll_stains(t0 / 1e9)
+                t1 = time.monotonic_ns()
+                tau = self._control(state, dt)
+                t2 = time.monotonic_ns()
+                self._send(state.seq, tau)
+                answered_seq = state.seq
+            self._publish_status()
+            t3 = time.monotonic_ns()
+            self.stats.add((t0 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+            t_prev = t0
+            if self.p.max_ticks and self.ticks >= self.p.max_ticks:
+                break
+            next_ns += period_ns
+            now = time.monotonic_ns()
+            if now > next_ns:
+                missed = (now - next_ns) // period_ns + 1
+                self.stats.overruns += int(missed)
+                next_ns += int(missed) * period_ns
+            time.sleep((next_ns - now) / 1e9)
+
+    # ------------------------------------------------------------------ pieces
+    def _control(self, state: RobotState, dt: float) -> np.ndarray:
+        self._ever_state = True
+        self._last_seq = state.seq
+        self.ticks += 1
+        q = np.asarray(state.q_rad)
+        dq = np.asarray(state.dq_rad_s)
+        wrench = np.asarray(state.wrench_world)
+        caps = state.capabilities
+        return self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm))
+
+    def _send(self, seq: int, tau: np.ndarray) -> None:
+        cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau.tolist())
+        self._last_command = cmd
+        self.node.publish(self.keys.robot_command, cmd)
+
+    def _dt_from_robot_clock(self, state: RobotState) -> float:
+        """Time since the last answered state on the robot's clock; the nominal period when that is unusable."""
+        dt = 1.0 / self.p.rate_hz
+        if self._last_robot_ns is not None and state.robot_time_ns > self._last_robot_ns:
+            measured = (state.robot_time_ns - self._last_robot_ns) * 1e-9
+            if measured <= 0.1:
+                dt = measured
+        self._last_robot_ns = state.robot_time_ns
+        return dt
+
+    def _check_lost(self, silence_s: float) -> None:
+        if self._ever_state and not self._lost and silence_s >= self.p.robot_lost_s:
+            self._lost = True
+            self.counters["robot_lost"] += 1
+            self.core.executor.robot_lost(f"no robot state for {silence_s * 1000:.0f} ms")
+            self._publish_status(force=True)
+
+    def _robot_back(self, state: RobotState) -> None:
+        log.warning("robot states back (seq %d after %d): restarting from the measured pose", state.seq,
+                    self._last_seq)
+        self.counters["robot_restarts"] += 1
+        self._lost = False
+        self._last_robot_ns = None
+        self._last_seq = -1
+        self.core.restart()
+
+    def _poll_stains(self, clock_s: float) -> None:
+        msg = self._stains.take()
+        ex = self.core.executor
+        if msg is not None:
+            update = self._stains_update(msg)
+            if update is not None:
+                ex.set_stains(*update)
+                self._stains_clock = clock_s
+                return
+        if self._stains_clock is not None and ex.stains_fresh and clock_s - self._stains_clock > self.p.stains_timeout_s:
+            self.counters["stains_stale"] += 1
+            ex.stains_stale(f"no stains update for {clock_s - self._stains_clock:.1f} s")
+
+    def _stains_update(self, msg) -> tuple[BoardPose, list[StainState]] | None:
+        if isinstance(msg, SimTruth):
+            if msg.T_board_to_world is None or len(msg.centres_board_m) != len(msg.stain_ids):
+                self.counters["truth_without_board"] += 1
+                return None
+            board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), (0.0, 0.0))
+            kappa_at = self.p.executor.kappa_remaining
+            stains = [StainState(i, np.asarray(c, float), float(s), r <= kappa_at)
+                      for i, c, s, r in zip(msg.stain_ids, msg.centres_board_m, msg.sizes_m, msg.remaining)]
+            return board, stains
+        board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), msg.board_size_m)
+        stains = [StainState(s.id, np.asarray(s.centre_board_m, float), s.size_m, s.kappa) for s in msg.stains]
+        return board, stains
+
+    def _poll_estop(self) -> None:
+        while True:
+            e = self._estops.get(0.0)
+            if e is None:
+                return
+            if e.engaged:
+                log.warning("e-stop from %s: %s", e.source or "?", e.reason)
+                self.core.executor.estop(f"e-stop: {e.reason}" + (f" ({e.source})" if e.source else ""))
+            else:
+                log.warning("e-stop released by %s", e.source or "?")
+                self.counters["estop_releases"] += 1
+                self.core.executor.clear()
+
+    # ------------------------------------------------------------------ status
+    def status(self) -> ControllerStatus:
+        ex, core = self.core.executor, self.core
+        counters = dict(self.counters)
+        counters.update(ex.counters)
+        counters.update(torque_rate_clipped=core.shaper.clipped_rate, torque_abs_clipped=core.shaper.clipped_abs)
+        for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
+                             ("estop", self._estops)):
+            if reader is None:
+                continue
+            counters[f"{name}_received"] = reader.received
+            for reason, n in reader.bad.items():
+                counters[f"{name}_dropped: {reason}"] = n
+        self._status_seq += 1
+        return ControllerStatus(seq=self._status_seq, stamp_ns=time.monotonic_ns(), phase=ex.phase, reason=ex.reason,
+                                current_mp=ex.current_mp, stain_id=ex.stain_id,
+                                normal_force_n=float(core.normal_force_n), timing=self.stats.summary(),
+                                counters=counters, wall_ns=time.time_ns())
+
+    def _publish_status(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now < self._next_status:
+            return
+        self._next_status = now + self._status_period_s
+        self.node.publish(self.keys.controller_status, self.status())
