@@ -5,9 +5,25 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import pytest
 
 matplotlib.use("Agg")
 
 REPO = Path(__file__).resolve().parent.parent
 #: The real demonstrations live beside the checkout, never inside it.
 REAL_DEMOS = REPO.parent / "shared" / "data" / "wiping-demos" / "circular_wiping_dataset.mat"
+
+
+@pytest.fixture(scope="session")
+def learned_skill():
+    """The skill learned from the bundled synthetic demonstration (3 stains, seed 0), what the controller defaults to."""
+    from controller.cli import load_or_learn_skill
+
+    return load_or_learn_skill("")
+
+
+@pytest.fixture(scope="session")
+def skill_file(learned_skill, tmp_path_factory) -> Path:
+    from controller.lamps.skill import save_skill
+
+    return save_skill(tmp_path_factory.mktemp("skill") / "skill.json", learned_skill)

@@ -1,0 +1,366 @@
+"""Controller benchmarks: control-law time per tick, real-time loop against the sim, lock-step closed loop.
+
+Usage: .venv/bin/python bench/bench_controller.py [--quick] [--json OUT]
+
+1. Control-law compute time per tick: ``ControllerCore.tick`` alone, timed
+   with ``perf_counter_ns`` around each call, in-process against an
+   in-process ``SimCore`` (no network, no camera) for a whole wipe of the
+   bundled skill (approach, contact, wiping, retreat; until the executor
+   reaches DONE, at most 20000 ticks). The stains come from the sim's truth
+   every 100 ticks. p50 / p99 / max [us] over all ticks, and split into WIPE
+   ticks and the rest. Baseline: the 1000 us period at 1 kHz. The same run
+   also gives the in-process closed-loop speed (sim step + controller tick
+   per wall second): the ceiling for item 3.
+2. Real-time mode over Zenoh for 60 s (10 s with --quick): ``lamps sim`` and
+   ``lamps controller`` each in their own process, both ``--mode realtime``,
+   no camera, stains from the sim's truth. The controller's status is
+   sampled every 0.5 s; its timing percentiles cover the last 2000 ticks, so
+   the table gives the median of those windowed p50 periods, the largest
+   windowed p99, the largest single period, and the overruns (missed
+   periods) at the end, also per 10,000 ticks. Baseline: a 1000 us period
+   with no overruns. Also the controller's final phase, its
+   ``ticks_without_fresh_state`` counter, and the sim's own step period p99
+   and ``stale_command_brakes`` (steps where no fresh command arrived).
+3. Lock-step real-time factor of the whole closed loop: the same two
+   processes in ``--mode lockstep`` (each sim step waits for the command
+   answering its state) until the controller reports DONE (at most 120 s).
+   Simulated seconds per wall second (from ``sim/truth``'s robot clock),
+   ticks per wall second, and the controller's loop period (one round trip)
+   p50 / p99. Baseline: 1.0 is real time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import platform
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from controller.cli import load_or_learn_skill  # noqa: E402
+from controller.core import ControllerCore  # noqa: E402
+from controller.executor import BoardPose, StainState  # noqa: E402
+from controller.params import ControllerParams  # noqa: E402
+from interfaces.config import ZenohSettings  # noqa: E402
+from interfaces.messages import ControllerStatus, ServiceStatus, SimTruth  # noqa: E402
+from interfaces.session import ServiceNode  # noqa: E402
+from sim.core import SimCore  # noqa: E402
+from sim.params import SimParams  # noqa: E402
+
+MAX_TICKS = 20_000
+STAINS_EVERY = 100
+SAMPLE_S = 0.5
+
+
+class BenchError(RuntimeError):
+    """A benchmark could not run (a subprocess died, a peer never came up)."""
+
+
+# ---------------------------------------------------------------------------------------------- 1. in process
+def _feed_stains(core: ControllerCore, sim: SimCore) -> None:
+    board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
+    stains = [StainState(s.id, np.array(s.centre_m), s.size_m, bool(r <= 0.03))
+              for s, r in zip(sim.dirt.stains, sim.dirt.remaining())]
+    core.executor.set_stains(board, stains)
+
+
+def _stats_us(ns: np.ndarray) -> dict:
+    if len(ns) == 0:
+        return {"ticks": 0, "p50_us": float("nan"), "p99_us": float("nan"), "max_us": float("nan")}
+    us = ns / 1e3
+    return {"ticks": int(len(us)), "p50_us": float(np.percentile(us, 50)), "p99_us": float(np.percentile(us, 99)),
+            "max_us": float(us.max())}
+
+
+def bench_tick(skill) -> dict:
+    sim = SimCore(SimParams.from_table({"camera": {"enabled": False}}))
+    core = ControllerCore(ControllerParams.from_table({}), skill)
+    times = np.zeros(MAX_TICKS, np.int64)
+    phases: list[str] = []
+    n = 0
+    t_wall = time.perf_counter()
+    try:
+        while n < MAX_TICKS and core.executor.phase != "DONE":
+            if n % STAINS_EVERY == 0:
+                _feed_stains(core, sim)
+            o = sim.out
+            t0 = time.perf_counter_ns()
+            tau = core.tick(o.q, o.dq, o.wrench, False, 0.001)
+            times[n] = time.perf_counter_ns() - t0
+            phases.append(core.executor.phase)
+            sim.step(tau.copy())
+            n += 1
+        wall = time.perf_counter() - t_wall
+        remaining = [float(r) for r in sim.dirt.remaining()]
+    finally:
+        sim.close()
+    times = times[:n]
+    wipe = np.array([p == "WIPE" for p in phases], bool)
+    per_phase = {}
+    for name in dict.fromkeys(phases):
+        per_phase[name] = _stats_us(times[np.array([p == name for p in phases], bool)])
+    return {"all": _stats_us(times), "wipe": _stats_us(times[wipe]), "other": _stats_us(times[~wipe]),
+            "per_phase": per_phase, "final_phase": core.executor.phase, "ticks": n, "wall_s": wall,
+            "loop_ticks_per_s": n / wall, "loop_x_realtime": n / wall / 1000.0, "remaining": remaining}
+
+
+# ---------------------------------------------------------------------------------------------- processes
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Proc:
+    """A service subprocess with its output in a temporary file; ``stop()`` is SIGINT, then kill after 20 s."""
+
+    def __init__(self, name: str, cmd: list[str], log_dir: Path) -> None:
+        self.name = name
+        self.log_path = log_dir / f"{name}.log"
+        self._log = open(self.log_path, "w+")
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        self.proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT, text=True)
+
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def check(self) -> None:
+        """Raise BenchError (with the output) when the process has exited."""
+        if self.proc.poll() is not None:
+            raise BenchError(f"{self.name} exited early with code {self.proc.returncode}; its output:\n"
+                             f"{self.output()}")
+
+    def stop(self, timeout_s: float = 20.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                print(f"warning: {self.name} did not stop within {timeout_s:.0f} s of SIGINT: killed", file=sys.stderr)
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+        return self.proc.returncode
+
+
+@contextlib.contextmanager
+def sim_and_controller(mode: str):
+    """(node, sim Proc, controller Proc) once both services are alive; both stopped on exit."""
+    p1, p2 = free_port(), free_port()
+    rid = f"bench{p1}"
+    realtime = ["--mode", "realtime"] if mode == "realtime" else ["--mode", "lockstep"]
+    sim_cmd = [sys.executable, "-m", "sim.cli", *realtime, "--no-camera", "--listen", f"tcp/127.0.0.1:{p1}",
+               "--robot-id", rid]
+    ctl_cmd = [sys.executable, "-m", "controller.cli", *realtime, "--stains-from", "truth",
+               "--connect", f"tcp/127.0.0.1:{p1}", "--listen", f"tcp/127.0.0.1:{p2}", "--robot-id", rid]
+    with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
+        procs = []
+        stack.callback(lambda: [p.stop() for p in reversed(procs)])
+        procs.append(Proc("sim", sim_cmd, Path(tmp)))
+        time.sleep(0.5)  # let the sim's listener come up before the controller dials it
+        procs.append(Proc("controller", ctl_cmd, Path(tmp)))
+        settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{p1}", f"tcp/127.0.0.1:{p2}"), robot_id=rid)
+        node = stack.enter_context(ServiceNode("bench", settings))
+        end = time.monotonic() + 60.0
+        while True:
+            for p in procs:
+                p.check()
+            if {"sim", "controller"} <= node.alive_services(0.5):
+                break
+            if time.monotonic() > end:
+                raise BenchError("sim and controller not both alive after 60 s; outputs:\n"
+                                 + "\n".join(f"--- {p.name}\n{p.output()}" for p in procs))
+            time.sleep(0.2)
+        yield node, procs[0], procs[1]
+
+
+# ---------------------------------------------------------------------------------------------- 2. real time
+def bench_realtime(duration_s: float) -> dict:
+    with sim_and_controller("realtime") as (node, sim, ctl):
+        status = node.latest(node.keys.controller_status, ControllerStatus)
+        sim_status = node.latest(node.keys.sim_status, ServiceStatus)
+        samples: list[ControllerStatus] = []
+        last_sim: ServiceStatus | None = None
+        last: ControllerStatus | None = None
+        t0 = time.monotonic()
+        next_sample = t0 + SAMPLE_S
+        while time.monotonic() < t0 + duration_s:
+            time.sleep(max(next_sample - time.monotonic(), 0.0))
+            next_sample += SAMPLE_S
+            sim.check()
+            ctl.check()
+            s = status.take()
+            if s is not None:
+                last = s
+                if s.timing.ticks > 0:
+                    samples.append(s)
+            ss = sim_status.take()
+            if ss is not None:
+                last_sim = ss
+        # the freshest statuses before stopping (controller at 20 Hz, sim at 2 Hz)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            s, ss = status.take(), sim_status.take()
+            last = s or last
+            last_sim = ss or last_sim
+            time.sleep(0.05)
+        wall = time.monotonic() - t0
+    if last is None or not samples:
+        raise BenchError("no controller status received in real-time mode")
+    t = last.timing
+    return {"duration_s": wall, "samples": len(samples),
+            "period_p50_us_median": float(np.median([s.timing.period_p50_us for s in samples])),
+            "period_p99_us_max": float(max(s.timing.period_p99_us for s in samples)),
+            "period_max_us": float(max(s.timing.period_max_us for s in samples)),
+            "update_p99_us_max": float(max(s.timing.update_p99_us for s in samples)),
+            "read_p99_us_max": float(max(s.timing.read_p99_us for s in samples)),
+            "write_p99_us_max": float(max(s.timing.write_p99_us for s in samples)),
+            "ticks": t.ticks, "overruns": t.overruns, "overruns_per_10k": 1e4 * t.overruns / max(t.ticks, 1),
+            "phase": last.phase, "reason": last.reason, "counters": dict(last.counters),
+            "ticks_without_fresh_state": last.counters.get("ticks_without_fresh_state"),
+            "sim_period_p99_us": None if last_sim is None else last_sim.timing.period_p99_us,
+            "sim_period_max_us": None if last_sim is None else last_sim.timing.period_max_us,
+            "sim_overruns": None if last_sim is None else last_sim.timing.overruns,
+            "sim_ticks": None if last_sim is None else last_sim.timing.ticks,
+            "stale_command_brakes": None if last_sim is None else last_sim.counters.get("stale_command_brakes", 0)}
+
+
+# ---------------------------------------------------------------------------------------------- 3. lock step
+def bench_lockstep(timeout_s: float) -> dict:
+    with sim_and_controller("lockstep") as (node, sim, ctl):
+        status = node.latest(node.keys.controller_status, ControllerStatus)
+        truth = node.latest(node.keys.sim_truth, SimTruth)
+        samples: list[ControllerStatus] = []
+        first: tuple[float, int, int] | None = None  # (wall, robot_time_ns, steps) of the first truth seen
+        newest: tuple[float, int, int] | None = None
+        last: ControllerStatus | None = None
+        t0 = time.monotonic()
+        next_sample = t0
+        while time.monotonic() < t0 + timeout_s:
+            time.sleep(0.02)
+            now = time.monotonic()
+            tr = truth.take()
+            if tr is not None and tr.robot_time_ns > 0:
+                newest = (now, tr.robot_time_ns, tr.seq)
+                if first is None:
+                    first = newest
+            s = status.take()
+            if s is not None:
+                last = s
+                if now >= next_sample and s.timing.ticks > 0:
+                    samples.append(s)
+                    next_sample = now + SAMPLE_S
+                if s.phase == "DONE":
+                    samples.append(s)
+                    break
+            sim.check()
+            ctl.check()
+        reached_done = last is not None and last.phase == "DONE"
+    if first is None or newest is None or newest[0] <= first[0] or last is None:
+        raise BenchError("no simulated time advanced in lock-step mode (no sim/truth or controller status)")
+    wall = newest[0] - first[0]
+    sim_s = (newest[1] - first[1]) / 1e9
+    steps = newest[2] - first[2]
+    with_ticks = [s for s in samples if s.timing.ticks > 0] or [last]
+    return {"reached_done": reached_done, "phase": last.phase, "reason": last.reason,
+            "wall_s": wall, "sim_s": sim_s, "x_realtime": sim_s / wall, "ticks_per_s": steps / wall,
+            "sim_time_total_s": newest[1] / 1e9, "controller_ticks": last.timing.ticks,
+            "period_p50_us_median": float(np.median([s.timing.period_p50_us for s in with_ticks])),
+            "period_p99_us_max": float(max(s.timing.period_p99_us for s in with_ticks)),
+            "period_p50_us_final": last.timing.period_p50_us, "period_p99_us_final": last.timing.period_p99_us,
+            "counters": dict(last.counters)}
+
+
+# ---------------------------------------------------------------------------------------------- report
+def _fmt(v, spec: str = ".0f") -> str:
+    return "n/a" if v is None else format(v, spec)
+
+
+def print_report(res: dict, cmd: str) -> None:
+    print(f"Controller benchmarks ({res['machine']})\n")
+    tk = res["tick"]
+    print(f"| control law, in-process whole wipe ({tk['ticks']} ticks, ended {tk['final_phase']}) | ticks | "
+          f"p50 us | p99 us | max us |\n|---|---|---|---|---|")
+    for label, key in (("ControllerCore.tick, all ticks", "all"), ("  WIPE ticks", "wipe"),
+                       ("  other phases", "other")):
+        r = tk[key]
+        print(f"| {label} | {r['ticks']} | {r['p50_us']:.0f} | {r['p99_us']:.0f} | {r['max_us']:.0f} |")
+    for name, r in tk["per_phase"].items():
+        print(f"| &nbsp;&nbsp;phase {name} | {r['ticks']} | {r['p50_us']:.0f} | {r['p99_us']:.0f} | "
+              f"{r['max_us']:.0f} |")
+    print(f"\n| in-process closed loop (SimCore.step + tick) | ticks/s | x real time (1 kHz) | stains left |"
+          f"\n|---|---|---|---|")
+    print(f"| whole wipe, {tk['wall_s']:.1f} s wall | {tk['loop_ticks_per_s']:.0f} | {tk['loop_x_realtime']:.2f} | "
+          f"{', '.join(f'{r:.1%}' for r in tk['remaining'])} |")
+    rt = res["realtime"]
+    print(f"\n| real-time mode over Zenoh, {rt['duration_s']:.0f} s ({rt['samples']} status samples) | value |"
+          f"\n|---|---|")
+    rows = [("controller period p50 (median of windows) us", _fmt(rt["period_p50_us_median"])),
+            ("controller period p99 (max of windows) us", _fmt(rt["period_p99_us_max"])),
+            ("controller period max us", _fmt(rt["period_max_us"])),
+            ("controller read / update / write p99 (max of windows) us",
+             f"{rt['read_p99_us_max']:.0f} / {rt['update_p99_us_max']:.0f} / {rt['write_p99_us_max']:.0f}"),
+            ("controller overruns / ticks", f"{rt['overruns']} / {rt['ticks']}"),
+            ("controller overruns per 10,000 ticks", f"{rt['overruns_per_10k']:.1f}"),
+            ("controller ticks_without_fresh_state", _fmt(rt["ticks_without_fresh_state"], "d")),
+            ("controller final phase", rt["phase"] + (f" ({rt['reason']})" if rt["reason"] else "")),
+            ("sim period p99 / max us", f"{_fmt(rt['sim_period_p99_us'])} / {_fmt(rt['sim_period_max_us'])}"),
+            ("sim overruns / steps", f"{_fmt(rt['sim_overruns'], 'd')} / {_fmt(rt['sim_ticks'], 'd')}"),
+            ("sim stale_command_brakes", _fmt(rt["stale_command_brakes"], "d"))]
+    for label, v in rows:
+        print(f"| {label} | {v} |")
+    lk = res["lockstep"]
+    print(f"\n| lock-step closed loop over Zenoh | value |\n|---|---|")
+    rows = [("ended in phase", lk["phase"] + ("" if lk["reached_done"] else " (120 s cap, not DONE)")
+             + (f" ({lk['reason']})" if lk["reason"] else "")),
+            ("simulated s / wall s", f"{lk['sim_s']:.1f} / {lk['wall_s']:.1f}"),
+            ("real-time factor", f"{lk['x_realtime']:.2f}"),
+            ("ticks per wall second", f"{lk['ticks_per_s']:.0f}"),
+            ("controller period (round trip) p50, median of windows us", f"{lk['period_p50_us_median']:.0f}"),
+            ("controller period (round trip) p99, max of windows us", f"{lk['period_p99_us_max']:.0f}"),
+            ("controller period p50 / p99 at the end us",
+             f"{lk['period_p50_us_final']:.0f} / {lk['period_p99_us_final']:.0f}")]
+    for label, v in rows:
+        print(f"| {label} | {v} |")
+    print(f"\ncpu count {os.cpu_count()}, Python {platform.python_version()}, {platform.machine()}")
+    print(f"reproduce: {cmd}")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="10 s real-time run instead of 60 s")
+    ap.add_argument("--json", metavar="OUT", help="also write the figures as JSON")
+    a = ap.parse_args()
+    cmd = ".venv/bin/python bench/bench_controller.py" + (" --quick" if a.quick else "")
+    res = {"machine": f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"}
+    try:
+        skill = load_or_learn_skill("")
+        res["tick"] = bench_tick(skill)
+        res["realtime"] = bench_realtime(10.0 if a.quick else 60.0)
+        res["lockstep"] = bench_lockstep(120.0)
+    except BenchError as exc:
+        print(f"bench_controller: {exc}", file=sys.stderr)
+        return 1
+    print_report(res, cmd)
+    if a.json:
+        from interfaces.atomic import write_text_atomic
+
+        write_text_atomic(Path(a.json), json.dumps(res, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

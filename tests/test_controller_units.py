@@ -1,0 +1,276 @@
+"""The controller's pure parts: motions, limits, force regulator, parameters, and the executor's phase logic."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controller.control.force import NormalForceRegulator
+from controller.control.limits import TorqueShaper, joint_margin_torque, speed_excess_force
+from controller.executor import BoardPose, SkillExecutor, StainState, ToolState
+from controller.motion import OrientationBlend, Quintic, brake_to_rest
+from controller.params import ControllerParams, ExecutorParams
+from interfaces.errors import ConfigError
+from interfaces.transforms import tool_rotation_on_board
+
+
+def test_quintic_meets_position_velocity_acceleration_at_both_ends():
+    start = (np.array([0.1, -0.2]), np.array([0.3, 0.0]), np.array([-1.0, 2.0]))
+    goal = (np.array([0.5, 0.4]), np.array([0.0, -0.2]), np.array([0.5, 0.0]))
+    q = Quintic(start, goal, 0.8)
+    for x, want in zip((q.position, q.velocity, q.acceleration), start):
+        np.testing.assert_allclose(x, want)
+    dt = 1e-4
+    pos, vel = [q.position.copy()], [q.velocity.copy()]
+    for _ in range(8000):
+        q.update(dt)
+        pos.append(q.position.copy())
+        vel.append(q.velocity.copy())
+    for x, want in zip((q.position, q.velocity, q.acceleration), goal):
+        np.testing.assert_allclose(x, want, atol=1e-9)
+    # the reported velocity is the derivative of the position
+    np.testing.assert_allclose(np.gradient(np.array(pos), dt, axis=0)[1:-1], np.array(vel)[1:-1], atol=1e-5)
+
+
+def test_brake_to_rest_stops_a_moving_point_continuously():
+    b = brake_to_rest(np.zeros(2), np.array([0.2, -0.1]), np.array([1.0, 0.0]), 0.3)
+    np.testing.assert_allclose(b.acceleration, [1.0, 0.0])
+    for _ in range(400):
+        b.update(0.001)
+    np.testing.assert_allclose(b.velocity, 0.0, atol=1e-12)
+    np.testing.assert_allclose(b.acceleration, 0.0, atol=1e-12)
+
+
+def test_orientation_blend_reaches_the_goal_with_consistent_rates():
+    R0 = np.eye(3)
+    R1 = tool_rotation_on_board(np.column_stack([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]]))
+    blend = OrientationBlend(R0, R1, 1.0)
+    prev = blend.R.copy()
+    for _ in range(500):
+        blend.update(0.001)
+    # finite-difference angular velocity (world axes) equals the reported one
+    import pinocchio as pin
+
+    before = blend.R.copy()
+    blend.update(0.001)
+    w_fd = pin.log3(blend.R @ before.T) / 0.001
+    np.testing.assert_allclose(w_fd, blend.omega, atol=1e-3)
+    for _ in range(600):
+        blend.update(0.001)
+    np.testing.assert_allclose(blend.R, R1, atol=1e-9)
+    assert blend.finished and not np.allclose(prev, R1)
+
+
+def test_torque_shaper_limits_rate_and_magnitude_but_not_the_gravity_offset():
+    shaper = TorqueShaper(np.array([10.0, 10.0]), rate_nm_s=1000.0)
+    g = np.array([5.0, -3.0])
+    out = shaper(np.array([8.0, -20.0]), 0.001, g)  # wants +3 / -17 beyond gravity: 1 Nm per ms allowed
+    np.testing.assert_allclose(out, [6.0, -4.0])
+    assert shaper.clipped_rate == 1
+    for _ in range(50):
+        out = shaper(np.array([8.0, -20.0]), 0.001, g)
+    np.testing.assert_allclose(out, [8.0, -10.0])  # the absolute limit
+    assert shaper.clipped_abs > 0
+
+
+def test_joint_margin_pushes_back_only_inside_the_margin():
+    lo, hi = np.array([-1.0]), np.array([1.0])
+    assert joint_margin_torque(np.array([0.5]), np.zeros(1), lo, hi, 0.1, 300.0, 10.0)[0] == 0.0
+    near_hi = joint_margin_torque(np.array([0.95]), np.array([0.2]), lo, hi, 0.1, 300.0, 10.0)[0]
+    near_lo = joint_margin_torque(np.array([-0.95]), np.array([-0.2]), lo, hi, 0.1, 300.0, 10.0)[0]
+    assert near_hi < 0 < near_lo
+    edge = joint_margin_torque(np.array([0.9 + 1e-9]), np.array([0.2]), lo, hi, 0.1, 300.0, 10.0)[0]
+    assert abs(edge) < 1e-5  # continuous at the margin's edge
+
+
+def test_speed_limit_brakes_only_above_the_limit():
+    assert np.all(speed_excess_force(np.array([0.3, 0.0, 0.0]), 0.5, 200.0) == 0.0)
+    f = speed_excess_force(np.array([0.0, 0.8, 0.0]), 0.5, 200.0)
+    np.testing.assert_allclose(f, [0.0, -60.0, 0.0])
+
+
+def test_force_regulator_reaches_the_target_on_a_spring_and_respects_the_cap():
+    reg = NormalForceRegulator(kp=0.3, ki=8.0, integral_limit_n=8.0, cap_n=40.0, filter_s=0.005)
+    force = 0.0
+    for _ in range(3000):  # a plant that delivers 80 % of the command with a 20 ms lag
+        cmd = reg.command(10.0, force, 0.001, in_contact=True)
+        force += (0.8 * cmd - force) * 0.05
+    assert abs(force - 10.0) < 0.05
+    assert reg.command(1000.0, 0.0, 0.001, True) == 40.0
+    for _ in range(20):
+        reg.measure(60.0, 0.001)
+    assert reg.over_cap
+    spike = NormalForceRegulator(0.3, 8.0, 8.0, 40.0, filter_s=0.005)
+    spike.measure(100.0, 0.001)  # one tick of impact
+    assert not spike.over_cap
+
+
+@pytest.mark.parametrize("table, match", [
+    ({"impedance": {"stiffness_n_m": -100.0}}, "stiffness_n_m"),
+    ({"force": {"target_n": 50.0}}, r"target_n \(50.0 N\) must be below cap_n \(40.0 N\)"),
+    ({"force": {"target_n": 20.0, "cap_n": 15.0}}, "must be below cap_n"),
+    ({"rate_hz": 20000.0}, r"rate_hz must be a number in \[100.0, 5000.0\]"),
+    ({"mode": "fast"}, "mode must be one of"),
+    ({"stains_from": "camera"}, "stains_from must be one of"),
+    ({"executor": {"standoff_m": 2.0}}, "standoff_m"),
+    ({"limits": {"torque_rate_nm_per_ms": 0.0}}, "torque_rate_nm_per_ms"),
+    ({"planner": {"order": "random"}}, "order must be"),
+    ({"force": {"gain": 1.0}}, r"unknown key\(s\) \['gain'\]"),
+    ({"impedance": 3}, r"\[controller.impedance\] must be a table"),
+])
+def test_bad_controller_config_is_refused_with_the_key_named(table, match):
+    with pytest.raises(ConfigError, match=match):
+        ControllerParams.from_table(table)
+
+
+def test_defaults_are_valid_and_the_example_config_lists_them():
+    import tomllib
+    from pathlib import Path
+
+    p = ControllerParams.from_table({})
+    assert p.force.target_n == 10.0 and p.force.cap_n == 40.0 and p.rate_hz == 1000.0
+    example = tomllib.loads((Path(__file__).resolve().parent.parent / "config" / "example.toml").read_text())
+    assert ControllerParams.from_table(example["controller"]) == p
+
+
+# --------------------------------------------------------------------------
+# the executor against an ideal arm (the pad is where the setpoint says; a stiff board)
+
+WALL = np.column_stack([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])
+BOARD = BoardPose(WALL, np.array([0.68, 0.4, 0.25]), np.array([0.8, 0.6]))
+
+
+class IdealArm:
+    """Follows the setpoint exactly; pressing into the board (h < 0) gives 2e4 N/m of force."""
+
+    def __init__(self, xy=(0.4, 0.3), h=0.08):
+        self.tool = ToolState(np.array(xy, float), h, np.zeros(2), 0.0, tool_rotation_on_board(WALL), 0.0)
+
+    def follow(self, sp) -> ToolState:
+        t = self.tool
+        t.xy = sp.xy.copy()
+        t.v_xy = sp.v_xy.copy()
+        t.R = sp.R.copy()
+        if sp.contact:
+            t.h = -sp.force_n / 2e4
+        else:
+            t.h = sp.h
+        t.force_n = max(0.0, -t.h * 2e4)
+        return t
+
+
+def stains(kappa=(False, False, False)):
+    centres = [(0.2, 0.2), (0.55, 0.35), (0.3, 0.45)]
+    return [StainState(i, np.array(c), 0.06, k) for i, (c, k) in enumerate(zip(centres, kappa))]
+
+
+def run(ex: SkillExecutor, arm: IdealArm, seconds: float, on_tick=None) -> list[tuple]:
+    log = []
+    for k in range(int(seconds * 1000)):
+        if on_tick is not None:
+            on_tick(k, ex)
+        sp = ex.step(0.001, arm.tool)
+        arm.follow(sp)
+        log.append((ex.phase, ex.stain_id, sp.xy.copy(), sp.v_xy.copy(), sp.a_xy.copy(), sp.contact, sp.force_n,
+                    arm.tool.h))
+    return log
+
+
+def phases(log) -> list[str]:
+    out = []
+    for entry in log:
+        if not out or out[-1] != entry[0]:
+            out.append(entry[0])
+    return out
+
+
+def test_executor_chains_the_stains_until_kappa_then_retreats(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains())
+    wiped: dict[int, int] = {}
+
+    def kappa_after_two_seconds(k, ex):
+        if ex.phase == "WIPE":
+            wiped[ex.stain_id] = wiped.get(ex.stain_id, 0) + 1
+        if k % 100 == 0:
+            ex.set_stains(BOARD, stains(tuple(wiped.get(i, 0) > 2000 for i in range(3))))
+
+    log = run(ex, arm, 30.0, kappa_after_two_seconds)
+    assert phases(log)[:2] == ["WAIT_PEERS", "APPROACH"] or phases(log)[0] == "APPROACH"
+    seq = [p for p in phases(log) if p not in ("WAIT_PEERS",)]
+    assert seq == ["APPROACH", "TRANSITION", "WIPE", "TRANSITION", "WIPE", "TRANSITION", "WIPE", "RETREAT", "DONE"]
+    assert sorted(wiped) == [0, 1, 2] and all(n > 2000 for n in wiped.values())
+    final = log[-1]
+    assert not final[5] and final[7] >= ExecutorParams().standoff_m - 1e-6  # lifted off
+    forces = np.array([e[6] for e in log if e[0] == "WIPE"])
+    np.testing.assert_allclose(forces, 10.0)
+    # the in-plane reference is continuous in acceleration at every MP junction
+    a = np.array([e[4] for e in log])
+    steps = np.linalg.norm(np.diff(a, axis=0), axis=1)
+    for j in ex.junction_ticks:
+        i = j - 1  # ticks count from 1, the log from 0
+        around = np.concatenate([steps[i - 6 : i - 1], steps[i + 1 : i + 6]])
+        assert steps[i - 1] <= 3.0 * around.max() + 1e-3, (j, steps[i - 1], around.max())
+
+
+def test_stale_stains_pause_off_the_board_and_fresh_ones_resume(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains())
+    run(ex, arm, 6.0)
+    assert ex.phase in ("WIPE", "TRANSITION")
+    ex.stains_stale("no stains update for 1.0 s")
+    log = run(ex, arm, 2.0)
+    assert ex.phase == "PAUSED" and ex.reason == "no stains update for 1.0 s"
+    assert not log[-1][5] and log[-1][7] > 0.03  # off the board
+    ex.set_stains(BOARD, stains())
+    log = run(ex, arm, 8.0)
+    assert "APPROACH" in phases(log) and ex.phase in ("WIPE", "TRANSITION")
+
+
+def test_estop_lifts_off_and_holds_until_released(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains())
+    run(ex, arm, 6.0)
+    ex.estop("button")
+    log = run(ex, arm, 3.0)
+    assert ex.phase == "ESTOP" and "button" in ex.reason
+    assert not log[-1][5] and log[-1][7] > 0.03
+    # the force ramps out within the e-stop ramp, then the pad rises
+    lifted = next(i for i, e in enumerate(log) if not e[5])
+    assert lifted <= 0.1 * 1000 + 5
+    ex.set_stains(BOARD, stains())  # fresh stains alone do not release an e-stop
+    run(ex, arm, 1.0)
+    assert ex.phase == "ESTOP"
+    ex.clear()
+    log = run(ex, arm, 6.0)
+    assert "APPROACH" in phases(log) and ex.phase in ("WIPE", "TRANSITION")
+
+
+def test_a_vanished_stain_is_not_visited_and_new_stains_after_done_are(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.0))
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains()[:1])
+    log = run(ex, arm, 12.0)
+    assert ex.phase == "DONE" and {e[1] for e in log if e[0] == "WIPE"} == {0}
+    assert ex.counters["wipe_timeouts"] == 1
+    ex.set_stains(BOARD, stains()[:1] + [StainState(7, np.array([0.6, 0.2]), 0.05, False)])
+    log = run(ex, arm, 10.0)
+    assert 7 in {e[1] for e in log if e[0] == "WIPE"}
+    assert 0 not in {e[1] for e in log if e[0] == "WIPE"}  # given up after its timeout, not retried
+
+
+def test_no_contact_below_the_board_is_a_fault_not_a_crash(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    arm.follow = lambda sp: _no_board(arm.tool, sp)
+    ex.set_stains(BOARD, stains())
+    run(ex, arm, 8.0)
+    assert ex.phase == "FAULT" and "no contact found" in ex.reason
+
+
+def _no_board(t: ToolState, sp) -> ToolState:
+    t.xy, t.v_xy, t.R, t.h, t.force_n = sp.xy.copy(), sp.v_xy.copy(), sp.R.copy(), sp.h, 0.0
+    return t
