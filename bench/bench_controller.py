@@ -80,7 +80,7 @@ def _stats_us(ns: np.ndarray) -> dict:
     if len(ns) == 0:
         return {"ticks": 0, "p50_us": float("nan"), "p99_us": float("nan"), "max_us": float("nan")}
     us = ns / 1e3
-    return {"ticks": int(len(us)), "p50_us": float(np.percentile(us, 50)), "p99_us": float(np.percentile(us, 99)),
+    return {"ticks": len(us), "p50_us": float(np.percentile(us, 50)), "p99_us": float(np.percentile(us, 99)),
             "max_us": float(us.max())}
 
 
@@ -129,7 +129,7 @@ class Proc:
     def __init__(self, name: str, cmd: list[str], log_dir: Path) -> None:
         self.name = name
         self.log_path = log_dir / f"{name}.log"
-        self._log = open(self.log_path, "w+")
+        self._log = open(self.log_path, "w+")  # noqa: SIM115 (open for the process's life)
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT, text=True)
 
@@ -301,8 +301,8 @@ def print_report(res: dict, cmd: str) -> None:
     for name, r in tk["per_phase"].items():
         print(f"| &nbsp;&nbsp;phase {name} | {r['ticks']} | {r['p50_us']:.0f} | {r['p99_us']:.0f} | "
               f"{r['max_us']:.0f} |")
-    print(f"\n| in-process closed loop (SimCore.step + tick) | ticks/s | x real time (1 kHz) | stains left |"
-          f"\n|---|---|---|---|")
+    print("\n| in-process closed loop (SimCore.step + tick) | ticks/s | x real time (1 kHz) | stains left |"
+          "\n|---|---|---|---|")
     print(f"| whole wipe, {tk['wall_s']:.1f} s wall | {tk['loop_ticks_per_s']:.0f} | {tk['loop_x_realtime']:.2f} | "
           f"{', '.join(f'{r:.1%}' for r in tk['remaining'])} |")
     rt = res["realtime"]
@@ -315,7 +315,8 @@ def print_report(res: dict, cmd: str) -> None:
              f"{rt['read_p99_us_max']:.0f} / {rt['update_p99_us_max']:.0f} / {rt['write_p99_us_max']:.0f}"),
             ("controller overruns / ticks", f"{rt['overruns']} / {rt['ticks']}"),
             ("controller overruns per 10,000 ticks", f"{rt['overruns_per_10k']:.1f}"),
-            ("controller ticks_without_fresh_state", _fmt(rt["ticks_without_fresh_state"], "d")),
+            ("controller ticks_without_fresh_state", "0 (never counted)" if rt["ticks_without_fresh_state"] is None
+             else str(rt["ticks_without_fresh_state"])),
             ("controller final phase", rt["phase"] + (f" ({rt['reason']})" if rt["reason"] else "")),
             ("sim period p99 / max us", f"{_fmt(rt['sim_period_p99_us'])} / {_fmt(rt['sim_period_max_us'])}"),
             ("sim overruns / steps", f"{_fmt(rt['sim_overruns'], 'd')} / {_fmt(rt['sim_ticks'], 'd')}"),
@@ -323,7 +324,7 @@ def print_report(res: dict, cmd: str) -> None:
     for label, v in rows:
         print(f"| {label} | {v} |")
     lk = res["lockstep"]
-    print(f"\n| lock-step closed loop over Zenoh | value |\n|---|---|")
+    print("\n| lock-step closed loop over Zenoh | value |\n|---|---|")
     rows = [("ended in phase", lk["phase"] + ("" if lk["reached_done"] else " (120 s cap, not DONE)")
              + (f" ({lk['reason']})" if lk["reason"] else "")),
             ("simulated s / wall s", f"{lk['sim_s']:.1f} / {lk['wall_s']:.1f}"),

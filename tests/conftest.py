@@ -23,7 +23,7 @@ def learned_skill():
 
 
 @pytest.fixture(scope="session")
-def skill_file(learned_skill, tmp_path_factory) -> Path:
+def learned_skill_file(learned_skill, tmp_path_factory) -> Path:
     from controller.lamps.skill import save_skill
 
     return save_skill(tmp_path_factory.mktemp("skill") / "skill.json", learned_skill)

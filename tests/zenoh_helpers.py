@@ -65,8 +65,9 @@ class SimProcess:
     Use as ``with SimProcess(tmp_path, {"mode": "lockstep"}) as sim: sim.node ...``.
     """
 
-    def __init__(self, tmp_path: Path, sim: dict, name: str = "sim", client: str = "test-client") -> None:
-        self.port = free_port()
+    def __init__(self, tmp_path: Path, sim: dict, name: str = "sim", client: str = "test-client",
+                 port: int | None = None) -> None:
+        self.port = port or free_port()
         self.robot_id = f"t{self.port}"
         self.config = write_config(tmp_path / f"{name}.toml", self.port, self.robot_id, sim)
         self.client_name = client

@@ -1,0 +1,244 @@
+"""The controller over real Zenoh against ``lamps sim`` (a real process) in lock-step.
+
+The controller service runs in this process (a thread with its own Zenoh
+session, listening on its own port and connected to the sim's) so the tests
+can read its trace; an "operator" session connected to both plays the
+e-stop button, the status display and a source of garbage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from controller.core import TRACE_COLUMNS, ControllerCore
+from controller.lamps.periodic import learn_periodic
+from controller.lamps.skill import PeriodicEntry
+from controller.params import ControllerParams
+from controller.service import ControllerService
+from interfaces.config import ZenohSettings
+from interfaces.messages import ControllerStatus, Estop, SimTruth
+from interfaces.session import ServiceNode
+
+from .zenoh_helpers import REPO, SimProcess, free_port, wait_for
+
+pytestmark = pytest.mark.slow
+NO_CAMERA = {"enabled": False}
+COL = {name: i for i, name in enumerate(TRACE_COLUMNS)}
+
+
+class ControllerThread:
+    """A ControllerService on a thread, connected to ``sim``; ``operator`` is a session that sees both."""
+
+    def __init__(self, sim: SimProcess, skill, table: dict | None = None) -> None:
+        self.port = free_port()
+        self.settings = ZenohSettings(listen=(f"tcp/127.0.0.1:{self.port}",),
+                                      connect=(f"tcp/127.0.0.1:{sim.port}",), robot_id=sim.robot_id)
+        self.params = ControllerParams.from_table({"stains_from": "truth", "trace_ticks": 120_000, **(table or {})})
+        self.core = ControllerCore(self.params, skill)
+        self.sim_port = sim.port
+        self.error: BaseException | None = None
+
+    def __enter__(self) -> "ControllerThread":
+        self.node = ServiceNode("controller", self.settings).__enter__()
+        self.service = ControllerService(self.params, self.node, self.core)
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+        op = ZenohSettings(connect=(f"tcp/127.0.0.1:{self.sim_port}", f"tcp/127.0.0.1:{self.port}"),
+                           robot_id=self.settings.robot_id)
+        self.operator = ServiceNode("operator", op).__enter__()
+        return self
+
+    def _run(self) -> None:
+        try:
+            self.service.run()
+        except BaseException as exc:  # reported by the test, never swallowed
+            self.error = exc
+
+    def __exit__(self, *exc) -> None:
+        self.service.stop.set()
+        self.thread.join(30.0)
+        self.operator.close()
+        self.node.close()
+        assert self.error is None, f"controller loop died: {self.error!r}"
+
+    @property
+    def phase(self) -> str:
+        return self.core.executor.phase
+
+    def wait_phase(self, phases: tuple[str, ...], timeout_s: float) -> str:
+        return wait_for(lambda: self.phase in phases and self.phase, timeout_s,
+                        f"controller phase in {phases} (now {self.phase} {self.core.executor.reason!r})")
+
+    def trace(self) -> np.ndarray:
+        return self.core.trace.array()
+
+
+def _circle_skill(skill, radius_m: float = 0.05, freq_hz: float = 1.0):
+    """The learned skill with its periodic MPs replaced by one learned from a clean 1 Hz circle."""
+    t = np.arange(0.0, 6.0, 1.0 / 200.0)
+    y = radius_m * np.column_stack([np.cos(2 * np.pi * freq_hz * t), np.sin(2 * np.pi * freq_hz * t)])
+    mp = learn_periodic(t, y)
+    first = skill.periodic[0]
+    return dataclasses.replace(skill, periodic=(PeriodicEntry(first.segment, first.cluster, 6.0, mp),))
+
+
+def test_free_space_tracking_of_a_1hz_5cm_circle_is_within_2mm_rms(tmp_path, learned_skill):
+    skill = _circle_skill(learned_skill)
+    table = {"executor": {"air": True, "wipe_timeout_s": 4.0},
+             "planner": {"min_amplitude_m": 0.05, "max_amplitude_m": 0.05}}
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim, \
+            ControllerThread(sim, skill, table) as ctl:
+        ctl.wait_phase(("WIPE",), 60.0)
+        wait_for(lambda: ctl.core.executor.counters["transitions"] >= 2, 60.0, "the first wipe to end")
+        tr = ctl.trace()
+    wipe = tr[tr[:, COL["phase"]] == 3]
+    t = wipe[:, COL["t_s"]]
+    steady = wipe[t > t[0] + 1.0]  # one period after entering the MP
+    ref = steady[:, COL["ref_p_x"]:COL["ref_p_z"] + 1]
+    meas = steady[:, COL["p_x"]:COL["p_z"] + 1]
+    err = np.linalg.norm(ref - meas, axis=1)
+    rms = float(np.sqrt(np.mean(err**2)))
+    # it really moved on the circle: the reference sweeps 10 cm in the plane
+    span = np.ptp(steady[:, COL["ref_x"]:COL["ref_y"] + 1], axis=0)
+    assert np.all(span > 0.095), span
+    assert len(steady) > 2500
+    print(f"free-space circle: RMS {rms * 1000:.2f} mm, max {err.max() * 1000:.2f} mm over {len(steady)} ticks")
+    assert rms <= 0.002, f"RMS tracking error {rms * 1000:.2f} mm"
+    assert np.all(steady[:, COL["force_n"]] < 0.5)  # in the air
+
+
+def test_full_wipe_of_three_seeded_stains_with_regulated_force_and_c2_junctions(tmp_path, learned_skill):
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim, \
+            ControllerThread(sim, learned_skill) as ctl:
+        truth = ctl.operator.latest(ctl.operator.keys.sim_truth, SimTruth)
+        status = ctl.operator.latest(ctl.operator.keys.controller_status, ControllerStatus)
+        ctl.wait_phase(("DONE", "FAULT"), 150.0)
+        assert ctl.phase == "DONE", ctl.core.executor.reason
+        time.sleep(0.3)
+        final = wait_for(truth.take, 5.0, "sim truth")
+        st = wait_for(status.take, 5.0, "controller status")
+        tr = ctl.trace()
+        junctions = list(ctl.core.executor.junction_ticks)
+    assert len(final.stain_ids) == 3
+    assert max(final.remaining) < 0.05, final.remaining
+    assert st.phase == "DONE" and st.timing.ticks > 5000 and st.counters["phase_wipe"] == 3
+    phase = tr[:, COL["phase"]]
+    force = tr[:, COL["force_n"]]
+    wiping = force[phase == 3]
+    assert len(wiping) > 1000
+    print(f"full wipe: remaining {np.round(final.remaining, 4).tolist()} after {tr[-1, 0]:.1f} s; force while wiping "
+          f"{wiping.mean():.2f} +- {wiping.std():.2f} N (min {wiping.min():.2f}, max {wiping.max():.2f}), "
+          f"max over the run {force.max():.1f} N")
+    assert np.all(np.abs(wiping - 10.0) <= 3.0), (wiping.min(), wiping.max())
+    assert force.max() < ControllerParams().force.cap_n
+    # the commanded in-plane reference is continuous in acceleration at every MP junction
+    a = tr[:, COL["ref_ax"]:COL["ref_ay"] + 1]
+    steps = np.linalg.norm(np.diff(a, axis=0), axis=1)
+    assert len(junctions) >= 7  # 3 transitions in, 3 wipes, the retreat
+    ratios = []
+    for j in junctions:
+        i = j - 1  # executor ticks count from 1, trace rows from 0
+        jump = steps[i - 1]
+        around = np.concatenate([steps[i - 7: i - 2], steps[i + 1: i + 6]]).max()
+        assert jump <= 3.0 * around + 1e-3, f"junction at tick {j}: acceleration step {jump:.4f} vs {around:.4f}"
+        ratios.append(jump / max(around, 1e-9))
+    print(f"junction acceleration step / largest neighbouring step: max {max(ratios):.2f}")
+
+
+def test_sim_stopping_is_a_fault_and_the_controller_recovers_when_it_returns(tmp_path, learned_skill):
+    sim_cfg = {"mode": "lockstep", "camera": NO_CAMERA}
+    first = SimProcess(tmp_path, sim_cfg, name="sim-a").__enter__()
+    try:
+        ctl = ControllerThread(first, learned_skill, {"robot_lost_s": 0.3}).__enter__()
+        try:
+            ctl.wait_phase(("TRANSITION", "WIPE"), 60.0)
+            first.stop()
+            ctl.wait_phase(("FAULT",), 5.0)
+            assert ctl.core.executor.reason.startswith("no robot state for")
+            status = ctl.operator.latest(ctl.operator.keys.controller_status, ControllerStatus)
+            st = wait_for(status.take, 3.0, "status while the robot is gone")
+            assert st.phase == "FAULT" and "no robot state" in st.reason
+            with SimProcess(tmp_path, sim_cfg, name="sim-b", port=first.port):
+                ctl.wait_phase(("APPROACH", "TRANSITION", "WIPE"), 60.0)
+                ctl.wait_phase(("WIPE",), 60.0)
+                assert ctl.service.counters["robot_restarts"] == 1
+        finally:
+            ctl.__exit__()
+    finally:
+        first.__exit__()
+
+
+def test_estop_lifts_the_eraser_off_and_bad_samples_are_counted_not_fatal(tmp_path, learned_skill):
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim, \
+            ControllerThread(sim, learned_skill) as ctl:
+        op, keys = ctl.operator, ctl.operator.keys
+        ctl.wait_phase(("WIPE",), 60.0)
+        for key in (keys.robot_state, keys.sim_truth, keys.controller_estop):
+            op.session.put(key, b"\x93garbage")
+        op.publish(keys.controller_estop, Estop(stamp_ns=time.monotonic_ns(), engaged=True, reason="test button",
+                                                source="pytest"))
+        ctl.wait_phase(("ESTOP",), 5.0)
+        t_estop = ctl.core.time_s
+        wait_for(lambda: ctl.core.time_s > t_estop + 2.0, 30.0, "2 s of sim time after the e-stop")
+        tr = ctl.trace()
+        after = tr[tr[:, COL["t_s"]] > t_estop + 1.5]
+        assert np.all(after[:, COL["contact"]] == 0.0)
+        assert np.all(after[:, COL["force_n"]] < 0.5)  # nothing touches the board
+        assert after[-1, COL["h"]] > 0.03  # the pad hovers at the standoff
+        assert "test button" in ctl.core.executor.reason
+        status = op.latest(keys.controller_status, ControllerStatus)
+        st = wait_for(status.take, 3.0, "status")
+        assert st.phase == "ESTOP"
+        for name in ("robot_state", "stains", "estop"):
+            assert any(k.startswith(f"{name}_dropped") for k in st.counters), (name, st.counters)
+        op.publish(keys.controller_estop, Estop(stamp_ns=time.monotonic_ns(), engaged=False, reason="cleared",
+                                                source="pytest"))
+        ctl.wait_phase(("APPROACH", "TRANSITION", "WIPE"), 10.0)
+
+
+# --------------------------------------------------------------------------
+# the command line: bad input is a one-line error and exit 1 before anything starts
+
+
+def _controller(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "interfaces.cli", "controller", *args], cwd=REPO,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("config, match", [
+    ("[controller.impedance]\nstiffness_n_m = -5.0\n", "stiffness_n_m must satisfy 0 <"),
+    ("[controller.force]\ntarget_n = 45.0\n", "target_n (45.0 N) must be below cap_n (40.0 N)"),
+    ("[controller]\nmode = \"realtime\"\nrate_hz = 5000.0\n", "cannot be held on this machine"),
+    ("[controller\n", "not valid TOML"),
+])
+def test_bad_config_is_refused_at_start_up(tmp_path, learned_skill_file, config, match):
+    path = tmp_path / "bad.toml"
+    path.write_text(config)
+    r = _controller("--config", str(path), "--skill", str(learned_skill_file), "--check")
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert match in r.stderr and r.stderr.startswith("lamps controller: error:"), r.stderr
+
+
+@pytest.mark.parametrize("content, match", [
+    ('{"format": "lamps-skill", "version": 7}', "unknown skill file version 7"),
+    ('{"format": "lamps-skill", "vers', "skill"),
+    ('[1, 2]', "a skill file holds a JSON object"),
+])
+def test_bad_skill_file_is_refused_at_start_up(tmp_path, content, match):
+    path = tmp_path / "skill.json"
+    path.write_text(content)
+    r = _controller("--skill", str(path), "--check")
+    assert r.returncode == 1 and match in r.stderr, r.stderr
+
+
+def test_check_reports_the_skill_and_the_tick_cost(learned_skill_file):
+    r = _controller("--skill", str(learned_skill_file), "--check")
+    assert r.returncode == 0, r.stderr
+    assert "ok: skill with 3 periodic" in r.stdout and "control tick p50" in r.stdout
