@@ -79,7 +79,11 @@ def load_or_learn_skill(path: str):
     from controller.lamps.skill import load_skill
 
     if path:
-        return load_skill(path)
+        skill = load_skill(path)
+        if not skill.transitional:
+            raise LampsError(f"{path}: the skill has no transitional MP; the controller needs one to move "
+                             "between stains (learn from a demonstration that wipes at least two stains)")
+        return skill
     from controller.lamps.learn import learn_skill
     from controller.lamps.synth import synthesize_demo
 
@@ -92,9 +96,11 @@ def load_or_learn_skill(path: str):
 
 def tick_cost_us(params, skill, model, n: int = 300) -> np.ndarray:
     """(n,) wall time [us] of the control tick on a representative posture (holding, no board)."""
+    import dataclasses
+
     from .core import ControllerCore
 
-    core = ControllerCore(params, skill, model)
+    core = ControllerCore(dataclasses.replace(params, trace_ticks=0), skill, model)
     q = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0])
     dq = np.full(7, 0.05)
     w = np.zeros(6)

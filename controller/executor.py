@@ -136,6 +136,9 @@ class Setpoint:
     force_n: float = 0.0
 
 
+#: An in-the-air stop takes at most this long [s] (its dip below the start height is <= 0.2 v T).
+AIR_BRAKE_S = 0.1
+
 # stages inside a phase
 _FLY, _DESCEND, _PRESS, _RUN, _LEAVE, _BRAKE, _UNPRESS, _LIFT, _HOLD = range(9)
 _ZERO2 = np.zeros(2)
@@ -196,16 +199,25 @@ class SkillExecutor:
         self._force_t, self._force_ramp_s = 0.0, 1.0
         self._after_lift = "DONE"
         self._initialised = False
+        self._estop: str | None = None
         self._creep = False
         self._restart_pending = False
 
     # ------------------------------------------------------------------ inputs
     def set_stains(self, board: BoardPose, stains: list[StainState]) -> None:
         """A fresh view of the board and its stains (kappa per stain)."""
-        if self.board is None or self._stage == _HOLD and not self._in_contact_phase():
+        if self.board is None:
             self.board = board
         elif not board.close_to(self.board):
-            self.counters["board_moved"] += 1
+            if self._stage == _HOLD and not self._sp.contact:
+                # adopt the new board while holding; the held pose stays where it is in the world
+                sp = self._sp
+                xyh = board.to_board(self.board.to_world(np.array([*sp.xy, sp.h])))
+                sp.xy[:], sp.h = xyh[:2], float(xyh[2])
+                self.board = board
+                self.counters["board_adopted"] += 1
+            else:
+                self.counters["board_moved"] += 1
         old_open = self._open_ids()
         self.stains = {s.id: s for s in stains}
         self.stains_fresh = True
@@ -224,10 +236,14 @@ class SkillExecutor:
             self._stop("PAUSED", reason)
 
     def estop(self, reason: str) -> None:
-        """E-stop: lift off (fast force ramp) and hold until :meth:`clear`."""
-        if self.phase != "ESTOP":
-            self.counters["estops"] += 1
-            self._stop("ESTOP", reason or "e-stop", fast=True)
+        """E-stop: lift off (fast force ramp) and hold until :meth:`clear`; latched across restarts."""
+        reason = reason or "e-stop"
+        self.counters["estops"] += 1
+        self._estop = reason
+        if self.phase != "ESTOP" or self._after_lift == "APPROACH":  # not yet stopping, or already released
+            self._stop("ESTOP", reason, fast=True)
+        else:
+            self.reason = reason
 
     def fault(self, reason: str) -> None:
         """A fault (force cap, no contact found, planning failed): lift off, hold until :meth:`clear`."""
@@ -237,12 +253,21 @@ class SkillExecutor:
             self._stop("FAULT", reason)
 
     def clear(self) -> None:
-        """Release an e-stop or a fault: re-approach the open stains (or hold DONE)."""
-        if self.phase in ("ESTOP", "FAULT"):
-            self.reason = ""
+        """Release an e-stop or a fault: re-approach the open stains (PAUSED while they are stale, DONE if none)."""
+        self._estop = None
+        if self.phase in ("ESTOP", "FAULT") and self._initialised:
             self._after_lift = "APPROACH"
             if self._stage == _HOLD:
-                self._start_approach_or_done()
+                self._resume()
+
+    def _resume(self) -> None:
+        if self._estop is not None:
+            return
+        if not self.stains_fresh:
+            self._set_phase("PAUSED", "waiting for fresh stains")
+            self._stage, self.current_mp = _HOLD, "hold"
+            return
+        self._start_approach_or_done()
 
     def robot_lost(self, reason: str) -> None:
         """No robot to command: FAULT at once, no motion (nothing would execute it)."""
@@ -259,9 +284,11 @@ class SkillExecutor:
 
     # ------------------------------------------------------------------ the tick
     def wait(self) -> None:
-        """No board known yet (no stains ever received): report WAIT_PEERS; the caller holds the arm."""
+        """No board known yet (no stains ever received): report WAIT_PEERS (or a latched ESTOP); the caller holds."""
         self.ticks += 1
-        if self.phase == "INIT":
+        if self._estop is not None:
+            self._set_phase("ESTOP", self._estop)
+        elif self.phase in ("INIT", "ESTOP"):
             self._set_phase("WAIT_PEERS", "")
 
     def step(self, dt_s: float, tool: ToolState) -> Setpoint:
@@ -276,8 +303,15 @@ class SkillExecutor:
             self._restart_pending = False
             self.phase, self.reason, self.current_mp, self.stain_id = "WAIT_PEERS", "", "", -1
             self._stage = _HOLD
+            if tool.force_n > self.f.contact_threshold_n and not self.p.air:
+                # back on a pressing pad: keep pressing what it measures, then ramp out and lift
+                sp = self._sp
+                sp.contact, sp.force_n = True, min(tool.force_n, self.f.target_n)
+                self._stop("PAUSED", "robot back with the pad on the board: lifting off before re-approaching")
+            if self._estop is not None:
+                self._stop("ESTOP", self._estop, fast=True)
         if self.phase == "WAIT_PEERS":
-            if self.stains_fresh:
+            if self.stains_fresh and self._estop is None:
                 self._hold_here(tool)
                 self._start_approach_or_done()
             return self._sp
@@ -333,11 +367,11 @@ class SkillExecutor:
                     self._set_phase("DONE", "")
                     self.current_mp = "hold"
                 elif self._after_lift == "APPROACH" and self.phase in ("ESTOP", "FAULT"):
-                    self._start_approach_or_done()
+                    self._resume()
         elif st == _HOLD:
             sp.v_xy[:] = sp.a_xy[:] = 0.0
             if self.phase == "PAUSED" and self.stains_fresh:
-                self._start_approach_or_done()
+                self._resume()
             elif self.phase == "DONE" and self.stains_fresh and self._open_ids():
                 self.counters["new_stains_after_done"] += 1
                 self._start_approach_or_done()
@@ -353,6 +387,8 @@ class SkillExecutor:
         try:
             self._plan = plan(self.skill, open_stains, self._sp.xy.copy(), self.planner)
         except PlanningError as exc:
+            self.counters["faults"] += 1
+            log.error("FAULT: planning failed: %s", exc)
             self._set_phase("FAULT", f"planning failed: {exc}")
             self._stage = _HOLD
             return
@@ -425,7 +461,11 @@ class SkillExecutor:
 
     def _start_transition(self, wipe: Wipe) -> None:
         sp = self._sp
-        spec = plan_transition(self.skill, self._plan, wipe, (sp.xy.copy(), sp.v_xy.copy(), sp.a_xy.copy()))
+        try:
+            spec = plan_transition(self.skill, self._plan, wipe, (sp.xy.copy(), sp.v_xy.copy(), sp.a_xy.copy()))
+        except PlanningError as exc:
+            self.fault(f"cannot plan the transition to stain {wipe.stain.id}: {exc}")
+            return
         self._xy_runner = TransitionalRunner(self.skill.transitional[spec.transitional_index].mp, spec.start,
                                              spec.goal, spec.duration_s, forcing_transform=spec.forcing_transform)
         self._spec = spec
@@ -514,9 +554,8 @@ class SkillExecutor:
         self.current_mp = "lift"
         if self._stage == _HOLD and not sp.contact:
             return
-        if self._turn is not None:  # stop turning where it is now
-            self._turn = None
-            sp.omega[:] = sp.domega[:] = 0.0
+        if self._turn is not None:  # bring the turn to rest smoothly, where it is heading
+            self._turn.stop(self.p.estop_ramp_s if fast else self.p.stop_s)
         self._brake(self.p.estop_ramp_s if fast else self.p.stop_s,
                     self.p.estop_ramp_s if fast else self.f.ramp_s)
 
@@ -527,8 +566,13 @@ class SkillExecutor:
             self._xy_runner = brake_to_rest(sp.xy, sp.v_xy, sp.a_xy, duration_s)
             self._start_force_ramp(0.0, force_ramp_s)
         else:
-            self._mover = brake_to_rest(np.array([*sp.xy, sp.h]), np.array([*sp.v_xy, sp.v_h]),
-                                        np.array([*sp.a_xy, sp.a_h]), duration_s)
+            # in the air: stop within 0.1 s and never below the current height (a brake while
+            # descending must not carry the pad on into the board)
+            T = min(duration_s, AIR_BRAKE_S)
+            p0, v0, a0 = np.array([*sp.xy, sp.h]), np.array([*sp.v_xy, sp.v_h]), np.array([*sp.a_xy, sp.a_h])
+            goal = p0 + 0.5 * v0 * T
+            goal[2] = max(goal[2], sp.h)
+            self._mover = Quintic((p0, v0, a0), (goal, np.zeros(3), np.zeros(3)), T)
         self._stage = _BRAKE
 
     def _begin_lift(self, tool: ToolState) -> None:

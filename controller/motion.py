@@ -103,6 +103,13 @@ class OrientationBlend:
     def finished(self) -> bool:
         return self._s.finished
 
+    def stop(self, duration_s: float) -> None:
+        """Bring the turn to rest within ``duration_s`` C2-continuously (on the same axis, a little further on)."""
+        s = self._s
+        p, v, a = s.position.copy(), s.velocity.copy(), s.acceleration.copy()
+        goal = np.clip(p + 0.5 * v * duration_s, 0.0, 1.0)
+        self._s = Quintic((p, v, a), (goal, np.zeros(1), np.zeros(1)), duration_s)
+
     def update(self, dt_s: float) -> None:
         self._s.update(dt_s)
         s, ds, dds = float(self._s.position[0]), float(self._s.velocity[0]), float(self._s.acceleration[0])

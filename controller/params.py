@@ -31,6 +31,10 @@ from interfaces.config import dataclass_from_table
 from interfaces.errors import ConfigError
 
 MODES = ("lockstep", "realtime")
+#: 20 min at 1 kHz, 190 MB of trace.
+MAX_TRACE_TICKS = 1_200_000
+#: A rest-to-rest quintic's peak speed over its mean speed.
+QUINTIC_PEAK_SPEED = 1.875
 STAIN_SOURCES = ("perception", "truth")
 
 
@@ -166,7 +170,7 @@ class ControllerParams:
     rate_hz : control rate. skill : skill file path ("" = learn the bundled
     demo at start-up). stains_from : ``perception`` or ``truth``.
     state_timeout_s : real time: a robot state older than this is not
-    answered (nothing new is sent; counted). robot_lost_s : no robot state
+    answered (nothing new is sent; counted); 0 = five periods. robot_lost_s : no robot state
     for this long (wall time, both modes; the lock-step sim re-sends its
     state every 0.1 s while it waits) -> FAULT, and a restart from the
     measured pose when states come back. stains_timeout_s : no stains update this long -> PAUSED.
@@ -179,7 +183,7 @@ class ControllerParams:
     rate_hz: float = 1000.0
     skill: str = ""
     stains_from: str = "perception"
-    state_timeout_s: float = 0.005
+    state_timeout_s: float = 0.0
     robot_lost_s: float = 0.5
     stains_timeout_s: float = 1.0
     status_rate_hz: float = 20.0
@@ -200,14 +204,25 @@ class ControllerParams:
             raise ConfigError(f"[{s}] skill must be a file path (string), got {self.skill!r}")
         if self.stains_from not in STAIN_SOURCES:
             raise ConfigError(f"[{s}] stains_from must be one of {STAIN_SOURCES}, got {self.stains_from!r}")
-        _range(s, "state_timeout_s", self.state_timeout_s, 1.5 / self.rate_hz, 1.0)
+        if self.state_timeout_s != 0.0:
+            _range(s, "state_timeout_s", self.state_timeout_s, 1.5 / self.rate_hz, 1.0)
         _range(s, "robot_lost_s", self.robot_lost_s, 0.15, 60.0)
         _range(s, "stains_timeout_s", self.stains_timeout_s, 0.05, 3600.0)
         _range(s, "status_rate_hz", self.status_rate_hz, 0.5, 200.0)
         for name in ("max_ticks", "trace_ticks"):
             v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= 10**8:
-                raise ConfigError(f"[{s}] {name} must be an integer in [0, 1e8], got {v!r}")
+            hi = MAX_TRACE_TICKS if name == "trace_ticks" else 10**9
+            if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= hi:
+                raise ConfigError(f"[{s}] {name} must be an integer in [0, {hi}], got {v!r}")
+        peak = QUINTIC_PEAK_SPEED * self.executor.approach_speed_m_s
+        if peak > self.limits.max_speed_m_s:
+            raise ConfigError(
+                f"[controller.executor] approach_speed_m_s = {self.executor.approach_speed_m_s} peaks at {peak:.2f} m/s, "
+                f"above [controller.limits] max_speed_m_s = {self.limits.max_speed_m_s}: the speed brake would fight it")
+
+    @property
+    def state_timeout_or_default_s(self) -> float:
+        return self.state_timeout_s or 5.0 / self.rate_hz
 
     @property
     def dt_s(self) -> float:

@@ -34,6 +34,8 @@ from interfaces.messages import ControllerStatus, Estop, LoopTiming, RobotState,
 from interfaces.session import ServiceNode
 from interfaces.transforms import transform_from_pose
 
+from controller.lamps.errors import PlanningError
+
 from .core import ControllerCore
 from .executor import BoardPose, StainState
 from .params import ControllerParams
@@ -89,6 +91,7 @@ class ControllerService:
         self._stains_clock = None
         self._lost = False
         self._ever_state = False
+        self._nq = core.model.nq
         if params.stains_from == "truth":
             self._stains = node.latest(self.keys.sim_truth, SimTruth)
         else:
@@ -119,7 +122,7 @@ class ControllerService:
         t_prev = time.perf_counter_ns()
         while not self.stop.is_set():
             t0 = time.perf_counter_ns()
-            state = states.get(0.02)
+            state = self._usable(states.get(0.02))
             now = time.monotonic()
             self._poll_estop()
             if state is None:
@@ -140,7 +143,8 @@ class ControllerService:
             t1 = time.perf_counter_ns()
             tau = self._control(state, dt)
             t2 = time.perf_counter_ns()
-            self._send(state.seq, tau)
+            if tau is not None:
+                self._send(state.seq, tau)
             self._publish_status()
             t3 = time.perf_counter_ns()
             self.stats.add((t3 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
@@ -152,7 +156,7 @@ class ControllerService:
         states = self.node.latest(self.keys.robot_state, RobotState)
         self._state_reader = states
         period_ns = int(round(1e9 / self.p.rate_hz))
-        timeout_ns = int(self.p.state_timeout_s * 1e9)
+        timeout_ns = int(self.p.state_timeout_or_default_s * 1e9)
         state: RobotState | None = None
         state_ns = 0
         answered_seq = -1
@@ -161,7 +165,7 @@ class ControllerService:
         dt = 1.0 / self.p.rate_hz
         while not self.stop.is_set():
             t0 = time.monotonic_ns()
-            new = states.take()
+            new = self._usable(states.take())
             if new is not None:
                 if state is not None and new.seq < state.seq or self._lost:
                     self._robot_back(new)
@@ -180,7 +184,8 @@ class ControllerService:
                 t1 = time.monotonic_ns()
                 tau = self._control(state, dt)
                 t2 = time.monotonic_ns()
-                self._send(state.seq, tau)
+                if tau is not None:
+                    self._send(state.seq, tau)
                 answered_seq = state.seq
             self._publish_status()
             t3 = time.monotonic_ns()
@@ -197,7 +202,8 @@ class ControllerService:
             time.sleep((next_ns - now) / 1e9)
 
     # ------------------------------------------------------------------ pieces
-    def _control(self, state: RobotState, dt: float) -> np.ndarray:
+    def _control(self, state: RobotState, dt: float) -> np.ndarray | None:
+        """Torques answering ``state``, or None (nothing is sent) for a state this robot model cannot use."""
         self._ever_state = True
         self._last_seq = state.seq
         self.ticks += 1
@@ -205,7 +211,27 @@ class ControllerService:
         dq = np.asarray(state.dq_rad_s)
         wrench = np.asarray(state.wrench_world)
         caps = state.capabilities
-        return self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm))
+        try:
+            tau = self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm))
+        except Exception as exc:  # a bug or an absurd state must not end the loop: fault, count, go on
+            self.counters["tick_errors"] += 1
+            log.exception("control tick failed")
+            self.core.executor.fault(f"control tick failed: {type(exc).__name__}: {exc}")
+            self.core.shaper.reset(None)
+            return None
+        if not np.all(np.isfinite(tau)):
+            self.counters["non_finite_torques"] += 1
+            self.core.shaper.reset(None)
+            self.core.executor.fault("the control law gave non-finite torques (absurd robot state?)")
+            return None
+        return tau
+
+    def _usable(self, state: RobotState | None) -> RobotState | None:
+        """``state`` if this robot model can use it (checked before its seq counts for anything), else None."""
+        if state is not None and len(state.q_rad) != self._nq:
+            self.counters[f"robot_state_dropped: {len(state.q_rad)} joints, the model has {self._nq}"] += 1
+            return None
+        return state
 
     def _send(self, seq: int, tau: np.ndarray) -> None:
         cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau.tolist())
@@ -236,6 +262,8 @@ class ControllerService:
         self._lost = False
         self._last_robot_ns = None
         self._last_seq = -1
+        self._last_command = None
+        self._stains_clock = None  # a new sim's clock starts again
         self.core.restart()
 
     def _poll_stains(self, clock_s: float) -> None:
@@ -244,7 +272,11 @@ class ControllerService:
         if msg is not None:
             update = self._stains_update(msg)
             if update is not None:
-                ex.set_stains(*update)
+                try:
+                    ex.set_stains(*update)
+                except (ValueError, PlanningError) as exc:  # never the loop's end
+                    self.counters[f"stains_rejected: {str(exc)[:60]}"] += 1
+                    return
                 self._stains_clock = clock_s
                 return
         if self._stains_clock is not None and ex.stains_fresh and clock_s - self._stains_clock > self.p.stains_timeout_s:
@@ -258,12 +290,23 @@ class ControllerService:
                 return None
             board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), (0.0, 0.0))
             kappa_at = self.p.executor.kappa_remaining
+            if len(msg.sizes_m) != len(msg.stain_ids):
+                self.counters["stains_rejected: truth sizes do not match its ids"] += 1
+                return None
             stains = [StainState(i, np.asarray(c, float), float(s), r <= kappa_at)
                       for i, c, s, r in zip(msg.stain_ids, msg.centres_board_m, msg.sizes_m, msg.remaining)]
-            return board, stains
+            return (board, stains) if self._stains_ok(stains) else None
         board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), msg.board_size_m)
         stains = [StainState(s.id, np.asarray(s.centre_board_m, float), s.size_m, s.kappa) for s in msg.stains]
-        return board, stains
+        return (board, stains) if self._stains_ok(stains) else None
+
+    def _stains_ok(self, stains: list[StainState]) -> bool:
+        for s in stains:
+            if s.centre_m.shape != (2,) or not np.all(np.isfinite(s.centre_m)) or not (s.size_m > 0
+                                                                                      and np.isfinite(s.size_m)):
+                self.counters["stains_rejected: a stain needs a finite 2-D centre and a positive size"] += 1
+                return False
+        return True
 
     def _poll_estop(self) -> None:
         while True:

@@ -23,7 +23,7 @@ from controller.lamps.skill import PeriodicEntry
 from controller.params import ControllerParams
 from controller.service import ControllerService
 from interfaces.config import ZenohSettings
-from interfaces.messages import ControllerStatus, Estop, SimTruth
+from interfaces.messages import Capabilities, ControllerStatus, Estop, Pose, RobotState, SimTruth
 from interfaces.session import ServiceNode
 
 from .zenoh_helpers import REPO, SimProcess, free_port, wait_for
@@ -182,6 +182,14 @@ def test_estop_lifts_the_eraser_off_and_bad_samples_are_counted_not_fatal(tmp_pa
         ctl.wait_phase(("WIPE",), 60.0)
         for key in (keys.robot_state, keys.sim_truth, keys.controller_estop):
             op.session.put(key, b"\x93garbage")
+        time.sleep(0.3)  # the stains reader keeps only the newest sample: let the garbage be taken first
+        # well-formed messages this controller cannot use: a 6-joint robot, a stain with a 3-D centre
+        op.publish(keys.robot_state, RobotState(seq=10**6, stamp_ns=1, q_rad=[0.0] * 6, dq_rad_s=[0.0] * 6,
+                                                tau_nm=[0.0] * 6, wrench_world=[0.0] * 6,
+                                                capabilities=Capabilities(False, [10.0] * 6)))
+        op.publish(keys.sim_truth, SimTruth(seq=1, stamp_ns=1, stain_ids=[0], remaining=[1.0], total_dirt=1.0,
+                                            contact_force_n=0.0, centres_board_m=[[0.1, 0.2, 0.3]], sizes_m=[0.05],
+                                            T_board_to_world=Pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])))
         op.publish(keys.controller_estop, Estop(stamp_ns=time.monotonic_ns(), engaged=True, reason="test button",
                                                 source="pytest"))
         ctl.wait_phase(("ESTOP",), 5.0)
@@ -198,6 +206,8 @@ def test_estop_lifts_the_eraser_off_and_bad_samples_are_counted_not_fatal(tmp_pa
         assert st.phase == "ESTOP"
         for name in ("robot_state", "stains", "estop"):
             assert any(k.startswith(f"{name}_dropped") for k in st.counters), (name, st.counters)
+        assert any("6 joints" in k for k in st.counters), st.counters
+        assert any(k.startswith("stains_rejected") for k in st.counters), st.counters
         op.publish(keys.controller_estop, Estop(stamp_ns=time.monotonic_ns(), engaged=False, reason="cleared",
                                                 source="pytest"))
         ctl.wait_phase(("APPROACH", "TRANSITION", "WIPE"), 10.0)

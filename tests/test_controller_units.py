@@ -274,3 +274,78 @@ def test_no_contact_below_the_board_is_a_fault_not_a_crash(learned_skill):
 def _no_board(t: ToolState, sp) -> ToolState:
     t.xy, t.v_xy, t.R, t.h, t.force_n = sp.xy.copy(), sp.v_xy.copy(), sp.R.copy(), sp.h, 0.0
     return t
+
+
+def test_an_estop_engaged_again_while_lifting_after_a_release_holds(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains())
+    run(ex, arm, 6.0)
+    ex.estop("first")
+    run(ex, arm, 0.05)  # still braking / lifting
+    ex.clear()
+    ex.estop("second")
+    log = run(ex, arm, 6.0)
+    assert set(phases(log)) == {"ESTOP"} and ex.reason == "second"
+    assert not log[-1][5] and log[-1][7] > 0.03
+
+
+def test_an_estop_before_the_first_stains_is_kept(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.estop("before start")
+    ex.wait()
+    assert ex.phase == "ESTOP"
+    ex.set_stains(BOARD, stains())
+    log = run(ex, arm, 3.0)
+    assert set(phases(log)) == {"ESTOP"}
+    ex.clear()
+    log = run(ex, arm, 3.0)
+    assert "APPROACH" in phases(log)
+
+
+def test_a_release_with_stale_stains_waits_paused_instead_of_wiping_blind(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains())
+    run(ex, arm, 6.0)
+    ex.estop("button")
+    run(ex, arm, 2.0)
+    ex.stains_stale("no stains update for 1.0 s")
+    ex.clear()
+    log = run(ex, arm, 2.0)
+    assert set(phases(log)) <= {"ESTOP", "PAUSED"} and ex.phase == "PAUSED"
+    ex.set_stains(BOARD, stains())
+    log = run(ex, arm, 4.0)
+    assert "APPROACH" in phases(log)
+
+
+def test_a_pause_while_descending_fast_never_drives_the_pad_into_the_board(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains())
+    # run until the fast part of the descent is at full speed
+    for _ in range(20000):
+        sp = ex.step(0.001, arm.tool)
+        arm.follow(sp)
+        if ex.current_mp == "descend" and sp.v_h < -0.2:
+            break
+    h_at_pause = sp.h
+    ex.stains_stale("no stains")
+    log = run(ex, arm, 2.0)
+    lowest = min(e[7] for e in log)
+    assert lowest > h_at_pause - 0.006 and lowest > 0.0, (h_at_pause, lowest)
+    assert ex.phase == "PAUSED" and log[-1][7] >= ExecutorParams().standoff_m - 1e-6
+
+
+def test_a_moved_board_is_adopted_while_holding_without_moving_the_held_pose(learned_skill):
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.set_stains(BOARD, [])
+    run(ex, arm, 0.5)
+    assert ex.phase == "DONE"
+    held = BOARD.to_world(np.array([*ex._sp.xy, ex._sp.h]))
+    moved = BoardPose(WALL, BOARD.origin_m + np.array([0.0, 0.01, 0.0]), BOARD.size_m)
+    ex.set_stains(moved, [])
+    np.testing.assert_allclose(moved.to_world(np.array([*ex._sp.xy, ex._sp.h])), held, atol=1e-12)
+    assert ex.board is moved
