@@ -347,8 +347,8 @@ def print_report(res: dict, cmd: str) -> None:
     print("\n| lock-step closed loop over Zenoh | value |\n|---|---|")
     rows = [("ended in phase", lk["phase"] + ("" if lk["reached_done"] else " (120 s cap, not DONE)")
              + (f" ({lk['reason']})" if lk["reason"] else "")),
-            (f"simulated s / wall s (from robot time {lk['sim_time_total_s'] - lk['sim_s']:.1f} s, first truth seen,"
-             f" to {lk['sim_time_total_s']:.1f} s)", f"{lk['sim_s']:.1f} / {lk['wall_s']:.1f}"),
+            ((f"simulated s / wall s (from robot time {lk['sim_time_total_s'] - lk['sim_s']:.1f} s, first truth "
+              f"seen, to {lk['sim_time_total_s']:.1f} s)"), f"{lk['sim_s']:.1f} / {lk['wall_s']:.1f}"),
             ("real-time factor", f"{lk['x_realtime']:.2f}"),
             ("ticks per wall second", f"{lk['ticks_per_s']:.0f}"),
             ("controller period (round trip) p50, median of windows us", f"{lk['period_p50_us_median']:.0f}"),

@@ -23,8 +23,8 @@ from interfaces.config import ZenohSettings, load_config
 from interfaces.errors import InterfaceError
 
 SERVICE = "controller"
-#: A real-time rate is refused when the control law's p99 takes more than this share of the period.
-MAX_TICK_SHARE = 0.7
+#: A real-time rate is refused when the control law's median tick takes more than this share of the period.
+MAX_TICK_SHARE = 0.5
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -115,14 +115,15 @@ def tick_cost_us(params, skill, model, n: int = 300) -> np.ndarray:
 def check_rate(params, skill, model) -> str:
     """Refuse a real-time rate whose period the control law cannot fit on this machine (ConfigError)."""
     costs = tick_cost_us(params, skill, model)
-    p99 = float(np.percentile(costs[50:], 99))
+    p50, p99 = (float(v) for v in np.percentile(costs[50:], [50, 99]))
     period_us = 1e6 / params.rate_hz
-    text = f"control tick p50 {np.median(costs[50:]):.0f} us, p99 {p99:.0f} us; period {period_us:.0f} us"
-    if params.mode == "realtime" and p99 > MAX_TICK_SHARE * period_us:
+    text = f"control tick p50 {p50:.0f} us, p99 {p99:.0f} us; period {period_us:.0f} us"
+    # the median, not the tail: a busy moment at start-up must not refuse a rate the machine holds
+    if params.mode == "realtime" and p50 > MAX_TICK_SHARE * period_us:
         raise InterfaceError(
             f"[controller] rate_hz = {params.rate_hz:g} cannot be held on this machine: a tick must fit in "
-            f"{period_us:.0f} us but the control law alone takes {p99:.0f} us (p99; limit "
-            f"{MAX_TICK_SHARE:.0%} of the period). Lower rate_hz.")
+            f"{period_us:.0f} us but the control law alone takes {p50:.0f} us (median; limit "
+            f"{MAX_TICK_SHARE:.0%} of the period, leaving the rest for the network). Lower rate_hz.")
     return text
 
 

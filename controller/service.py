@@ -162,7 +162,6 @@ class ControllerService:
         answered_seq = -1
         next_ns = time.monotonic_ns()
         t_prev = next_ns
-        dt = 1.0 / self.p.rate_hz
         while not self.stop.is_set():
             t0 = time.monotonic_ns()
             new = self._usable(states.take())
@@ -177,9 +176,10 @@ class ControllerService:
                 if state is not None:
                     self.counters["ticks_without_fresh_state"] += 1
                     self._check_lost(age_ns / 1e9)
+            elif state.seq == answered_seq:
+                self.counters["ticks_without_new_state"] += 1  # already answered; the robot holds that command
             else:
-                if state.seq == answered_seq:
-                    self.counters["ticks_on_held_state"] += 1
+                dt = self._dt_from_robot_clock(state)  # the robot's own time, also across skipped periods
                 self._poll_stains(t0 / 1e9)
                 t1 = time.monotonic_ns()
                 tau = self._control(state, dt)
