@@ -199,7 +199,7 @@ class ControllerParams:
         s = "controller"
         if self.mode not in MODES:
             raise ConfigError(f"[{s}] mode must be one of {MODES}, got {self.mode!r}")
-        _range(s, "rate_hz", self.rate_hz, 100.0, 5000.0)
+        _range(s, "rate_hz", self.rate_hz, 100.0, 10000.0)
         if not isinstance(self.skill, str):
             raise ConfigError(f"[{s}] skill must be a file path (string), got {self.skill!r}")
         if self.stains_from not in STAIN_SOURCES:
