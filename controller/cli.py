@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from controller.lamps.errors import LampsError
-from interfaces.config import ZenohSettings, load_config
+from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 
 SERVICE = "controller"
@@ -43,9 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", type=float, metavar="N", help="normal force to wipe with (default 10 N)")
     p.add_argument("--max-ticks", type=int, metavar="N", help="stop after N ticks (default: run until stopped)")
     p.add_argument("--trace", metavar="FILE.npz", help="record reference and measurement; written on exit")
-    p.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (repeatable)")
-    p.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint to connect to (repeatable)")
-    p.add_argument("--robot-id", help="key prefix becomes lamps/<robot-id>")
+    add_zenoh_options(p)
     p.add_argument("--check", action="store_true", help="validate config, skill and rate, then exit")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     return p
@@ -67,11 +65,7 @@ def load(a: argparse.Namespace):
         table.setdefault("executor", {})["air"] = a.air
     if a.force is not None:
         table.setdefault("force", {})["target_n"] = a.force
-    zenoh = cfg.zenoh
-    over = {k: v for k, v in (("listen", a.listen), ("connect", a.connect), ("robot_id", a.robot_id)) if v is not None}
-    if over:
-        zenoh = ZenohSettings(**{**{f: getattr(zenoh, f) for f in zenoh.__dataclass_fields__}, **over})
-    return zenoh, ControllerParams.from_table(table)
+    return zenoh_with_options(cfg.zenoh, a), ControllerParams.from_table(table)
 
 
 def load_or_learn_skill(path: str):

@@ -175,3 +175,24 @@ def dataclass_from_table(cls, section: str, table: Mapping[str, Any], **extra):
     if unknown:
         raise ConfigError(f"[{section}] unknown key(s) {unknown}; valid: {sorted(known)}")
     return cls(**dict(table), **extra)
+
+
+# --------------------------------------------------------------------------
+# the Zenoh options every service's command line has
+
+
+def add_zenoh_options(parser) -> None:
+    """``--listen``, ``--connect`` (repeatable endpoints) and ``--robot-id`` on an argparse parser."""
+    parser.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (repeatable)")
+    parser.add_argument("--connect", metavar="ENDPOINT", action="append",
+                        help="Zenoh endpoint to connect to (repeatable)")
+    parser.add_argument("--robot-id", help="key prefix becomes lamps/<robot-id>")
+
+
+def zenoh_with_options(settings: ZenohSettings, args) -> ZenohSettings:
+    """``settings`` with the options of :func:`add_zenoh_options` that were given (they win over the file)."""
+    over = {k: v for k, v in (("listen", args.listen), ("connect", args.connect), ("robot_id", args.robot_id))
+            if v is not None}
+    if not over:
+        return settings
+    return ZenohSettings(**{**{f: getattr(settings, f) for f in settings.__dataclass_fields__}, **over})

@@ -14,7 +14,7 @@ import logging
 import signal
 import sys
 
-from interfaces.config import load_config
+from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 
 SERVICE = "sim"
@@ -39,18 +39,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-camera", action="store_true", help="do not render camera frames")
     p.add_argument("--camera-size", metavar="WxH", help="camera resolution, e.g. 320x240 (default 640x480)")
     p.add_argument("--camera-rate", type=float, metavar="HZ", help="camera frame rate (default 10)")
-    p.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (repeatable)")
-    p.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint to connect to (repeatable)")
-    p.add_argument("--robot-id", help="key prefix becomes lamps/<robot-id>")
+    add_zenoh_options(p)
     p.add_argument("--check", action="store_true", help="validate the configuration and the board pose, then exit")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     return p
 
 
-def _overrides(a: argparse.Namespace) -> tuple[dict, dict, dict]:
+def _overrides(a: argparse.Namespace) -> tuple[dict, dict]:
     sim: dict = {}
     camera: dict = {}
-    zenoh: dict = {}
     for key, value in (("mode", a.mode), ("seed", a.seed), ("gravity_compensated", a.gravity_compensated),
                        ("stale_limit_s", a.stale_limit), ("max_steps", a.max_steps)):
         if value is not None:
@@ -69,10 +66,7 @@ def _overrides(a: argparse.Namespace) -> tuple[dict, dict, dict]:
         camera.update(width=w, height=h)
     if a.camera_rate is not None:
         camera["rate_hz"] = a.camera_rate
-    for key, value in (("listen", a.listen), ("connect", a.connect), ("robot_id", a.robot_id)):
-        if value is not None:
-            zenoh[key] = value
-    return sim, camera, zenoh
+    return sim, camera
 
 
 def _merge(base: dict, extra: dict) -> dict:
@@ -84,20 +78,14 @@ def _merge(base: dict, extra: dict) -> dict:
 
 def load(a: argparse.Namespace):
     """(ZenohSettings, SimParams) from file, environment and options."""
-    from interfaces.config import ZenohSettings
-
     from .params import SimParams
 
     cfg = load_config(a.config)
-    sim_over, cam_over, zenoh_over = _overrides(a)
+    sim_over, cam_over = _overrides(a)
     table = _merge(dict(cfg.table("sim")), sim_over)
     if cam_over:
         table = _merge(table, {"camera": cam_over})
-    zenoh = cfg.zenoh
-    if zenoh_over:
-        fields = {f: getattr(zenoh, f) for f in zenoh.__dataclass_fields__}
-        zenoh = ZenohSettings(**{**fields, **zenoh_over})
-    return zenoh, SimParams.from_table(table)
+    return zenoh_with_options(cfg.zenoh, a), SimParams.from_table(table)
 
 
 def main(argv: list[str] | None = None) -> int:
