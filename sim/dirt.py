@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from interfaces.errors import ConfigError
+from interfaces.stain_shape import Shape, shape_of
 
 
 @dataclass(frozen=True)
@@ -130,6 +131,14 @@ class DirtGrid:
         self._index = [np.flatnonzero(self.labels.ravel() == s.id) for s in self.stains]
         self._initial = np.array([self.dirt.ravel()[i].sum() for i in self._index], float)
         self.version = 0
+
+    def shapes(self) -> list[Shape]:
+        """The drawn stains' true centres and sizes (:mod:`interfaces.stain_shape`), in stain order."""
+        out = []
+        for index in self._index:
+            iy, ix = np.divmod(index, self.nx)
+            out.append(shape_of(np.column_stack([(ix + 0.5) * self.cell_m, (iy + 0.5) * self.cell_m]), self.cell_m))
+        return out
 
     @property
     def stain_ids(self) -> list[int]:

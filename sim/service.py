@@ -88,9 +88,9 @@ class SimService:
         self._status_period_s = 1.0 / params.status_rate_hz
         self._next_status = 0.0
         self._board_pose = pose_from_transform(self.core.board.T_board_to_world)
-        stains = self.core.dirt.stains
-        self._centres = [list(s.centre_m) for s in stains]
-        self._sizes = [s.size_m for s in stains]
+        shapes = self.core.dirt.shapes()  # what was drawn, not the nominal ellipses
+        self._centres = [[float(v) for v in s.centre_m] for s in shapes]
+        self._sizes = [float(s.size_m) for s in shapes]
         self._commands_key = self.keys.robot_command
         self.braked = True
 

@@ -130,7 +130,10 @@ def test_pressing_and_sliding_wipes_the_stain_under_the_pad_and_leaves_the_next_
     assert final.remaining[0] < 0.2, final.remaining
     assert final.remaining[1] == 1.0
     assert final.contact_force_n > 2.0
-    assert final.T_board_to_world is not None and final.centres_board_m[0] == [cx, cy]
+    assert final.T_board_to_world is not None
+    # the truth is what was drawn: the wobbly 6 x 2.4 cm ellipse's centre and long extent, not the nominal ones
+    assert np.allclose(final.centres_board_m[0], [cx, cy], atol=0.004), final.centres_board_m
+    assert 0.045 < final.sizes_m[0] < 0.07, final.sizes_m
 
 
 def test_lockstep_runs_are_bit_identical_for_a_seed(tmp_path, model):

@@ -143,6 +143,11 @@ def test_stains_have_their_size_and_remaining_dirt_is_tracked():
     extent_x = (xs.max() - xs.min() + 1) * 0.002
     assert 0.06 < extent_x <= 0.09  # the wobbly edge stays within about 10 % of the nominal size
     assert g.remaining().tolist() == [1.0]
+    # the truth reports the drawn stain: its centre and the extent along its long axis (here board x)
+    truth = g.shapes()[0]
+    assert truth.size_m == pytest.approx(extent_x, abs=0.003)
+    assert np.allclose(truth.centre_m, (0.2, 0.15), atol=0.004)
+    assert truth.extent_m[0] == pytest.approx(extent_x) and truth.extent_m[1] < 0.06
     g.dirt[g.labels == 0] *= 0.5
     assert g.remaining()[0] == pytest.approx(0.5)
 
