@@ -20,8 +20,12 @@ FAULT(reason) and ESTOP reachable from any phase.
   of j at the entry phase (:func:`~controller.lamps.planner.plan_transition`),
   so the reference is continuous in acceleration at both junctions.
 * WIPE(i): the periodic MP re-anchored at the stain's centre and scaled to
-  its size, until its kappa is set (or ``wipe_timeout_s``), then on until
-  the phase heads for the next stain (:func:`exit_phase_delay`).
+  its size, until its kappa is set (or ``wipe_timeout_s``: one pass), then
+  on until the phase heads for the next stain (:func:`exit_phase_delay`). A
+  camera cannot see a stain under the eraser, so a stain left without kappa
+  is passed over until ``recheck_s`` after the pass (perception looks at
+  it meanwhile) and wiped again after the others, at most ``max_passes``
+  times.
 * Re-planning: whenever the executor picks the next stain it re-plans over
   the stains open *now* (appeared, vanished or done ones included); a stain
   that moves while it is wiped moves the MP's anchor through its ramp.
@@ -38,6 +42,7 @@ FAULT(reason) and ESTOP reachable from any phase.
 from __future__ import annotations
 
 import logging
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -185,6 +190,9 @@ class SkillExecutor:
         self.stains: dict[int, StainState] = {}
         self.stains_fresh = False
         self._given_up: set[int] = set()
+        self._passes: Counter[int] = Counter()
+        self._left_at: dict[int, float] = {}  # stain id -> clock at the end of a pass without kappa
+        self.clock_s = 0.0
         self._sp = Setpoint()
         self._stage = _HOLD
         self._mover: Quintic | None = None
@@ -297,6 +305,7 @@ class SkillExecutor:
         Needs a board (:meth:`set_stains` called once); until then call :meth:`wait`.
         """
         self.ticks += 1
+        self.clock_s += dt_s
         if not self._initialised or self._restart_pending:
             self._hold_here(tool)
             self._initialised = True
@@ -507,8 +516,13 @@ class SkillExecutor:
                 done = s is None or s.kappa
                 if not done and self._wipe_t >= self.p.wipe_timeout_s:
                     self.counters["wipe_timeouts"] += 1
-                    self._given_up.add(sid)
-                    log.warning("stain %d: no kappa after %.0f s, moving on", sid, self._wipe_t)
+                    self._passes[sid] += 1
+                    self._left_at[sid] = self.clock_s
+                    if self._passes[sid] >= self.p.max_passes:
+                        self._given_up.add(sid)
+                        log.warning("stain %d: no kappa after %d passes, giving up", sid, self._passes[sid])
+                    else:
+                        log.info("stain %d: no kappa after %.1f s, back to it later", sid, self._wipe_t)
                     done = True
                 if done:
                     self._choose_next(runner)
@@ -630,4 +644,5 @@ class SkillExecutor:
 
     def _open_stains(self) -> list[Stain]:
         return [Stain(s.id, s.centre_m, s.size_m) for s in self.stains.values()
-                if not s.kappa and s.id not in self._given_up]
+                if not s.kappa and s.id not in self._given_up
+                and self.clock_s - self._left_at.get(s.id, -math.inf) >= self.p.recheck_s]

@@ -120,7 +120,11 @@ class ExecutorParams:
     [m]; approach_speed_m_s : mean speed of free moves [m/s];
     descend_speed_m_s : speed towards the board until contact [m/s];
     turn_rate_rad_s : mean angular speed of free moves [rad/s];
-    wipe_timeout_s : leave a stain after this long even without kappa [s];
+    wipe_timeout_s : one pass over a stain lasts at most this long without
+    kappa [s] (the eraser hides the stain from the camera: it is judged once
+    the pad has left); recheck_s : a stain left without kappa is wiped again
+    only after this long [s] (perception's time to look at it), after the
+    others; max_passes : passes before a stain is given up;
     kappa_remaining : with ``stains_from = "truth"``, a stain is done when
     its remaining dirt is at most this fraction; air : wipe ``air_height_m``
     above the board without touching it (a dry run); stop_s : time to brake
@@ -136,7 +140,9 @@ class ExecutorParams:
     descend_speed_m_s: float = 0.02
     creep_height_m: float = 0.008
     turn_rate_rad_s: float = 0.6
-    wipe_timeout_s: float = 30.0
+    wipe_timeout_s: float = 5.0
+    recheck_s: float = 1.0
+    max_passes: int = 4
     kappa_remaining: float = 0.03
     air: bool = False
     air_height_m: float = 0.03
@@ -151,6 +157,9 @@ class ExecutorParams:
         _range(s, "descend_speed_m_s", self.descend_speed_m_s, 0.005, 0.3)
         _range(s, "turn_rate_rad_s", self.turn_rate_rad_s, 0.05, 3.0)
         _range(s, "wipe_timeout_s", self.wipe_timeout_s, 0.5, 3600.0)
+        _range(s, "recheck_s", self.recheck_s, 0.0, 60.0)
+        if not isinstance(self.max_passes, int) or isinstance(self.max_passes, bool) or not 1 <= self.max_passes <= 100:
+            raise ConfigError(f"[{s}] max_passes must be an integer in [1, 100], got {self.max_passes!r}")
         _range(s, "kappa_remaining", self.kappa_remaining, 0.0, 1.0)
         if not isinstance(self.air, bool):
             raise ConfigError(f"[{s}] air must be true or false, got {self.air!r}")

@@ -296,6 +296,9 @@ class ControllerService:
             stains = [StainState(i, np.asarray(c, float), float(s), r <= kappa_at)
                       for i, c, s, r in zip(msg.stain_ids, msg.centres_board_m, msg.sizes_m, msg.remaining)]
             return (board, stains) if self._stains_ok(stains) else None
+        if msg.board == "lost":  # perception cannot see the board: nothing is known, not even what is clean
+            self.counters["stains_unknown"] += 1
+            return None
         board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), msg.board_size_m)
         stains = [StainState(s.id, np.asarray(s.centre_board_m, float), s.size_m, s.kappa) for s in msg.stains]
         return (board, stains) if self._stains_ok(stains) else None

@@ -29,6 +29,8 @@ COMMAND_MODES = ("torque", "hold")
 PHASES = ("INIT", "WAIT_PEERS", "APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE", "PAUSED", "FAULT", "ESTOP")
 #: Image encodings a CameraFrame may carry.
 ENCODINGS = ("rgb8", "bgr8", "mono8", "jpeg", "png")
+#: How perception knows the board in a :class:`Stains` message.
+BOARD_STATES = ("seen", "held", "lost")
 _BYTES_PER_PIXEL = {"rgb8": 3, "bgr8": 3, "mono8": 1}
 
 
@@ -220,6 +222,11 @@ class Stains(Message, frozen=True):
 
     T_board_to_world : board frame (origin at a corner, x along the width, y
     along the height, z out of the board). board_size_m : (2,) width, height.
+    board : ``"seen"`` (markers found in this frame), ``"held"`` (the last
+    good pose, markers hidden for a moment) or ``"lost"``: nothing is known
+    now, every stain has ``visible = 0`` and ``kappa = False`` and a consumer
+    must not act on the stains. frame_seq / robot_time_ns : the camera frame
+    the stains come from (robot_time_ns 0 when unknown).
     """
 
     seq: int
@@ -227,9 +234,14 @@ class Stains(Message, frozen=True):
     T_board_to_world: Pose
     board_size_m: list[float]
     stains: list[StainObservation]
+    board: str = "seen"
+    frame_seq: int = -1
+    robot_time_ns: int = 0
 
     def __post_init__(self) -> None:
         _finite("board_size_m", self.board_size_m, 2)
+        if self.board not in BOARD_STATES:
+            raise ValueError(f"board must be one of {BOARD_STATES}, got {self.board!r}")
         ids = [s.id for s in self.stains]
         if len(set(ids)) != len(ids):
             raise ValueError(f"stain ids must be unique, got {ids}")

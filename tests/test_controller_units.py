@@ -250,7 +250,7 @@ def test_estop_lifts_off_and_holds_until_released(learned_skill):
 
 
 def test_a_vanished_stain_is_not_visited_and_new_stains_after_done_are(learned_skill):
-    ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.0))
+    ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.0, max_passes=1))
     arm = IdealArm()
     ex.set_stains(BOARD, stains()[:1])
     log = run(ex, arm, 12.0)
@@ -349,3 +349,24 @@ def test_a_moved_board_is_adopted_while_holding_without_moving_the_held_pose(lea
     ex.set_stains(moved, [])
     np.testing.assert_allclose(moved.to_world(np.array([*ex._sp.xy, ex._sp.h])), held, atol=1e-12)
     assert ex.board is moved
+
+
+def test_a_stain_without_kappa_gets_another_pass_after_the_others_and_a_recheck(learned_skill):
+    """The eraser hides the stain from the camera: after a pass it is left, judged, and wiped again if still open."""
+    ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, recheck_s=1.0, max_passes=3))
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains()[:2])
+    log = run(ex, arm, 25.0)
+    visits = [sid for i, (phase, sid, *_rest) in enumerate(log)
+              if phase == "WIPE" and (i == 0 or log[i - 1][0] != "WIPE" or log[i - 1][1] != sid)]
+    # never two passes in a row on one stain, each stain three passes, then given up
+    assert all(a != b for a, b in zip(visits, visits[1:])), visits
+    assert sorted(visits) == [0, 0, 0, 1, 1, 1], visits
+    assert ex.counters["wipe_timeouts"] == 6 and ex.phase == "DONE"
+    ex2 = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, recheck_s=1.0, max_passes=3))
+    ex2.set_stains(BOARD, stains()[:1])
+    log = run(ex2, arm, 6.0)
+    # alone on the board: lifted off after the pass, a fresh view; kappa from it ends the job
+    ex2.set_stains(BOARD, [StainState(0, stains()[0].centre_m, stains()[0].size_m, True)])
+    run(ex2, arm, 6.0)
+    assert ex2.phase == "DONE" and ex2.counters["wipe_timeouts"] >= 1
