@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "plan": ("controller.lamps.cli:plan_main", "plan and roll out a skill over given stains"),
     "sim": ("sim.cli:main", "the simulated robot, board and camera as a Zenoh service"),
     "controller": ("controller.cli:main", "run a skill on the robot: impedance control and the skill executor"),
+    "perception": ("perception.cli:main", "stains and kappa from camera images (board markers, ink clustering)"),
 }
 
 

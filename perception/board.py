@@ -1,0 +1,230 @@
+"""The board from its corner markers: detection, size, pose, and the rectifying homography.
+
+The markers follow :mod:`interfaces.board_markers` (ids 0-3 of
+``DICT_4X4_50`` at the corners). Each frame: detect the markers, solve the
+board pose from every visible marker corner (a planar PnP, board frame z = 0),
+refuse it if the corners reproject badly. The board size, unless configured,
+is measured once from the markers (:func:`measure_board`: each marker's own
+pose gives its centre, the centres' spacing along the board axes gives the
+width and height, then pose and size are refined together on all corners).
+
+:class:`BoardTracker` keeps the last good estimate through frames where the
+arm hides the markers, for ``hold_s``; then the board is lost.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from interfaces.board_markers import (ARUCO_DICTIONARY, MARKER_IDS, MARKER_INSET_M, MARKER_SIDE_M,
+                                      marker_corners_board)
+
+from .params import BoardParams
+
+#: Marker centre in the board frame is (a + s/2) from its two nearest edges.
+_CENTRE_INSET_M = MARKER_INSET_M + MARKER_SIDE_M / 2
+
+
+def make_detector() -> cv2.aruco.ArucoDetector:
+    """An ArUco detector for the board's dictionary with sub-pixel corner refinement."""
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ARUCO_DICTIONARY)), params)
+
+
+def detect_markers(detector: cv2.aruco.ArucoDetector, grey: np.ndarray) -> dict[int, np.ndarray]:
+    """Corners (4, 2) [px] of each board marker seen in ``grey`` (H, W) uint8, by id (other ids ignored)."""
+    corners, ids, _ = detector.detectMarkers(grey)
+    if ids is None:
+        return {}
+    out: dict[int, np.ndarray] = {}
+    for c, i in zip(corners, ids.ravel()):
+        if int(i) in MARKER_IDS and int(i) not in out:
+            out[int(i)] = c.reshape(4, 2).astype(np.float64)
+    return out
+
+
+def _transform(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(np.asarray(rvec, float).reshape(3, 1))[0]
+    T[:3, 3] = np.asarray(tvec, float).ravel()
+    return T
+
+
+def _board_points(markers: dict[int, np.ndarray], size_m: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Object points (n, 3) in the board frame and image points (n, 2) of the visible marker corners."""
+    board = marker_corners_board(size_m)
+    ids = sorted(markers)
+    obj = np.concatenate([np.column_stack([board[i], np.zeros(4)]) for i in ids])
+    img = np.concatenate([markers[i] for i in ids])
+    return obj, img
+
+
+def reprojection_rms(obj: np.ndarray, img: np.ndarray, K: np.ndarray, T_board_to_camera: np.ndarray) -> float:
+    """RMS distance [px] between ``img`` (n, 2) and the projections of ``obj`` (n, 3)."""
+    rvec = cv2.Rodrigues(T_board_to_camera[:3, :3])[0]
+    proj, _ = cv2.projectPoints(obj, rvec, T_board_to_camera[:3, 3], K, None)
+    return float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
+
+
+def solve_pose(markers: dict[int, np.ndarray], size_m: tuple[float, float], K: np.ndarray,
+               guess: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """``(T_board_to_camera (4, 4), rms_px)`` from the visible markers' corners (a planar PnP)."""
+    obj, img = _board_points(markers, size_m)
+    if guess is not None:
+        rvec = cv2.Rodrigues(guess[:3, :3])[0]
+        ok, rvec, tvec = cv2.solvePnP(obj, img, K, None, rvec, guess[:3, 3].copy(), useExtrinsicGuess=True,
+                                      flags=cv2.SOLVEPNP_ITERATIVE)
+    else:
+        ok, rvec, tvec = cv2.solvePnP(obj, img, K, None, flags=cv2.SOLVEPNP_SQPNP)
+    if not ok:
+        return np.eye(4), math.inf
+    T = _transform(rvec, tvec)
+    return T, reprojection_rms(obj, img, K, T)
+
+
+def measure_board(markers: dict[int, np.ndarray], K: np.ndarray) -> tuple[tuple[float, float], np.ndarray, float]:
+    """``(size_m (w, h), T_board_to_camera, rms_px)`` from at least three markers, or ValueError.
+
+    Each marker's pose (PnP on its own square) gives its centre and axes;
+    centres of markers in different columns give the width, in different
+    rows the height; pose and size are then refined together on all corners.
+    """
+    if len(markers) < 3:
+        raise ValueError(f"measuring the board needs 3 markers, saw {sorted(markers)}")
+    s = MARKER_SIDE_M
+    square = np.array([[-s / 2, s / 2, 0], [s / 2, s / 2, 0], [s / 2, -s / 2, 0], [-s / 2, -s / 2, 0]])
+    centres, axes = {}, []
+    for i, c in markers.items():
+        ok, rvec, tvec = cv2.solvePnP(square, c, K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        if ok:
+            T = _transform(rvec, tvec)
+            centres[i], _ = T[:3, 3], axes.append(T[:3, :3])
+    # the average marker orientation: board x and y in the camera frame
+    u, _, vt = np.linalg.svd(sum(axes))
+    R = u @ vt
+    col = {0: 0, 1: 1, 2: 1, 3: 0}
+    row = {0: 0, 1: 0, 2: 1, 3: 1}
+    widths, heights = [], []
+    ids = sorted(centres)
+    for a_i, i in enumerate(ids):
+        for j in ids[a_i + 1:]:
+            d = centres[j] - centres[i]
+            if col[i] != col[j]:
+                widths.append(abs(d @ R[:, 0]) + 2 * _CENTRE_INSET_M)
+            if row[i] != row[j]:
+                heights.append(abs(d @ R[:, 1]) + 2 * _CENTRE_INSET_M)
+    if not widths or not heights:
+        raise ValueError(f"markers {ids} do not span both board axes")
+    size0 = (float(np.mean(widths)), float(np.mean(heights)))
+    T0, _ = solve_pose(markers, size0, K)
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        obj, img = _board_points(markers, (x[6], x[7]))
+        proj, _ = cv2.projectPoints(obj, x[:3], x[3:6], K, None)
+        return (proj.reshape(-1, 2) - img).ravel()
+
+    x0 = np.concatenate([cv2.Rodrigues(T0[:3, :3])[0].ravel(), T0[:3, 3], size0])
+    x = least_squares(residual, x0, method="lm").x
+    size = (float(x[6]), float(x[7]))
+    T = _transform(x[:3], x[3:6])
+    obj, img = _board_points(markers, size)
+    return size, T, reprojection_rms(obj, img, K, T)
+
+
+def pose_distance(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
+    """Translation [m] and rotation [deg] between two (4, 4) poses."""
+    dR = T_a[:3, :3].T @ T_b[:3, :3]
+    angle = math.degrees(math.acos(float(np.clip((np.trace(dR) - 1.0) / 2.0, -1.0, 1.0))))
+    return float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3])), angle
+
+
+@dataclass(frozen=True)
+class BoardEstimate:
+    """The board as last seen.
+
+    T_board_to_world : (4, 4). T_board_to_camera : (4, 4). size_m : (w, h).
+    state : ``"seen"`` (this frame), ``"held"`` (the last good pose, markers
+    hidden for less than ``hold_s``) or ``"lost"``. markers : ids seen this
+    frame. t_s : time of the last good pose [s]. moved : the pose jumped
+    (another board, or this one moved): what was known about its stains is
+    void. reason : why not ``"seen"``.
+    """
+
+    T_board_to_world: np.ndarray
+    T_board_to_camera: np.ndarray
+    size_m: tuple[float, float]
+    state: str
+    markers: tuple[int, ...]
+    t_s: float
+    moved: bool = False
+    reason: str = ""
+
+
+class BoardTracker:
+    """The board pose frame after frame, holding the last good one through short occlusions of the markers."""
+
+    def __init__(self, params: BoardParams) -> None:
+        self.p = params
+        self.detector = make_detector()
+        self.size_m: tuple[float, float] | None = None if params.size_m == (0.0, 0.0) else params.size_m
+        self.last: BoardEstimate | None = None
+        self.why = ""  # why the last frame gave no fresh pose
+
+    def update(self, grey: np.ndarray, K: np.ndarray, T_camera_to_world: np.ndarray, t_s: float) -> BoardEstimate | None:
+        """The board in this frame (``grey`` (H, W) uint8); None until it has been found once."""
+        markers = detect_markers(self.detector, grey)
+        reason = self._why_not(markers)
+        T_bc, size = None, self.size_m
+        if not reason:
+            try:
+                if size is None:
+                    size, T_bc, rms = measure_board(markers, K)
+                else:
+                    guess = self.last.T_board_to_camera if self.last is not None else None
+                    T_bc, rms = solve_pose(markers, size, K, guess)
+                    if rms > self.p.max_reprojection_px and self.p.size_m == (0.0, 0.0) and len(markers) >= 3:
+                        size, T_bc, rms = measure_board(markers, K)  # another board, of another size
+                if rms > self.p.max_reprojection_px:
+                    reason = f"markers reproject badly ({rms:.1f} px RMS)"
+            except (ValueError, cv2.error) as exc:
+                reason = f"board pose failed: {str(exc).splitlines()[0][:60]}"
+        self.why = reason
+        if reason:
+            return self._hold(markers, t_s, reason)
+        T_bw = T_camera_to_world @ T_bc
+        moved = False
+        if self.last is not None:
+            dist, angle = pose_distance(self.last.T_board_to_world, T_bw)
+            moved = dist > self.p.moved_m or angle > self.p.moved_deg
+        self.size_m = size
+        self.last = BoardEstimate(T_bw, T_bc, size, "seen", tuple(sorted(markers)), t_s, moved)
+        return self.last
+
+    def _why_not(self, markers: dict[int, np.ndarray]) -> str:
+        if not markers:
+            return "no markers seen"
+        need = 3 if self.size_m is None else self.p.min_markers
+        if len(markers) < need:
+            return f"only markers {sorted(markers)} seen (need {need})"
+        return ""
+
+    def _hold(self, markers: dict[int, np.ndarray], t_s: float, reason: str) -> BoardEstimate | None:
+        last = self.last
+        if last is None:
+            return None
+        state = "held" if t_s - last.t_s <= self.p.hold_s else "lost"
+        if state == "lost":
+            reason = f"{reason}; board not seen for {t_s - last.t_s:.1f} s"
+        return BoardEstimate(last.T_board_to_world, last.T_board_to_camera, last.size_m, state,
+                             tuple(sorted(markers)), last.t_s, False, reason)
+
+    def reset(self) -> None:
+        """Forget the board (and its measured size unless configured)."""
+        self.last = None
+        self.size_m = None if self.p.size_m == (0.0, 0.0) else self.p.size_m

@@ -1,0 +1,132 @@
+"""``lamps perception``: stains and kappa from camera images, as a Zenoh service or over files.
+
+Configuration comes from ``--config FILE`` (TOML, ``[zenoh]`` and
+``[perception]`` tables, see :mod:`perception.params`), then ``LAMPS_*``
+environment variables, then the options below. The source is the camera on
+Zenoh (default), or ``--source folder:DIR`` / ``video:FILE`` for offline
+checks, or ``device:N`` for a live UVC camera (a RealSense colour stream);
+offline sources can write every stains message as a JSON line with
+``--jsonl FILE`` and run without Zenoh (``--no-zenoh``). A bad config or
+source is a one-line error and exit code 1; Ctrl-C or SIGTERM stops it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import signal
+import sys
+
+import msgspec
+
+from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+from interfaces.errors import InterfaceError
+
+from .params import PerceptionParams, parse_source
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="lamps perception",
+        description="Finds the board from its ArUco markers, the stains on it and when each is wiped (kappa); "
+                    "publishes perception/stains over Zenoh. Options override the config file.")
+    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh] and [perception] tables")
+    p.add_argument("--camera", metavar="NAME", help="camera name: frames from camera/<NAME>/frame (default board)")
+    p.add_argument("--source", metavar="SPEC", help="zenoh (default), folder:DIR, video:FILE or device:N")
+    p.add_argument("--debug-images", action="store_true", default=None,
+                   help="publish the rectified board with stains drawn on perception/debug")
+    p.add_argument("--jsonl", metavar="FILE", help="also write every stains message as a JSON line (offline checks)")
+    p.add_argument("--no-zenoh", action="store_true", help="offline sources only: do not open a Zenoh session")
+    add_zenoh_options(p)
+    p.add_argument("--check", action="store_true", help="validate config and source, then exit")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    return p
+
+
+def load(a: argparse.Namespace):
+    """(ZenohSettings, PerceptionParams) from file, environment and options."""
+    cfg = load_config(a.config)
+    table = {k: (dict(v) if isinstance(v, dict) else v) for k, v in cfg.table("perception").items()}
+    for key, value in (("camera", a.camera), ("source", a.source), ("debug_images", a.debug_images)):
+        if value is not None:
+            table[key] = value
+    return zenoh_with_options(cfg.zenoh, a), PerceptionParams.from_table(table)
+
+
+def as_dict(value):
+    """A message as plain JSON-able dicts and lists, field names kept (messages travel as arrays)."""
+    if isinstance(value, msgspec.Struct):
+        return {f: as_dict(getattr(value, f)) for f in value.__struct_fields__}
+    if isinstance(value, (list, tuple)):
+        return [as_dict(v) for v in value]
+    return value
+
+
+def open_source(params: PerceptionParams, node):
+    kind, _ = parse_source(params.source)
+    if kind == "zenoh":
+        from .sources import ZenohSource
+
+        return ZenohSource(node, params.camera)
+    from .sources import OpenCVSource
+
+    return OpenCVSource(params.source, params)
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="%(asctime)s perception %(levelname)s %(name)s: %(message)s")
+    try:
+        zenoh_settings, params = load(a)
+        kind, _ = parse_source(params.source)
+        if a.no_zenoh and kind == "zenoh":
+            raise InterfaceError("--no-zenoh needs an offline source (--source folder:DIR, video:FILE or device:N)")
+        source = None if kind == "zenoh" else open_source(params, None)
+    except (InterfaceError, OSError) as exc:
+        print(f"lamps perception: error: {exc}", file=sys.stderr)
+        return 1
+    if a.check:
+        print(f"ok: source {params.source}, camera {params.camera}, keys under {zenoh_settings.keys.prefix}")
+        if source is not None:
+            source.close()
+        return 0
+    from interfaces.session import ServiceNode
+
+    from .service import SERVICE, PerceptionService
+
+    node = None
+    if not a.no_zenoh:
+        try:
+            node = ServiceNode(SERVICE, zenoh_settings).__enter__()
+        except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
+            print(f"lamps perception: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+            return 1
+    if source is None:
+        source = open_source(params, node)
+    partial = f"{a.jsonl}.partial" if a.jsonl else None
+    out = open(partial, "w") if partial else None  # renamed into place when complete
+    sink = (lambda msg: out.write(json.dumps(as_dict(msg)) + "\n")) if out else None
+    service = PerceptionService(params, node, source, sink)
+    signal.signal(signal.SIGTERM, lambda *_: service.stop.set())
+    signal.signal(signal.SIGINT, lambda *_: service.stop.set())
+    try:
+        frames = service.run()
+    finally:
+        source.close()
+        if node is not None:
+            node.close()
+        if out is not None:
+            out.close()
+            os.replace(partial, a.jsonl)
+    status = service.status()
+    logging.getLogger("perception").info("stopped after %d frames: %s", frames, status.detail)
+    if kind != "zenoh":
+        print(f"{frames} frames: {status.detail}; counters {dict(sorted(status.counters.items()))}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,263 @@
+"""Parameters of ``lamps perception``, one frozen dataclass per concern, from the ``[perception]`` config table.
+
+Layout (every key optional)::
+
+    [perception]
+    camera = "board"            # frames from camera/<camera>/frame
+    source = "zenoh"            # or "folder:DIR", "video:FILE", "device:N" (offline checks, a UVC camera)
+    publish_rate_hz = 10.0      # perception/stains at least this often
+    [perception.board]   size_m, resolution_m, min_markers, hold_s, max_reprojection_px, ...
+    [perception.ink]     ink_rgb, board_rgb, stain_level, illumination_range, max_residual, ...
+    [perception.stains]  link_m, min_area_m2, confirm_s, region_margin_m
+    [perception.kappa]   level, debounce_s, min_seen, memory_s, reappear_margin
+    [perception.camera_model]  fx, fy, cx, cy, position_m, look_at_m, up_m (sources without one)
+
+Every value is checked when built; an unknown key or a value out of range
+raises :class:`~interfaces.errors.ConfigError` naming the key and its range.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from interfaces.config import check_range as _range
+from interfaces.config import check_vector, dataclass_from_table
+from interfaces.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class BoardParams:
+    """Finding the board.
+
+    size_m : (width, height) [m], or (0, 0) to measure it from the corner
+    markers at the first fix. resolution_m : pixel size of the rectified
+    board image [m]. min_markers : markers needed for a fresh pose. hold_s :
+    the last good pose is used this long when too few markers are seen
+    (the arm covers them) [s]; after that the stains are unknown.
+    max_reprojection_px : RMS corner reprojection error above which a pose is
+    refused. moved_m / moved_deg : a jump this large means another board (or
+    a moved one): the stains are detected afresh. edge_margin_m : border of
+    the board not looked at (rectification bleeds over its edge) [m].
+    """
+
+    size_m: tuple[float, float] = (0.0, 0.0)
+    resolution_m: float = 0.002
+    min_markers: int = 2
+    hold_s: float = 2.0
+    max_reprojection_px: float = 2.0
+    moved_m: float = 0.03
+    moved_deg: float = 3.0
+    edge_margin_m: float = 0.01
+
+    def __post_init__(self) -> None:
+        s = "perception.board"
+        size = check_vector(s, "size_m", self.size_m, 2)
+        object.__setattr__(self, "size_m", size)
+        if size != (0.0, 0.0) and not all(0.2 <= v <= 5.0 for v in size):
+            raise ConfigError(f"[{s}] size_m must be [0, 0] (measure) or two lengths in [0.2, 5.0] m, got {list(size)}")
+        _range(s, "resolution_m", self.resolution_m, 0.0005, 0.01)
+        if not isinstance(self.min_markers, int) or isinstance(self.min_markers, bool) or not 1 <= self.min_markers <= 4:
+            raise ConfigError(f"[{s}] min_markers must be an integer in [1, 4], got {self.min_markers!r}")
+        _range(s, "hold_s", self.hold_s, 0.0, 600.0)
+        _range(s, "max_reprojection_px", self.max_reprojection_px, 0.1, 20.0)
+        _range(s, "moved_m", self.moved_m, 0.001, 1.0)
+        _range(s, "moved_deg", self.moved_deg, 0.1, 90.0)
+        _range(s, "edge_margin_m", self.edge_margin_m, 0.0, 0.1)
+
+
+@dataclass(frozen=True)
+class InkParams:
+    """Telling ink from clean board and from anything that is not board.
+
+    Each board pixel is explained as ``x = s (1 - d a)`` (per channel,
+    relative to the local white): illumination ``s`` (shading, shadows) and
+    ink fraction ``d`` with the ink's absorption ``a = 1 - ink_rgb /
+    board_rgb``. ink_rgb / board_rgb : the ink and the clean board as one
+    camera sees them in the same light (RGB, 0-255). stain_level : ink
+    fraction from which a pixel is stain. illumination_range : ``s`` outside
+    it is not board (the arm, deep shadow, a glare). max_residual : colour
+    distance from the board-and-ink model above which a pixel is not board
+    (the eraser, the arm's orange ring). prior_weight : pull of ``s``
+    towards 1 (needed for neutral, e.g. black, ink). occlusion_margin_m :
+    occluded areas grow by this [m] (mixed pixels at their edges).
+    """
+
+    ink_rgb: tuple[float, float, float] = (28.0, 38.0, 96.0)
+    board_rgb: tuple[float, float, float] = (242.0, 243.0, 238.0)
+    stain_level: float = 0.3
+    illumination_range: tuple[float, float] = (0.82, 1.3)
+    max_residual: float = 0.06
+    prior_weight: float = 0.002
+    occlusion_fill_m: float = 0.04
+    occlusion_margin_m: float = 0.004
+
+    def __post_init__(self) -> None:
+        s = "perception.ink"
+        ink = check_vector(s, "ink_rgb", self.ink_rgb, 3)
+        board = check_vector(s, "board_rgb", self.board_rgb, 3)
+        if not all(0 <= v <= 255 for v in ink + board):
+            raise ConfigError(f"[{s}] ink_rgb and board_rgb must be colours in [0, 255]")
+        if not all(b > 0 for b in board) or max(1 - i / b for i, b in zip(ink, board)) < 0.2:
+            raise ConfigError(f"[{s}] ink_rgb {list(ink)} must be darker than board_rgb {list(board)} "
+                              "by at least 20 % in some channel")
+        object.__setattr__(self, "ink_rgb", ink)
+        object.__setattr__(self, "board_rgb", board)
+        _range(s, "stain_level", self.stain_level, 0.05, 0.95)
+        lo, hi = check_vector(s, "illumination_range", self.illumination_range, 2)
+        if not 0.05 <= lo < 1.0 < hi <= 5.0:
+            raise ConfigError(f"[{s}] illumination_range must be [lo, hi] with 0.05 <= lo < 1 < hi <= 5, "
+                              f"got {[lo, hi]}")
+        object.__setattr__(self, "illumination_range", (lo, hi))
+        _range(s, "max_residual", self.max_residual, 0.005, 1.0)
+        _range(s, "prior_weight", self.prior_weight, 0.0, 10.0)
+        _range(s, "occlusion_fill_m", self.occlusion_fill_m, 0.0, 0.2)
+        _range(s, "occlusion_margin_m", self.occlusion_margin_m, 0.0, 0.05)
+
+
+@dataclass(frozen=True)
+class StainParams:
+    """Clustering stain pixels into stains and following them.
+
+    link_m : stain pixels closer than this belong to the same stain
+    (single-linkage clustering, the number of stains is not given) [m].
+    min_area_m2 : smaller clusters are noise [m^2]. confirm_s : a new
+    cluster becomes a stain after it has been seen this long [s] (and
+    perception/stains is first published once the board has been watched
+    this long). region_margin_m : a stain's region reaches this far beyond
+    its ink, so its edges count in the remaining fraction [m].
+    """
+
+    link_m: float = 0.015
+    min_area_m2: float = 1.5e-4
+    confirm_s: float = 0.3
+    region_margin_m: float = 0.006
+
+    def __post_init__(self) -> None:
+        s = "perception.stains"
+        _range(s, "link_m", self.link_m, 0.001, 0.2)
+        _range(s, "min_area_m2", self.min_area_m2, 1e-6, 0.1)
+        _range(s, "confirm_s", self.confirm_s, 0.0, 10.0)
+        _range(s, "region_margin_m", self.region_margin_m, 0.0, 0.05)
+
+
+@dataclass(frozen=True)
+class KappaParams:
+    """When a stain counts as wiped (kappa = 1).
+
+    kappa turns 1 once the remaining fraction has stayed at or below
+    ``level`` for ``debounce_s`` while at least ``min_seen`` of the stain has
+    been seen within the last ``memory_s`` (an occluded pixel keeps its last
+    observation and never counts as clean by being hidden). It returns to 0
+    only when the remaining fraction rises above ``level + reappear_margin``
+    for ``debounce_s`` (new ink on the stain).
+    """
+
+    level: float = 0.03
+    debounce_s: float = 0.2
+    min_seen: float = 0.9
+    memory_s: float = 1.5
+    reappear_margin: float = 0.1
+
+    def __post_init__(self) -> None:
+        s = "perception.kappa"
+        _range(s, "level", self.level, 0.0, 0.9)
+        _range(s, "debounce_s", self.debounce_s, 0.0, 10.0)
+        _range(s, "min_seen", self.min_seen, 0.1, 1.0)
+        _range(s, "memory_s", self.memory_s, 0.05, 60.0)
+        _range(s, "reappear_margin", self.reappear_margin, 0.01, 1.0)
+
+
+@dataclass(frozen=True)
+class CameraModelParams:
+    """The camera model for sources whose frames carry none (image folder, video file, capture device).
+
+    fx, fy, cx, cy [px] at the frames' resolution (0 = a D435i-like 615 px
+    focal length scaled to the width, principal point at the centre);
+    position_m, look_at_m, up_m: the camera pose in the world (robot base)
+    frame; the board pose is then reported in that frame.
+    """
+
+    fx: float = 0.0
+    fy: float = 0.0
+    cx: float = 0.0
+    cy: float = 0.0
+    position_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    look_at_m: tuple[float, float, float] = (1.0, 0.0, 1.0)
+    up_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+    def __post_init__(self) -> None:
+        s = "perception.camera"
+        for name in ("fx", "fy", "cx", "cy"):
+            _range(s, name, getattr(self, name), 0.0, 20000.0)
+        for name in ("position_m", "look_at_m", "up_m"):
+            object.__setattr__(self, name, check_vector(s, name, getattr(self, name), 3))
+
+
+#: Source specifications: ``zenoh``, ``folder:DIR``, ``video:FILE``, ``device:N``.
+SOURCE_KINDS = ("zenoh", "folder", "video", "device")
+
+
+def parse_source(spec: str) -> tuple[str, str]:
+    """``(kind, argument)`` of a source specification, or ConfigError naming the valid forms."""
+    if not isinstance(spec, str):
+        raise ConfigError(f"[perception] source must be a string, got {spec!r}")
+    kind, _, arg = spec.partition(":")
+    if kind == "zenoh" and not arg:
+        return kind, ""
+    if kind in ("folder", "video") and arg:
+        return kind, arg
+    if kind == "device" and re.fullmatch(r"\d{1,3}", arg):
+        return kind, arg
+    raise ConfigError(f"[perception] source must be 'zenoh', 'folder:DIR', 'video:FILE' or 'device:N', got {spec!r}")
+
+
+@dataclass(frozen=True)
+class PerceptionParams:
+    """Everything ``lamps perception`` needs (see the module docstring for the layout)."""
+
+    camera: str = "board"
+    source: str = "zenoh"
+    publish_rate_hz: float = 10.0
+    status_rate_hz: float = 2.0
+    debug_images: bool = False
+    debug_rate_hz: float = 2.0
+    frame_timeout_s: float = 2.0
+    source_rate_hz: float = 10.0
+    board: BoardParams = field(default_factory=BoardParams)
+    ink: InkParams = field(default_factory=InkParams)
+    stains: StainParams = field(default_factory=StainParams)
+    kappa: KappaParams = field(default_factory=KappaParams)
+    model: CameraModelParams = field(default_factory=CameraModelParams)
+
+    def __post_init__(self) -> None:
+        s = "perception"
+        if not isinstance(self.camera, str) or not re.fullmatch(r"[A-Za-z0-9_\-.]+", self.camera):
+            raise ConfigError(f"[{s}] camera must be letters, digits, '_', '-' or '.', got {self.camera!r}")
+        parse_source(self.source)
+        _range(s, "publish_rate_hz", self.publish_rate_hz, 1.0, 200.0)
+        _range(s, "status_rate_hz", self.status_rate_hz, 0.1, 50.0)
+        _range(s, "debug_rate_hz", self.debug_rate_hz, 0.1, 30.0)
+        _range(s, "frame_timeout_s", self.frame_timeout_s, 0.1, 60.0)
+        _range(s, "source_rate_hz", self.source_rate_hz, 0.1, 120.0)
+        if not isinstance(self.debug_images, bool):
+            raise ConfigError(f"[{s}] debug_images must be true or false, got {self.debug_images!r}")
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> "PerceptionParams":
+        """The ``[perception]`` table (with its sub-tables) as parameters."""
+        if not isinstance(table, Mapping):
+            raise ConfigError(f"[perception] must be a table, got {type(table).__name__}")
+        table = dict(table)
+        subs = {"board": BoardParams, "ink": InkParams, "stains": StainParams, "kappa": KappaParams,
+                "camera_model": CameraModelParams}
+        parts = {}
+        for name, kind in subs.items():
+            key = "model" if name == "camera_model" else name
+            try:
+                parts[key] = dataclass_from_table(kind, f"perception.{name}", table.pop(name, {}))
+            except TypeError as exc:
+                raise ConfigError(f"[perception.{name}] {exc}") from None
+        return dataclass_from_table(cls, "perception", table, **parts)

@@ -1,0 +1,132 @@
+"""One camera frame in, the board and its stains out: the whole of perception without any I/O.
+
+:meth:`Perception.process` runs board finding (:mod:`~perception.board`),
+rectification (:mod:`~perception.rectify`), pixel classification
+(:mod:`~perception.classify`) and stain tracking (:mod:`~perception.tracking`)
+and returns a :class:`Result` whose ``stains`` is the message to publish (or
+None while nothing can be said yet) and whose ``reason`` says why a frame
+did not give a fresh view.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from interfaces.messages import StainObservation, Stains
+from interfaces.transforms import pose_from_transform
+
+from .board import BoardEstimate, BoardTracker
+from .classify import InkClassifier, InkMap
+from .frames import Frame
+from .params import PerceptionParams
+from .rectify import BoardGrid
+from .tracking import StainTracker
+
+#: Marker areas are left out of the stain search with this margin [m].
+MARKER_MARGIN_M = 0.005
+#: The frame clock going back by more than this means a restarted source [s].
+CLOCK_RESTART_S = 1.0
+
+
+@dataclass
+class Result:
+    """What one frame gave.
+
+    stains : the message to publish, or None (board never found, warming
+    up). board : the board estimate (None before the first fix). reason :
+    why the view is not fresh ("" when it is). timing_ms : duration of
+    each stage. ink / rect : this frame's classification and rectified image
+    (None when the board is lost), for debug images.
+    """
+
+    stains: Stains | None
+    board: BoardEstimate | None
+    reason: str = ""
+    timing_ms: dict[str, float] = field(default_factory=dict)
+    ink: InkMap | None = None
+    rect: np.ndarray | None = None
+
+
+class Perception:
+    """Board, stains and kappa from a stream of :class:`~perception.frames.Frame`."""
+
+    def __init__(self, params: PerceptionParams) -> None:
+        self.p = params
+        self.board = BoardTracker(params.board)
+        self.grid: BoardGrid | None = None
+        self.classifier: InkClassifier | None = None
+        self.tracker: StainTracker | None = None
+        self._first_fix_t: float | None = None
+        self._last_t: float | None = None
+        self._seq = 0
+        self.resets = 0
+
+    def reset(self) -> None:
+        """Forget the board and its stains (a restarted source, another board)."""
+        self.board.reset()
+        self.grid = self.classifier = self.tracker = None
+        self._first_fix_t = None
+        self.resets += 1
+
+    def process(self, frame: Frame) -> Result:
+        """The board and its stains in ``frame``."""
+        timing: dict[str, float] = {}
+        t0 = time.perf_counter()
+        if self._last_t is not None and frame.t_s < self._last_t - CLOCK_RESTART_S:
+            self.reset()
+        self._last_t = frame.t_s
+        grey = cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY)
+        est = self.board.update(grey, frame.K, frame.T_camera_to_world, frame.t_s)
+        t1 = time.perf_counter()
+        timing["board"] = (t1 - t0) * 1e3
+        if est is None:
+            return Result(None, None, "board not found: " + self.board.why, timing)
+        if est.moved or (self.grid is not None and self.grid.size_m != est.size_m):
+            self.reset()
+            self.board.last = est  # keep this fix: it is the new board
+            self.board.size_m = est.size_m
+        if self.grid is None:
+            self._setup(est)
+        if self._first_fix_t is None:
+            self._first_fix_t = frame.t_s
+        if est.state == "lost":
+            return Result(self._message(est, frame, lost=True), est, est.reason, timing)
+        rect = self.grid.warp(frame.rgb, self.grid.image_from_grid(frame.K, est.T_board_to_camera))
+        t2 = time.perf_counter()
+        ink = self.classifier.classify(rect)
+        t3 = time.perf_counter()
+        self.tracker.update(ink, frame.t_s)
+        t4 = time.perf_counter()
+        timing.update(rectify=(t2 - t1) * 1e3, classify=(t3 - t2) * 1e3, track=(t4 - t3) * 1e3)
+        warming = frame.t_s - self._first_fix_t < self.p.stains.confirm_s - 1e-9
+        msg = None if warming else self._message(est, frame, lost=False)
+        reason = est.reason or ("warming up" if warming else "")
+        return Result(msg, est, reason, timing, ink, rect)
+
+    def _setup(self, est: BoardEstimate) -> None:
+        self.grid = BoardGrid(est.size_m, self.p.board.resolution_m)
+        looked_at = self.grid.looked_at(self.p.board.edge_margin_m, MARKER_MARGIN_M)
+        self.classifier = InkClassifier(self.p.ink, looked_at, self.p.board.resolution_m)
+        self.tracker = StainTracker(self.grid, self.p.stains, self.p.kappa)
+
+    def _message(self, est: BoardEstimate, frame: Frame, lost: bool) -> Stains:
+        T = est.T_board_to_world
+        out = []
+        for tr in self.tracker.tracks:
+            if tr.shape is None:
+                continue
+            c = tr.shape.centre_m
+            world = T[:3, :3] @ np.array([c[0], c[1], 0.0]) + T[:3, 3]
+            out.append(StainObservation(
+                id=tr.id, centre_board_m=[float(c[0]), float(c[1])], centre_world_m=world.tolist(),
+                size_m=float(tr.shape.size_m), extent_board_m=[float(v) for v in tr.shape.extent_m],
+                remaining=float(tr.remaining), visible=0.0 if lost else float(tr.visible),
+                kappa=False if lost else bool(tr.kappa)))
+        self._seq += 1
+        return Stains(seq=self._seq, stamp_ns=time.monotonic_ns(), T_board_to_world=pose_from_transform(T),
+                      board_size_m=[float(v) for v in est.size_m], stains=out, board=est.state,
+                      frame_seq=frame.seq, robot_time_ns=frame.robot_time_ns)

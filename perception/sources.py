@@ -1,0 +1,142 @@
+"""Where frames come from: Zenoh camera messages, an image folder, a video file or a capture device.
+
+Every source turns its input into a :class:`~perception.frames.Frame` and
+counts what it could not use by reason, so the rest of perception is one
+code path. ``read()`` never raises on bad input; it returns None when there
+is no (usable) frame now, and sets ``ended`` when a finite source is done.
+Sources without a camera model of their own (files, devices) take it from
+``[perception.camera_model]``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from interfaces.messages import CameraFrame
+
+from .frames import Frame, FrameError, frame_from_message
+from .params import CameraModelParams, PerceptionParams, parse_source
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+#: The default focal length of a D435i colour stream at 640 px width [px].
+DEFAULT_FX_AT_640 = 615.0
+
+
+def camera_model(params: CameraModelParams, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(K (3, 3), T_camera_to_world (4, 4))`` of a configured camera for frames of ``width`` x ``height``."""
+    f = DEFAULT_FX_AT_640 * width / 640.0
+    K = np.array([[params.fx or f, 0.0, params.cx or (width - 1) / 2.0],
+                  [0.0, params.fy or f, params.cy or (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+    position, target, up = (np.array(v, float) for v in (params.position_m, params.look_at_m, params.up_m))
+    z = target - position
+    z /= np.linalg.norm(z)
+    y = -(up - (up @ z) * z)
+    if np.linalg.norm(y) < 1e-6:
+        raise FrameError("bad camera model: up_m is parallel to the viewing direction")
+    y /= np.linalg.norm(y)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([np.cross(y, z), y, z])
+    T[:3, 3] = position
+    return K, T
+
+
+class ZenohSource:
+    """Newest camera frame on ``camera/<name>/frame`` (older ones are superseded, counted as dropped)."""
+
+    ended = False
+
+    def __init__(self, node, camera: str) -> None:
+        self.reader = node.latest(node.keys.camera_frame(camera), CameraFrame)
+        self.counters: Counter[str] = Counter()
+        self._last_seq: int | None = None
+
+    def read(self) -> Frame | None:
+        msg = self.reader.take()
+        for reason, n in self.reader.bad.items():  # undecodable payloads, counted by the reader
+            self.counters[f"frames_bad: {reason}"] = n
+        if msg is None:
+            return None
+        if self._last_seq is not None and msg.seq > self._last_seq + 1:
+            self.counters["frames_dropped"] += msg.seq - self._last_seq - 1
+        self._last_seq = msg.seq
+        try:
+            return frame_from_message(msg)
+        except FrameError as exc:
+            self.counters[f"frames_bad: {str(exc).split(':')[0]}"] += 1
+            return None
+
+    def close(self) -> None:
+        self.reader.close()
+
+
+class OpenCVSource:
+    """Frames from an image folder (sorted by name), a video file or a capture device (e.g. a UVC RealSense).
+
+    Folder frames are stamped ``index / rate_hz`` and video frames by their
+    position in the file, so debounce times mean the same as live; device
+    frames by the monotonic clock.
+    """
+
+    def __init__(self, spec: str, params: PerceptionParams) -> None:
+        self.kind, arg = parse_source(spec)
+        self.model = params.model
+        self.rate_hz = params.source_rate_hz
+        self.counters: Counter[str] = Counter()
+        self.ended = False
+        self._seq = 0
+        self._files: list[Path] = []
+        self._cap = None
+        if self.kind == "folder":
+            folder = Path(arg)
+            if not folder.is_dir():
+                raise FileNotFoundError(f"image folder {arg!r} does not exist")
+            self._files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+            if not self._files:
+                raise FileNotFoundError(f"image folder {arg!r} has no {'/'.join(IMAGE_SUFFIXES)} files")
+        elif self.kind in ("video", "device"):
+            self._cap = cv2.VideoCapture(arg if self.kind == "video" else int(arg))
+            if not self._cap.isOpened():
+                raise FileNotFoundError(f"cannot open {self.kind} {arg!r}")
+        else:
+            raise ValueError(f"OpenCVSource cannot read {spec!r}")
+
+    def read(self) -> Frame | None:
+        if self.ended:
+            return None
+        t = self._seq / self.rate_hz
+        if self.kind == "folder":
+            if self._seq >= len(self._files):
+                self.ended = True
+                return None
+            path = self._files[self._seq]
+            bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            self._seq += 1
+            if bgr is None:
+                self.counters["frames_bad: corrupt image file"] += 1
+                return None
+        else:
+            ok, bgr = self._cap.read()
+            if not ok:
+                if self.kind == "video":
+                    self.ended = True
+                else:
+                    self.counters["frames_bad: capture failed"] += 1
+                return None
+            self._seq += 1
+            t = (self._cap.get(cv2.CAP_PROP_POS_MSEC) / 1e3 if self.kind == "video" else time.monotonic())
+        h, w = bgr.shape[:2]
+        try:
+            K, T = camera_model(self.model, w, h)
+        except FrameError as exc:
+            self.counters[f"frames_bad: {str(exc).split(':')[0]}"] += 1
+            return None
+        return Frame(np.ascontiguousarray(bgr[..., ::-1]), K, T, float(t), self._seq - 1, time.monotonic_ns())
+
+    def close(self) -> None:
+        if self._cap is not None:
+            self._cap.release()

@@ -1,0 +1,194 @@
+"""Stains followed frame to frame on the rectified board: stable ids, regions, remaining and visible fractions, kappa.
+
+A stain is born from a cluster of stain pixels (:func:`~perception.cluster.cluster_pixels`)
+that stays for ``confirm_s``. From then on it owns a *region*: the pixels
+ever seen as its ink (its *core*), grown by ``region_margin_m``. Stain
+pixels within ``link_m`` of a core join it (the rest of a stain the arm hid
+at first, ink smeared by the eraser); stain pixels farther away start new
+candidates. Per region pixel the tracker keeps
+
+- ``d_ref``: the most ink seen there (the stain at its first sighting,
+  since wiping only removes ink),
+- ``d_last``: the ink at its last visible observation, and when that was.
+
+Fractions of a stain::
+
+    remaining = sum(d_last) / sum(d_ref)      over its region
+    visible   = visible pixels / region pixels  (this frame)
+    seen      = pixels observed within memory_s / region pixels
+
+so a pixel the arm or the eraser hides keeps its last observation and never
+turns clean by being hidden; kappa (:class:`~perception.kappa.KappaLatch`)
+needs ``seen >= min_seen``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from interfaces.stain_shape import Shape, shape_of
+
+from .classify import InkMap
+from .cluster import cluster_pixels, disc
+from .kappa import KappaLatch
+from .params import KappaParams, StainParams
+from .rectify import BoardGrid
+
+
+@dataclass
+class _Candidate:
+    centre_px: np.ndarray
+    first_t: float
+    last_t: float
+    frames: int
+    mask: np.ndarray
+
+
+@dataclass
+class Track:
+    """One stain. Arrays are (rows, cols) over the rectified grid; ``box`` = (r0, r1, c0, c1) bounds the region."""
+
+    id: int
+    core: np.ndarray
+    region: np.ndarray
+    d_ref: np.ndarray
+    d_last: np.ndarray
+    t_seen: np.ndarray
+    latch: KappaLatch
+    box: tuple[int, int, int, int]
+    shape: Shape | None = None
+    remaining: float = 1.0
+    visible: float = 0.0
+    seen: float = 0.0
+    born_t: float = 0.0
+
+    @property
+    def kappa(self) -> bool:
+        return self.latch.kappa
+
+
+def _box_of(mask: np.ndarray, pad: int) -> tuple[int, int, int, int]:
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    r, c = mask.shape
+    return (max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, r), max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, c))
+
+
+class StainTracker:
+    """All stains of one board; :meth:`update` once per classified frame."""
+
+    def __init__(self, grid: BoardGrid, stains: StainParams, kappa: KappaParams) -> None:
+        self.grid = grid
+        self.p = stains
+        self.kp = kappa
+        res = grid.resolution_m
+        self.link_px = stains.link_m / res
+        self.min_px = max(int(np.ceil(stains.min_area_m2 / (res * res))), 1)
+        self._margin = disc(stains.region_margin_m / res)
+        self._link = disc(self.link_px)
+        self._pad = int(np.ceil(self.link_px + stains.region_margin_m / res)) + 1
+        self.tracks: list[Track] = []
+        self._candidates: list[_Candidate] = []
+        self._next_id = 0
+
+    # -- per frame -------------------------------------------------------------------------------------
+
+    def update(self, ink: InkMap, t_s: float) -> None:
+        """Follow the stains into the frame of ``ink`` taken at ``t_s`` [s]."""
+        visible = ink.visible
+        owned = np.zeros(visible.shape, bool)
+        for tr in self.tracks:
+            self._grow(tr, ink, owned)
+            owned |= tr.region
+        for tr in self.tracks:
+            self._observe(tr, ink, visible, t_s)
+        near = cv2.dilate(owned.view(np.uint8), self._link).view(bool) if self.tracks else owned
+        self._detect(ink.stain & ~near, ink, visible, t_s)
+
+    def _grow(self, tr: Track, ink: InkMap, owned: np.ndarray) -> None:
+        """Stain pixels within ``link_m`` of the core (and nobody's) join the stain."""
+        r0, r1, c0, c1 = tr.box
+        reach = cv2.dilate(tr.core[r0:r1, c0:c1].view(np.uint8), self._link).view(bool)
+        new = reach & ink.stain[r0:r1, c0:c1] & ~tr.core[r0:r1, c0:c1] & ~owned[r0:r1, c0:c1]
+        if not new.any():
+            return
+        tr.core[r0:r1, c0:c1] |= new
+        self._set_region(tr)
+
+    def _set_region(self, tr: Track) -> None:
+        tr.box = _box_of(tr.core, self._pad)
+        r0, r1, c0, c1 = tr.box
+        tr.region[r0:r1, c0:c1] = cv2.dilate(tr.core[r0:r1, c0:c1].view(np.uint8), self._margin).view(bool)
+
+    def _observe(self, tr: Track, ink: InkMap, visible: np.ndarray, t_s: float) -> None:
+        r0, r1, c0, c1 = tr.box
+        reg = tr.region[r0:r1, c0:c1]
+        vis = visible[r0:r1, c0:c1] & reg
+        d = ink.d[r0:r1, c0:c1]
+        d_last, d_ref, t_seen = tr.d_last[r0:r1, c0:c1], tr.d_ref[r0:r1, c0:c1], tr.t_seen[r0:r1, c0:c1]
+        d_last[vis] = d[vis]
+        t_seen[vis] = t_s
+        np.maximum(d_ref, np.where(vis, d, 0.0), out=d_ref)
+        n = int(reg.sum())
+        ref = float(d_ref[reg].sum())
+        tr.remaining = float(np.clip(d_last[reg].sum() / ref, 0.0, 1.0)) if ref > 0 else 1.0
+        tr.visible = int(vis.sum()) / max(n, 1)
+        tr.seen = int(np.count_nonzero(t_s - t_seen[reg] <= self.kp.memory_s)) / max(n, 1)
+        tr.latch.update(t_s, tr.remaining, tr.seen)
+        core = tr.core[r0:r1, c0:c1]
+        rows, cols = np.nonzero(core)
+        if rows.size:
+            tr.shape = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m)
+
+    def _detect(self, free: np.ndarray, ink: InkMap, visible: np.ndarray, t_s: float) -> None:
+        """New clusters: candidates until seen for ``confirm_s``, then stains."""
+        n, labels = cluster_pixels(free, self.link_px)
+        seen_now: list[tuple[np.ndarray, np.ndarray]] = []
+        if n:
+            counts = np.bincount(labels.ravel(), minlength=n + 1)
+            for k in np.flatnonzero(counts >= self.min_px):
+                if k == 0:
+                    continue
+                mask = labels == k
+                rows, cols = np.nonzero(mask)
+                seen_now.append((np.array([rows.mean(), cols.mean()]), mask))
+        kept: list[_Candidate] = []
+        for centre, mask in seen_now:
+            match = min(self._candidates, key=lambda c: np.linalg.norm(c.centre_px - centre), default=None)
+            if match is not None and np.linalg.norm(match.centre_px - centre) <= 2 * self.link_px \
+                    and not any(match is k for k in kept):
+                match.centre_px, match.last_t, match.frames, match.mask = centre, t_s, match.frames + 1, mask
+                kept.append(match)
+            else:
+                kept.append(_Candidate(centre, t_s, t_s, 1, mask))
+        self._candidates = []
+        for c in kept:
+            if t_s - c.first_t >= self.p.confirm_s - 1e-9 and (c.frames >= 2 or self.p.confirm_s == 0):
+                self._promote(c, ink, visible, t_s)
+            else:
+                self._candidates.append(c)
+
+    def _promote(self, c: _Candidate, ink: InkMap, visible: np.ndarray, t_s: float) -> None:
+        shape = c.mask.shape
+        tr = Track(self._next_id, c.mask.copy(), np.zeros(shape, bool), np.zeros(shape, np.float32),
+                   np.zeros(shape, np.float32), np.full(shape, -np.inf), KappaLatch(self.kp), (0, 0, 0, 0),
+                   born_t=t_s)
+        self._next_id += 1
+        self._set_region(tr)
+        self._observe(tr, ink, visible, t_s)
+        self.tracks.append(tr)
+
+    # -- queries ---------------------------------------------------------------------------------------
+
+    def candidates(self) -> int:
+        return len(self._candidates)
+
+    def debug_labels(self) -> np.ndarray:
+        """(rows, cols) int32: track index + 1 on each region, 0 elsewhere (for drawing)."""
+        out = np.zeros(self.grid.shape, np.int32)
+        for i, tr in enumerate(self.tracks):
+            out[tr.region] = i + 1
+        return out
