@@ -1,0 +1,144 @@
+"""Perception benchmark: processing time per 640x480 frame on one core, and kappa latency in the closed loop.
+
+1. Frames rendered by ``lamps sim`` (lock-step, wall board, 4 seeded stains,
+   the arm parked and the arm over the board) are processed by
+   :class:`perception.pipeline.Perception` with OpenCV on one thread; per
+   stage and total. Baseline in the same run: the same stain pixels clustered
+   with scikit-learn's DBSCAN (``min_samples = 1``, same link distance), the
+   paper's pixel clustering done directly.
+2. The closed loop over real Zenoh (``lamps sim`` with its camera, the
+   controller taking stains from perception, perception on the sim's
+   frames): for each stain, when the truth fell below the kappa level, when
+   the stain was back in view, and when perception published kappa (sim
+   time), plus the wall-clock age of each published stains message.
+
+Run: ``.venv/bin/python bench/bench_perception.py`` (about 2 minutes); prints a JSON summary.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from sklearn.cluster import DBSCAN  # noqa: E402
+
+from interfaces.messages import CameraFrame, SimTruth  # noqa: E402
+from interfaces.robot_model import RobotModel  # noqa: E402
+from perception.cluster import cluster_pixels  # noqa: E402
+from perception.frames import frame_from_message  # noqa: E402
+from perception.params import PerceptionParams  # noqa: E402
+from perception.pipeline import Perception  # noqa: E402
+from tests.zenoh_helpers import SimProcess, run_lockstep, wait_for  # noqa: E402  (the real sim, started as in tests)
+
+PARKED_Q = [2.6, 0.3, 0.0, -1.2, 0.0, 0.8, 0.0]
+
+
+def render(tmp: Path, model: RobotModel, cfg: dict, steps: int) -> list[CameraFrame]:
+    with SimProcess(tmp, {"mode": "lockstep", "camera": {"rate_hz": 10.0}, **cfg}) as sim:
+        inbox = sim.node.inbox(sim.keys.camera_frame("board"), CameraFrame, maxlen=10_000)
+        run_lockstep(sim, steps, lambda s: model.gravity(np.array(s.q_rad)) - 5.0 * np.array(s.dq_rad_s))
+        wait_for(lambda: inbox.received >= steps // 100 - 1, 30.0, "frames")
+        out = []
+        while (f := inbox.get(0.0)) is not None:
+            out.append(f)
+    return out
+
+
+def bench_frames(frames: list[CameraFrame], repeat: int = 3) -> dict:
+    cv2.setNumThreads(1)
+    stages: dict[str, list[float]] = {}
+    totals, dbscan_ms, ours_ms = [], [], []
+    for _ in range(repeat):
+        p = Perception(PerceptionParams())
+        for msg in frames:
+            f = frame_from_message(msg)
+            t0 = time.perf_counter()
+            r = p.process(f)
+            totals.append((time.perf_counter() - t0) * 1e3)
+            for k, v in r.timing_ms.items():
+                stages.setdefault(k, []).append(v)
+            if r.ink is not None:
+                mask = r.ink.stain
+                link = p.tracker.link_px
+                t0 = time.perf_counter()
+                cluster_pixels(mask, link)
+                ours_ms.append((time.perf_counter() - t0) * 1e3)
+                pts = np.argwhere(mask)
+                t0 = time.perf_counter()
+                if len(pts):
+                    DBSCAN(eps=link, min_samples=1).fit_predict(pts)
+                dbscan_ms.append((time.perf_counter() - t0) * 1e3)
+    tot = np.array(totals[len(frames) // 4:])  # after the first frames (board measured, buffers warm)
+    return {
+        "frames": len(totals), "p50_ms": float(np.percentile(tot, 50)), "p99_ms": float(np.percentile(tot, 99)),
+        "fps_one_core_p50": 1000.0 / float(np.percentile(tot, 50)),
+        "stages_p50_ms": {k: float(np.percentile(v, 50)) for k, v in stages.items()},
+        "clustering_p50_ms": float(np.percentile(ours_ms, 50)), "dbscan_p50_ms": float(np.percentile(dbscan_ms, 50)),
+        "dbscan_over_ours": float(np.percentile(dbscan_ms, 50) / max(np.percentile(ours_ms, 50), 1e-6)),
+    }
+
+
+def bench_closed_loop(tmp: Path) -> dict:
+    from controller.cli import load_or_learn_skill
+    from tests.test_controller_service import ControllerThread
+    from tests.test_perception_service import PerceptionThread
+
+    skill = load_or_learn_skill("")
+    t_start = time.monotonic()
+    with SimProcess(tmp, {"mode": "lockstep", "camera": {"rate_hz": 10.0}}) as sim, \
+            ControllerThread(sim, skill, {"stains_from": "perception", "trace_ticks": 0}) as ctl, \
+            PerceptionThread(sim.robot_id, [sim.port, ctl.port]) as per:
+        truth = ctl.operator.inbox(ctl.operator.keys.sim_truth, SimTruth, maxlen=100_000)
+        truths: list[SimTruth] = []
+
+        def done() -> bool:
+            while (t := truth.get(0.0)) is not None:
+                truths.append(t)
+            return ctl.phase == "DONE" and bool(truths) and max(truths[-1].remaining) < 0.05
+
+        wait_for(done, 600.0, "the wipe")
+        wall = time.monotonic() - t_start
+        sent = list(per.sent)
+        level = per.params.kappa.level
+        status = per.service.status()
+    msgs = [m for _, m in sent if m.board != "lost"]
+    centres = np.array(truths[-1].centres_board_m)
+    out = []
+    for sid in sorted({s.id for m in msgs for s in m.stains}):
+        obs = [(m.robot_time_ns * 1e-9, s) for m in msgs for s in m.stains if s.id == sid]
+        k = int(np.argmin(np.linalg.norm(centres - obs[-1][1].centre_board_m, axis=1)))
+        t_truth = next(t.robot_time_ns * 1e-9 for t in truths if t.remaining[k] <= level)
+        t_kappa = next((t for t, s in obs if s.kappa), float("nan"))
+        t_view = next((t for t, s in obs if t >= t_truth and s.visible >= per.params.kappa.min_seen), float("nan"))
+        out.append({"stain": k, "truth_below_s": t_truth, "in_view_s": t_view, "kappa_s": t_kappa,
+                    "latency_from_truth_s": t_kappa - t_truth, "latency_from_view_s": t_kappa - t_view})
+    rates = np.diff([t for t, _ in sent])
+    return {"stains": out, "final_remaining": truths[-1].remaining, "sim_time_s": truths[-1].robot_time_ns * 1e-9,
+            "wall_s": wall, "publish_interval_p50_ms": float(np.median(rates) * 1e3),
+            "publish_interval_max_ms": float(rates.max() * 1e3),
+            "process_p50_us": status.counters.get("process_p50_us"), "frames": status.counters.get("frames_processed")}
+
+
+def main() -> int:
+    model = RobotModel()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        parked = render(tmp, model, {"seed": 0, "start_q_rad": PARKED_Q, "dirt": {"stains": 4}}, 3000)
+        arm = render(tmp, model, {"seed": 0, "dirt": {"stains": 4}}, 3000)
+        result = {"frames_arm_parked": bench_frames(parked), "frames_arm_over_board": bench_frames(arm),
+                  "closed_loop": bench_closed_loop(tmp)}
+    print(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
