@@ -173,3 +173,13 @@ def test_source_specs():
     assert parse_source("device:2") == ("device", "2")
     with pytest.raises(ConfigError):
         parse_source("device:cam")
+
+
+def test_the_example_config_shows_the_defaults():
+    import tomllib
+
+    from .conftest import REPO
+
+    with open(REPO / "config" / "example.toml", "rb") as f:
+        table = tomllib.load(f)["perception"]
+    assert PerceptionParams.from_table(table) == PerceptionParams()
