@@ -34,6 +34,7 @@ from sklearn.cluster import DBSCAN  # noqa: E402
 from interfaces.messages import CameraFrame, SimTruth  # noqa: E402
 from interfaces.robot_model import RobotModel  # noqa: E402
 from perception.cluster import cluster_pixels  # noqa: E402
+from perception.evaluate import kappa_timings  # noqa: E402
 from perception.frames import frame_from_message  # noqa: E402
 from perception.params import PerceptionParams  # noqa: E402
 from perception.pipeline import Perception  # noqa: E402
@@ -108,19 +109,11 @@ def bench_closed_loop(tmp: Path) -> dict:
         wait_for(done, 600.0, "the wipe")
         wall = time.monotonic() - t_start
         sent = list(per.sent)
-        level = per.params.kappa.level
         status = per.service.status()
-    msgs = [m for _, m in sent if m.board != "lost"]
-    centres = np.array(truths[-1].centres_board_m)
-    out = []
-    for sid in sorted({s.id for m in msgs for s in m.stains}):
-        obs = [(m.robot_time_ns * 1e-9, s) for m in msgs for s in m.stains if s.id == sid]
-        k = int(np.argmin(np.linalg.norm(centres - obs[-1][1].centre_board_m, axis=1)))
-        t_truth = next(t.robot_time_ns * 1e-9 for t in truths if t.remaining[k] <= level)
-        t_kappa = next((t for t, s in obs if s.kappa), float("nan"))
-        t_view = next((t for t, s in obs if t >= t_truth and s.visible >= per.params.kappa.min_seen), float("nan"))
-        out.append({"stain": k, "truth_below_s": t_truth, "in_view_s": t_view, "kappa_s": t_kappa,
-                    "latency_from_truth_s": t_kappa - t_truth, "latency_from_view_s": t_kappa - t_view})
+    out = [{"stain": k.truth_index, "truth_below_s": k.truth_below_s, "in_view_s": k.in_view_s,
+            "kappa_s": k.kappa_s, "latency_from_truth_s": k.kappa_s - k.truth_below_s,
+            "latency_from_view_s": k.kappa_s - k.in_view_s}
+           for k in kappa_timings([m for _, m in sent], truths, per.params.kappa)]
     rates = np.diff([t for t, _ in sent])
     return {"stains": out, "final_remaining": truths[-1].remaining, "sim_time_s": truths[-1].robot_time_ns * 1e-9,
             "wall_s": wall, "publish_interval_p50_ms": float(np.median(rates) * 1e3),

@@ -7,6 +7,7 @@ do not route for each other), fed by the camera of a real ``lamps sim``.
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import threading
@@ -19,6 +20,7 @@ from interfaces.config import ZenohSettings
 from interfaces.robot_model import RobotModel
 from interfaces.messages import CameraFrame, CameraIntrinsics, Pose, ServiceStatus, SimTruth, Stains
 from interfaces.session import ServiceNode
+from perception.evaluate import kappa_timings
 from perception.params import PerceptionParams
 from perception.service import PerceptionService
 from perception.sources import ZenohSource
@@ -84,24 +86,12 @@ def test_closed_loop_wipes_three_seeded_stains_on_perceptions_stains(tmp_path, l
     assert ctl.service.counters.get("stains_rejected", 0) == 0
     # kappa against the truth: perception's flag comes after the truth fell below the level, and soon after
     # the eraser uncovered the stain (it cannot see under the pad)
-    msgs = [m for _, m in per.sent if m.board != "lost"]
-    centres = np.array(final.centres_board_m)
     level = per.params.kappa.level
-    report, checks = [], []
-    for sid in sorted({s.id for m in msgs for s in m.stains}):
-        obs = [(m.robot_time_ns * 1e-9, s) for m in msgs for s in m.stains if s.id == sid]
-        t_idx = int(np.argmin(np.linalg.norm(centres - obs[-1][1].centre_board_m, axis=1)))
-        t_truth = next(t.robot_time_ns * 1e-9 for t in truths if t.remaining[t_idx] <= level)
-        t_kappa = next((t for t, s in obs if s.kappa), None)
-        if t_kappa is None:  # the arm hovering over it after its last pass hid part of it from the camera
-            report.append(f"stain {t_idx}: truth <= {level:.0%} at {t_truth:.2f} s, no kappa (never fully in view)")
-            continue
-        t_seen = next((t for t, s in obs if t >= t_truth and s.visible >= per.params.kappa.min_seen), None)
-        truth_at_kappa = min(truths, key=lambda t: abs(t.robot_time_ns * 1e-9 - t_kappa)).remaining[t_idx]
-        seen = f"{t_seen:.2f} s" if t_seen is not None else "never fully"
-        report.append(f"stain {t_idx}: truth <= {level:.0%} at {t_truth:.2f} s, in view at {seen}, "
-                      f"kappa at {t_kappa:.2f} s (truth then {truth_at_kappa:.1%})")
-        checks.append((truth_at_kappa <= 0.05 and (t_seen is None or t_kappa - t_seen <= 0.5), report[-1]))
+    timings = kappa_timings([m for _, m in per.sent], truths, per.params.kappa)
+    report = [k.describe(level) for k in timings]
+    # a stain without kappa: the arm hovering over it after its last pass hid part of it from the camera
+    checks = [(k.truth_at_kappa <= 0.05 and not k.kappa_s - k.in_view_s > 0.5, line)
+              for k, line in zip(timings, report) if math.isfinite(k.kappa_s)]
     print("\n".join(report))
     for ok, line in checks:
         assert ok, line
