@@ -121,11 +121,18 @@ class InkClassifier:
         self.p = params
         self.looked_at = looked_at
         self.M, self.m = unmixing_matrix(ink_absorption(params), params.prior_weight)
-        self.a = ink_absorption(params).astype(np.float32)
         rows, cols = looked_at.shape
         self.block_px = max(int(round(WHITE_BLOCK_M / resolution_m)), 4)
-        self._cols = np.arange(cols, dtype=np.float32)[None, :]
-        self._rows = np.arange(rows, dtype=np.float32)[:, None]
+        # per pixel [1, col, row]: the local white is cv2.transform of it with the (3, 3) fitted coefficients
+        self._affine_basis = np.dstack([np.ones((rows, cols), np.float32),
+                                        np.broadcast_to(np.arange(cols, dtype=np.float32)[None, :], (rows, cols)),
+                                        np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None], (rows, cols))])
+        # [s, t] = M x + m and the model's residual e = x - A [s, t] = (I - A M) x - A m: both affine in x,
+        # so each is one cv2.transform with a (k, 4) matrix (fused, float32, no temporaries per channel)
+        A = np.column_stack([np.ones(3), -ink_absorption(params)])
+        self._to_st = np.hstack([self.M, self.m[:, None]]).astype(np.float32)
+        self._to_residual = np.hstack([np.eye(3) - A @ self.M, -(A @ self.m)[:, None]]).astype(np.float32)
+        self._sum3 = np.ones((1, 3), np.float32)
         r = int(np.ceil(params.occlusion_margin_m / resolution_m))
         self._grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)) if r > 0 else None
         c = int(np.ceil(params.occlusion_fill_m / resolution_m / 2))
@@ -136,20 +143,17 @@ class InkClassifier:
         p = self.p
         rgb = rect_rgb.astype(np.float32)
         coef = fit_white(rgb, self.looked_at, self.block_px)
-        x = np.empty_like(rgb)
-        for c in range(3):
-            white = coef[c, 0] + coef[c, 1] * self._cols + coef[c, 2] * self._rows
-            np.divide(rgb[..., c], np.maximum(white, 1.0), out=x[..., c])
-        M = self.M.astype(np.float32)
-        s = x @ M[0] + np.float32(self.m[0])
-        t = x @ M[1] + np.float32(self.m[1])
-        model = s[..., None] - t[..., None] * self.a
-        residual = np.sqrt(np.sum((x - model) ** 2, axis=2))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.where(s > 1e-3, t / s, 0.0).astype(np.float32)
+        white = cv2.transform(self._affine_basis, coef.astype(np.float32))  # (rows, cols, 3)
+        np.maximum(white, 1.0, out=white)
+        x = cv2.divide(rgb, white)
+        s, t = cv2.split(cv2.transform(x, self._to_st))
+        e = cv2.transform(x, self._to_residual)
+        residual2 = cv2.transform(cv2.multiply(e, e), self._sum3)
+        d = cv2.divide(t, s)  # s ~ 0 (black: outside the camera image) is out of the illumination range below
         lo, hi = p.illumination_range
-        bad = (s < lo) | (s > hi) | (residual > p.max_residual) | (d < D_RANGE[0]) | (d > D_RANGE[1])
-        bad |= rect_rgb.max(axis=2) == 0  # outside the camera image
+        ok = cv2.inRange(s, lo, hi) & cv2.inRange(d, D_RANGE[0], D_RANGE[1]) \
+            & cv2.inRange(residual2, -1.0, p.max_residual ** 2)
+        bad = ok == 0
         if self._fill is not None:  # highlights on the arm, gaps between its links: not board to judge
             bad |= ~self.looked_at
             bad = cv2.morphologyEx(bad.view(np.uint8), cv2.MORPH_CLOSE, self._fill).view(bool)
