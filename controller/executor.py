@@ -30,8 +30,10 @@ FAULT(reason) and ESTOP reachable from any phase.
   the stains open *now* (appeared, vanished or done ones included); a stain
   that moves while it is wiped moves the MP's anchor through its ramp.
 * RETREAT: the in-plane motion is brought to rest C2-continuously, the
-  force ramps down, the pad lifts to ``standoff_m``; DONE holds there and
-  re-approaches if new stains appear.
+  force ramps down, the pad lifts to ``standoff_m``; with stains still
+  waiting for kappa it then flies to :func:`look_point` (off them, on the
+  robot base's side, so the arm does not hide them from the camera) and
+  waits ``recheck_s`` there; DONE holds and re-approaches if stains open.
 * PAUSED / FAULT / ESTOP: the in-plane motion brakes to rest, the force
   ramps down (fast on an e-stop), the pad lifts off and holds. PAUSED
   resumes by itself when stains are fresh again; FAULT and ESTOP wait for
@@ -145,8 +147,24 @@ class Setpoint:
 AIR_BRAKE_S = 0.1
 
 # stages inside a phase
-_FLY, _DESCEND, _PRESS, _RUN, _LEAVE, _BRAKE, _UNPRESS, _LIFT, _HOLD = range(9)
+_FLY, _DESCEND, _PRESS, _RUN, _LEAVE, _BRAKE, _UNPRESS, _LIFT, _HOLD, _LOOK = range(10)
 _ZERO2 = np.zeros(2)
+
+
+def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[float], clearance_m: float) -> np.ndarray:
+    """(2,) board point [m] from which the arm leaves ``centres_m`` (stains (2,), sizes [m]) in the camera's view.
+
+    The arm runs from the pad back towards the robot base, so the pad goes
+    ``clearance_m`` beyond the stains' extent in the direction of the base
+    (its projection on the board plane; the world origin), clipped into the
+    board. With the base right behind the stains: along board -x.
+    """
+    c = np.mean(np.asarray(centres_m, float), axis=0)
+    reach = max(float(np.linalg.norm(np.asarray(x) - c)) + 0.5 * s for x, s in zip(centres_m, sizes_m))
+    d = board.to_board(np.zeros(3))[:2] - c
+    n = float(np.linalg.norm(d))
+    d = d / n if n > 1e-6 else np.array([-1.0, 0.0])
+    return np.clip(c + d * (reach + clearance_m), 0.0, board.size_m)
 
 
 class SkillExecutor:
@@ -372,11 +390,21 @@ class SkillExecutor:
             self._move3(dt)
             if self._mover.finished:
                 self._stage = _HOLD
-                if self.phase in ("RETREAT",):
+                if self.phase == "RETREAT" and self._begin_look():
+                    pass
+                elif self.phase in ("RETREAT",):
                     self._set_phase("DONE", "")
                     self.current_mp = "hold"
                 elif self._after_lift == "APPROACH" and self.phase in ("ESTOP", "FAULT"):
                     self._resume()
+        elif st == _LOOK:
+            self._move3(dt)
+            if self._mover.finished:
+                for sid in self._pending_ids():  # perception gets its full recheck_s from here
+                    self._left_at[sid] = self.clock_s
+                self._stage = _HOLD
+                self._set_phase("DONE", "")
+                self.current_mp = "hold"
         elif st == _HOLD:
             sp.v_xy[:] = sp.a_xy[:] = 0.0
             if self.phase == "PAUSED" and self.stains_fresh:
@@ -588,6 +616,33 @@ class SkillExecutor:
             goal[2] = max(goal[2], sp.h)
             self._mover = Quintic((p0, v0, a0), (goal, np.zeros(3), np.zeros(3)), T)
         self._stage = _BRAKE
+
+    def _begin_look(self) -> bool:
+        """Off the board's stains awaiting kappa, so that the arm does not hide them from the camera.
+
+        After the last pass with stains still without kappa (waiting for
+        ``recheck_s``), the pad flies at ``standoff_m`` to the board point
+        ``look_clearance_m`` beyond their edge on the side of the robot base:
+        the arm reaches back towards the base, away from them. False (no
+        move) when nothing waits or the clearance is 0.
+        """
+        pending = [self.stains[i] for i in self._pending_ids()]
+        if not pending or self.p.look_clearance_m <= 0.0 or self.board is None:
+            return False
+        goal = look_point(self.board, [s.centre_m for s in pending], [s.size_m for s in pending],
+                          self.p.look_clearance_m)
+        sp = self._sp
+        if np.linalg.norm(goal - sp.xy) < 0.005:
+            return False
+        self._mover = rest_to_rest(np.array([*sp.xy, sp.h]), np.array([*goal, sp.h]), self.p.approach_speed_m_s, 0.5)
+        self.current_mp = "look"
+        self.counters["looks"] += 1
+        self._stage = _LOOK
+        return True
+
+    def _pending_ids(self) -> list[int]:
+        """Stains passed over without kappa, waiting to be looked at (not given up)."""
+        return [i for i, s in self.stains.items() if not s.kappa and i in self._left_at and i not in self._given_up]
 
     def _begin_lift(self, tool: ToolState) -> None:
         sp = self._sp

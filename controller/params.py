@@ -125,6 +125,9 @@ class ExecutorParams:
     the pad has left); recheck_s : a stain left without kappa is wiped again
     only after this long [s] (perception's time to look at it), after the
     others; max_passes : passes before a stain is given up;
+    look_clearance_m : after the last pass with stains still without kappa,
+    the pad waits this far beyond their edge on the robot base's side, where
+    the arm does not hide them from the camera [m] (0: where the pass ended);
     kappa_remaining : with ``stains_from = "truth"``, a stain is done when
     its remaining dirt is at most this fraction; air : wipe ``air_height_m``
     above the board without touching it (a dry run); stop_s : time to brake
@@ -140,9 +143,10 @@ class ExecutorParams:
     descend_speed_m_s: float = 0.02
     creep_height_m: float = 0.008
     turn_rate_rad_s: float = 0.6
-    wipe_timeout_s: float = 5.0
+    wipe_timeout_s: float = 2.5
     recheck_s: float = 1.0
-    max_passes: int = 4
+    max_passes: int = 6
+    look_clearance_m: float = 0.1
     kappa_remaining: float = 0.03
     air: bool = False
     air_height_m: float = 0.03
@@ -160,6 +164,7 @@ class ExecutorParams:
         _range(s, "recheck_s", self.recheck_s, 0.0, 60.0)
         if not isinstance(self.max_passes, int) or isinstance(self.max_passes, bool) or not 1 <= self.max_passes <= 100:
             raise ConfigError(f"[{s}] max_passes must be an integer in [1, 100], got {self.max_passes!r}")
+        _range(s, "look_clearance_m", self.look_clearance_m, 0.0, 1.0)
         _range(s, "kappa_remaining", self.kappa_remaining, 0.0, 1.0)
         if not isinstance(self.air, bool):
             raise ConfigError(f"[{s}] air must be true or false, got {self.air!r}")

@@ -7,7 +7,7 @@ import pytest
 
 from controller.control.force import NormalForceRegulator
 from controller.control.limits import TorqueShaper, joint_margin_torque, speed_excess_force
-from controller.executor import BoardPose, SkillExecutor, StainState, ToolState
+from controller.executor import BoardPose, SkillExecutor, StainState, ToolState, look_point
 from controller.motion import OrientationBlend, Quintic, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
 from interfaces.errors import ConfigError
@@ -370,3 +370,47 @@ def test_a_stain_without_kappa_gets_another_pass_after_the_others_and_a_recheck(
     ex2.set_stains(BOARD, [StainState(0, stains()[0].centre_m, stains()[0].size_m, True)])
     run(ex2, arm, 6.0)
     assert ex2.phase == "DONE" and ex2.counters["wipe_timeouts"] >= 1
+
+
+def test_look_point_is_beyond_the_stains_towards_the_robot_base_and_on_the_board():
+    base_xy = BOARD.to_board(np.zeros(3))[:2]
+    c = np.array([0.5, 0.3])
+    p = look_point(BOARD, [c], [0.06], 0.1)
+    toward = (base_xy - c) / np.linalg.norm(base_xy - c)
+    np.testing.assert_allclose(p - c, 0.13 * toward, atol=1e-9)  # 3 cm stain radius + 10 cm clearance
+    # clipped into the board when the stain is near the base's edge
+    q = look_point(BOARD, [base_xy.clip(0.02, BOARD.size_m - 0.02)], [0.06], 0.5)
+    assert np.all(q >= 0.0) and np.all(q <= BOARD.size_m)
+
+
+def test_after_the_last_pass_without_kappa_the_pad_waits_off_the_stain_for_the_camera(learned_skill):
+    """The arm hovering over the stain it just wiped hides it: the pad moves off it, on the base's side, and waits."""
+    ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, recheck_s=1.0, max_passes=3))
+    arm = IdealArm()
+    s0 = stains()[0]
+    ex.set_stains(BOARD, [s0])
+    log = []
+    t_done = None
+    for k in range(20_000):
+        sp = ex.step(0.001, arm.tool)
+        arm.follow(sp)
+        log.append((ex.phase, ex.current_mp, sp.xy.copy(), sp.h))
+        if ex.phase == "DONE" and t_done is None:
+            t_done = k
+            break
+    assert t_done is not None and ex.counters["looks"] == 1
+    look = [e for e in log if e[1] == "look"]
+    assert look and all(e[0] == "RETREAT" and e[3] >= ExecutorParams().standoff_m - 1e-9 for e in look)
+    expected = look_point(BOARD, [s0.centre_m], [s0.size_m], ExecutorParams().look_clearance_m)
+    np.testing.assert_allclose(log[-1][2], expected, atol=1e-6)
+    # it waits there a full recheck_s (perception's time to look) before another pass
+    log2 = run(ex, arm, 0.9)
+    assert all(e[0] == "DONE" for e in log2)
+    ex.set_stains(BOARD, [StainState(0, s0.centre_m, s0.size_m, True)])  # kappa from the fresh view
+    log3 = run(ex, arm, 2.0)
+    assert all(e[0] == "DONE" for e in log3) and ex.counters["wipe_timeouts"] == 1
+    # without a clearance it holds where the pass ended, as before
+    ex0 = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, look_clearance_m=0.0))
+    ex0.set_stains(BOARD, [s0])
+    run(ex0, IdealArm(), 8.0)
+    assert ex0.counters["looks"] == 0
