@@ -5,7 +5,8 @@ The file has one table per concern (``[zenoh]``, ``[sim]``, ``[controller]``,
 dataclass. Environment variables override single values without editing the
 file (what compose and tests use):
 
-* ``LAMPS__<SECTION>__<KEY>=<value>`` sets ``[section] key`` (lower-cased);
+* ``LAMPS__<SECTION>__<KEY>=<value>`` sets ``[section] key`` (lower-cased;
+  ``LAMPS__SIM__BOARD__PRESET`` reaches into the sub-table ``[sim.board]``);
   the value is parsed as a TOML value (``500``, ``true``, ``"x"``,
   ``["tcp/127.0.0.1:7447"]``) and taken as a plain string if it is not one.
 * Shorthands: ``LAMPS_ROBOT_ID``, ``LAMPS_KEY_PREFIX``, ``LAMPS_ZENOH_LISTEN``
@@ -98,8 +99,9 @@ def _parse_value(text: str) -> Any:
         return text
 
 
-def _env_overrides(env: Mapping[str, str]) -> list[tuple[str, str, Any]]:
-    out = []
+def _env_overrides(env: Mapping[str, str]) -> list[tuple[tuple[str, ...], Any]]:
+    """(table path, value) per override: shorthands first, then ``LAMPS__A__B[__C...]`` in name order."""
+    out: list[tuple[tuple[str, ...], Any]] = []
     for name, (section, key) in _SHORTHANDS.items():
         if name in env:
             raw = env[name]
@@ -107,13 +109,14 @@ def _env_overrides(env: Mapping[str, str]) -> list[tuple[str, str, Any]]:
                 value: Any = [e.strip() for e in raw.split(",") if e.strip()]
             else:
                 value = _parse_value(raw)
-            out.append((section, key, value))
-    for name, raw in env.items():
+            out.append(((section, key), value))
+    for name in sorted(env):
         if name.startswith("LAMPS__"):
             parts = name[len("LAMPS__"):].lower().split("__")
-            if len(parts) != 2 or not all(parts):
-                raise ConfigError(f"environment variable {name}: expected LAMPS__<SECTION>__<KEY>")
-            out.append((parts[0], parts[1], _parse_value(raw)))
+            if len(parts) < 2 or not all(parts):
+                raise ConfigError(f"environment variable {name}: expected LAMPS__<SECTION>__<KEY> "
+                                  "(or LAMPS__<SECTION>__<TABLE>__<KEY>)")
+            out.append((tuple(parts), _parse_value(env[name])))
     return out
 
 
@@ -141,8 +144,13 @@ def load_config(path: str | os.PathLike | None = None, env: Mapping[str, str] | 
     for name, table in data.items():
         if not isinstance(table, dict):
             raise ConfigError(f"{source}: top-level key {name!r} must be a [table], got {type(table).__name__}")
-    for section, key, value in _env_overrides(env):
-        data.setdefault(section, {})[key] = value
+    for path_keys, value in _env_overrides(env):
+        table = data
+        for part in path_keys[:-1]:
+            table = table.setdefault(part, {})
+            if not isinstance(table, dict):
+                raise ConfigError(f"environment override {'.'.join(path_keys)}: {part!r} is not a table")
+        table[path_keys[-1]] = value
     zenoh = ZenohSettings.from_table(data.pop("zenoh", {}))
     return Config(zenoh, data, source)
 

@@ -178,6 +178,9 @@ def test_config_file_and_environment_overrides(tmp_path):
     assert cfg.table("sim") == {"rate_hz": 500, "mode": "lock-step"}
     assert cfg.zenoh.keys.prefix == "x/y"
     assert load_config(None, env={}).zenoh == ZenohSettings()
+    # a sub-table, as compose sets the board preset and the stain count
+    cfg = load_config(path, env={"LAMPS__SIM__BOARD__PRESET": "table", "LAMPS__SIM__DIRT__STAINS": "2"})
+    assert cfg.table("sim") == {"rate_hz": 1000, "board": {"preset": "table"}, "dirt": {"stains": 2}}
 
 
 @pytest.mark.parametrize(
@@ -190,6 +193,7 @@ def test_config_file_and_environment_overrides(tmp_path):
         ("[zenoh]\nport = 1\n", {}, "unknown key"),
         ("", {"LAMPS_ZENOH_MULTICAST": "maybe"}, "multicast_scouting must be true or false"),
         ("", {"LAMPS__SIM": "1"}, "LAMPS__<SECTION>__<KEY>"),
+        ("", {"LAMPS__SIM__RATE_HZ": "5", "LAMPS__SIM__RATE_HZ__X": "1"}, "'rate_hz' is not a table"),
         ("", {"LAMPS_ROBOT_ID": "a b"}, "robot id"),
     ],
 )
