@@ -57,6 +57,13 @@ class Trace:
         self.n += 1
         return r
 
+    def since(self, tick: int) -> tuple[int, np.ndarray, int]:
+        """Rows from ``tick`` (a count of rows ever written) on: (first tick, rows in time order, rows lost)."""
+        m = len(self.data)
+        first = max(tick, self.n - m)
+        idx = np.arange(first, self.n) % m
+        return first, self.data[idx], first - tick
+
     def array(self) -> np.ndarray:
         """(m, len(TRACE_COLUMNS)) in time order."""
         m = len(self.data)
@@ -96,7 +103,9 @@ class ControllerCore:
         self.press_n = 0.0
         self.last_terms = None
         self.time_s = 0.0
-        self.trace = Trace(params.trace_ticks) if params.trace_ticks else None
+        # published in batches with each status: a ring of >= 5 s covers a late status
+        n_trace = max(params.trace_ticks, int(5 * params.rate_hz) if params.publish_trace else 0)
+        self.trace = Trace(n_trace) if n_trace else None
         self._tau = np.zeros(self.model.nq)
         self.kin = Kinematics(self.model)
 

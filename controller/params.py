@@ -190,7 +190,9 @@ class ControllerParams:
     measured pose when states come back. stains_timeout_s : no stains update this long -> PAUSED.
     status_rate_hz : ControllerStatus rate. max_ticks : stop after this many
     ticks (0 = run until stopped). trace_ticks : keep this many ticks of
-    reference/measurement trace in memory (0 = none).
+    reference/measurement trace in memory (0 = none). publish_trace : publish
+    every tick's trace row on ``controller/trace`` in batches with each
+    status (what ``lamps up`` records and reports from).
     """
 
     mode: str = "lockstep"
@@ -203,6 +205,7 @@ class ControllerParams:
     status_rate_hz: float = 20.0
     max_ticks: int = 0
     trace_ticks: int = 0
+    publish_trace: bool = True
     impedance: ImpedanceParams = field(default_factory=ImpedanceParams)
     force: ForceParams = field(default_factory=ForceParams)
     limits: LimitParams = field(default_factory=LimitParams)
@@ -228,6 +231,8 @@ class ControllerParams:
             hi = MAX_TRACE_TICKS if name == "trace_ticks" else 10**9
             if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= hi:
                 raise ConfigError(f"[{s}] {name} must be an integer in [0, {hi}], got {v!r}")
+        if not isinstance(self.publish_trace, bool):
+            raise ConfigError(f"[{s}] publish_trace must be true or false, got {self.publish_trace!r}")
         peak = QUINTIC_PEAK_SPEED * self.executor.approach_speed_m_s
         if peak > self.limits.max_speed_m_s:
             raise ConfigError(

@@ -30,13 +30,14 @@ from collections import Counter
 
 import numpy as np
 
-from interfaces.messages import ControllerStatus, Estop, LoopTiming, RobotState, SimTruth, Stains, TorqueCommand
+from interfaces.messages import (ControllerStatus, ControllerTrace, Estop, LoopTiming, RobotState, SimTruth, Stains,
+                                 TorqueCommand)
 from interfaces.session import ServiceNode
 from interfaces.transforms import transform_from_pose
 
 from controller.lamps.errors import PlanningError
 
-from .core import ControllerCore
+from .core import TRACE_COLUMNS, ControllerCore
 from .executor import BoardPose, StainState
 from .params import ControllerParams
 
@@ -85,6 +86,8 @@ class ControllerService:
         self._status_period_s = 1.0 / params.status_rate_hz
         self._next_status = 0.0
         self._status_seq = 0
+        self._trace_sent = 0
+        self._trace_seq = 0
         self._last_seq = -1
         self._last_robot_ns: int | None = None
         self._last_command: TorqueCommand | None = None
@@ -349,3 +352,15 @@ class ControllerService:
             return
         self._next_status = now + self._status_period_s
         self.node.publish(self.keys.controller_status, self.status())
+        if self.p.publish_trace and self.core.trace is not None:
+            self._publish_trace()
+
+    def _publish_trace(self) -> None:
+        first, rows, dropped = self.core.trace.since(self._trace_sent)
+        if not len(rows):
+            return
+        self._trace_sent = first + len(rows)
+        self._trace_seq += 1
+        self.node.publish(self.keys.controller_trace, ControllerTrace(
+            seq=self._trace_seq, stamp_ns=time.monotonic_ns(), columns=list(TRACE_COLUMNS), first_tick=first,
+            n_rows=len(rows), data=rows.astype("<f8").tobytes(), dropped=dropped))

@@ -82,6 +82,11 @@ class Keys:
         return self._k("controller/status")
 
     @property
+    def controller_trace(self) -> str:
+        """controller -> recorders, with each status: :class:`~interfaces.messages.ControllerTrace` (every tick)."""
+        return self._k("controller/trace")
+
+    @property
     def controller_estop(self) -> str:
         """anyone allowed -> controller, event: :class:`~interfaces.messages.Estop`."""
         return self._k("controller/estop")

@@ -285,6 +285,31 @@ class ControllerStatus(Message, frozen=True):
             raise ValueError(f"phase must be one of {PHASES}, got {self.phase!r}")
 
 
+class ControllerTrace(Message, frozen=True):
+    """Controller -> recorders: every control tick since the previous batch, reference and measurement.
+
+    columns : names of the ``c`` columns (``controller.core.TRACE_COLUMNS``:
+    time [s], phase code, board-frame reference xy / velocity / acceleration,
+    measured pad position, world positions [m], forces [N], contact flag).
+    data : ``n_rows * c`` float64 little-endian, row-major. first_tick : the
+    controller tick of the first row; dropped : rows lost before this batch
+    (the ring was too short for the publishing period).
+    """
+
+    seq: int
+    stamp_ns: int
+    columns: list[str]
+    first_tick: int
+    n_rows: int
+    data: bytes
+    dropped: int = 0
+
+    def __post_init__(self) -> None:
+        if self.n_rows < 0 or len(self.data) != 8 * self.n_rows * len(self.columns):
+            raise ValueError(f"trace data holds {len(self.data)} bytes, not {self.n_rows} rows of "
+                             f"{len(self.columns)} float64")
+
+
 class ServiceStatus(Message, frozen=True):
     """A service's health: what it processed, dropped and why (counters by reason), its loop timing."""
 
@@ -336,5 +361,5 @@ class SimTruth(Message, frozen=True):
 
 #: Every message type, for decoders and tests.
 MESSAGE_TYPES: tuple[type[Message], ...] = (
-    RobotState, TorqueCommand, CameraFrame, Stains, ControllerStatus, ServiceStatus, Estop, SimTruth,
+    RobotState, TorqueCommand, CameraFrame, Stains, ControllerStatus, ControllerTrace, ServiceStatus, Estop, SimTruth,
 )

@@ -23,7 +23,7 @@ from controller.lamps.skill import PeriodicEntry
 from controller.params import ControllerParams
 from controller.service import ControllerService
 from interfaces.config import ZenohSettings
-from interfaces.messages import Capabilities, ControllerStatus, Estop, Pose, RobotState, SimTruth
+from interfaces.messages import ControllerTrace, Capabilities, ControllerStatus, Estop, Pose, RobotState, SimTruth
 from interfaces.session import ServiceNode
 
 from .zenoh_helpers import REPO, SimProcess, free_port, wait_for
@@ -119,13 +119,26 @@ def test_full_wipe_of_three_seeded_stains_with_regulated_force_and_c2_junctions(
             ControllerThread(sim, learned_skill) as ctl:
         truth = ctl.operator.latest(ctl.operator.keys.sim_truth, SimTruth)
         status = ctl.operator.latest(ctl.operator.keys.controller_status, ControllerStatus)
+        batches = ctl.operator.inbox(ctl.operator.keys.controller_trace, ControllerTrace, maxlen=100_000)
         ctl.wait_phase(("DONE", "FAULT"), 150.0)
         assert ctl.phase == "DONE", ctl.core.executor.reason
         time.sleep(0.3)
         final = wait_for(truth.take, 5.0, "sim truth")
         st = wait_for(status.take, 5.0, "controller status")
-        tr = ctl.trace()
         junctions = list(ctl.core.executor.junction_ticks)
+    tr = ctl.trace()  # the controller has stopped: its ring and what it published are final
+    n_ticks = ctl.core.trace.n
+    received = []
+    while (b := batches.get(0.0)) is not None:
+        received.append(b)
+    # every tick's trace row went out on controller/trace, in order, none lost, equal to the controller's own
+    assert received and all(b.dropped == 0 and b.columns == list(TRACE_COLUMNS) for b in received)
+    assert all(b.first_tick == a.first_tick + a.n_rows for a, b in zip(received, received[1:]))
+    published = np.frombuffer(b"".join(b.data for b in received), "<f8").reshape(-1, len(TRACE_COLUMNS))
+    f0, start = received[0].first_tick, n_ticks - len(tr)  # ticks of the first published row and of tr's first
+    ticks = range(max(start, f0), f0 + len(published))
+    assert len(ticks) > 1000
+    np.testing.assert_array_equal(published[ticks.start - f0:], tr[ticks.start - start:ticks.stop - start])
     assert len(final.stain_ids) == 3
     assert max(final.remaining) < 0.05, final.remaining
     assert st.phase == "DONE" and st.timing.ticks > 5000 and st.counters["phase_wipe"] == 3
