@@ -24,6 +24,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sim": ("sim.cli:main", "the simulated robot, board and camera as a Zenoh service"),
     "controller": ("controller.cli:main", "run a skill on the robot: impedance control and the skill executor"),
     "perception": ("perception.cli:main", "stains and kappa from camera images (board markers, ink clustering)"),
+    "up": ("launch.cli:up_main", "the whole cell from docker-compose.yml as local processes, recorded and reported"),
+    "record": ("launch.cli:record_main", "record every key into an MCAP file; report.json and plots when stopped"),
+    "report": ("launch.cli:report_main", "rebuild a run's report.json and plots from its recording"),
 }
 
 

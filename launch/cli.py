@@ -1,0 +1,355 @@
+"""``lamps up`` (the whole cell from docker-compose.yml), ``lamps record`` and ``lamps report``.
+
+``lamps up`` learns the skill (the bundled demo by default), starts every
+service of the compose file as a local process with the compose command and
+environment (:mod:`launch.compose`), shows progress, ends when the controller
+is DONE with every stain judged clean (or on a fault, a dead service,
+``--max-duration`` or Ctrl-C), stops everything and prints the report the
+recorder wrote into the run folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import signal
+import sys
+import threading
+import time
+import tomllib
+from pathlib import Path
+
+from interfaces.errors import ConfigError, InterfaceError
+
+BOARDS = {"vertical": "wall", "wall": "wall", "horizontal": "table", "table": "table"}
+#: The controller DONE this long (wall) with nothing open ends the run.
+SETTLE_S = 2.0
+#: FAULT or ESTOP held this long (wall) ends the run.
+FAULT_HOLD_S = 5.0
+
+
+class UpError(Exception):
+    """A clear, one-line reason why the cell could not run."""
+
+
+def _print(line: str) -> None:
+    print(line, flush=True)
+
+
+def build_up_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="lamps up", description=(
+        "Run the whole cell (sim, controller, perception, recorder) as docker-compose.yml describes it, as local "
+        "processes. Without options: the bundled demo is learned, a wall board gets 3 random stains, the robot "
+        "cleans it; the run folder gets report.json, plots and an MCAP recording."))
+    p.add_argument("--seed", type=int, default=0, help="stains: count, places, shapes (default 0)")
+    p.add_argument("--stains", type=int, default=3, help="number of random stains (default 3)")
+    p.add_argument("--board", default="vertical", metavar="vertical|horizontal|FILE.toml",
+                   help="board preset, or a TOML file with a [board] table (preset = \"custom\", origin_m, "
+                        "quat_wxyz, size_m; see config/example.toml [sim.board])")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' (default: learn the bundled demo)")
+    src.add_argument("--demo", metavar="FILE", help="learn this demonstration first (CSV, NPZ, TSV, MAT#i)")
+    p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
+                   help="lockstep: deterministic, as fast as the machine goes (default); realtime: 1 kHz wall clock")
+    p.add_argument("--max-duration", type=float, default=600.0, metavar="S", help="give up after S s wall (default 600)")
+    p.add_argument("--out", metavar="DIR", help="run folder (default runs/<time>)")
+    p.add_argument("--compose", metavar="FILE", help="compose file (default: docker-compose.yml of this checkout)")
+    p.add_argument("--port-base", type=int, metavar="N",
+                   help="listen on N, N+1, ... (default: free ports); a busy port is refused before anything starts")
+    p.add_argument("--robot-id", default=None, help="key prefix lamps/<robot-id> (default iiwa)")
+    p.add_argument("-q", "--quiet", action="store_true", help="do not echo the services' logs")
+    return p
+
+
+def _board_env(board: str) -> dict[str, str]:
+    """Compose variables and service environment for ``--board``."""
+    if board in BOARDS:
+        return {"LAMPS_BOARD": BOARDS[board]}
+    path = Path(board)
+    if not path.is_file():
+        raise UpError(f"--board {board!r}: not one of {sorted(set(BOARDS))} and no such file")
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise UpError(f"--board {board}: not valid TOML ({exc})") from None
+    table = table.get("sim", {}).get("board", table.get("board"))
+    if not isinstance(table, dict) or not table:
+        raise UpError(f"--board {board}: no [board] table")
+    return {f"LAMPS__SIM__BOARD__{k.upper()}": json.dumps(v) for k, v in table.items()}
+
+
+def _learn(a, out: Path, echo) -> Path:
+    """The skill file to run: given, learned from --demo, or learned from the bundled demo."""
+    from .procs import Child
+
+    if a.skill:
+        skill = Path(a.skill).resolve()
+        if not skill.is_file():
+            raise UpError(f"--skill {a.skill}: no such file")
+        return skill
+    learn = out / "learn"
+    lamps = (sys.executable, "-m", "interfaces.cli")
+    if a.demo:
+        if not Path(a.demo.split("#")[0]).is_file():
+            raise UpError(f"--demo {a.demo}: no such file")
+        argv = (*lamps, "learn", a.demo, "-o", str(learn / "skill.json"), "--plots", str(learn))
+    else:  # the controller's own default: the bundled synthetic demonstration, 3 stains, seed 0
+        argv = (*lamps, "demo", "--stains", "3", "--seed", "0", "--out", str(learn))
+    child = Child("learn", argv, {"MPLBACKEND": "Agg"}, out / "logs", echo)
+    code = child.proc.wait()
+    child.stop()
+    if code != 0 or not (learn / "skill.json").is_file():
+        raise UpError(f"learning the skill failed (exit {code}): {child.last_words()}")
+    return (learn / "skill.json").resolve()
+
+
+def up_main(argv: list[str] | None = None) -> int:
+    a = build_up_parser().parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="lamps up %(levelname)s: %(message)s")
+    stop_requested = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop_requested.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop_requested.set())
+    try:
+        return _up(a, stop_requested)
+    except (UpError, ConfigError, InterfaceError) as exc:
+        print(f"lamps up: error: {exc}", file=sys.stderr)
+        return 1
+
+
+def _up(a, stop_requested: threading.Event) -> int:
+    from .compose import DEFAULT_COMPOSE, active, free_port, load_compose, localize
+    from .procs import Child, wait_port
+
+    if a.stains < 0 or a.stains > 50:
+        raise UpError(f"--stains must be in [0, 50], got {a.stains}")
+    if not (a.max_duration > 0 and math.isfinite(a.max_duration)):
+        raise UpError(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
+    board_env = _board_env(a.board)
+    out = Path(a.out) if a.out else Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    if out.exists() and any(out.iterdir()):
+        raise UpError(f"--out {out}: exists and is not empty (a run folder is never overwritten)")
+    out.mkdir(parents=True, exist_ok=True)
+    out = out.resolve()
+    echo = None if a.quiet else _print
+    compose_path = Path(a.compose) if a.compose else DEFAULT_COMPOSE
+    # read the compose file before learning: a broken one should not cost the learning time
+    load_compose(compose_path, dict(os.environ))
+
+    t_start = time.monotonic()
+    skill = _learn(a, out, echo)
+    variables = dict(os.environ)
+    variables.update(LAMPS_SEED=str(a.seed), LAMPS_STAINS=str(a.stains), LAMPS_MODE=a.mode, LAMPS_SKILL=str(skill),
+                     LAMPS_OUT=str(out), **{k: v for k, v in board_env.items() if k == "LAMPS_BOARD"})
+    if a.robot_id:
+        variables["LAMPS_ROBOT_ID"] = a.robot_id
+    profiles = tuple(p for p in variables.get("COMPOSE_PROFILES", "sim").split(",") if p)
+    services = active(load_compose(compose_path, variables), profiles)
+    port_of = None
+    if a.port_base is not None:
+        from .compose import _listen_ports
+
+        port_of, n = {}, a.port_base
+        for s in services:
+            for p in _listen_ports(s):
+                port_of[(s.name, p)] = n
+                n += 1
+        for (name, _), port in port_of.items():
+            if _port_busy(port):
+                raise UpError(f"service {name}: port {port} is already in use (choose another --port-base)")
+    local = localize(services, port_of)
+    extra_env = {k: v for k, v in board_env.items() if k.startswith("LAMPS__")}
+    robot_id = next((s.environment.get("LAMPS_ROBOT_ID") for s in local if s.environment.get("LAMPS_ROBOT_ID")),
+                    "iiwa")
+
+    children: list[Child] = []
+    outcome, why = "stopped", "stopped by the user"
+    report = None
+    try:
+        for svc in local:
+            child = Child(svc.name, svc.argv, {**svc.environment, **extra_env, "MPLBACKEND": "Agg"}, out / "logs",
+                          echo)
+            children.append(child)
+            for port in svc.listen_ports:
+                if not wait_port(port, child, 120.0):
+                    code = child.returncode
+                    raise UpError(f"service {svc.name} failed at start-up"
+                                  + (f" (exit {code})" if code is not None else " (not listening after 120 s)")
+                                  + f": {child.last_words()}")
+        _print(f"lamps up: {', '.join(c.name for c in children)} running; run folder {out}")
+        outcome, why = _watch(local, children, robot_id, a.max_duration, stop_requested, free_port)
+    except UpError as exc:
+        outcome, why = "failed", str(exc)
+        print(f"lamps up: error: {exc}", file=sys.stderr)
+    finally:
+        codes = {}
+        recorder = [c for c in children if c.name == "recorder"]
+        for c in reversed([c for c in children if c.name != "recorder"]):
+            codes[c.name] = c.stop()
+        run = {"outcome": outcome, "why": why, "duration_s": time.monotonic() - t_start, "services": codes,
+               "key_prefix": f"lamps/{robot_id}", "skill": str(skill),
+               "options": {k: v for k, v in vars(a).items()}}
+        from interfaces.atomic import write_text_atomic
+
+        write_text_atomic(out / "run.json", json.dumps(run, indent=1) + "\n")
+        for c in recorder:
+            codes[c.name] = c.stop(timeout_s=120.0)
+    if (out / "report.json").is_file():
+        report = json.loads((out / "report.json").read_text())
+    elif (out / "recording.mcap").is_file():
+        from .report import write_report
+        report = write_report(out)
+    if report is None:
+        print(f"lamps up: no recording in {out}: {why}", file=sys.stderr)
+        return 1
+    from .report import summary_lines
+
+    for line in summary_lines(report):
+        _print(line)
+    _print(f"report: {out / 'report.json'}; recording: {out / 'recording.mcap'} (opens in Foxglove)")
+    if report["outcome"] != "cleaned":
+        print(f"lamps up: the board was not cleaned ({report['outcome']}: {why})", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _port_busy(port: int) -> bool:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return True
+    return False
+
+
+def _watch(local, children, robot_id: str, max_duration_s: float, stop_requested, _free_port) -> tuple[str, str]:
+    """Progress on the terminal until the run ends; returns (outcome for run.json, why)."""
+    from interfaces.config import ZenohSettings
+    from interfaces.messages import ControllerStatus, SimTruth, Stains
+    from interfaces.session import ServiceNode
+
+    endpoints = [f"tcp/127.0.0.1:{p}" for s in local for p in s.listen_ports]
+    settings = ZenohSettings(connect=tuple(endpoints), robot_id=robot_id)
+    t0 = time.monotonic()
+    with ServiceNode("launcher", settings) as node:
+        keys = node.keys
+        status = node.latest(keys.controller_status, ControllerStatus)
+        truth = node.latest(keys.sim_truth, SimTruth)
+        stains = node.latest(keys.perception_stains, Stains)
+        st = tr = sn = None
+        done_since = fault_since = None
+        first_dirt = None
+        next_print = 0.0
+        while True:
+            now = time.monotonic()
+            if stop_requested.is_set():
+                return "stopped", "stopped by the user (Ctrl-C)"
+            for c in children:
+                if c.returncode is not None:
+                    raise UpError(f"service {c.name} exited with code {c.returncode}: {c.last_words()}")
+            if now - t0 > max_duration_s:
+                return "timeout", f"not finished after --max-duration {max_duration_s:g} s"
+            st = status.take() or st
+            tr = truth.take() or tr
+            if first_dirt is None and tr is not None and tr.total_dirt > 0:
+                first_dirt = tr.total_dirt
+            sn = stains.take() or sn
+            if st is not None:
+                open_stains = sn is None or sn.board == "lost" or any(not s.kappa for s in sn.stains)
+                done_since = (done_since or now) if st.phase == "DONE" and not open_stains else None
+                fault_since = (fault_since or now) if st.phase in ("FAULT", "ESTOP") else None
+                if done_since is not None and now - done_since >= SETTLE_S:
+                    return "cleaned", "the controller is DONE and perception judged every stain clean"
+                if fault_since is not None and now - fault_since >= FAULT_HOLD_S:
+                    return "fault", f"controller {st.phase}: {st.reason}"
+            if now >= next_print:
+                next_print = now + 2.0
+                _print(_progress(now - t0, st, tr, sn, first_dirt))
+            time.sleep(0.05)
+
+
+def _progress(t: float, st, tr, sn, first_dirt: float | None) -> str:
+    parts = [f"[up {t:5.1f} s]"]
+    if tr is not None:
+        parts.append(f"robot {tr.robot_time_ns * 1e-9:5.1f} s")
+    if st is not None:
+        mp = f" {st.current_mp}" if st.current_mp else ""
+        parts.append(f"phase {st.phase}{mp}" + (f" ({st.reason})" if st.reason else ""))
+        parts.append(f"force {st.normal_force_n:4.1f} N")
+    if sn is not None:
+        parts.append(f"stains clean {sum(s.kappa for s in sn.stains)}/{len(sn.stains)} (board {sn.board})")
+    if tr is not None and first_dirt:
+        parts.append(f"dirt removed {1.0 - tr.total_dirt / first_dirt:.0%} (sim truth)")
+    return " | ".join(parts)
+
+
+# ---------------------------------------------------------------------------------------------------- record
+
+def record_main(argv: list[str] | None = None) -> int:
+    from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+
+    p = argparse.ArgumentParser(prog="lamps record", description=(
+        "Record every key of the cell into DIR/recording.mcap (opens in Foxglove) until stopped (SIGTERM or "
+        "Ctrl-C); then write DIR/report.json and the plots."))
+    p.add_argument("--out", required=True, metavar="DIR", help="run folder")
+    p.add_argument("--config", metavar="FILE", help="TOML config with a [zenoh] table")
+    p.add_argument("--no-report", action="store_true", help="only the recording")
+    add_zenoh_options(p)
+    a = p.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="lamps record %(levelname)s: %(message)s")
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        settings = zenoh_with_options(load_config(a.config).zenoh, a)
+        from interfaces.session import ServiceNode
+
+        from .record import Recorder
+
+        node = ServiceNode("recorder", settings).__enter__()
+    except (ConfigError, InterfaceError) as exc:
+        print(f"lamps record: error: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # zenoh's own error type for a bad endpoint
+        print(f"lamps record: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return 1
+    out = Path(a.out)
+    try:
+        rec = Recorder(node.session, settings.keys, out)
+        stop.wait()
+        path = rec.close()
+    finally:
+        node.close()
+    print(f"recorded {sum(rec.counters.values())} messages into {path}", flush=True)
+    if a.no_report:
+        return 0
+    return _write_report(out, settings.keys)
+
+
+def _write_report(out: Path, keys=None) -> int:
+    from .report import summary_lines, write_report
+
+    try:
+        report = write_report(out, keys=keys)
+    except Exception as exc:  # a report must never lose the recording: say why and keep it
+        print(f"lamps report: error: cannot build the report of {out}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    for line in summary_lines(report):
+        print(line, flush=True)
+    return 0
+
+
+def report_main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="lamps report", description=(
+        "Rebuild RUN_DIR/report.json and the plots from RUN_DIR/recording.mcap (and run.json if present)."))
+    p.add_argument("run_dir", metavar="RUN_DIR")
+    a = p.parse_args(argv)
+    run = Path(a.run_dir)
+    if not (run / "recording.mcap").is_file():
+        print(f"lamps report: error: {run}: no recording.mcap (is this a run folder?)", file=sys.stderr)
+        return 1
+    return _write_report(run)

@@ -1,0 +1,229 @@
+"""Record every key of a cell into an MCAP file that opens in Foxglove.
+
+One subscription on ``<prefix>/**``; the Zenoh thread only appends the raw
+sample to a queue, a writer thread decodes and writes. Each key is a channel
+(topic = the key) with JSON messages (field names as in
+``interfaces/messages.py``; ``bytes`` as base64), except camera frames,
+which are written as ``foxglove.CompressedImage`` (JPEG) so Foxglove shows
+them, with their pose and intrinsics on ``<key>/info``. ``log_time`` is the
+wall clock at receipt [ns]; the message's own stamps stay in the message.
+
+The file is written as ``recording.mcap.partial`` and renamed when finished,
+so a half-written recording is never mistaken for a whole one.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import logging
+import os
+import threading
+import time
+from collections import Counter, deque
+from pathlib import Path
+from typing import Any
+
+import cv2
+import msgspec
+import numpy as np
+from mcap.writer import Writer
+
+from interfaces.codec import Decoder
+from interfaces.errors import MessageDecodeError
+from interfaces.keys import Keys
+from interfaces.messages import (CameraFrame, ControllerStatus, ControllerTrace, Estop, Message, RobotState,
+                                 ServiceStatus, SimTruth, Stains, TorqueCommand)
+
+log = logging.getLogger(__name__)
+
+RECORDING = "recording.mcap"
+
+_COMPRESSED_IMAGE_SCHEMA = {
+    "type": "object",
+    "title": "foxglove.CompressedImage",
+    "properties": {
+        "timestamp": {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}},
+        "frame_id": {"type": "string"},
+        "data": {"type": "string", "contentEncoding": "base64"},
+        "format": {"type": "string"},
+    },
+}
+
+
+def message_type_of(keys: Keys, key: str) -> type[Message] | None:
+    """The message type published on ``key`` (None for keys the contract does not define)."""
+    table = {keys.robot_state: RobotState, keys.robot_command: TorqueCommand, keys.perception_stains: Stains,
+             keys.perception_status: ServiceStatus, keys.perception_debug: CameraFrame,
+             keys.controller_status: ControllerStatus, keys.controller_trace: ControllerTrace,
+             keys.controller_estop: Estop, keys.sim_truth: SimTruth, keys.sim_status: ServiceStatus}
+    if key in table:
+        return table[key]
+    cam = keys.camera_frame("x")[:-len("x/frame")]
+    if key.startswith(cam) and key.endswith("/frame"):
+        return CameraFrame
+    return None
+
+
+def to_builtins(msg: Any) -> Any:
+    """A message as plain JSON-able data with field names (array-like structs become objects)."""
+    if isinstance(msg, msgspec.Struct):
+        return {f: to_builtins(getattr(msg, f)) for f in msg.__struct_fields__}
+    if isinstance(msg, (list, tuple)):
+        return [to_builtins(v) for v in msg]
+    if isinstance(msg, dict):
+        return {str(k): to_builtins(v) for k, v in msg.items()}
+    if isinstance(msg, (bytes, bytearray, memoryview)):
+        return base64.b64encode(bytes(msg)).decode("ascii")
+    return msg
+
+
+def _jpeg_of(frame: CameraFrame) -> bytes | None:
+    from perception.frames import FrameError, rgb_from_message
+    try:
+        rgb = rgb_from_message(frame)
+    except FrameError:
+        return None
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
+    return buf.tobytes() if ok else None
+
+
+class McapSink:
+    """Channels and schemas on demand; :meth:`write` one decoded message (or raw bytes) per call."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._f = open(path, "wb")
+        self._w = Writer(self._f)
+        self._w.start(profile="", library="lamps")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._seq: Counter[str] = Counter()
+
+    def _schema(self, name: str, schema: dict) -> int:
+        if name not in self._schemas:
+            self._schemas[name] = self._w.register_schema(name=name, encoding="jsonschema",
+                                                          data=json.dumps(schema).encode())
+        return self._schemas[name]
+
+    def _channel(self, topic: str, schema_name: str, schema: dict) -> int:
+        if topic not in self._channels:
+            self._channels[topic] = self._w.register_channel(topic=topic, message_encoding="json",
+                                                             schema_id=self._schema(schema_name, schema))
+        return self._channels[topic]
+
+    def write_json(self, topic: str, schema_name: str, data: Any, t_ns: int, schema: dict | None = None) -> None:
+        ch = self._channel(topic, schema_name, schema or {"type": "object", "title": schema_name})
+        self._seq[topic] += 1
+        self._w.add_message(channel_id=ch, log_time=t_ns, publish_time=t_ns, sequence=self._seq[topic],
+                            data=msgspec.json.encode(data))
+
+    def write(self, key: str, msg: Message, t_ns: int) -> None:
+        if isinstance(msg, CameraFrame):
+            jpeg = _jpeg_of(msg)
+            stamp = msg.robot_time_ns or msg.stamp_ns
+            if jpeg is not None:
+                self.write_json(key, "foxglove.CompressedImage",
+                                {"timestamp": {"sec": stamp // 10**9, "nsec": stamp % 10**9}, "frame_id": msg.camera,
+                                 "data": base64.b64encode(jpeg).decode("ascii"), "format": "jpeg"},
+                                t_ns, _COMPRESSED_IMAGE_SCHEMA)
+            info = to_builtins(msg)
+            info.pop("data", None)
+            self.write_json(key + "/info", "lamps.CameraFrameInfo", info, t_ns)
+            return
+        self.write_json(key, f"lamps.{type(msg).__name__}", to_builtins(msg), t_ns)
+
+    def finish(self) -> None:
+        self._w.finish()
+        self._f.flush()
+        os.fsync(self._f.fileno())
+        self._f.close()
+
+
+class Recorder:
+    """Subscribes ``<prefix>/**`` on ``session`` and writes ``out_dir/recording.mcap`` until :meth:`close`.
+
+    counters : samples recorded per key suffix, plus ``undecodable`` and
+    ``unknown_key`` (recorded as raw base64 on their own channel).
+    """
+
+    def __init__(self, session, keys: Keys, out_dir: Path, max_queue: int = 200_000) -> None:
+        self.keys = keys
+        self.out_dir = Path(out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.partial = self.out_dir / (RECORDING + ".partial")
+        self.sink = McapSink(self.partial)
+        self.counters: Counter[str] = Counter()
+        self._queue: deque = deque(maxlen=max_queue)
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._decoders: dict[str, Decoder | None] = {}
+        self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
+        self._thread.start()
+        self._sub = session.declare_subscriber(f"{keys.prefix}/**", self._on_sample)
+
+    def _on_sample(self, sample) -> None:  # Zenoh thread: never waits
+        if len(self._queue) == self._queue.maxlen:
+            self.counters["dropped_queue_full"] += 1
+        self._queue.append((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+        self._wake.set()
+
+    def _decoder(self, key: str) -> Decoder | None:
+        if key not in self._decoders:
+            t = message_type_of(self.keys, key)
+            self._decoders[key] = Decoder(t) if t is not None else None
+        return self._decoders[key]
+
+    def _drain(self) -> None:
+        while self._queue:
+            key, data, t_ns = self._queue.popleft()
+            dec = self._decoder(key)
+            short = key[len(self.keys.prefix) + 1:]
+            try:
+                if dec is None:
+                    raise MessageDecodeError("no message type for this key")
+                self.sink.write(key, dec(data), t_ns)
+                self.counters[short] += 1
+            except MessageDecodeError as exc:
+                self.counters["undecodable" if dec is not None else "unknown_key"] += 1
+                self.sink.write_json(key + "/raw", "lamps.Raw", {"error": str(exc),
+                                                                 "data": base64.b64encode(data).decode("ascii")}, t_ns)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait(0.1)
+            self._wake.clear()
+            self._drain()
+
+    def close(self) -> Path:
+        """Stop, write what is queued, finish the file; returns the recording's final path."""
+        self._sub.undeclare()
+        self._stop.set()
+        self._wake.set()
+        self._thread.join(60.0)
+        self._drain()
+        self.sink.finish()
+        final = self.out_dir / RECORDING
+        os.replace(self.partial, final)
+        return final
+
+
+def read_recording(path: Path) -> dict[str, list[tuple[int, dict]]]:
+    """Every message of a recording by topic: [(log_time_ns, JSON object)], in log-time order."""
+    from mcap.reader import make_reader
+
+    out: dict[str, list[tuple[int, dict]]] = {}
+    with open(path, "rb") as f:
+        for _schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
+            out.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data)))
+    return out
+
+
+def trace_array(batches: list[dict]) -> tuple[list[str], np.ndarray]:
+    """Recorded ``controller/trace`` batches -> (columns, (n, c) rows in tick order; gaps left out)."""
+    if not batches:
+        return [], np.zeros((0, 0))
+    cols = batches[0]["columns"]
+    rows = sorted(((b["first_tick"], np.frombuffer(base64.b64decode(b["data"]), "<f8").reshape(-1, len(cols)))
+                   for b in batches if b["columns"] == cols), key=lambda r: r[0])
+    return cols, np.vstack([r for _, r in rows]) if rows else np.zeros((0, len(cols)))

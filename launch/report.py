@@ -1,0 +1,273 @@
+"""A run's report and plots, rebuilt from its recording alone (``lamps report RUN_DIR``).
+
+``report.json`` (schema ``lamps-run-report/1``; every quantity in SI units):
+
+* ``outcome``: ``cleaned`` (controller DONE and >= 95 % of the dirt gone),
+  ``incomplete``, ``fault`` (ended in FAULT or ESTOP), or what the launcher
+  recorded in ``run.json`` (``failed``: a service died; ``timeout``;
+  ``stopped``: Ctrl-C) when that is worse.
+* ``duration_s`` (wall), ``sim_time_s`` (robot clock), ``dirt_removed_fraction``
+  (1 - final / first total dirt of ``sim/truth``).
+* ``stains``: per true stain ``id``, ``centre_board_m``, ``size_m``,
+  ``initial_remaining``, ``final_remaining``, ``truth_below_level_s`` and
+  ``kappa_s`` (robot time; null if never), ``kappa_latency_s``.
+* ``max_normal_force_n``, ``normal_force_mean_n`` and ``normal_force_std_n``
+  while wiping, ``time_above_cap_s`` (measured force above ``force_cap_n``).
+* ``max_junction_accel_jump`` [m/s^2]: the largest change of the in-plane
+  reference acceleration across one tick at an MP junction, and
+  ``junction_step_ratio_max``: that change over the largest ordinary
+  one-tick change in the 5 ticks around it (<= ~1: continuous).
+* ``tracking_rms_m``: in-plane reference vs measured pad while wiping.
+* ``loop_timing``: the controller's last reported loop statistics.
+* ``faults``: every entry into PAUSED, FAULT or ESTOP (robot time, phase, reason).
+* ``services``: exit codes from the launcher (if any); ``counters``: the
+  last status counters of each service; ``plots``: the PNG files written.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controller.core import PHASE_CODES
+from controller.params import ForceParams
+from interfaces.atomic import write_text_atomic
+from interfaces.keys import Keys
+
+from .record import RECORDING, read_recording, trace_array
+
+SCHEMA = "lamps-run-report/1"
+#: Fraction of the dirt that must be gone for the outcome ``cleaned``.
+CLEANED_FRACTION = 0.95
+#: A stain counts as wiped in the truth at or below this remaining fraction (perception's kappa level).
+TRUTH_LEVEL = 0.03
+_WIPING = (PHASE_CODES["WIPE"], PHASE_CODES["TRANSITION"])
+_OUTCOME_RANK = {"cleaned": 0, "incomplete": 1, "timeout": 2, "stopped": 2, "fault": 3, "failed": 4}
+
+
+def _topic(rec: dict, key: str) -> list[dict]:
+    return [m for _, m in rec.get(key, [])]
+
+
+def _junction_steps(tr: np.ndarray, col: dict[str, int], window: int = 5) -> tuple[float, float]:
+    """(largest one-tick reference-acceleration change at an MP junction [m/s^2], its ratio to the ticks around)."""
+    if len(tr) < 3:
+        return 0.0, 0.0
+    phase = tr[:, col["phase"]]
+    a = tr[:, [col["ref_ax"], col["ref_ay"]]]
+    steps = np.linalg.norm(np.diff(a, axis=0), axis=1)  # steps[k] = a[k+1] - a[k]
+    chain = set(_WIPING)
+    js = [k for k in range(1, len(tr)) if phase[k] != phase[k - 1] and phase[k - 1] in chain
+          and (phase[k] in chain or phase[k] == PHASE_CODES["RETREAT"])]
+    worst, ratio = 0.0, 0.0
+    for j in js:
+        at = steps[max(j - 2, 0): j + 1]  # the change lands within a tick of the phase flag
+        around = np.concatenate([steps[max(j - 2 - window, 0): max(j - 2, 0)], steps[j + 1: j + 1 + window]])
+        jump = float(at.max())
+        worst = max(worst, jump)
+        ratio = max(ratio, jump / max(float(around.max()) if around.size else 0.0, 1e-9))
+    return worst, ratio
+
+
+def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None) -> dict[str, Any]:
+    """The report of ``run_dir`` from its ``recording.mcap`` (and ``run.json`` from the launcher, if there)."""
+    run_dir = Path(run_dir)
+    rec = read_recording(run_dir / RECORDING)
+    launcher = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").is_file() else {}
+    keys = keys or Keys(launcher.get("key_prefix", Keys().prefix))
+    cap_n = cap_n if cap_n is not None else launcher.get("force_cap_n", ForceParams().cap_n)
+    truth = _topic(rec, keys.sim_truth)
+    status = _topic(rec, keys.controller_status)
+    stains_msgs = [m for m in _topic(rec, keys.perception_stains) if m.get("board") != "lost"]
+    cols, tr = trace_array(_topic(rec, keys.controller_trace))
+    col = {c: i for i, c in enumerate(cols)}
+    times = [t for msgs in rec.values() for t, _ in msgs[:1] + msgs[-1:]]
+
+    report: dict[str, Any] = {"schema": SCHEMA, "run_dir": run_dir.name}
+    report["duration_s"] = launcher.get("duration_s", (max(times) - min(times)) * 1e-9 if times else 0.0)
+    report["sim_time_s"] = truth[-1]["robot_time_ns"] * 1e-9 if truth else (float(tr[-1, 0]) if len(tr) else 0.0)
+    removed = (1.0 - truth[-1]["total_dirt"] / truth[0]["total_dirt"]) if truth and truth[0]["total_dirt"] > 0 else 0.0
+    report["dirt_removed_fraction"] = float(removed)
+
+    stains = []
+    if truth:
+        first, last = truth[0], truth[-1]
+        centres = np.array(last["centres_board_m"]) if last["centres_board_m"] else np.zeros((0, 2))
+        for k, sid in enumerate(last["stain_ids"]):
+            below = next((t["robot_time_ns"] * 1e-9 for t in truth if t["remaining"][k] <= TRUTH_LEVEL), None)
+            kappa = None
+            for m in stains_msgs:
+                for s in m["stains"]:
+                    if s["kappa"] and len(centres) and int(np.argmin(np.linalg.norm(
+                            centres - np.array(s["centre_board_m"]), axis=1))) == k:
+                        kappa = m["robot_time_ns"] * 1e-9
+                        break
+                if kappa is not None:
+                    break
+            stains.append({"id": sid, "centre_board_m": last["centres_board_m"][k] if len(centres) else None,
+                           "size_m": last["sizes_m"][k] if last["sizes_m"] else None,
+                           "initial_remaining": first["remaining"][k], "final_remaining": last["remaining"][k],
+                           "truth_below_level_s": below, "kappa_s": kappa,
+                           "kappa_latency_s": (kappa - below) if kappa is not None and below is not None else None})
+    report["stains"] = stains
+
+    if len(tr):
+        force = tr[:, col["force_n"]]
+        wiping = np.isin(tr[:, col["phase"]], _WIPING) & (tr[:, col["contact"]] > 0.5)
+        dt = float(np.median(np.diff(tr[:, 0]))) if len(tr) > 1 else 0.0
+        report["max_normal_force_n"] = float(force.max())
+        report["normal_force_mean_n"] = float(force[wiping].mean()) if wiping.any() else 0.0
+        report["normal_force_std_n"] = float(force[wiping].std()) if wiping.any() else 0.0
+        report["time_above_cap_s"] = float(np.count_nonzero(force > cap_n) * dt)
+        jump, ratio = _junction_steps(tr, col)
+        report["max_junction_accel_jump"] = jump
+        report["junction_step_ratio_max"] = ratio
+        err = tr[wiping][:, [col["ref_x"], col["ref_y"]]] - tr[wiping][:, [col["x"], col["y"]]]
+        report["tracking_rms_m"] = float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else 0.0
+        report["trace_ticks"] = int(len(tr))
+    else:
+        report.update(max_normal_force_n=max((t["contact_force_n"] for t in truth), default=0.0),
+                      normal_force_mean_n=0.0, normal_force_std_n=0.0, time_above_cap_s=0.0,
+                      max_junction_accel_jump=0.0, junction_step_ratio_max=0.0, tracking_rms_m=0.0, trace_ticks=0)
+    report["force_cap_n"] = cap_n
+    report["loop_timing"] = status[-1]["timing"] if status else {}
+    faults, prev = [], None
+    for s in status:
+        if s["phase"] != prev and s["phase"] in ("PAUSED", "FAULT", "ESTOP"):
+            faults.append({"wall_ns": s.get("wall_ns", 0), "phase": s["phase"], "reason": s["reason"]})
+        prev = s["phase"]
+    report["faults"] = faults
+    final_phase = status[-1]["phase"] if status else "none"
+    report["final_phase"] = final_phase
+    if final_phase in ("FAULT", "ESTOP"):
+        outcome = "fault"
+    elif final_phase == "DONE" and removed >= CLEANED_FRACTION:
+        outcome = "cleaned"
+    else:
+        outcome = "incomplete"
+    told = launcher.get("outcome")
+    if told and _OUTCOME_RANK.get(told, 0) > _OUTCOME_RANK[outcome]:
+        outcome = told
+    report["outcome"] = outcome
+    report["services"] = launcher.get("services", {})
+    counters = {"controller": status[-1]["counters"] if status else {}}
+    for name, key in (("perception", keys.perception_status), ("sim", keys.sim_status)):
+        msgs = _topic(rec, key)
+        counters[name] = msgs[-1]["counters"] if msgs else {}
+    report["counters"] = counters
+    report["plots"] = write_plots(run_dir, rec, keys, tr, col, truth, stains_msgs)
+    return report
+
+
+def write_report(run_dir: Path, **kwargs) -> dict[str, Any]:
+    """Build the report and write ``report.json`` atomically; returns it."""
+    report = build_report(run_dir, **kwargs)
+    write_text_atomic(Path(run_dir) / "report.json", json.dumps(report, indent=1, default=_json_default) + "\n")
+    return report
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    raise TypeError(f"not JSON: {type(o).__name__}")
+
+
+def _frames(rec: dict, keys: Keys) -> list[np.ndarray]:
+    import cv2
+    cam = keys.camera_frame("x")[:-len("x/frame")]
+    topic = next((t for t in rec if t.startswith(cam) and t.endswith("/frame")), None)
+    if topic is None:
+        return []
+    msgs = rec[topic]
+    out = []
+    for _, m in (msgs[0], msgs[-1]):
+        img = cv2.imdecode(np.frombuffer(base64.b64decode(m["data"]), np.uint8), cv2.IMREAD_COLOR)
+        if img is not None:
+            out.append(img[..., ::-1])
+    return out
+
+
+def write_plots(run_dir: Path, rec: dict, keys: Keys, tr: np.ndarray, col: dict[str, int], truth: list[dict],
+                stains_msgs: list[dict]) -> list[str]:
+    """PNGs: board before/after, eraser path by MP kind, force/acceleration/phase over time. Returns their names."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from interfaces.atomic import write_atomic
+
+    written = []
+
+    def save(fig, name: str) -> None:
+        write_atomic(Path(run_dir) / name, lambda f: fig.savefig(f, format="png", dpi=100))
+        plt.close(fig)
+        written.append(name)
+
+    frames = _frames(rec, keys)
+    if len(frames) == 2:
+        fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
+        removed = (1.0 - truth[-1]["total_dirt"] / truth[0]["total_dirt"]) if truth and truth[0]["total_dirt"] else 0
+        for a, img, title in zip(ax, frames, ("before", f"after ({removed:.1%} of the dirt removed)")):
+            a.imshow(img)
+            a.set_title(title)
+            a.axis("off")
+        save(fig, "board_before_after.png")
+    if len(tr):
+        phase = tr[:, col["phase"]]
+        fig, ax = plt.subplots(figsize=(8, 6))
+        kinds = (("periodic MP (WIPE)", PHASE_CODES["WIPE"], "tab:blue"),
+                 ("transitional MP", PHASE_CODES["TRANSITION"], "tab:orange"))
+        free = ~np.isin(phase, _WIPING)
+        ax.plot(tr[free, col["x"]], tr[free, col["y"]], ",", color="0.6", label="free moves (approach, retreat)")
+        for label, code, colour in kinds:
+            sel = phase == code
+            ax.plot(tr[sel, col["x"]], tr[sel, col["y"]], ".", ms=1, color=colour, label=label)
+        if truth and truth[-1]["centres_board_m"]:
+            for c, s in zip(truth[-1]["centres_board_m"], truth[-1]["sizes_m"]):
+                ax.add_patch(plt.Circle(c, s / 2, fill=False, color="k", lw=1))
+        if stains_msgs:
+            w, h = stains_msgs[-1]["board_size_m"]
+            ax.add_patch(plt.Rectangle((0, 0), w, h, fill=False, color="0.3", lw=1.5))
+        ax.set_aspect("equal")
+        ax.set_xlabel("board x [m]")
+        ax.set_ylabel("board y [m]")
+        ax.set_title("eraser path on the board (true stains as circles)")
+        ax.legend(loc="upper right", fontsize=8, markerscale=8)
+        save(fig, "eraser_path.png")
+
+        t = tr[:, 0]
+        fig, ax = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+        ax[0].plot(t, tr[:, col["force_n"]], lw=0.7, label="measured normal force")
+        ax[0].plot(t, tr[:, col["press_n"]], lw=0.7, label="commanded press")
+        ax[0].set_ylabel("force [N]")
+        ax[0].legend(fontsize=8)
+        ax[1].plot(t, np.linalg.norm(tr[:, [col["ref_ax"], col["ref_ay"]]], axis=1), lw=0.7)
+        ax[1].set_ylabel("|reference accel.| [m/s^2]")
+        ax[2].step(t, phase, where="post", lw=0.8)
+        ax[2].set_yticks(list(PHASE_CODES.values()), list(PHASE_CODES), fontsize=7)
+        ax[2].set_xlabel("robot time [s]")
+        save(fig, "timeseries.png")
+    if (Path(run_dir) / "learn" / "fig4_reachability.png").is_file():
+        written.append("learn/fig4_reachability.png")
+    return written
+
+
+def summary_lines(report: dict[str, Any]) -> list[str]:
+    """A few lines for the terminal."""
+    lines = [f"outcome {report['outcome']}: {report['dirt_removed_fraction']:.1%} of the dirt removed in "
+             f"{report['sim_time_s']:.1f} s robot time ({report['duration_s']:.1f} s wall)",
+             f"force while wiping {report['normal_force_mean_n']:.1f} +- {report['normal_force_std_n']:.1f} N, "
+             f"max {report['max_normal_force_n']:.1f} N; tracking RMS {report['tracking_rms_m'] * 1000:.2f} mm; "
+             f"junction accel. step max {report['max_junction_accel_jump']:.3f} m/s^2 "
+             f"({report['junction_step_ratio_max']:.2f}x an ordinary tick)"]
+    for s in report["stains"]:
+        k = "no kappa" if s["kappa_s"] is None else f"kappa at {s['kappa_s']:.1f} s"
+        lines.append(f"  stain {s['id']}: {s['initial_remaining']:.0%} -> {s['final_remaining']:.1%}, {k}")
+    for f in report["faults"]:
+        lines.append(f"  {f['phase']}: {f['reason']}")
+    return lines
+
