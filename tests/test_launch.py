@@ -1,0 +1,282 @@
+"""The cell as one product: docker-compose.yml, `lamps up` running its commands locally, recording and report.
+
+There is no Docker engine here, so the compose file is checked as data, and
+`lamps up` runs each compose service's command with its environment as a
+local process (host names -> 127.0.0.1, ports -> local ports): the compose
+commands are exercised end to end over real Zenoh.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from interfaces.cli import COMMANDS
+from interfaces.errors import ConfigError
+from interfaces.keys import Keys
+from launch.compose import active, free_port, load_compose, localize, substitute
+from launch.record import read_recording, trace_array
+from launch.report import SCHEMA, build_report
+
+from .conftest import REPO
+
+COMPOSE = REPO / "docker-compose.yml"
+LAMPS = [sys.executable, "-m", "interfaces.cli"]
+
+
+# ------------------------------------------------------------------------------------------ compose file as data
+
+def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_off():
+    services = load_compose(COMPOSE, {})
+    assert {"sim", "controller", "perception", "recorder"} <= set(services)
+    sim = services["sim"]
+    assert sim.profiles == ("sim",) and "robot" in sim.aliases  # a `real` profile can replace it as `robot`
+    assert (REPO / ".env").read_text().strip() == "COMPOSE_PROFILES=sim"  # the default profile
+    for s in services.values():
+        assert s.command[0] == "lamps" and s.command[1] in COMMANDS, s.command
+        assert s.environment["LAMPS_ZENOH_MULTICAST"] == "false" and s.environment["LAMPS_ZENOH_MODE"] == "peer"
+        for ep in s.environment.get("LAMPS_ZENOH_CONNECT", "").split(","):
+            assert not ep or ep.startswith("tcp/robot:") or ep.split("/")[1].split(":")[0] in services, ep
+    # nobody connects to `sim` by name: the robot side is reached as `robot`
+    assert all("tcp/sim:" not in s.environment.get("LAMPS_ZENOH_CONNECT", "") for s in services.values())
+    # volumes for skills and run output
+    assert any(v.startswith("./skills:/skills") for v in services["controller"].volumes)
+    assert any(v.startswith("./runs:/runs") for v in services["recorder"].volumes)
+    # defaults when no variable is set: lock-step, seed 0, 3 stains, wall board, learn the bundled demo
+    env = sim.environment
+    assert (env["LAMPS__SIM__MODE"], env["LAMPS__SIM__SEED"], env["LAMPS__SIM__DIRT__STAINS"],
+            env["LAMPS__SIM__BOARD__PRESET"]) == ("lockstep", "0", "3", "wall")
+    assert services["controller"].environment["LAMPS__CONTROLLER__SKILL"] == ""
+    order = [s.name for s in active(services, ("sim",))]
+    assert order.index("sim") < order.index("controller") < order.index("perception") < order.index("recorder")
+    assert "sim" not in [s.name for s in active(services, ("real",))]
+
+
+def test_every_compose_service_config_is_accepted_by_its_own_check(tmp_path):
+    """Each service's compose environment passes the service's --check (what the container would start with)."""
+    services = active(load_compose(COMPOSE, {"LAMPS_BOARD": "table", "LAMPS_STAINS": "2"}), ("sim",))
+    for svc in localize(services):
+        if svc.name == "recorder":
+            continue
+        r = subprocess.run([*svc.argv, "--check"], env={**os.environ, **svc.environment}, capture_output=True,
+                           text=True, timeout=300)
+        assert r.returncode == 0, (svc.name, r.stderr)
+
+
+def test_localize_maps_service_names_to_loopback_and_listen_ports_to_local_ones():
+    services = active(load_compose(COMPOSE, {}), ("sim",))
+    local = {s.name: s for s in localize(services, {("sim", 7447): 20001, ("controller", 7448): 20002,
+                                                    ("perception", 7449): 20003})}
+    assert local["sim"].environment["LAMPS_ZENOH_LISTEN"] == "tcp/127.0.0.1:20001"
+    assert local["controller"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:20001"
+    assert local["recorder"].environment["LAMPS_ZENOH_CONNECT"] == \
+        "tcp/127.0.0.1:20001,tcp/127.0.0.1:20002,tcp/127.0.0.1:20003"
+    assert local["sim"].argv[:3] == (sys.executable, "-m", "interfaces.cli") and local["sim"].argv[3] == "sim"
+    # free ports by default, all different
+    ports = [p for s in localize(services) for p in s.listen_ports]
+    assert len(ports) == 3 == len(set(ports))
+
+
+@pytest.mark.parametrize("text, match", [
+    ("services: {}\n", "no services"),
+    ("services:\n  a: {command: lamps sim}\n", "exec form"),
+    ("services:\n  a: {command: [lamps, sim], depends_on: [b]}\n", "unknown service 'b'"),
+    ("services: [\n", "not valid YAML"),
+])
+def test_a_broken_compose_file_is_refused_with_the_reason(tmp_path, text, match):
+    p = tmp_path / "compose.yml"
+    p.write_text(text)
+    with pytest.raises(ConfigError, match=match):
+        load_compose(p, {})
+
+
+def test_a_connect_to_a_service_that_is_not_there_is_named():
+    services = active(load_compose(COMPOSE, {}), ("real",))  # no `robot` without the sim
+    with pytest.raises(ConfigError, match="connects to 'tcp/robot:7447'"):
+        localize(services)
+
+
+def test_variables_are_substituted_as_compose_does():
+    assert substitute("${A:-x}-${B-y}-${C}", {"A": "", "B": ""}) == "x--"
+    assert substitute("${A:-x}", {"A": "1"}) == "1"
+
+
+def test_the_image_installs_every_package_and_the_robot_description(tmp_path):
+    """No Docker here: the Dockerfile copies every package pyproject installs, and a wheel carries the URDF."""
+    text = (REPO / "Dockerfile").read_text()
+    include = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]["include"]
+    for pattern in include:
+        assert f"COPY {pattern.rstrip('*')} ./{pattern.rstrip('*')}" in text, pattern
+    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
+                        str(tmp_path), str(REPO)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    import zipfile
+    names = zipfile.ZipFile(next(tmp_path.glob("lamps-*.whl"))).namelist()
+    assert "interfaces/description/iiwa14_eraser.urdf" in names
+    assert any(n.startswith("launch/") for n in names)
+
+
+# ------------------------------------------------------------------------------------------ the whole cell
+
+def _port_base(n: int = 3) -> int:
+    """A base port with n free ports after it."""
+    for _ in range(50):
+        base = free_port()
+        if base + n < 65535 and all(_free(base + i) for i in range(n)):
+            return base
+    raise RuntimeError("no free port range")
+
+
+def _free(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+            return True
+        except OSError:
+            return False
+
+
+def _nobody_listens(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(1.0)
+        return s.connect_ex(("127.0.0.1", port)) != 0
+
+
+def _up(args: list[str], timeout_s: float = 300.0, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([*LAMPS, "up", "-q", *args], capture_output=True, text=True, timeout=timeout_s,
+                          env={**os.environ, "MPLBACKEND": "Agg", **(env or {})}, cwd=REPO)
+
+
+def _check_run(out: Path, base: int) -> dict:
+    report = json.loads((out / "report.json").read_text())
+    assert report["schema"] == SCHEMA
+    rec = read_recording(out / "recording.mcap")
+    keys = Keys()
+    for key in (keys.robot_state, keys.robot_command, keys.controller_status, keys.controller_trace,
+                keys.perception_stains, keys.sim_truth, keys.camera_frame("board")):
+        assert rec.get(key), f"nothing recorded on {key}"
+    truth = [m for _, m in rec[keys.sim_truth]]
+    # the report agrees with the simulator's truth
+    assert report["outcome"] == "cleaned" and report["dirt_removed_fraction"] >= 0.95
+    assert report["dirt_removed_fraction"] == pytest.approx(1 - truth[-1]["total_dirt"] / truth[0]["total_dirt"])
+    assert [s["final_remaining"] for s in report["stains"]] == truth[-1]["remaining"]
+    assert len(report["stains"]) == 3 and all(s["kappa_s"] is not None for s in report["stains"])
+    assert all(s["truth_below_level_s"] <= s["kappa_s"] for s in report["stains"])
+    # the MP junctions: the reference acceleration steps no more than an ordinary tick does (skill issue bound:
+    # continuous to the tick) and no more than 1 % of the peak reference acceleration above it
+    cols, tr = trace_array([m for _, m in rec[keys.controller_trace]])
+    col = {c: i for i, c in enumerate(cols)}
+    peak = float(np.max(np.linalg.norm(tr[:, [col["ref_ax"], col["ref_ay"]]], axis=1)))
+    assert report["junction_step_ratio_max"] <= 3.0, report["junction_step_ratio_max"]
+    assert report["max_junction_accel_jump"] <= 0.01 * peak + 0.3, (report["max_junction_accel_jump"], peak)
+    assert 8.0 <= report["normal_force_mean_n"] <= 12.0 and report["time_above_cap_s"] == 0.0
+    assert report["tracking_rms_m"] < 0.01 and report["faults"] == []
+    for name in ("board_before_after.png", "eraser_path.png", "timeseries.png"):
+        assert (out / name).stat().st_size > 10_000, name
+    run = json.loads((out / "run.json").read_text())
+    assert run["services"] == {"perception": 0, "controller": 0, "sim": 0}, run
+    # every process stopped: nobody listens on the cell's ports any more
+    assert all(_nobody_listens(base + i) for i in range(3))
+    return report
+
+
+@pytest.mark.slow
+def test_lamps_up_default_cleans_a_wall_board_and_reports_it(tmp_path):
+    """The README's main command: learn the bundled demo, 3 random stains on the wall board, clean, report."""
+    out, base = tmp_path / "run", _port_base()
+    t0 = time.monotonic()
+    r = _up(["--out", str(out), "--port-base", str(base), "--max-duration", "240"])
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    report = _check_run(out, base)
+    assert "learn/fig4_reachability.png" in report["plots"] and (out / "learn" / "skill.json").is_file()
+    assert "outcome cleaned" in r.stdout
+    print(f"lamps up (wall): {time.monotonic() - t0:.0f} s wall, {report['sim_time_s']:.1f} s robot time, "
+          f"removed {report['dirt_removed_fraction']:.2%}")
+    # `lamps report` rebuilds the same report from the recording alone
+    first = report
+    for name in ("report.json", "eraser_path.png"):
+        (out / name).unlink()
+    r = subprocess.run([*LAMPS, "report", str(out)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    again = json.loads((out / "report.json").read_text())
+    assert again == first and (out / "eraser_path.png").is_file()
+
+
+@pytest.mark.slow
+def test_lamps_up_on_a_horizontal_board_with_a_given_skill(tmp_path, learned_skill_file):
+    out, base = tmp_path / "run", _port_base()
+    r = _up(["--out", str(out), "--port-base", str(base), "--board", "horizontal", "--skill", str(learned_skill_file),
+             "--seed", "1", "--max-duration", "240"])
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    report = _check_run(out, base)
+    run = json.loads((out / "run.json").read_text())
+    assert run["options"]["board"] == "horizontal" and not (out / "learn").exists()
+    print(f"lamps up (table): {report['sim_time_s']:.1f} s robot time, removed {report['dirt_removed_fraction']:.2%}")
+
+
+# ------------------------------------------------------------------------------------------ bad input
+
+@pytest.mark.parametrize("args, code, match", [
+    (["--bogus"], 2, "unrecognized arguments: --bogus"),
+    (["--skill", "/nonexistent/skill.json"], 1, "--skill /nonexistent/skill.json: no such file"),
+    (["--demo", "/nonexistent/demo.csv"], 1, "--demo /nonexistent/demo.csv: no such file"),
+    (["--board", "diagonal"], 1, "--board 'diagonal': not one of"),
+    (["--max-duration", "-1"], 1, "--max-duration must be a positive"),
+])
+def test_bad_options_are_refused_before_anything_starts(tmp_path, args, code, match):
+    r = _up(["--out", str(tmp_path / "run"), *args], timeout_s=60)
+    assert r.returncode == code and match in r.stderr, (r.returncode, r.stderr)
+    assert "running" not in r.stdout
+
+
+def test_a_busy_port_is_refused_naming_the_service(tmp_path, learned_skill_file):
+    base = _port_base()
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", base + 1))  # the controller's
+        s.listen()
+        r = _up(["--out", str(tmp_path / "run"), "--port-base", str(base), "--skill", str(learned_skill_file)],
+                timeout_s=60)
+    assert r.returncode == 1 and f"service controller: port {base + 1} is already in use" in r.stderr, r.stderr
+
+
+@pytest.mark.slow
+def test_a_service_failing_at_start_up_is_named_and_everything_is_stopped(tmp_path, learned_skill_file):
+    base = _port_base()
+    r = _up(["--out", str(tmp_path / "run"), "--port-base", str(base), "--skill", str(learned_skill_file)],
+            timeout_s=120, env={"LAMPS__CONTROLLER__RATE_HZ": "5"})
+    assert r.returncode == 1, r.stderr
+    assert "service controller failed at start-up (exit 1)" in r.stderr and "rate_hz" in r.stderr, r.stderr
+    run = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert run["outcome"] == "failed" and run["services"]["sim"] == 0
+    assert all(_nobody_listens(base + i) for i in range(3))
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_every_service_and_keeps_the_recording(tmp_path, learned_skill_file):
+    out, base = tmp_path / "run", _port_base()
+    p = subprocess.Popen([*LAMPS, "up", "-q", "--out", str(out), "--port-base", str(base), "--skill",
+                          str(learned_skill_file)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env={**os.environ, "MPLBACKEND": "Agg"}, cwd=REPO)
+    lines = []
+    for line in p.stdout:
+        lines.append(line)
+        if "phase WIPE" in line:
+            break
+    p.send_signal(signal.SIGINT)
+    stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 1, stderr
+    run = json.loads((out / "run.json").read_text())
+    assert run["outcome"] == "stopped" and all(c in (0, -15) for c in run["services"].values()), run
+    report = build_report(out)
+    assert report["outcome"] == "stopped" and report["trace_ticks"] > 1000
+    assert all(_nobody_listens(base + i) for i in range(3))
