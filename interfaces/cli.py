@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "up": ("launch.cli:up_main", "the whole cell from docker-compose.yml as local processes, recorded and reported"),
     "record": ("launch.cli:record_main", "record every key into an MCAP file; report.json and plots when stopped"),
     "report": ("launch.cli:report_main", "rebuild a run's report.json and plots from its recording"),
+    "bench": ("launch.bench:main", "run every benchmark into bench.json and a markdown page (a source checkout)"),
 }
 
 

@@ -280,3 +280,14 @@ def test_ctrl_c_stops_every_service_and_keeps_the_recording(tmp_path, learned_sk
     report = build_report(out)
     assert report["outcome"] == "stopped" and report["trace_ticks"] > 1000
     assert all(_nobody_listens(base + i) for i in range(3))
+
+
+def test_lamps_bench_collects_the_benchmarks_into_json_and_markdown(tmp_path):
+    r = subprocess.run([*LAMPS, "bench", "--quick", "--out", str(tmp_path), "--only", "bench_periodic_step",
+                        "--only", "bench_transitional_step"], capture_output=True, text=True, timeout=600, cwd=REPO)
+    assert r.returncode == 0, r.stderr
+    res = json.loads((tmp_path / "bench.json").read_text())
+    assert set(res["benchmarks"]) == {"bench_periodic_step", "bench_transitional_step"}
+    assert all(b["exit_code"] == 0 and b["result"] for b in res["benchmarks"].values())
+    md = (tmp_path / "bench.md").read_text()
+    assert "## bench_periodic_step" in md and "PeriodicRunner.update" in md and "| what |" in md
