@@ -3,9 +3,9 @@
 ``lamps up`` learns the skill (the bundled demo by default), starts every
 service of the compose file as a local process with the compose command and
 environment (:mod:`launch.compose`), shows progress, ends when the controller
-is DONE with every stain judged clean (or on a fault, a dead service,
-``--max-duration`` or Ctrl-C), stops everything and prints the report the
-recorder wrote into the run folder.
+stays DONE (or on a fault held 5 s, a dead service, ``--max-duration`` or
+Ctrl-C), stops everything and prints the report the recorder wrote into the
+run folder.
 """
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ from pathlib import Path
 from interfaces.errors import ConfigError, InterfaceError
 
 BOARDS = {"vertical": "wall", "wall": "wall", "horizontal": "table", "table": "table"}
-#: The controller DONE this long (wall) with nothing open ends the run.
-SETTLE_S = 2.0
+#: The controller DONE this long (wall) ends the run (longer than the executor's 1 s recheck, after which a
+#: stain still without kappa would be wiped again).
+SETTLE_S = 2.5
 #: FAULT or ESTOP held this long (wall) ends the run.
 FAULT_HOLD_S = 5.0
 
@@ -81,7 +82,7 @@ def _board_env(board: str) -> dict[str, str]:
     return {f"LAMPS__SIM__BOARD__{k.upper()}": json.dumps(v) for k, v in table.items()}
 
 
-def _learn(a, out: Path, echo) -> Path:
+def _learn(a, out: Path, echo, stop_requested: threading.Event) -> Path:
     """The skill file to run: given, learned from --demo, or learned from the bundled demo."""
     from .procs import Child
 
@@ -99,8 +100,12 @@ def _learn(a, out: Path, echo) -> Path:
     else:  # the controller's own default: the bundled synthetic demonstration, 3 stains, seed 0
         argv = (*lamps, "demo", "--stains", "3", "--seed", "0", "--out", str(learn))
     child = Child("learn", argv, {"MPLBACKEND": "Agg"}, out / "logs", echo)
-    code = child.proc.wait()
-    child.stop()
+    while child.returncode is None:
+        if stop_requested.is_set():
+            child.stop()
+            raise UpError("stopped by the user while learning the skill")
+        time.sleep(0.1)
+    code = child.stop()
     if code != 0 or not (learn / "skill.json").is_file():
         raise UpError(f"learning the skill failed (exit {code}): {child.last_words()}")
     return (learn / "skill.json").resolve()
@@ -139,7 +144,7 @@ def _up(a, stop_requested: threading.Event) -> int:
     load_compose(compose_path, dict(os.environ))
 
     t_start = time.monotonic()
-    skill = _learn(a, out, echo)
+    skill = _learn(a, out, echo, stop_requested)
     variables = dict(os.environ)
     variables.update(LAMPS_SEED=str(a.seed), LAMPS_STAINS=str(a.stains), LAMPS_MODE=a.mode, LAMPS_SKILL=str(skill),
                      LAMPS_OUT=str(out), **{k: v for k, v in board_env.items() if k == "LAMPS_BOARD"})
@@ -259,11 +264,11 @@ def _watch(local, children, robot_id: str, max_duration_s: float, stop_requested
                 first_dirt = tr.total_dirt
             sn = stains.take() or sn
             if st is not None:
-                open_stains = sn is None or sn.board == "lost" or any(not s.kappa for s in sn.stains)
-                done_since = (done_since or now) if st.phase == "DONE" and not open_stains else None
+                # DONE longer than the executor's recheck: nothing waits for another pass
+                done_since = (done_since or now) if st.phase == "DONE" else None
                 fault_since = (fault_since or now) if st.phase in ("FAULT", "ESTOP") else None
                 if done_since is not None and now - done_since >= SETTLE_S:
-                    return "cleaned", "the controller is DONE and perception judged every stain clean"
+                    return "done", "the controller is DONE"
                 if fault_since is not None and now - fault_since >= FAULT_HOLD_S:
                     return "fault", f"controller {st.phase}: {st.reason}"
             if now >= next_print:
