@@ -183,6 +183,12 @@ def _check_run(out: Path, base: int) -> dict:
     assert report["tracking_rms_m"] < 0.01 and report["faults"] == []
     for name in ("board_before_after.png", "eraser_path.png", "timeseries.png"):
         assert (out / name).stat().st_size > 10_000, name
+    # a complete MCAP file (summary and statistics, what Foxglove indexes), images as foxglove.CompressedImage
+    from mcap.reader import make_reader
+    with open(out / "recording.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.message_count > 10_000
+    assert "foxglove.CompressedImage" in {sc.name for sc in summary.schemas.values()}
     run = json.loads((out / "run.json").read_text())
     assert run["services"] == {"perception": 0, "controller": 0, "sim": 0}, run
     # every process stopped: nobody listens on the cell's ports any more
@@ -311,3 +317,37 @@ def test_a_board_pose_file_becomes_the_sims_board_table(tmp_path):
     f.write_text("[other]\nx = 1\n")
     with pytest.raises(UpError, match="no \\[board\\] table"):
         _board_env(str(f))
+
+
+def _pid_listening_on(port: int) -> int | None:
+    """The process whose environment sets LAMPS_ZENOH_LISTEN to our local port (a service lamps up started)."""
+    want = f"LAMPS_ZENOH_LISTEN=tcp/127.0.0.1:{port}".encode()
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if want in (d / "environ").read_bytes().split(b"\0"):
+                    return int(d.name)
+            except OSError:
+                continue
+    return None
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/environ").exists(), reason="needs /proc")
+def test_a_service_dying_mid_run_stops_the_others_and_is_named(tmp_path, learned_skill_file):
+    out, base = tmp_path / "run", _port_base()
+    p = subprocess.Popen([*LAMPS, "up", "-q", "--out", str(out), "--port-base", str(base), "--skill",
+                          str(learned_skill_file)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env={**os.environ, "MPLBACKEND": "Agg"}, cwd=REPO)
+    for line in p.stdout:
+        if "phase WIPE" in line:
+            break
+    pid = _pid_listening_on(base + 2)  # perception
+    assert pid is not None
+    os.kill(pid, signal.SIGKILL)
+    stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 1 and "service perception exited with code -9" in stderr, stderr
+    run = json.loads((out / "run.json").read_text())
+    assert run["outcome"] == "failed" and run["services"]["perception"] == -9
+    assert all(_nobody_listens(base + i) for i in range(3))
+    assert (out / "recording.mcap").is_file() and json.loads((out / "report.json").read_text())["outcome"] == "failed"
