@@ -125,7 +125,7 @@ def up_main(argv: list[str] | None = None) -> int:
 
 
 def _up(a, stop_requested: threading.Event) -> int:
-    from .compose import DEFAULT_COMPOSE, active, free_port, load_compose, localize
+    from .compose import DEFAULT_COMPOSE, active, free_port, listen_ports, load_compose, localize
     from .procs import Child, wait_port
 
     if a.stains < 0 or a.stains > 50:
@@ -154,11 +154,11 @@ def _up(a, stop_requested: threading.Event) -> int:
     services = active(load_compose(compose_path, variables), profiles)
     port_of = None
     if a.port_base is not None:
-        from .compose import _listen_ports
+
 
         port_of, n = {}, a.port_base
         for s in services:
-            for p in _listen_ports(s):
+            for p in listen_ports(s):
                 port_of[(s.name, p)] = n
                 n += 1
         for (name, _), port in port_of.items():

@@ -157,7 +157,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def _listen_ports(s: ComposeService) -> list[int]:
+def listen_ports(s: ComposeService) -> list[int]:
     ports = []
     for ep in s.environment.get("LAMPS_ZENOH_LISTEN", "").split(","):
         m = _ENDPOINT.match(ep.strip())
@@ -181,7 +181,7 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
             host_of[h] = s.name
     ports = dict(port_of or {})
     for s in services:
-        for p in _listen_ports(s):
+        for p in listen_ports(s):
             ports.setdefault((s.name, p), free_port())
 
     def endpoint(ep: str, own: str) -> str:
@@ -205,5 +205,5 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
             if env.get(key):
                 env[key] = ",".join(endpoint(e, s.name) for e in env[key].split(",") if e.strip())
         argv = (*lamps, *s.command[1:]) if s.command[0] == "lamps" else s.command
-        out.append(LocalService(s.name, tuple(argv), env, tuple(ports[(s.name, p)] for p in _listen_ports(s))))
+        out.append(LocalService(s.name, tuple(argv), env, tuple(ports[(s.name, p)] for p in listen_ports(s))))
     return out
