@@ -154,8 +154,6 @@ def _up(a, stop_requested: threading.Event) -> int:
     services = active(load_compose(compose_path, variables), profiles)
     port_of = None
     if a.port_base is not None:
-
-
         port_of, n = {}, a.port_base
         for s in services:
             for p in listen_ports(s):
