@@ -26,6 +26,7 @@ from typing import Any
 from controller.control.params import ControlConfigError, ImpedanceParams
 from controller.lamps.errors import PlanningError
 from controller.lamps.planner import PlannerParams
+from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import dataclass_from_table
 from interfaces.errors import ConfigError
@@ -162,8 +163,7 @@ class ExecutorParams:
         _range(s, "turn_rate_rad_s", self.turn_rate_rad_s, 0.05, 3.0)
         _range(s, "wipe_timeout_s", self.wipe_timeout_s, 0.5, 3600.0)
         _range(s, "recheck_s", self.recheck_s, 0.0, 60.0)
-        if not isinstance(self.max_passes, int) or isinstance(self.max_passes, bool) or not 1 <= self.max_passes <= 100:
-            raise ConfigError(f"[{s}] max_passes must be an integer in [1, 100], got {self.max_passes!r}")
+        check_int(s, "max_passes", self.max_passes, 1, 100)
         _range(s, "look_clearance_m", self.look_clearance_m, 0.0, 1.0)
         _range(s, "kappa_remaining", self.kappa_remaining, 0.0, 1.0)
         if not isinstance(self.air, bool):
@@ -226,11 +226,8 @@ class ControllerParams:
         _range(s, "robot_lost_s", self.robot_lost_s, 0.15, 60.0)
         _range(s, "stains_timeout_s", self.stains_timeout_s, 0.05, 3600.0)
         _range(s, "status_rate_hz", self.status_rate_hz, 0.5, 200.0)
-        for name in ("max_ticks", "trace_ticks"):
-            v = getattr(self, name)
-            hi = MAX_TRACE_TICKS if name == "trace_ticks" else 10**9
-            if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= hi:
-                raise ConfigError(f"[{s}] {name} must be an integer in [0, {hi}], got {v!r}")
+        check_int(s, "max_ticks", self.max_ticks, 0, 10**9)
+        check_int(s, "trace_ticks", self.trace_ticks, 0, MAX_TRACE_TICKS)
         if not isinstance(self.publish_trace, bool):
             raise ConfigError(f"[{s}] publish_trace must be true or false, got {self.publish_trace!r}")
         peak = QUINTIC_PEAK_SPEED * self.executor.approach_speed_m_s

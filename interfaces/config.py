@@ -165,6 +165,16 @@ def check_range(section: str, name: str, value: Any, lo: float, hi: float) -> No
         raise ConfigError(f"[{section}] {name} must be a number in [{lo}, {hi}], got {value!r}")
 
 
+def check_int(section: str, name: str, value: Any, lo: int, hi: int | None = None, what: str = "an integer") -> None:
+    """Raise ConfigError unless ``value`` is an int (not a bool) in ``[lo, hi]`` (no upper bound if ``hi`` is None)."""
+    if not isinstance(value, int) or isinstance(value, bool) or value < lo or (hi is not None and value > hi):
+        if hi is not None:
+            text = f"{what} in [{lo}, {hi}]"
+        else:
+            text = "a non-negative integer" if lo == 0 else f"{what} >= {lo}"
+        raise ConfigError(f"[{section}] {name} must be {text}, got {value!r}")
+
+
 def check_vector(section: str, name: str, value: Any, n: int) -> tuple[float, ...]:
     """``value`` as a tuple of ``n`` finite floats, or ConfigError."""
     ok = (isinstance(value, (list, tuple)) and len(value) == n

@@ -23,6 +23,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import check_vector, dataclass_from_table
 from interfaces.errors import ConfigError
@@ -59,8 +60,7 @@ class BoardParams:
         if size != (0.0, 0.0) and not all(0.2 <= v <= 5.0 for v in size):
             raise ConfigError(f"[{s}] size_m must be [0, 0] (measure) or two lengths in [0.2, 5.0] m, got {list(size)}")
         _range(s, "resolution_m", self.resolution_m, 0.0005, 0.01)
-        if not isinstance(self.min_markers, int) or isinstance(self.min_markers, bool) or not 1 <= self.min_markers <= 4:
-            raise ConfigError(f"[{s}] min_markers must be an integer in [1, 4], got {self.min_markers!r}")
+        check_int(s, "min_markers", self.min_markers, 1, 4)
         _range(s, "hold_s", self.hold_s, 0.0, 600.0)
         _range(s, "max_reprojection_px", self.max_reprojection_px, 0.1, 20.0)
         _range(s, "moved_m", self.moved_m, 0.001, 1.0)

@@ -25,6 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import check_vector as _vector
 from interfaces.config import dataclass_from_table as _from_table
@@ -124,12 +125,9 @@ class DirtParams:
 
     def __post_init__(self) -> None:
         s = "sim.dirt"
-        if not isinstance(self.wipe_every_steps, int) or isinstance(self.wipe_every_steps, bool) \
-                or not 1 <= self.wipe_every_steps <= 20:
-            raise ConfigError(f"[{s}] wipe_every_steps must be an integer in [1, 20], got {self.wipe_every_steps!r}")
+        check_int(s, "wipe_every_steps", self.wipe_every_steps, 1, 20)
         _range(s, "cell_m", self.cell_m, 0.0005, 0.002)
-        if not isinstance(self.stains, int) or isinstance(self.stains, bool) or not 0 <= self.stains <= 12:
-            raise ConfigError(f"[{s}] stains must be an integer count in [0, 12], got {self.stains!r}")
+        check_int(s, "stains", self.stains, 0, 12, what="an integer count")
         lo, hi = _vector(s, "stain_size_m", self.stain_size_m, 2)
         if not 0.01 <= lo <= hi <= 0.3:
             raise ConfigError(f"[{s}] stain_size_m must be (min, max) with 0.01 <= min <= max <= 0.3, got {self.stain_size_m!r}")
@@ -179,9 +177,7 @@ class CameraParams:
         if not isinstance(self.enabled, bool) or not isinstance(self.shadow, bool):
             raise ConfigError(f"[{s}] enabled and shadow must be true or false")
         for name, lo, hi in (("width", 64, 1920), ("height", 48, 1080)):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
-                raise ConfigError(f"[{s}] {name} must be an integer in [{lo}, {hi}], got {v!r}")
+            check_int(s, name, getattr(self, name), lo, hi)
         _range(s, "rate_hz", self.rate_hz, 0.5, 60.0)
         if not isinstance(self.name, str) or not re.fullmatch(r"[A-Za-z0-9_\-.]+", self.name):
             raise ConfigError(f"[{s}] name must be letters, digits, '_', '-' or '.', got {self.name!r}")
@@ -243,8 +239,7 @@ class SimParams:
         s = "sim"
         if self.mode not in MODES:
             raise ConfigError(f"[{s}] mode must be one of {MODES}, got {self.mode!r}")
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
-            raise ConfigError(f"[{s}] seed must be a non-negative integer, got {self.seed!r}")
+        check_int(s, "seed", self.seed, 0)
         _range(s, "rate_hz", self.rate_hz, 100.0, 5000.0)
         _range(s, "stale_limit_s", self.stale_limit_s, 2.0 / self.rate_hz, 1.0)
         for name in ("gravity_compensated", "lockstep_camera_sync"):
@@ -257,8 +252,7 @@ class SimParams:
         _range(s, "truth_rate_hz", self.truth_rate_hz, 0.1, self.rate_hz)
         _range(s, "status_rate_hz", self.status_rate_hz, 0.1, 100.0)
         _range(s, "lockstep_republish_s", self.lockstep_republish_s, 0.001, 10.0)
-        if not isinstance(self.max_steps, int) or isinstance(self.max_steps, bool) or self.max_steps < 0:
-            raise ConfigError(f"[{s}] max_steps must be a non-negative integer, got {self.max_steps!r}")
+        check_int(s, "max_steps", self.max_steps, 0)
 
     @property
     def dt_s(self) -> float:
