@@ -31,7 +31,7 @@ sys.path.insert(0, str(REPO))
 
 from sklearn.cluster import DBSCAN  # noqa: E402
 
-from interfaces.messages import CameraFrame, SimTruth  # noqa: E402
+from interfaces.messages import CameraFrame  # noqa: E402
 from interfaces.robot_model import RobotModel  # noqa: E402
 from perception.cluster import cluster_pixels  # noqa: E402
 from perception.evaluate import kappa_timings  # noqa: E402
@@ -90,33 +90,17 @@ def bench_frames(frames: list[CameraFrame], repeat: int = 3) -> dict:
 
 def bench_closed_loop(tmp: Path) -> dict:
     from controller.cli import load_or_learn_skill
-    from tests.test_controller_service import ControllerThread
-    from tests.test_perception_service import PerceptionThread
+    from tests.test_perception_service import run_closed_loop
 
-    skill = load_or_learn_skill("")
-    t_start = time.monotonic()
-    with SimProcess(tmp, {"mode": "lockstep", "camera": {"rate_hz": 10.0}}) as sim, \
-            ControllerThread(sim, skill, {"stains_from": "perception", "trace_ticks": 0}) as ctl, \
-            PerceptionThread(sim.robot_id, [sim.port, ctl.port]) as per:
-        truth = ctl.operator.inbox(ctl.operator.keys.sim_truth, SimTruth, maxlen=100_000)
-        truths: list[SimTruth] = []
-
-        def done() -> bool:
-            while (t := truth.get(0.0)) is not None:
-                truths.append(t)
-            return ctl.phase == "DONE" and bool(truths) and max(truths[-1].remaining) < 0.05
-
-        wait_for(done, 600.0, "the wipe")
-        wall = time.monotonic() - t_start
-        sent = list(per.sent)
-        status = per.service.status()
+    run = run_closed_loop(tmp, load_or_learn_skill(""), timeout_s=600.0)
+    truths, sent, status = run.truths, run.sent, run.perception_status
     out = [{"stain": k.truth_index, "truth_below_s": k.truth_below_s, "in_view_s": k.in_view_s,
             "kappa_s": k.kappa_s, "latency_from_truth_s": k.kappa_s - k.truth_below_s,
             "latency_from_view_s": k.kappa_s - k.in_view_s}
-           for k in kappa_timings([m for _, m in sent], truths, per.params.kappa)]
+           for k in kappa_timings([m for _, m in sent], truths, run.kappa)]
     rates = np.diff([t for t, _ in sent])
     return {"stains": out, "final_remaining": truths[-1].remaining, "sim_time_s": truths[-1].robot_time_ns * 1e-9,
-            "wall_s": wall, "publish_interval_p50_ms": float(np.median(rates) * 1e3),
+            "wall_s": run.wall_s, "publish_interval_p50_ms": float(np.median(rates) * 1e3),
             "publish_interval_max_ms": float(rates.max() * 1e3),
             "process_p50_us": status.counters.get("process_p50_us"), "frames": status.counters.get("frames_processed")}
 

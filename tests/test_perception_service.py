@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -63,9 +64,24 @@ class PerceptionThread:
         assert self.error is None, f"perception loop died: {self.error!r}"
 
 
-def test_closed_loop_wipes_three_seeded_stains_on_perceptions_stains(tmp_path, learned_skill):
+@dataclass
+class ClosedLoop:
+    """What one closed-loop run (sim with camera, controller on perception's stains, perception) left behind."""
+
+    truths: list[SimTruth]
+    sent: list  # (wall time, Stains) as perception published them
+    kappa: object  # perception's KappaParams
+    executor_counters: dict
+    service_counters: dict
+    perception_status: object
+    wall_s: float
+
+
+def run_closed_loop(tmp_path, skill, timeout_s: float = 400.0) -> ClosedLoop:
+    """Until every stain is below 5 % in the truth and the controller is DONE (also used by the benchmark)."""
+    t0 = time.monotonic()
     with SimProcess(tmp_path, {"mode": "lockstep", "camera": {"rate_hz": 10.0}}) as sim, \
-            ControllerThread(sim, learned_skill, {"stains_from": "perception", "trace_ticks": 0}) as ctl, \
+            ControllerThread(sim, skill, {"stains_from": "perception", "trace_ticks": 0}) as ctl, \
             PerceptionThread(sim.robot_id, [sim.port, ctl.port]) as per:
         truth = ctl.operator.inbox(ctl.operator.keys.sim_truth, SimTruth, maxlen=100_000)
         truths: list[SimTruth] = []
@@ -77,17 +93,23 @@ def test_closed_loop_wipes_three_seeded_stains_on_perceptions_stains(tmp_path, l
             return ctl.phase == "DONE" and bool(truths) and max(truths[-1].remaining) < 0.05
 
         ctl.wait_phase(("WIPE",), 90.0)
-        wait_for(all_wiped_and_done, 400.0, "every stain wiped and the controller DONE")
-        counters = dict(ctl.core.executor.counters)
+        wait_for(all_wiped_and_done, timeout_s, "every stain wiped and the controller DONE")
+        return ClosedLoop(truths, list(per.sent), per.params.kappa, dict(ctl.core.executor.counters),
+                          dict(ctl.service.counters), per.service.status(), time.monotonic() - t0)
+
+
+def test_closed_loop_wipes_three_seeded_stains_on_perceptions_stains(tmp_path, learned_skill):
+    run = run_closed_loop(tmp_path, learned_skill)
+    truths, counters = run.truths, run.executor_counters
     final = truths[-1]
     print(f"closed loop on perception: remaining {np.round(final.remaining, 3).tolist()} after "
           f"{final.robot_time_ns / 1e9:.1f} s sim time; executor {counters}")
     assert np.all(np.array(final.remaining) < 0.05), final.remaining
-    assert ctl.service.counters.get("stains_rejected", 0) == 0
+    assert run.service_counters.get("stains_rejected", 0) == 0
     # kappa against the truth: perception's flag comes after the truth fell below the level, and soon after
     # the eraser uncovered the stain (it cannot see under the pad)
-    level = per.params.kappa.level
-    timings = kappa_timings([m for _, m in per.sent], truths, per.params.kappa)
+    level = run.kappa.level
+    timings = kappa_timings([m for _, m in run.sent], truths, run.kappa)
     report = [k.describe(level) for k in timings]
     print("\n".join(report))
     # every stain judged wiped by perception itself (after its last pass the pad waits off the stains, on the
