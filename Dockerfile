@@ -21,6 +21,7 @@ COPY pyproject.toml README.md ./
 RUN mkdir -p controller sim perception interfaces launch \
     && pip install . && pip uninstall -y lamps
 
+COPY lampskit ./lampskit
 COPY controller ./controller
 COPY sim ./sim
 COPY perception ./perception

@@ -49,7 +49,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from controller.cli import load_or_learn_skill  # noqa: E402
+from lampskit.learn.learn import bundled_skill  # noqa: E402
 from controller.core import ControllerCore  # noqa: E402
 from controller.executor import BoardPose, StainState  # noqa: E402
 from controller.params import ControllerParams  # noqa: E402
@@ -369,7 +369,7 @@ def main() -> int:
     cmd = ".venv/bin/python bench/bench_controller.py" + (" --quick" if a.quick else "")
     res = {"machine": f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"}
     try:
-        skill = load_or_learn_skill("")
+        skill = bundled_skill()
         res["tick"] = bench_tick(skill)
         res["realtime"] = bench_realtime(10.0 if a.quick else 60.0)
         res["lockstep"] = bench_lockstep(120.0)
@@ -378,7 +378,7 @@ def main() -> int:
         return 1
     print_report(res, cmd)
     if a.json:
-        from interfaces.atomic import write_text_atomic
+        from lampskit.atomic import write_text_atomic
 
         write_text_atomic(Path(a.json), json.dumps(res, indent=2))
     return 0

@@ -89,10 +89,10 @@ def bench_frames(frames: list[CameraFrame], repeat: int = 3) -> dict:
 
 
 def bench_closed_loop(tmp: Path) -> dict:
-    from controller.cli import load_or_learn_skill
+    from lampskit.learn.learn import bundled_skill
     from tests.test_perception_service import run_closed_loop
 
-    run = run_closed_loop(tmp, load_or_learn_skill(""), timeout_s=600.0)
+    run = run_closed_loop(tmp, bundled_skill(), timeout_s=600.0)
     truths, sent, status = run.truths, run.sent, run.perception_status
     out = [{"stain": k.truth_index, "truth_below_s": k.truth_below_s, "in_view_s": k.in_view_s,
             "kappa_s": k.kappa_s, "latency_from_truth_s": k.kappa_s - k.truth_below_s,

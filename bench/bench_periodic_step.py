@@ -31,8 +31,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from controller.lamps.periodic import forcing, learn_periodic, periodic_state  # noqa: E402
-from controller.lamps.periodic_runner import PeriodicRunner  # noqa: E402
+from lampskit.core.periodic import forcing, periodic_state  # noqa: E402
+from lampskit.learn.periodic_fit import learn_periodic  # noqa: E402
+from lampskit.core.periodic_runner import PeriodicRunner  # noqa: E402
 
 DT_S = 1e-3
 
@@ -118,7 +119,7 @@ def run(quick: bool) -> list[dict]:
         phases = iter(np.random.default_rng(1).uniform(0, 2 * np.pi, n_calls))
         closed = time_calls(lambda: periodic_state(mp, next(phases)), n_calls)
 
-        base = dict(n_dims=n_dims, n_basis=mp.n_basis, n_harmonics=int(mp._stacked.shape[0]), calls=n_calls)
+        base = dict(n_dims=n_dims, n_basis=mp.n_basis, n_harmonics=int(mp.limit_cycle.shape[0]), calls=n_calls)
         for what, samples, err in (
             ("PeriodicRunner.update", fast, fast_err),
             ("PeriodicRunner.update (ramping)", ramp, None),

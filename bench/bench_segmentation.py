@@ -6,7 +6,7 @@ Input: synthetic wiping demonstrations (8 stains, ``synth.synthesize_demo``)
 sampled at the rate that gives 2 000, 5 000 and 20 000 samples of a 3-D
 trajectory. For each size:
 
-- ``lamps optics``: :func:`controller.lamps.optics.optics` on the raw
+- ``lamps optics``: :func:`lampskit.learn.optics.optics` on the raw
   positions, ``min_samples = 50`` (best of 3 runs below 20 000 samples);
 - baseline ``sklearn OPTICS``: ``sklearn.cluster.OPTICS(min_samples=50,
   max_eps=inf)`` on the same points, one run (``--quick`` skips it at
@@ -34,9 +34,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from controller.lamps.optics import optics  # noqa: E402
-from controller.lamps.segmentation import frame_accuracy, segment, segment_counts  # noqa: E402
-from controller.lamps.synth import synthesize_demo  # noqa: E402
+from lampskit.learn.optics import optics  # noqa: E402
+from lampskit.learn.segmentation import frame_accuracy, segment, segment_counts  # noqa: E402
+from lampskit.learn.synth import synthesize_demo  # noqa: E402
 
 SIZES = (2000, 5000, 20000)
 MIN_SAMPLES = 50

@@ -195,7 +195,7 @@ def main() -> int:
           f"{rt['period_max_us']:.0f} | {rt['sim_overruns']} / {rt['sim_ticks']} | {rt['lost_states']} | "
           f"{rt['camera_frames']} (skipped {rt['camera_ticks_skipped']}) |")
     if a.json:
-        from interfaces.atomic import write_text_atomic
+        from lampskit.atomic import write_text_atomic
 
         write_text_atomic(Path(a.json), json.dumps(res, indent=2))
     return 0

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from controller.lamps.errors import LampsError
+from lampskit.errors import LampsError, SkillFileError
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 
@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mode", choices=("lockstep", "realtime"),
                    help="lockstep: answer each robot state (deterministic); realtime: own fixed-rate clock")
     p.add_argument("--rate", type=float, metavar="HZ", help="control rate (default 1000)")
-    p.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' (default: learn the bundled demo)")
+    p.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' or 'lamps demo' (required here or as [controller] skill)")
     p.add_argument("--stains-from", choices=("perception", "truth"),
                    help="where stains come from: perception/stains, or sim/truth (tests, no perception)")
     p.add_argument("--air", action="store_true", default=None, help="dry run: wipe in the air above the board")
@@ -68,23 +68,21 @@ def load(a: argparse.Namespace):
     return zenoh_with_options(cfg.zenoh, a), ControllerParams.from_table(table)
 
 
-def load_or_learn_skill(path: str):
-    """The skill file at ``path``, or (empty path) the skill learned from the bundled synthetic demonstration."""
-    from controller.lamps.skill import load_skill
+def load_runnable_skill(path: str):
+    """The skill file at ``path``, checked to hold what the executor needs (SkillFileError otherwise).
 
-    if path:
-        skill = load_skill(path)
-        if not skill.transitional:
-            raise LampsError(f"{path}: the skill has no transitional MP; the controller needs one to move "
+    The controller never learns: a skill comes from ``lamps learn`` or
+    ``lamps demo`` (``lamps up`` runs the latter before it starts the cell).
+    """
+    from lampskit.core.skill import load_skill
+
+    if not path:
+        raise SkillFileError("no skill file: give --skill FILE or [controller] skill (LAMPS__CONTROLLER__SKILL); "
+                             "make one with 'lamps demo --out DIR' (the bundled demo) or 'lamps learn DEMO -o FILE'")
+    skill = load_skill(path)
+    if not skill.transitional:
+        raise SkillFileError(f"{path}: the skill has no transitional MP; the controller needs one to move "
                              "between stains (learn from a demonstration that wipes at least two stains)")
-        return skill
-    from controller.lamps.learn import learn_skill
-    from controller.lamps.synth import synthesize_demo
-
-    log = logging.getLogger("controller")
-    t0 = time.monotonic()
-    skill, _ = learn_skill(synthesize_demo(3, 0).demo)
-    log.info("no skill file given: learned the bundled demo in %.1f s", time.monotonic() - t0)
     return skill
 
 
@@ -123,7 +121,7 @@ def check_rate(params, skill, model) -> str:
 
 def write_trace(path: str, core) -> None:
     from controller.core import TRACE_COLUMNS
-    from interfaces.atomic import write_atomic
+    from lampskit.atomic import write_atomic
 
     write_atomic(path, lambda f: np.savez(f, trace=core.trace.array(), columns=np.array(TRACE_COLUMNS),
                                           junction_ticks=np.array(core.executor.junction_ticks)))
@@ -137,10 +135,10 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_settings, params = load(a)
         from interfaces.robot_model import RobotModel
 
-        skill = load_or_learn_skill(params.skill)
+        skill = load_runnable_skill(params.skill)
         model = RobotModel()
         timing = check_rate(params, skill, model)
-    except (InterfaceError, LampsError, OSError) as exc:
+    except (LampsError, OSError) as exc:
         print(f"lamps controller: error: {exc}", file=sys.stderr)
         return 1
     if a.check:

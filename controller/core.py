@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller.lamps.skill import Skill
+from lampskit.core.skill import Skill
 from interfaces.robot_model import RobotModel
 
 from .control.force import NormalForceRegulator

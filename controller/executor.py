@@ -17,7 +17,7 @@ FAULT(reason) and ESTOP reachable from any phase.
   ``contact_threshold_n``, ramp the force up to its target.
 * TRANSITION into stain j: the learned transitional MP from the current
   reference state (position, velocity, acceleration) into the periodic MP
-  of j at the entry phase (:func:`~controller.lamps.planner.plan_transition`),
+  of j at the entry phase (:func:`~lampskit.core.planner.plan_transition`),
   so the reference is continuous in acceleration at both junctions.
 * WIPE(i): the periodic MP re-anchored at the stain's centre and scaled to
   its size, until its kappa is set (or ``wipe_timeout_s``: one pass), then
@@ -50,11 +50,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.lamps.errors import PlanningError
-from controller.lamps.planner import Plan, PlannerParams, Stain, Wipe, exit_phase_delay, plan, plan_transition
-from controller.lamps.periodic_runner import PeriodicRunner
-from controller.lamps.skill import Skill
-from controller.lamps.transitional_runner import TransitionalRunner
+from lampskit.errors import PlanningError
+from lampskit.core.planner import Plan, PlannerParams, Stain, Wipe, exit_phase_delay, plan, plan_transition
+from lampskit.core.periodic_runner import PeriodicRunner
+from lampskit.core.skill import Skill
+from lampskit.core.transitional_runner import TransitionalRunner
 from interfaces.transforms import tool_rotation_on_board
 
 from .motion import OrientationBlend, Quintic, brake_to_rest, orientation_duration, rest_to_rest

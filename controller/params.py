@@ -5,7 +5,7 @@ Layout (every key optional)::
     [controller]
     mode = "lockstep"          # answer each robot state; or "realtime": own 1 kHz clock
     rate_hz = 1000.0
-    skill = ""                 # skill file; "" = learn the bundled synthetic demo at start-up
+    skill = ""                 # skill file from lamps learn / lamps demo (required to start)
     stains_from = "perception" # or "truth": take stains from sim/truth (tests, before perception exists)
     [controller.impedance]  stiffness_n_m, stiffness_nm_rad, damping_factor, nullspace_stiffness_nm_rad
     [controller.force]      target_n, cap_n, kp, ki, integral_limit_n, contact_threshold_n, ...
@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from controller.control.params import ControlConfigError, ImpedanceParams
-from controller.lamps.errors import PlanningError
-from controller.lamps.planner import PlannerParams
+from lampskit.errors import PlanningError
+from lampskit.core.planner import PlannerParams
 from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import dataclass_from_table
@@ -181,8 +181,8 @@ class ControllerParams:
 
     mode : ``lockstep`` (answer each robot state, time from the robot's
     clock) or ``realtime`` (own fixed-rate clock, newest state).
-    rate_hz : control rate. skill : skill file path ("" = learn the bundled
-    demo at start-up). stains_from : ``perception`` or ``truth``.
+    rate_hz : control rate. skill : skill file path (required before the
+    controller starts; "" only for configs that set it later). stains_from : ``perception`` or ``truth``.
     state_timeout_s : real time: a robot state older than this is not
     answered (nothing new is sent; counted); 0 = five periods. robot_lost_s : no robot state
     for this long (wall time, both modes; the lock-step sim re-sends its

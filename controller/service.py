@@ -35,7 +35,7 @@ from interfaces.messages import (ControllerStatus, ControllerTrace, Estop, LoopT
 from interfaces.session import ServiceNode
 from interfaces.transforms import transform_from_pose
 
-from controller.lamps.errors import PlanningError
+from lampskit.errors import PlanningError
 
 from .core import TRACE_COLUMNS, ControllerCore
 from .executor import BoardPose, StainState

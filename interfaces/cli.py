@@ -12,15 +12,15 @@ import sys
 
 #: subcommand -> (entry point, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("controller.lamps.cli:demo_main", "the embedded default: synthesize, learn, plot, save a skill"),
-    "demo-data": ("controller.lamps.cli:demo_data_main", "write a synthetic multi-periodic wiping demonstration"),
-    "segment": ("controller.lamps.cli:segment_main", "segment a demonstration into periodic and transitional MPs"),
+    "demo": ("lampskit.cli:demo_main", "the embedded default: synthesize, learn, plot, save a skill"),
+    "demo-data": ("lampskit.cli:demo_data_main", "write a synthetic multi-periodic wiping demonstration"),
+    "segment": ("lampskit.cli:segment_main", "segment a demonstration into periodic and transitional MPs"),
     "evaluate-segmentation": (
-        "controller.lamps.cli:evaluate_main",
+        "lampskit.cli:evaluate_main",
         "frame accuracy of a segmentation against hand labels",
     ),
-    "learn": ("controller.lamps.cli:learn_main", "segment and learn a demonstration into a skill file"),
-    "plan": ("controller.lamps.cli:plan_main", "plan and roll out a skill over given stains"),
+    "learn": ("lampskit.cli:learn_main", "segment and learn a demonstration into a skill file"),
+    "plan": ("lampskit.cli:plan_main", "plan and roll out a skill over given stains"),
     "sim": ("sim.cli:main", "the simulated robot, board and camera as a Zenoh service"),
     "controller": ("controller.cli:main", "run a skill on the robot: impedance control and the skill executor"),
     "perception": ("perception.cli:main", "stains and kappa from camera images (board markers, ink clustering)"),

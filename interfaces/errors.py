@@ -1,10 +1,12 @@
-"""One root exception for the Zenoh contract, with one subclass per edge."""
+"""The contract's errors: one subclass of the project root :class:`~lampskit.errors.LampsError` per edge."""
 
 from __future__ import annotations
 
+from lampskit.errors import LampsError
 
-class InterfaceError(Exception):
-    """Root of every error raised deliberately by :mod:`interfaces`."""
+
+class InterfaceError(LampsError):
+    """Root of every error raised deliberately by :mod:`interfaces` (messages, configuration, robot model)."""
 
 
 class MessageDecodeError(InterfaceError, ValueError):

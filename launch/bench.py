@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from interfaces.atomic import write_text_atomic
+from lampskit.atomic import write_text_atomic
 
 BENCH_DIR = Path(__file__).resolve().parent.parent / "bench"
 #: The benchmarks in the order they run (cheap ones first).

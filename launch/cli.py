@@ -22,7 +22,7 @@ import time
 import tomllib
 from pathlib import Path
 
-from interfaces.errors import ConfigError, InterfaceError
+from lampskit.errors import LampsError
 
 BOARDS = {"vertical": "wall", "wall": "wall", "horizontal": "table", "table": "table"}
 #: The controller DONE this long (wall) ends the run (longer than the executor's 1 s recheck, after which a
@@ -32,7 +32,7 @@ SETTLE_S = 2.5
 FAULT_HOLD_S = 5.0
 
 
-class UpError(Exception):
+class UpError(LampsError):
     """A clear, one-line reason why the cell could not run."""
 
 
@@ -119,13 +119,13 @@ def up_main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop_requested.set())
     try:
         return _up(a, stop_requested)
-    except (UpError, ConfigError, InterfaceError) as exc:
+    except LampsError as exc:
         print(f"lamps up: error: {exc}", file=sys.stderr)
         return 1
 
 
 def _up(a, stop_requested: threading.Event) -> int:
-    from .compose import DEFAULT_COMPOSE, active, free_port, listen_ports, load_compose, localize
+    from .compose import DEFAULT_COMPOSE, active, free_port, listen_ports, load_compose, localize, run_locally
     from .procs import Child, wait_port
 
     if a.stains < 0 or a.stains > 50:
@@ -151,7 +151,7 @@ def _up(a, stop_requested: threading.Event) -> int:
     if a.robot_id:
         variables["LAMPS_ROBOT_ID"] = a.robot_id
     profiles = tuple(p for p in variables.get("COMPOSE_PROFILES", "sim").split(",") if p)
-    services = active(load_compose(compose_path, variables), profiles)
+    services = run_locally(active(load_compose(compose_path, variables), profiles))
     port_of = None
     if a.port_base is not None:
         port_of, n = {}, a.port_base
@@ -194,7 +194,7 @@ def _up(a, stop_requested: threading.Event) -> int:
         run = {"outcome": outcome, "why": why, "duration_s": time.monotonic() - t_start, "services": codes,
                "key_prefix": f"lamps/{robot_id}", "skill": str(skill),
                "options": {k: v for k, v in vars(a).items()}}
-        from interfaces.atomic import write_text_atomic
+        from lampskit.atomic import write_text_atomic
 
         write_text_atomic(out / "run.json", json.dumps(run, indent=1) + "\n")
         for c in recorder:
@@ -314,7 +314,7 @@ def record_main(argv: list[str] | None = None) -> int:
         from .record import Recorder
 
         node = ServiceNode("recorder", settings).__enter__()
-    except (ConfigError, InterfaceError) as exc:
+    except LampsError as exc:
         print(f"lamps record: error: {exc}", file=sys.stderr)
         return 1
     except Exception as exc:  # zenoh's own error type for a bad endpoint

@@ -43,6 +43,7 @@ class ComposeService:
     profiles: tuple[str, ...] = ()
     aliases: tuple[str, ...] = ()
     volumes: tuple[str, ...] = ()
+    labels: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -118,13 +119,28 @@ def load_compose(path: str | os.PathLike = DEFAULT_COMPOSE, variables: Mapping[s
                 if isinstance(net, dict):
                     aliases += _strings(net.get("aliases"), f"{where}: aliases")
         vols = tuple(substitute(str(v), variables) for v in (svc.get("volumes") or ()))
+        labels_raw = svc.get("labels") or {}
+        if isinstance(labels_raw, list):
+            labels_raw = dict(e.split("=", 1) if "=" in e else (e, "") for e in labels_raw)
+        if not isinstance(labels_raw, dict):
+            raise ConfigError(f"{where}: labels must be a mapping or a list")
+        labels = {str(k): substitute(str(v), variables) for k, v in labels_raw.items()}
         out[name] = ComposeService(name, tuple(substitute(c, variables) for c in cmd), env, deps,
-                                   _strings(svc.get("profiles"), f"{where}: profiles"), aliases, vols)
+                                   _strings(svc.get("profiles"), f"{where}: profiles"), aliases, vols, labels)
     for s in out.values():
         for d in s.depends_on:
             if d not in out:
                 raise ConfigError(f"{p}: service {s.name!r} depends on unknown service {d!r}")
     return out
+
+
+#: A service labelled ``lamps.up: skip`` is compose's alone: ``lamps up`` does its job itself (learning the skill).
+SKIP_LABEL = "lamps.up"
+
+
+def run_locally(services: list[ComposeService]) -> list[ComposeService]:
+    """The services ``lamps up`` starts as processes: all but those labelled ``lamps.up: skip``."""
+    return [s for s in services if s.labels.get(SKIP_LABEL) != "skip"]
 
 
 def active(services: Mapping[str, ComposeService], profiles: tuple[str, ...]) -> list[ComposeService]:

@@ -35,7 +35,7 @@ import numpy as np
 
 from controller.core import PHASE_CODES
 from controller.params import ForceParams
-from interfaces.atomic import write_text_atomic
+from lampskit.atomic import write_text_atomic
 from interfaces.keys import Keys
 
 from .record import RECORDING, read_recording, trace_array
@@ -198,7 +198,7 @@ def write_plots(run_dir: Path, rec: dict, keys: Keys, tr: np.ndarray, col: dict[
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from interfaces.atomic import write_atomic
+    from lampskit.atomic import write_atomic
 
     written = []
 

@@ -22,6 +22,7 @@ import sys
 import msgspec
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
 
 from .params import PerceptionParams, parse_source
@@ -85,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         if a.no_zenoh and kind == "zenoh":
             raise InterfaceError("--no-zenoh needs an offline source (--source folder:DIR, video:FILE or device:N)")
         source = None if kind == "zenoh" else open_source(params, None)
-    except (InterfaceError, OSError) as exc:
+    except (LampsError, OSError) as exc:
         print(f"lamps perception: error: {exc}", file=sys.stderr)
         return 1
     if a.check:

@@ -15,10 +15,11 @@ import cv2
 import numpy as np
 
 from interfaces.messages import CameraFrame, CameraIntrinsics
+from lampskit.errors import LampsError
 from interfaces.transforms import transform_from_pose
 
 
-class FrameError(ValueError):
+class FrameError(LampsError, ValueError):
     """A frame that cannot be used; ``str(exc)`` starts with a short reason (``"corrupt jpeg: ..."``)."""
 
 

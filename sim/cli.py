@@ -15,6 +15,7 @@ import signal
 import sys
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
 
 SERVICE = "sim"
@@ -97,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         from .core import SimCore
 
         core = SimCore(params)
-    except InterfaceError as exc:
+    except LampsError as exc:
         print(f"lamps sim: error: {exc}", file=sys.stderr)
         return 1
     if a.check:

@@ -16,14 +16,14 @@ REAL_DEMOS = REPO.parent / "shared" / "data" / "wiping-demos" / "circular_wiping
 
 @pytest.fixture(scope="session")
 def learned_skill():
-    """The skill learned from the bundled synthetic demonstration (3 stains, seed 0), what the controller defaults to."""
-    from controller.cli import load_or_learn_skill
+    """The skill learned from the bundled synthetic demonstration (3 stains, seed 0), what ``lamps up`` runs."""
+    from lampskit.learn.learn import bundled_skill
 
-    return load_or_learn_skill("")
+    return bundled_skill()
 
 
 @pytest.fixture(scope="session")
 def learned_skill_file(learned_skill, tmp_path_factory) -> Path:
-    from controller.lamps.skill import save_skill
+    from lampskit.core.skill import save_skill
 
     return save_skill(tmp_path_factory.mktemp("skill") / "skill.json", learned_skill)

@@ -5,16 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.lamps.baselines import (
+from lampskit.learn.baselines import (
     KinematicLimits,
     learn_target_crossing_dmp,
     limits_from_states,
     rollout_target_crossing_dmp,
     ruckig_transition,
 )
-from controller.lamps.errors import PlanningError
-from controller.lamps.transitional import TrajectorySamples, rollout, similarity_transform
-from controller.lamps.transitional_learn import learn_transitional
+from lampskit.errors import PlanningError
+from lampskit.core.transitional import TrajectorySamples
+from lampskit.core.transitional_plan import rollout, similarity_transform
+from lampskit.learn.transitional_fit import learn_transitional
 
 from .test_transitional import human_demo, random_case
 

@@ -87,7 +87,7 @@ def test_evaluate_segmentation_on_a_real_demo(capsys):
 
 
 def test_learn_writes_a_loadable_skill(skill_file):
-    from controller.lamps.skill import load_skill
+    from lampskit.core.skill import load_skill
 
     skill = load_skill(skill_file)
     assert len(skill.periodic) == 3 and len(skill.transitional) >= 2

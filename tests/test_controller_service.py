@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from controller.core import TRACE_COLUMNS, ControllerCore
-from controller.lamps.periodic import learn_periodic
-from controller.lamps.skill import PeriodicEntry
+from lampskit.learn.periodic_fit import learn_periodic
+from lampskit.core.skill import PeriodicEntry
 from controller.params import ControllerParams
 from controller.service import ControllerService
 from interfaces.config import ZenohSettings
@@ -259,6 +259,12 @@ def test_bad_skill_file_is_refused_at_start_up(tmp_path, content, match):
     path.write_text(content)
     r = _controller("--skill", str(path), "--check")
     assert r.returncode == 1 and match in r.stderr, r.stderr
+
+
+def test_no_skill_file_is_refused_the_controller_never_learns():
+    r = _controller("--check")
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "no skill file" in r.stderr and "lamps demo" in r.stderr, r.stderr
 
 
 def test_check_reports_the_skill_and_the_tick_cost(learned_skill_file):

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.lamps import demo_io
-from controller.lamps.demo import Demonstration
-from controller.lamps.errors import DemoError
-from controller.lamps.synth import synthesize_demo
+from lampskit.learn import demo_io
+from lampskit.learn.demo import Demonstration
+from lampskit.errors import DemoError
+from lampskit.learn.synth import synthesize_demo
 from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 
 from .conftest import REAL_DEMOS

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.lamps.errors import LearningError
-from controller.lamps.gmr import (
+from lampskit.errors import LearningError
+from lampskit.learn.gmr import (
     MAX_PHASE_STD_RAD,
     fit_periodic_gmm,
     gmr_mean,

@@ -24,7 +24,7 @@ import pytest
 from interfaces.cli import COMMANDS
 from interfaces.errors import ConfigError
 from interfaces.keys import Keys
-from launch.compose import active, free_port, load_compose, localize, substitute
+from launch.compose import active, free_port, load_compose, localize, run_locally, substitute
 from launch.record import read_recording, trace_array
 from launch.report import SCHEMA, build_report
 
@@ -44,6 +44,8 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
     assert (REPO / ".env").read_text().strip() == "COMPOSE_PROFILES=sim"  # the default profile
     for s in services.values():
         assert s.command[0] == "lamps" and s.command[1] in COMMANDS, s.command
+        if s.name == "skill":  # the one-shot learning service talks to nobody
+            continue
         assert s.environment["LAMPS_ZENOH_MULTICAST"] == "false" and s.environment["LAMPS_ZENOH_MODE"] == "peer"
         for ep in s.environment.get("LAMPS_ZENOH_CONNECT", "").split(","):
             assert not ep or ep.startswith("tcp/robot:") or ep.split("/")[1].split(":")[0] in services, ep
@@ -52,19 +54,24 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
     # volumes for skills and run output
     assert any(v.startswith("./skills:/skills") for v in services["controller"].volumes)
     assert any(v.startswith("./runs:/runs") for v in services["recorder"].volumes)
-    # defaults when no variable is set: lock-step, seed 0, 3 stains, wall board, learn the bundled demo
+    # defaults when no variable is set: lock-step, seed 0, 3 stains, wall board, the bundled demo's skill
     env = sim.environment
     assert (env["LAMPS__SIM__MODE"], env["LAMPS__SIM__SEED"], env["LAMPS__SIM__DIRT__STAINS"],
             env["LAMPS__SIM__BOARD__PRESET"]) == ("lockstep", "0", "3", "wall")
-    assert services["controller"].environment["LAMPS__CONTROLLER__SKILL"] == ""
+    assert services["controller"].environment["LAMPS__CONTROLLER__SKILL"] == "/skills/bundled/skill.json"
+    # the controller never learns: compose learns the bundled demo first, lamps up learns it itself
+    assert services["skill"].command[:2] == ("lamps", "demo") and "/skills/bundled" in services["skill"].command
+    assert "skill" in services["controller"].depends_on
+    assert [s.name for s in run_locally(list(services.values()))] == [n for n in services if n != "skill"]
     order = [s.name for s in active(services, ("sim",))]
     assert order.index("sim") < order.index("controller") < order.index("perception") < order.index("recorder")
     assert "sim" not in [s.name for s in active(services, ("real",))]
 
 
-def test_every_compose_service_config_is_accepted_by_its_own_check(tmp_path):
+def test_every_compose_service_config_is_accepted_by_its_own_check(tmp_path, learned_skill_file):
     """Each service's compose environment passes the service's --check (what the container would start with)."""
-    services = active(load_compose(COMPOSE, {"LAMPS_BOARD": "table", "LAMPS_STAINS": "2"}), ("sim",))
+    variables = {"LAMPS_BOARD": "table", "LAMPS_STAINS": "2", "LAMPS_SKILL": str(learned_skill_file)}
+    services = run_locally(active(load_compose(COMPOSE, variables), ("sim",)))
     for svc in localize(services):
         if svc.name == "recorder":
             continue

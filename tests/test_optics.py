@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from sklearn.cluster import OPTICS
 
-from controller.lamps.errors import SegmentationError
-from controller.lamps.optics import OpticsResult, optics, reachability_in_ordering
+from lampskit.errors import SegmentationError
+from lampskit.learn.optics import OpticsResult, optics, reachability_in_ordering
 
 
 def _on_grid(x: np.ndarray, cells_per_unit: int) -> np.ndarray:

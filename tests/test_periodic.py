@@ -10,17 +10,11 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from controller.lamps.errors import LearningError, PlanningError, SkillFileError
-from controller.lamps.periodic import (
-    PeriodicMP,
-    forcing,
-    forcing_target,
-    learn_periodic,
-    periodic_state,
-    significant_harmonics,
-)
-from controller.lamps.periodic_phase import assign_phase, estimate_frequency
-from controller.lamps.periodic_runner import PeriodicRunner, PeriodicStatus, rollout, step_matrix
+from lampskit.errors import LearningError, PlanningError, SkillFileError
+from lampskit.core.periodic import PeriodicMP, forcing, periodic_state
+from lampskit.learn.periodic_fit import forcing_target, learn_periodic, significant_harmonics
+from lampskit.learn.periodic_phase import assign_phase, estimate_frequency
+from lampskit.core.periodic_runner import PeriodicRunner, PeriodicStatus, rollout, step_matrix
 
 from .conftest import REAL_DEMOS
 

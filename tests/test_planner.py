@@ -7,20 +7,12 @@ import itertools
 import numpy as np
 import pytest
 
-from controller.lamps.errors import PlanningError
-from controller.lamps.learn import learn_skill
-from controller.lamps.periodic import periodic_state
-from controller.lamps.planner import (
-    PlannerParams,
-    Stain,
-    entry_phase,
-    exit_phase_delay,
-    junction_step_ratios,
-    order_stains,
-    plan,
-    rollout,
-)
-from controller.lamps.synth import synthesize_demo
+from lampskit.errors import PlanningError
+from lampskit.learn.learn import learn_skill
+from lampskit.core.periodic import periodic_state
+from lampskit.core.planner import PlannerParams, Stain, entry_phase, exit_phase_delay, order_stains, plan
+from lampskit.core.rollout import junction_step_ratios, rollout
+from lampskit.learn.synth import synthesize_demo
 
 
 @pytest.fixture(scope="module")

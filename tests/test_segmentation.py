@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from sklearn.cluster import cluster_optics_dbscan
 
-from controller.lamps.demo import Demonstration
-from controller.lamps.errors import SegmentationError
-from controller.lamps.segmentation import (
+from lampskit.learn.demo import Demonstration
+from lampskit.errors import SegmentationError
+from lampskit.learn.segmentation import (
     PROGRESS_TOTAL,
     Segment,
     Segmentation,
@@ -21,7 +21,7 @@ from controller.lamps.segmentation import (
     segment_counts,
     true_segment_count,
 )
-from controller.lamps.synth import synthesize_demo
+from lampskit.learn.synth import synthesize_demo
 
 
 def _check_invariants(seg: Segmentation, n: int) -> None:

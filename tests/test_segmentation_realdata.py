@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.lamps.demo import Demonstration
-from controller.lamps.segmentation import frame_accuracy, segment, segment_counts
+from lampskit.learn.demo import Demonstration
+from lampskit.learn.segmentation import frame_accuracy, segment, segment_counts
 
 from .conftest import REAL_DEMOS
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.lamps.errors import LearningError
-from controller.lamps.surface import fit_surface_frame
-from controller.lamps.synth import synthesize_demo
+from lampskit.errors import LearningError
+from lampskit.core.surface import fit_surface_frame
+from lampskit.learn.synth import synthesize_demo
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -9,24 +9,20 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from controller.lamps.errors import LearningError, PlanningError, SkillFileError
-from controller.lamps.transitional import (
+from lampskit.errors import LearningError, PlanningError, SkillFileError
+from lampskit.core.transitional import TransitionalMP, TransitionStatus
+from lampskit.core.transitional_maths import (
     N_TABLE,
-    TransitionalMP,
-    TransitionStatus,
     crossing_target_coefficients,
     crossing_window_s,
-    evaluate,
     forcing_term,
     fundamental_tables,
     gate_and_gains,
     phase,
-    plan_transition,
-    rollout,
-    similarity_transform,
 )
-from controller.lamps.transitional_learn import learn_transitional
-from controller.lamps.transitional_runner import TransitionalRunner
+from lampskit.core.transitional_plan import evaluate, plan_transition, rollout, similarity_transform
+from lampskit.learn.transitional_fit import learn_transitional
+from lampskit.core.transitional_runner import TransitionalRunner
 
 DT = 0.001
 

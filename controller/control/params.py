@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from controller.lamps.errors import LampsError
+from interfaces.errors import ConfigError
 
 
-class ControlConfigError(LampsError, ValueError):
+class ControlConfigError(ConfigError):
     """An impedance parameter is out of its valid range."""
 
 

@@ -7,7 +7,9 @@ import time
 
 import numpy as np
 
-from .transitional import N_TABLE, TransitionalMP, TransitionStatus, plan_transition
+from lampskit.core.transitional import TransitionalMP, TransitionStatus
+from lampskit.core.transitional_maths import N_TABLE
+from lampskit.core.transitional_plan import plan_transition
 
 
 class TransitionalRunner:
@@ -44,8 +46,8 @@ class TransitionalRunner:
         self._goal = p.goal
         self._a = 0.0 if math.isinf(p.sigma_s) else -1.0 / p.sigma_s**2
         self._scale = np.array([[1.0], [1.0 / self._T], [1.0 / self._T**2]])
-        self._hermite = mp._hermite
-        self._m = mp._hermite.shape[1] // 12
+        self._hermite = mp.table
+        self._m = mp.table.shape[1] // 12
         self._coefficients = p.coefficients
         self._state = p.start.copy()
         self.position_m, self.velocity_m_s, self.acceleration_m_s2 = self._state[0], self._state[1], self._state[2]

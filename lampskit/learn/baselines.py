@@ -28,22 +28,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .derivatives import resample_uniform
-from .errors import LearningError, PlanningError
-from .transitional import (
+from lampskit.learn.derivatives import resample_uniform
+from lampskit.errors import LearningError, PlanningError
+from lampskit.core.transitional import (
     DEFAULT_LAMBDA,
     DEFAULT_N_BASIS,
     DEFAULT_REACH_M,
     MIN_DURATION_S,
     MIN_SAMPLES,
     TrajectorySamples,
+)
+from lampskit.core.transitional_maths import (
     basis_centres_widths,
     crossing_target_coefficients,
     crossing_window_s,
     forcing_term,
     phase,
-    smooth_kinematics,
 )
+from lampskit.learn.transitional_fit import smooth_kinematics
 
 #: Pole of the second-order baseline (per duration), as the third-order MP's ``p``.
 DEFAULT_Q = 20.0

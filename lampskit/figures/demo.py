@@ -17,17 +17,17 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from interfaces.atomic import write_atomic  # noqa: E402
+from lampskit.atomic import write_atomic  # noqa: E402
 
-from .demo import Demonstration  # noqa: E402
-from .segmentation import Segmentation, segment  # noqa: E402
-from .skill import Skill  # noqa: E402
+from lampskit.learn.demo import Demonstration  # noqa: E402
+from lampskit.learn.segmentation import Segmentation, segment  # noqa: E402
+from lampskit.core.skill import Skill  # noqa: E402
 
 TRANSITIONAL_COLOUR = "0.6"
 log = logging.getLogger(__name__)
 
 
-def _save(fig, path: Path) -> Path:
+def save_figure(fig, path: Path) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -55,7 +55,7 @@ def figure_reachability(seg: Segmentation, path: Path) -> Path:
     ax.set_xlabel("OPTICS ordering")
     ax.set_ylabel("reachability distance [m]")
     ax.set_title("Ordering-reachability plot (valleys: periodic MPs, peaks: transitional MPs)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def figure_segmentation_comparison(
@@ -77,7 +77,7 @@ def figure_segmentation_comparison(
         ax.set_xlabel("principal axis 1 [m]")
     axes[0].set_ylabel("principal axis 2 [m]")
     fig.suptitle("Segmentation of the demonstration (grey: transitional)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def figure_generalisation(skill: Skill, plan_, ro, path: Path) -> Path:
@@ -95,7 +95,7 @@ def figure_generalisation(skill: Skill, plan_, ro, path: Path) -> Path:
     ax.set_ylabel("board y [m]")
     ax.legend(loc="best", markerscale=6)
     ax.set_title("Skill generalised to a new board (stains in visiting order)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def write_generalisation_figure(skill: Skill, plan_, ro, path: Path) -> Path:
@@ -114,7 +114,7 @@ def write_figures(
     Figs. 6 and 7 need a learned transitional MP; without one they are
     skipped (logged), the others are still written.
     """
-    from .plots_mp import figure_transition_comparison, figure_transition_phases
+    from lampskit.figures.primitives import figure_transition_comparison, figure_transition_phases
 
     folder = Path(folder)
     jobs = [

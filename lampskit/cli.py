@@ -1,7 +1,7 @@
 """Command-line entry points of the skill-learning half (``lamps demo``, ``segment``, ``learn``, ...).
 
 Each ``*_main(argv) -> int`` parses its own arguments. A
-:class:`~controller.lamps.errors.LampsError` becomes one line on stderr
+:class:`~lampskit.errors.LampsError` becomes one line on stderr
 naming the problem and exit code 1; usage errors exit 2. Output files are
 written only after everything they depend on succeeded, and atomically.
 """
@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from interfaces.atomic import write_text_atomic
+from lampskit.atomic import write_text_atomic
 
-from .errors import LampsError
+from lampskit.errors import LampsError
 
 log = logging.getLogger("lamps")
 
@@ -88,8 +88,8 @@ def demo_data_main(argv: list[str]) -> int:
     p.add_argument("--labels", type=Path, default=None, help="also write the true per-sample labels (CSV)")
 
     def body(a: argparse.Namespace) -> int:
-        from .demo_io import write_demo_csv, write_demo_npz, write_labels_csv
-        from .synth import synthesize_demo
+        from lampskit.learn.demo_io import write_demo_csv, write_demo_npz, write_labels_csv
+        from lampskit.learn.synth import synthesize_demo
 
         if a.output.suffix.lower() not in (".csv", ".npz"):
             raise LampsError(f"{a.output}: output must end in .csv or .npz")
@@ -120,8 +120,8 @@ def _add_segment_options(p: argparse.ArgumentParser) -> None:
 
 
 def _segment(a: argparse.Namespace):
-    from .demo_io import read_demo
-    from .segmentation import segment
+    from lampskit.learn.demo_io import read_demo
+    from lampskit.learn.segmentation import segment
 
     demo = read_demo(a.demo)
     progress = Progress()
@@ -177,8 +177,8 @@ def evaluate_main(argv: list[str]) -> int:
     p.add_argument("--json", type=Path, default=None, help="write the scores as JSON")
 
     def body(a: argparse.Namespace) -> int:
-        from .demo_io import read_labels
-        from .segmentation import frame_accuracy
+        from lampskit.learn.demo_io import read_labels
+        from lampskit.learn.segmentation import frame_accuracy
 
         if a.json:
             _check_out_parent(a.json)
@@ -210,9 +210,9 @@ def learn_main(argv: list[str]) -> int:
     p.add_argument("--plots", type=Path, default=None, help="folder for the paper's Figs. 4-7 as PNG")
 
     def body(a: argparse.Namespace) -> int:
-        from .demo_io import read_demo
-        from .learn import learn_skill
-        from .skill import save_skill
+        from lampskit.learn.demo_io import read_demo
+        from lampskit.learn.learn import learn_skill
+        from lampskit.core.skill import save_skill
 
         _check_out_parent(a.output)
         demo = read_demo(a.demo)
@@ -221,7 +221,7 @@ def learn_main(argv: list[str]) -> int:
         print(_skill_summary(skill))
         print(f"wrote {a.output}")
         if a.plots:
-            from .plots import write_figures
+            from lampskit.figures.demo import write_figures
 
             a.plots.mkdir(parents=True, exist_ok=True)
             for path in write_figures(demo, skill, seg, a.plots, progress=Progress()):
@@ -252,7 +252,7 @@ def _skill_summary(skill) -> str:
 
 
 def _parse_stains(text: str):
-    from .planner import Stain
+    from lampskit.core.planner import Stain
 
     stains = []
     for i, item in enumerate(filter(None, (s.strip() for s in text.split(";")))):
@@ -274,8 +274,9 @@ def plan_main(argv: list[str]) -> int:
     p.add_argument("--csv", type=Path, default=None, help="write the rolled-out reference as CSV")
 
     def body(a: argparse.Namespace) -> int:
-        from .planner import plan, rollout
-        from .skill import load_skill
+        from lampskit.core.planner import plan
+        from lampskit.core.rollout import rollout
+        from lampskit.core.skill import load_skill
 
         if a.csv:
             _check_out_parent(a.csv)
@@ -320,13 +321,14 @@ def demo_main(argv: list[str]) -> int:
     p.add_argument("--out", type=Path, default=None, help="output folder (default runs/demo-<time>)")
 
     def body(a: argparse.Namespace) -> int:
-        from .demo_io import write_demo_csv, write_labels_csv
-        from .learn import learn_skill
-        from .planner import Stain, junction_step_ratios, plan, rollout
-        from .plots import write_figures, write_generalisation_figure
-        from .segmentation import frame_accuracy
-        from .skill import save_skill
-        from .synth import synthesize_demo
+        from lampskit.learn.demo_io import write_demo_csv, write_labels_csv
+        from lampskit.learn.learn import learn_skill
+        from lampskit.core.planner import Stain, plan
+        from lampskit.core.rollout import junction_step_ratios, rollout
+        from lampskit.figures.demo import write_figures, write_generalisation_figure
+        from lampskit.learn.segmentation import frame_accuracy
+        from lampskit.core.skill import save_skill
+        from lampskit.learn.synth import synthesize_demo
 
         out = a.out or Path("runs") / time.strftime("demo-%Y%m%d-%H%M%S")
         s = synthesize_demo(a.stains, a.seed)

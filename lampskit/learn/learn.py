@@ -11,13 +11,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .demo import Demonstration
-from .errors import LearningError, SegmentationError
-from .periodic import learn_periodic
-from .segmentation import Segmentation, segment
-from .skill import PeriodicEntry, Skill, TransitionalEntry
-from .surface import fit_surface_frame
-from .transitional_learn import learn_transitional
+from lampskit.learn.demo import Demonstration
+from lampskit.errors import LearningError, SegmentationError
+from lampskit.learn.periodic_fit import learn_periodic
+from lampskit.learn.segmentation import Segmentation, segment
+from lampskit.core.skill import PeriodicEntry, Skill, TransitionalEntry
+from lampskit.core.surface import fit_surface_frame
+from lampskit.learn.transitional_fit import learn_transitional
 
 log = logging.getLogger(__name__)
 
@@ -87,3 +87,14 @@ def learn_skill(
     }
     skill = Skill(surface, tuple(periodic), tuple(transitional), segmentation.to_dict(summary=True), source)
     return skill, segmentation
+
+
+def bundled_skill(n_stains: int = 3, seed: int = 0) -> Skill:
+    """The skill learned from the bundled synthetic demonstration (what ``lamps demo`` and ``lamps up`` learn).
+
+    ``n_stains`` wiped stains, ``seed`` of :func:`~lampskit.learn.synth.synthesize_demo`.
+    """
+    from lampskit.learn.synth import synthesize_demo
+
+    skill, _ = learn_skill(synthesize_demo(n_stains, seed).demo)
+    return skill

@@ -17,27 +17,24 @@ board plane) and the tool's current state, the planner
    rotation and uniform scale of its forcing term.
 
 All positions here are in-plane board coordinates (x, y) [m]; the normal
-direction belongs to the force controller. :func:`rollout` executes a plan
-at a fixed rate with a stand-in for kappa (a number of cycles per stain)
-and is what the plots, tests and benchmarks use; the controller's skill
-executor (issue 4) calls the same :func:`plan_transition` with perception's
-kappa.
+direction belongs to the force controller. :func:`lampskit.core.rollout.rollout`
+executes a plan at a fixed rate with a stand-in for kappa (a number of
+cycles per stain) for the plots, tests and benchmarks; the controller's skill
+executor calls the same :func:`plan_transition` with perception's kappa.
 """
 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import PlanningError
-from .periodic import periodic_state
-from .periodic_runner import PeriodicRunner
-from .skill import Skill
-from .transitional import TransitionStatus, similarity_transform
-from .transitional_runner import TransitionalRunner
+from lampskit.errors import PlanningError
+from lampskit.core.periodic import periodic_state
+from lampskit.core.skill import Skill
+from lampskit.core.transitional_plan import similarity_transform
 
 #: Up to this many stains the visiting order is found by exhaustive search.
 EXACT_ORDER_MAX = 7
@@ -336,157 +333,3 @@ def _pick_transitional(skill: Skill, move_m: np.ndarray) -> tuple[int, np.ndarra
         return 0, np.zeros((2, 2))
     i, e = min(cands, key=lambda ie: abs(np.log(np.linalg.norm(ie[1].mp.demo_displacement_m) / dist)))
     return i, similarity_transform(e.mp.demo_displacement_m, move_m)
-
-
-# --------------------------------------------------------------------------
-# offline execution
-
-
-@dataclass(frozen=True)
-class Rollout:
-    """A plan executed at a fixed rate.
-
-    Attributes
-    ----------
-    t_s : array, shape (N,)
-    position_m, velocity_m_s, acceleration_m_s2 : arrays, shape (N, 2)
-        Reference in the board plane.
-    kind : array of str, shape (N,)
-        ``"periodic"`` or ``"transitional"`` per sample.
-    stain : array of int, shape (N,)
-        Stain id being wiped or approached.
-    junctions : tuple of int
-        Sample indices where one MP hands over to the next (first sample of the new MP).
-    transitions : tuple of TransitionSpec
-    """
-
-    t_s: np.ndarray
-    position_m: np.ndarray
-    velocity_m_s: np.ndarray
-    acceleration_m_s2: np.ndarray
-    kind: np.ndarray
-    stain: np.ndarray
-    junctions: tuple[int, ...]
-    transitions: tuple[TransitionSpec, ...]
-
-
-def rollout(
-    skill: Skill,
-    plan_: Plan,
-    start: tuple[np.ndarray, np.ndarray, np.ndarray],
-    *,
-    dt_s: float = 0.001,
-    cycles_per_stain: float | None = None,
-    is_done: Callable[[Wipe, float], bool] | None = None,
-) -> Rollout:
-    """Execute ``plan_`` from ``start`` at ``1/dt_s`` Hz.
-
-    Each stain is wiped until ``is_done(wipe, cycles_done)`` (kappa's stand-in)
-    is true; by default after ``cycles_per_stain`` cycles (default: the mean
-    demonstrated count, at least 2); then, unless it is the last, until the
-    phase heads for the next stain (:func:`exit_phase_delay`). The first
-    sample is ``start`` at t = 0; the rollout ends on the last stain's
-    periodic MP (lifting off and retreating are the controller's).
-    """
-    if not 1e-4 <= dt_s <= 0.02:
-        raise PlanningError(f"dt_s must be in [0.0001, 0.02] s, got {dt_s}")
-    if is_done is None:
-        if cycles_per_stain is None:
-            n = max(2.0, float(np.mean([e.n_cycles for e in skill.periodic])))
-        elif np.isfinite(cycles_per_stain) and 0 < cycles_per_stain <= 1000:
-            n = float(cycles_per_stain)
-        else:
-            raise PlanningError(f"cycles_per_stain must be in (0, 1000], got {cycles_per_stain!r}")
-        is_done = lambda wipe, cycles: cycles >= n  # noqa: E731
-    out_t, out_p, out_v, out_a, out_kind, out_stain = [], [], [], [], [], []
-    junctions, specs = [], []
-    state = tuple(np.asarray(x, dtype=float).reshape(2) for x in start)
-    t = 0.0
-
-    def record(runner, kind: str, stain_id: int) -> None:
-        out_t.append(t)
-        out_p.append(runner.position_m.copy())
-        out_v.append(runner.velocity_m_s.copy())
-        out_a.append(runner.acceleration_m_s2.copy())
-        out_kind.append(kind)
-        out_stain.append(stain_id)
-
-    next_centres = {a.stain.id: b.stain.centre_m for a, b in zip(plan_.wipes, plan_.wipes[1:])}
-    for wipe in plan_.wipes:
-        spec = plan_transition(skill, plan_, wipe, state)
-        specs.append(spec)
-        trans = TransitionalRunner(
-            skill.transitional[spec.transitional_index].mp,
-            spec.start,
-            spec.goal,
-            spec.duration_s,
-            forcing_transform=spec.forcing_transform,
-        )
-        junctions.append(len(out_t))
-        if not out_t:
-            record(trans, "transitional", wipe.stain.id)  # the start state, t = 0
-        while trans.update(dt_s) == TransitionStatus.WORKING:
-            t += dt_s
-            record(trans, "transitional", wipe.stain.id)
-        t += dt_s
-        # Hand over at the goal (g1, g2) and entry phase, then advance the
-        # periodic MP by the time the last tick went past T.
-        periodic = PeriodicRunner(
-            skill.periodic[wipe.periodic_index].mp,
-            wipe.anchor_m,
-            wipe.amplitude_m,
-            wipe.omega_rad_s,
-            spec.entry_phase_rad,
-            start_position_m=spec.goal[0],
-            start_velocity_m_s=spec.goal[1],
-        )
-        phase0 = periodic.phase_unwrapped_rad
-        if trans.overrun_s > 0.0:
-            periodic.update(trans.overrun_s)
-        junctions.append(len(out_t))
-        record(periodic, "periodic", wipe.stain.id)
-        while not is_done(wipe, (periodic.phase_unwrapped_rad - phase0) / (2 * np.pi)):
-            periodic.update(dt_s)
-            t += dt_s
-            record(periodic, "periodic", wipe.stain.id)
-        towards = next_centres.get(wipe.stain.id)
-        delay = 0.0 if towards is None else exit_phase_delay(skill, wipe, periodic.phase_rad, towards)
-        leave_at = periodic.phase_unwrapped_rad + delay
-        while periodic.phase_unwrapped_rad < leave_at:
-            periodic.update(dt_s)
-            t += dt_s
-            record(periodic, "periodic", wipe.stain.id)
-        state = (periodic.position_m.copy(), periodic.velocity_m_s.copy(), periodic.acceleration_m_s2.copy())
-    return Rollout(
-        np.array(out_t),
-        np.array(out_p),
-        np.array(out_v),
-        np.array(out_a),
-        np.array(out_kind),
-        np.array(out_stain),
-        tuple(junctions[1:]),
-        tuple(specs),
-    )
-
-
-def junction_step_ratios(ro: Rollout, window: int = 5) -> np.ndarray:
-    """How much each MP junction steps compared with the ordinary ticks around it.
-
-    For every junction ``j`` and each of position, velocity, acceleration:
-    ``|x[j] - x[j-1]|`` divided by the largest ``|x[k] - x[k-1]|`` over the
-    ``window`` ticks before and after (junction excluded). A continuous
-    reference gives ratios near 1 or below; a jump shows as a ratio far
-    above 1 (for a jump of ``J``, ``J / (rate of change * dt)``).
-
-    Returns
-    -------
-    array, shape (n_junctions, 3)
-    """
-    out = np.empty((len(ro.junctions), 3))
-    for col, x in enumerate((ro.position_m, ro.velocity_m_s, ro.acceleration_m_s2)):
-        steps = np.linalg.norm(np.diff(x, axis=0), axis=1)  # steps[k] = x[k+1] - x[k]
-        for row, j in enumerate(ro.junctions):
-            around = np.concatenate([steps[max(j - 1 - window, 0) : j - 1], steps[j : j + window]])
-            out[row, col] = steps[j - 1] / max(float(around.max()) if around.size else 0.0, 1e-12)
-    return out
-

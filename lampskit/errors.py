@@ -1,12 +1,17 @@
-"""One root exception for the skill-learning code, with one subclass per edge.
+"""The project's one exception root, :class:`LampsError`, and the LAMPS library's subclasses.
 
+Every error the project raises on purpose derives from :class:`LampsError`,
+so a caller (a CLI, a service loop, a test) catches one type; each concern
+has its own subclass: here the library's (demonstrations, segmentation,
+learning, skill files, planning), in :mod:`interfaces.errors` the contract's
+(messages, configuration), and one per process package where it needs one.
 Every message names the offending value and what would have been valid, so
 a command-line user can fix the input without reading the code.
 """
 
 
 class LampsError(Exception):
-    """Root of every error raised deliberately by :mod:`controller.lamps`."""
+    """Root of every error raised deliberately anywhere in the project."""
 
 
 class DemoError(LampsError, ValueError):

@@ -14,17 +14,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .baselines import learn_target_crossing_dmp, rollout_target_crossing_dmp, ruckig_transition
-from .demo import Demonstration
-from .errors import PlanningError
-from .periodic import periodic_state
-from .periodic_runner import rollout as periodic_rollout
-from .planner import PlannerParams, transition_duration
-from .plots import _save, plt
-from .segmentation import Segmentation
-from .skill import PeriodicEntry, Skill, TransitionalEntry
-from .transitional import TrajectorySamples, similarity_transform
-from .transitional import rollout as transitional_rollout
+from lampskit.learn.baselines import learn_target_crossing_dmp, rollout_target_crossing_dmp, ruckig_transition
+from lampskit.learn.demo import Demonstration
+from lampskit.errors import PlanningError
+from lampskit.core.periodic import periodic_state
+from lampskit.core.periodic_runner import rollout as periodic_rollout
+from lampskit.core.planner import PlannerParams, transition_duration
+from lampskit.figures.demo import plt, save_figure
+from lampskit.learn.segmentation import Segmentation
+from lampskit.core.skill import PeriodicEntry, Skill, TransitionalEntry
+from lampskit.core.transitional import TrajectorySamples
+from lampskit.core.transitional_plan import similarity_transform
+from lampskit.core.transitional_plan import rollout as transitional_rollout
 
 DT_S = 0.001
 #: Periodic motion shown before and after each transition [s].
@@ -126,7 +127,7 @@ def figure_transition_comparison(demo: Demonstration, skill: Skill, seg: Segment
             axes[r, d].axvline(T, color="k", lw=0.5)
     axes[0, 0].legend(loc="best", fontsize=8)
     fig.suptitle(f"Transition between two periodic MPs (green: previous, gold: next; {note})")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def figure_transition_phases(skill: Skill, path: Path, n_phases: int = 4) -> Path:
@@ -163,4 +164,4 @@ def figure_transition_phases(skill: Skill, path: Path, n_phases: int = 4) -> Pat
     axes[1, 0].set_ylabel("|acceleration| [m/s²]")
     axes[0, 0].legend(loc="best", fontsize=8)
     fig.suptitle(f"Transitional MP into the next periodic MP at different entry phases ({note})")
-    return _save(fig, path)
+    return save_figure(fig, path)

@@ -1,8 +1,8 @@
-"""Frequency and phase of a periodic segment (step 1 of :mod:`.periodic`'s learning).
+"""Frequency and phase of a periodic segment (step 1 of :mod:`lampskit.learn.periodic_fit`'s learning).
 
 :func:`estimate_frequency` gives Omega [rad/s], :func:`assign_phase` the
 phase [rad] of every sample; both rest on one fit of a harmonic model with a
-smooth phase correction (see the module docstring of :mod:`.periodic`).
+smooth phase correction (see the module docstring of :mod:`lampskit.learn.periodic_fit`).
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ import numpy as np
 from scipy.interpolate import BSpline
 from scipy.optimize import least_squares
 
-from .derivatives import resample_uniform
-from .errors import LearningError
+from lampskit.core.periodic import TWO_PI
+from lampskit.errors import LearningError
+from lampskit.learn.derivatives import resample_uniform
 
-TWO_PI = 2.0 * np.pi
 
 #: Minimum RMS oscillation after detrending [m]; below this there is nothing to learn.
 MIN_OSCILLATION_M = 1e-4
@@ -62,7 +62,7 @@ class _PhaseFit(NamedTuple):
         return out
 
 
-def _validate_segment(t_s, y) -> tuple[np.ndarray, np.ndarray]:
+def validate_segment(t_s, y) -> tuple[np.ndarray, np.ndarray]:
     t = np.asarray(t_s, dtype=float)
     y = np.asarray(y, dtype=float)
     if y.ndim == 1:
@@ -201,7 +201,7 @@ def _fit_phase(t: np.ndarray, y: np.ndarray, follow_drift: bool) -> _PhaseFit:
     return _PhaseFit(t_mid, half, omega, knots, p, offset, r2)
 
 
-def _checked_phase_fit(t, y, follow_drift=True) -> _PhaseFit:
+def checked_phase_fit(t, y, follow_drift=True) -> _PhaseFit:
     fit = _fit_phase(t, y, follow_drift)
     duration = t[-1] - t[0]
     phase_span = float(fit.phase(t[-1]) - fit.phase(t[0]))
@@ -250,8 +250,8 @@ def estimate_frequency(t_s: np.ndarray, y: np.ndarray) -> float:
         Non-finite values, fewer than 1.5 cycles, no oscillation, or no
         periodic structure (explained variance below 60 %).
     """
-    t, y = _validate_segment(t_s, y)
-    fit = _checked_phase_fit(t, y)
+    t, y = validate_segment(t_s, y)
+    fit = checked_phase_fit(t, y)
     return float(fit.phase(t[-1]) - fit.phase(t[0])) / (t[-1] - t[0])
 
 
@@ -273,5 +273,5 @@ def assign_phase(t_s: np.ndarray, y: np.ndarray, *, follow_drift: bool = True) -
     phase_rad : array, shape (T,)
         Zero where the dominant dimension's fundamental peaks (mod 2 pi).
     """
-    t, y = _validate_segment(t_s, y)
-    return _checked_phase_fit(t, y, follow_drift).phase(t)
+    t, y = validate_segment(t_s, y)
+    return checked_phase_fit(t, y, follow_drift).phase(t)

@@ -17,7 +17,7 @@ Formats, chosen by the file name:
 Labels (for ``lamps evaluate-segmentation``): a ``.csv`` with a ``label``
 column (``periodic`` / ``transitional``) or a ``periodic`` column (1 / 0),
 an ``.npz`` with ``true_periodic``, or ``file.mat#INDEX`` (state 2 =
-periodic). Every problem raises :class:`~controller.lamps.errors.DemoError`
+periodic). Every problem raises :class:`~lampskit.errors.DemoError`
 naming the file and what is wrong; writers are atomic.
 """
 
@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from interfaces.atomic import write_atomic, write_text_atomic
+from lampskit.atomic import write_atomic, write_text_atomic
 from interfaces.transforms import quat_wxyz_from_matrix
 
-from .demo import Demonstration
-from .errors import DemoError
+from lampskit.learn.demo import Demonstration
+from lampskit.errors import DemoError
 
 #: Longest marker gap [s] that is bridged by interpolation in a QTM export.
 MAX_MARKER_GAP_S = 0.1

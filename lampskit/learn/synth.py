@@ -25,8 +25,8 @@ import numpy as np
 
 from interfaces.transforms import quat_wxyz_from_matrix
 
-from .demo import Demonstration
-from .errors import DemoError
+from lampskit.learn.demo import Demonstration
+from lampskit.errors import DemoError
 
 #: Board area in which stains are placed, board frame [m] (x range, y range).
 BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))

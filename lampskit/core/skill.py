@@ -28,12 +28,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from interfaces.atomic import write_text_atomic
+from lampskit.atomic import write_text_atomic
 
-from .errors import LampsError, SkillFileError
-from .periodic import PeriodicMP
-from .surface import SurfaceFrame
-from .transitional import TransitionalMP
+from lampskit.errors import LampsError, SkillFileError
+from lampskit.core.periodic import PeriodicMP
+from lampskit.core.surface import SurfaceFrame
+from lampskit.core.transitional import TransitionalMP
 
 FORMAT = "lamps-skill"
 VERSION = 1

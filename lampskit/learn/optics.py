@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import SegmentationError
+from lampskit.errors import SegmentationError
 
 #: sklearn rounds distances to this many decimals (``np.finfo(float64).precision``).
 _DECIMALS = np.finfo(np.float64).precision

@@ -23,8 +23,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .errors import PlanningError
-from .periodic import TWO_PI, PeriodicMP, _check_execution_params, _periodic_state_impl
+from lampskit.errors import PlanningError
+from lampskit.core.periodic import TWO_PI, PeriodicMP, check_execution_params, periodic_state_unchecked
 
 #: Default time constant tau of the critically damped parameter filters [s]: a step
 #: in a target is 90 % done after 3.9 tau (0.78 s), with no overshoot.
@@ -146,7 +146,7 @@ class PeriodicRunner:
         start_velocity_m_s: np.ndarray | None = None,
         ramp_time_constant_s: float = DEFAULT_RAMP_TIME_CONSTANT_S,
     ) -> None:
-        anchor, amp, omega = _check_execution_params(mp, anchor_m, amplitude_m, omega_rad_s)
+        anchor, amp, omega = check_execution_params(mp, anchor_m, amplitude_m, omega_rad_s)
         phase = mp.phase_start_rad if start_phase_rad is None else float(start_phase_rad)
         if not math.isfinite(phase):
             raise PlanningError(f"start_phase_rad must be finite, got {start_phase_rad!r}")
@@ -154,7 +154,7 @@ class PeriodicRunner:
         if not (math.isfinite(tau) and tau >= 0):
             raise PlanningError(f"ramp_time_constant_s must be finite and >= 0 s, got {ramp_time_constant_s!r}")
         n = mp.n_dims
-        pos0, vel0, _ = _periodic_state_impl(mp._stacked, np.asarray(phase % TWO_PI), anchor, amp, omega)
+        pos0, vel0, _ = periodic_state_unchecked(mp.limit_cycle, np.asarray(phase % TWO_PI), anchor, amp, omega)
         for name, value in (("start_position_m", start_position_m), ("start_velocity_m_s", start_velocity_m_s)):
             if value is not None and (np.shape(value) != (n,) or not np.isfinite(value).all()):
                 raise PlanningError(f"{name} must be a finite array of shape ({n},), got {value!r}")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import savgol_filter
 
-from .errors import DemoError
+from lampskit.errors import DemoError
 
 
 def resample_uniform(t_s: np.ndarray, y: np.ndarray, rate_hz: float | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import LearningError
+from lampskit.errors import LearningError
 
 #: |normal . world_z| above this counts as a horizontal surface (table).
 HORIZONTAL_COS = 0.9

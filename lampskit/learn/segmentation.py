@@ -84,9 +84,9 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy.signal import savgol_filter
 
-from .demo import Demonstration
-from .errors import SegmentationError
-from .optics import OpticsResult, optics
+from lampskit.learn.demo import Demonstration
+from lampskit.errors import SegmentationError
+from lampskit.learn.optics import OpticsResult, optics
 
 METHODS = ("optics", "kmeans", "affinity")
 #: Time window setting the default ``min_samples`` [s].

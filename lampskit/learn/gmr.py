@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import LearningError
+from lampskit.errors import LearningError
 
 TWO_PI = 2.0 * np.pi
 #: Phase standard deviation cap per component [rad]; keeps each component's seam (at mu + pi) invisible.

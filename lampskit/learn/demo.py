@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import DemoError
+from lampskit.errors import DemoError
 
 #: Fewer samples than this cannot hold one periodic and one transitional MP.
 MIN_SAMPLES = 50
