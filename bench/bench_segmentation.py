@@ -35,7 +35,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from lampskit.learn.optics import optics  # noqa: E402
-from lampskit.learn.segmentation import frame_accuracy, segment, segment_counts  # noqa: E402
+from lampskit.learn.segmentation import segment
+from lampskit.learn.segmentation_scores import frame_accuracy, segment_counts
 from lampskit.learn.synth import synthesize_demo  # noqa: E402
 
 SIZES = (2000, 5000, 20000)

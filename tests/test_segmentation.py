@@ -10,17 +10,9 @@ from sklearn.cluster import cluster_optics_dbscan
 
 from lampskit.learn.demo import Demonstration
 from lampskit.errors import SegmentationError
-from lampskit.learn.segmentation import (
-    PROGRESS_TOTAL,
-    Segment,
-    Segmentation,
-    dbscan_labels,
-    frame_accuracy,
-    otsu_threshold,
-    segment,
-    segment_counts,
-    true_segment_count,
-)
+from lampskit.learn.reachability import dbscan_labels, otsu_threshold
+from lampskit.learn.segmentation import PROGRESS_TOTAL, Segment, Segmentation, segment
+from lampskit.learn.segmentation_scores import frame_accuracy, segment_counts, true_segment_count
 from lampskit.learn.synth import synthesize_demo
 
 

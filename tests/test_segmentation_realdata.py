@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from lampskit.learn.demo import Demonstration
-from lampskit.learn.segmentation import frame_accuracy, segment, segment_counts
+from lampskit.learn.segmentation import segment
+from lampskit.learn.segmentation_scores import frame_accuracy, segment_counts
 
 from .conftest import REAL_DEMOS
 

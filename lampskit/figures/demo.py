@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 from lampskit.atomic import write_atomic  # noqa: E402
 
 from lampskit.learn.demo import Demonstration  # noqa: E402
-from lampskit.learn.segmentation import Segmentation, segment  # noqa: E402
+from lampskit.learn.segmentation import Segmentation, segment
 from lampskit.core.skill import Skill  # noqa: E402
 
 TRANSITIONAL_COLOUR = "0.6"

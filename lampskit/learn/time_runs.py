@@ -1,0 +1,206 @@
+"""Steps 5-7 of the segmentation: per-sample labels into time runs, their boundaries, the periodicity check.
+
+A run is ``(cluster or -1, start, end)`` over sample indices (end
+exclusive); -1 is transitional. :mod:`lampskit.learn.segmentation` explains
+each step: runs of one cluster joined where the tool stays in its region,
+short runs relabelled, periodic runs' ends moved to where the motion stops
+recurring, and candidates that do not cover their area repeatedly rejected.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+from lampskit.learn.reachability import smooth_positions
+
+Run = tuple[int, int, int]  # (cluster or -1, start, end)
+#: A transitional gap stays inside its cluster when no sample is farther from
+#: the cluster centre than this many times the cluster's 95th percentile radius.
+STAY_FACTOR = 1.5
+#: Period search range [s].
+MIN_PERIOD_S, MAX_PERIOD_S = 0.2, 5.0
+#: Lags compared in the recurrence, as fractions of the period.
+LAG_LO, LAG_HI = 0.85, 1.15
+#: A sample recurs when its (median-filtered) recurrence is below this many
+#: times the run's median recurrence.
+REC_GAMMA = 2.0
+#: ... and an extent of at least this [m].
+MIN_EXTENT_M = 0.005
+
+
+def runs_from_labels(labels: np.ndarray) -> list[Run]:
+    """Runs of equal labels (T,) as ``(label, start, end)``."""
+    edges = np.flatnonzero(np.diff(labels)) + 1
+    starts = np.r_[0, edges]
+    ends = np.r_[edges, len(labels)]
+    return [(int(labels[a]), int(a), int(b)) for a, b in zip(starts, ends)]
+
+
+def join_runs(runs: list[Run]) -> list[Run]:
+    out: list[Run] = []
+    for c, a, b in runs:
+        if out and out[-1][0] == c:
+            out[-1] = (c, out[-1][1], b)
+        else:
+            out.append((c, a, b))
+    return out
+
+
+def bridge_stays(runs: list[Run], smooth: np.ndarray) -> list[Run]:
+    """Join two runs of one cluster when the transitional run between them stays in the cluster's region."""
+    out = list(runs)
+    i = 1
+    while i + 1 < len(out):
+        (c0, a0, b0), (c, a, b), (c1, a1, b1) = out[i - 1], out[i], out[i + 1]
+        if c == -1 and c0 >= 0 and c0 == c1:
+            pts = np.vstack([smooth[a0:b0], smooth[a1:b1]])
+            centre = pts.mean(axis=0)
+            radius = float(np.percentile(np.linalg.norm(pts - centre, axis=1), 95))
+            if np.max(np.linalg.norm(smooth[a:b] - centre, axis=1)) <= STAY_FACTOR * radius:
+                out[i - 1 : i + 2] = [(c0, a0, b1)]
+                continue
+        i += 1
+    return out
+
+
+def merge_short_runs(runs: list[Run], t_s: np.ndarray, min_duration_s: float, transitions: bool) -> list[Run]:
+    """Relabel runs shorter than ``min_duration_s``, shortest first.
+
+    With ``transitions`` (OPTICS) a short cluster run becomes transitional
+    unless one cluster surrounds it, and a short transitional run joins a
+    cluster only when that cluster is on both sides or it lies at an end of
+    the demo. Without (baselines) a short run joins its longer neighbour.
+    """
+    period = float(t_s[1] - t_s[0]) if len(t_s) > 1 else 0.0
+
+    def duration(r: Run) -> float:
+        return float(t_s[r[2] - 1] - t_s[r[1]]) + period
+
+    runs = join_runs(runs)
+    kept: set[int] = set()  # starts of short runs that stay as they are
+    while len(runs) > 1:
+        short = [(duration(r), i) for i, r in enumerate(runs) if r[1] not in kept and duration(r) < min_duration_s]
+        if not short:
+            break
+        i = min(short)[1]
+        c, a, _ = runs[i]
+        left = runs[i - 1][0] if i > 0 else None
+        right = runs[i + 1][0] if i + 1 < len(runs) else None
+        if not transitions:
+            if left is None or right is None:
+                new = right if left is None else left
+            else:
+                new = left if duration(runs[i - 1]) >= duration(runs[i + 1]) else right
+        elif c >= 0:
+            new = left if left is not None and left == right else -1
+        elif left is None or right is None:
+            new = right if left is None else left
+        else:
+            new = left if left == right else c
+        if new == c:
+            kept.add(a)
+            continue
+        runs[i] = (new, runs[i][1], runs[i][2])
+        runs = join_runs(runs)
+        kept = {r[1] for r in runs} & kept
+    return runs
+
+
+def period_samples(points: np.ndarray, rate_hz: float) -> int | None:
+    """Dominant period [samples] of ``points`` (K, d): the autocorrelation peak after its first zero."""
+    x = points - points.mean(axis=0)
+    n = len(x)
+    lo = int(MIN_PERIOD_S * rate_hz)
+    hi = min(n // 2, int(MAX_PERIOD_S * rate_hz))
+    if hi <= lo + 2:
+        return None
+    f = np.fft.rfft(x, 2 * n, axis=0)
+    ac = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=1), 2 * n)[:n] / (n - np.arange(n))
+    below = np.flatnonzero(ac[:hi] < 0)
+    if below.size == 0 or max(lo, int(below[0])) >= hi:
+        return None
+    start = max(lo, int(below[0]))
+    return start + int(np.argmax(ac[start:hi]))
+
+
+def recurrence(state: np.ndarray, period: int) -> np.ndarray:
+    """Distance from each state (K, d) to the path ``period`` (+-15 %) samples before or after it, shape (K,).
+
+    The path is the polyline through the states, so the distance does not
+    depend on where the samples happen to fall on it; inf where no lag fits.
+    """
+    n = len(state)
+    rec = np.full(n, np.inf)
+    seg = np.diff(state, axis=0)  # segment j runs from state j to j + 1
+    seg_len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-300)
+    for lag in range(max(1, int(LAG_LO * period)), min(n - 1, int(np.ceil(LAG_HI * period))) + 1):
+        # state i against segment (i - lag, i - lag + 1), and against (i + lag - 1, i + lag)
+        for p_sl, s_sl in ((slice(lag, n), slice(0, n - lag)), (slice(0, n - lag), slice(lag - 1, n - 1))):
+            rel = state[p_sl] - state[s_sl]
+            u = np.clip(np.einsum("ij,ij->i", rel, seg[s_sl]) / seg_len2[s_sl], 0.0, 1.0)
+            d = np.linalg.norm(rel - u[:, None] * seg[s_sl], axis=1)
+            np.minimum(rec[p_sl], d, out=rec[p_sl])
+    return rec
+
+
+def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> list[Run]:
+    """Move each periodic run's ends to where the motion stops recurring (step 6 of the module docstring)."""
+    n = len(smooth)
+    velocity = smooth_positions(smooth, rate_hz, deriv=1)
+    labels = np.full(n, -1)
+    per = [r for r in runs if r[0] >= 0]
+    for j, (c, a, b) in enumerate(per):
+        labels[a:b] = c
+        period = period_samples(smooth[a:b], rate_hz)
+        if period is None:
+            continue
+        lo = max(per[j - 1][2] if j > 0 else 0, a - period)
+        hi = min(per[j + 1][1] if j + 1 < len(per) else n, b + period)
+        omega = 2 * np.pi * rate_hz / period
+        rec = recurrence(np.hstack([smooth[lo:hi], velocity[lo:hi] / omega]), period)
+        finite = np.isfinite(rec)
+        if not finite[a - lo : b - lo].any():
+            continue
+        rec[~finite] = np.max(rec[finite])
+        rec = median_filter(rec, size=max(1, period // 2) | 1, mode="nearest")
+        level = REC_GAMMA * float(np.median(rec[a - lo : b - lo]))
+        stretches = [(s0, s1) for v, s0, s1 in runs_from_labels((rec < level).astype(int)) if v == 1 and s1 - s0 >= period]
+        if stretches:
+            labels[a:b] = -1
+            labels[lo + stretches[0][0] : lo + stretches[-1][1]] = c
+    return runs_from_labels(labels)
+
+
+def extent_and_ratio(points: np.ndarray) -> tuple[float, float]:
+    """Range [m] along the first principal axis of ``points`` (K, 3), and path length / that range."""
+    if len(points) < 3:
+        return 0.0, 0.0
+    path = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+    centred = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    proj = centred @ vt[0]
+    extent = float(proj.max() - proj.min())
+    return extent, (path / extent if extent > 0 else 0.0)
+
+
+def check_periodic(runs: list[Run], smooth: np.ndarray, min_ratio: float) -> tuple[list[Run], list[tuple[int, int, str]]]:
+    out: list[Run] = []
+    rejected: list[tuple[int, int, str]] = []
+    for c, a, b in runs:
+        if c >= 0:
+            extent, ratio = extent_and_ratio(smooth[a:b])
+            if extent < MIN_EXTENT_M:
+                rejected.append((a, b, f"extent {extent * 1000:.2g} mm < {MIN_EXTENT_M * 1000:g} mm"))
+                c = -1
+            elif ratio < min_ratio:
+                rejected.append((a, b, f"path length / extent {ratio:.2f} < {min_ratio:g}"))
+                c = -1
+        out.append((c, a, b))
+    return join_runs(out), rejected
+
+
+def renumber(runs: list[Run]) -> list[Run]:
+    """Cluster ids 0, 1, ... in order of first appearance."""
+    ids: dict[int, int] = {}
+    return [((ids.setdefault(c, len(ids)) if c >= 0 else -1), a, b) for c, a, b in runs]
