@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from lampskit.atomic import write_atomic, write_text_atomic
-from interfaces.transforms import quat_wxyz_from_matrix
+from lampskit.core.rotations import quat_wxyz_from_matrix
 
 from lampskit.learn.demo import Demonstration
 from lampskit.errors import DemoError

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from interfaces.transforms import quat_wxyz_from_matrix
+from lampskit.core.rotations import quat_wxyz_from_matrix
 
 from lampskit.learn.demo import Demonstration
 from lampskit.errors import DemoError
