@@ -178,7 +178,7 @@ def evaluate_main(argv: list[str]) -> int:
 
     def body(a: argparse.Namespace) -> int:
         from lampskit.learn.demo_io import read_labels
-        from lampskit.learn.segmentation import frame_accuracy
+        from lampskit.learn.segmentation_scores import frame_accuracy
 
         if a.json:
             _check_out_parent(a.json)
@@ -323,10 +323,8 @@ def demo_main(argv: list[str]) -> int:
     def body(a: argparse.Namespace) -> int:
         from lampskit.learn.demo_io import write_demo_csv, write_labels_csv
         from lampskit.learn.learn import learn_skill
-        from lampskit.core.planner import Stain, plan
-        from lampskit.core.rollout import junction_step_ratios, rollout
         from lampskit.figures.demo import write_figures, write_generalisation_figure
-        from lampskit.learn.segmentation import frame_accuracy
+        from lampskit.learn.segmentation_scores import frame_accuracy
         from lampskit.core.skill import save_skill
         from lampskit.learn.synth import synthesize_demo
 
@@ -339,28 +337,14 @@ def demo_main(argv: list[str]) -> int:
         print(_segment_table(s.demo, seg))
         print(f"segmentation frame accuracy vs truth: {acc:.4f}")
         print(_skill_summary(skill))
-        rng = np.random.default_rng(a.seed + 1000)
-        new_board = [Stain(i, rng.uniform([0.15, 0.15], [0.95, 0.65]), float(rng.uniform(0.04, 0.1))) for i in range(3)]
-        start = np.array([0.05, 0.05])
-        pl = plan(skill, new_board, start)
-        ro = rollout(skill, pl, (start, np.zeros(2), np.zeros(2)))
+        pl, ro = _generalise_to_new_board(skill, a.seed)
         paths = write_demo_csv(out / "demo.csv", s.demo), write_labels_csv(
             out / "labels.csv", s.demo.t_s, s.true_periodic, s.true_stain
         )
         figs = write_figures(s.demo, skill, seg, out, progress=Progress())
         figs.append(write_generalisation_figure(skill, pl, ro, out / "generalisation.png"))
         skill_path = save_skill(out / "skill.json", skill)
-        ratios = junction_step_ratios(ro)
-        summary = {
-            "demo_samples": s.demo.n_samples,
-            "segmentation_frame_accuracy": acc,
-            "periodic_segments": sum(x.kind == "periodic" for x in seg.segments),
-            "true_periodic_segments": len(s.strokes),
-            "new_board_order": list(pl.order),
-            "rollout_duration_s": float(ro.t_s[-1]),
-            "max_junction_accel_step_ratio": float(ratios[:, 2].max()) if len(ratios) else 0.0,
-            "peak_accel_m_s2": float(np.linalg.norm(ro.acceleration_m_s2, axis=1).max()),
-        }
+        summary = _demo_summary(s, seg, acc, pl, ro)
         write_text_atomic(out / "summary.json", json.dumps(summary, indent=1) + "\n")
         for path in [*paths, *figs, skill_path, out / "summary.json"]:
             print(f"wrote {path}")
@@ -372,3 +356,32 @@ def demo_main(argv: list[str]) -> int:
         return 0
 
     return _run("demo", p, argv, body)
+
+
+def _generalise_to_new_board(skill, seed: int):
+    """Plan and roll out ``skill`` over 3 random stains (seeded) of a board it has never seen: (plan, rollout)."""
+    from lampskit.core.planner import Stain, plan
+    from lampskit.core.rollout import rollout
+
+    rng = np.random.default_rng(seed + 1000)
+    new_board = [Stain(i, rng.uniform([0.15, 0.15], [0.95, 0.65]), float(rng.uniform(0.04, 0.1))) for i in range(3)]
+    start = np.array([0.05, 0.05])
+    pl = plan(skill, new_board, start)
+    return pl, rollout(skill, pl, (start, np.zeros(2), np.zeros(2)))
+
+
+def _demo_summary(s, seg, accuracy: float, pl, ro) -> dict:
+    """summary.json of ``lamps demo``: the segmentation against the truth and the new board's rollout."""
+    from lampskit.core.rollout import junction_step_ratios
+
+    ratios = junction_step_ratios(ro)
+    return {
+        "demo_samples": s.demo.n_samples,
+        "segmentation_frame_accuracy": accuracy,
+        "periodic_segments": sum(x.kind == "periodic" for x in seg.segments),
+        "true_periodic_segments": len(s.strokes),
+        "new_board_order": list(pl.order),
+        "rollout_duration_s": float(ro.t_s[-1]),
+        "max_junction_accel_step_ratio": float(ratios[:, 2].max()) if len(ratios) else 0.0,
+        "peak_accel_m_s2": float(np.linalg.norm(ro.acceleration_m_s2, axis=1).max()),
+    }

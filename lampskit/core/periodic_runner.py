@@ -90,6 +90,21 @@ def _step_coefficients(a: float, alpha: float, beta: float) -> tuple[float, ...]
     return p11, p12, g0_1, g1_1, p21, p22, g0_2, g1_2
 
 
+def _start_state(mp: PeriodicMP, phase: float, anchor: np.ndarray, amp: float, omega: float,
+                 start_position_m, start_velocity_m_s) -> tuple[np.ndarray, np.ndarray]:
+    """Position and velocity (n_dims,) to start from: the limit cycle's at ``phase`` unless given (checked)."""
+    n = mp.n_dims
+    pos0, vel0, _ = periodic_state_unchecked(mp.limit_cycle, np.asarray(phase % TWO_PI), anchor, amp, omega)
+    for name, value in (("start_position_m", start_position_m), ("start_velocity_m_s", start_velocity_m_s)):
+        if value is not None and (np.shape(value) != (n,) or not np.isfinite(value).all()):
+            raise PlanningError(f"{name} must be a finite array of shape ({n},), got {value!r}")
+    if start_position_m is not None:
+        pos0 = np.asarray(start_position_m, dtype=float)
+    if start_velocity_m_s is not None:
+        vel0 = np.asarray(start_velocity_m_s, dtype=float)
+    return pos0, vel0
+
+
 class PeriodicRunner:
     """Runs a periodic DMP at a fixed control rate, ruckig style.
 
@@ -153,16 +168,19 @@ class PeriodicRunner:
         tau = float(ramp_time_constant_s)
         if not (math.isfinite(tau) and tau >= 0):
             raise PlanningError(f"ramp_time_constant_s must be finite and >= 0 s, got {ramp_time_constant_s!r}")
-        n = mp.n_dims
-        pos0, vel0, _ = periodic_state_unchecked(mp.limit_cycle, np.asarray(phase % TWO_PI), anchor, amp, omega)
-        for name, value in (("start_position_m", start_position_m), ("start_velocity_m_s", start_velocity_m_s)):
-            if value is not None and (np.shape(value) != (n,) or not np.isfinite(value).all()):
-                raise PlanningError(f"{name} must be a finite array of shape ({n},), got {value!r}")
-        if start_position_m is not None:
-            pos0 = np.asarray(start_position_m, dtype=float)
-        if start_velocity_m_s is not None:
-            vel0 = np.asarray(start_velocity_m_s, dtype=float)
+        pos0, vel0 = _start_state(mp, phase, anchor, amp, omega, start_position_m, start_velocity_m_s)
+        self._allocate(mp, anchor, amp, omega, tau, pos0, vel0)
+        self.phase_rad = phase % TWO_PI
+        self.cycles = int(phase // TWO_PI)
+        self.time_s = 0.0
+        self.calculation_duration_us = 0.0
+        self._forcing_into(self.phase_rad, self._z[2])
+        self._write_outputs(self._z)
 
+    def _allocate(self, mp: PeriodicMP, anchor: np.ndarray, amp: float, omega: float, tau: float,
+                  pos0: np.ndarray, vel0: np.ndarray) -> None:
+        """Every buffer the step uses, allocated once; the state set to ``pos0``, ``vel0`` (n_dims,)."""
+        n = mp.n_dims
         self.mp = mp
         self.n_dims = n
         self._alpha, self._beta = mp.alpha, mp.beta
@@ -204,12 +222,6 @@ class PeriodicRunner:
         self.position_m = self._out[0]
         self.velocity_m_s = self._out[1]
         self.acceleration_m_s2 = self._out[2]
-        self.phase_rad = phase % TWO_PI
-        self.cycles = int(phase // TWO_PI)
-        self.time_s = 0.0
-        self.calculation_duration_us = 0.0
-        self._forcing_into(self.phase_rad, self._z[2])
-        self._write_outputs(self._z)
 
     # -- effective parameters (read only)
     @property

@@ -250,7 +250,14 @@ class _Streams:
             start = end
 
 
-def _optics_impl(x: np.ndarray, min_samples: int, progress: ProgressCallback | None) -> OpticsResult:
+def _first_offers(x: np.ndarray, min_samples: int):
+    """Core distances (n,) and every sample's first offers from its ``k_first`` nearest neighbours.
+
+    Returns ``(k_first, core, first_keys (n, k_first), first_ids (n, k_first),
+    first_bound (list of n floats), first_count (list of n ints))``: a
+    sample's offers below its bound, in order, are exact; the rest of its
+    stream is refilled on demand (:class:`_Streams`).
+    """
     n = len(x)
     k_first = min(n, max(16, int(_FIRST_FACTOR * min_samples)))
     dists, idx = cKDTree(x).query(x, k=k_first, workers=-1)
@@ -258,9 +265,13 @@ def _optics_impl(x: np.ndarray, min_samples: int, progress: ProgressCallback | N
     core = _round(dists[:, min_samples - 1])
     first_keys, first_ids, first_bound = _offers(dists, idx, core, complete=k_first >= n)
     first_count = np.sum(first_keys < first_bound[:, None], axis=1).tolist()
-    first_bound = first_bound.tolist()
-    del dists, idx
+    return k_first, core, first_keys, first_ids, first_bound.tolist(), first_count
 
+
+def _optics_impl(x: np.ndarray, min_samples: int, progress: ProgressCallback | None) -> OpticsResult:
+    """The ordering loop. One function on purpose: its locals are bound once for the heap loop's speed."""
+    n = len(x)
+    k_first, core, first_keys, first_ids, first_bound, first_count = _first_offers(x, min_samples)
     processed = bytearray(n)
     reach = np.full(n, np.inf)
     pred = np.full(n, -1, dtype=int)
