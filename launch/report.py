@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import base64
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +36,8 @@ import numpy as np
 
 from controller.core import PHASE_CODES
 from controller.params import ForceParams
-from lampskit.atomic import write_text_atomic
 from interfaces.keys import Keys
+from lampskit.atomic import write_text_atomic
 
 from .record import RECORDING, read_recording, trace_array
 
@@ -73,94 +74,161 @@ def _junction_steps(tr: np.ndarray, col: dict[str, int], window: int = 5) -> tup
     return worst, ratio
 
 
-def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None) -> dict[str, Any]:
-    """The report of ``run_dir`` from its ``recording.mcap`` (and ``run.json`` from the launcher, if there)."""
-    run_dir = Path(run_dir)
+@dataclass(frozen=True)
+class _Run:
+    """What a report is built from: a run folder's recording, split by topic, and the launcher's ``run.json``.
+
+    rec : every recorded message by topic, [(log_time_ns, JSON object)]
+    launcher : ``run.json`` ({} when the recorder ran without the launcher)
+    truth, status : ``sim/truth`` and ``controller/status`` messages in order
+    stains_msgs : ``perception/stains`` messages with a board in view
+    tr : array, shape (n_ticks, n_columns), the controller trace; col : its column name -> index
+    cap_n : force cap [N] for ``time_above_cap_s``
+    """
+
+    rec: dict
+    launcher: dict
+    keys: Keys
+    cap_n: float
+    truth: list[dict]
+    status: list[dict]
+    stains_msgs: list[dict]
+    tr: np.ndarray
+    col: dict[str, int]
+
+
+def _read_run(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None) -> _Run:
+    """The recording of ``run_dir`` and its ``run.json``; ``keys`` and ``cap_n`` default to what the launcher ran."""
     rec = read_recording(run_dir / RECORDING)
     launcher = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").is_file() else {}
     keys = keys or Keys(launcher.get("key_prefix", Keys().prefix))
     cap_n = cap_n if cap_n is not None else launcher.get("force_cap_n", ForceParams().cap_n)
-    truth = _topic(rec, keys.sim_truth)
-    status = _topic(rec, keys.controller_status)
-    stains_msgs = [m for m in _topic(rec, keys.perception_stains) if m.get("board") != "lost"]
     cols, tr = trace_array(_topic(rec, keys.controller_trace))
-    col = {c: i for i, c in enumerate(cols)}
-    times = [t for msgs in rec.values() for t, _ in msgs[:1] + msgs[-1:]]
+    return _Run(rec=rec, launcher=launcher, keys=keys, cap_n=cap_n, truth=_topic(rec, keys.sim_truth),
+                status=_topic(rec, keys.controller_status),
+                stains_msgs=[m for m in _topic(rec, keys.perception_stains) if m.get("board") != "lost"],
+                tr=tr, col={c: i for i, c in enumerate(cols)})
 
+
+def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None) -> dict[str, Any]:
+    """The report of ``run_dir`` from its ``recording.mcap`` (and ``run.json`` from the launcher, if there)."""
+    run_dir = Path(run_dir)
+    run = _read_run(run_dir, keys, cap_n)
     report: dict[str, Any] = {"schema": SCHEMA, "run_dir": run_dir.name}
-    report["duration_s"] = launcher.get("duration_s", (max(times) - min(times)) * 1e-9 if times else 0.0)
-    report["sim_time_s"] = truth[-1]["robot_time_ns"] * 1e-9 if truth else (float(tr[-1, 0]) if len(tr) else 0.0)
-    removed = (1.0 - truth[-1]["total_dirt"] / truth[0]["total_dirt"]) if truth and truth[0]["total_dirt"] > 0 else 0.0
-    report["dirt_removed_fraction"] = float(removed)
+    report.update(_progress_section(run))
+    report["stains"] = _stains_section(run.truth, run.stains_msgs)
+    report.update(_force_section(run.tr, run.col, run.truth, run.cap_n))
+    report["force_cap_n"] = run.cap_n
+    report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
+    report["faults"] = _faults_section(run.status)
+    report["final_phase"] = run.status[-1]["phase"] if run.status else "none"
+    report["outcome"] = _outcome(report["final_phase"], report["dirt_removed_fraction"], run.launcher.get("outcome"))
+    report["services"] = run.launcher.get("services", {})
+    report["counters"] = _counters_section(run)
+    report["plots"] = write_plots(run_dir, run.rec, run.keys, run.tr, run.col, run.truth, run.stains_msgs)
+    return report
 
+
+def _dirt_removed(truth: list[dict]) -> float:
+    """1 - last / first total dirt of ``sim/truth`` (0 without truth or dirt)."""
+    return (1.0 - truth[-1]["total_dirt"] / truth[0]["total_dirt"]) if truth and truth[0]["total_dirt"] > 0 else 0.0
+
+
+def _progress_section(run: _Run) -> dict[str, float]:
+    """``duration_s`` (the launcher's, else the recording's span), ``sim_time_s`` and ``dirt_removed_fraction``."""
+    times = [t for msgs in run.rec.values() for t, _ in msgs[:1] + msgs[-1:]]
+    truth, tr = run.truth, run.tr
+    return {"duration_s": run.launcher.get("duration_s", (max(times) - min(times)) * 1e-9 if times else 0.0),
+            "sim_time_s": truth[-1]["robot_time_ns"] * 1e-9 if truth else (float(tr[-1, 0]) if len(tr) else 0.0),
+            "dirt_removed_fraction": float(_dirt_removed(truth))}
+
+
+def _stains_section(truth: list[dict], stains_msgs: list[dict]) -> list[dict[str, Any]]:
+    """Per true stain: where, how big, how much is left, and when the truth and perception saw it wiped."""
+    if not truth:
+        return []
+    first, last = truth[0], truth[-1]
+    centres = np.array(last["centres_board_m"]) if last["centres_board_m"] else np.zeros((0, 2))
     stains = []
-    if truth:
-        first, last = truth[0], truth[-1]
-        centres = np.array(last["centres_board_m"]) if last["centres_board_m"] else np.zeros((0, 2))
-        for k, sid in enumerate(last["stain_ids"]):
-            below = next((t["robot_time_ns"] * 1e-9 for t in truth if t["remaining"][k] <= TRUTH_LEVEL), None)
-            kappa = None
-            for m in stains_msgs:
-                for s in m["stains"]:
-                    if s["kappa"] and len(centres) and int(np.argmin(np.linalg.norm(
-                            centres - np.array(s["centre_board_m"]), axis=1))) == k:
-                        kappa = m["robot_time_ns"] * 1e-9
-                        break
-                if kappa is not None:
-                    break
-            stains.append({"id": sid, "centre_board_m": last["centres_board_m"][k] if len(centres) else None,
-                           "size_m": last["sizes_m"][k] if last["sizes_m"] else None,
-                           "initial_remaining": first["remaining"][k], "final_remaining": last["remaining"][k],
-                           "truth_below_level_s": below, "kappa_s": kappa,
-                           "kappa_latency_s": (kappa - below) if kappa is not None and below is not None else None})
-    report["stains"] = stains
+    for k, sid in enumerate(last["stain_ids"]):
+        below = next((t["robot_time_ns"] * 1e-9 for t in truth if t["remaining"][k] <= TRUTH_LEVEL), None)
+        kappa = _first_kappa_s(stains_msgs, centres, k)
+        stains.append({"id": sid, "centre_board_m": last["centres_board_m"][k] if len(centres) else None,
+                       "size_m": last["sizes_m"][k] if last["sizes_m"] else None,
+                       "initial_remaining": first["remaining"][k], "final_remaining": last["remaining"][k],
+                       "truth_below_level_s": below, "kappa_s": kappa,
+                       "kappa_latency_s": (kappa - below) if kappa is not None and below is not None else None})
+    return stains
 
-    if len(tr):
-        force = tr[:, col["force_n"]]
-        wiping = np.isin(tr[:, col["phase"]], _WIPING) & (tr[:, col["contact"]] > 0.5)
-        dt = float(np.median(np.diff(tr[:, 0]))) if len(tr) > 1 else 0.0
-        report["max_normal_force_n"] = float(force.max())
-        report["normal_force_mean_n"] = float(force[wiping].mean()) if wiping.any() else 0.0
-        report["normal_force_std_n"] = float(force[wiping].std()) if wiping.any() else 0.0
-        report["time_above_cap_s"] = float(np.count_nonzero(force > cap_n) * dt)
-        jump, ratio = _junction_steps(tr, col)
-        report["max_junction_accel_jump"] = jump
-        report["junction_step_ratio_max"] = ratio
-        err = tr[wiping][:, [col["ref_x"], col["ref_y"]]] - tr[wiping][:, [col["x"], col["y"]]]
-        report["tracking_rms_m"] = float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else 0.0
-        report["trace_ticks"] = int(len(tr))
-    else:
-        report.update(max_normal_force_n=max((t["contact_force_n"] for t in truth), default=0.0),
-                      normal_force_mean_n=0.0, normal_force_std_n=0.0, time_above_cap_s=0.0,
-                      max_junction_accel_jump=0.0, junction_step_ratio_max=0.0, tracking_rms_m=0.0, trace_ticks=0)
-    report["force_cap_n"] = cap_n
-    report["loop_timing"] = status[-1]["timing"] if status else {}
+
+def _first_kappa_s(stains_msgs: list[dict], centres_board_m: np.ndarray, k: int) -> float | None:
+    """Robot time [s] of the first perceived stain with kappa whose nearest true stain is ``k`` (None if never).
+
+    centres_board_m : array, shape (n_stains, 2), the true stain centres on the board
+    """
+    for m in stains_msgs:
+        for s in m["stains"]:
+            if s["kappa"] and len(centres_board_m) and int(np.argmin(np.linalg.norm(
+                    centres_board_m - np.array(s["centre_board_m"]), axis=1))) == k:
+                return m["robot_time_ns"] * 1e-9
+    return None
+
+
+def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n: float) -> dict[str, Any]:
+    """Normal force while wiping, time above the cap, MP junction steps and tracking, from the controller trace.
+
+    Without a trace only the peak contact force of the sim truth is known; the rest is 0.
+    """
+    if not len(tr):
+        return {"max_normal_force_n": max((t["contact_force_n"] for t in truth), default=0.0),
+                "normal_force_mean_n": 0.0, "normal_force_std_n": 0.0, "time_above_cap_s": 0.0,
+                "max_junction_accel_jump": 0.0, "junction_step_ratio_max": 0.0, "tracking_rms_m": 0.0,
+                "trace_ticks": 0}
+    force = tr[:, col["force_n"]]
+    wiping = np.isin(tr[:, col["phase"]], _WIPING) & (tr[:, col["contact"]] > 0.5)
+    dt = float(np.median(np.diff(tr[:, 0]))) if len(tr) > 1 else 0.0
+    jump, ratio = _junction_steps(tr, col)
+    err = tr[wiping][:, [col["ref_x"], col["ref_y"]]] - tr[wiping][:, [col["x"], col["y"]]]
+    return {"max_normal_force_n": float(force.max()),
+            "normal_force_mean_n": float(force[wiping].mean()) if wiping.any() else 0.0,
+            "normal_force_std_n": float(force[wiping].std()) if wiping.any() else 0.0,
+            "time_above_cap_s": float(np.count_nonzero(force > cap_n) * dt),
+            "max_junction_accel_jump": jump,
+            "junction_step_ratio_max": ratio,
+            "tracking_rms_m": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else 0.0,
+            "trace_ticks": len(tr)}
+
+
+def _faults_section(status: list[dict]) -> list[dict[str, Any]]:
+    """Every entry into PAUSED, FAULT or ESTOP in the controller's status."""
     faults, prev = [], None
     for s in status:
         if s["phase"] != prev and s["phase"] in ("PAUSED", "FAULT", "ESTOP"):
             faults.append({"wall_ns": s.get("wall_ns", 0), "phase": s["phase"], "reason": s["reason"]})
         prev = s["phase"]
-    report["faults"] = faults
-    final_phase = status[-1]["phase"] if status else "none"
-    report["final_phase"] = final_phase
+    return faults
+
+
+def _outcome(final_phase: str, removed: float, told: str | None) -> str:
+    """``fault``, ``cleaned`` or ``incomplete`` from the recording, or the launcher's ``told`` when that is worse."""
     if final_phase in ("FAULT", "ESTOP"):
         outcome = "fault"
     elif final_phase == "DONE" and removed >= CLEANED_FRACTION:
         outcome = "cleaned"
     else:
         outcome = "incomplete"
-    told = launcher.get("outcome")
     if told and _OUTCOME_RANK.get(told, 0) > _OUTCOME_RANK[outcome]:
         outcome = told
-    report["outcome"] = outcome
-    report["services"] = launcher.get("services", {})
-    counters = {"controller": status[-1]["counters"] if status else {}}
-    for name, key in (("perception", keys.perception_status), ("sim", keys.sim_status)):
-        msgs = _topic(rec, key)
+    return outcome
+
+
+def _counters_section(run: _Run) -> dict[str, dict]:
+    """The last status counters of the controller, perception and the sim."""
+    counters = {"controller": run.status[-1]["counters"] if run.status else {}}
+    for name, key in (("perception", run.keys.perception_status), ("sim", run.keys.sim_status)):
+        msgs = _topic(run.rec, key)
         counters[name] = msgs[-1]["counters"] if msgs else {}
-    report["counters"] = counters
-    report["plots"] = write_plots(run_dir, rec, keys, tr, col, truth, stains_msgs)
-    return report
+    return counters
 
 
 def write_report(run_dir: Path, **kwargs) -> dict[str, Any]:
@@ -209,61 +277,80 @@ def write_plots(run_dir: Path, rec: dict, keys: Keys, tr: np.ndarray, col: dict[
 
     frames = _frames(rec, keys)
     if len(frames) == 2:
-        fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
-        removed = (1.0 - truth[-1]["total_dirt"] / truth[0]["total_dirt"]) if truth and truth[0]["total_dirt"] else 0
-        for a, img, title in zip(ax, frames, ("before", f"after ({removed:.1%} of the dirt removed)")):
-            a.imshow(img)
-            a.set_title(title)
-            a.axis("off")
-        save(fig, "board_before_after.png")
+        save(_board_before_after_figure(frames, truth), "board_before_after.png")
     if len(tr):
-        phase = tr[:, col["phase"]]
-        fig, ax = plt.subplots(figsize=(8, 6))
-        kinds = (("periodic MP (WIPE)", PHASE_CODES["WIPE"], "tab:blue"),
-                 ("transitional MP", PHASE_CODES["TRANSITION"], "tab:orange"))
-        free = ~np.isin(phase, _WIPING)
-        ax.plot(tr[free, col["x"]], tr[free, col["y"]], ",", color="0.6", label="free moves (approach, retreat)")
-        for label, code, colour in kinds:
-            sel = phase == code
-            ax.plot(tr[sel, col["x"]], tr[sel, col["y"]], ".", ms=1, color=colour, label=label)
-        if truth and truth[-1]["centres_board_m"]:
-            for c, s in zip(truth[-1]["centres_board_m"], truth[-1]["sizes_m"]):
-                ax.add_patch(plt.Circle(c, s / 2, fill=False, color="k", lw=1))
-        if stains_msgs:
-            w, h = stains_msgs[-1]["board_size_m"]
-            ax.add_patch(plt.Rectangle((0, 0), w, h, fill=False, color="0.3", lw=1.5))
-        ax.set_aspect("equal")
-        ax.set_xlabel("board x [m]")
-        ax.set_ylabel("board y [m]")
-        ax.set_title("eraser path on the board (true stains as circles)")
-        ax.legend(loc="upper right", fontsize=8, markerscale=8)
-        save(fig, "eraser_path.png")
-
-        t = tr[:, 0]
-        fig, ax = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
-        ax[0].plot(t, tr[:, col["force_n"]], lw=0.7, label="measured normal force")
-        ax[0].plot(t, tr[:, col["press_n"]], lw=0.7, label="commanded press")
-        ax[0].set_ylabel("force [N]")
-        ax[0].legend(fontsize=8)
-        ax[1].plot(t, np.linalg.norm(tr[:, [col["ref_ax"], col["ref_ay"]]], axis=1), lw=0.7)
-        ax[1].set_ylabel("|reference accel.| [m/s^2]")
-        ax[2].step(t, phase, where="post", lw=0.8)
-        ax[2].set_yticks(list(PHASE_CODES.values()), list(PHASE_CODES), fontsize=7)
-        ax[2].set_xlabel("robot time [s]")
-        save(fig, "timeseries.png")
+        save(_eraser_path_figure(tr, col, truth, stains_msgs), "eraser_path.png")
+        save(_timeseries_figure(tr, col), "timeseries.png")
     if (Path(run_dir) / "learn" / "fig4_reachability.png").is_file():
         written.append("learn/fig4_reachability.png")
     return written
 
 
+def _board_before_after_figure(frames: list[np.ndarray], truth: list[dict]):
+    """The first and last camera image side by side, the dirt removed in the title."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
+    for a, img, title in zip(ax, frames, ("before", f"after ({_dirt_removed(truth):.1%} of the dirt removed)")):
+        a.imshow(img)
+        a.set_title(title)
+        a.axis("off")
+    return fig
+
+
+def _eraser_path_figure(tr: np.ndarray, col: dict[str, int], truth: list[dict], stains_msgs: list[dict]):
+    """The pad on the board coloured by MP kind, with the true stains as circles and the board's outline."""
+    import matplotlib.pyplot as plt
+
+    phase = tr[:, col["phase"]]
+    fig, ax = plt.subplots(figsize=(8, 6))
+    kinds = (("periodic MP (WIPE)", PHASE_CODES["WIPE"], "tab:blue"),
+             ("transitional MP", PHASE_CODES["TRANSITION"], "tab:orange"))
+    free = ~np.isin(phase, _WIPING)
+    ax.plot(tr[free, col["x"]], tr[free, col["y"]], ",", color="0.6", label="free moves (approach, retreat)")
+    for label, code, colour in kinds:
+        sel = phase == code
+        ax.plot(tr[sel, col["x"]], tr[sel, col["y"]], ".", ms=1, color=colour, label=label)
+    if truth and truth[-1]["centres_board_m"]:
+        for c, s in zip(truth[-1]["centres_board_m"], truth[-1]["sizes_m"]):
+            ax.add_patch(plt.Circle(c, s / 2, fill=False, color="k", lw=1))
+    if stains_msgs:
+        w, h = stains_msgs[-1]["board_size_m"]
+        ax.add_patch(plt.Rectangle((0, 0), w, h, fill=False, color="0.3", lw=1.5))
+    ax.set_aspect("equal")
+    ax.set_xlabel("board x [m]")
+    ax.set_ylabel("board y [m]")
+    ax.set_title("eraser path on the board (true stains as circles)")
+    ax.legend(loc="upper right", fontsize=8, markerscale=8)
+    return fig
+
+
+def _timeseries_figure(tr: np.ndarray, col: dict[str, int]):
+    """Measured force and commanded press, |reference acceleration| and the phase over robot time."""
+    import matplotlib.pyplot as plt
+
+    t = tr[:, 0]
+    fig, ax = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    ax[0].plot(t, tr[:, col["force_n"]], lw=0.7, label="measured normal force")
+    ax[0].plot(t, tr[:, col["press_n"]], lw=0.7, label="commanded press")
+    ax[0].set_ylabel("force [N]")
+    ax[0].legend(fontsize=8)
+    ax[1].plot(t, np.linalg.norm(tr[:, [col["ref_ax"], col["ref_ay"]]], axis=1), lw=0.7)
+    ax[1].set_ylabel("|reference accel.| [m/s^2]")
+    ax[2].step(t, tr[:, col["phase"]], where="post", lw=0.8)
+    ax[2].set_yticks(list(PHASE_CODES.values()), list(PHASE_CODES), fontsize=7)
+    ax[2].set_xlabel("robot time [s]")
+    return fig
+
+
 def summary_lines(report: dict[str, Any]) -> list[str]:
     """A few lines for the terminal."""
-    lines = [f"outcome {report['outcome']}: {report['dirt_removed_fraction']:.1%} of the dirt removed in "
-             f"{report['sim_time_s']:.1f} s robot time ({report['duration_s']:.1f} s wall)",
-             f"force while wiping {report['normal_force_mean_n']:.1f} +- {report['normal_force_std_n']:.1f} N, "
-             f"max {report['max_normal_force_n']:.1f} N; tracking RMS {report['tracking_rms_m'] * 1000:.2f} mm; "
-             f"junction accel. step max {report['max_junction_accel_jump']:.3f} m/s^2 "
-             f"({report['junction_step_ratio_max']:.2f}x an ordinary tick)"]
+    lines = [(f"outcome {report['outcome']}: {report['dirt_removed_fraction']:.1%} of the dirt removed in "
+              f"{report['sim_time_s']:.1f} s robot time ({report['duration_s']:.1f} s wall)"),
+             (f"force while wiping {report['normal_force_mean_n']:.1f} +- {report['normal_force_std_n']:.1f} N, "
+              f"max {report['max_normal_force_n']:.1f} N; tracking RMS {report['tracking_rms_m'] * 1000:.2f} mm; "
+              f"junction accel. step max {report['max_junction_accel_jump']:.3f} m/s^2 "
+              f"({report['junction_step_ratio_max']:.2f}x an ordinary tick)")]
     for s in report["stains"]:
         k = "no kappa" if s["kappa_s"] is None else f"kappa at {s['kappa_s']:.1f} s"
         lines.append(f"  stain {s['id']}: {s['initial_remaining']:.0%} -> {s['final_remaining']:.1%}, {k}")
