@@ -1,6 +1,7 @@
-"""The controller process: everything that decides motion.
+"""The controller process: everything that decides motion, at the robot's rate.
 
-``controller.lamps`` holds the skill-learning maths (segmentation, periodic
-and transitional movement primitives, skill files, planner); it has no
-network or simulator dependency and is usable offline from the CLI.
+It runs a skill file made by :mod:`lampskit` (it never learns) with the
+LAMPS runtime core only: the skill executor (phases, MP chaining, safety
+reactions), one control tick (impedance, force regulation, limits in
+:mod:`controller.control`), and the Zenoh loops around them.
 """

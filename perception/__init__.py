@@ -1,1 +1,1 @@
-"""Camera frames in, stains and kappa out (arrives with issue 5)."""
+"""The perception service: camera frames in, stains and kappa out (board markers, ink per pixel, clusters)."""

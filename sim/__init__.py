@@ -1,1 +1,1 @@
-"""The robot side: PyBullet whiteboard simulator (arrives with issue 3)."""
+"""The robot side in simulation: a PyBullet iiwa with an eraser, a whiteboard with dirt, a camera."""

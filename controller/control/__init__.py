@@ -1,5 +1,5 @@
 """The control law: Cartesian impedance with Pinocchio, contact-force regulation and limits.
 
 Pure maths on numpy arrays and a Pinocchio model; no network, no simulator.
-The controller service (issue 4) wraps it in its fixed-rate loop.
+The controller service (:mod:`controller.service`) runs it in its fixed-rate loop.
 """

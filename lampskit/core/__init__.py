@@ -1,0 +1,12 @@
+"""The LAMPS runtime: movement primitives, their runners, skill files, the planner (numpy only).
+
+- :mod:`.periodic`: the periodic DMP, eqs. (1)-(6), and its limit cycle in closed form;
+  :mod:`.periodic_runner`: its exact-step 1 kHz runner.
+- :mod:`.transitional`: the third-order transitional MP, eqs. (7)-(19);
+  :mod:`.transitional_maths`: its equations and tables; :mod:`.transitional_plan`:
+  a transition between two states; :mod:`.transitional_runner`: its 1 kHz runner.
+- :mod:`.skill`: the skill file; :mod:`.surface`: the demonstration's surface frame;
+  :mod:`.rotations`: rotation matrices and quaternions.
+- :mod:`.planner`: stain order, MP choice, entry and exit phases, transitions;
+  :mod:`.rollout`: a plan executed offline at a fixed rate.
+"""

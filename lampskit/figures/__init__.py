@@ -1,0 +1,1 @@
+"""The paper's figures (matplotlib, headless): :mod:`.demo` (Figs. 4-5, the skill), :mod:`.primitives` (Figs. 6-7)."""
