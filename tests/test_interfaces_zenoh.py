@@ -11,7 +11,7 @@ from interfaces.config import ZenohSettings
 from interfaces.messages import Capabilities, Estop, RobotState, TorqueCommand
 from interfaces.session import ServiceNode
 
-from .zenoh_helpers import free_port, wait_for
+from .zenoh_helpers import free_port, wait_alive, wait_for, wait_gone, wait_sample, wait_subscribed
 
 
 @pytest.fixture()
@@ -21,7 +21,7 @@ def peers():
     a = ServiceNode("sim", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=robot))
     b = ServiceNode("controller", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=robot))
     with a, b:
-        wait_for(lambda: "sim" in b.alive_services(0.5))
+        wait_alive(b, "sim")
         yield a, b
 
 
@@ -34,7 +34,8 @@ def test_messages_cross_between_two_peers(peers):
     sim, ctrl = peers
     states = ctrl.latest(ctrl.keys.robot_state, RobotState)
     commands = sim.latest(sim.keys.robot_command, TorqueCommand)
-    time.sleep(0.2)  # let the subscriptions propagate
+    wait_subscribed(sim.session, sim.keys.robot_state)
+    wait_subscribed(ctrl.session, ctrl.keys.robot_command)
     sim.publish(sim.keys.robot_state, state(1))
     got = wait_for(states.take)
     assert got.seq == 1 and got.q_rad == state(1).q_rad and got.capabilities == state(1).capabilities
@@ -47,7 +48,7 @@ def test_messages_cross_between_two_peers(peers):
 def test_the_reader_keeps_only_the_newest_sample(peers):
     sim, ctrl = peers
     states = ctrl.latest(ctrl.keys.robot_state, RobotState)
-    time.sleep(0.2)
+    wait_subscribed(sim.session, sim.keys.robot_state)
     for seq in range(1, 51):
         sim.publish(sim.keys.robot_state, state(seq))
     seen = []
@@ -66,13 +67,21 @@ def test_the_reader_keeps_only_the_newest_sample(peers):
 def test_bad_samples_are_counted_and_dropped_and_the_reader_goes_on(peers):
     sim, ctrl = peers
     states = ctrl.latest(ctrl.keys.robot_state, RobotState)
-    time.sleep(0.2)
+    wait_subscribed(sim.session, sim.keys.robot_state)
     raw = sim.session.declare_publisher(sim.keys.robot_state)
     bad_payloads = [b"garbage", encode(state(1))[:-3], encode(Estop(stamp_ns=1, engaged=True, reason="x"))]
-    for payload in bad_payloads:
+    decoded = []
+    for n, payload in enumerate(bad_payloads, 1):
         raw.put(payload)
-        time.sleep(0.15)
-        assert states.take() is None
+
+        def taken(n=n):  # one at a time: the reader keeps only the newest payload
+            msg = states.take()
+            if msg is not None:
+                decoded.append(msg)
+            return states.received >= n
+
+        wait_for(taken, what=f"the reader taking bad payload {n}")
+    assert decoded == []
     assert sum(states.bad.values()) == 3 and states.received == 3
     assert any("expected a RobotState, got a Estop" in reason for reason in states.bad)
     sim.publish(sim.keys.robot_state, state(2))
@@ -86,8 +95,8 @@ def test_liveliness_follows_the_service():
     watcher = ServiceNode("tests", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=robot))
     with watcher:
         with ServiceNode("perception", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=robot)):
-            wait_for(lambda: "perception" in watcher.alive_services(0.5))
-        wait_for(lambda: "perception" not in watcher.alive_services(0.5))
+            wait_alive(watcher, "perception")
+        wait_gone(watcher, "perception")
 
 
 def test_other_prefixes_are_not_heard():
@@ -96,7 +105,12 @@ def test_other_prefixes_are_not_heard():
     b = ServiceNode("controller", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id="cell-b"))
     with a, b:
         states = b.latest(b.keys.robot_state, RobotState)
-        time.sleep(0.3)
+        marks = b.inbox(b.keys.controller_estop, Estop)
+        wait_subscribed(a.session, b.keys.robot_state)  # b's subscriptions are known to a
+        wait_subscribed(a.session, b.keys.controller_estop)
         a.publish(a.keys.robot_state, state(1))
-        time.sleep(0.3)
+        # a mark on b's own prefix, sent after it over the same link: once b has the mark, a sample on the
+        # other prefix would have arrived before it
+        a.publish(b.keys.controller_estop, Estop(stamp_ns=1, engaged=False, reason="mark"))
+        assert wait_sample(marks, what="the mark on b's prefix").reason == "mark"
         assert states.take() is None and states.received == 0

@@ -1,4 +1,11 @@
-"""Helpers for tests over real Zenoh on loopback: free ports, bounded waits, a real ``lamps sim`` process."""
+"""Helpers for tests over real Zenoh on loopback: free ports, bounded waits, a real ``lamps sim`` process.
+
+Tests never sleep to let Zenoh settle: they wait, with a timeout that fails
+the test naming what did not happen, for a peer's liveliness token
+(:func:`wait_alive`), for a subscriber to be known to the publishing
+session (:func:`wait_subscribed`) or for a received sample
+(:func:`wait_sample`).
+"""
 
 from __future__ import annotations
 
@@ -11,6 +18,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import zenoh
 
 from interfaces.config import ZenohSettings
 from interfaces.messages import RobotState, ServiceStatus, TorqueCommand
@@ -25,15 +33,57 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def wait_for(predicate, timeout_s: float = 5.0, what: str = "condition"):
-    """Poll ``predicate`` until it returns something truthy (fails the test after the timeout)."""
+def wait_for(predicate, timeout_s: float = 5.0, what: str = "condition", period_s: float = 0.005):
+    """Poll ``predicate`` every ``period_s`` until it returns something truthy and return that.
+
+    Fails the test (AssertionError naming ``what``) after ``timeout_s``.
+    """
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
         value = predicate()
         if value:
             return value
-        time.sleep(0.005)
+        time.sleep(period_s)
     raise AssertionError(f"{what} not met within {timeout_s} s")
+
+
+def wait_alive(node: ServiceNode, service: str, timeout_s: float = 10.0) -> None:
+    """Wait until ``node`` sees the liveliness token ``alive/<service>`` (the peer's session is up)."""
+    wait_for(lambda: service in node.alive_services(0.5), timeout_s, f"the liveliness token of {service!r}")
+
+
+def wait_gone(node: ServiceNode, service: str, timeout_s: float = 10.0) -> None:
+    """Wait until the liveliness token ``alive/<service>`` has gone from ``node``'s view."""
+    wait_for(lambda: service not in node.alive_services(0.5), timeout_s,
+             f"the liveliness token of {service!r} to go")
+
+
+def wait_subscribed(session: zenoh.Session, key: str, timeout_s: float = 10.0, what: str | None = None) -> None:
+    """Wait until ``session`` knows a subscriber on ``key``, so a put from it is delivered.
+
+    The matching status of a publisher declared for the purpose. A
+    subscriber of ``session`` itself matches too: call it on a session that
+    does not subscribe to ``key``.
+    """
+    pub = session.declare_publisher(key)
+    try:
+        wait_for(lambda: pub.matching_status.matching, timeout_s, what or f"a subscriber on {key}")
+    finally:
+        pub.undeclare()
+
+
+def wait_sample(reader, accept=None, timeout_s: float = 5.0, what: str = "a sample"):
+    """The first message ``reader`` (a ``Latest`` or an ``Inbox``) receives for which ``accept(msg)`` holds.
+
+    Messages before it are taken and dropped; ``accept`` None takes any.
+    """
+    take = reader.take if hasattr(reader, "take") else (lambda: reader.get(0.0))
+
+    def accepted():
+        msg = take()
+        return msg if msg is not None and (accept is None or accept(msg)) else None
+
+    return wait_for(accepted, timeout_s, what)
 
 
 def toml_value(v) -> str:
@@ -81,14 +131,28 @@ class SimProcess:
         settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{self.port}",), robot_id=self.robot_id)
         self.node = ServiceNode(self.client_name, settings).__enter__()
         try:
-            wait_for(lambda: self.proc.poll() is not None or "sim" in self.node.alive_services(0.5), 60.0,
-                     "sim liveliness")
-            if self.proc.poll() is not None:
-                raise AssertionError(f"lamps sim exited with {self.proc.returncode}:\n{self.proc.stdout.read()}")
+            self._wait_started()
         except BaseException:
             self.__exit__()
             raise
         return self
+
+    def _wait_started(self) -> None:
+        """Until the sim's liveliness token is seen and it subscribes to commands (after its camera started)."""
+        wait_for(lambda: self.proc.poll() is not None or "sim" in self.node.alive_services(0.5), 60.0,
+                 "sim liveliness")
+        self._check_running()
+        commands = self.node.session.declare_publisher(self.keys.robot_command)
+        try:
+            wait_for(lambda: self.proc.poll() is not None or commands.matching_status.matching, 60.0,
+                     "lamps sim subscribing to robot/command")
+        finally:
+            commands.undeclare()
+        self._check_running()
+
+    def _check_running(self) -> None:
+        if self.proc.poll() is not None:
+            raise AssertionError(f"lamps sim exited with {self.proc.returncode}:\n{self.proc.stdout.read()}")
 
     @property
     def keys(self):
@@ -139,6 +203,10 @@ def run_lockstep(sim: SimProcess, steps: int, policy, timeout_s: float = 120.0) 
     return out
 
 
-def latest_status(sim: SimProcess, timeout_s: float = 5.0) -> ServiceStatus:
+def latest_status(sim: SimProcess, timeout_s: float = 5.0, accept=None, what: str = "a sim status") -> ServiceStatus:
+    """The next sim status (published after this call) for which ``accept(status)`` holds (default: any)."""
     reader = sim.node.latest(sim.keys.sim_status, ServiceStatus)
-    return wait_for(reader.take, timeout_s, "a sim status")
+    try:
+        return wait_sample(reader, accept, timeout_s, what)
+    finally:
+        reader.close()
