@@ -19,7 +19,7 @@ from sim.board import board_from_params
 from sim.camera import project
 from sim.params import BoardParams
 
-from .zenoh_helpers import SimProcess, latest_status, run_lockstep, wait_for
+from .zenoh_helpers import SimProcess, latest_status, run_lockstep, wait_for, wait_sample
 
 pytestmark = pytest.mark.slow
 NO_CAMERA = {"enabled": False}
@@ -167,7 +167,7 @@ def test_realtime_stale_command_makes_the_arm_brake_and_hold(tmp_path, model, st
         while time.monotonic() < end:  # hold the arm with gravity torques, answering each state
             s = states.take()
             if s is None:
-                time.sleep(0.0005)
+                time.sleep(0.0005)  # polling the one-slot reader between 1 kHz states, not waiting for Zenoh
                 continue
             last = s
             sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=s.seq, stamp_ns=time.monotonic_ns(),
@@ -177,10 +177,12 @@ def test_realtime_stale_command_makes_the_arm_brake_and_hold(tmp_path, model, st
         sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=last.seq, stamp_ns=time.monotonic_ns(),
                                                                tau_nm=push.tolist()))
         q_push = np.array(last.q_rad)
-        time.sleep(0.4)
-        after = wait_for(states.take, 5.0, "a robot state")
-        time.sleep(0.3)
-        later = wait_for(states.take, 5.0, "a robot state")
+        # no command after the push: 0.4 s and then 0.3 s more on the sim's own clock (real time, but a
+        # loaded machine may run it slower than the wall clock)
+        after = wait_sample(states, lambda s: s.robot_time_ns >= last.robot_time_ns + 400_000_000, 10.0,
+                            "a robot state 0.4 s (robot time) after the push")
+        later = wait_sample(states, lambda s: s.robot_time_ns >= after.robot_time_ns + 300_000_000, 10.0,
+                            "a robot state 0.3 s (robot time) later")
         status = latest_status(sim)
     moved = abs(after.q_rad[0] - q_push[0])
     if should_brake:
@@ -213,15 +215,15 @@ def test_bad_commands_are_counted_and_never_reach_the_physics(tmp_path, model):
         sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=0, stamp_ns=1, tau_nm=[0.0] * 6))  # wrong length
         for _ in range(25):  # out-of-sequence chatter every 20 ms must not stop state 0 being re-sent
             sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=5, stamp_ns=1, tau_nm=[0.0] * 7))
-            time.sleep(0.02)
-        status = latest_status(sim)
+            time.sleep(0.02)  # the chatter's pace over 0.5 s is the scenario, not a wait for Zenoh
+        status = latest_status(sim, 10.0, lambda m: m.counters.get("commands_out_of_sequence", 0) >= 25,
+                               "a sim status counting the 25 out-of-sequence commands")
         assert status.seq == 0, "no bad command may step the physics"
-        assert status.counters["states_republished"] >= 3 and status.counters["commands_out_of_sequence"] >= 20
+        assert status.counters["states_republished"] >= 3 and status.counters["commands_out_of_sequence"] == 25
         over = model.gravity(np.array(s0.q_rad)) + np.array([0, 0, 0, 0, 0, 500.0, 0])
         sim.node.publish(sim.keys.robot_command, TorqueCommand(seq=0, stamp_ns=1, tau_nm=over.tolist()))
         s1 = wait_for(lambda: (lambda s: s if s is not None and s.seq == 1 else None)(states.get(1.0)), 10.0, "state 1")
-        time.sleep(0.6)
-        status = latest_status(sim)
+        status = latest_status(sim, 10.0, lambda m: m.seq >= 1, "a sim status after step 1")
         pub.undeclare()
     assert s1.tau_nm[5] == pytest.approx(40.0)  # clipped to joint 6's limit
     c = status.counters

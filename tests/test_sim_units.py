@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -22,6 +21,8 @@ from sim.commands import HOLD, CommandGate
 from sim.dirt import DirtGrid, StainShape, random_stains, stains_from_specs
 from sim.params import BoardParams, CameraParams, SimParams
 from sim.world import build_world
+
+from .zenoh_helpers import wait_for
 
 
 @pytest.fixture(scope="module")
@@ -307,10 +308,12 @@ def test_renderer_shows_wiped_dirt_and_survives_its_own_death():
         cam._proc.kill()
         cam._proc.join(5.0)
         assert cam.wait_idle(5.0)
-        deadline = time.monotonic() + 5.0
-        while not cam.dead and time.monotonic() < deadline:
+
+        def noticed() -> bool:  # a request to the dead renderer (or its publisher thread) finds it gone
             cam.request(3, 0, 0, core.q_start, core.dirt.dirt, 3)
-            time.sleep(0.05)
+            return cam.dead
+
+        wait_for(noticed, 5.0, "the camera noticing that its renderer died", period_s=0.05)
         assert cam.dead and not cam.request(4, 0, 0, core.q_start, core.dirt.dirt, 4)
     finally:
         stop.set()
