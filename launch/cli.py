@@ -20,6 +20,7 @@ import sys
 import threading
 import time
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
 from lampskit.errors import LampsError
@@ -125,19 +126,11 @@ def up_main(argv: list[str] | None = None) -> int:
 
 
 def _up(a, stop_requested: threading.Event) -> int:
-    from .compose import DEFAULT_COMPOSE, active, free_port, listen_ports, load_compose, localize, run_locally
-    from .procs import Child, wait_port
+    from .compose import DEFAULT_COMPOSE, load_compose
 
-    if a.stains < 0 or a.stains > 50:
-        raise UpError(f"--stains must be in [0, 50], got {a.stains}")
-    if not (a.max_duration > 0 and math.isfinite(a.max_duration)):
-        raise UpError(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
+    _check_options(a)
     board_env = _board_env(a.board)
-    out = Path(a.out) if a.out else Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    if out.exists() and any(out.iterdir()):
-        raise UpError(f"--out {out}: exists and is not empty (a run folder is never overwritten)")
-    out.mkdir(parents=True, exist_ok=True)
-    out = out.resolve()
+    out = _new_run_folder(a.out)
     echo = None if a.quiet else _print
     compose_path = Path(a.compose) if a.compose else DEFAULT_COMPOSE
     # read the compose file before learning: a broken one should not cost the learning time
@@ -145,70 +138,145 @@ def _up(a, stop_requested: threading.Event) -> int:
 
     t_start = time.monotonic()
     skill = _learn(a, out, echo, stop_requested)
+    cell = _plan_cell(a, compose_path, board_env, skill, out)
+    why = _run_cell(cell, a, echo, stop_requested, t_start)
+    return _show_report(out, why)
+
+
+def _check_options(a) -> None:
+    """The numeric options in range (the others are checked where they are used)."""
+    if a.stains < 0 or a.stains > 50:
+        raise UpError(f"--stains must be in [0, 50], got {a.stains}")
+    if not (a.max_duration > 0 and math.isfinite(a.max_duration)):
+        raise UpError(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
+
+
+def _new_run_folder(out_option: str | None) -> Path:
+    """The run folder (``--out``, default ``runs/<time>``), created; refused if it holds anything."""
+    out = Path(out_option) if out_option else Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    if out.exists() and any(out.iterdir()):
+        raise UpError(f"--out {out}: exists and is not empty (a run folder is never overwritten)")
+    out.mkdir(parents=True, exist_ok=True)
+    return out.resolve()
+
+
+@dataclass(frozen=True)
+class _Cell:
+    """What ``lamps up`` runs: the services as local processes, in start order, and where they write."""
+
+    services: list  # LocalService, localised from the compose file
+    env: dict[str, str]  # added to every service's environment (the board table of a --board file)
+    robot_id: str
+    skill: Path
+    out: Path
+
+
+def _plan_cell(a, compose_path: Path, board_env: dict[str, str], skill: Path, out: Path) -> _Cell:
+    """The compose file read with the run's variables, its active services localised on their ports."""
+    from .compose import active, load_compose, localize, run_locally
+
+    variables = _compose_variables(a, board_env, skill, out)
+    profiles = tuple(p for p in variables.get("COMPOSE_PROFILES", "sim").split(",") if p)
+    services = run_locally(active(load_compose(compose_path, variables), profiles))
+    local = localize(services, _port_map(services, a.port_base))
+    robot_id = next((s.environment.get("LAMPS_ROBOT_ID") for s in local if s.environment.get("LAMPS_ROBOT_ID")),
+                    "iiwa")
+    return _Cell(services=local, env={k: v for k, v in board_env.items() if k.startswith("LAMPS__")},
+                 robot_id=robot_id, skill=skill, out=out)
+
+
+def _compose_variables(a, board_env: dict[str, str], skill: Path, out: Path) -> dict[str, str]:
+    """The environment plus the ``LAMPS_*`` variables docker-compose.yml substitutes, from the options."""
     variables = dict(os.environ)
     variables.update(LAMPS_SEED=str(a.seed), LAMPS_STAINS=str(a.stains), LAMPS_MODE=a.mode, LAMPS_SKILL=str(skill),
                      LAMPS_OUT=str(out), **{k: v for k, v in board_env.items() if k == "LAMPS_BOARD"})
     if a.robot_id:
         variables["LAMPS_ROBOT_ID"] = a.robot_id
-    profiles = tuple(p for p in variables.get("COMPOSE_PROFILES", "sim").split(",") if p)
-    services = run_locally(active(load_compose(compose_path, variables), profiles))
-    port_of = None
-    if a.port_base is not None:
-        port_of, n = {}, a.port_base
-        for s in services:
-            for p in listen_ports(s):
-                port_of[(s.name, p)] = n
-                n += 1
-        for (name, _), port in port_of.items():
-            if _port_busy(port):
-                raise UpError(f"service {name}: port {port} is already in use (choose another --port-base)")
-    local = localize(services, port_of)
-    extra_env = {k: v for k, v in board_env.items() if k.startswith("LAMPS__")}
-    robot_id = next((s.environment.get("LAMPS_ROBOT_ID") for s in local if s.environment.get("LAMPS_ROBOT_ID")),
-                    "iiwa")
+    return variables
 
-    children: list[Child] = []
+
+def _port_map(services, port_base: int | None) -> dict[tuple[str, int], int] | None:
+    """(service, compose port) -> port_base, port_base + 1, ... in service order; None (free ports) without a base.
+
+    Every port is checked before anything starts: a busy one is refused, naming its service.
+    """
+    from .compose import listen_ports
+
+    if port_base is None:
+        return None
+    port_of, n = {}, port_base
+    for s in services:
+        for p in listen_ports(s):
+            port_of[(s.name, p)] = n
+            n += 1
+    for (name, _), port in port_of.items():
+        if _port_busy(port):
+            raise UpError(f"service {name}: port {port} is already in use (choose another --port-base)")
+    return port_of
+
+
+def _run_cell(cell: _Cell, a, echo, stop_requested: threading.Event, t_start: float) -> str:
+    """Start the services, watch the run, stop everything and write ``run.json``; returns why the run ended."""
+    children: list = []
     outcome, why = "stopped", "stopped by the user"
-    report = None
     try:
-        for svc in local:
-            child = Child(svc.name, svc.argv, {**svc.environment, **extra_env, "MPLBACKEND": "Agg"}, out / "logs",
-                          echo)
-            children.append(child)
-            for port in svc.listen_ports:
-                if not wait_port(port, child, 120.0):
-                    code = child.returncode
-                    raise UpError(f"service {svc.name} failed at start-up"
-                                  + (f" (exit {code})" if code is not None else " (not listening after 120 s)")
-                                  + f": {child.last_words()}")
-        _print(f"lamps up: {', '.join(c.name for c in children)} running; run folder {out}")
-        outcome, why = _watch(local, children, robot_id, a.max_duration, stop_requested, free_port)
+        _start_services(cell, echo, children)
+        _print(f"lamps up: {', '.join(c.name for c in children)} running; run folder {cell.out}")
+        outcome, why = _watch(cell.services, children, cell.robot_id, a.max_duration, stop_requested)
     except UpError as exc:
         outcome, why = "failed", str(exc)
         print(f"lamps up: error: {exc}", file=sys.stderr)
     finally:
-        codes = {}
-        recorder = [c for c in children if c.name == "recorder"]
-        for c in reversed([c for c in children if c.name != "recorder"]):
-            codes[c.name] = c.stop()
-        run = {"outcome": outcome, "why": why, "duration_s": time.monotonic() - t_start, "services": codes,
-               "key_prefix": f"lamps/{robot_id}", "skill": str(skill),
-               "options": {k: v for k, v in vars(a).items()}}
-        from lampskit.atomic import write_text_atomic
+        _stop_services(children, cell, {"outcome": outcome, "why": why}, a, t_start)
+    return why
 
-        write_text_atomic(out / "run.json", json.dumps(run, indent=1) + "\n")
-        for c in recorder:
-            codes[c.name] = c.stop(timeout_s=120.0)
-    if (out / "report.json").is_file():
-        report = json.loads((out / "report.json").read_text())
-    elif (out / "recording.mcap").is_file():
-        from .report import write_report
-        report = write_report(out)
-    if report is None:
+
+def _start_services(cell: _Cell, echo, children: list) -> None:
+    """Start the services in order, each listening on its ports before the next one starts.
+
+    ``children`` gets each child as it starts, so whatever started is stopped when a later one fails.
+    """
+    from .procs import Child, wait_port
+
+    for svc in cell.services:
+        child = Child(svc.name, svc.argv, {**svc.environment, **cell.env, "MPLBACKEND": "Agg"}, cell.out / "logs",
+                      echo)
+        children.append(child)
+        for port in svc.listen_ports:
+            if not wait_port(port, child, 120.0):
+                code = child.returncode
+                raise UpError(f"service {svc.name} failed at start-up"
+                              + (f" (exit {code})" if code is not None else " (not listening after 120 s)")
+                              + f": {child.last_words()}")
+
+
+def _stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_start: float) -> None:
+    """Stop the services in reverse start order, write ``run.json``, then stop the recorder (its report reads it).
+
+    ended : ``outcome`` and ``why`` of the run, the first fields of ``run.json``
+    """
+    from lampskit.atomic import write_text_atomic
+
+    codes = {}
+    for c in reversed([c for c in children if c.name != "recorder"]):
+        codes[c.name] = c.stop()
+    run = {**ended, "duration_s": time.monotonic() - t_start, "services": codes,
+           "key_prefix": f"lamps/{cell.robot_id}", "skill": str(cell.skill),
+           "options": {k: v for k, v in vars(a).items()}}
+    write_text_atomic(cell.out / "run.json", json.dumps(run, indent=1) + "\n")
+    for c in children:
+        if c.name == "recorder":
+            c.stop(timeout_s=120.0)
+
+
+def _show_report(out: Path, why: str) -> int:
+    """Print the summary of the report the recorder wrote (or build it from the recording); 0 if cleaned."""
+    if not (out / "report.json").is_file() and not (out / "recording.mcap").is_file():
         print(f"lamps up: no recording in {out}: {why}", file=sys.stderr)
         return 1
-    from .report import summary_lines
+    from .report import summary_lines, write_report
 
+    report = json.loads((out / "report.json").read_text()) if (out / "report.json").is_file() else write_report(out)
     for line in summary_lines(report):
         _print(line)
     _print(f"report: {out / 'report.json'}; recording: {out / 'recording.mcap'} (opens in Foxglove)")
@@ -229,7 +297,7 @@ def _port_busy(port: int) -> bool:
     return False
 
 
-def _watch(local, children, robot_id: str, max_duration_s: float, stop_requested, _free_port) -> tuple[str, str]:
+def _watch(local, children, robot_id: str, max_duration_s: float, stop_requested) -> tuple[str, str]:
     """Progress on the terminal until the run ends; returns (outcome for run.json, why)."""
     from interfaces.config import ZenohSettings
     from interfaces.messages import ControllerStatus, SimTruth, Stains
