@@ -25,8 +25,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "controller": ("controller.cli:main", "run a skill on the robot: impedance control and the skill executor"),
     "perception": ("perception.cli:main", "stains and kappa from camera images (board markers, ink clustering)"),
     "up": ("launch.cli:up_main", "the whole cell from docker-compose.yml as local processes, recorded and reported"),
-    "record": ("launch.cli:record_main", "record every key into an MCAP file; report.json and plots when stopped"),
-    "report": ("launch.cli:report_main", "rebuild a run's report.json and plots from its recording"),
+    "record": (
+        "launch.record_cli:record_main",
+        "record every key into an MCAP file; report.json and plots when stopped",
+    ),
+    "report": ("launch.record_cli:report_main", "rebuild a run's report.json and plots from its recording"),
     "bench": ("launch.bench:main", "run every benchmark into bench.json and a markdown page (a source checkout)"),
 }
 
