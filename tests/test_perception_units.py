@@ -11,7 +11,7 @@ from interfaces.board_markers import marker_corners_board
 from interfaces.errors import ConfigError
 from interfaces.messages import CameraFrame, CameraIntrinsics, Pose
 from perception.board import detect_markers, make_detector, measure_board, solve_pose
-from perception.classify import InkClassifier, ink_absorption
+from perception.classify import InkClassifier
 from perception.cluster import cluster_pixels
 from perception.frames import FrameError, rgb_from_message
 from perception.kappa import KappaLatch
@@ -48,15 +48,17 @@ def _board(rows=60, cols=80, white=(205, 205, 201)) -> np.ndarray:
 
 def test_ink_fraction_is_recovered_under_any_light_and_shade():
     params = InkParams()
-    a = ink_absorption(params)
     clf = InkClassifier(params, np.ones((60, 80), bool), 0.002)
     for gain, shade in [(1.0, 1.0), (0.55, 1.0), (1.15, 0.9), (0.8, 0.85)]:
         white = np.array([205.0, 205.0, 201.0]) * gain
-        img = np.tile(white, (60, 80, 1))
+        # the ink in the same light as this white: params.ink_rgb is the ink where the board is params.board_rgb
+        ink_colour = np.array(params.ink_rgb) * white / np.array(params.board_rgb)
         d_true = np.zeros((60, 80))
         d_true[20:40, 30:50] = np.linspace(0.0, 1.0, 20)[None, :]  # a ramp of ink
-        img[:, 60:] *= shade  # a soft shadow over part of the board and the ink
-        img = img * (1 - d_true[..., None] * a)
+        # a pixel with a fraction d of ink averages the ink and the board (mixing by area, not the classifier's
+        # absorption formula), then a soft shadow over part of the board and the ink
+        img = (1 - d_true[..., None]) * white + d_true[..., None] * ink_colour
+        img[:, 60:] *= shade
         ink = clf.classify(np.clip(img, 0, 255).round().astype(np.uint8))
         sel = ~ink.occluded[20:40, 30:50]
         assert sel.mean() > 0.9

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 import pytest
+from matplotlib.path import Path as MplPath
 
 from interfaces.errors import ConfigError
 from interfaces.messages import TorqueCommand
@@ -94,14 +95,33 @@ def test_wiping_removes_dirt_only_under_the_pad():
     g = _grid_full_of_dirt()
     centre, axis = np.array([0.2, 0.15]), np.array([math.cos(0.5), math.sin(0.5)])
     n = g.wipe(centre, axis, (0.06, 0.025), np.array([0.2, 0.0]), 0.0, 10.0, 0.01, 2.0, 2.0)
-    xs = (np.arange(g.nx) + 0.5) * 0.002 - centre[0]
-    ys = (np.arange(g.ny) + 0.5) * 0.002 - centre[1]
-    along = axis[0] * xs[None, :] + axis[1] * ys[:, None]
-    across = -axis[1] * xs[None, :] + axis[0] * ys[:, None]
-    under = (np.abs(along) <= 0.06) & (np.abs(across) <= 0.025)
+    # the pad: a 12 x 5 cm rectangle turned by 0.5 rad; cells inside it by matplotlib's point-in-polygon test
+    across = np.array([-axis[1], axis[0]])
+    corners = [centre + sa * 0.06 * axis + sb * 0.025 * across for sa, sb in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+    xs, ys = np.meshgrid((np.arange(g.nx) + 0.5) * 0.002, (np.arange(g.ny) + 0.5) * 0.002)
+    under = MplPath(corners).contains_points(np.column_stack([xs.ravel(), ys.ravel()])).reshape(g.dirt.shape)
     assert n == under.sum() == np.count_nonzero(g.dirt < 1.0)
     assert np.all(g.dirt[~under] == 1.0)
-    np.testing.assert_allclose(g.dirt[under], math.exp(-2.0 * 8.0 * 0.2 * 0.01), rtol=1e-6)
+    assert n * 0.002**2 == pytest.approx(0.12 * 0.05, rel=0.02)  # the pad's area, up to its edge cells
+    wiped = g.dirt[under]
+    assert 0.0 < wiped.min() and wiped.max() < 1.0 and np.ptp(wiped) == 0.0  # a pure slide: the same everywhere
+
+
+def test_the_removal_law_is_exponential_in_the_excess_force_times_the_distance_slid():
+    """d <- d exp(-k (F - F0) ds), checked by its properties and one e-fold rather than by evaluating it."""
+    def left(force=10.0, speed=0.2, dt=0.01, steps=1):
+        g = _grid_full_of_dirt()
+        for _ in range(steps):
+            g.wipe(np.array([0.2, 0.15]), np.array([1.0, 0.0]), (0.06, 0.025), np.array([speed, 0.0]), 0.0,
+                   force, dt, 2.0, 2.0)
+        return float(g.dirt[int(0.15 / 0.002), int(0.2 / 0.002)])  # the cell under the pad's centre
+
+    assert left(steps=2) == pytest.approx(left(dt=0.02), rel=1e-6)  # two steps are one step twice as long
+    assert left(speed=0.4) == pytest.approx(left(dt=0.02), rel=1e-6)  # only the distance slid counts
+    assert math.log(left(force=18.0)) == pytest.approx(2 * math.log(left(force=10.0)), rel=1e-5)  # 16 N vs 8 N over
+    assert math.log(left(speed=0.4)) == pytest.approx(2 * math.log(left(speed=0.2)), rel=1e-5)
+    # the units of rate_per_n_m: 2 / (N m) with 8 N over the threshold, over 1/16 m of sliding, is one e-fold
+    assert left(force=10.0, speed=0.25, dt=0.25) == pytest.approx(math.exp(-1.0), rel=1e-6)
 
 
 def test_removal_needs_force_above_the_threshold_and_sliding_and_grows_with_both():
