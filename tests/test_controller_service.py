@@ -26,7 +26,7 @@ from interfaces.config import ZenohSettings
 from interfaces.messages import ControllerTrace, Capabilities, ControllerStatus, Estop, Pose, RobotState, SimTruth
 from interfaces.session import ServiceNode
 
-from .zenoh_helpers import REPO, SimProcess, free_port, wait_for
+from .zenoh_helpers import REPO, SimProcess, free_port, wait_for, wait_sample, wait_subscribed
 
 pytestmark = pytest.mark.slow
 NO_CAMERA = {"enabled": False}
@@ -122,9 +122,9 @@ def test_full_wipe_of_three_seeded_stains_with_regulated_force_and_c2_junctions(
         batches = ctl.operator.inbox(ctl.operator.keys.controller_trace, ControllerTrace, maxlen=100_000)
         ctl.wait_phase(("DONE", "FAULT"), 150.0)
         assert ctl.phase == "DONE", ctl.core.executor.reason
-        time.sleep(0.3)
-        final = wait_for(truth.take, 5.0, "sim truth")
-        st = wait_for(status.take, 5.0, "controller status")
+        st = wait_sample(status, lambda m: m.phase == "DONE", 5.0, "a controller status saying DONE")
+        truth.take()  # one from before DONE, perhaps: the final truth is the next one
+        final = wait_sample(truth, timeout_s=5.0, what="a sim truth after DONE")
         junctions = list(ctl.core.executor.junction_ticks)
     tr = ctl.trace()  # the controller has stopped: its ring and what it published are final
     n_ticks = ctl.core.trace.n
@@ -193,16 +193,30 @@ def test_estop_lifts_the_eraser_off_and_bad_samples_are_counted_not_fatal(tmp_pa
             ControllerThread(sim, learned_skill) as ctl:
         op, keys = ctl.operator, ctl.operator.keys
         ctl.wait_phase(("WIPE",), 60.0)
-        for key in (keys.robot_state, keys.sim_truth, keys.controller_estop):
-            op.session.put(key, b"\x93garbage")
-        time.sleep(0.3)  # the stains reader keeps only the newest sample: let the garbage be taken first
+        garbage = {"robot_state": keys.robot_state, "stains": keys.sim_truth, "estop": keys.controller_estop}
+        for key in garbage.values():
+            wait_subscribed(op.session, key, what=f"the controller subscribing to {key}")
+        status = op.latest(keys.controller_status, ControllerStatus)
+        put_garbage = {f"{name}_dropped": (lambda k=key: op.session.put(k, b"\x93garbage"))
+                       for name, key in garbage.items()}
+        for put in put_garbage.values():
+            put()
+        # the stains reader keeps only the newest sample (the sim's truth may overwrite the garbage): until the
+        # status counts a dropped sample on every key, put the garbage again on the keys it does not count yet
+        wait_for(lambda: _until_counted(status, put_garbage), 10.0,
+                 "a controller status counting garbage on robot_state, stains and estop")
         # well-formed messages this controller cannot use: a 6-joint robot, a stain with a 3-D centre
-        op.publish(keys.robot_state, RobotState(seq=10**6, stamp_ns=1, q_rad=[0.0] * 6, dq_rad_s=[0.0] * 6,
-                                                tau_nm=[0.0] * 6, wrench_world=[0.0] * 6,
-                                                capabilities=Capabilities(False, [10.0] * 6)))
-        op.publish(keys.sim_truth, SimTruth(seq=1, stamp_ns=1, stain_ids=[0], remaining=[1.0], total_dirt=1.0,
-                                            contact_force_n=0.0, centres_board_m=[[0.1, 0.2, 0.3]], sizes_m=[0.05],
-                                            T_board_to_world=Pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])))
+        six_joints = RobotState(seq=10**6, stamp_ns=1, q_rad=[0.0] * 6, dq_rad_s=[0.0] * 6, tau_nm=[0.0] * 6,
+                                wrench_world=[0.0] * 6, capabilities=Capabilities(False, [10.0] * 6))
+        flat_stain = SimTruth(seq=1, stamp_ns=1, stain_ids=[0], remaining=[1.0], total_dirt=1.0, contact_force_n=0.0,
+                              centres_board_m=[[0.1, 0.2, 0.3]], sizes_m=[0.05],
+                              T_board_to_world=Pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]))
+        unusable = {"robot_state_dropped: 6 joints": lambda: op.publish(keys.robot_state, six_joints),
+                    "stains_rejected": lambda: op.publish(keys.sim_truth, flat_stain)}
+        for send in unusable.values():
+            send()
+        wait_for(lambda: _until_counted(status, unusable), 10.0,
+                 "a controller status counting the 6-joint state and the 3-D stain")
         op.publish(keys.controller_estop, Estop(stamp_ns=time.monotonic_ns(), engaged=True, reason="test button",
                                                 source="pytest"))
         ctl.wait_phase(("ESTOP",), 5.0)
@@ -214,8 +228,7 @@ def test_estop_lifts_the_eraser_off_and_bad_samples_are_counted_not_fatal(tmp_pa
         assert np.all(after[:, COL["force_n"]] < 0.5)  # nothing touches the board
         assert after[-1, COL["h"]] > 0.03  # the pad hovers at the standoff
         assert "test button" in ctl.core.executor.reason
-        status = op.latest(keys.controller_status, ControllerStatus)
-        st = wait_for(status.take, 3.0, "status")
+        st = wait_sample(status, lambda m: m.phase == "ESTOP", 3.0, "a controller status saying ESTOP")
         assert st.phase == "ESTOP"
         for name in ("robot_state", "stains", "estop"):
             assert any(k.startswith(f"{name}_dropped") for k in st.counters), (name, st.counters)
@@ -224,6 +237,21 @@ def test_estop_lifts_the_eraser_off_and_bad_samples_are_counted_not_fatal(tmp_pa
         op.publish(keys.controller_estop, Estop(stamp_ns=time.monotonic_ns(), engaged=False, reason="cleared",
                                                 source="pytest"))
         ctl.wait_phase(("APPROACH", "TRANSITION", "WIPE"), 10.0)
+
+
+def _until_counted(status, sends: dict) -> bool:
+    """True once the newest controller status has a counter starting with each key of ``sends``.
+
+    Until then, every call that finds a new status calls ``sends[prefix]()`` for each prefix not counted yet
+    (publish again what a one-slot reader may have lost to a newer sample).
+    """
+    st = status.take()
+    if st is None:
+        return False
+    missing = [prefix for prefix in sends if not any(k.startswith(prefix) for k in st.counters)]
+    for prefix in missing:
+        sends[prefix]()
+    return not missing
 
 
 # --------------------------------------------------------------------------
