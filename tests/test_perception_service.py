@@ -27,7 +27,7 @@ from perception.service import PerceptionService
 from perception.sources import ZenohSource
 
 from .test_controller_service import ControllerThread
-from .zenoh_helpers import REPO, SimProcess, free_port, run_lockstep, wait_for
+from .zenoh_helpers import REPO, SimProcess, free_port, run_lockstep, wait_for, wait_sample, wait_subscribed
 
 pytestmark = pytest.mark.slow
 
@@ -141,20 +141,27 @@ def test_bad_frames_are_counted_with_reasons_and_a_lost_board_is_unknown_never_c
         with op:
             status = op.latest(op.keys.perception_status, ServiceStatus)
             key = op.keys.camera_frame("board")
-            time.sleep(0.5)
+            wait_subscribed(op.session, key, what="perception subscribing to the camera frames")
+            wait_sample(status, timeout_s=10.0, what="a perception status reaching the operator")
+
+            def n_bad(m: ServiceStatus) -> int:
+                return sum(n for k, n in m.counters.items() if k.startswith("frames_bad"))
+
             seq = 10_000
             blank = bytes([230]) * (64 * 48 * 3)
-            # one at a time: the camera reader keeps only the newest frame
-            for sample in (b"\x00not a frame", _frame(seq + 1, b"\xff\xd8\xff truncated jpeg", "jpeg"),
-                           _frame(seq + 2, b"\x89PNG\r\n\x1a\n broken", "png")):
+            # one at a time (the camera reader keeps only the newest frame): each until the status counts it
+            for n, sample in enumerate((b"\x00not a frame", _frame(seq + 1, b"\xff\xd8\xff truncated jpeg", "jpeg"),
+                                        _frame(seq + 2, b"\x89PNG\r\n\x1a\n broken", "png")), 1):
                 op.session.put(key, sample) if isinstance(sample, bytes) else op.publish(key, sample)
-                time.sleep(0.2)
-            for i in range(3, 30):  # 2.7 s of frames without markers, past hold_s
+                wait_sample(status, lambda m: n_bad(m) >= n, 10.0, f"a status counting bad frame {n}")
+            for i in range(3, 30):  # 2.7 s of frames without markers, past hold_s; each until it is processed
                 op.publish(key, _frame(seq + i, blank))
-                time.sleep(0.03)
-            s = wait_for(lambda: (m := status.take()) is not None and m.counters.get("frames_bad: corrupt jpeg")
-                         and m, 10.0, "a status counting the bad frames")
-        assert s.counters.get("frames_bad: corrupt png") == 1
+                wait_for(lambda: per.sent and per.sent[-1][1].frame_seq >= seq + i, 10.0,
+                         f"perception's stains from blank frame {seq + i}")
+            processed = per.service.counters["frames_processed"]
+            s = wait_sample(status, lambda m: m.timing.ticks >= processed, 10.0,
+                            "a status published after the last blank frame")
+        assert s.counters.get("frames_bad: corrupt jpeg") == 1 and s.counters.get("frames_bad: corrupt png") == 1
         assert sum(n for k, n in s.counters.items() if k.startswith("frames_bad")) == 3, s.counters
         assert any(k.startswith("frames_not_fresh: no markers seen") for k in s.counters), s.counters
         last = per.sent[-1][1]
