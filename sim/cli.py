@@ -123,6 +123,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         steps = service.run()
     except (RuntimeError, OSError) as exc:
+        if service.stop.is_set():  # stopped while starting: the signal reached the renderer too, not a fault
+            logging.getLogger("sim").info("stopped during start-up (%s)", exc)
+            return 0
         print(f"lamps sim: error: {exc}", file=sys.stderr)
         return 1
     finally:
