@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from enum import StrEnum
 
 import msgspec
 
@@ -25,13 +26,35 @@ SCHEMA_VERSION = 1
 
 #: Commands the robot side understands.
 COMMAND_MODES = ("torque", "hold")
-#: Controller phases (DESIGN.md, "Controller phases").
-PHASES = ("INIT", "WAIT_PEERS", "APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE", "PAUSED", "FAULT", "ESTOP")
 #: Image encodings a CameraFrame may carry.
 ENCODINGS = ("rgb8", "bgr8", "mono8", "jpeg", "png")
 #: How perception knows the board in a :class:`Stains` message.
 BOARD_STATES = ("seen", "held", "lost")
 _BYTES_PER_PIXEL = {"rgb8": 3, "bgr8": 3, "mono8": 1}
+
+
+class Phase(StrEnum):
+    """The controller's phases, in the order of their trace codes; each equals its name as a string (the wire format).
+
+    INIT -> WAIT_PEERS -> APPROACH -> TRANSITION -> WIPE -> ... -> RETREAT
+    -> DONE; PAUSED, FAULT and ESTOP are reachable from any phase
+    (:mod:`controller.executor`).
+    """
+
+    INIT = "INIT"
+    WAIT_PEERS = "WAIT_PEERS"
+    APPROACH = "APPROACH"
+    WIPE = "WIPE"
+    TRANSITION = "TRANSITION"
+    RETREAT = "RETREAT"
+    DONE = "DONE"
+    PAUSED = "PAUSED"
+    FAULT = "FAULT"
+    ESTOP = "ESTOP"
+
+
+#: The phases' names, as :class:`ControllerStatus` carries them.
+PHASES = tuple(p.value for p in Phase)
 
 
 def _finite(name: str, values: Sequence[float], length: int | None = None) -> None:
@@ -263,7 +286,7 @@ class LoopTiming(msgspec.Struct, frozen=True, array_like=True):
 class ControllerStatus(Message, frozen=True):
     """Controller -> anyone: phase, what runs, force, timing and counters.
 
-    phase : one of :data:`PHASES`; reason : why (always set in PAUSED, FAULT,
+    phase : a :class:`Phase` name; reason : why (always set in PAUSED, FAULT,
     ESTOP); current_mp : e.g. ``"periodic 3"``; normal_force_n : measured
     contact force along the board normal [N]; counters : e.g. dropped samples
     per key.
@@ -282,7 +305,7 @@ class ControllerStatus(Message, frozen=True):
 
     def __post_init__(self) -> None:
         if self.phase not in PHASES:
-            raise ValueError(f"phase must be one of {PHASES}, got {self.phase!r}")
+            raise ValueError(f"phase must be one of {', '.join(PHASES)}, got {self.phase!r}")
 
 
 class ControllerTrace(Message, frozen=True):

@@ -21,7 +21,9 @@ from interfaces.messages import (
     ControllerStatus,
     ControllerTrace,
     Estop,
+    PHASES,
     LoopTiming,
+    Phase,
     Pose,
     RobotState,
     ServiceStatus,
@@ -146,11 +148,20 @@ def test_constructors_validate_too():
     with pytest.raises(ValueError, match="needs 24 bytes"):
         CameraFrame(seq=0, stamp_ns=0, camera="c", encoding="rgb8", data=b"123",
                     intrinsics=CameraIntrinsics(1.0, 1.0, 0.0, 0.0, 4, 2), T_camera_to_world=IDENTITY)
-    with pytest.raises(ValueError, match="phase must be one of"):
+    with pytest.raises(ValueError, match="phase must be one of INIT, WAIT_PEERS, .*, ESTOP, got 'DANCING'"):
         ControllerStatus(seq=0, stamp_ns=0, phase="DANCING")
     with pytest.raises(ValueError, match="unique"):
         Stains(seq=0, stamp_ns=0, T_board_to_world=IDENTITY, board_size_m=[1, 1],
                stains=[samples()[3].stains[0]] * 2)
+
+
+def test_a_phase_is_its_name_on_the_wire_and_the_status_checks_against_the_one_list():
+    assert PHASES == tuple(p.name for p in Phase) and PHASES[:2] == ("INIT", "WAIT_PEERS")
+    assert Phase.WIPE == "WIPE" and f"{Phase.WIPE}" == "WIPE" and "WIPE" in {Phase.WIPE}
+    st = ControllerStatus(seq=1, stamp_ns=2, phase=Phase.TRANSITION)
+    back = decode(encode(st), ControllerStatus)
+    assert back.phase == "TRANSITION" and Phase(back.phase) is Phase.TRANSITION
+    assert encode(st) == encode(ControllerStatus(seq=1, stamp_ns=2, phase="TRANSITION"))
 
 
 # -------------------------------------------------------------------------- keys and config
