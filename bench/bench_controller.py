@@ -51,7 +51,7 @@ sys.path.insert(0, str(REPO))
 
 from lampskit.learn.learn import bundled_skill  # noqa: E402
 from controller.core import ControllerCore  # noqa: E402
-from controller.executor import BoardPose, StainState  # noqa: E402
+from controller.executor_types import BoardPose, StainState  # noqa: E402
 from controller.params import ControllerParams  # noqa: E402
 from interfaces.config import ZenohSettings  # noqa: E402
 from interfaces.messages import ControllerStatus, ServiceStatus, SimTruth  # noqa: E402

@@ -6,7 +6,8 @@ motion to rest) is a :class:`Quintic`: the unique fifth-order polynomial
 meeting given position, velocity and acceleration at both ends, so a
 motion that starts where the last one left off is continuous in
 acceleration (C2) at the hand-over. :class:`OrientationBlend` turns the pad
-from one orientation to another along the geodesic with a quintic time law.
+from one orientation to another along the geodesic with a quintic time law;
+:class:`SmoothRamp` moves a scalar (the force target) along a smoothstep.
 """
 
 from __future__ import annotations
@@ -82,6 +83,46 @@ def brake_to_rest(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, duration_s: fl
     p0, v0, a0 = (np.asarray(x, float) for x in (p0, v0, a0))
     z = np.zeros_like(p0)
     return Quintic((p0, v0, a0), (p0 + 0.5 * v0 * duration_s, z, z), duration_s)
+
+
+def vertical_move(xy_m: np.ndarray, h0_m: float, h1_m: float, duration_s: float, v0_m_s: float = 0.0) -> Quintic:
+    """A quintic in (x, y, h): ``xy_m`` (2,) held, h from ``h0_m`` [m] (moving at ``v0_m_s``) to rest at ``h1_m``."""
+    z = np.zeros(3)
+    return Quintic((np.array([*xy_m, h0_m]), np.array([0.0, 0.0, v0_m_s]), z), (np.array([*xy_m, h1_m]), z, z),
+                   duration_s)
+
+
+def brake_above(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, duration_s: float) -> Quintic:
+    """As :func:`brake_to_rest` for (x, y, h) (3,), but never stopping below the start height ``p0[2]``.
+
+    A brake while descending must not carry the pad on into the board.
+    """
+    goal = p0 + 0.5 * v0 * duration_s
+    goal[2] = max(goal[2], p0[2])
+    return Quintic((p0, v0, a0), (goal, np.zeros(3), np.zeros(3)), duration_s)
+
+
+class SmoothRamp:
+    """A scalar from ``start`` to ``goal`` over ``duration_s`` along the smoothstep s^2 (3 - 2 s), s in [0, 1]."""
+
+    def __init__(self) -> None:
+        self.start = self.goal = 0.0
+        self.s = 0.0
+        self.duration_s = 1.0
+
+    def restart(self, start: float, goal: float, duration_s: float) -> None:
+        self.start, self.goal = start, float(goal)
+        self.s, self.duration_s = 0.0, float(duration_s)
+
+    def update(self, dt_s: float) -> float:
+        """Advance by ``dt_s`` [s]; the value now (``goal`` once :attr:`finished`)."""
+        self.s = min(self.s + dt_s / self.duration_s, 1.0)
+        s = self.s
+        return self.start + (self.goal - self.start) * s * s * (3.0 - 2.0 * s)
+
+    @property
+    def finished(self) -> bool:
+        return self.s >= 1.0
 
 
 class OrientationBlend:

@@ -38,7 +38,7 @@ from interfaces.transforms import transform_from_pose
 from lampskit.errors import PlanningError
 
 from .core import TRACE_COLUMNS, ControllerCore
-from .executor import BoardPose, StainState
+from .executor_types import BoardPose, StainState
 from .params import ControllerParams
 
 log = logging.getLogger(__name__)

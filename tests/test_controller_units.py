@@ -7,7 +7,8 @@ import pytest
 
 from controller.control.force import NormalForceRegulator
 from controller.control.limits import TorqueShaper, joint_margin_torque, speed_excess_force
-from controller.executor import BoardPose, SkillExecutor, StainState, ToolState, look_point
+from controller.executor import SkillExecutor
+from controller.executor_types import BoardPose, StainState, ToolState, look_point
 from controller.motion import OrientationBlend, Quintic, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
 from interfaces.errors import ConfigError
@@ -344,10 +345,10 @@ def test_a_moved_board_is_adopted_while_holding_without_moving_the_held_pose(lea
     ex.set_stains(BOARD, [])
     run(ex, arm, 0.5)
     assert ex.phase == "DONE"
-    held = BOARD.to_world(np.array([*ex._sp.xy, ex._sp.h]))
+    held = BOARD.to_world(np.array([*ex.motion.setpoint.xy, ex.motion.setpoint.h]))
     moved = BoardPose(WALL, BOARD.origin_m + np.array([0.0, 0.01, 0.0]), BOARD.size_m)
     ex.set_stains(moved, [])
-    np.testing.assert_allclose(moved.to_world(np.array([*ex._sp.xy, ex._sp.h])), held, atol=1e-12)
+    np.testing.assert_allclose(moved.to_world(np.array([*ex.motion.setpoint.xy, ex.motion.setpoint.h])), held, atol=1e-12)
     assert ex.board is moved
 
 
@@ -414,3 +415,28 @@ def test_after_the_last_pass_without_kappa_the_pad_waits_off_the_stain_for_the_c
     ex0.set_stains(BOARD, [s0])
     run(ex0, IdealArm(), 8.0)
     assert ex0.counters["looks"] == 0
+
+
+@pytest.mark.parametrize("phase, dt_s, mp", [("TRANSITION", 0.0, "transitional"), ("WIPE", 0.5, "periodic")])
+def test_a_runner_step_error_is_a_fault_naming_the_mp_and_the_status(learned_skill, phase, dt_s, mp):
+    """A runner refuses the step (the transitional MP needs dt > 0, the periodic one dt <= 0.1 s): FAULT, no raise."""
+    ex = SkillExecutor(learned_skill, ExecutorParams())
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains())
+    for _ in range(20_000):
+        arm.follow(ex.step(0.001, arm.tool))
+        if ex.phase == phase:
+            break
+    running = ex.current_mp
+    assert ex.phase == phase and running.startswith(mp)
+    ex.step(dt_s, arm.tool)
+    assert ex.phase == "FAULT" and ex.reason == f"{running} MP step failed: ERROR_INVALID_INPUT"
+    log = run(ex, arm, 2.0)
+    assert ex.phase == "FAULT" and not log[-1][5] and log[-1][7] > 0.03  # lifted off and holding
+
+
+def test_the_trace_phase_codes_follow_the_one_phase_list():
+    from controller.core import PHASE_CODES
+    from interfaces.messages import Phase
+
+    assert list(PHASE_CODES) == [p.value for p in Phase] and PHASE_CODES[Phase.WIPE] == PHASE_CODES["WIPE"] == 3

@@ -1,0 +1,239 @@
+"""The chain of learned MPs over the stains, one control tick at a time (ruckig style).
+
+:class:`MpChain` drives the in-plane reference while the pad wipes:
+
+* TRANSIT into stain j: the learned transitional MP from the current
+  reference state (position, velocity, acceleration) into the periodic MP
+  of j at the entry phase (:func:`~lampskit.core.planner.plan_transition`),
+  so the reference is continuous in acceleration at both junctions.
+* WIPE j: the periodic MP anchored at the stain's centre and scaled to its
+  size, until the stain is done (kappa, vanished, or one pass of
+  ``wipe_timeout_s``); a stain that moves meanwhile moves the anchor
+  through the MP's ramp (:meth:`MpChain.follow_stain`).
+* LEAVE j: re-planned over the stains open *now* (appeared, vanished or
+  done ones included), the periodic MP runs on until its phase heads for
+  the next stain (:func:`~lampskit.core.planner.exit_phase_delay`).
+
+:meth:`MpChain.update` returns a :class:`ChainResult`; a runner's error
+status or a failed plan is :attr:`ChainResult.ERROR` with the reason in
+:attr:`MpChain.error`, never an exception."""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from enum import IntEnum
+
+import numpy as np
+
+from lampskit.core.periodic_runner import PeriodicRunner
+from lampskit.core.planner import (Plan, PlannerParams, TransitionSpec, Wipe, exit_phase_delay, plan,
+                                   plan_transition)
+from lampskit.core.skill import Skill
+from lampskit.core.transitional_runner import TransitionalRunner
+from lampskit.errors import PlanningError
+
+from .executor_types import Setpoint
+from .stain_book import StainBook
+
+log = logging.getLogger(__name__)
+
+
+class ChainResult(IntEnum):
+    """Result of :meth:`MpChain.start` and :meth:`MpChain.update` (negative = error)."""
+
+    ERROR = -1  #: see :attr:`MpChain.error`; the reference was not written
+    WORKING = 0
+    TRANSITION = 1  #: a transitional MP started, into the stain of :attr:`MpChain.wipe` (a junction)
+    WIPE = 2  #: the stain's periodic MP took over (a junction)
+    FINISHED = 3  #: the last stain left at its exit phase; the reference was not written: bring it to rest
+
+
+class ChainStep(IntEnum):
+    """What the chain runs; :meth:`MpChain.update` calls one handler per step."""
+
+    TRANSIT = 0  #: a transitional MP into the stain's periodic MP
+    WIPE = 1  #: the periodic MP until the stain is done
+    LEAVE = 2  #: the periodic MP until its phase heads for the next stain
+
+
+class MpChain:
+    """Transitional and periodic MPs chained over the planned wipes. See the module docstring.
+
+    Parameters
+    ----------
+    skill : Skill
+    planner : PlannerParams
+    wipe_timeout_s : float
+        One pass over a stain without kappa lasts this long [s].
+    counters : Counter
+        Shared with the executor: ``replans``, ``wipe_timeouts``.
+
+    Attributes
+    ----------
+    wipe : Wipe or None
+        The stain being wiped or transitioned to.
+    step : ChainStep
+    error : str
+        Why the last :attr:`ChainResult.ERROR`.
+    """
+
+    def __init__(self, skill: Skill, planner: PlannerParams, wipe_timeout_s: float, counters: Counter[str]) -> None:
+        self.skill = skill
+        self.planner = planner
+        self.wipe_timeout_s = wipe_timeout_s
+        self.counters = counters
+        self.wipe: Wipe | None = None
+        self.step = ChainStep.TRANSIT
+        self.error = ""
+        self._runner: TransitionalRunner | PeriodicRunner | None = None
+        self._plan: Plan | None = None
+        self._entry: TransitionSpec | None = None
+        self._next: Wipe | None = None
+        self._leave_at = 0.0
+        self._wipe_t = 0.0
+        self._on_step = {ChainStep.TRANSIT: self._on_transit, ChainStep.WIPE: self._on_wipe,
+                         ChainStep.LEAVE: self._on_leave}
+
+    @property
+    def current_mp(self) -> str:
+        """``"transitional k"`` or ``"periodic k"``: the MP running."""
+        if self.step == ChainStep.TRANSIT:
+            return f"transitional {self._entry.transitional_index}"
+        return f"periodic {self.wipe.periodic_index}"
+
+    def start(self, plan_: Plan, reference: Setpoint) -> ChainResult:
+        """Into the plan's first wipe from the reference's in-plane state: TRANSITION or ERROR."""
+        self._plan = plan_
+        return self._start_transition(plan_.wipes[0], reference)
+
+    def update(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+        """Advance by ``dt_s`` [s] at ``clock_s`` [s] and write the in-plane reference (not on ERROR or FINISHED).
+
+        A transition starting in this tick starts from ``reference`` as the
+        previous tick left it.
+        """
+        result = self._on_step[self.step](dt_s, reference, book, clock_s)
+        if result == ChainResult.ERROR or result == ChainResult.FINISHED:
+            return result
+        r = self._runner
+        reference.xy[:], reference.v_xy[:], reference.a_xy[:] = r.position_m, r.velocity_m_s, r.acceleration_m_s2
+        return result
+
+    def follow_stain(self, book: StainBook) -> ChainResult | None:
+        """Re-anchor the periodic MP (through its ramp) at the wiped stain if it moved over 2 mm; None if not."""
+        s = book.stains.get(self.wipe.stain.id)
+        if s is None or not np.linalg.norm(s.centre_m - self._runner.anchor_m) > 0.002:
+            return None
+        return self._checked(self._runner.set_targets(anchor_m=s.centre_m))
+
+    # ------------------------------------------------------------------ one handler per step
+    def _on_transit(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+        runner = self._runner
+        status = runner.update(dt_s)
+        if status < 0:
+            return self._checked(status)
+        if runner.finished:
+            return self._start_wipe(runner.overrun_s)
+        return ChainResult.WORKING
+
+    def _on_wipe(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+        runner = self._runner
+        status = runner.update(dt_s)
+        if status < 0:
+            return self._checked(status)
+        self._wipe_t += dt_s
+        if not self._pass_over(book, clock_s):
+            return ChainResult.WORKING
+        if self._choose_next(runner, book, clock_s) == ChainResult.ERROR:
+            return ChainResult.ERROR
+        return self._leave_when_due(runner, reference)
+
+    def _on_leave(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+        status = self._runner.update(dt_s)
+        if status < 0:
+            return self._checked(status)
+        return self._leave_when_due(self._runner, reference)
+
+    # ------------------------------------------------------------------ hand-overs
+    def _start_transition(self, wipe: Wipe, reference: Setpoint) -> ChainResult:
+        r = reference
+        try:
+            spec = plan_transition(self.skill, self._plan, wipe, (r.xy.copy(), r.v_xy.copy(), r.a_xy.copy()))
+            runner = TransitionalRunner(self.skill.transitional[spec.transitional_index].mp, spec.start, spec.goal,
+                                        spec.duration_s, forcing_transform=spec.forcing_transform)
+        except PlanningError as exc:
+            return self._failed(f"cannot plan the transition to stain {wipe.stain.id}: {exc}")
+        self._runner, self._entry, self.wipe = runner, spec, wipe
+        self.step = ChainStep.TRANSIT
+        return ChainResult.TRANSITION
+
+    def _start_wipe(self, overrun_s: float) -> ChainResult:
+        """The stain's periodic MP from where the transition ended, ``overrun_s`` [s] into its motion."""
+        wipe, entry = self.wipe, self._entry
+        try:
+            runner = PeriodicRunner(self.skill.periodic[wipe.periodic_index].mp, wipe.anchor_m, wipe.amplitude_m,
+                                    wipe.omega_rad_s, entry.entry_phase_rad, start_position_m=entry.goal[0],
+                                    start_velocity_m_s=entry.goal[1])
+        except PlanningError as exc:
+            return self._failed(f"cannot start the periodic MP {wipe.periodic_index} on stain {wipe.stain.id}: {exc}")
+        self._runner = runner
+        self._wipe_t = 0.0
+        self._leave_at = np.inf
+        self.step = ChainStep.WIPE
+        if overrun_s > 0.0:
+            status = runner.update(overrun_s)
+            if status < 0:
+                return self._checked(status)
+        return ChainResult.WIPE
+
+    def _pass_over(self, book: StainBook, clock_s: float) -> bool:
+        """The stain has kappa, has vanished, or this pass timed out (then it waits for a recheck)."""
+        sid = self.wipe.stain.id
+        if book.is_done(sid):
+            return True
+        if self._wipe_t < self.wipe_timeout_s:
+            return False
+        self.counters["wipe_timeouts"] += 1
+        if book.end_pass(sid, clock_s):
+            log.warning("stain %d: no kappa after %d passes, giving up", sid, book.max_passes)
+        else:
+            log.info("stain %d: no kappa after %.1f s, back to it later", sid, self._wipe_t)
+        return True
+
+    def _choose_next(self, runner: PeriodicRunner, book: StainBook, clock_s: float) -> ChainResult:
+        """Re-plan over the stains open now; keep wiping until the phase heads for the next one."""
+        current = self.wipe.stain.id
+        open_stains = [s for s in book.open_stains(clock_s) if s.id != current]
+        self._next = None
+        towards = None
+        if open_stains:
+            try:
+                self._plan = plan(self.skill, open_stains, runner.position_m.copy(), self.planner)
+            except PlanningError as exc:
+                return self._failed(f"planning failed: {exc}")
+            self.counters["replans"] += 1
+            self._next = self._plan.wipes[0]
+            towards = self._next.anchor_m
+        delay = 0.0 if towards is None else exit_phase_delay(self.skill, self.wipe, runner.phase_rad, towards)
+        self._leave_at = runner.phase_unwrapped_rad + delay
+        self.step = ChainStep.LEAVE
+        return ChainResult.WORKING
+
+    def _leave_when_due(self, runner: PeriodicRunner, reference: Setpoint) -> ChainResult:
+        """Once the phase reaches the exit phase: into the next stain, or FINISHED after the last."""
+        if runner.phase_unwrapped_rad < self._leave_at:
+            return ChainResult.WORKING
+        if self._next is None:
+            return ChainResult.FINISHED
+        return self._start_transition(self._next, reference)
+
+    def _checked(self, status: IntEnum) -> ChainResult:
+        """WORKING for a good runner status; an error (negative) is ERROR naming the MP and the status."""
+        if status < 0:
+            return self._failed(f"{self.current_mp} MP step failed: {status.name}")
+        return ChainResult.WORKING
+
+    def _failed(self, reason: str) -> ChainResult:
+        self.error = reason
+        return ChainResult.ERROR

@@ -1,0 +1,199 @@
+"""The skill executor's setpoint outside the MP chain: fly, descend, press, brake, lift off, one tick at a time.
+
+:class:`FreeMotion` owns the :class:`~controller.executor_types.Setpoint`
+(board frame) and the motions that move it when no learned MP does: a
+quintic in (x, y, h) in the air (:mod:`controller.motion`), the pad's turn,
+an in-plane brake while in contact and the force target's ramp. Each
+``start`` method sets a motion up from the setpoint as it is, so the
+reference stays continuous in acceleration; each step method advances it
+by one tick and says whether it has arrived. Which motion runs when is the
+executor's decision (:mod:`controller.executor`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from interfaces.transforms import tool_rotation_on_board
+
+from .executor_types import BoardPose, Setpoint, StainState, ToolState, look_point
+from .motion import (OrientationBlend, Quintic, SmoothRamp, brake_above, brake_to_rest, orientation_duration,
+                     rest_to_rest, vertical_move)
+from .params import ExecutorParams, ForceParams
+
+#: An in-the-air stop takes at most this long [s] (its dip below the start height is <= 0.2 v T).
+AIR_BRAKE_S = 0.1
+
+
+class FreeMotion:
+    """The setpoint and its free motions. See the module docstring.
+
+    Parameters
+    ----------
+    params : ExecutorParams
+    force : ForceParams
+
+    Attributes
+    ----------
+    setpoint : Setpoint
+        Written in place every tick.
+    """
+
+    def __init__(self, params: ExecutorParams, force: ForceParams) -> None:
+        self.p = params
+        self.f = force
+        self.setpoint = Setpoint()
+        self._mover: Quintic | None = None  # x, y, h in the air
+        self._turn: OrientationBlend | None = None
+        self._xy_brake: Quintic | None = None  # x, y in contact
+        self._force = SmoothRamp()
+
+    @property
+    def turning(self) -> bool:
+        return self._turn is not None
+
+    # ------------------------------------------------------------------ starting a motion
+    def hold_here(self, tool: ToolState) -> None:
+        """Setpoint = the measured pose, at rest, in the air."""
+        sp = self.setpoint
+        sp.xy[:], sp.h = tool.xy, tool.h
+        sp.v_xy[:] = sp.a_xy[:] = 0.0
+        sp.v_h = sp.a_h = 0.0
+        sp.R[:] = tool.R
+        sp.omega[:] = sp.domega[:] = 0.0
+        sp.contact, sp.force_n = False, 0.0
+        self._turn = None
+
+    def cancel_turn(self) -> None:
+        self._turn = None
+
+    def rest_in_plane(self) -> None:
+        """Zero in-plane velocity and acceleration (the position stays)."""
+        self.setpoint.v_xy[:] = self.setpoint.a_xy[:] = 0.0
+
+    def adopt_board(self, old: BoardPose, new: BoardPose) -> None:
+        """Re-express the setpoint on a moved board so that it stays where it is in the world."""
+        sp = self.setpoint
+        xyh = new.to_board(old.to_world(sp.xyh()))
+        sp.xy[:], sp.h = xyh[:2], float(xyh[2])
+
+    def fly_to_hover(self, xy_m: np.ndarray, board: BoardPose) -> None:
+        """Rest to rest to ``standoff_m`` above ``xy_m`` (2,) [m], turning the pad flat onto the board meanwhile."""
+        sp = self.setpoint
+        self._mover = rest_to_rest(sp.xyh(), np.array([*xy_m, self.p.standoff_m]), self.p.approach_speed_m_s, 0.5)
+        R_goal = tool_rotation_on_board(board.R)
+        T_turn = max(orientation_duration(sp.R, R_goal, self.p.turn_rate_rad_s), self._mover.T, 0.3)
+        self._turn = OrientationBlend(sp.R, R_goal, T_turn)
+        sp.contact = False
+
+    def descend(self) -> None:
+        """Down to ``creep_height_m`` at the approach speed (air mode: to ``air_height_m``)."""
+        sp = self.setpoint
+        if self.p.air:
+            bottom = self.p.air_height_m
+            T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.3)
+        else:
+            bottom = min(self.p.creep_height_m, sp.h)
+            T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.2)
+        self._mover = vertical_move(sp.xy, sp.h, bottom, T)
+
+    def creep(self) -> None:
+        """On at ``descend_speed_m_s`` (peak) towards and past the surface, to ``contact_search_m`` below it."""
+        sp = self.setpoint
+        bottom = -self.p.contact_search_m
+        # a rest-to-rest quintic peaks at 1.875x its mean speed: mean = descend speed / 1.875
+        T = abs(sp.h - bottom) * 1.875 / self.p.descend_speed_m_s
+        self._mover = vertical_move(sp.xy, sp.h, bottom, T)
+
+    def press(self, tool: ToolState) -> None:
+        """In contact at the measured height: the force target ramps from the measured force to ``target_n``."""
+        sp = self.setpoint
+        sp.v_xy[:] = sp.a_xy[:] = 0.0
+        sp.h, sp.v_h, sp.a_h = tool.h, 0.0, 0.0
+        sp.contact = True
+        sp.force_n = min(max(tool.force_n, 0.0), self.f.target_n)
+        self._force.restart(sp.force_n, self.f.target_n, self.f.ramp_s)
+
+    def press_measured(self, force_n: float) -> None:
+        """In contact, pressing with ``force_n`` [N] (capped at the target), e.g. when found pressing."""
+        self.setpoint.contact, self.setpoint.force_n = True, min(force_n, self.f.target_n)
+
+    def stop_turn(self, duration_s: float) -> None:
+        """Bring a running turn to rest smoothly within ``duration_s`` [s], where it is heading."""
+        if self._turn is not None:
+            self._turn.stop(duration_s)
+
+    def brake(self, duration_s: float, force_ramp_s: float) -> bool:
+        """Bring the reference to rest C2-continuously: True in contact (in-plane, force to 0), False in the air.
+
+        In the air, x, y and h stop within :data:`AIR_BRAKE_S`, never below
+        the current height (a brake while descending must not carry the pad
+        on into the board).
+        """
+        sp = self.setpoint
+        if sp.contact:
+            self._xy_brake = brake_to_rest(sp.xy, sp.v_xy, sp.a_xy, duration_s)
+            self._force.restart(sp.force_n, 0.0, force_ramp_s)
+            return True
+        self._mover = brake_above(sp.xyh(), np.array([*sp.v_xy, sp.v_h]), np.array([*sp.a_xy, sp.a_h]),
+                                  min(duration_s, AIR_BRAKE_S))
+        return False
+
+    def lift(self, tool: ToolState) -> None:
+        """Out of contact (from the measured height) or on from the air, up to ``standoff_m``."""
+        sp = self.setpoint
+        h0 = tool.h if sp.contact else sp.h
+        v0 = 0.0 if sp.contact else sp.v_h
+        sp.contact, sp.force_n = False, 0.0
+        goal_h = max(self.p.standoff_m, h0)
+        T = max(abs(goal_h - h0) / self.p.descend_speed_m_s, 0.3)
+        self._mover = vertical_move(sp.xy, h0, goal_h, T, v0)
+        sp.h, sp.v_h, sp.a_h = h0, v0, 0.0
+
+    def fly_to_look(self, board: BoardPose, pending: list[StainState]) -> bool:
+        """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there.
+
+        The arm reaches back towards the robot base, away from them, so the
+        camera sees them; ``look_clearance_m`` beyond their edge.
+        """
+        goal = look_point(board, [s.centre_m for s in pending], [s.size_m for s in pending], self.p.look_clearance_m)
+        sp = self.setpoint
+        if np.linalg.norm(goal - sp.xy) < 0.005:
+            return False
+        self._mover = rest_to_rest(sp.xyh(), np.array([*goal, sp.h]), self.p.approach_speed_m_s, 0.5)
+        return True
+
+    # ------------------------------------------------------------------ one tick
+    def step_turn(self, dt_s: float) -> None:
+        """Advance the pad's turn, if one runs, by ``dt_s`` [s]."""
+        if self._turn is None:
+            return
+        sp, turn = self.setpoint, self._turn
+        turn.update(dt_s)
+        sp.R[:], sp.omega[:], sp.domega[:] = turn.R, turn.omega, turn.domega
+        if turn.finished:
+            self._turn = None
+            sp.omega[:] = 0.0
+            sp.domega[:] = 0.0
+
+    def move(self, dt_s: float) -> bool:
+        """Advance x, y, h along the quintic by ``dt_s`` [s]; True once at its end."""
+        m, sp = self._mover, self.setpoint
+        m.update(dt_s)
+        sp.xy[:] = m.position[:2]
+        sp.v_xy[:] = m.velocity[:2]
+        sp.a_xy[:] = m.acceleration[:2]
+        sp.h, sp.v_h, sp.a_h = float(m.position[2]), float(m.velocity[2]), float(m.acceleration[2])
+        return m.finished
+
+    def ramp_force(self, dt_s: float) -> bool:
+        """Advance the force target along its ramp by ``dt_s`` [s]; True once at the ramp's goal."""
+        self.setpoint.force_n = self._force.update(dt_s)
+        return self._force.finished
+
+    def unpress(self, dt_s: float) -> bool:
+        """Advance the in-plane brake and the force ramp by ``dt_s`` [s]; True once both are done."""
+        b, sp = self._xy_brake, self.setpoint
+        b.update(dt_s)
+        sp.xy[:], sp.v_xy[:], sp.a_xy[:] = b.position, b.velocity, b.acceleration
+        return self.ramp_force(dt_s) and b.finished

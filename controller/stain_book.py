@@ -1,0 +1,82 @@
+"""Which stains the skill executor still has to wipe, and when it may wipe each again.
+
+A camera cannot see a stain under the eraser, so a stain left without
+kappa after a pass is passed over until ``recheck_s`` after that pass
+(perception looks at it meanwhile) and wiped again after the others, at
+most ``max_passes`` times; then it is given up.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+from lampskit.core.planner import Stain
+
+from .executor_types import StainState
+
+
+class StainBook:
+    """The stains last seen and the passes made over them.
+
+    Parameters
+    ----------
+    recheck_s : float
+        Time [s] after a pass without kappa before the stain is open again.
+    max_passes : int
+        Passes without kappa after which a stain is given up.
+
+    Attributes
+    ----------
+    stains : dict of int to StainState
+        The last view, by stain id.
+    """
+
+    def __init__(self, recheck_s: float, max_passes: int) -> None:
+        self.recheck_s = recheck_s
+        self.max_passes = max_passes
+        self.stains: dict[int, StainState] = {}
+        self._given_up: set[int] = set()
+        self._passes: Counter[int] = Counter()
+        self._left_at: dict[int, float] = {}  # stain id -> clock [s] at the end of a pass without kappa
+
+    def update(self, stains: list[StainState], clock_s: float) -> bool:
+        """A fresh view of the stains (kappa per stain): True if it changes which are open at ``clock_s`` [s]."""
+        old_open = self.open_ids(clock_s)
+        self.stains = {s.id: s for s in stains}
+        return self.open_ids(clock_s) != old_open
+
+    def is_done(self, stain_id: int) -> bool:
+        """The stain has kappa or is no longer seen."""
+        s = self.stains.get(stain_id)
+        return s is None or s.kappa
+
+    def end_pass(self, stain_id: int, clock_s: float) -> bool:
+        """A pass over the stain ended without kappa at ``clock_s`` [s]: True if that was its last.
+
+        The stain waits ``recheck_s``; after ``max_passes`` it is given up.
+        """
+        self._passes[stain_id] += 1
+        self._left_at[stain_id] = clock_s
+        if self._passes[stain_id] >= self.max_passes:
+            self._given_up.add(stain_id)
+            return True
+        return False
+
+    def open_stains(self, clock_s: float) -> list[Stain]:
+        """The stains to wipe at ``clock_s`` [s]: without kappa, not given up, not waiting for a recheck."""
+        return [Stain(s.id, s.centre_m, s.size_m) for s in self.stains.values()
+                if not s.kappa and s.id not in self._given_up
+                and clock_s - self._left_at.get(s.id, -math.inf) >= self.recheck_s]
+
+    def open_ids(self, clock_s: float) -> set[int]:
+        return {s.id for s in self.open_stains(clock_s)}
+
+    def pending(self) -> list[StainState]:
+        """Stains passed over without kappa, waiting to be looked at (not given up)."""
+        return [s for i, s in self.stains.items() if not s.kappa and i in self._left_at and i not in self._given_up]
+
+    def looked_at(self, clock_s: float) -> None:
+        """The camera has a clear view of the pending stains from ``clock_s`` [s] on: their recheck starts again."""
+        for s in self.pending():
+            self._left_at[s.id] = clock_s
