@@ -24,19 +24,22 @@ from __future__ import annotations
 import numpy as np
 
 from lampskit.core.skill import Skill
+from interfaces.messages import Phase
 from interfaces.robot_model import RobotModel
 
 from .control.force import NormalForceRegulator
 from .control.impedance import Kinematics, Reference, TaskShaping, impedance_torque
 from .control.limits import TorqueShaper, joint_margin_torque, speed_excess_force
-from .executor import SkillExecutor, ToolState
+from .executor import SkillExecutor
+from .executor_types import BoardPose, Setpoint, ToolState
 from .params import ControllerParams
 
 #: Columns of the trace (see :class:`Trace`).
 TRACE_COLUMNS = ("t_s", "phase", "ref_x", "ref_y", "ref_vx", "ref_vy", "ref_ax", "ref_ay", "x", "y", "h",
                  "ref_p_x", "ref_p_y", "ref_p_z", "p_x", "p_y", "p_z", "force_n", "press_n", "contact")
-PHASE_CODES = {name: i for i, name in enumerate(
-    ("INIT", "WAIT_PEERS", "APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE", "PAUSED", "FAULT", "ESTOP"))}
+#: Trace code of each phase name: its place in :class:`~interfaces.messages.Phase`.
+PHASE_CODES = {phase.value: i for i, phase in enumerate(Phase)}
+_HALTED = (Phase.FAULT, Phase.ESTOP)
 
 
 class Trace:
@@ -128,72 +131,100 @@ class ControllerCore:
         of these and the description's apply).
         """
         self.time_s += dt_s
-        ex, model = self.executor, self.model
         if self.q_rest is None:
             self.q_rest = q.copy()
             self.shaper.reset(None)
         if tau_max_nm is not None:
-            np.minimum(model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
+            np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
-        p, R, v = kin.p, kin.R, kin.twist
-        shaping, ref = self.shaping, self.ref
-        board = ex.board
+        board = self.executor.board
         if board is None:
-            ex.wait()
-            if self._hold is None:
-                self._hold = (p.copy(), R.copy())
-            ref.p_m[:], ref.R[:] = self._hold
-            ref.twist[:] = 0.0
-            ref.accel[:] = 0.0
-            shaping.force_axis = None
-            self.normal_force_n = 0.0
+            self._hold_reference(kin)
             sp = None
         else:
             n = board.normal
-            xyh = board.to_board(p)
-            vb = board.R.T @ v[:3]
-            self.normal_force_n = float(wrench[:3] @ n)
-            self.force.measure(self.normal_force_n, dt_s)
-            if self.force.over_cap and ex.phase not in ("FAULT", "ESTOP"):
-                ex.fault(f"normal force {self.force.filtered_n:.1f} N above the cap {self.p.force.cap_n:.0f} N")
-            tool = ToolState(xyh[:2], float(xyh[2]), vb[:2], float(vb[2]), R, self.normal_force_n)
-            sp = ex.step(dt_s, tool)
-            h = xyh[2] if sp.contact else sp.h
-            ref.p_m[:] = board.origin_m + board.R[:, 0] * sp.xy[0] + board.R[:, 1] * sp.xy[1] + n * h
-            ref.R[:] = sp.R
-            ref.twist[:3] = board.R[:, :2] @ sp.v_xy + n * (0.0 if sp.contact else sp.v_h)
-            ref.twist[3:] = sp.omega
-            ref.accel[:3] = board.R[:, :2] @ sp.a_xy + n * (0.0 if sp.contact else sp.a_h)
-            ref.accel[3:] = sp.domega
-            if sp.contact:
-                shaping.force_axis = n
-                in_contact = self.normal_force_n > self.p.force.contact_threshold_n
-                self.press_n = self.force.command(sp.force_n, self.normal_force_n, dt_s, in_contact)
-                shaping.press_n = self.press_n
-            else:
-                shaping.force_axis = None
-                self.press_n = 0.0
-                self.force.reset()
+            tool = self._measure_tool(board, n, kin, wrench, dt_s)
+            sp = self.executor.step(dt_s, tool)
+            self._reference_from_setpoint(board, n, sp, tool)
+            self._regulate_force(n, sp, dt_s)
+        self._shape_task(kin, dt_s)
+        tau = self._torque(q, dq, kin, gravity_compensated, dt_s)
+        if self.trace is not None:
+            self._record(sp, kin.p, board)
+        return tau
+
+    def _hold_reference(self, kin: Kinematics) -> None:
+        """No board yet: the executor waits and the reference holds the pose of the first such tick."""
+        self.executor.wait()
+        if self._hold is None:
+            self._hold = (kin.p.copy(), kin.R.copy())
+        ref = self.ref
+        ref.p_m[:], ref.R[:] = self._hold
+        ref.twist[:] = 0.0
+        ref.accel[:] = 0.0
+        self.shaping.force_axis = None
+        self.normal_force_n = 0.0
+
+    def _measure_tool(self, board: BoardPose, n: np.ndarray, kin: Kinematics, wrench: np.ndarray,
+                      dt_s: float) -> ToolState:
+        """The pad in the board frame, the force along the normal ``n`` (3,) (filtered; over the cap: a fault)."""
+        xyh = board.to_board(kin.p)
+        vb = board.R.T @ kin.twist[:3]
+        self.normal_force_n = float(wrench[:3] @ n)
+        self.force.measure(self.normal_force_n, dt_s)
+        ex = self.executor
+        if self.force.over_cap and ex.phase not in _HALTED:
+            ex.fault(f"normal force {self.force.filtered_n:.1f} N above the cap {self.p.force.cap_n:.0f} N")
+        return ToolState(xyh[:2], float(xyh[2]), vb[:2], float(vb[2]), kin.R, self.normal_force_n)
+
+    def _reference_from_setpoint(self, board: BoardPose, n: np.ndarray, sp: Setpoint, tool: ToolState) -> None:
+        """The world reference of the board-frame setpoint; in contact, the measured height and no normal motion."""
+        ref = self.ref
+        h = tool.h if sp.contact else sp.h
+        ref.p_m[:] = board.origin_m + board.R[:, 0] * sp.xy[0] + board.R[:, 1] * sp.xy[1] + n * h
+        ref.R[:] = sp.R
+        ref.twist[:3] = board.R[:, :2] @ sp.v_xy + n * (0.0 if sp.contact else sp.v_h)
+        ref.twist[3:] = sp.omega
+        ref.accel[:3] = board.R[:, :2] @ sp.a_xy + n * (0.0 if sp.contact else sp.a_h)
+        ref.accel[3:] = sp.domega
+
+    def _regulate_force(self, n: np.ndarray, sp: Setpoint, dt_s: float) -> None:
+        """In contact, the press force along the normal ``n`` (3,) from the regulator (PI + feed-forward); else none."""
+        shaping = self.shaping
+        if sp.contact:
+            shaping.force_axis = n
+            in_contact = self.normal_force_n > self.p.force.contact_threshold_n
+            self.press_n = self.force.command(sp.force_n, self.normal_force_n, dt_s, in_contact)
+            shaping.press_n = self.press_n
+        else:
+            shaping.force_axis = None
+            self.press_n = 0.0
+            self.force.reset()
+
+    def _shape_task(self, kin: Kinematics, dt_s: float) -> None:
+        """Stiffness ramped in (smoothstep from 20 %) since the (re)start; a brake above the speed limit."""
         self._since_start_s += dt_s
         ramp = self.p.limits.gain_ramp_s
         s = 1.0 if ramp <= 0 else min(self._since_start_s / ramp, 1.0)
-        shaping.stiffness_scale = 0.2 + 0.8 * s * s * (3.0 - 2.0 * s)
+        self.shaping.stiffness_scale = 0.2 + 0.8 * s * s * (3.0 - 2.0 * s)
         lim = self.p.limits
-        shaping.extra_force_n = speed_excess_force(v[:3], lim.max_speed_m_s, lim.speed_brake_gain_n_s_m)
-        terms = impedance_torque(model, q, dq, ref, self.p.impedance, self.q_rest, not gravity_compensated, shaping,
-                                 kin)
+        self.shaping.extra_force_n = speed_excess_force(kin.twist[:3], lim.max_speed_m_s, lim.speed_brake_gain_n_s_m)
+
+    def _torque(self, q: np.ndarray, dq: np.ndarray, kin: Kinematics, gravity_compensated: bool,
+                dt_s: float) -> np.ndarray:
+        """Impedance torque plus the joint-limit repulsion, then the absolute and rate limits (gravity outside)."""
+        model, lim = self.model, self.p.limits
+        terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.q_rest, not gravity_compensated,
+                                 self.shaping, kin)
         self.last_terms = terms
         tau = self._tau
         tau[:] = terms.tau_nm
         tau += joint_margin_torque(q, dq, model.limits.q_min, model.limits.q_max, lim.joint_margin_rad,
                                    lim.joint_margin_stiffness_nm_rad, lim.joint_margin_damping_nm_s_rad)
-        gravity = None if gravity_compensated else kin.g
-        self.shaper(tau, dt_s, gravity)
-        if self.trace is not None:
-            self._record(sp, p, board)
+        self.shaper(tau, dt_s, None if gravity_compensated else kin.g)
         return tau
 
-    def _record(self, sp, p: np.ndarray, board) -> None:
+    def _record(self, sp: Setpoint | None, p: np.ndarray, board: BoardPose | None) -> None:
         r = self.trace.row()
         r[0], r[1] = self.time_s, PHASE_CODES.get(self.executor.phase, -1)
         if sp is not None:
