@@ -301,7 +301,7 @@ def _port_busy(port: int) -> bool:
 def _watch(local, children, robot_id: str, max_duration_s: float, stop_requested) -> tuple[str, str]:
     """Progress on the terminal until the run ends; returns (outcome for run.json, why)."""
     from interfaces.config import ZenohSettings
-    from interfaces.messages import ControllerStatus, SimTruth, Stains
+    from interfaces.messages import ControllerStatus, Phase, SimTruth, Stains
     from interfaces.session import ServiceNode
 
     endpoints = [f"tcp/127.0.0.1:{p}" for s in local for p in s.listen_ports]
@@ -332,8 +332,8 @@ def _watch(local, children, robot_id: str, max_duration_s: float, stop_requested
             sn = stains.take() or sn
             if st is not None:
                 # DONE longer than the executor's recheck: nothing waits for another pass
-                done_since = (done_since or now) if st.phase == "DONE" else None
-                fault_since = (fault_since or now) if st.phase in ("FAULT", "ESTOP") else None
+                done_since = (done_since or now) if st.phase == Phase.DONE else None
+                fault_since = (fault_since or now) if st.phase in (Phase.FAULT, Phase.ESTOP) else None
                 if done_since is not None and now - done_since >= SETTLE_S:
                     return "done", "the controller is DONE"
                 if fault_since is not None and now - fault_since >= FAULT_HOLD_S:

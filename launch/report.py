@@ -37,6 +37,7 @@ import numpy as np
 from controller.core import PHASE_CODES
 from controller.params import ForceParams
 from interfaces.keys import Keys
+from interfaces.messages import Phase
 from lampskit.atomic import write_text_atomic
 
 from .record import RECORDING, read_recording, trace_array
@@ -46,7 +47,7 @@ SCHEMA = "lamps-run-report/1"
 CLEANED_FRACTION = 0.95
 #: A stain counts as wiped in the truth at or below this remaining fraction (perception's kappa level).
 TRUTH_LEVEL = 0.03
-_WIPING = (PHASE_CODES["WIPE"], PHASE_CODES["TRANSITION"])
+_WIPING = (PHASE_CODES[Phase.WIPE], PHASE_CODES[Phase.TRANSITION])
 _OUTCOME_RANK = {"cleaned": 0, "incomplete": 1, "timeout": 2, "stopped": 2, "fault": 3, "failed": 4}
 
 
@@ -63,7 +64,7 @@ def _junction_steps(tr: np.ndarray, col: dict[str, int], window: int = 5) -> tup
     steps = np.linalg.norm(np.diff(a, axis=0), axis=1)  # steps[k] = a[k+1] - a[k]
     chain = set(_WIPING)
     js = [k for k in range(1, len(tr)) if phase[k] != phase[k - 1] and phase[k - 1] in chain
-          and (phase[k] in chain or phase[k] == PHASE_CODES["RETREAT"])]
+          and (phase[k] in chain or phase[k] == PHASE_CODES[Phase.RETREAT])]
     worst, ratio = 0.0, 0.0
     for j in js:
         at = steps[max(j - 2, 0): j + 1]  # the change lands within a tick of the phase flag
@@ -203,7 +204,7 @@ def _faults_section(status: list[dict]) -> list[dict[str, Any]]:
     """Every entry into PAUSED, FAULT or ESTOP in the controller's status."""
     faults, prev = [], None
     for s in status:
-        if s["phase"] != prev and s["phase"] in ("PAUSED", "FAULT", "ESTOP"):
+        if s["phase"] != prev and s["phase"] in (Phase.PAUSED, Phase.FAULT, Phase.ESTOP):
             faults.append({"wall_ns": s.get("wall_ns", 0), "phase": s["phase"], "reason": s["reason"]})
         prev = s["phase"]
     return faults
@@ -211,9 +212,9 @@ def _faults_section(status: list[dict]) -> list[dict[str, Any]]:
 
 def _outcome(final_phase: str, removed: float, told: str | None) -> str:
     """``fault``, ``cleaned`` or ``incomplete`` from the recording, or the launcher's ``told`` when that is worse."""
-    if final_phase in ("FAULT", "ESTOP"):
+    if final_phase in (Phase.FAULT, Phase.ESTOP):
         outcome = "fault"
-    elif final_phase == "DONE" and removed >= CLEANED_FRACTION:
+    elif final_phase == Phase.DONE and removed >= CLEANED_FRACTION:
         outcome = "cleaned"
     else:
         outcome = "incomplete"
@@ -304,8 +305,8 @@ def _eraser_path_figure(tr: np.ndarray, col: dict[str, int], truth: list[dict], 
 
     phase = tr[:, col["phase"]]
     fig, ax = plt.subplots(figsize=(8, 6))
-    kinds = (("periodic MP (WIPE)", PHASE_CODES["WIPE"], "tab:blue"),
-             ("transitional MP", PHASE_CODES["TRANSITION"], "tab:orange"))
+    kinds = (("periodic MP (WIPE)", PHASE_CODES[Phase.WIPE], "tab:blue"),
+             ("transitional MP", PHASE_CODES[Phase.TRANSITION], "tab:orange"))
     free = ~np.isin(phase, _WIPING)
     ax.plot(tr[free, col["x"]], tr[free, col["y"]], ",", color="0.6", label="free moves (approach, retreat)")
     for label, code, colour in kinds:
