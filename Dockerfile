@@ -22,6 +22,7 @@ RUN mkdir -p controller sim perception interfaces launch \
     && pip install . && pip uninstall -y lamps
 
 COPY lampskit ./lampskit
+COPY robot ./robot
 COPY controller ./controller
 COPY sim ./sim
 COPY perception ./perception

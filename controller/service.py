@@ -30,8 +30,9 @@ from collections import Counter
 
 import numpy as np
 
-from interfaces.messages import (ControllerStatus, ControllerTrace, Estop, LoopTiming, RobotState, SimTruth, Stains,
+from interfaces.messages import (HOLD, ControllerStatus, ControllerTrace, Estop, RobotState, SimTruth, Stains,
                                  TorqueCommand)
+from interfaces.loop_stats import LoopStats
 from interfaces.session import ServiceNode
 from interfaces.transforms import transform_from_pose
 
@@ -44,31 +45,6 @@ from .params import ControllerParams
 log = logging.getLogger(__name__)
 
 SERVICE = "controller"
-_TIMING_WINDOW = 2000
-
-
-class LoopStats:
-    """Ring buffers of the loop period and its read / update / write parts [us], and the overrun count."""
-
-    def __init__(self, window: int = _TIMING_WINDOW) -> None:
-        self.buf = np.zeros((4, window))
-        self.n = 0
-        self.overruns = 0
-
-    def add(self, period_us: float, read_us: float, update_us: float, write_us: float) -> None:
-        i = self.n % self.buf.shape[1]
-        b = self.buf
-        b[0, i], b[1, i], b[2, i], b[3, i] = period_us, read_us, update_us, write_us
-        self.n += 1
-
-    def summary(self) -> LoopTiming:
-        m = min(self.n, self.buf.shape[1])
-        if m == 0:
-            return LoopTiming(overruns=self.overruns)
-        b = self.buf[:, :m]
-        p99 = np.percentile(b, 99, axis=1)  # one call: this runs inside the loop
-        return LoopTiming(float(np.median(b[0])), float(p99[0]), float(b[0].max()), float(p99[1]), float(p99[2]),
-                          float(p99[3]), self.n, self.overruns)
 
 
 class ControllerService:
@@ -146,8 +122,7 @@ class ControllerService:
             t1 = time.perf_counter_ns()
             tau = self._control(state, dt)
             t2 = time.perf_counter_ns()
-            if tau is not None:
-                self._send(state.seq, tau)
+            self._send(state.seq, tau)
             self._publish_status()
             t3 = time.perf_counter_ns()
             self.stats.add((t3 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
@@ -187,8 +162,7 @@ class ControllerService:
                 t1 = time.monotonic_ns()
                 tau = self._control(state, dt)
                 t2 = time.monotonic_ns()
-                if tau is not None:
-                    self._send(state.seq, tau)
+                self._send(state.seq, tau)
                 answered_seq = state.seq
             self._publish_status()
             t3 = time.monotonic_ns()
@@ -196,17 +170,13 @@ class ControllerService:
             t_prev = t0
             if self.p.max_ticks and self.ticks >= self.p.max_ticks:
                 break
-            next_ns += period_ns
             now = time.monotonic_ns()
-            if now > next_ns:
-                missed = (now - next_ns) // period_ns + 1
-                self.stats.overruns += int(missed)
-                next_ns += int(missed) * period_ns
+            next_ns = self.stats.next_deadline(next_ns, period_ns, now)
             time.sleep((next_ns - now) / 1e9)
 
     # ------------------------------------------------------------------ pieces
     def _control(self, state: RobotState, dt: float) -> np.ndarray | None:
-        """Torques answering ``state``, or None (nothing is sent) for a state this robot model cannot use."""
+        """Torques answering ``state``, or None when the tick failed (then the answer is ``hold``)."""
         self._ever_state = True
         self._last_seq = state.seq
         self.ticks += 1
@@ -236,8 +206,14 @@ class ControllerService:
             return None
         return state
 
-    def _send(self, seq: int, tau: np.ndarray) -> None:
-        cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau.tolist())
+    def _send(self, seq: int, tau: np.ndarray | None) -> None:
+        """Answer state ``seq``: the torques, or (``tau`` None: the tick failed) ``hold``, which the robot side
+        applies by braking; the controller never goes silent on a state it has taken."""
+        if tau is None:
+            self.counters["holds_sent"] += 1
+            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=[0.0] * self._nq, mode=HOLD)
+        else:
+            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau.tolist())
         self._last_command = cmd
         self.node.publish(self.keys.robot_command, cmd)
 

@@ -25,7 +25,9 @@ import msgspec
 SCHEMA_VERSION = 1
 
 #: Commands the robot side understands.
-COMMAND_MODES = ("torque", "hold")
+#: TorqueCommand modes: apply the torques, or brake and hold position (torques ignored).
+TORQUE, HOLD = "torque", "hold"
+COMMAND_MODES = (TORQUE, HOLD)
 #: Image encodings a CameraFrame may carry.
 ENCODINGS = ("rgb8", "bgr8", "mono8", "jpeg", "png")
 #: How perception knows the board in a :class:`Stains` message.

@@ -14,11 +14,11 @@ import pybullet as pb
 
 from interfaces.description import PAD_SIZE_M
 from interfaces.errors import ConfigError
+from interfaces.messages import HOLD
 from interfaces.robot_model import RobotModel
 
 from .board import Board, board_from_params, check_board, start_configuration, wipe_region
 from .camera import camera_pose
-from .commands import HOLD
 from .dirt import DirtGrid, random_stains, stains_from_specs
 from .params import SimParams
 from .robot import Readout, SimRobot

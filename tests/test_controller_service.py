@@ -26,7 +26,7 @@ from interfaces.config import ZenohSettings
 from interfaces.messages import ControllerTrace, Capabilities, ControllerStatus, Estop, Pose, RobotState, SimTruth
 from interfaces.session import ServiceNode
 
-from .zenoh_helpers import REPO, SimProcess, free_port, wait_for, wait_sample, wait_subscribed
+from .zenoh_helpers import REPO, SimProcess, free_port, latest_status, wait_for, wait_sample, wait_subscribed
 
 pytestmark = pytest.mark.slow
 NO_CAMERA = {"enabled": False}
@@ -186,6 +186,29 @@ def test_sim_stopping_is_a_fault_and_the_controller_recovers_when_it_returns(tmp
             ctl.__exit__()
     finally:
         first.__exit__()
+
+
+def test_a_failed_tick_is_answered_with_hold_and_the_lockstep_cell_goes_on(tmp_path, learned_skill):
+    """The controller never goes silent: a tick that raises answers its state with ``hold``, the sim brakes."""
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim, \
+            ControllerThread(sim, learned_skill) as ctl:
+        ctl.wait_phase(("TRANSITION", "WIPE"), 60.0)
+        real_tick, failed_at = ctl.core.tick, []
+
+        def tick_failing_once(*args, **kwargs):
+            if not failed_at:
+                failed_at.append(ctl.service.ticks)
+                raise RuntimeError("injected fault")
+            return real_tick(*args, **kwargs)
+
+        ctl.core.tick = tick_failing_once
+        ctl.wait_phase(("FAULT",), 10.0)
+        assert "injected fault" in ctl.core.executor.reason
+        # the sim applied the hold and stepped on: the answers after it are in sequence again
+        status = latest_status(sim, 10.0, lambda st: st.seq > failed_at[0] + 200, "the sim stepping past the hold")
+        assert status.counters.get("commands_hold", 0) >= 1, status.counters
+        assert ctl.service.counters["holds_sent"] == 1 and ctl.service.counters["tick_errors"] == 1
+        assert ctl.service.ticks > failed_at[0] + 200
 
 
 def test_estop_lifts_the_eraser_off_and_bad_samples_are_counted_not_fatal(tmp_path, learned_skill):

@@ -18,7 +18,8 @@ from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 from sim import cli
 from sim.board import board_from_params, check_board, start_configuration
 from sim.camera import camera_pose, intrinsics_of, look_at, project
-from sim.commands import HOLD, CommandGate
+from interfaces.messages import HOLD
+from robot.gate import CommandGate
 from sim.dirt import DirtGrid, StainShape, random_stains, stains_from_specs
 from sim.params import BoardParams, CameraParams, SimParams
 from sim.world import build_world

@@ -1,0 +1,9 @@
+"""The robot side of the cell: one port, one protocol, several robots.
+
+:mod:`robot.port` is what a robot side implements (read / write / hold,
+lifecycle, capabilities); :mod:`robot.server` owns the ``robot/*``
+protocol for all of them; :mod:`robot.gate` checks every command before it
+reaches hardware. Implementations: the simulator (:mod:`sim.service`), a
+mock arm for tests (:mod:`robot.mock`) and the KUKA LBR iiwa through
+lbr_fri_ros2_stack (:mod:`robot.lbr`).
+"""

@@ -1,0 +1,104 @@
+"""The robot port: what a robot side (simulator, mock arm, real-robot adapter) implements, nothing more.
+
+In the spirit of a ros2_control hardware interface: a lifecycle
+(:meth:`RobotPort.activate` / :meth:`RobotPort.deactivate`), one
+:meth:`RobotPort.read` of the measured state and one
+:meth:`RobotPort.write` of joint torques (or :meth:`RobotPort.hold`) per
+cycle, and declared :class:`~interfaces.messages.Capabilities`. The
+``robot/*`` protocol (timing modes, sequence matching, re-sends, stale
+commands, the command gate, counters) belongs to
+:class:`robot.server.RobotServer` alone; a port never sees a message.
+
+Two kinds of port:
+
+* stepped (``clocked = False``): time advances when the server writes (the
+  simulator, the mock arm). The server sets the pace: one step per answered
+  state in lock-step, its own wall clock in real time.
+* clocked (``clocked = True``): the robot has its own clock (FRI). The
+  server publishes each new reading as it comes and forwards each answer as
+  soon as it arrives; :meth:`RobotPort.wait_reading` blocks for the next one.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from interfaces.messages import Capabilities
+
+
+@dataclass
+class Reading:
+    """One measurement of the robot side (SI units, joint order of the robot model).
+
+    q_rad, dq_rad_s, tau_nm : (n,) joint positions [rad], velocities [rad/s]
+    and applied torques [Nm]; wrench_world : (6,) contact force [N] then
+    torque [Nm] on the tool, world axes; robot_time_ns : the robot side's own
+    clock [ns]; dq_estimated : True when the velocity is estimated (filtered
+    positions), not measured.
+    """
+
+    q_rad: np.ndarray
+    dq_rad_s: np.ndarray
+    tau_nm: np.ndarray
+    wrench_world: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    robot_time_ns: int = 0
+    dq_estimated: bool = False
+
+
+class RobotPort(ABC):
+    """A robot side behind the ``robot/*`` keys. Subclasses implement only their own hardware's side.
+
+    Attributes
+    ----------
+    capabilities : Capabilities
+        What the robot does by itself (gravity compensation, torque limits, backend name).
+    clocked : bool
+        True when the robot has its own clock (see the module docstring).
+    """
+
+    capabilities: Capabilities
+    clocked: bool = False
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.capabilities.torque_limits_nm)
+
+    def activate(self) -> None:
+        """Commands may be applied from now on (default: nothing to do)."""
+
+    def deactivate(self) -> None:
+        """Leave the outputs safe (holding position) and stop applying commands."""
+        self.hold()
+
+    @abstractmethod
+    def read(self) -> Reading:
+        """The state now: after the last write for a stepped port, the newest measurement for a clocked one."""
+
+    def wait_reading(self, timeout_s: float) -> bool:
+        """Clocked ports: wait up to ``timeout_s`` for a new measurement (True when one came). Stepped: True."""
+        return True
+
+    @abstractmethod
+    def write(self, tau_nm: np.ndarray) -> None:
+        """Apply joint torques (n,) [Nm] for one cycle (already gated: finite, within limits)."""
+
+    @abstractmethod
+    def hold(self) -> None:
+        """Brake and hold the current position for one cycle, whatever was commanded before."""
+
+    def after_cycle(self, lockstep: bool) -> None:
+        """Called after each written cycle (a simulator publishes its extras here). Default: nothing."""
+
+    def counters(self) -> dict[str, int]:
+        """The port's own counters for the status (merged with the server's)."""
+        return {}
+
+    def detail(self) -> str:
+        """A short line for the status (mode, state)."""
+        return ""
+
+    def close(self) -> None:
+        """Release what the port holds (connections, processes)."""

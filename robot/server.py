@@ -1,0 +1,266 @@
+"""The ``robot/*`` protocol, owned here once for every robot side: states out, commands in, timing, safety.
+
+:class:`RobotServer` serves one :class:`~robot.port.RobotPort` on the
+network. It publishes ``robot/state`` (:class:`~interfaces.messages.RobotState`)
+and reads ``robot/command`` (:class:`~interfaces.messages.TorqueCommand`):
+
+* lock-step (stepped ports): state k is published; the port is written
+  once a valid command with ``seq == k`` arrives (state k is re-sent every
+  ``republish_s`` until then), so a run is deterministic for a seed;
+* real-time (stepped ports): ``rate_hz`` on absolute wall-clock deadlines,
+  the newest command is held; with no command yet, a ``hold`` command, or
+  a command older than ``stale_limit_s``, the port brakes and holds.
+  Overruns are counted and the missed periods skipped, never caught up;
+* clocked ports (a real robot): each new reading is published as it comes;
+  each command answering the newest state is written as soon as it arrives;
+  a state left unanswered when the next one comes is a late command, and
+  the port holds that cycle; no valid command for ``stale_limit_s`` holds
+  until one comes.
+
+Every command passes the :class:`~robot.gate.CommandGate` first; undecodable
+payloads, wrong lengths, out-of-sequence answers and late commands are
+dropped and counted by reason. Status (counters, loop timing) goes to the
+status key at ``status_rate_hz``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from interfaces.loop_stats import LoopStats
+from interfaces.messages import HOLD, RobotState, ServiceStatus, TorqueCommand
+from interfaces.session import ServiceNode
+
+from .gate import DEFAULT_TAU_RATE_NM_S, CommandGate
+from .port import RobotPort
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ServerParams:
+    """Timing of the protocol.
+
+    mode : ``"lockstep"`` or ``"realtime"`` (clocked ports are always driven by their own clock);
+    rate_hz : the real-time rate [Hz]; stale_limit_s : a command older than this is not applied [s];
+    republish_s : lock-step re-send period of an unanswered state [s]; max_steps : stop after this
+    many written cycles (0: never); status_rate_hz : status publications per second (wall);
+    tau_rate_nm_s : the gate's torque-rate limit [Nm/s].
+    """
+
+    mode: str = "lockstep"
+    rate_hz: float = 1000.0
+    stale_limit_s: float = 0.02
+    republish_s: float = 0.05
+    max_steps: int = 0
+    status_rate_hz: float = 10.0
+    tau_rate_nm_s: float = DEFAULT_TAU_RATE_NM_S
+
+
+class RobotServer:
+    """One robot side on the network. ``run()`` blocks until :attr:`stop` is set or ``max_steps`` cycles.
+
+    Parameters
+    ----------
+    port : the hardware side. node : an open :class:`ServiceNode`. params : timing.
+    service : the name in the status. status_key : where the status goes.
+    """
+
+    def __init__(self, port: RobotPort, node: ServiceNode, params: ServerParams, service: str,
+                 status_key: str) -> None:
+        self.port = port
+        self.node = node
+        self.p = params
+        self.service = service
+        self.keys = node.keys
+        self.status_key = status_key
+        self.counters: Counter[str] = Counter()
+        self.gate = CommandGate(np.asarray(port.capabilities.torque_limits_nm), self.counters,
+                                params.tau_rate_nm_s, 1.0 / params.rate_hz)
+        self.stop = threading.Event()
+        self.stats = LoopStats()
+        self.steps = 0
+        self.braked = True
+        self._sources: list = []
+        self._status_period_s = 1.0 / params.status_rate_hz
+        self._next_status = 0.0
+
+    # -- lifecycle ---------------------------------------------------------------------------------
+    def run(self) -> int:
+        """Serve until stopped; returns the number of written cycles."""
+        self.port.activate()
+        try:
+            if self.port.clocked:
+                self._run_clocked()
+            elif self.p.mode == "lockstep":
+                self._run_lockstep()
+            else:
+                self._run_realtime()
+        finally:
+            self.port.deactivate()
+            self._publish_status(force=True)
+        return self.steps
+
+    # -- one cycle ---------------------------------------------------------------------------------
+    def _apply(self, command: np.ndarray | str) -> None:
+        """Write ``command`` (gated torques, or ``"hold"``) to the port: one cycle."""
+        if isinstance(command, str):
+            if not self.braked:
+                self.counters["holds_applied"] += 1
+            self.port.hold()
+            self.braked = True
+        else:
+            self.port.write(command)
+            self.braked = False
+        self.steps += 1
+
+    def _in_sequence(self, cmd: TorqueCommand, seq: int) -> bool:
+        if cmd.seq != seq:
+            self.counters["commands_out_of_sequence"] += 1
+            return False
+        return True
+
+    # -- loops -------------------------------------------------------------------------------------
+    def _run_lockstep(self) -> None:
+        inbox = self.node.inbox(self.keys.robot_command, TorqueCommand)
+        self._sources = [inbox]
+        self.publish_state()
+        last_pub = time.monotonic()
+        republish = self.p.republish_s
+        t_prev = time.perf_counter_ns()
+        while not self.stop.is_set():
+            t0 = time.perf_counter_ns()
+            cmd = inbox.get(min(republish, 0.05))
+            now = time.monotonic()
+            self._publish_status()
+            if now - last_pub >= republish:  # on every pass: stale-seq chatter must not starve a late peer
+                self.publish_state()
+                self.counters["states_republished"] += 1
+                last_pub = now
+            if cmd is None or not self._in_sequence(cmd, self.steps):
+                continue
+            command = self.gate.accept(cmd)
+            if command is None:
+                continue
+            t1 = time.perf_counter_ns()
+            self._apply(command)
+            self.port.after_cycle(lockstep=True)
+            t2 = time.perf_counter_ns()
+            self.publish_state()
+            last_pub = now
+            t3 = time.perf_counter_ns()
+            self.stats.add((t3 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+            t_prev = t3
+            if self.p.max_steps and self.steps >= self.p.max_steps:
+                break
+
+    def _run_realtime(self) -> None:
+        latest = self.node.latest(self.keys.robot_command, TorqueCommand)
+        self._sources = [latest]
+        period_ns = int(round(1e9 / self.p.rate_hz))
+        stale_ns = int(self.p.stale_limit_s * 1e9)
+        held: np.ndarray | str | None = None
+        last_cmd_ns = -stale_ns - 1
+        next_ns = time.monotonic_ns()
+        t_prev = next_ns
+        self.publish_state()
+        while not self.stop.is_set():
+            t0 = time.monotonic_ns()
+            cmd = latest.take()
+            if cmd is not None:
+                accepted = self.gate.accept(cmd)
+                if accepted is not None:
+                    held = accepted if isinstance(accepted, str) else accepted.copy()
+                    last_cmd_ns = t0
+            fresh = held is not None and t0 - last_cmd_ns <= stale_ns
+            if not fresh and held is not None and not self.braked:
+                self.counters["stale_command_brakes"] += 1
+                log.warning("no fresh command for %.0f ms: braking", (t0 - last_cmd_ns) / 1e6)
+            t1 = time.monotonic_ns()
+            self._apply(held if fresh else HOLD)
+            self.port.after_cycle(lockstep=False)
+            t2 = time.monotonic_ns()
+            self.publish_state()
+            self._publish_status()
+            t3 = time.monotonic_ns()
+            self.stats.add((t0 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+            t_prev = t0
+            if self.p.max_steps and self.steps >= self.p.max_steps:
+                break
+            now = time.monotonic_ns()
+            next_ns = self.stats.next_deadline(next_ns, period_ns, now)
+            time.sleep((next_ns - now) / 1e9)
+
+    def _run_clocked(self) -> None:
+        """A robot with its own clock: publish each reading as it comes, forward each answer as it arrives."""
+        inbox = self.node.inbox(self.keys.robot_command, TorqueCommand, maxlen=4)
+        self._sources = [inbox]
+        stale_ns = int(self.p.stale_limit_s * 1e9)
+        seq = -1
+        answered = True
+        last_good_ns = time.monotonic_ns()
+        last_state_ns = last_good_ns
+        while not self.stop.is_set():
+            t0 = time.monotonic_ns()
+            if self.port.wait_reading(0.0005):
+                if seq >= 0 and not answered:
+                    self.counters["commands_late"] += 1
+                    self._apply(HOLD)  # this cycle gets the safe hold: the answer did not come in time
+                seq += 1
+                answered = False
+                self.publish_state(seq)
+                self.stats.add((t0 - last_state_ns) / 1e3, 0.0, 0.0, (time.monotonic_ns() - t0) / 1e3)
+                last_state_ns = t0
+            cmd = inbox.get(0.0) if not answered else None
+            while cmd is not None and not answered:
+                if self._in_sequence(cmd, seq):
+                    command = self.gate.accept(cmd)
+                    if command is not None:
+                        self._apply(command)
+                        self.port.after_cycle(lockstep=False)
+                        answered = True
+                        last_good_ns = time.monotonic_ns()
+                        self.counters["answer_latency_us_last"] = int((last_good_ns - last_state_ns) / 1e3)
+                        break
+                cmd = inbox.get(0.0)
+            if not answered and not self.braked and time.monotonic_ns() - last_good_ns > stale_ns:
+                self.counters["stale_command_brakes"] += 1
+                self._apply(HOLD)
+                answered = True
+            self._publish_status()
+            if self.p.max_steps and self.steps >= self.p.max_steps:
+                break
+
+    # -- outputs -----------------------------------------------------------------------------------
+    def publish_state(self, seq: int | None = None) -> None:
+        """Publish the port's reading as state ``seq`` (default: the cycles written so far)."""
+        r = self.port.read()
+        self.node.publish(self.keys.robot_state, RobotState(
+            seq=self.steps if seq is None else seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
+            dq_rad_s=r.dq_rad_s.tolist(), tau_nm=r.tau_nm.tolist(), wrench_world=r.wrench_world.tolist(),
+            capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns()))
+
+    def status(self) -> ServiceStatus:
+        counters = dict(self.counters)
+        for source in self._sources:
+            counters["commands_received"] = counters.get("commands_received", 0) + source.received
+            for reason, n in source.bad.items():
+                counters[f"commands_dropped_bad_payload: {reason}"] = n
+        counters.update(self.port.counters())
+        detail = f"mode={'clocked' if self.port.clocked else self.p.mode} step={self.steps} braked={self.braked}"
+        extra = self.port.detail()
+        return ServiceStatus(service=self.service, seq=self.steps, stamp_ns=time.monotonic_ns(), counters=counters,
+                             detail=f"{detail} {extra}".strip(), timing=self.stats.summary())
+
+    def _publish_status(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now < self._next_status:
+            return
+        self._next_status = now + self._status_period_s
+        self.node.publish(self.status_key, self.status())
