@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "learn": ("lampskit.cli:learn_main", "segment and learn a demonstration into a skill file"),
     "plan": ("lampskit.cli:plan_main", "plan and roll out a skill over given stains"),
     "sim": ("sim.cli:main", "the simulated robot, board and camera as a Zenoh service"),
+    "robot": ("robot.cli:main", "a robot side over Zenoh: the real iiwa through lbr_fri_ros2_stack, or a mock arm"),
     "controller": ("controller.cli:main", "run a skill on the robot: impedance control and the skill executor"),
     "perception": ("perception.cli:main", "stains and kappa from camera images (board markers, ink clustering)"),
     "up": ("launch.cli:up_main", "the whole cell from docker-compose.yml as local processes, recorded and reported"),

@@ -101,6 +101,16 @@ class Keys:
         """sim -> anyone: :class:`~interfaces.messages.ServiceStatus`."""
         return self._k("sim/status")
 
+    @property
+    def robot_status(self) -> str:
+        """real-robot adapter -> anyone: :class:`~interfaces.messages.ServiceStatus` (armed, guards, timing)."""
+        return self._k("robot/status")
+
+    @property
+    def robot_arm(self) -> str:
+        """operator -> real-robot adapter, event: :class:`~interfaces.messages.ArmRequest`."""
+        return self._k("robot/arm")
+
     def alive(self, service: str) -> str:
         """Liveliness token of ``service`` (presence only)."""
         return self._k(f"alive/{_check_chunks(service, 'service name')}")

@@ -355,6 +355,19 @@ class Estop(Message, frozen=True):
     source: str = ""
 
 
+class ArmRequest(Message, frozen=True):
+    """Operator -> a real-robot adapter: start commanding the robot (``armed=True``) or stop, with who and why.
+
+    The adapter arms only when the robot's session says commanding is
+    possible; it disarms by itself on a guard trip, controller loss or stop.
+    """
+
+    stamp_ns: int
+    armed: bool
+    reason: str = ""
+    source: str = ""
+
+
 class SimTruth(Message, frozen=True):
     """Sim -> tests and reports: the true dirt per stain and the contact force.
 
@@ -387,4 +400,5 @@ class SimTruth(Message, frozen=True):
 #: Every message type, for decoders and tests.
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     RobotState, TorqueCommand, CameraFrame, Stains, ControllerStatus, ControllerTrace, ServiceStatus, Estop, SimTruth,
+    ArmRequest,
 )

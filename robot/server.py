@@ -15,7 +15,9 @@ and reads ``robot/command`` (:class:`~interfaces.messages.TorqueCommand`):
   each command answering the newest state is written as soon as it arrives;
   a state left unanswered when the next one comes is a late command, and
   the port holds that cycle; no valid command for ``stale_limit_s`` holds
-  until one comes.
+  until one comes. With ``mode = "lockstep"`` the robot itself waits for
+  each answer (the lbr peer's lock-step): no deadline, the unanswered state
+  is re-sent every ``republish_s``.
 
 Every command passes the :class:`~robot.gate.CommandGate` first; undecodable
 payloads, wrong lengths, out-of-sequence answers and late commands are
@@ -202,10 +204,12 @@ class RobotServer:
         inbox = self.node.inbox(self.keys.robot_command, TorqueCommand, maxlen=4)
         self._sources = [inbox]
         stale_ns = int(self.p.stale_limit_s * 1e9)
+        republish_ns = int(self.p.republish_s * 1e9)
+        lockstep = self.p.mode == "lockstep"
         seq = -1
         answered = True
         last_good_ns = time.monotonic_ns()
-        last_state_ns = last_good_ns
+        last_state_ns = last_pub_ns = last_good_ns
         while not self.stop.is_set():
             t0 = time.monotonic_ns()
             if self.port.wait_reading(0.0005):
@@ -216,7 +220,11 @@ class RobotServer:
                 answered = False
                 self.publish_state(seq)
                 self.stats.add((t0 - last_state_ns) / 1e3, 0.0, 0.0, (time.monotonic_ns() - t0) / 1e3)
-                last_state_ns = t0
+                last_state_ns = last_pub_ns = t0
+            elif seq >= 0 and not answered and t0 - last_pub_ns >= republish_ns:
+                self.publish_state(seq)  # a robot that waits for its answer (the lock-step peer): say it again
+                self.counters["states_republished"] += 1
+                last_pub_ns = t0
             cmd = inbox.get(0.0) if not answered else None
             while cmd is not None and not answered:
                 if self._in_sequence(cmd, seq):
@@ -229,7 +237,9 @@ class RobotServer:
                         self.counters["answer_latency_us_last"] = int((last_good_ns - last_state_ns) / 1e3)
                         break
                 cmd = inbox.get(0.0)
-            if not answered and not self.braked and time.monotonic_ns() - last_good_ns > stale_ns:
+            if lockstep:
+                pass  # the robot waits for the answer (a lock-step peer): no deadline to miss
+            elif not answered and not self.braked and time.monotonic_ns() - last_good_ns > stale_ns:
                 self.counters["stale_command_brakes"] += 1
                 self._apply(HOLD)
                 answered = True

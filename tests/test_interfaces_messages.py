@@ -15,6 +15,7 @@ from interfaces.keys import Keys
 from interfaces.messages import (
     MESSAGE_TYPES,
     SCHEMA_VERSION,
+    ArmRequest,
     CameraFrame,
     CameraIntrinsics,
     Capabilities,
@@ -64,6 +65,7 @@ def samples():
         ServiceStatus(service="perception", seq=1, stamp_ns=2, counters={"frames": 10, "dropped": 1}, detail="ok"),
         Estop(stamp_ns=11, engaged=True, reason="operator", source="pendant"),
         SimTruth(seq=4, stamp_ns=5, stain_ids=[0, 1], remaining=[0.25, 1.0], total_dirt=1234.5, contact_force_n=10.1),
+        ArmRequest(stamp_ns=12, armed=True, reason="T1 first run", source="operator"),
     ]
 
 

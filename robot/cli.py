@@ -1,0 +1,127 @@
+"""``lamps robot``: a robot side of the cell as a Zenoh service: the real iiwa through lbr_fri_ros2_stack, or a mock.
+
+``--backend lbr`` serves :class:`~robot.lbr.adapter.LbrPort` (the stack
+behind zenoh-bridge-ros2dds; keys from the ``[lbr]`` table) with the
+``robot/*`` protocol of :mod:`robot.server`: it monitors from the start
+and commands only once armed (``--arm``, ``[lbr] arm``, or an ArmRequest on
+``robot/arm``). ``--backend mock`` serves :class:`~robot.mock.MockArm`
+(no physics engine) for trying a controller or the protocol.
+
+Configuration: ``--config FILE`` (``[zenoh]``, ``[lbr]``, ``[robot]``
+tables), then ``LAMPS_*`` environment variables, then the options. A bad
+configuration is one line and exit 1; Ctrl-C or SIGTERM disarms (one last
+hold), says why and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+
+from interfaces.config import add_zenoh_options, check_range, load_config, zenoh_with_options
+from interfaces.errors import ConfigError
+from lampskit.errors import LampsError
+
+SERVICE = "robot"
+BACKENDS = ("lbr", "mock")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="lamps robot",
+        description="A robot side of the cell over Zenoh: the KUKA LBR iiwa through lbr_fri_ros2_stack and "
+                    "zenoh-bridge-ros2dds (--backend lbr), or a mock arm. Options override the config file.")
+    p.add_argument("--backend", choices=BACKENDS, default="lbr", help="lbr: the real robot (default); mock: a mock arm")
+    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh], [lbr] and [robot] tables")
+    p.add_argument("--mode", choices=("lockstep", "realtime"),
+                   help="lbr: realtime for a real robot (default), lockstep behind the lbr peer's lock-step; "
+                        "mock: lockstep (default) or realtime")
+    p.add_argument("--namespace", help="lbr: the stack's robot name (topics /NS/state, /NS/command/torque)")
+    p.add_argument("--arm", action="store_true", default=None,
+                   help="lbr: arm as soon as the robot's session allows commanding (else: an ArmRequest on robot/arm)")
+    add_zenoh_options(p)
+    p.add_argument("--check", action="store_true", help="validate the configuration, then exit")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    return p
+
+
+def load(a: argparse.Namespace):
+    """(ZenohSettings, LbrParams, ServerParams) from file, environment and options."""
+    from robot.lbr.params import LbrParams
+    from robot.server import ServerParams
+
+    cfg = load_config(a.config)
+    lbr = dict(cfg.table("lbr"))
+    if a.namespace is not None:
+        lbr["namespace"] = a.namespace
+    if a.arm is not None:
+        lbr["arm"] = a.arm
+    lbr_params = LbrParams.from_table(lbr)
+    robot = dict(cfg.table("robot"))
+    unknown = sorted(set(robot) - {"mode", "rate_hz", "status_rate_hz", "republish_s"})
+    if unknown:
+        raise ConfigError(f"[robot] unknown key(s) {unknown}; valid: mode, rate_hz, status_rate_hz, republish_s")
+    mode = a.mode or robot.get("mode", "realtime" if a.backend == "lbr" else "lockstep")
+    if mode not in ("lockstep", "realtime"):
+        raise ConfigError(f"[robot] mode must be lockstep or realtime, got {mode!r}")
+    rate = robot.get("rate_hz", 1000.0)
+    check_range("robot", "rate_hz", rate, 1.0, 10_000.0)
+    status = robot.get("status_rate_hz", 10.0)
+    check_range("robot", "status_rate_hz", status, 0.1, 100.0)
+    republish = robot.get("republish_s", 0.05)
+    check_range("robot", "republish_s", republish, 0.001, 10.0)
+    server = ServerParams(mode=mode, rate_hz=float(rate), stale_limit_s=lbr_params.stale_limit_s,
+                          republish_s=float(republish), status_rate_hz=float(status))
+    return zenoh_with_options(cfg.zenoh, a), lbr_params, server
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="%(asctime)s robot %(levelname)s %(name)s: %(message)s")
+    try:
+        zenoh_settings, lbr_params, server_params = load(a)
+    except LampsError as exc:
+        print(f"lamps robot: error: {exc}", file=sys.stderr)
+        return 1
+    if a.check:
+        where = f"topics under /{lbr_params.namespace}" if a.backend == "lbr" else "a mock arm"
+        print(f"ok: backend {a.backend} ({where}), mode {server_params.mode}, keys under {zenoh_settings.keys.prefix}")
+        return 0
+    from interfaces.session import ServiceNode
+
+    from .server import RobotServer
+
+    try:
+        node = ServiceNode(SERVICE, zenoh_settings).__enter__()
+    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
+        print(f"lamps robot: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return 1
+    try:
+        port = _port(a.backend, lbr_params, node)
+        server = RobotServer(port, node, server_params, SERVICE, node.keys.robot_status)
+        signal.signal(signal.SIGTERM, lambda *_: server.stop.set())
+        signal.signal(signal.SIGINT, lambda *_: server.stop.set())
+        server.run()
+        port.close()
+    finally:
+        node.close()
+    reason = getattr(port, "disarm_reason", "")
+    logging.getLogger("robot").warning("stopped after %d cycles%s", server.steps, f" ({reason})" if reason else "")
+    return 0
+
+
+def _port(backend: str, lbr_params, node):
+    if backend == "mock":
+        from .mock import MockArm
+
+        return MockArm()
+    from .lbr.adapter import LbrPort
+
+    return LbrPort(lbr_params, node)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,51 @@
+"""A mock arm for tests: seven decoupled joints, no gravity, no contact; a stepped :class:`~robot.port.RobotPort`.
+
+Each joint is an inertia with viscous friction,
+``I ddq = tau - d dq`` (semi-implicit Euler at ``dt_s``); ``hold`` brakes
+(velocity to zero, position kept). It speaks the same ``robot/*``
+protocol as the simulator through :class:`~robot.server.RobotServer`, so a
+controller or a protocol test cannot tell it apart, but it needs no
+physics engine.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from interfaces.messages import Capabilities
+
+from .port import Reading, RobotPort
+
+
+class MockArm(RobotPort):
+    """The mock arm. ``q0_rad`` (7,) start position; ``tau_max_nm`` (7,) limits; ``dt_s`` step [s]."""
+
+    def __init__(self, q0_rad=None, tau_max_nm=None, dt_s: float = 0.001, inertia_kg_m2: float = 0.5,
+                 damping_nm_s_rad: float = 1.0) -> None:
+        self.q = np.zeros(7) if q0_rad is None else np.array(q0_rad, float)
+        self.dq = np.zeros(7)
+        self.tau = np.zeros(7)
+        self.dt_s, self.inertia, self.damping = dt_s, inertia_kg_m2, damping_nm_s_rad
+        limits = np.full(7, 100.0) if tau_max_nm is None else np.asarray(tau_max_nm, float)
+        self.capabilities = Capabilities(True, limits.tolist(), "mock")
+        self.steps = 0
+        self.holds = 0
+
+    def read(self) -> Reading:
+        return Reading(self.q.copy(), self.dq.copy(), self.tau.copy(), np.zeros(6),
+                       int(round(self.steps * self.dt_s * 1e9)))
+
+    def write(self, tau_nm: np.ndarray) -> None:
+        self.tau[:] = tau_nm
+        self.dq += self.dt_s * (self.tau - self.damping * self.dq) / self.inertia
+        self.q += self.dt_s * self.dq
+        self.steps += 1
+
+    def hold(self) -> None:
+        self.tau[:] = 0.0
+        self.dq[:] = 0.0
+        self.steps += 1
+        self.holds += 1
+
+    def counters(self) -> dict[str, int]:
+        return {"mock_holds": self.holds}
