@@ -1,0 +1,112 @@
+"""``lamps lbr-peer``: the simulated iiwa behind lbr_fri_ros2_stack's keys, as zenoh-bridge-ros2dds shows them.
+
+Configuration comes from ``--config FILE`` (TOML: ``[zenoh]``, ``[lbr_peer]``
+and ``[sim]`` for the arm, board, dirt and camera; see
+:mod:`robot.lbr.peer`), then ``LAMPS_*`` environment variables
+(:mod:`interfaces.config`), then the options below (highest priority).
+A broken config file or an impossible board pose is a one-line error and
+exit code 1 before anything starts; Ctrl-C or SIGTERM stops it cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+
+from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+from lampskit.errors import LampsError
+
+PROG = "lamps lbr-peer"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="A robot to test the real-robot adapter against: publishes and takes lbr_fri_ros2_stack's CDR "
+                    "messages on the bridge keys (<namespace>/state, <namespace>/command/torque, ...) at the FRI "
+                    "rate, backed by the PyBullet iiwa. Options override the config file, which overrides the "
+                    "defaults.")
+    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh], [lbr_peer] and [sim] tables")
+    p.add_argument("--mode", choices=("lockstep", "realtime"),
+                   help="lockstep: step once per received torque command (deterministic); "
+                        "realtime: the FRI period on the wall clock, newest command held")
+    p.add_argument("--namespace", metavar="NS", help="the stack's robot namespace (default lbr: keys lbr/...)")
+    add_zenoh_options(p)
+    p.add_argument("--check", action="store_true", help="validate the configuration and the board pose, then exit")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    return p
+
+
+def load(a: argparse.Namespace):
+    """(ZenohSettings, LbrPeerParams, SimParams) from file, environment and options."""
+    from .peer import LbrPeerParams, sim_params_for_peer
+
+    cfg = load_config(a.config)
+    table = dict(cfg.table("lbr_peer"))
+    for key, value in (("mode", a.mode), ("namespace", a.namespace)):
+        if value is not None:
+            table[key] = value
+    params = LbrPeerParams.from_table(table)
+    return zenoh_with_options(cfg.zenoh, a), params, sim_params_for_peer(cfg.table("sim"), params)
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="%(asctime)s lbr-peer %(levelname)s %(name)s: %(message)s")
+    try:
+        zenoh_settings, params, sim_params = load(a)
+        from sim.core import SimCore
+
+        core = SimCore(sim_params)
+    except LampsError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 1
+    if a.check:
+        t = params.topics
+        print(f"ok: keys {t.key(t.state)}, {t.key(t.torque_command)}, {t.key(t.wrench)}, {t.key(t.joint_states)}; "
+              f"mode {params.mode}, sample time {params.sample_time_s * 1e3:g} ms, {sim_params.board.preset} board, "
+              f"{len(core.dirt.stains)} stains, sim keys under {zenoh_settings.keys.prefix}")
+        core.close()
+        return 0
+    return _serve(zenoh_settings, params, sim_params, core)
+
+
+def _serve(zenoh_settings, params, sim_params, core) -> int:
+    from interfaces.session import ServiceNode
+
+    from .peer import SERVICE, LbrPeer
+
+    try:
+        node = ServiceNode(SERVICE, zenoh_settings).__enter__()
+    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
+        core.close()
+        print(f"{PROG}: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return 1
+    log = logging.getLogger("robot.lbr.peer")
+    try:
+        peer = LbrPeer(params, sim_params, node, core)
+    except Exception:
+        core.close()
+        node.close()
+        raise
+    signal.signal(signal.SIGTERM, lambda *_: peer.stop.set())
+    signal.signal(signal.SIGINT, lambda *_: peer.stop.set())
+    try:
+        steps = peer.run()
+    except (RuntimeError, OSError) as exc:
+        if peer.stop.is_set():  # stopped while the camera renderer started: the signal reached it too
+            log.info("stopped during start-up (%s)", exc)
+            return 0
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        node.close()
+    log.info("stopped after %d steps, %d watchdog trips", steps, peer.session.watchdog_trips)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
