@@ -1,0 +1,379 @@
+"""The lbr peer: its parts without a network, then ``lamps lbr-peer`` as a process against a raw CDR client.
+
+The client is what our real-robot adapter will be: a Zenoh session on the
+bridge keys (``lbr/state`` in, ``lbr/command/torque`` out) decoding and
+encoding CDR with :mod:`robot.lbr.msgs`, and the cell's keys for the
+status and the truth.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from interfaces.config import ZenohSettings
+from interfaces.errors import ConfigError
+from interfaces.messages import ServiceStatus, SimTruth
+from interfaces.robot_model import RobotModel
+from interfaces.session import ServiceNode
+from robot.lbr import msgs
+from robot.lbr.msgs import SessionState
+from robot.lbr.peer import (TORQUE_COMMAND_BYTES, FriSession, LbrPeerParams, applied_torque_nm, drop_reason,
+                            external_torque_nm, sim_params_for_peer)
+
+from .conftest import REPO
+from .zenoh_helpers import free_port, toml_value, wait_alive, wait_sample, wait_subscribed, write_config
+
+READY, WAIT, ACTIVE = SessionState.MONITORING_READY, SessionState.COMMANDING_WAIT, SessionState.COMMANDING_ACTIVE
+MS = 1_000_000
+
+
+# -- configuration ------------------------------------------------------------------------------------------
+
+def test_the_example_config_shows_the_defaults():
+    example = tomllib.loads((REPO / "config" / "example.toml").read_text())
+    assert LbrPeerParams.from_table(example["lbr_peer"]) == LbrPeerParams()
+    p = LbrPeerParams()
+    assert (p.namespace, p.mode, p.sample_time_s, p.operation_mode, p.joint_stiffness_nm_rad) == \
+        ("lbr", "lockstep", 0.001, "T1", 0.0)
+
+
+@pytest.mark.parametrize("table, match", [
+    ({"mode": "warp"}, r"\[lbr_peer\] mode must be one of"),
+    ({"namespace": "a b"}, r"\[lbr_peer\] namespace"),
+    ({"namespace": "lbr/*"}, r"\[lbr_peer\] namespace"),
+    ({"sample_time_s": 0.1}, r"\[lbr_peer\] sample_time_s must be a number in \[0.001, 0.01\]"),
+    ({"watchdog_s": 0.001}, r"\[lbr_peer\] watchdog_s"),
+    ({"operation_mode": "AUTO"}, r"\[lbr_peer\] operation_mode must be one of \('T1', 'T2', 'AUT'\)"),
+    ({"wrench_rate_hz": 2000.0}, r"\[lbr_peer\] wrench_rate_hz"),
+    ({"joint_stiffness_nm_rad": -1.0}, r"\[lbr_peer\] joint_stiffness_nm_rad"),
+    ({"recommanding_after_s": True}, r"\[lbr_peer\] recommanding_after_s"),
+    ({"stiffness": 3.0}, r"\[lbr_peer\] unknown key\(s\) \['stiffness'\]"),
+])
+def test_bad_peer_config_is_refused_with_the_key_named(table, match):
+    with pytest.raises(ConfigError, match=match):
+        LbrPeerParams.from_table(table)
+
+
+def test_the_arm_is_gravity_compensated_and_stepped_at_the_fri_rate_whatever_sim_says():
+    p = LbrPeerParams(sample_time_s=0.002, mode="realtime", namespace="/robots/lbr/")
+    sim = sim_params_for_peer({"gravity_compensated": False, "rate_hz": 500.0, "seed": 3}, p)
+    assert sim.gravity_compensated and sim.rate_hz == 500.0 and sim.mode == "realtime" and sim.seed == 3
+    assert p.namespace == "robots/lbr" and p.robot_name == "lbr"
+    assert p.topics.key(p.topics.state) == "robots/lbr/state"
+
+
+# -- the session, the torque law, the external torque -------------------------------------------------------
+
+def test_fri_session_goes_ready_wait_active_and_the_watchdog_trips_and_comes_back():
+    s = FriSession(LbrPeerParams(commanding_after_s=0.05, watchdog_s=0.1, recommanding_after_s=1.0))
+    assert s.state == READY
+    assert not s.command(10 * MS) and s.state == READY  # the LBRServer app does not run yet: ignored
+    assert s.advance(49 * MS) is None and s.state == READY
+    s.advance(50 * MS)
+    assert s.state == WAIT
+    assert s.command(60 * MS) and s.state == ACTIVE
+    assert s.advance(160 * MS) is None and s.state == ACTIVE  # exactly the watchdog: still fine
+    why = s.advance(161 * MS)
+    assert s.state == READY and s.watchdog_trips == 1 and "101 ms" in why
+    assert not s.command(200 * MS)
+    s.advance(1160 * MS)
+    assert s.state == READY
+    s.advance(1161 * MS)
+    assert s.state == WAIT
+    assert s.command(1162 * MS) and s.state == ACTIVE
+    assert s.advance(1163 * MS, waited_ns=150 * MS) is not None  # lock-step: the wall time waited counts
+    assert s.state == READY and s.watchdog_trips == 2
+
+
+def test_applied_torque_is_the_overlay_plus_the_joint_spring():
+    q = np.linspace(-0.3, 0.3, 7)
+    tau = applied_torque_nm(np.ones(7), q + 0.01, q, 200.0)
+    np.testing.assert_allclose(tau, np.full(7, 3.0))
+    np.testing.assert_allclose(applied_torque_nm(np.arange(7.0), q + 1.0, q, 0.0), np.arange(7.0))
+
+
+def test_external_torque_is_the_virtual_work_of_the_wrench_by_finite_differences():
+    """tau_i = f . dp/dq_i + m . dtheta/dq_i at the TCP, world axes (J^T w without using J)."""
+    model = RobotModel()
+    rng = np.random.default_rng(0)
+    q = np.array([0.5, 0.3, -0.6, -1.9, -0.1, -0.6, -1.2])
+    w = rng.normal(size=6) * np.array([10, 10, 10, 1, 1, 1])
+    tau = external_torque_nm(model.tcp_jacobian(q), w)
+    eps = 1e-6
+    p0, R0 = model.tcp_pose(q)
+    for i in range(7):
+        dq = np.zeros(7)
+        dq[i] = eps
+        p1, R1 = model.tcp_pose(q + dq)
+        dR = R1 @ R0.T
+        dtheta = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]]) / 2
+        assert tau[i] == pytest.approx((w[:3] @ (p1 - p0) + w[3:] @ dtheta) / eps, abs=1e-4)
+
+
+def test_dropped_commands_are_classified_by_reason():
+    good = msgs.encode_torque_command(np.zeros(7), np.ones(7))
+    assert len(good) == TORQUE_COMMAND_BYTES
+
+    def reason(raw):
+        with pytest.raises(msgs.LbrWireError) as exc:
+            msgs.decode_torque_command(raw)
+        return drop_reason(raw, exc.value)
+
+    six = good[:4] + np.zeros(12).tobytes()  # a sender with float64[6] arrays
+    nan = msgs.encode_torque_command(np.zeros(7), np.array([0, 0, np.nan, 0, 0, 0, 0]))
+    assert [reason(r) for r in (b"garbage", b"", six, good[:60], nan)] == \
+        ["not_cdr", "not_cdr", "wrong_length", "wrong_length", "non_finite"]
+
+
+# -- the command line ---------------------------------------------------------------------------------------
+
+def test_check_names_the_keys_and_a_bad_config_is_one_line(tmp_path, capsys):
+    from robot.lbr import peer_cli
+
+    path = tmp_path / "ok.toml"
+    path.write_text('[lbr_peer]\nnamespace = "arm1"\n[sim.camera]\nenabled = false\n')
+    assert peer_cli.main(["--config", str(path), "--check", "--mode", "realtime"]) == 0
+    out = capsys.readouterr().out
+    assert "arm1/state" in out and "arm1/command/torque" in out and "mode realtime" in out
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[lbr_peer]\nwatchdog_s = 100.0\n")
+    assert peer_cli.main(["--config", str(bad), "--check"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "[lbr_peer] watchdog_s" in err
+    with pytest.raises(SystemExit) as exc:
+        peer_cli.main(["--mode", "warp"])
+    assert exc.value.code == 2
+
+
+def test_lbr_peer_is_a_lamps_command():
+    from interfaces.cli import COMMANDS
+
+    assert COMMANDS["lbr-peer"][0] == "robot.lbr.peer_cli:main"
+
+
+# -- the peer as a process ----------------------------------------------------------------------------------
+
+class StateTap:
+    """Every ``LBRState`` on a key, decoded, in arrival order; :meth:`next` waits for one that is accepted."""
+
+    def __init__(self, session, key: str) -> None:
+        self.states: list[msgs.LbrState] = []
+        self._cursor = 0
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample) -> None:
+        state = msgs.decode_state(sample.payload.to_bytes())
+        with self._cond:
+            self.states.append(state)
+            self._cond.notify_all()
+
+    def next(self, accept=None, timeout_s: float = 5.0, what: str = "a state") -> msgs.LbrState:
+        """The first state after the last one taken for which ``accept(state)`` holds (earlier ones skipped)."""
+        end = time.monotonic() + timeout_s
+        with self._cond:
+            while True:
+                while self._cursor < len(self.states):
+                    state = self.states[self._cursor]
+                    self._cursor += 1
+                    if accept is None or accept(state):
+                        return state
+                if not self._cond.wait(max(end - time.monotonic(), 0.0)) and time.monotonic() >= end:
+                    raise AssertionError(f"{what} not received within {timeout_s} s")
+
+    def skip_all(self) -> None:
+        with self._cond:
+            self._cursor = len(self.states)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class PeerProcess:
+    """``lamps lbr-peer`` in its own process, a client node connected to it, a tap on its states."""
+
+    def __init__(self, tmp_path: Path, peer: dict, args: tuple[str, ...] = (), namespace: str = "lbr") -> None:
+        self.port = free_port()
+        self.robot_id = f"t{self.port}"
+        self.config = write_config(tmp_path / "peer.toml", self.port, self.robot_id, {"camera": {"enabled": False}})
+        with self.config.open("a") as f:
+            f.write("\n[lbr_peer]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in peer.items()))
+        self.args = args
+        self.topics = msgs.LbrTopics(namespace)
+
+    def __enter__(self) -> PeerProcess:
+        self.proc = subprocess.Popen([sys.executable, "-m", "robot.lbr.peer_cli", "--config", str(self.config),
+                                      *self.args], cwd=REPO, env=dict(os.environ, PYTHONUNBUFFERED="1"),
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{self.port}",), robot_id=self.robot_id)
+        self.node = ServiceNode("test-client", settings).__enter__()
+        try:
+            self.tap = StateTap(self.node.session, self.key(self.topics.state))
+            wait_alive(self.node, "lbr-peer", 60.0)
+            wait_subscribed(self.node.session, self.key(self.topics.torque_command), 30.0,
+                            "the peer's command subscriber")
+            self.commands = self.node.session.declare_publisher(self.key(self.topics.torque_command))
+        except BaseException:
+            self.__exit__()
+            raise
+        return self
+
+    def key(self, topic: str) -> str:
+        return self.topics.key(topic)
+
+    def send(self, q_rad, tau_nm) -> None:
+        self.commands.put(msgs.encode_torque_command(np.asarray(q_rad, float), np.asarray(tau_nm, float)))
+
+    def status(self, accept=None, what: str = "a peer status") -> ServiceStatus:
+        reader = self.node.latest(self.node.keys.sim_status, ServiceStatus)
+        try:
+            return wait_sample(reader, accept, 10.0, what)
+        finally:
+            reader.close()
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(20.0)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+                raise AssertionError("lamps lbr-peer did not stop on SIGINT") from None
+        return self.proc.returncode
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self.stop()
+        finally:
+            self.node.close()
+
+
+def every_fri_cycle(stamps_ns: np.ndarray) -> bool:
+    """Stamps 1 ms apart on the robot's clock (a sample the loopback dropped under load leaves a 2 ms gap)."""
+    d = np.diff(stamps_ns)
+    return len(d) > 10 and bool(np.all(d > 0) and np.all(d % MS == 0) and np.mean(d == MS) > 0.95)
+
+
+def _start_pose() -> np.ndarray:
+    from sim.board import board_from_params, start_configuration
+    from sim.params import BoardParams, SimParams
+
+    return start_configuration(board_from_params(BoardParams()), SimParams().start_standoff_m)
+
+
+@pytest.mark.slow
+def test_lockstep_peer_speaks_the_stacks_messages_and_steps_once_per_command(tmp_path):
+    peer_cfg = {"mode": "lockstep", "commanding_after_s": 1.5, "watchdog_s": 0.1, "recommanding_after_s": 0.1,
+                "status_rate_hz": 20.0}
+    with PeerProcess(tmp_path, peer_cfg) as peer:
+        wrenches, joint_states = [], []
+        session = peer.node.session
+        subs = [session.declare_subscriber(peer.key(peer.topics.wrench),
+                                           lambda s: wrenches.append(msgs.decode_wrench(s.payload.to_bytes()))),
+                session.declare_subscriber(peer.key(peer.topics.joint_states),
+                                           lambda s: joint_states.append(s.payload.to_bytes()))]
+        truth = peer.node.latest(peer.node.keys.sim_truth, SimTruth)
+        # the operator has not started the LBRServer app yet: the robot runs on its own clock, arm held
+        first = peer.tap.next(what="a state while MONITORING_READY")
+        assert first.session_state == READY and first.sample_time_s == 0.001
+        assert (first.safety_state, first.drive_state, first.operation_mode) == (0, 2, 0)  # normal, active, T1
+        assert (first.client_command_mode, first.control_mode) == (3, 2)  # torque overlay on joint impedance
+        np.testing.assert_allclose(first.q_rad, _start_pose(), atol=1e-3)
+        wait_state = peer.tap.next(lambda s: s.session_state == WAIT, 10.0, "COMMANDING_WAIT")
+        ready = np.array([s.stamp_ns for s in peer.tap.states if s.session_state == READY])
+        assert every_fri_cycle(ready) and wait_state.stamp_ns == 1500 * MS
+        # lock-step: the state waits for its answer, re-published with the same stamp
+        again = peer.tap.next(timeout_s=2.0, what="a re-published state")
+        assert again.stamp_ns == wait_state.stamp_ns and again.session_state == WAIT
+
+        # garbage, wrong lengths and NaN are counted and do not step the arm
+        peer.commands.put(b"garbage")
+        peer.commands.put(msgs.encode_torque_command(np.zeros(7), np.zeros(7))[:60])
+        peer.send(wait_state.q_rad, [0, 0, np.nan, 0, 0, 0, 0])
+        status = peer.status(lambda m: m.counters.get("commands_dropped_non_finite", 0) >= 1
+                             and m.counters.get("commands_dropped_not_cdr", 0) >= 1
+                             and m.counters.get("commands_dropped_wrong_length", 0) >= 1, "the bad commands counted")
+        assert status.counters["steps"] == 1500 and status.counters["session_state"] == int(WAIT)
+        assert status.service == "lbr-peer" and status.counters["commands_received"] == 3
+        assert max(s.stamp_ns for s in peer.tap.states) == wait_state.stamp_ns  # no step
+
+        # each command steps the arm exactly once; +0.5 Nm on A1 (a vertical axis) turns it positive
+        state, seen = wait_state, []
+        for k in range(300):
+            tau = np.array([0.5, 0, 0, 0, 0, 0, 0]) if k >= 50 else np.zeros(7)
+            peer.send(state.q_rad, tau)
+            nxt = peer.tap.next(lambda s, t=state.stamp_ns: s.stamp_ns != t, what=f"the state after command {k}")
+            assert nxt.stamp_ns == state.stamp_ns + MS, k
+            assert nxt.session_state == ACTIVE
+            np.testing.assert_array_equal(nxt.q_commanded_rad, state.q_rad)
+            state = nxt
+            seen.append(state)
+        q = np.array([s.q_rad for s in seen])
+        assert np.all(np.diff(q[60:, 0]) > 0) and q[-1, 0] - q[50, 0] > 0.01  # the free joints swing along
+        np.testing.assert_allclose(seen[-1].tau_measured_nm[0], 0.5, atol=0.05)  # overlay + gravity (0 on A1)
+        np.testing.assert_allclose(q[:50], np.repeat(q[:1], 50, axis=0), atol=1e-4)  # zero torque: held
+        assert max(np.abs(s.tau_external_nm).max() for s in seen) < 1e-6  # free space
+
+        # no answer for longer than the watchdog: back to MONITORING_READY on the robot's own clock, arm held
+        tripped = peer.tap.next(lambda s: s.session_state == READY, 5.0, "the watchdog trip")
+        again = peer.tap.next(lambda s: s.session_state == WAIT, 5.0, "COMMANDING_WAIT after the trip")
+        assert again.stamp_ns - tripped.stamp_ns == 99 * MS  # recommanding_after_s of robot time
+        held = [s.q_rad[0] for s in peer.tap.states if tripped.stamp_ns + 50 * MS <= s.stamp_ns <= again.stamp_ns]
+        assert np.ptp(held) < 1e-5  # the brakes stopped A1, which was turning
+        status = peer.status(lambda m: m.counters.get("watchdog_trips") == 1, "one watchdog trip")
+        assert status.counters["session_state"] == int(WAIT) and status.counters["commands_applied"] == 300
+        assert status.counters["steps"] == 1500 + 300 + 100  # tripped at 1.8 s, WAIT again at 1.9 s
+
+        assert wrenches and all(f == "lbr_link_ee" and np.all(w == 0) for f, w in wrenches)
+        assert joint_states and msgs.decode_joint_names(joint_states[-1]) == tuple(f"lbr_A{i}" for i in range(1, 8))
+        assert wait_sample(truth, timeout_s=5.0, what="sim/truth").stain_ids
+        for sub in subs:
+            sub.undeclare()
+        assert peer.stop() == 0
+
+
+@pytest.mark.slow
+def test_realtime_peer_runs_at_the_fri_rate_and_its_watchdog_holds_the_arm(tmp_path):
+    peer_cfg = {"mode": "lockstep", "watchdog_s": 0.1, "recommanding_after_s": 0.3, "status_rate_hz": 20.0}
+    with PeerProcess(tmp_path, peer_cfg, ("--mode", "realtime", "--namespace", "arm2"), namespace="arm2") as peer:
+        first = peer.tap.next(what="a state")
+        t0 = time.monotonic()
+        later = peer.tap.next(lambda s: time.monotonic() - t0 > 0.5, what="states for 0.5 s")
+        assert first.session_state == WAIT and later.session_state == WAIT  # no command yet: nothing commands
+        stamps = np.array([s.stamp_ns for s in peer.tap.states])
+        assert every_fri_cycle(stamps)
+        assert len(stamps) > 200  # about 500 in 0.5 s; a loaded machine skips periods
+
+        answering = threading.Event()
+        answering.set()
+
+        def answer(sample):  # what an adapter does: answer each state as it comes
+            if answering.is_set():
+                st = msgs.decode_state(sample.payload.to_bytes())
+                peer.send(st.q_rad, [0.5, 0, 0, 0, 0, 0, 0])
+
+        sub = peer.node.session.declare_subscriber(peer.key(peer.topics.state), answer)
+        active = peer.tap.next(lambda s: s.session_state == ACTIVE, 5.0, "COMMANDING_ACTIVE")
+        moving = peer.tap.next(lambda s: s.stamp_ns > active.stamp_ns + 200 * MS, 5.0, "0.2 s of commanding")
+        assert moving.q_rad[0] - active.q_rad[0] > 0.005
+        answering.clear()
+        tripped = peer.tap.next(lambda s: s.session_state == READY, 5.0, "the watchdog trip")
+        back = peer.tap.next(lambda s: s.session_state == WAIT, 5.0, "COMMANDING_WAIT after the trip")
+        assert back.stamp_ns - tripped.stamp_ns == pytest.approx(300 * MS, abs=2 * MS)
+        held = [s.q_rad[0] for s in peer.tap.states if tripped.stamp_ns + 50 * MS <= s.stamp_ns <= back.stamp_ns]
+        assert np.ptp(held) < 1e-5
+        status = peer.status(lambda m: m.counters.get("watchdog_trips") == 1, "one watchdog trip")
+        assert status.counters["commands_applied"] > 50 and status.timing.ticks > 500
+        sub.undeclare()
+        assert peer.stop() == 0
