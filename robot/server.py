@@ -200,49 +200,57 @@ class RobotServer:
             time.sleep((next_ns - now) / 1e9)
 
     def _run_clocked(self) -> None:
-        """A robot with its own clock: publish each reading as it comes, forward each answer as it arrives."""
-        inbox = self.node.inbox(self.keys.robot_command, TorqueCommand, maxlen=4)
+        """A robot with its own clock: publish each reading as it comes, forward each answer as it arrives.
+
+        An answer to one of the last ``stale_limit_s`` worth of states is forwarded if it is newer than the
+        last one forwarded (a controller on its own clock often answers state k after k + 1 has come); a
+        state that got no answer before the next one is a late cycle, which the port holds (it repeats the
+        last command while that is fresh). In lock-step only the answer to the current state counts.
+        """
+        inbox = self.node.inbox(self.keys.robot_command, TorqueCommand, maxlen=8)
         self._sources = [inbox]
+        lockstep = self.p.mode == "lockstep"
+        max_lag = 0 if lockstep else max(1, int(self.p.stale_limit_s * self.p.rate_hz))
         stale_ns = int(self.p.stale_limit_s * 1e9)
         republish_ns = int(self.p.republish_s * 1e9)
-        lockstep = self.p.mode == "lockstep"
-        seq = -1
-        answered = True
+        seq = last_applied = -1
         last_good_ns = time.monotonic_ns()
         last_state_ns = last_pub_ns = last_good_ns
         while not self.stop.is_set():
             t0 = time.monotonic_ns()
             if self.port.wait_reading(0.0005):
-                if seq >= 0 and not answered:
+                if seq >= 0 and last_applied < seq:
                     self.counters["commands_late"] += 1
-                    self._apply(HOLD)  # this cycle gets the safe hold: the answer did not come in time
+                    if not lockstep:
+                        self._apply(HOLD)  # this cycle is held: its answer did not come in time
                 seq += 1
-                answered = False
                 self.publish_state(seq)
                 self.stats.add((t0 - last_state_ns) / 1e3, 0.0, 0.0, (time.monotonic_ns() - t0) / 1e3)
                 last_state_ns = last_pub_ns = t0
-            elif seq >= 0 and not answered and t0 - last_pub_ns >= republish_ns:
+            elif lockstep and seq >= 0 and last_applied < seq and t0 - last_pub_ns >= republish_ns:
                 self.publish_state(seq)  # a robot that waits for its answer (the lock-step peer): say it again
                 self.counters["states_republished"] += 1
                 last_pub_ns = t0
-            cmd = inbox.get(0.0) if not answered else None
-            while cmd is not None and not answered:
-                if self._in_sequence(cmd, seq):
+            cmd = inbox.get(0.0)
+            while cmd is not None:
+                if cmd.seq <= last_applied or not 0 <= seq - cmd.seq <= max_lag:
+                    self.counters["commands_out_of_sequence"] += 1
+                else:
                     command = self.gate.accept(cmd)
                     if command is not None:
                         self._apply(command)
-                        self.port.after_cycle(lockstep=False)
-                        answered = True
+                        self.port.after_cycle(lockstep=lockstep)
+                        last_applied = cmd.seq
                         last_good_ns = time.monotonic_ns()
-                        self.counters["answer_latency_us_last"] = int((last_good_ns - last_state_ns) / 1e3)
-                        break
+                        if cmd.seq == seq:
+                            self.counters["answer_latency_us_last"] = int((last_good_ns - last_state_ns) / 1e3)
+                        else:
+                            self.counters["answers_one_or_more_states_late"] += 1
                 cmd = inbox.get(0.0)
-            if lockstep:
-                pass  # the robot waits for the answer (a lock-step peer): no deadline to miss
-            elif not answered and not self.braked and time.monotonic_ns() - last_good_ns > stale_ns:
+            stale = time.monotonic_ns() - last_good_ns > stale_ns
+            if not lockstep and last_applied < seq and not self.braked and stale:
                 self.counters["stale_command_brakes"] += 1
                 self._apply(HOLD)
-                answered = True
             self._publish_status()
             if self.p.max_steps and self.steps >= self.p.max_steps:
                 break

@@ -12,14 +12,16 @@ description.
 
 Commands: ``LBRTorqueCommand`` with the measured joint position and the
 controller's torques as overlay. Nothing is sent until the adapter is
-**armed** (``--arm``, ``[lbr] arm = true`` or an
-:class:`~interfaces.messages.ArmRequest` on ``robot/arm``), and arming is
-refused unless the session says commanding is possible (COMMANDING_WAIT or
+**armed**: with ``--arm`` (``[lbr] arm = true``) at the first controller
+command the session allows, or by an :class:`~interfaces.messages.ArmRequest`
+on ``robot/arm``; arming is refused unless the session says commanding is possible (COMMANDING_WAIT or
 COMMANDING_ACTIVE), safety is normal and the drives are active. Every
 command passes :func:`~robot.lbr.guards.guard_trip` first; a trip disarms.
 
-Safe hold (a late or missing controller answer, or ``hold``): damping
-torques ``-D dq`` with the measured joint position; after
+Safe hold (a late or missing controller answer, or ``hold``): the last
+command again while it is younger than ``stale_limit_s`` (one late answer
+must not step the torque), then damping torques ``-D dq`` with the measured
+joint position; after
 ``hold_timeout_s`` of holding the adapter disarms and stops commanding, so
 that the robot's own FRI watchdog ends the session and the robot stops.
 Disarming (stop, signal, controller loss, guard trip, session lost) sends
@@ -76,6 +78,7 @@ class LbrPort(RobotPort):
         self.arm_pending = params.arm
         self.disarm_reason = "not armed yet"
         self._velocity = VelocityFilter(7, params.velocity_cutoff_hz)
+        self._hold_damping = np.array(params.hold_damping_nm_s_rad)
         self._cond = threading.Condition()
         self._inbox: LbrState | None = None
         self._state: LbrState | None = None
@@ -83,6 +86,7 @@ class LbrPort(RobotPort):
         self._stack_wrench: np.ndarray | None = None
         self._names_ok: bool | None = None
         self._tau_prev: np.ndarray | None = None
+        self._tau_prev_ns = 0
         self._holding_since_ns: int | None = None
         topics = params.topics
         s = node.session
@@ -144,23 +148,34 @@ class LbrPort(RobotPort):
         return self._reading
 
     def write(self, tau_nm: np.ndarray) -> None:
-        if not self.armed:
+        if not self.armed and not (self.arm_pending and self._cannot_arm() is None
+                                   and self.arm("--arm at start-up, and the controller answers")):
             self.counts["commands_while_disarmed"] += 1
             return
         r = self._reading
-        reason = guard_trip(r.q_rad, r.dq_rad_s, tau_nm, self._tau_prev, self._state.sample_time_s, self.limits)
+        # the rate guard compares with the last sent command over the robot time since (late cycles in between)
+        since_s = (r.robot_time_ns - self._tau_prev_ns) * 1e-9 if self._tau_prev is not None else 0.0
+        dt_s = max(self._state.sample_time_s, since_s)
+        reason = guard_trip(r.q_rad, r.dq_rad_s, tau_nm, self._tau_prev, dt_s, self.limits)
         if reason is not None:
             self.counts["guard_trips"] += 1
             self.disarm(f"guard: {reason}")
             return
         self._send(tau_nm)
         self._tau_prev = np.array(tau_nm, float)
+        self._tau_prev_ns = r.robot_time_ns
         self._holding_since_ns = None
         self.counts["commands_sent"] += 1
 
     def hold(self) -> None:
-        """Damping torques with the measured position; disarm after ``hold_timeout_s`` of holding."""
+        """Hold this cycle: the last command again while it is younger than ``stale_limit_s`` (a late answer must
+        not step the torque), then damping torques with the measured position; disarm after ``hold_timeout_s``."""
         if not self.armed:
+            return
+        if self._tau_prev is not None and \
+                (self._reading.robot_time_ns - self._tau_prev_ns) * 1e-9 <= self.p.stale_limit_s:
+            self._send(self._tau_prev)
+            self.counts["commands_repeated"] += 1
             return
         now = time.monotonic_ns()
         if self._holding_since_ns is None:
@@ -225,8 +240,6 @@ class LbrPort(RobotPort):
                 self.arm(f"request from {req.source[:40] or 'unknown'}: {req.reason[:80]}")
             else:
                 self.disarm(f"disarm request from {req.source[:40] or 'unknown'}: {req.reason[:80]}")
-        if self.arm_pending and not self.armed and self._state is not None and self._cannot_arm() is None:
-            self.arm("--arm at start-up")
 
     def _check_session(self) -> None:
         st = self._state
@@ -254,7 +267,7 @@ class LbrPort(RobotPort):
     def _send_hold(self) -> None:
         if self._state is None:
             return
-        tau = np.clip(-self.p.hold_damping_nm_s_rad * self._reading.dq_rad_s, -self.limits.tau_max_nm,
+        tau = np.clip(-self._hold_damping * self._reading.dq_rad_s, -self.limits.tau_max_nm,
                       self.limits.tau_max_nm)
         self._send(tau)
 

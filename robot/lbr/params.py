@@ -11,10 +11,10 @@
     joint_names = ["lbr_A1", ..., "lbr_A7"]  # the stack's names, in our joint order
     wrench_source = "external_torque"        # or "stack": the bridge's WrenchStamped (world-aligned at the pad)
     velocity_cutoff_hz = 80.0                # low-pass of the position difference
-    hold_damping_nm_s_rad = 5.0              # safe hold: tau = -D dq with the measured position
+    hold_damping_nm_s_rad = [4.0, 4.0, 2.0, 2.0, 0.5, 0.3, 0.1]   # safe hold per joint: tau = -D dq
     hold_timeout_s = 0.5                     # holding this long without a controller command: stop commanding
     stale_limit_s = 0.005                    # a controller answer later than this is not sent; hold instead
-    max_joint_speed_scale = 0.5              # guard: this share of the description's joint speed limits
+    max_joint_speed_scale = 0.8              # guard: this share of the description's joint speed limits
     tau_rate_nm_s = 2000.0                   # guard: torque change per second
     limit_margin_rad = 0.05                  # guard: distance kept from the joint position limits
     arm = false                              # arm at start-up (else: an ArmRequest on robot/arm)
@@ -32,6 +32,11 @@ from .msgs import N_JOINTS, LbrTopics
 
 WRENCH_SOURCES = ("external_torque", "stack")
 DEFAULT_JOINT_NAMES = tuple(f"lbr_A{i}" for i in range(1, N_JOINTS + 1))
+#: Safe-hold damping per joint [Nm s/rad]. An explicit -D dq at the FRI period is stable only for
+#: D < 2 I / dt with I the joint's inertia: the wrist (A7 with an eraser, about 1e-3 kg m^2 in the
+#: simulator, which has no rotor inertia) allows about 2, so the wrist gets a tenth of that; the real
+#: robot's reflected motor inertia is far larger.
+DEFAULT_HOLD_DAMPING = (4.0, 4.0, 2.0, 2.0, 0.5, 0.3, 0.1)
 
 
 @dataclass(frozen=True)
@@ -46,10 +51,10 @@ class LbrParams:
     joint_names: tuple[str, ...] = field(default=DEFAULT_JOINT_NAMES)
     wrench_source: str = "external_torque"
     velocity_cutoff_hz: float = 80.0
-    hold_damping_nm_s_rad: float = 5.0
+    hold_damping_nm_s_rad: tuple[float, ...] = DEFAULT_HOLD_DAMPING
     hold_timeout_s: float = 0.5
     stale_limit_s: float = 0.005
-    max_joint_speed_scale: float = 0.5
+    max_joint_speed_scale: float = 0.8
     tau_rate_nm_s: float = 2000.0
     limit_margin_rad: float = 0.05
     arm: bool = False
@@ -69,7 +74,12 @@ class LbrParams:
         if self.wrench_source not in WRENCH_SOURCES:
             raise ConfigError(f"[{s}] wrench_source must be one of {WRENCH_SOURCES}, got {self.wrench_source!r}")
         _range(s, "velocity_cutoff_hz", self.velocity_cutoff_hz, 1.0, 500.0)
-        _range(s, "hold_damping_nm_s_rad", self.hold_damping_nm_s_rad, 0.0, 100.0)
+        d = self.hold_damping_nm_s_rad
+        if not isinstance(d, (list, tuple)) or len(d) != N_JOINTS:
+            raise ConfigError(f"[{s}] hold_damping_nm_s_rad must be {N_JOINTS} numbers (A1..A7), got {d!r}")
+        for v in d:
+            _range(s, "hold_damping_nm_s_rad", v, 0.0, 100.0)
+        object.__setattr__(self, "hold_damping_nm_s_rad", tuple(float(v) for v in d))
         _range(s, "hold_timeout_s", self.hold_timeout_s, 0.001, 10.0)
         _range(s, "stale_limit_s", self.stale_limit_s, 0.0005, 1.0)
         _range(s, "max_joint_speed_scale", self.max_joint_speed_scale, 0.01, 1.0)
