@@ -26,6 +26,8 @@ from pathlib import Path
 
 from lampskit.errors import LampsError
 
+#: ``--robot``: the compose profile of the robot side (``real`` needs a robot and is compose's alone).
+ROBOTS = ("sim", "lbr-sim")
 BOARDS = {"vertical": "wall", "wall": "wall", "horizontal": "table", "table": "table"}
 #: The controller DONE this long (wall) ends the run (longer than the executor's 1 s recheck, after which a
 #: stain still without kappa would be wiped again).
@@ -55,6 +57,9 @@ def build_up_parser() -> argparse.ArgumentParser:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' (default: learn the bundled demo)")
     src.add_argument("--demo", metavar="FILE", help="learn this demonstration first (CSV, NPZ, TSV, MAT#i)")
+    p.add_argument("--robot", choices=ROBOTS, default="sim",
+                   help="the robot side: sim (PyBullet, default) or lbr-sim (the same arm behind lbr_fri_ros2_stack's "
+                        "messages, driven by the real-robot adapter)")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: deterministic, as fast as the machine goes (default); realtime: 1 kHz wall clock")
     p.add_argument("--max-duration", type=float, default=600.0, metavar="S", help="give up after S s wall (default 600)")
@@ -189,6 +194,7 @@ def _plan_cell(a, compose_path: Path, board_env: dict[str, str], skill: Path, ou
 def _compose_variables(a, board_env: dict[str, str], skill: Path, out: Path) -> dict[str, str]:
     """The environment plus the ``LAMPS_*`` variables docker-compose.yml substitutes, from the options."""
     variables = dict(os.environ)
+    variables["COMPOSE_PROFILES"] = a.robot
     variables.update(LAMPS_SEED=str(a.seed), LAMPS_STAINS=str(a.stains), LAMPS_MODE=a.mode, LAMPS_SKILL=str(skill),
                      LAMPS_OUT=str(out), **{k: v for k, v in board_env.items() if k == "LAMPS_BOARD"})
     if a.robot_id:

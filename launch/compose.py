@@ -219,7 +219,8 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
         env = dict(s.environment)
         for key in ("LAMPS_ZENOH_LISTEN", "LAMPS_ZENOH_CONNECT"):
             if env.get(key):
-                env[key] = ",".join(endpoint(e, s.name) for e in env[key].split(",") if e.strip())
+                # two names of one service (robot, camera) become one endpoint, once
+                env[key] = ",".join(dict.fromkeys(endpoint(e, s.name) for e in env[key].split(",") if e.strip()))
         argv = (*lamps, *s.command[1:]) if s.command[0] == "lamps" else s.command
         out.append(LocalService(s.name, tuple(argv), env, tuple(ports[(s.name, p)] for p in listen_ports(s))))
     return out

@@ -38,19 +38,36 @@ LAMPS = [sys.executable, "-m", "interfaces.cli"]
 
 def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_off():
     services = load_compose(COMPOSE, {})
-    assert {"sim", "controller", "perception", "recorder"} <= set(services)
+    assert {"sim", "lbr-peer", "robot-lbr-sim", "robot-lbr", "bridge", "controller", "perception",
+            "recorder"} <= set(services)
     sim = services["sim"]
-    assert sim.profiles == ("sim",) and "robot" in sim.aliases  # a `real` profile can replace it as `robot`
+    assert sim.profiles == ("sim",) and {"robot", "camera"} <= set(sim.aliases)
     assert (REPO / ".env").read_text().strip() == "COMPOSE_PROFILES=sim"  # the default profile
+    hosts = {h for s in services.values() for h in (s.name, *s.aliases)}
     for s in services.values():
+        if s.name == "bridge":  # zenoh-bridge-ros2dds's own image; compose's alone
+            assert s.labels.get("lamps.up") == "skip" and "--no-multicast-scouting" in s.command
+            continue
         assert s.command[0] == "lamps" and s.command[1] in COMMANDS, s.command
         if s.name == "skill":  # the one-shot learning service talks to nobody
             continue
         assert s.environment["LAMPS_ZENOH_MULTICAST"] == "false" and s.environment["LAMPS_ZENOH_MODE"] == "peer"
         for ep in s.environment.get("LAMPS_ZENOH_CONNECT", "").split(","):
-            assert not ep or ep.startswith("tcp/robot:") or ep.split("/")[1].split(":")[0] in services, ep
-    # nobody connects to `sim` by name: the robot side is reached as `robot`
-    assert all("tcp/sim:" not in s.environment.get("LAMPS_ZENOH_CONNECT", "") for s in services.values())
+            assert not ep or ep.split("/")[1].split(":")[0] in hosts, ep
+    # nobody connects to a robot side by its service name: it is `robot` (robot/*) and `camera` (frames, truth)
+    robot_sides = ("sim", "lbr-peer", "robot-lbr-sim", "robot-lbr")
+    assert all(f"tcp/{r}:" not in s.environment.get("LAMPS_ZENOH_CONNECT", "")
+               for s in services.values() for r in robot_sides)
+    # each profile has exactly one `robot` and one `camera`... (real: the camera is the user's, see README)
+    for profile, robot in (("sim", "sim"), ("lbr-sim", "robot-lbr-sim"), ("real", "robot-lbr")):
+        on = active(services, (profile,))
+        assert [s.name for s in on if "robot" in s.aliases] == [robot], profile
+        order = [s.name for s in on]
+        assert order.index(robot) < order.index("controller") < order.index("perception") < order.index("recorder")
+    assert [s.name for s in active(services, ("lbr-sim",)) if "camera" in s.aliases] == ["lbr-peer"]
+    assert services["robot-lbr-sim"].environment["LAMPS__LBR__ARM"] == "true"  # the peer's operator has started
+    assert services["robot-lbr"].environment["LAMPS__LBR__ARM"] == "false"  # a real robot is armed by a person
+    assert services["robot-lbr"].environment["LAMPS__ROBOT__MODE"] == "realtime"
     # volumes for skills and run output
     assert any(v.startswith("./skills:/skills") for v in services["controller"].volumes)
     assert any(v.startswith("./runs:/runs") for v in services["recorder"].volumes)
@@ -62,10 +79,8 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
     # the controller never learns: compose learns the bundled demo first, lamps up learns it itself
     assert services["skill"].command[:2] == ("lamps", "demo") and "/skills/bundled" in services["skill"].command
     assert "skill" in services["controller"].depends_on
-    assert [s.name for s in run_locally(list(services.values()))] == [n for n in services if n != "skill"]
-    order = [s.name for s in active(services, ("sim",))]
-    assert order.index("sim") < order.index("controller") < order.index("perception") < order.index("recorder")
-    assert "sim" not in [s.name for s in active(services, ("real",))]
+    assert [s.name for s in run_locally(list(services.values()))] == [n for n in services
+                                                                      if n not in ("skill", "bridge")]
 
 
 def test_every_compose_service_config_is_accepted_by_its_own_check(tmp_path, learned_skill_file):
@@ -92,6 +107,15 @@ def test_localize_maps_service_names_to_loopback_and_listen_ports_to_local_ones(
     # free ports by default, all different
     ports = [p for s in localize(services) for p in s.listen_ports]
     assert len(ports) == 3 == len(set(ports))
+    # lbr-sim: the adapter is `robot`, the lbr peer `bridge` and `camera`; the recorder hears both
+    lbr = {s.name: s for s in localize(run_locally(active(load_compose(COMPOSE, {}), ("lbr-sim",))),
+                                       {("lbr-peer", 7447): 21001, ("robot-lbr-sim", 7447): 21002,
+                                        ("controller", 7448): 21003, ("perception", 7449): 21004})}
+    assert lbr["robot-lbr-sim"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21001"
+    assert lbr["controller"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21002"
+    assert lbr["perception"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21001,tcp/127.0.0.1:21003"
+    assert lbr["recorder"].environment["LAMPS_ZENOH_CONNECT"] == \
+        "tcp/127.0.0.1:21002,tcp/127.0.0.1:21001,tcp/127.0.0.1:21003,tcp/127.0.0.1:21004"
 
 
 @pytest.mark.parametrize("text, match", [
