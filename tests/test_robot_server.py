@@ -1,0 +1,217 @@
+"""The ``robot/*`` protocol of :class:`robot.server.RobotServer` over real Zenoh, with the mock arm (a stepped port).
+
+The server runs in this process on a thread with its own session (listening on a free port, multicast
+off); the test plays the controller with a second session connected to it. The mock arm is read
+directly where the test needs its truth (steps taken, holds).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import msgspec
+import numpy as np
+import pytest
+
+from interfaces.codec import encode
+from interfaces.config import ZenohSettings
+from interfaces.messages import HOLD, RobotState, ServiceStatus, TorqueCommand
+from interfaces.session import ServiceNode
+from robot.mock import MockArm
+from robot.server import RobotServer, ServerParams
+
+from .zenoh_helpers import free_port, wait_sample, wait_subscribed
+
+
+class ServerThread:
+    """A :class:`RobotServer` serving ``make_port(node)`` on a thread; :attr:`ctl` is a controller's node.
+
+    ``states`` (every RobotState, in order) and ``status`` (newest ServiceStatus) are readers of
+    :attr:`ctl`, subscribed before the server publishes its first state.
+    """
+
+    def __init__(self, make_port, params: ServerParams, service: str = "robot") -> None:
+        self.port_no = free_port()
+        robot_id = f"t{self.port_no}"
+        self.settings = ZenohSettings(listen=(f"tcp/127.0.0.1:{self.port_no}",), robot_id=robot_id)
+        self.ctl_settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{self.port_no}",), robot_id=robot_id)
+        self.make_port, self.params, self.service = make_port, params, service
+        self.node = self.ctl = self.thread = self.port = None
+        self.error: BaseException | None = None
+        self.steps_run: int | None = None
+
+    def __enter__(self) -> "ServerThread":
+        try:
+            self.node = ServiceNode(self.service, self.settings).__enter__()
+            self.port = self.make_port(self.node)
+            self.server = RobotServer(self.port, self.node, self.params, self.service, self.node.keys.robot_status)
+            self.ctl = ServiceNode("controller", self.ctl_settings).__enter__()
+            self.keys = self.ctl.keys
+            self.states = self.ctl.inbox(self.keys.robot_state, RobotState, maxlen=100_000)
+            self.status = self.ctl.latest(self.keys.robot_status, ServiceStatus)
+            for key in (self.keys.robot_state, self.keys.robot_status):
+                wait_subscribed(self.node.session, key, what=f"the controller subscribing to {key}")
+            self.thread = threading.Thread(target=self._run, daemon=True)
+            self.thread.start()
+            wait_subscribed(self.ctl.session, self.keys.robot_command, what="the server reading robot/command")
+        except BaseException:
+            self.__exit__()
+            raise
+        return self
+
+    def _run(self) -> None:
+        try:
+            self.steps_run = self.server.run()
+        except BaseException as exc:  # reported by __exit__, never swallowed
+            self.error = exc
+
+    def __exit__(self, *exc) -> None:
+        if self.thread is not None:
+            self.server.stop.set()
+            self.thread.join(10.0)
+        if self.port is not None:
+            self.port.close()
+        for node in (self.ctl, self.node):
+            if node is not None:
+                node.close()
+        assert self.thread is None or not self.thread.is_alive(), "the server did not stop"
+        assert self.error is None, f"the server loop died: {self.error!r}"
+
+    # -- the controller's side ---------------------------------------------------------------------
+    def command(self, seq: int, tau, mode: str = "torque") -> None:
+        self.ctl.publish(self.keys.robot_command, TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(),
+                                                                tau_nm=[float(v) for v in tau], mode=mode))
+
+    def state(self, accept, what: str, timeout_s: float = 5.0) -> RobotState:
+        return wait_sample(self.states, accept, timeout_s, what)
+
+    def state_seq(self, seq: int) -> RobotState:
+        return self.state(lambda s: s.seq == seq, f"robot state {seq}")
+
+    def wait_status(self, accept, what: str, timeout_s: float = 5.0) -> ServiceStatus:
+        return wait_sample(self.status, accept, timeout_s, what)
+
+
+def lockstep(**kw) -> ServerParams:
+    return ServerParams(**{"mode": "lockstep", "republish_s": 0.05, "status_rate_hz": 100.0, **kw})
+
+
+def mock_step(q: np.ndarray, dq: np.ndarray, tau: np.ndarray, arm: MockArm) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the mock's law, written out: I ddq = tau - d dq, semi-implicit Euler."""
+    dq = dq + arm.dt_s * (tau - arm.damping * dq) / arm.inertia
+    return q + arm.dt_s * dq, dq
+
+
+def raw_command(seq: int, tau) -> bytes:
+    """A TorqueCommand's bytes with any torques (bypassing the constructor's checks)."""
+    wire = msgspec.msgpack.decode(encode(TorqueCommand(seq=seq, stamp_ns=1, tau_nm=[0.0] * 7)))
+    wire[3] = list(tau)
+    return msgspec.msgpack.encode(wire)
+
+
+def test_lockstep_steps_once_per_answer_in_sequence_and_drops_the_others():
+    arm = MockArm(q0_rad=np.linspace(-0.3, 0.3, 7))
+    with ServerThread(lambda node: arm, lockstep()) as srv:
+        s0 = srv.state_seq(0)
+        srv.command(2, [9.0] * 7)  # answers to states that were never sent
+        srv.command(1, [9.0] * 7)
+        tau = np.arange(1.0, 8.0)
+        srv.command(0, tau)
+        s1 = srv.state_seq(1)
+        srv.command(0, tau)  # the same answer again, now late
+        st = srv.wait_status(lambda m: m.counters.get("commands_out_of_sequence", 0) >= 3,
+                             "a status counting the three out-of-sequence answers")
+        assert st.seq == 1 and arm.steps == 1, "only the answer to state 0 stepped, and once"
+        srv.command(1, tau)
+        s2 = srv.state_seq(2)
+        st = srv.wait_status(lambda m: m.seq == 2, "a status after step 2")
+    q1, dq1 = mock_step(np.array(s0.q_rad), np.array(s0.dq_rad_s), tau, arm)
+    assert s1.q_rad == q1.tolist() and s1.dq_rad_s == dq1.tolist() and s1.tau_nm == tau.tolist()
+    q2, dq2 = mock_step(q1, dq1, tau, arm)
+    assert s2.q_rad == q2.tolist() and s2.dq_rad_s == dq2.tolist()
+    assert s2.robot_time_ns == 2_000_000 and s2.capabilities.backend == "mock"
+    c = st.counters
+    assert c["commands_out_of_sequence"] == 3 and c["commands_applied"] == 2 and c["commands_received"] == 5, c
+    assert st.detail.startswith("mode=lockstep step=2 braked=False"), st.detail
+
+
+def test_an_unanswered_state_is_re_sent_until_answered():
+    arm = MockArm()
+    with ServerThread(lambda node: arm, lockstep(republish_s=0.02)) as srv:
+        resent = [srv.state_seq(0) for _ in range(4)]
+        assert arm.steps == 0
+        srv.command(0, np.zeros(7))
+        s1 = srv.state_seq(1)
+        st = srv.wait_status(lambda m: m.seq == 1, "a status after the answer")
+        assert arm.steps == 1
+    assert all(s.q_rad == resent[0].q_rad and s.robot_time_ns == 0 for s in resent)
+    assert [s.stamp_ns for s in resent] == sorted({s.stamp_ns for s in resent}), "each re-send is a new publication"
+    assert s1.robot_time_ns == 1_000_000
+    assert st.counters["states_republished"] >= 3
+
+
+def test_the_gate_drops_wrong_lengths_clips_limits_and_rate_and_holds_on_request():
+    arm = MockArm(tau_max_nm=[50.0] * 7)
+    with ServerThread(lambda node: arm, lockstep(tau_rate_nm_s=5000.0)) as srv:  # 5 Nm per 1 ms cycle
+        s0 = srv.state_seq(0)
+        srv.command(0, [0.0] * 6)  # one joint short
+        pub = srv.ctl.session.declare_publisher(srv.keys.robot_command)
+        pub.put(b"\x00garbage")
+        pub.put(raw_command(0, [float("nan")] * 7))
+        pub.undeclare()
+        srv.command(0, [80.0, 0, 0, 0, 0, 0, -80.0])  # over the 50 Nm limit; the first command has no rate reference
+        s1 = srv.state_seq(1)
+        srv.command(1, [50.0, 20.0, 0, 0, 0, 0, -50.0])  # joint 2 jumps 20 Nm: 5 Nm allowed
+        s2 = srv.state_seq(2)
+        srv.command(2, [1e3] * 7, mode=HOLD)  # torques ignored
+        s3 = srv.state_seq(3)
+        srv.command(3, [0.0, 20.0, 0, 0, 0, 0, 0])  # after a hold the controller ramps in: no rate reference
+        s4 = srv.state_seq(4)
+        st = srv.wait_status(lambda m: m.seq == 4, "a status after step 4")
+        assert arm.steps == 4 and arm.holds == 1
+    assert s1.tau_nm == [50.0, 0, 0, 0, 0, 0, -50.0]
+    assert s2.tau_nm == [50.0, 5.0, 0, 0, 0, 0, -50.0]
+    assert s3.tau_nm == [0.0] * 7 and s3.dq_rad_s == [0.0] * 7 and s3.q_rad == s2.q_rad, "the hold brakes in place"
+    assert s4.tau_nm == [0.0, 20.0, 0, 0, 0, 0, 0]
+    assert s0.tau_nm == [0.0] * 7
+    c = st.counters
+    assert c["commands_dropped_wrong_length"] == 1 and c["commands_clipped"] == 1 and c["commands_rate_limited"] == 1
+    assert c["commands_hold"] == 1 and c["holds_applied"] == 1 and c["mock_holds"] == 1 and c["commands_applied"] == 3
+    bad = {k: v for k, v in c.items() if k.startswith("commands_dropped_bad_payload")}
+    assert sum(bad.values()) == 2 and c["commands_received"] == 7, c
+
+
+@pytest.mark.slow
+def test_realtime_brakes_without_a_command_and_when_the_command_goes_stale():
+    rate_hz, stale_s = 500.0, 0.03
+    arm = MockArm(dt_s=1.0 / rate_hz)
+    params = ServerParams(mode="realtime", rate_hz=rate_hz, stale_limit_s=stale_s, status_rate_hz=100.0)
+    with ServerThread(lambda node: arm, params) as srv:
+        first = srv.wait_status(lambda m: m.seq >= 20, "a status after 20 real-time cycles")
+        assert first.counters["mock_holds"] == first.seq, "no command yet: every cycle holds"
+        srv.command(0, [2.0] * 7)  # once; real time ignores seq and holds the newest command while it is fresh
+        st = srv.wait_status(lambda m: m.counters.get("stale_command_brakes", 0) >= 1, "a stale-command brake")
+        braked = srv.state(lambda s: s.seq > st.seq + 5, "cycles after the brake")
+        later = srv.state(lambda s: s.seq > braked.seq + 20, "20 more cycles")
+    torque_steps = arm.steps - arm.holds
+    # fresh for stale_limit_s: at most stale_s * rate_hz + 1 cycles (fewer when the loop overran)
+    assert 1 <= torque_steps <= stale_s * rate_hz + 1, torque_steps
+    assert arm.holds > first.seq
+    assert braked.dq_rad_s == [0.0] * 7 and later.q_rad == braked.q_rad and later.tau_nm == [0.0] * 7
+    assert braked.q_rad[0] > 0.0, "the command moved the arm while it was fresh"
+    assert st.counters["stale_command_brakes"] == 1 and st.counters["commands_applied"] == 1
+    assert st.timing.ticks > 20
+
+
+def test_max_steps_ends_the_run_and_deactivating_leaves_the_arm_holding():
+    arm = MockArm()
+    with ServerThread(lambda node: arm, lockstep(max_steps=2)) as srv:
+        for k in range(2):
+            srv.state_seq(k)
+            srv.command(k, [1.0] * 7)
+        srv.thread.join(5.0)
+        assert not srv.thread.is_alive() and srv.steps_run == 2
+        final = srv.wait_status(lambda m: m.seq == 2, "the final status")
+    assert arm.steps == 3 and arm.holds == 1, "two torque steps, then deactivate's hold"
+    assert arm.dq.tolist() == [0.0] * 7 and final.counters["commands_applied"] == 2
