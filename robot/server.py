@@ -14,7 +14,7 @@ and reads ``robot/command`` (:class:`~interfaces.messages.TorqueCommand`):
 * clocked ports (a real robot): each new reading is published as it comes;
   each command answering the newest state is written as soon as it arrives;
   a state left unanswered when the next one comes is a late command, and
-  the port holds that cycle; no valid command for ``stale_limit_s`` holds
+  the port holds that cycle; a state unanswered for ``stale_limit_s`` holds
   until one comes. With ``mode = "lockstep"`` the robot itself waits for
   each answer (the lbr peer's lock-step): no deadline, the unanswered state
   is re-sent every ``republish_s``.
@@ -247,7 +247,7 @@ class RobotServer:
                         else:
                             self.counters["answers_one_or_more_states_late"] += 1
                 cmd = inbox.get(0.0)
-            stale = time.monotonic_ns() - last_good_ns > stale_ns
+            stale = time.monotonic_ns() - last_state_ns > stale_ns  # this state's age: a slow robot is not late
             if not lockstep and last_applied < seq and not self.braked and stale:
                 self.counters["stale_command_brakes"] += 1
                 self._apply(HOLD)
