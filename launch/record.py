@@ -32,8 +32,8 @@ from mcap.writer import Writer
 from interfaces.codec import Decoder
 from interfaces.errors import MessageDecodeError
 from interfaces.keys import Keys
-from interfaces.messages import (CameraFrame, ControllerStatus, ControllerTrace, Estop, Message, RobotState,
-                                 ServiceStatus, SimTruth, Stains, TorqueCommand)
+from interfaces.messages import (ArmRequest, CameraFrame, ControllerStatus, ControllerTrace, Estop, Message,
+                                 RobotState, ServiceStatus, SimTruth, Stains, TorqueCommand)
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +56,8 @@ def message_type_of(keys: Keys, key: str) -> type[Message] | None:
     table = {keys.robot_state: RobotState, keys.robot_command: TorqueCommand, keys.perception_stains: Stains,
              keys.perception_status: ServiceStatus, keys.perception_debug: CameraFrame,
              keys.controller_status: ControllerStatus, keys.controller_trace: ControllerTrace,
-             keys.controller_estop: Estop, keys.sim_truth: SimTruth, keys.sim_status: ServiceStatus}
+             keys.controller_estop: Estop, keys.sim_truth: SimTruth, keys.sim_status: ServiceStatus,
+             keys.robot_status: ServiceStatus, keys.robot_arm: ArmRequest}
     if key in table:
         return table[key]
     cam = keys.camera_frame("x")[:-len("x/frame")]
