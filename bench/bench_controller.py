@@ -49,6 +49,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from lampskit.core.skill import save_skill  # noqa: E402
 from lampskit.learn.learn import bundled_skill  # noqa: E402
 from controller.core import ControllerCore  # noqa: E402
 from controller.executor_types import BoardPose, StainState  # noqa: E402
@@ -160,24 +161,44 @@ class Proc:
         return self.proc.returncode
 
 
+def _robot_side(robot: str, mode: str, p1: int, rid: str, bridge: int) -> list[tuple[str, list[str], str]]:
+    """(name, argv, liveliness name) of the robot side's processes: the sim, or the lbr peer and the adapter."""
+    if robot == "sim":
+        return [("sim", [sys.executable, "-m", "sim.cli", "--mode", mode, "--no-camera",
+                         "--listen", f"tcp/127.0.0.1:{p1}", "--robot-id", rid], "sim")]
+    return [("lbr-peer", [sys.executable, "-m", "robot.lbr.peer_cli", "--mode", mode,
+                          "--listen", f"tcp/127.0.0.1:{bridge}", "--robot-id", rid], "lbr-peer"),
+            ("robot", [sys.executable, "-m", "robot.cli", "--backend", "lbr", "--mode", mode, "--arm",
+                       "--connect", f"tcp/127.0.0.1:{bridge}", "--listen", f"tcp/127.0.0.1:{p1}",
+                       "--robot-id", rid], "robot")]
+
+
 @contextlib.contextmanager
-def sim_and_controller(mode: str):
-    """(node, sim Proc, controller Proc) once both services are alive; both stopped on exit."""
-    p1, p2 = free_port(), free_port()
+def sim_and_controller(mode: str, robot: str = "sim"):
+    """(node, robot-side Proc, controller Proc, refusals) once all are alive; all stopped on exit.
+
+    robot ``"sim"``: ``lamps sim``; ``"lbr"``: ``lamps lbr-peer`` (the arm behind lbr_fri_ros2_stack's
+    CDR keys) and ``lamps robot --backend lbr --arm`` in front of it. The controller sees ``robot/*`` alike.
+    """
+    p1, p2, bridge = free_port(), free_port(), free_port()
     rid = f"bench{p1}"
-    realtime = ["--mode", "realtime"] if mode == "realtime" else ["--mode", "lockstep"]
-    sim_cmd = [sys.executable, "-m", "sim.cli", *realtime, "--no-camera", "--listen", f"tcp/127.0.0.1:{p1}",
-               "--robot-id", rid]
-    ctl_cmd = [sys.executable, "-m", "controller.cli", *realtime, "--stains-from", "truth",
-               "--connect", f"tcp/127.0.0.1:{p1}", "--listen", f"tcp/127.0.0.1:{p2}", "--robot-id", rid]
     with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
+        skill = save_skill(Path(tmp) / "skill.json", bundled_skill())
+        ctl_cmd = [sys.executable, "-m", "controller.cli", "--mode", mode, "--stains-from", "truth", "--skill",
+                   str(skill), "--connect", f"tcp/127.0.0.1:{p1}", "--listen", f"tcp/127.0.0.1:{p2}",
+                   "--robot-id", rid]
         procs = []
         stack.callback(lambda: [p.stop() for p in reversed(procs)])
-        procs.append(Proc("sim", sim_cmd, Path(tmp)))
-        time.sleep(0.5)  # let the sim's listener come up before the controller dials it
+        side = _robot_side(robot, mode, p1, rid, bridge)
+        for name, cmd, _ in side:
+            procs.append(Proc(name, cmd, Path(tmp)))
+            time.sleep(0.5)  # let each listener come up before the next one dials it
+        n_side = len(procs)
         procs.append(Proc("controller", ctl_cmd, Path(tmp)))
-        settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{p1}", f"tcp/127.0.0.1:{p2}"), robot_id=rid)
+        ends = (p1, p2) if robot == "sim" else (p1, p2, bridge)  # the peer has the truth and the sim status
+        settings = ZenohSettings(connect=tuple(f"tcp/127.0.0.1:{p}" for p in ends), robot_id=rid)
         node = stack.enter_context(ServiceNode("bench", settings))
+        want = {alive for _, _, alive in side} | {"controller"}
         end = time.monotonic() + 60.0
         refusals: list[str] = []
         while True:
@@ -189,22 +210,24 @@ def sim_and_controller(mode: str):
                 ctl.stop()
                 procs.append(Proc(f"controller{len(refusals)}", ctl_cmd, Path(tmp)))
                 continue
-            for p in (procs[0], procs[-1]):
+            for p in (*procs[:n_side], procs[-1]):
                 p.check()
-            if {"sim", "controller"} <= node.alive_services(0.5):
+            if want <= node.alive_services(0.5):
                 break
             if time.monotonic() > end:
-                raise BenchError("sim and controller not both alive after 60 s; outputs:\n"
+                raise BenchError(f"{sorted(want)} not all alive after 60 s; outputs:\n"
                                  + "\n".join(f"--- {p.name}\n{p.output()}" for p in procs))
             time.sleep(0.2)
-        yield node, procs[0], procs[-1], refusals
+        yield node, procs[n_side - 1], procs[-1], refusals
 
 
 # ---------------------------------------------------------------------------------------------- 2. real time
-def bench_realtime(duration_s: float) -> dict:
-    with sim_and_controller("realtime") as (node, sim, ctl, refusals):
+def bench_realtime(duration_s: float, robot: str = "sim") -> dict:
+    with sim_and_controller("realtime", robot) as (node, sim, ctl, refusals):
         status = node.latest(node.keys.controller_status, ControllerStatus)
         sim_status = node.latest(node.keys.sim_status, ServiceStatus)
+        robot_status = node.latest(node.keys.robot_status, ServiceStatus)
+        last_robot: ServiceStatus | None = None
         samples: list[ControllerStatus] = []
         last_sim: ServiceStatus | None = None
         last: ControllerStatus | None = None
@@ -226,12 +249,14 @@ def bench_realtime(duration_s: float) -> dict:
             ss = sim_status.take()
             if ss is not None:
                 last_sim = ss
+            last_robot = robot_status.take() or last_robot
         # the freshest statuses before stopping (controller at 20 Hz, sim at 2 Hz)
         end = time.monotonic() + 1.0
         while time.monotonic() < end:
             s, ss = status.take(), sim_status.take()
             last = s or last
             last_sim = ss or last_sim
+            last_robot = robot_status.take() or last_robot
             time.sleep(0.05)
         wall = time.monotonic() - t0
     if last is None or not samples:
@@ -252,12 +277,14 @@ def bench_realtime(duration_s: float) -> dict:
             "sim_period_max_us": None if last_sim is None else last_sim.timing.period_max_us,
             "sim_overruns": None if last_sim is None else last_sim.timing.overruns,
             "sim_ticks": None if last_sim is None else last_sim.timing.ticks,
-            "stale_command_brakes": None if last_sim is None else last_sim.counters.get("stale_command_brakes", 0)}
+            "stale_command_brakes": None if last_sim is None else last_sim.counters.get("stale_command_brakes", 0),
+            "robot_counters": None if last_robot is None else dict(last_robot.counters),
+            "robot_detail": None if last_robot is None else last_robot.detail}
 
 
 # ---------------------------------------------------------------------------------------------- 3. lock step
-def bench_lockstep(timeout_s: float) -> dict:
-    with sim_and_controller("lockstep") as (node, sim, ctl, refusals):
+def bench_lockstep(timeout_s: float, robot: str = "sim") -> dict:
+    with sim_and_controller("lockstep", robot) as (node, sim, ctl, refusals):
         status = node.latest(node.keys.controller_status, ControllerStatus)
         truth = node.latest(node.keys.sim_truth, SimTruth)
         samples: list[ControllerStatus] = []

@@ -9,7 +9,9 @@
   :meth:`Latest.take` never blocks. Bad payloads are counted per reason,
   logged (rate-limited) and dropped; the caller never sees an exception.
 * :class:`Inbox` keeps every sample in arrival order (bounded) and lets a
-  loop *wait* for the next one with a timeout: what a lock-step peer needs.
+  loop *wait* for the next one with a timeout: what a lock-step peer needs;
+  it can also set an event shared with other sources, so one loop waits on
+  several at once.
 """
 
 from __future__ import annotations
@@ -106,9 +108,11 @@ class Inbox(Generic[M]):
     :attr:`bad` and dropped there.
     """
 
-    def __init__(self, session: zenoh.Session, key: str, msg_type: type[M], maxlen: int = 64) -> None:
+    def __init__(self, session: zenoh.Session, key: str, msg_type: type[M], maxlen: int = 64,
+                 wake: threading.Event | None = None) -> None:
         self.key = key
         self._decode = Decoder(msg_type)
+        self._wake = wake
         self._queue: deque[M] = deque(maxlen=maxlen)
         self._ready = threading.Condition()
         self._bad = _BadSamples(key)
@@ -128,6 +132,8 @@ class Inbox(Generic[M]):
             self.received += 1
             self._queue.append(msg)
             self._ready.notify()
+        if self._wake is not None:
+            self._wake.set()
 
     def get(self, timeout_s: float) -> M | None:
         """The oldest sample not yet taken, waiting up to ``timeout_s``; None on timeout."""
@@ -184,9 +190,9 @@ class ServiceNode:
         self._readers.append(reader)
         return reader
 
-    def inbox(self, key: str, msg_type: type[M], maxlen: int = 64) -> Inbox[M]:
-        """An in-order reader of ``key`` that can wait for the next sample."""
-        reader = Inbox(self.session, key, msg_type, maxlen)
+    def inbox(self, key: str, msg_type: type[M], maxlen: int = 64, wake: threading.Event | None = None) -> Inbox[M]:
+        """An in-order reader of ``key`` that can wait for the next sample (and sets ``wake`` on each one)."""
+        reader = Inbox(self.session, key, msg_type, maxlen, wake)
         self._readers.append(reader)
         return reader
 

@@ -81,6 +81,9 @@ class RobotPort(ABC):
         """Clocked ports: wait up to ``timeout_s`` for a new measurement (True when one came). Stepped: True."""
         return True
 
+    def set_wake(self, wake) -> None:
+        """Clocked ports: set ``wake`` (a threading.Event) whenever a new measurement arrives. Default: nothing."""
+
     @abstractmethod
     def write(self, tau_nm: np.ndarray) -> None:
         """Apply joint torques (n,) [Nm] for one cycle (already gated: finite, within limits)."""

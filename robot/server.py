@@ -87,6 +87,8 @@ class RobotServer:
                                 params.tau_rate_nm_s, 1.0 / params.rate_hz)
         self.stop = threading.Event()
         self.stats = LoopStats()
+        self._latency_us = np.zeros(2000)  # clocked: state published -> its answer forwarded [us], a ring
+        self._n_latency = 0
         self.steps = 0
         self.braked = True
         self._sources: list = []
@@ -207,7 +209,9 @@ class RobotServer:
         state that got no answer before the next one is a late cycle, which the port holds (it repeats the
         last command while that is fresh). In lock-step only the answer to the current state counts.
         """
-        inbox = self.node.inbox(self.keys.robot_command, TorqueCommand, maxlen=8)
+        wake = threading.Event()  # a new reading or a new command: the loop waits on both at once
+        self.port.set_wake(wake)
+        inbox = self.node.inbox(self.keys.robot_command, TorqueCommand, maxlen=8, wake=wake)
         self._sources = [inbox]
         lockstep = self.p.mode == "lockstep"
         max_lag = 0 if lockstep else max(1, int(self.p.stale_limit_s * self.p.rate_hz))
@@ -217,8 +221,10 @@ class RobotServer:
         last_good_ns = time.monotonic_ns()
         last_state_ns = last_pub_ns = last_good_ns
         while not self.stop.is_set():
+            wake.wait(0.001)
+            wake.clear()
             t0 = time.monotonic_ns()
-            if self.port.wait_reading(0.0005):
+            if self.port.wait_reading(0.0):
                 if seq >= 0 and last_applied < seq:
                     self.counters["commands_late"] += 1
                     if not lockstep:
@@ -243,7 +249,9 @@ class RobotServer:
                         last_applied = cmd.seq
                         last_good_ns = time.monotonic_ns()
                         if cmd.seq == seq:
-                            self.counters["answer_latency_us_last"] = int((last_good_ns - last_state_ns) / 1e3)
+                            self._latency_us[self._n_latency % len(self._latency_us)] = \
+                                (last_good_ns - last_state_ns) / 1e3
+                            self._n_latency += 1
                         else:
                             self.counters["answers_one_or_more_states_late"] += 1
                 cmd = inbox.get(0.0)
@@ -271,6 +279,10 @@ class RobotServer:
             for reason, n in source.bad.items():
                 counters[f"commands_dropped_bad_payload: {reason}"] = n
         counters.update(self.port.counters())
+        if self._n_latency:  # the round trip through the controller, as the robot side sees it
+            lat = self._latency_us[:min(self._n_latency, len(self._latency_us))]
+            p50, p99 = np.percentile(lat, [50, 99])
+            counters.update(answer_latency_p50_us=int(p50), answer_latency_p99_us=int(p99))
         detail = f"mode={'clocked' if self.port.clocked else self.p.mode} step={self.steps} braked={self.braked}"
         extra = self.port.detail()
         return ServiceStatus(service=self.service, seq=self.steps, stamp_ns=time.monotonic_ns(), counters=counters,

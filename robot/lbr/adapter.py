@@ -80,6 +80,7 @@ class LbrPort(RobotPort):
         self._velocity = VelocityFilter(7, params.velocity_cutoff_hz)
         self._hold_damping = np.array(params.hold_damping_nm_s_rad)
         self._cond = threading.Condition()
+        self._wake: threading.Event | None = None
         self._inbox: LbrState | None = None
         self._state: LbrState | None = None
         self._reading = Reading(np.zeros(7), np.zeros(7), np.zeros(7), np.zeros(6), 0, dq_estimated=True)
@@ -108,6 +109,8 @@ class LbrPort(RobotPort):
             self.counts["states_received"] += 1
             self._inbox = st
             self._cond.notify()
+        if self._wake is not None:
+            self._wake.set()
 
     def _on_joint_states(self, sample) -> None:
         try:
@@ -143,6 +146,9 @@ class LbrPort(RobotPort):
         self._poll_arm_requests()
         self._check_session()
         return True
+
+    def set_wake(self, wake: threading.Event) -> None:
+        self._wake = wake
 
     def read(self) -> Reading:
         return self._reading
@@ -203,6 +209,7 @@ class LbrPort(RobotPort):
             self.disarm_reason = f"arming refused: {why}"
             return False
         self.armed, self.arm_pending = True, False
+        self.disarm_reason = ""  # the status's why= is for not commanding; an old refusal must not show
         self._tau_prev, self._holding_since_ns = None, None
         self.counts["arms"] += 1
         log.warning("lbr: ARMED (%s): commanding torques", reason or "request")
