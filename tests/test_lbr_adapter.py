@@ -272,6 +272,7 @@ def test_arming_is_refused_until_the_session_commands_and_a_disarm_request_stops
         s = cell.step(Q0)
         st = cell.request(True, "arms")
         assert "armed=True" in st.detail and "session=COMMANDING_ACTIVE" in st.detail, st.detail
+        assert "refused" not in st.detail, f"a refusal from before arming still shown: {st.detail}"
         cell.answer(s, np.ones(7))
         n = len(cell.stack.commands)
         st = cell.request(False, "disarms")
@@ -291,7 +292,7 @@ def test_the_arm_parameter_arms_as_soon_as_the_session_allows():
         _, jp, tau = cell.answer(cell.step(Q0 + 1e-6), np.full(7, 0.5))  # the first commanding state
         assert jp.tolist() == (Q0 + 1e-6).tolist() and tau.tolist() == [0.5] * 7
         st = cell.wait_status(lambda m: "armed=True" in m.detail, "a status saying armed")
-    assert st.counters["arms"] == 1
+    assert st.counters["arms"] == 1 and "not armed yet" not in st.detail, st.detail
 
 
 # --------------------------------------------------------------------------
