@@ -212,7 +212,7 @@ def test_states_arrive_as_robot_states_in_joint_order_with_estimated_velocity_an
     assert first.dq_rad_s == [0.0] * 7, "no velocity before a second sample"
     np.testing.assert_allclose(last.dq_rad_s, v, rtol=0.01)
     np.testing.assert_allclose(last.wrench_world, F, rtol=0.01, atol=0.05)
-    assert abs(last.stamp_ns - time.monotonic_ns()) < 60e9 and last.wall_ns > 0
+    assert first.stamp_ns < last.stamp_ns and first.wall_ns <= last.wall_ns, "the server's own clocks"
 
 
 # --------------------------------------------------------------------------
