@@ -276,7 +276,7 @@ class RobotServer:
         counters = dict(self.counters)
         for source in self._sources:
             counters["commands_received"] = counters.get("commands_received", 0) + source.received
-            for reason, n in source.bad.items():
+            for reason, n in list(source.bad.items()):  # Zenoh's thread may add a reason meanwhile
                 counters[f"commands_dropped_bad_payload: {reason}"] = n
         counters.update(self.port.counters())
         if self._n_latency:  # the round trip through the controller, as the robot side sees it

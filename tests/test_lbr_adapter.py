@@ -602,9 +602,12 @@ def test_wrong_joint_names_are_counted_and_arming_is_refused_until_they_are_righ
 
 
 @pytest.mark.parametrize("kw, why", [
-    ({"session": READY}, "robot left commanding (session MONITORING_READY, safety NORMAL_OPERATION)"),
+    ({"session": READY},
+     "robot left commanding (session MONITORING_READY, safety NORMAL_OPERATION, drives ACTIVE)"),
     ({"safety": SafetyState.SAFETY_STOP_LEVEL_1},
-     "robot left commanding (session COMMANDING_ACTIVE, safety SAFETY_STOP_LEVEL_1)"),
+     "robot left commanding (session COMMANDING_ACTIVE, safety SAFETY_STOP_LEVEL_1, drives ACTIVE)"),
+    ({"drive": DriveState.OFF},
+     "robot left commanding (session COMMANDING_ACTIVE, safety NORMAL_OPERATION, drives OFF)"),
 ])
 def test_leaving_commanding_while_armed_disarms(kw, why):
     with Cell() as cell:

@@ -160,9 +160,9 @@ class LbrPort(RobotPort):
             return
         r = self._reading
         # the rate guard compares with the last sent command over the robot time since (late cycles in between)
-        since_s = (r.robot_time_ns - self._tau_prev_ns) * 1e-9 if self._tau_prev is not None else 0.0
-        dt_s = max(self._state.sample_time_s, since_s)
-        reason = guard_trip(r.q_rad, r.dq_rad_s, tau_nm, self._tau_prev, dt_s, self.limits)
+        since_s = (r.robot_time_ns - self._tau_prev_ns) * 1e-9 if self._tau_prev is not None else None
+        reason = guard_trip(r.q_rad, r.dq_rad_s, tau_nm, self._tau_prev, self._state.sample_time_s, self.limits,
+                            since_s)
         if reason is not None:
             self.counts["guard_trips"] += 1
             self.disarm(f"guard: {reason}")
@@ -202,6 +202,8 @@ class LbrPort(RobotPort):
     # -- arming ------------------------------------------------------------------------------------
     def arm(self, reason: str = "") -> bool:
         """Start commanding if the robot's session allows it; False (and why, logged) otherwise."""
+        if self.armed:
+            return True
         why = self._cannot_arm()
         if why is not None:
             self.counts["arm_refused"] += 1
@@ -250,9 +252,10 @@ class LbrPort(RobotPort):
 
     def _check_session(self) -> None:
         st = self._state
-        if self.armed and (st.session_state not in COMMANDING or st.safety_state != SafetyState.NORMAL_OPERATION):
+        if self.armed and (st.session_state not in COMMANDING or st.safety_state != SafetyState.NORMAL_OPERATION
+                           or st.drive_state != DriveState.ACTIVE):
             self.disarm(f"robot left commanding (session {_name(SessionState, st.session_state)}, safety "
-                        f"{_name(SafetyState, st.safety_state)})")
+                        f"{_name(SafetyState, st.safety_state)}, drives {_name(DriveState, st.drive_state)})")
 
     # -- pieces ------------------------------------------------------------------------------------
     def _take(self, st: LbrState) -> None:

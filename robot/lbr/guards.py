@@ -45,8 +45,12 @@ def joint_name(i: int) -> str:
 
 
 def guard_trip(q: np.ndarray, dq: np.ndarray, tau: np.ndarray, tau_prev: np.ndarray | None, dt_s: float,
-               limits: GuardLimits) -> str | None:
-    """The reason ``tau`` (n,) [Nm] must not be sent at ``q``, ``dq`` (n,), or None. ``tau_prev``: last sent."""
+               limits: GuardLimits, since_prev_s: float | None = None) -> str | None:
+    """The reason ``tau`` (n,) [Nm] must not be sent at ``q``, ``dq`` (n,), or None.
+
+    ``dt_s`` : the robot's period [s] (how far the position check looks ahead); ``tau_prev`` : the last
+    command sent, ``since_prev_s`` [s] ago (default ``dt_s``), for the torque-rate check.
+    """
     for name, v in (("position", q), ("velocity", dq), ("torque", tau)):
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
@@ -68,11 +72,12 @@ def guard_trip(q: np.ndarray, dq: np.ndarray, tau: np.ndarray, tau_prev: np.ndar
         return f"joint {joint_name(i)} torque {tau[i]:+.1f} Nm over the limit {limits.tau_max_nm[i]:.1f} Nm"
     if tau_prev is not None:
         step = np.abs(tau - tau_prev)
-        allowed = limits.tau_rate_nm_s * max(dt_s, 1e-4)
+        since = dt_s if since_prev_s is None else max(since_prev_s, dt_s)
+        allowed = limits.tau_rate_nm_s * max(since, 1e-4)
         over = np.flatnonzero(step > allowed)
         if over.size:
             i = int(over[0])
-            return (f"joint {joint_name(i)} torque step {step[i]:.1f} Nm in {dt_s * 1e3:.1f} ms over the rate limit "
+            return (f"joint {joint_name(i)} torque step {step[i]:.1f} Nm in {since * 1e3:.1f} ms over the rate limit "
                     f"{limits.tau_rate_nm_s:g} Nm/s")
     return None
 
