@@ -39,10 +39,15 @@ class CommandGate:
         self.tau = np.zeros_like(self.tau_max)
         self._prev = np.zeros_like(self.tau_max)
         self._have_prev = False
-        self._max_step = float(tau_rate_nm_s) * float(dt_s)
+        self._rate = float(tau_rate_nm_s)
+        self._max_step = self._rate * float(dt_s)
 
-    def accept(self, cmd: TorqueCommand) -> np.ndarray | str | None:
-        """Clipped torques (n,) [Nm] (a buffer reused by the next call), ``"hold"``, or None if dropped."""
+    def accept(self, cmd: TorqueCommand, elapsed_s: float | None = None) -> np.ndarray | str | None:
+        """Clipped torques (n,) [Nm] (a buffer reused by the next call), ``"hold"``, or None if dropped.
+
+        ``elapsed_s`` : time since the last applied command [s] (default one cycle): the rate limit allows
+        ``tau_rate_nm_s`` times that, so commands that come late or after skipped periods are not clipped.
+        """
         if cmd.mode == HOLD:
             self.counters["commands_hold"] += 1
             self._have_prev = False  # after a brake the controller ramps in; no rate reference
@@ -57,9 +62,10 @@ class CommandGate:
         if np.any(np.abs(self.tau) > self.tau_max):
             self.counters["commands_clipped"] += 1
             np.clip(self.tau, -self.tau_max, self.tau_max, out=self.tau)
-        if self._have_prev and np.any(np.abs(self.tau - self._prev) > self._max_step):
+        max_step = self._max_step if elapsed_s is None else max(self._max_step, self._rate * elapsed_s)
+        if self._have_prev and np.any(np.abs(self.tau - self._prev) > max_step):
             self.counters["commands_rate_limited"] += 1
-            np.clip(self.tau, self._prev - self._max_step, self._prev + self._max_step, out=self.tau)
+            np.clip(self.tau, self._prev - max_step, self._prev + max_step, out=self.tau)
         self._prev[:] = self.tau
         self._have_prev = True
         self.counters["commands_applied"] += 1

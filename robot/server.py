@@ -178,7 +178,7 @@ class RobotServer:
             t0 = time.monotonic_ns()
             cmd = latest.take()
             if cmd is not None:
-                accepted = self.gate.accept(cmd)
+                accepted = self.gate.accept(cmd, (t0 - last_cmd_ns) * 1e-9)
                 if accepted is not None:
                     held = accepted if isinstance(accepted, str) else accepted.copy()
                     last_cmd_ns = t0
@@ -242,7 +242,7 @@ class RobotServer:
                 if cmd.seq <= last_applied or not 0 <= seq - cmd.seq <= max_lag:
                     self.counters["commands_out_of_sequence"] += 1
                 else:
-                    command = self.gate.accept(cmd)
+                    command = self.gate.accept(cmd, None if lockstep else (time.monotonic_ns() - last_good_ns) * 1e-9)
                     if command is not None:
                         self._apply(command)
                         self.port.after_cycle(lockstep=lockstep)
