@@ -337,10 +337,10 @@ def test_guard_torque_step_over_the_rate_limit_disarms():
         n = len(cell.stack.commands)
         s = cell.step(Q0)
         cell.ctl.publish(cell.keys.robot_command, TorqueCommand(seq=s.seq, stamp_ns=1,
-                                                                tau_nm=[1.0, 4.0, 1.0, 1.0, 1.0, 1.0, 1.0]))
+                                                                tau_nm=[1.0, 7.0, 1.0, 1.0, 1.0, 1.0, 1.0]))
         wait_for(lambda: len(cell.stack.commands) > n, 5.0, "the trip's last hold")
-        _tripped(cell, s, "joint A2 torque step 3.0 Nm in 1.0 ms over the rate limit 2000 Nm/s")
-    assert [tau[1] for _, _, tau in cell.stack.commands] == [1.0, 0.0], "the 4 Nm never went out"
+        _tripped(cell, s, "joint A2 torque step 6.0 Nm in 1.0 ms over the rate limit 5000 Nm/s")
+    assert [tau[1] for _, _, tau in cell.stack.commands] == [1.0, 0.0], "the 7 Nm never went out"
 
 
 def test_guard_torque_over_the_limit_disarms_and_the_gate_clips_before_it():

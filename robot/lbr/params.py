@@ -15,7 +15,7 @@
     hold_timeout_s = 0.5                     # holding this long without a controller command: stop commanding
     stale_limit_s = 0.005                    # a controller answer later than this is not sent; hold instead
     max_joint_speed_scale = 0.8              # guard: this share of the description's joint speed limits
-    tau_rate_nm_s = 2000.0                   # guard: torque change per second
+    tau_rate_nm_s = 5000.0                   # guard: torque change per second (the controller keeps to ~1000)
     limit_margin_rad = 0.05                  # guard: distance kept from the joint position limits
     arm = false                              # arm at start-up (else: an ArmRequest on robot/arm)
 """
@@ -55,7 +55,7 @@ class LbrParams:
     hold_timeout_s: float = 0.5
     stale_limit_s: float = 0.005
     max_joint_speed_scale: float = 0.8
-    tau_rate_nm_s: float = 2000.0
+    tau_rate_nm_s: float = 5000.0
     limit_margin_rad: float = 0.05
     arm: bool = False
 
