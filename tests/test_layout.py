@@ -69,7 +69,8 @@ def _imports(path: Path) -> list[tuple[int, str]]:
                        "perception", "launch", "scipy", "sklearn", "matplotlib")),
     ("lampskit/learn", ("lampskit.figures", "lampskit.cli", "interfaces", "controller", "sim", "perception", "launch")),
     ("controller", ("lampskit.learn", "lampskit.figures", "lampskit.cli", "matplotlib", "sklearn", "sim",
-                    "perception", "launch")),
+                    "perception", "launch", "robot")),
+    ("robot", ("lampskit.learn", "lampskit.figures", "controller", "perception", "launch", "matplotlib", "sklearn")),
 ])
 def test_no_module_imports_across_the_layout(folder, forbidden):
     """Static: a lazy import inside a function counts too."""
