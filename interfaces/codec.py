@@ -3,7 +3,8 @@
 ``encode(msg) -> bytes`` and ``decode(data, RobotState) -> RobotState``;
 :class:`Decoder` is the reusable form for a hot loop (one msgspec decoder
 built once). Any failure, garbage, truncation, another message type, another
-schema version, a value out of range, raises
+schema version, a value out of range, a payload larger than its type may be
+(refused before parsing), raises
 :class:`~interfaces.errors.MessageDecodeError` whose text names the problem.
 """
 
@@ -14,7 +15,7 @@ from typing import Generic, TypeVar
 import msgspec
 
 from .errors import MessageDecodeError
-from .messages import SCHEMA_VERSION, Message
+from .messages import MAX_PAYLOAD_BYTES, SCHEMA_VERSION, Message
 
 M = TypeVar("M", bound=Message)
 
@@ -32,8 +33,17 @@ class Decoder(Generic[M]):
     def __init__(self, msg_type: type[M]) -> None:
         self.msg_type = msg_type
         self._decoder = msgspec.msgpack.Decoder(msg_type)
+        #: payloads larger than this [bytes] are refused unparsed (:data:`~interfaces.messages.MAX_PAYLOAD_BYTES`)
+        self.max_bytes = MAX_PAYLOAD_BYTES.get(msg_type, 1_048_576)
+
+    def check_size(self, n_bytes: int) -> None:
+        """Raise MessageDecodeError for a payload of ``n_bytes`` larger than this type may be (nothing parsed)."""
+        if n_bytes > self.max_bytes:
+            raise MessageDecodeError(f"oversized {self.msg_type.__name__} payload: {n_bytes} bytes > "
+                                     f"{self.max_bytes}, not parsed")
 
     def __call__(self, data: bytes | bytearray | memoryview) -> M:
+        self.check_size(len(data))
         try:
             msg = self._decoder.decode(data)
         except Exception as exc:  # any failure (incl. RecursionError on absurd nesting) is a bad payload

@@ -402,3 +402,13 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     RobotState, TorqueCommand, CameraFrame, Stains, ControllerStatus, ControllerTrace, ServiceStatus, Estop, SimTruth,
     ArmRequest,
 )
+
+#: The largest payload [bytes] each message type may legitimately have. Receivers drop a larger one, counted,
+#: before parsing it (a huge well-formed message must not stall a 1 kHz loop). Each bound is far above what
+#: the cell sends: a 7-joint RobotState is about 0.4 kB, a TorqueCommand 0.1 kB, a 640x480 rgb8 frame 0.9 MB
+#: (1920x1080 raw: 6.2 MB), a 50 ms trace batch about 15 kB, a status with its counters a few kB.
+MAX_PAYLOAD_BYTES: dict[type[Message], int] = {
+    RobotState: 16_384, TorqueCommand: 4_096, CameraFrame: 16_000_000, Stains: 262_144,
+    ControllerStatus: 65_536, ControllerTrace: 1_048_576, ServiceStatus: 65_536, Estop: 4_096,
+    SimTruth: 262_144, ArmRequest: 4_096,
+}

@@ -74,6 +74,7 @@ class Latest(Generic[M]):
             return None
         self.received += 1
         try:
+            self._decode.check_size(len(sample.payload))  # before copying it out: a huge one is never parsed
             return self._decode(sample.payload.to_bytes())
         except MessageDecodeError as exc:
             self._bad.count(str(exc))
@@ -122,6 +123,7 @@ class Inbox(Generic[M]):
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
+            self._decode.check_size(len(sample.payload))  # before copying it out: a huge one is never parsed
             msg = self._decode(sample.payload.to_bytes())
         except MessageDecodeError as exc:
             with self._ready:

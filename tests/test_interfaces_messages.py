@@ -13,6 +13,7 @@ from interfaces.config import ZenohSettings, load_config
 from interfaces.errors import ConfigError, MessageDecodeError
 from interfaces.keys import Keys
 from interfaces.messages import (
+    MAX_PAYLOAD_BYTES,
     MESSAGE_TYPES,
     SCHEMA_VERSION,
     ArmRequest,
@@ -223,3 +224,18 @@ def test_bad_config_names_the_problem(tmp_path, text, env, match):
 def test_missing_config_file(tmp_path):
     with pytest.raises(ConfigError, match="no such config file"):
         load_config(tmp_path / "nope.toml", env={})
+
+
+def test_a_payload_larger_than_its_type_may_be_is_refused_unparsed():
+    dec = Decoder(TorqueCommand)
+    ok = encode(TorqueCommand(seq=1, stamp_ns=2, tau_nm=[0.5] * 7))
+    assert dec(ok).seq == 1 and len(ok) < dec.max_bytes
+    with pytest.raises(MessageDecodeError, match=r"oversized TorqueCommand payload: 1000000 bytes > 4096, not parsed"):
+        dec(b"\x00" * 1_000_000)  # garbage: had it been parsed the error would say "not a msgpack message"
+    big = encode(TorqueCommand(seq=1, stamp_ns=2, tau_nm=[0.5] * 1000))
+    with pytest.raises(MessageDecodeError, match="oversized TorqueCommand"):
+        dec(big)
+    for t in MESSAGE_TYPES:  # every type has its bound, and the samples above are all well inside theirs
+        assert t in MAX_PAYLOAD_BYTES
+    for msg in samples():
+        assert len(encode(msg)) < MAX_PAYLOAD_BYTES[type(msg)]

@@ -89,6 +89,27 @@ def test_bad_samples_are_counted_and_dropped_and_the_reader_goes_on(peers):
     raw.undeclare()
 
 
+def test_an_oversized_sample_is_dropped_before_it_is_parsed(peers):
+    """A well-formed RobotState 10x larger than any robot's is counted and dropped; the next good one decodes."""
+    sim, ctrl = peers
+    states = ctrl.latest(ctrl.keys.robot_state, RobotState)
+    inbox = ctrl.inbox(ctrl.keys.robot_state, RobotState)
+    wait_subscribed(sim.session, sim.keys.robot_state)
+    n = 20_000  # joints: about 0.5 MB, well-formed, and would cost a 1 kHz loop milliseconds to decode
+    huge = RobotState(seq=1, stamp_ns=1, q_rad=[0.1] * n, dq_rad_s=[0.0] * n, tau_nm=[0.0] * n,
+                      wrench_world=[0.0] * 6, capabilities=Capabilities(False, [1.0] * n))
+    payload = encode(huge)
+    assert len(payload) > 10 * 16_384
+    sim.session.put(sim.keys.robot_state, payload)
+    wait_for(lambda: states.take() is None and states.received >= 1, what="the newest-sample reader taking it")
+    wait_for(lambda: inbox.received >= 1, what="the in-order reader taking it")
+    for reader in (states, inbox):
+        assert list(reader.bad) == ["oversized RobotState payload"], reader.bad
+    assert inbox.get(0.0) is None
+    sim.publish(sim.keys.robot_state, state(2))
+    assert wait_for(states.take).seq == 2 and inbox.get(5.0).seq == 2
+
+
 def test_liveliness_follows_the_service():
     port = free_port()
     robot = f"t{port}"
