@@ -620,3 +620,13 @@ def test_leaving_commanding_while_armed_disarms(kw, why):
         st = cell.wait_status(lambda m: "armed=False" in m.detail, "a status saying disarmed")
     assert f"why='{why}'" in st.detail, st.detail
     assert st.counters["disarms"] == 1 and st.counters["commands_sent"] == 1
+
+
+def test_states_stopping_while_armed_disarms():
+    """The stack or the bridge gone: no state for hold_timeout_s disarms, so commanding never resumes on stale data."""
+    with Cell(lbr={"hold_timeout_s": 0.2}) as cell:
+        cell.armed()
+        cell.answer(cell.step(Q0), np.ones(7))
+        st = cell.wait_status(lambda m: "armed=False" in m.detail, "a status saying disarmed", timeout_s=5.0)
+    assert "why='no robot state for" in st.detail and "stack or bridge gone" in st.detail, st.detail
+    assert st.counters["disarms"] == 1

@@ -24,7 +24,7 @@ must not step the torque), then damping torques ``-D dq`` with the measured
 joint position; after
 ``hold_timeout_s`` of holding the adapter disarms and stops commanding, so
 that the robot's own FRI watchdog ends the session and the robot stops.
-Disarming (stop, signal, controller loss, guard trip, session lost) sends
+Disarming (stop, signal, controller loss, guard trip, session lost, no robot state for ``hold_timeout_s``) sends
 one last hold and says why (log, status).
 """
 
@@ -89,6 +89,7 @@ class LbrPort(RobotPort):
         self._tau_prev: np.ndarray | None = None
         self._tau_prev_ns = 0
         self._holding_since_ns: int | None = None
+        self._last_state_ns: int | None = None
         topics = params.topics
         s = node.session
         self._subs = [s.declare_subscriber(topics.key(topics.state), self._on_state),
@@ -137,8 +138,10 @@ class LbrPort(RobotPort):
         with self._cond:
             if self._inbox is None and not self._cond.wait_for(lambda: self._inbox is not None, timeout_s):
                 self._poll_arm_requests()
+                self._check_states_flow()
                 return False
             st, self._inbox = self._inbox, None
+        self._last_state_ns = time.monotonic_ns()  # a re-sent state too: the robot is there, waiting
         if self._state is not None and st.stamp_ns == self._state.stamp_ns:
             self.counts["states_repeated"] += 1  # a peer re-sending while it waits: nothing new
             return False
@@ -249,6 +252,14 @@ class LbrPort(RobotPort):
                 self.arm(f"request from {req.source[:40] or 'unknown'}: {req.reason[:80]}")
             else:
                 self.disarm(f"disarm request from {req.source[:40] or 'unknown'}: {req.reason[:80]}")
+
+    def _check_states_flow(self) -> None:
+        """Armed without a robot state for ``hold_timeout_s`` (the stack or the bridge gone): disarm, so that the
+        adapter never resumes commanding from a stale picture when states come back."""
+        if self.armed and self._last_state_ns is not None:
+            silent_s = (time.monotonic_ns() - self._last_state_ns) * 1e-9
+            if silent_s > self.p.hold_timeout_s:
+                self.disarm(f"no robot state for {silent_s * 1e3:.0f} ms (stack or bridge gone)")
 
     def _check_session(self) -> None:
         st = self._state
