@@ -7,11 +7,19 @@ dynamically consistent generalised inverse Jbar = M^-1 J^T Lambda::
     e      = [p_ref - p ; log(R_ref R^T)]          pose error, world axes
     de     = v_ref - J dq                          twist error
     F      = Lambda (a_ref - dJ dq) + K e + D de   (6,) task wrench
-    D      = 2 zeta sqrt(K Lambda)                 per axis, on the diagonal of Lambda
+    D      = 2 zeta per mode of Lambda on K        (see :func:`task_modes`)
     tau    = J^T F + N^T tau_0 + C(q, dq) dq [+ g(q)]
     N^T    = I - J^T Jbar^T                        consistent nullspace projector
     tau_0  = M (K_n (q_rest - q) - 2 sqrt(K_n) dq) posture
 
+The damping is designed on the modes of the task-space mass on the
+stiffness (double diagonalisation): each mode is damped with ratio zeta.
+Damping each axis with Lambda's diagonal instead over-damps the modes
+whose mass is much smaller than that diagonal (the wrist: 4x critical at
+the start pose), and a damper that strong on a light joint is unstable
+with two periods of loop delay. No mode is stiffer than
+``max_mode_frequency_rad_s`` either (the wrist's spin on K_r alone would
+be at ~350 rad/s): the loop's delay margin is then known, whatever the pose.
 The feed-forward Lambda (a_ref - dJ dq) cancels the inertia of the
 tracked motion (dJ dq is the pad's acceleration at zero joint acceleration,
 the velocity-product part); without it a 1 Hz circle of 5 cm radius is
@@ -140,6 +148,49 @@ class TaskShaping:
 _PLAIN = TaskShaping()
 
 
+@dataclass
+class TaskModes:
+    """Stiffness and damping of the task as modes: ``K = B diag(k) B^T``, ``D = B diag(d) B^T``.
+
+    B (6, 6): the mode shapes, scaled so that ``B^-1 Lambda B^-T`` is
+    diagonal too (the modal masses); k (6,), d (6,): modal stiffness and
+    damping (multiply by the 6-vectors in ``B^T`` coordinates).
+    """
+
+    B: np.ndarray
+    k: np.ndarray
+    d: np.ndarray
+
+    def wrench(self, e: np.ndarray, de: np.ndarray) -> np.ndarray:
+        """K e + D de (6,) for pose error ``e`` (6,) and twist error ``de`` (6,), without forming K or D."""
+        B = self.B
+        return B @ (self.k * (B.T @ e) + self.d * (B.T @ de))
+
+    def stiffness(self) -> np.ndarray:
+        """K (6, 6)."""
+        return (self.B * self.k) @ self.B.T
+
+    def damping(self) -> np.ndarray:
+        """D (6, 6)."""
+        return (self.B * self.d) @ self.B.T
+
+
+def task_modes(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float) -> TaskModes:
+    """The modes of task mass ``Lam`` (6, 6) on diagonal stiffness ``K`` (6,), capped and damped.
+
+    With S = diag(sqrt(K)) and ``S^-1 Lam S^-1 = U diag(m) U^T``, B = S U:
+    mode i has mass m_i and unit stiffness (natural frequency 1/sqrt(m_i)).
+    A mode faster than ``max_omega_rad_s`` gets stiffness ``max_omega^2 m_i``
+    (it then rings at exactly the cap); every mode gets damping
+    ``2 zeta sqrt(k_i m_i)``. Without a capped mode K is ``diag(K)`` exactly.
+    """
+    s = np.sqrt(K)
+    m, U = np.linalg.eigh(Lam / np.outer(s, s))
+    m = np.clip(m, 1e-12, None)
+    k = np.minimum(1.0, max_omega_rad_s * max_omega_rad_s * m)
+    return TaskModes(s[:, None] * U, k, 2.0 * zeta * np.sqrt(k * m))
+
+
 def _clip_norm(v: np.ndarray, limit: float) -> None:
     n = float(np.linalg.norm(v))
     if n > limit:
@@ -170,8 +221,11 @@ def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Refe
         for v in (e, de, a):
             v[:3] -= (v[:3] @ n) * n
     K = shaping.stiffness_scale * np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
-    D = 2.0 * params.damping_factor * np.sqrt(K * np.clip(np.diag(Lam), 1e-6, None))
-    F = Lam @ a + K * e + D * de
+    modes = task_modes(Lam, K, params.damping_factor, params.max_mode_frequency_rad_s)
+    F = modes.wrench(e, de)
+    if n is not None:
+        F[:3] -= (F[:3] @ n) * n  # the coupled modes must not push along the force-regulated axis
+    F += Lam @ a  # with its normal part: what keeps the normal acceleration zero under in-plane motion
     if n is not None:
         lam_n = float(n @ Lam[:3, :3] @ n)
         F[:3] -= (shaping.press_n + lam_n * shaping.normal_damping_1_s * float(twist[:3] @ n)) * n

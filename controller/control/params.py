@@ -23,8 +23,13 @@ class ImpedanceParams:
     """Cartesian impedance at the pad centre (world axes).
 
     stiffness_n_m : translational stiffness K_t [N/m]; stiffness_nm_rad :
-    rotational K_r [Nm/rad]. damping_factor : zeta in D = 2 zeta sqrt(K Lambda)
-    per axis (1 = critical damping of the task-space mass Lambda).
+    rotational K_r [Nm/rad]. damping_factor : zeta, the damping ratio of
+    every mode of the task-space mass Lambda on K (1 = critical; the damping
+    matrix comes from the modes, not from Lambda's diagonal).
+    max_mode_frequency_rad_s : no mode of Lambda on K is stiffer than this
+    natural frequency [rad/s]: a mode above it (the spin of a light wrist on
+    K_r) gets the stiffness that puts it there. The loop's delay sets it:
+    keep it times the round trip (state -> command applied) below ~0.35.
     nullspace_stiffness_nm_rad : posture spring K_n [Nm/rad] (its damping
     is critical for a unit inertia, scaled by M) pulling towards the rest posture.
     """
@@ -32,10 +37,12 @@ class ImpedanceParams:
     stiffness_n_m: float = 1500.0
     stiffness_nm_rad: float = 150.0
     damping_factor: float = 1.0
+    max_mode_frequency_rad_s: float = 120.0
     nullspace_stiffness_nm_rad: float = 10.0
 
     def __post_init__(self) -> None:
         _positive("stiffness_n_m", self.stiffness_n_m, 1e5)
         _positive("stiffness_nm_rad", self.stiffness_nm_rad, 1e4)
         _positive("damping_factor", self.damping_factor, 5.0)
+        _positive("max_mode_frequency_rad_s", self.max_mode_frequency_rad_s, 2000.0)
         _positive("nullspace_stiffness_nm_rad", self.nullspace_stiffness_nm_rad, 1e3, zero_ok=True)
