@@ -138,6 +138,7 @@ class ControllerService:
         state: RobotState | None = None
         state_ns = 0
         answered_seq = -1
+        robot_rate = 0.0
         next_ns = time.monotonic_ns()
         t_prev = next_ns
         while not self.stop.is_set():
@@ -146,6 +147,8 @@ class ControllerService:
             if new is not None:
                 if state is not None and new.seq < state.seq or self._lost:
                     self._robot_back(new)
+                if new.capabilities.state_rate_hz != robot_rate:
+                    robot_rate = self._check_robot_rate(new.capabilities.state_rate_hz)
                 state, state_ns = new, t0
             self._poll_estop()
             age_ns = t0 - state_ns
@@ -226,6 +229,15 @@ class ControllerService:
                 dt = measured
         self._last_robot_ns = state.robot_time_ns
         return dt
+
+    def _check_robot_rate(self, robot_hz: float) -> float:
+        """Say so (once per change) when the robot declares a state rate other than this loop's; returns it."""
+        if robot_hz > 0 and abs(robot_hz - self.p.rate_hz) > 0.1 * robot_hz:
+            self.counters["robot_state_rate_differs"] += 1
+            log.warning("the robot publishes states at %.0f Hz, this controller ticks at %.0f Hz: set "
+                        "[controller] rate_hz = %.0f (a faster loop answers the same state again, a slower one "
+                        "leaves states unanswered)", robot_hz, self.p.rate_hz, robot_hz)
+        return robot_hz
 
     def _check_lost(self, silence_s: float) -> None:
         if self._ever_state and not self._lost and silence_s >= self.p.robot_lost_s:

@@ -99,18 +99,25 @@ class Capabilities(msgspec.Struct, frozen=True, array_like=True):
 
     gravity_compensated : the robot adds gravity torques itself (the real iiwa
     does); the controller must not add them again. torque_limits_nm : (n,)
-    absolute joint torque limits [Nm]. backend : ``"sim"`` or ``"real"`` (for
-    logs only; controllers must not branch on it).
+    absolute joint torque limits [Nm]. backend : ``"sim"``, ``"lbr"``, ... (for
+    logs only; controllers must not branch on it). state_rate_hz : how often
+    the robot samples and publishes its state [Hz] (the FRI rate; 0 = not
+    declared): a real-time controller faster than it only answers the same
+    state again.
     """
 
     gravity_compensated: bool
     torque_limits_nm: list[float]
     backend: str = "sim"
+    state_rate_hz: float = 0.0
 
     def __post_init__(self) -> None:
         _finite("torque_limits_nm", self.torque_limits_nm)
         if any(v <= 0 for v in self.torque_limits_nm):
             raise ValueError("torque_limits_nm must be positive")
+        _finite("state_rate_hz", [self.state_rate_hz])
+        if self.state_rate_hz < 0:
+            raise ValueError("state_rate_hz must be >= 0 (0: not declared)")
 
 
 class RobotState(Message, frozen=True):

@@ -27,7 +27,7 @@ class MockArm(RobotPort):
         self.tau = np.zeros(7)
         self.dt_s, self.inertia, self.damping = dt_s, inertia_kg_m2, damping_nm_s_rad
         limits = np.full(7, 100.0) if tau_max_nm is None else np.asarray(tau_max_nm, float)
-        self.capabilities = Capabilities(True, limits.tolist(), "mock")
+        self.capabilities = Capabilities(True, limits.tolist(), "mock", 1.0 / dt_s)
         self.steps = 0
         self.holds = 0
 

@@ -40,7 +40,7 @@ class SimPort(RobotPort):
         self.node = node
         self.keys = node.keys
         self.core = core
-        self.capabilities = Capabilities(params.gravity_compensated, core.tau_max.tolist(), "sim")
+        self.capabilities = Capabilities(params.gravity_compensated, core.tau_max.tolist(), "sim", params.rate_hz)
         self.camera: CameraProcess | None = None
         self._camera_thread: threading.Thread | None = None
         self._extra: Counter[str] = Counter()

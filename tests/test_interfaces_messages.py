@@ -239,3 +239,10 @@ def test_a_payload_larger_than_its_type_may_be_is_refused_unparsed():
         assert t in MAX_PAYLOAD_BYTES
     for msg in samples():
         assert len(encode(msg)) < MAX_PAYLOAD_BYTES[type(msg)]
+
+
+@pytest.mark.parametrize("rate, match", [(-1.0, "state_rate_hz must be >= 0"), (float("nan"), "state_rate_hz")])
+def test_a_robot_state_rate_must_be_finite_and_not_negative(rate, match):
+    with pytest.raises(ValueError, match=match):
+        Capabilities(True, [10.0] * 7, "lbr", rate)
+    assert Capabilities(True, [10.0] * 7).state_rate_hz == 0.0, "not declared"

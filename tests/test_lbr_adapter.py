@@ -209,6 +209,7 @@ def test_states_arrive_as_robot_states_in_joint_order_with_estimated_velocity_an
     assert last.robot_time_ns == 1_700_000_001_039_000_000, "the LBRState's stamp, seconds and nanoseconds"
     caps = last.capabilities
     assert caps.gravity_compensated and caps.backend == "lbr" and caps.torque_limits_nm == LIMITS.tau_max.tolist()
+    assert caps.state_rate_hz == pytest.approx(1000.0), "the FRI sample time of the states"
     assert first.dq_rad_s == [0.0] * 7, "no velocity before a second sample"
     np.testing.assert_allclose(last.dq_rad_s, v, rtol=0.01)
     np.testing.assert_allclose(last.wrench_world, F, rtol=0.01, atol=0.05)

@@ -8,7 +8,7 @@ the tool wrench comes from the external torques through our model
 (``F = (J J^T + l^2 I)^-1 J tau_ext`` at the pad, world axes) or, with
 ``wrench_source = "stack"``, from the bridge's ``WrenchStamped``.
 Capabilities: the robot compensates gravity itself; torque limits from the
-description.
+description; the state rate from the FRI sample time in the states.
 
 Commands: ``LBRTorqueCommand`` with the measured joint position and the
 controller's torques as overlay. Nothing is sent until the adapter is
@@ -270,6 +270,10 @@ class LbrPort(RobotPort):
 
     # -- pieces ------------------------------------------------------------------------------------
     def _take(self, st: LbrState) -> None:
+        if self._state is None or st.sample_time_s != self._state.sample_time_s:
+            caps = self.capabilities  # the robot's rate is what its states say (the FRI send period)
+            self.capabilities = Capabilities(caps.gravity_compensated, caps.torque_limits_nm, caps.backend,
+                                             1.0 / st.sample_time_s if st.sample_time_s > 0 else 0.0)
         self._state = st
         r = self._reading
         r.q_rad = st.q_rad
