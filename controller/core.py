@@ -15,7 +15,8 @@ Per tick:
    acceleration); in contact the normal is force-regulated (PI + feed-forward);
 4. impedance torque with the pose error clipped, the stiffness ramped in
    after (re)starts, a brake above the Cartesian speed limit, plus a
-   repulsion near joint limits; then absolute and rate torque limits (the
+   repulsion near joint limits, a brake on joints above their share of the
+   speed limit; then absolute and rate torque limits (the
    model gravity, when the robot lacks its own, is outside the rate limit).
 """
 
@@ -29,17 +30,21 @@ from interfaces.robot_model import RobotModel
 
 from .control.force import NormalForceRegulator
 from .control.impedance import Kinematics, Reference, TaskShaping, impedance_torque
-from .control.limits import TorqueShaper, joint_margin_torque, speed_excess_force
+from .control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
+                             speed_excess_force)
 from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
 from .params import ControllerParams
 
 #: Columns of the trace (see :class:`Trace`).
 TRACE_COLUMNS = ("t_s", "phase", "ref_x", "ref_y", "ref_vx", "ref_vy", "ref_ax", "ref_ay", "x", "y", "h",
-                 "ref_p_x", "ref_p_y", "ref_p_z", "p_x", "p_y", "p_z", "force_n", "press_n", "contact")
+                 "ref_p_x", "ref_p_y", "ref_p_z", "p_x", "p_y", "p_z", "force_n", "press_n", "contact",
+                 "speed_scale")
 #: Trace code of each phase name: its place in :class:`~interfaces.messages.Phase`.
 PHASE_CODES = {phase.value: i for i, phase in enumerate(Phase)}
 _HALTED = (Phase.FAULT, Phase.ESTOP)
+#: How far ahead [s] the speed override looks along the reference's acceleration (a transition speeds up fast).
+OVERRIDE_LOOKAHEAD_S = 0.1
 
 
 class Trace:
@@ -48,7 +53,9 @@ class Trace:
     Columns :data:`TRACE_COLUMNS`: time [s], phase code (:data:`PHASE_CODES`),
     in-plane reference (board frame) position/velocity/acceleration, measured
     board-frame pad position, world reference and measured positions [m],
-    measured normal force and commanded press force [N], contact flag.
+    measured normal force and commanded press force [N], contact flag, the
+    skill's time scale (:class:`~controller.control.limits.SpeedOverride`);
+    the reference's rates are as executed (time-scaled).
     """
 
     def __init__(self, n: int) -> None:
@@ -110,6 +117,13 @@ class ControllerCore:
         n_trace = max(params.trace_ticks, int(5 * params.rate_hz) if params.publish_trace else 0)
         self.trace = Trace(n_trace) if n_trace else None
         self._tau = np.zeros(self.model.nq)
+        self._brake = np.zeros(self.model.nq)
+        self._period_s = 1.0 / params.rate_hz
+        self._speed_onset = params.limits.joint_speed_share * self.model.limits.dq_max
+        self.override = SpeedOverride(self.model.limits.dq_max, params.limits.reference_joint_speed_share)
+        self._demand = np.zeros(self.model.nq)
+        self._twist_ahead = np.zeros(6)
+        self.override_used = 1.0
         self.kin = Kinematics(self.model)
 
     def restart(self) -> None:
@@ -118,6 +132,7 @@ class ControllerCore:
         self.q_rest = None
         self._since_start_s = 0.0
         self.force.reset()
+        self.override.reset()
         self.executor.restart()
 
     def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
@@ -144,9 +159,11 @@ class ControllerCore:
         else:
             n = board.normal
             tool = self._measure_tool(board, n, kin, wrench, dt_s)
-            sp = self.executor.step(dt_s, tool)
-            self._reference_from_setpoint(board, n, sp, tool)
+            scale = self.override_used = self.override.scale
+            sp = self.executor.step(dt_s * scale, tool)
+            self._reference_from_setpoint(board, n, sp, tool, scale)
             self._regulate_force(n, sp, dt_s)
+            self._update_override(kin, scale, dt_s)
         self._shape_task(kin, dt_s)
         tau = self._torque(q, dq, kin, gravity_compensated, dt_s)
         if self.trace is not None:
@@ -177,16 +194,31 @@ class ControllerCore:
             ex.fault(f"normal force {self.force.filtered_n:.1f} N above the cap {self.p.force.cap_n:.0f} N")
         return ToolState(xyh[:2], float(xyh[2]), vb[:2], float(vb[2]), kin.R, self.normal_force_n)
 
-    def _reference_from_setpoint(self, board: BoardPose, n: np.ndarray, sp: Setpoint, tool: ToolState) -> None:
-        """The world reference of the board-frame setpoint; in contact, the measured height and no normal motion."""
+    def _reference_from_setpoint(self, board: BoardPose, n: np.ndarray, sp: Setpoint, tool: ToolState,
+                                 scale: float) -> None:
+        """The world reference of the board-frame setpoint, its rates at the time ``scale`` (velocities x scale,
+        accelerations x scale^2); in contact, the measured height and no normal motion."""
         ref = self.ref
         h = tool.h if sp.contact else sp.h
+        s2 = scale * scale
         ref.p_m[:] = board.origin_m + board.R[:, 0] * sp.xy[0] + board.R[:, 1] * sp.xy[1] + n * h
         ref.R[:] = sp.R
         ref.twist[:3] = board.R[:, :2] @ sp.v_xy + n * (0.0 if sp.contact else sp.v_h)
-        ref.twist[3:] = sp.omega
+        ref.twist[:3] *= scale
+        np.multiply(sp.omega, scale, out=ref.twist[3:])
         ref.accel[:3] = board.R[:, :2] @ sp.a_xy + n * (0.0 if sp.contact else sp.a_h)
-        ref.accel[3:] = sp.domega
+        ref.accel[:3] *= s2
+        np.multiply(sp.domega, s2, out=ref.accel[3:])
+
+    def _update_override(self, kin: Kinematics, scale: float, dt_s: float) -> None:
+        """The time scale of the next tick from the joint speeds the unscaled reference asks for (the least-inertia
+        ones, ``M^-1 J^T Lambda v``), looking ``OVERRIDE_LOOKAHEAD_S`` ahead along its acceleration."""
+        v = self._twist_ahead
+        np.multiply(self.ref.accel, OVERRIDE_LOOKAHEAD_S / scale, out=v)  # the unscaled acceleration x lookahead
+        v += self.ref.twist
+        v /= scale  # unscaled: twist / s + accel / s^2 * lookahead
+        np.matmul(kin.M_inv, kin.J.T @ (kin.Lambda @ v), out=self._demand)
+        self.override.update(self._demand, dt_s)
 
     def _regulate_force(self, n: np.ndarray, sp: Setpoint, dt_s: float) -> None:
         """In contact, the press force along the normal ``n`` (3,) from the regulator (PI + feed-forward); else none."""
@@ -221,15 +253,21 @@ class ControllerCore:
         tau[:] = terms.tau_nm
         tau += joint_margin_torque(q, dq, model.limits.q_min, model.limits.q_max, lim.joint_margin_rad,
                                    lim.joint_margin_stiffness_nm_rad, lim.joint_margin_damping_nm_s_rad)
-        self.shaper(tau, dt_s, None if gravity_compensated else kin.g)
+        tau += joint_speed_brake_torque(dq, self._speed_onset, lim.joint_speed_brake_1_s, np.diag(kin.M), self._brake)
+        # the robot steps from one command to the next within one of its cycles, however long the controller
+        # took: the rate limit is per answer (at most one nominal period's worth), not per elapsed time
+        self.shaper(tau, min(dt_s, self._period_s), None if gravity_compensated else kin.g)
         return tau
 
     def _record(self, sp: Setpoint | None, p: np.ndarray, board: BoardPose | None) -> None:
         r = self.trace.row()
         r[0], r[1] = self.time_s, PHASE_CODES.get(self.executor.phase, -1)
         if sp is not None:
-            r[2:4], r[4:6], r[6:8] = sp.xy, sp.v_xy, sp.a_xy
+            s = self.override_used  # the reference's rates as executed (time-scaled)
+            r[2:4] = sp.xy
+            np.multiply(sp.v_xy, s, out=r[4:6])
+            np.multiply(sp.a_xy, s * s, out=r[6:8])
             r[8:11] = board.to_board(p)
             r[19] = float(sp.contact)
         r[11:14], r[14:17] = self.ref.p_m, p
-        r[17], r[18] = self.normal_force_n, self.press_n
+        r[17], r[18], r[20] = self.normal_force_n, self.press_n, self.override_used

@@ -85,6 +85,11 @@ class LimitParams:
     joint_margin_rad : repulsion starts this close to a position limit
     [rad], with joint_margin_stiffness_nm_rad and joint_margin_damping_nm_s_rad;
     max_speed_m_s : the pad is braked above this Cartesian speed [m/s];
+    reference_joint_speed_share : the skill is slowed down (time scaling)
+    where its reference would ask a joint for more than this share of its
+    speed limit (the description's; 10 turns it off); joint_speed_share : a joint is braked
+    above this share, with joint_speed_brake_1_s [1/s] on its own inertia;
+    both below the real-robot adapter's guard (0.8 of the limit);
     max_position_error_m, max_rotation_error_rad : the pose error is clipped
     to these (bounded pull towards a far reference); gain_ramp_s : the
     stiffness ramps up over this long after (re)starting [s].
@@ -96,6 +101,9 @@ class LimitParams:
     joint_margin_damping_nm_s_rad: float = 10.0
     max_speed_m_s: float = 0.6
     speed_brake_gain_n_s_m: float = 200.0
+    reference_joint_speed_share: float = 0.6
+    joint_speed_share: float = 0.65
+    joint_speed_brake_1_s: float = 150.0
     max_position_error_m: float = 0.05
     max_rotation_error_rad: float = 0.3
     gain_ramp_s: float = 0.5
@@ -108,6 +116,9 @@ class LimitParams:
         _range(s, "joint_margin_damping_nm_s_rad", self.joint_margin_damping_nm_s_rad, 0.0, 500.0)
         _range(s, "max_speed_m_s", self.max_speed_m_s, 0.05, 2.0)
         _range(s, "speed_brake_gain_n_s_m", self.speed_brake_gain_n_s_m, 0.0, 5000.0)
+        _range(s, "reference_joint_speed_share", self.reference_joint_speed_share, 0.05, 10.0)
+        _range(s, "joint_speed_share", self.joint_speed_share, 0.1, 1.0)
+        _range(s, "joint_speed_brake_1_s", self.joint_speed_brake_1_s, 0.0, 400.0)
         _range(s, "max_position_error_m", self.max_position_error_m, 0.005, 0.5)
         _range(s, "max_rotation_error_rad", self.max_rotation_error_rad, 0.05, 3.2)
         _range(s, "gain_ramp_s", self.gain_ramp_s, 0.0, 10.0)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from controller.control.force import NormalForceRegulator
-from controller.control.limits import TorqueShaper, joint_margin_torque, speed_excess_force
+from controller.control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
+                                       speed_excess_force)
 from controller.executor import SkillExecutor
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
 from controller.motion import OrientationBlend, Quintic, brake_to_rest
@@ -440,3 +441,30 @@ def test_the_trace_phase_codes_follow_the_one_phase_list():
     from interfaces.messages import Phase
 
     assert list(PHASE_CODES) == [p.value for p in Phase] and PHASE_CODES[Phase.WIPE] == PHASE_CODES["WIPE"] == 3
+
+
+def test_joint_speed_brake_acts_only_above_the_onset_against_the_motion_on_the_joint_inertia():
+    onset = np.array([1.0, 1.0, 2.0])
+    out = np.zeros(3)
+    tau = joint_speed_brake_torque(np.array([0.5, -1.5, 2.5]), onset, 100.0, np.array([1.0, 2.0, 0.1]), out)
+    assert tau is out
+    np.testing.assert_allclose(tau, [0.0, 100.0 * 2.0 * 0.5, -100.0 * 0.1 * 0.5])
+
+
+def test_speed_override_slows_to_the_share_holds_the_peak_and_recovers_slowly():
+    dq_max = np.array([2.0, 1.0])
+    ov = SpeedOverride(dq_max, share=0.5, min_scale=0.1, down_rate_1_s=8.0, up_rate_1_s=0.5, release_1_s=0.5)
+    assert ov.update(np.array([0.9, 0.4]), 0.001) == 1.0, "0.45 of the limit: within the share"
+    for _ in range(1000):  # the reference asks joint 2 for its full speed: half the speed is allowed
+        s = ov.update(np.array([0.0, 1.0]), 0.001)
+    assert s == pytest.approx(0.5) and ov.slowed_ticks > 0
+    s_before = s
+    for _ in range(100):  # a stroke turns round: the demand drops for 0.1 s, the held peak barely moves
+        s = ov.update(np.array([0.0, 0.0]), 0.001)
+    assert s == pytest.approx(s_before, abs=0.06)
+    for _ in range(3000):
+        s = ov.update(np.zeros(2), 0.001)
+    assert s == 1.0, "back to full speed once the demand has gone"
+    for _ in range(2000):  # an absurd demand (a singularity): never slower than min_scale
+        s = ov.update(np.array([0.0, 1e6]), 0.001)
+    assert s == pytest.approx(0.1)

@@ -222,10 +222,7 @@ def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Refe
             v[:3] -= (v[:3] @ n) * n
     K = shaping.stiffness_scale * np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
     modes = task_modes(Lam, K, params.damping_factor, params.max_mode_frequency_rad_s)
-    F = modes.wrench(e, de)
-    if n is not None:
-        F[:3] -= (F[:3] @ n) * n  # the coupled modes must not push along the force-regulated axis
-    F += Lam @ a  # with its normal part: what keeps the normal acceleration zero under in-plane motion
+    F = modes.wrench(e, de) + Lam @ a
     if n is not None:
         lam_n = float(n @ Lam[:3, :3] @ n)
         F[:3] -= (shaping.press_n + lam_n * shaping.normal_damping_1_s * float(twist[:3] @ n)) * n

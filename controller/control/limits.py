@@ -11,6 +11,11 @@
   error, so a far reference cannot command a violent pull).
 * :func:`speed_excess_force`: a braking force along the pad's velocity
   when it moves faster than the Cartesian speed limit.
+* :func:`joint_speed_brake_torque`: a damping torque on each joint that
+  moves faster than its share of the joint speed limit (so the robot's own
+  speed guard, at a higher share, is not what stops a fast motion).
+* :class:`SpeedOverride`: slows the skill down (time scaling) where its
+  reference would ask a joint for more than a share of its speed limit.
 """
 
 from __future__ import annotations
@@ -108,3 +113,78 @@ def speed_excess_force(v_m_s: np.ndarray, max_speed_m_s: float, gain_n_s_m: floa
     if speed <= max_speed_m_s:
         return np.zeros(3)
     return -gain_n_s_m * (speed - max_speed_m_s) * v_m_s / speed
+
+
+def joint_speed_brake_torque(dq: np.ndarray, onset_rad_s: np.ndarray, rate_1_s: float, inertia_kg_m2: np.ndarray,
+                             out: np.ndarray) -> np.ndarray:
+    """(n,) torque [Nm] into ``out``: ``-rate * M_ii * (|dq_i| - onset_i) * sign(dq_i)`` above ``onset_i``, else 0.
+
+    dq : (n,) joint speeds [rad/s]; onset_rad_s : (n,) where braking starts;
+    rate_1_s : how fast the excess decays on the joint's own inertia [1/s];
+    inertia_kg_m2 : (n,) the diagonal of the joint-space inertia M [kg m^2].
+    """
+    np.abs(dq, out=out)
+    out -= onset_rad_s
+    np.maximum(out, 0.0, out=out)
+    out *= np.sign(dq)
+    out *= inertia_kg_m2
+    out *= -rate_1_s
+    return out
+
+
+class SpeedOverride:
+    """Time scaling of the skill so that no joint is asked to move faster than a share of its speed limit.
+
+    Like a robot's speed override, but set by the motion itself: each tick
+    the caller reports the joint speeds (n,) [rad/s] that the *unscaled*
+    reference would need (:meth:`update`); their largest share of the
+    limits is peak-held (it falls by at most ``release_1_s`` per second, so
+    a periodic motion gets one steady scale, not one that breathes with each
+    stroke); the scale ``s`` in (0, 1] moves towards ``min(1, share / peak)``,
+    down by at most ``down_rate_1_s`` and up by at most ``up_rate_1_s`` per second.
+    The skill advances by ``s dt``; its velocities are multiplied by ``s``
+    and its accelerations by ``s^2`` (the path is unchanged, only slower).
+
+    Parameters
+    ----------
+    dq_max_rad_s : (n,) joint speed limits [rad/s]. share : the share of them the reference may ask for.
+    min_scale : the slowest the skill runs. down_rate_1_s, up_rate_1_s : how fast the scale may change [1/s].
+    release_1_s : how fast the held peak demand falls [share/s].
+
+    Attributes
+    ----------
+    scale : float
+        The current scale. demand_share : float, the held peak of the unscaled demand over the limits.
+    slowed_ticks : int
+        Ticks with ``scale < 1``.
+    """
+
+    def __init__(self, dq_max_rad_s: np.ndarray, share: float, min_scale: float = 0.05,
+                 down_rate_1_s: float = 8.0, up_rate_1_s: float = 0.5, release_1_s: float = 0.5) -> None:
+        self.inv_dq_max = 1.0 / np.asarray(dq_max_rad_s, float)
+        self.share = float(share)
+        self.min_scale = float(min_scale)
+        self.down = float(down_rate_1_s)
+        self.up = float(up_rate_1_s)
+        self.release = float(release_1_s)
+        self.scale = 1.0
+        self.demand_share = 0.0
+        self.slowed_ticks = 0
+        self._ratio = np.zeros_like(self.inv_dq_max)
+
+    def reset(self) -> None:
+        self.scale = 1.0
+        self.demand_share = 0.0
+
+    def update(self, demand_rad_s: np.ndarray, dt_s: float) -> float:
+        """The scale for the next tick, given the joint speeds (n,) the unscaled reference needs now."""
+        np.multiply(np.abs(demand_rad_s), self.inv_dq_max, out=self._ratio)
+        r = max(float(self._ratio.max()), self.demand_share - self.release * dt_s)
+        self.demand_share = r
+        target = 1.0 if r <= self.share else max(self.share / r, self.min_scale)
+        s = self.scale
+        s = max(target, s - self.down * dt_s) if target < s else min(target, s + self.up * dt_s)
+        self.scale = s
+        if s < 1.0:
+            self.slowed_ticks += 1
+        return s
