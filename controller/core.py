@@ -29,7 +29,7 @@ from interfaces.messages import Phase
 from interfaces.robot_model import RobotModel
 
 from .control.force import NormalForceRegulator
-from .control.impedance import Kinematics, Reference, TaskShaping, impedance_torque
+from .control.impedance import Kinematics, Reference, TaskShaping, impedance_torque, task_modes, task_stiffness
 from .control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
                              speed_excess_force)
 from .executor import SkillExecutor
@@ -43,6 +43,9 @@ TRACE_COLUMNS = ("t_s", "phase", "ref_x", "ref_y", "ref_vx", "ref_vy", "ref_ax",
 #: Trace code of each phase name: its place in :class:`~interfaces.messages.Phase`.
 PHASE_CODES = {phase.value: i for i, phase in enumerate(Phase)}
 _HALTED = (Phase.FAULT, Phase.ESTOP)
+#: The task's modes (an eigen-decomposition of Lambda on K) are refreshed this often [ticks] and whenever the
+#: stiffness scale changes: Lambda changes slowly with the pose, and the decomposition costs a fifth of a tick.
+MODES_EVERY_TICKS = 10
 #: How far ahead [s] the speed override looks along the reference's acceleration (a transition speeds up fast).
 OVERRIDE_LOOKAHEAD_S = 0.1
 
@@ -124,6 +127,9 @@ class ControllerCore:
         self._demand = np.zeros(self.model.nq)
         self._twist_ahead = np.zeros(6)
         self.override_used = 1.0
+        self._modes = None
+        self._modes_age = 0
+        self._modes_scale = -1.0
         self.kin = Kinematics(self.model)
 
     def restart(self) -> None:
@@ -247,7 +253,7 @@ class ControllerCore:
         """Impedance torque plus the joint-limit repulsion, then the absolute and rate limits (gravity outside)."""
         model, lim = self.model, self.p.limits
         terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.q_rest, not gravity_compensated,
-                                 self.shaping, kin)
+                                 self.shaping, kin, self._task_modes(kin))
         self.last_terms = terms
         tau = self._tau
         tau[:] = terms.tau_nm
@@ -258,6 +264,16 @@ class ControllerCore:
         # took: the rate limit is per answer (at most one nominal period's worth), not per elapsed time
         self.shaper(tau, min(dt_s, self._period_s), None if gravity_compensated else kin.g)
         return tau
+
+    def _task_modes(self, kin: Kinematics):
+        scale = self.shaping.stiffness_scale
+        self._modes_age += 1
+        if self._modes is None or self._modes_age >= MODES_EVERY_TICKS or scale != self._modes_scale:
+            imp = self.p.impedance
+            self._modes = task_modes(kin.Lambda, task_stiffness(imp, scale), imp.damping_factor,
+                                     imp.max_mode_frequency_rad_s)
+            self._modes_age, self._modes_scale = 0, scale
+        return self._modes
 
     def _record(self, sp: Setpoint | None, p: np.ndarray, board: BoardPose | None) -> None:
         r = self.trace.row()

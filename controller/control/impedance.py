@@ -175,6 +175,11 @@ class TaskModes:
         return (self.B * self.d) @ self.B.T
 
 
+def task_stiffness(params: ImpedanceParams, scale: float = 1.0) -> np.ndarray:
+    """(6,) diagonal task stiffness [N/m x3, Nm/rad x3] times ``scale``."""
+    return scale * np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
+
+
 def task_modes(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float) -> TaskModes:
     """The modes of task mass ``Lam`` (6, 6) on diagonal stiffness ``K`` (6,), capped and damped.
 
@@ -199,14 +204,16 @@ def _clip_norm(v: np.ndarray, limit: float) -> None:
 
 def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Reference, params: ImpedanceParams,
                      q_rest: np.ndarray, add_gravity: bool, shaping: TaskShaping = _PLAIN,
-                     kin: Kinematics | None = None) -> ImpedanceTerms:
+                     kin: Kinematics | None = None, modes: TaskModes | None = None) -> ImpedanceTerms:
     """Joint torques (7,) [Nm] of the impedance law at state ``q``, ``dq`` (see the module docstring).
 
     With ``shaping.force_axis = n`` the translational error, twist error
     and reference acceleration lose their component along n, which instead
     gets ``-press_n`` of force and a damping ``-Lambda_nn c v_n``.
     kin : the arm's :class:`Kinematics` already updated at (q, dq) this
-    tick (computed here when None).
+    tick (computed here when None). modes : :func:`task_modes` of this
+    stiffness (with ``shaping.stiffness_scale``) on a recent Lambda (the
+    modes change slowly with the pose; computed here when None).
     """
     if kin is None:
         kin = Kinematics(model).update(q, dq)
@@ -220,8 +227,9 @@ def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Refe
     if n is not None:
         for v in (e, de, a):
             v[:3] -= (v[:3] @ n) * n
-    K = shaping.stiffness_scale * np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
-    modes = task_modes(Lam, K, params.damping_factor, params.max_mode_frequency_rad_s)
+    if modes is None:
+        modes = task_modes(Lam, task_stiffness(params, shaping.stiffness_scale), params.damping_factor,
+                           params.max_mode_frequency_rad_s)
     F = modes.wrench(e, de) + Lam @ a
     if n is not None:
         lam_n = float(n @ Lam[:3, :3] @ n)
