@@ -16,7 +16,13 @@ file (what compose and tests use):
 ``[zenoh]`` keys: ``mode`` (``peer`` | ``client`` | ``router``), ``listen``
 and ``connect`` (lists of endpoints such as ``tcp/127.0.0.1:7447``),
 ``multicast_scouting`` (default false: it fails in containers and CI),
-``robot_id``, ``key_prefix`` (default ``lamps/<robot_id>``).
+``robot_id``, ``key_prefix`` (default ``lamps/<robot_id>``); authentication and
+access control (:mod:`interfaces.access`): ``user`` (the service's role),
+``password_file`` (its password, one line), ``credentials_file`` (every role's
+``user:password``, to check the peers that connect), ``access_control``
+(true: apply the cell's access-control list; needs a user). Shorthands
+``LAMPS_ZENOH_USER``, ``LAMPS_ZENOH_PASSWORD_FILE``,
+``LAMPS_ZENOH_CREDENTIALS_FILE``, ``LAMPS_ZENOH_ACCESS_CONTROL``.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from .access import ROLES
 from .errors import ConfigError
 from .keys import DEFAULT_ROBOT_ID, Keys
 
@@ -40,6 +47,10 @@ _SHORTHANDS = {
     "LAMPS_ZENOH_CONNECT": ("zenoh", "connect"),
     "LAMPS_ZENOH_MODE": ("zenoh", "mode"),
     "LAMPS_ZENOH_MULTICAST": ("zenoh", "multicast_scouting"),
+    "LAMPS_ZENOH_USER": ("zenoh", "user"),
+    "LAMPS_ZENOH_PASSWORD_FILE": ("zenoh", "password_file"),
+    "LAMPS_ZENOH_CREDENTIALS_FILE": ("zenoh", "credentials_file"),
+    "LAMPS_ZENOH_ACCESS_CONTROL": ("zenoh", "access_control"),
 }
 
 
@@ -53,8 +64,24 @@ class ZenohSettings:
     multicast_scouting: bool = False
     robot_id: str = DEFAULT_ROBOT_ID
     key_prefix: str = ""
+    user: str = ""
+    password_file: str = ""
+    credentials_file: str = ""
+    access_control: bool = False
 
     def __post_init__(self) -> None:
+        for name in ("user", "password_file", "credentials_file"):
+            if not isinstance(getattr(self, name), str):
+                raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
+        if not isinstance(self.access_control, bool):
+            raise ConfigError(f"[zenoh] access_control must be true or false, got {self.access_control!r}")
+        if self.user and self.user not in ROLES:
+            raise ConfigError(f"[zenoh] user must be one of the cell's roles {ROLES}, got {self.user!r}")
+        if self.user and not (self.password_file and self.credentials_file):
+            raise ConfigError("[zenoh] user needs password_file and credentials_file (make them with "
+                              "'lamps credentials DIR')")
+        if self.access_control and not self.user:
+            raise ConfigError("[zenoh] access_control needs a user (the service's role) and its credentials")
         if self.mode not in ZENOH_MODES:
             raise ConfigError(f"[zenoh] mode must be one of {ZENOH_MODES}, got {self.mode!r}")
         for name in ("listen", "connect"):

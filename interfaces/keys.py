@@ -88,8 +88,14 @@ class Keys:
 
     @property
     def controller_estop(self) -> str:
-        """anyone allowed -> controller, event: :class:`~interfaces.messages.Estop`."""
+        """anyone authenticated -> controller and robot side, event: :class:`~interfaces.messages.Estop` engaging the
+        e-stop (a release here is ignored: releases have their own key, which access control gives the operator)."""
         return self._k("controller/estop")
+
+    @property
+    def controller_estop_release(self) -> str:
+        """operator -> controller and robot side, event: :class:`~interfaces.messages.Estop` with ``engaged=False``."""
+        return self._k("controller/estop/release")
 
     @property
     def sim_truth(self) -> str:

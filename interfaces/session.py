@@ -21,13 +21,15 @@ import logging
 import threading
 import time
 from collections import Counter, deque
+from pathlib import Path
 from typing import Generic, TypeVar
 
 import zenoh
 
+from .access import cell_acl
 from .codec import Decoder, encode
 from .config import ZenohSettings
-from .errors import MessageDecodeError
+from .errors import ConfigError, MessageDecodeError
 from .keys import Keys
 from .messages import Message
 
@@ -45,7 +47,26 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
     cfg.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
     cfg.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
     cfg.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
+    if settings.user:
+        password = _read_secret(settings.password_file, "password_file")
+        _read_secret(settings.credentials_file, "credentials_file")
+        cfg.insert_json5("transport/auth/usrpwd", json.dumps(
+            {"user": settings.user, "password": password, "dictionary_file": settings.credentials_file}))
+    if settings.access_control:
+        cfg.insert_json5("access_control", json.dumps(cell_acl(settings.keys)))
     return cfg
+
+
+def _read_secret(path: str, what: str) -> str:
+    """The first line of a credentials file; ConfigError naming the file when it cannot be used."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"[zenoh] {what} {path!r}: {exc.strerror or exc}") from None
+    first = text.strip().splitlines()[0].strip() if text.strip() else ""
+    if not first:
+        raise ConfigError(f"[zenoh] {what} {path!r} is empty")
+    return first
 
 
 class Latest(Generic[M]):

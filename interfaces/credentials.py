@@ -1,0 +1,66 @@
+"""``lamps credentials DIR``: one password per role of the cell and the dictionary that checks them.
+
+Writes ``DIR/<role>.password`` (a random 256-bit secret, one line) for
+every role of :data:`interfaces.access.ROLES` and ``DIR/credentials.txt``
+(``role:password`` per line: what each service checks connecting peers
+against), each atomically with mode 0600. Existing files are never
+overwritten: a cell keeps its credentials until they are deleted on
+purpose. A service then runs with ``LAMPS_ZENOH_USER=<role>``,
+``LAMPS_ZENOH_PASSWORD_FILE=DIR/<role>.password``,
+``LAMPS_ZENOH_CREDENTIALS_FILE=DIR/credentials.txt`` and
+``LAMPS_ZENOH_ACCESS_CONTROL=true``.
+
+Zenoh's user-password authentication is a challenge-response: a service
+that checks others needs their passwords, so this keeps a cell on one
+trusted host (or one compose project) honest, not a hostile network; cells
+that leave one machine need mutual TLS with per-service certificates.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import secrets
+import sys
+from pathlib import Path
+
+from lampskit.atomic import write_text_atomic
+
+from .access import ROLES
+
+DICTIONARY = "credentials.txt"
+
+
+def password_file(directory: Path, role: str) -> Path:
+    return directory / f"{role}.password"
+
+
+def make_credentials(directory: Path) -> dict[str, Path]:
+    """Create the files (see the module docstring); role -> its password file. FileExistsError if any exists."""
+    directory.mkdir(parents=True, exist_ok=True)
+    targets = [password_file(directory, r) for r in ROLES] + [directory / DICTIONARY]
+    present = [str(p) for p in targets if p.exists()]
+    if present:
+        raise FileExistsError(f"credentials already exist, not overwritten: {', '.join(present)}")
+    words = {role: secrets.token_hex(32) for role in ROLES}
+    for role, word in words.items():
+        write_text_atomic(password_file(directory, role), word + "\n", mode=0o600)
+    write_text_atomic(directory / DICTIONARY, "".join(f"{r}:{w}\n" for r, w in words.items()), mode=0o600)
+    return {role: password_file(directory, role) for role in ROLES}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="lamps credentials", description=__doc__.split("\n\n")[0])
+    ap.add_argument("directory", type=Path, help="where the password files and credentials.txt go")
+    args = ap.parse_args(argv)
+    try:
+        files = make_credentials(args.directory)
+    except (FileExistsError, OSError) as exc:
+        print(f"lamps credentials: {exc}", file=sys.stderr)
+        return 1
+    d = args.directory
+    print(f"wrote {len(files)} password files and {d / DICTIONARY} (mode 0600); a service runs as a role with")
+    print(f"  LAMPS_ZENOH_USER=<role> LAMPS_ZENOH_PASSWORD_FILE={d}{os.sep}<role>.password "
+          f"LAMPS_ZENOH_CREDENTIALS_FILE={d / DICTIONARY} LAMPS_ZENOH_ACCESS_CONTROL=true")
+    print(f"roles: {', '.join(ROLES)}")
+    return 0
