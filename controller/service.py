@@ -1,7 +1,8 @@
 """The controller as a Zenoh service: lock-step and real-time loops around :class:`~controller.core.ControllerCore`.
 
 Reads ``robot/state``, the stains (``perception/stains``, or ``sim/truth``
-with ``stains_from = "truth"``) and ``controller/estop``; writes
+with ``stains_from = "truth"``), ``controller/estop`` (engage) and
+``controller/estop/release``; writes
 ``robot/command`` and ``controller/status``.
 
 * lock-step: every new robot state is answered with one command (a state
@@ -76,6 +77,7 @@ class ControllerService:
         else:
             self._stains = node.latest(self.keys.perception_stains, Stains)
         self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
+        self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
 
     # ------------------------------------------------------------------ loops
     def run(self) -> int:
@@ -303,17 +305,24 @@ class ControllerService:
         return True
 
     def _poll_estop(self) -> None:
-        while True:
-            e = self._estops.get(0.0)
-            if e is None:
-                return
-            if e.engaged:
-                log.warning("e-stop from %s: %s", e.source or "?", e.reason)
-                self.core.executor.estop(f"e-stop: {e.reason}" + (f" ({e.source})" if e.source else ""))
-            else:
-                log.warning("e-stop released by %s", e.source or "?")
-                self.counters["estop_releases"] += 1
-                self.core.executor.clear()
+        """Engage on ``controller/estop``; release only from ``controller/estop/release`` (the operator's key under
+        access control): a release on the engage key is ignored and counted."""
+        for inbox, release_key in ((self._estops, False), (self._releases, True)):
+            while True:
+                e = inbox.get(0.0)
+                if e is None:
+                    break
+                if e.engaged:
+                    log.warning("e-stop from %s: %s", e.source or "?", e.reason)
+                    self.core.executor.estop(f"e-stop: {e.reason}" + (f" ({e.source})" if e.source else ""))
+                elif release_key:
+                    log.warning("e-stop released by %s", e.source or "?")
+                    self.counters["estop_releases"] += 1
+                    self.core.executor.clear()
+                else:
+                    self.counters["estop_releases_ignored_on_the_engage_key"] += 1
+                    log.warning("e-stop release from %s on the engage key ignored (releases go to %s)",
+                                e.source or "?", self.keys.controller_estop_release)
 
     # ------------------------------------------------------------------ status
     def status(self) -> ControllerStatus:
@@ -322,7 +331,7 @@ class ControllerService:
         counters.update(ex.counters)
         counters.update(torque_rate_clipped=core.shaper.clipped_rate, torque_abs_clipped=core.shaper.clipped_abs)
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
-                             ("estop", self._estops)):
+                             ("estop", self._estops), ("estop_release", self._releases)):
             if reader is None:
                 continue
             counters[f"{name}_received"] = reader.received

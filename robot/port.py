@@ -92,6 +92,10 @@ class RobotPort(ABC):
     def hold(self) -> None:
         """Brake and hold the current position for one cycle, whatever was commanded before."""
 
+    def estop_hold(self) -> None:
+        """Hold for one cycle because the e-stop is engaged: at once, no grace (default: :meth:`hold`)."""
+        self.hold()
+
     def after_cycle(self, lockstep: bool) -> None:
         """Called after each written cycle (a simulator publishes its extras here). Default: nothing."""
 

@@ -19,6 +19,12 @@ and reads ``robot/command`` (:class:`~interfaces.messages.TorqueCommand`):
   each answer (the lbr peer's lock-step): no deadline, the unanswered state
   is re-sent every ``republish_s``.
 
+The e-stop is the robot side's too: an engaging :class:`~interfaces.messages.Estop`
+on ``controller/estop`` makes every cycle a hold (:meth:`RobotPort.estop_hold`)
+whatever commands arrive, until a release on ``controller/estop/release``
+(the operator's key under access control; a release on the engage key is
+ignored and counted). The status says ``estop=engaged`` and why.
+
 Every command passes the :class:`~robot.gate.CommandGate` first; undecodable
 payloads, wrong lengths, out-of-sequence answers and late commands are
 dropped and counted by reason. Status (counters, loop timing) goes to the
@@ -36,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from interfaces.loop_stats import LoopStats
-from interfaces.messages import HOLD, RobotState, ServiceStatus, TorqueCommand
+from interfaces.messages import HOLD, Estop, RobotState, ServiceStatus, TorqueCommand
 from interfaces.session import ServiceNode
 
 from .gate import DEFAULT_TAU_RATE_NM_S, CommandGate
@@ -94,6 +100,9 @@ class RobotServer:
         self._sources: list = []
         self._status_period_s = 1.0 / params.status_rate_hz
         self._next_status = 0.0
+        self.estop_reason: str | None = None
+        self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
+        self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def run(self) -> int:
@@ -112,9 +121,31 @@ class RobotServer:
         return self.steps
 
     # -- one cycle ---------------------------------------------------------------------------------
+    def _poll_estop(self) -> None:
+        for inbox, release_key in ((self._estops, False), (self._releases, True)):
+            while (e := inbox.get(0.0)) is not None:
+                if e.engaged:
+                    if self.estop_reason is None:
+                        log.warning("e-stop from %s: %s; holding whatever is commanded", e.source or "?", e.reason)
+                    self.counters["estops"] += 1
+                    self.estop_reason = f"{e.reason[:80]} ({e.source[:40] or '?'})"
+                elif release_key:
+                    if self.estop_reason is not None:
+                        log.warning("e-stop released by %s", e.source or "?")
+                    self.counters["estop_releases"] += 1
+                    self.estop_reason = None
+                else:
+                    self.counters["estop_releases_ignored_on_the_engage_key"] += 1
+
     def _apply(self, command: np.ndarray | str) -> None:
-        """Write ``command`` (gated torques, or ``"hold"``) to the port: one cycle."""
-        if isinstance(command, str):
+        """Write ``command`` (gated torques, or ``"hold"``) to the port: one cycle (a hold while e-stopped)."""
+        self._poll_estop()
+        if self.estop_reason is not None:
+            if not isinstance(command, str):
+                self.counters["commands_held_for_estop"] += 1
+            self.port.estop_hold()
+            self.braked = True
+        elif isinstance(command, str):
             if not self.braked:
                 self.counters["holds_applied"] += 1
             self.port.hold()
@@ -283,12 +314,19 @@ class RobotServer:
             lat = self._latency_us[:min(self._n_latency, len(self._latency_us))]
             p50, p99 = np.percentile(lat, [50, 99])
             counters.update(answer_latency_p50_us=int(p50), answer_latency_p99_us=int(p99))
-        detail = f"mode={'clocked' if self.port.clocked else self.p.mode} step={self.steps} braked={self.braked}"
+        counters["estop_engaged"] = int(self.estop_reason is not None)
+        for name, source in (("estop", self._estops), ("estop_release", self._releases)):
+            for reason, n in list(source.bad.items()):
+                counters[f"{name}_dropped: {reason}"] = n
+        estop = "" if self.estop_reason is None else f" estop=engaged ({self.estop_reason})"
+        detail = (f"mode={'clocked' if self.port.clocked else self.p.mode} step={self.steps} braked={self.braked}"
+                  f"{estop}")
         extra = self.port.detail()
         return ServiceStatus(service=self.service, seq=self.steps, stamp_ns=time.monotonic_ns(), counters=counters,
                              detail=f"{detail} {extra}".strip(), timing=self.stats.summary())
 
     def _publish_status(self, force: bool = False) -> None:
+        self._poll_estop()  # also while no command comes (a lock-step robot waiting for its answer)
         now = time.monotonic()
         if not force and now < self._next_status:
             return

@@ -215,3 +215,31 @@ def test_max_steps_ends_the_run_and_deactivating_leaves_the_arm_holding():
         final = srv.wait_status(lambda m: m.seq == 2, "the final status")
     assert arm.steps == 3 and arm.holds == 1, "two torque steps, then deactivate's hold"
     assert arm.dq.tolist() == [0.0] * 7 and final.counters["commands_applied"] == 2
+
+
+def test_the_robot_side_holds_while_the_estop_is_engaged_whatever_is_commanded():
+    """Lock-step: every answer still steps the arm, but as a hold while e-stopped (a rogue or a broken controller
+    cannot move it); a release on the engage key changes nothing; the release key does."""
+    from interfaces.messages import Estop
+
+    arm = MockArm(q0_rad=np.zeros(7))
+    with ServerThread(lambda node: arm, lockstep()) as srv:
+        for key in (srv.keys.controller_estop, srv.keys.controller_estop_release):
+            wait_subscribed(srv.ctl.session, key, what=f"the server reading {key}")
+        srv.state_seq(0)
+        srv.ctl.publish(srv.keys.controller_estop, Estop(stamp_ns=1, engaged=True, reason="red button", source="op"))
+        srv.ctl.publish(srv.keys.controller_estop, Estop(stamp_ns=2, engaged=False, reason="sneaky", source="x"))
+        for seq in range(5):
+            srv.command(seq, [40.0] * 7)
+            srv.state_seq(seq + 1)
+        st = srv.wait_status(lambda m: m.seq == 5, "a status after 5 steps")
+        assert np.all(arm.q == 0.0) and arm.holds == 5, "held five cycles, not moved by 40 Nm"
+        assert "estop=engaged (red button (op))" in st.detail and st.counters["estop_engaged"] == 1
+        assert st.counters["commands_held_for_estop"] == 5
+        assert st.counters["estop_releases_ignored_on_the_engage_key"] == 1
+        srv.ctl.publish(srv.keys.controller_estop_release, Estop(stamp_ns=3, engaged=False, reason="ok", source="op"))
+        srv.wait_status(lambda m: m.counters.get("estop_engaged") == 0, "the release seen")
+        srv.command(5, [40.0] * 7)
+        srv.state_seq(6)
+        st = srv.wait_status(lambda m: m.seq == 6, "a status after the release")
+        assert np.all(arm.q > 0.0) and st.counters["estop_engaged"] == 0 and "estop" not in st.detail.split()[-1]

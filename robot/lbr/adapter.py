@@ -196,6 +196,12 @@ class LbrPort(RobotPort):
         self._send_hold()
         self.counts["holds_sent"] += 1
 
+    def estop_hold(self) -> None:
+        """E-stop: damping torques with the measured position at once (no repeat of the last command)."""
+        if self.armed:
+            self._send_hold()
+            self.counts["estop_holds_sent"] += 1
+
     def activate(self) -> None:
         log.info("lbr: monitoring %s (commands only once armed)", self.p.topics.key(self.p.state_topic))
 
