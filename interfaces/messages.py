@@ -18,8 +18,46 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from enum import StrEnum
+from typing import Annotated
 
 import msgspec
+from msgspec.structs import force_setattr
+
+#: Longest strings a message may carry (a longer one fails to decode: dropped and counted). Producers' statuses
+#: are clipped to them on construction, so no input can make a status grow.
+NAME_MAX = 64
+TEXT_MAX = 512
+DETAIL_MAX = 1024
+COUNTER_KEY_MAX = 160
+COUNTERS_MAX = 256
+Name = Annotated[str, msgspec.Meta(max_length=NAME_MAX)]
+Text = Annotated[str, msgspec.Meta(max_length=TEXT_MAX)]
+Detail = Annotated[str, msgspec.Meta(max_length=DETAIL_MAX)]
+Counters = Annotated[dict[Annotated[str, msgspec.Meta(max_length=COUNTER_KEY_MAX)], int],
+                     msgspec.Meta(max_length=COUNTERS_MAX)]
+
+
+def bounded_counters(counters: dict[str, int]) -> dict[str, int]:
+    """``counters`` with keys clipped to :data:`COUNTER_KEY_MAX` and at most :data:`COUNTERS_MAX` entries (the rest
+    summed into ``"other counters"``)."""
+    if len(counters) <= COUNTERS_MAX and all(len(k) <= COUNTER_KEY_MAX for k in counters):
+        return counters
+    out: dict[str, int] = {}
+    for k, v in counters.items():
+        k = k[:COUNTER_KEY_MAX]
+        if k in out or len(out) < COUNTERS_MAX - 1:
+            out[k] = out.get(k, 0) + v
+        else:
+            out["other counters"] = out.get("other counters", 0) + v
+    return out
+
+
+def _clip(msg, **limits: int) -> None:
+    """Clip the named string fields of a just-built (frozen) message to their limits."""
+    for name, limit in limits.items():
+        value = getattr(msg, name)
+        if len(value) > limit:
+            force_setattr(msg, name, value[:limit])
 
 #: Bump when a change could make an old reader misread a new message.
 SCHEMA_VERSION = 1
@@ -108,7 +146,7 @@ class Capabilities(msgspec.Struct, frozen=True, array_like=True):
 
     gravity_compensated: bool
     torque_limits_nm: list[float]
-    backend: str = "sim"
+    backend: Name = "sim"
     state_rate_hz: float = 0.0
 
     def __post_init__(self) -> None:
@@ -165,7 +203,7 @@ class TorqueCommand(Message, frozen=True):
     seq: int
     stamp_ns: int
     tau_nm: list[float]
-    mode: str = "torque"
+    mode: Name = "torque"
 
     def __post_init__(self) -> None:
         _finite("tau_nm", self.tau_nm)
@@ -201,8 +239,8 @@ class CameraFrame(Message, frozen=True):
 
     seq: int
     stamp_ns: int
-    camera: str
-    encoding: str
+    camera: Name
+    encoding: Name
     data: bytes
     intrinsics: CameraIntrinsics
     T_camera_to_world: Pose
@@ -266,7 +304,7 @@ class Stains(Message, frozen=True):
     T_board_to_world: Pose
     board_size_m: list[float]
     stains: list[StainObservation]
-    board: str = "seen"
+    board: Name = "seen"
     frame_seq: int = -1
     robot_time_ns: int = 0
 
@@ -303,16 +341,18 @@ class ControllerStatus(Message, frozen=True):
 
     seq: int
     stamp_ns: int
-    phase: str
-    reason: str = ""
-    current_mp: str = ""
+    phase: Name
+    reason: Text = ""
+    current_mp: Text = ""
     stain_id: int = -1
     normal_force_n: float = 0.0
     timing: LoopTiming = msgspec.field(default_factory=LoopTiming)
-    counters: dict[str, int] = msgspec.field(default_factory=dict)
+    counters: Counters = msgspec.field(default_factory=dict)
     wall_ns: int = 0
 
     def __post_init__(self) -> None:
+        _clip(self, reason=TEXT_MAX, current_mp=TEXT_MAX)
+        force_setattr(self, "counters", bounded_counters(self.counters))
         if self.phase not in PHASES:
             raise ValueError(f"phase must be one of {', '.join(PHASES)}, got {self.phase!r}")
 
@@ -330,7 +370,7 @@ class ControllerTrace(Message, frozen=True):
 
     seq: int
     stamp_ns: int
-    columns: list[str]
+    columns: Annotated[list[Name], msgspec.Meta(max_length=64)]
     first_tick: int
     n_rows: int
     data: bytes
@@ -345,12 +385,16 @@ class ControllerTrace(Message, frozen=True):
 class ServiceStatus(Message, frozen=True):
     """A service's health: what it processed, dropped and why (counters by reason), its loop timing."""
 
-    service: str
+    service: Name
     seq: int
     stamp_ns: int
-    counters: dict[str, int] = msgspec.field(default_factory=dict)
-    detail: str = ""
+    counters: Counters = msgspec.field(default_factory=dict)
+    detail: Detail = ""
     timing: LoopTiming = msgspec.field(default_factory=LoopTiming)
+
+    def __post_init__(self) -> None:
+        _clip(self, detail=DETAIL_MAX)
+        force_setattr(self, "counters", bounded_counters(self.counters))
 
 
 class Estop(Message, frozen=True):
@@ -358,8 +402,11 @@ class Estop(Message, frozen=True):
 
     stamp_ns: int
     engaged: bool
-    reason: str
-    source: str = ""
+    reason: Text
+    source: Name = ""
+
+    def __post_init__(self) -> None:
+        _clip(self, reason=TEXT_MAX, source=NAME_MAX)
 
 
 class ArmRequest(Message, frozen=True):
@@ -371,8 +418,11 @@ class ArmRequest(Message, frozen=True):
 
     stamp_ns: int
     armed: bool
-    reason: str = ""
-    source: str = ""
+    reason: Text = ""
+    source: Name = ""
+
+    def __post_init__(self) -> None:
+        _clip(self, reason=TEXT_MAX, source=NAME_MAX)
 
 
 class SimTruth(Message, frozen=True):

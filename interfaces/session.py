@@ -38,6 +38,8 @@ M = TypeVar("M", bound=Message)
 
 #: At most one log line per key and this many seconds about bad samples.
 BAD_SAMPLE_LOG_PERIOD_S = 5.0
+#: At most this many distinct reasons are counted per key; the rest are "other reasons".
+MAX_BAD_REASONS = 16
 
 
 def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
@@ -116,7 +118,10 @@ class _BadSamples:
         self._last_log = -float("inf")
 
     def count(self, reason: str) -> None:
-        self.bad[reason.split(":")[0][:60]] += 1
+        reason = reason.split(":")[0][:60]
+        if reason not in self.bad and len(self.bad) >= MAX_BAD_REASONS:  # a sender cannot grow the status
+            reason = "other reasons"
+        self.bad[reason] += 1
         now = time.monotonic()
         if now - self._last_log >= BAD_SAMPLE_LOG_PERIOD_S:
             self._last_log = now

@@ -246,3 +246,31 @@ def test_a_robot_state_rate_must_be_finite_and_not_negative(rate, match):
     with pytest.raises(ValueError, match=match):
         Capabilities(True, [10.0] * 7, "lbr", rate)
     assert Capabilities(True, [10.0] * 7).state_rate_hz == 0.0, "not declared"
+
+
+def _wire_with(msg, index: int, value) -> bytes:
+    """``msg``'s bytes with field ``index`` of its wire array replaced (bypassing the constructor)."""
+    wire = msgspec.msgpack.decode(encode(msg))
+    wire[index] = value
+    return msgspec.msgpack.encode(wire)
+
+
+def test_strings_are_bounded_on_the_wire_and_clipped_when_built():
+    from interfaces.messages import COUNTERS_MAX, DETAIL_MAX, NAME_MAX, TEXT_MAX, ArmRequest, ServiceStatus
+
+    e = Estop(stamp_ns=1, engaged=True, reason="r" * 10**6, source="s" * 1000)
+    assert len(e.reason) == TEXT_MAX and len(e.source) == NAME_MAX, "a producer's long text is clipped"
+    assert decode(encode(e), Estop) == e
+    ok = Estop(stamp_ns=1, engaged=True, reason="short", source="op")
+    wire = msgspec.msgpack.decode(encode(ok))
+    i = wire.index("short")
+    with pytest.raises(MessageDecodeError):  # a rogue's 1 MB reason never becomes a message
+        decode(_wire_with(ok, i, "r" * (TEXT_MAX + 1)), Estop)
+    with pytest.raises(MessageDecodeError):
+        decode(_wire_with(ok, wire.index("op"), "s" * (NAME_MAX + 1)), Estop)
+    assert len(ArmRequest(stamp_ns=1, armed=True, reason="a" * 5000).reason) == TEXT_MAX
+    many = {f"reason {i}: " + "x" * 500: 1 for i in range(1000)}
+    st = ServiceStatus(service="svc", seq=1, stamp_ns=1, counters=many, detail="d" * 10**5)
+    assert len(st.detail) == DETAIL_MAX and len(st.counters) == COUNTERS_MAX
+    assert sum(st.counters.values()) == 1000 and "other counters" in st.counters
+    assert decode(encode(st), ServiceStatus) == st
