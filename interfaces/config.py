@@ -70,6 +70,9 @@ class ZenohSettings:
     access_control: bool = False
 
     def __post_init__(self) -> None:
+        for name in ("mode", "robot_id", "key_prefix"):
+            if not isinstance(getattr(self, name), str):
+                raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
         for name in ("user", "password_file", "credentials_file"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
@@ -86,7 +89,7 @@ class ZenohSettings:
             raise ConfigError(f"[zenoh] mode must be one of {ZENOH_MODES}, got {self.mode!r}")
         for name in ("listen", "connect"):
             value = getattr(self, name)
-            if isinstance(value, str) or not all(isinstance(e, str) and "/" in e for e in value):
+            if not isinstance(value, (list, tuple)) or not all(isinstance(e, str) and "/" in e for e in value):
                 raise ConfigError(f"[zenoh] {name} must be a list of endpoints like 'tcp/127.0.0.1:7447', got {value!r}")
             object.__setattr__(self, name, tuple(value))
         if not isinstance(self.multicast_scouting, bool):
