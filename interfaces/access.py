@@ -2,9 +2,11 @@
 
 Every service authenticates as one role (Zenoh user-password
 authentication: its user name is the role) and every service applies the
-same access-control list on what it receives (ingress) and forwards
-(egress), so a message from a peer that may not write a key is dropped at
-the first hop, wherever that peer connects. Keys not listed below are open
+same access-control list on what it receives (ingress: the subject is
+the sending peer), so a message from a peer that may not write a key is
+dropped at the first hop, wherever that peer connects. (Egress rules would
+be checked against the *receiving* peer: a deny on robot/state for
+everyone but the robot would stop the robot sending its states.) Keys not listed below are open
 to any authenticated peer; unauthenticated peers cannot join at all.
 
 ======================  =========================================
@@ -58,7 +60,7 @@ def cell_acl(keys: Keys) -> dict[str, Any]:
     for i, (key, allowed) in enumerate(writers(keys).items()):
         others = [r for r in ROLES if r not in allowed]
         rule = f"put-{i}"
-        rules.append({"id": rule, "permission": "deny", "flows": ["ingress", "egress"], "messages": ["put", "delete"],
+        rules.append({"id": rule, "permission": "deny", "flows": ["ingress"], "messages": ["put", "delete"],
                       "key_exprs": [key]})
         policies.append({"id": f"only-{'-'.join(allowed)}-{i}", "rules": [rule], "subjects": others})
     return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects,

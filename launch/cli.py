@@ -175,20 +175,27 @@ class _Cell:
     robot_id: str
     skill: Path
     out: Path
+    credentials: Path  # the run's per-role passwords (the containers' /secrets)
+    access_control: bool
 
 
 def _plan_cell(a, compose_path: Path, board_env: dict[str, str], skill: Path, out: Path) -> _Cell:
     """The compose file read with the run's variables, its active services localised on their ports."""
     from .compose import active, load_compose, localize, run_locally
 
+    from interfaces.credentials import make_credentials
+
     variables = _compose_variables(a, board_env, skill, out)
     profiles = tuple(p for p in variables.get("COMPOSE_PROFILES", "sim").split(",") if p)
     services = run_locally(active(load_compose(compose_path, variables), profiles))
-    local = localize(services, _port_map(services, a.port_base))
+    credentials = out / "credentials"
+    make_credentials(credentials, if_missing=True)  # a new run folder: new passwords for this run
+    local = localize(services, _port_map(services, a.port_base), secrets=credentials)
     robot_id = next((s.environment.get("LAMPS_ROBOT_ID") for s in local if s.environment.get("LAMPS_ROBOT_ID")),
                     "iiwa")
+    access = any(s.environment.get("LAMPS_ZENOH_ACCESS_CONTROL", "false").lower() == "true" for s in local)
     return _Cell(services=local, env={k: v for k, v in board_env.items() if k.startswith("LAMPS__")},
-                 robot_id=robot_id, skill=skill, out=out)
+                 robot_id=robot_id, skill=skill, out=out, credentials=credentials, access_control=access)
 
 
 def _compose_variables(a, board_env: dict[str, str], skill: Path, out: Path) -> dict[str, str]:
@@ -229,7 +236,7 @@ def _run_cell(cell: _Cell, a, echo, stop_requested: threading.Event, t_start: fl
     try:
         _start_services(cell, echo, children)
         _print(f"lamps up: {', '.join(c.name for c in children)} running; run folder {cell.out}")
-        outcome, why = _watch(cell.services, children, cell.robot_id, a.max_duration, stop_requested)
+        outcome, why = _watch(cell, children, a.max_duration, stop_requested)
     except UpError as exc:
         outcome, why = "failed", str(exc)
         print(f"lamps up: error: {exc}", file=sys.stderr)
@@ -304,14 +311,20 @@ def _port_busy(port: int) -> bool:
     return False
 
 
-def _watch(local, children, robot_id: str, max_duration_s: float, stop_requested) -> tuple[str, str]:
+def _watch(cell: _Cell, children, max_duration_s: float, stop_requested) -> tuple[str, str]:
     """Progress on the terminal until the run ends; returns (outcome for run.json, why)."""
     from interfaces.config import ZenohSettings
+    from interfaces.credentials import DICTIONARY, password_file
     from interfaces.messages import ControllerStatus, Phase, SimTruth, Stains
     from interfaces.session import ServiceNode
 
+    local, robot_id = cell.services, cell.robot_id
     endpoints = [f"tcp/127.0.0.1:{p}" for s in local for p in s.listen_ports]
-    settings = ZenohSettings(connect=tuple(endpoints), robot_id=robot_id)
+    auth = {}
+    if cell.access_control:  # the launcher watches as the operator
+        auth = dict(user="operator", password_file=str(password_file(cell.credentials, "operator")),
+                    credentials_file=str(cell.credentials / DICTIONARY), access_control=True)
+    settings = ZenohSettings(connect=tuple(endpoints), robot_id=robot_id, **auth)
     t0 = time.monotonic()
     with ServiceNode("launcher", settings) as node:
         keys = node.keys

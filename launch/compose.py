@@ -134,6 +134,8 @@ def load_compose(path: str | os.PathLike = DEFAULT_COMPOSE, variables: Mapping[s
     return out
 
 
+#: Where the containers find the cell's credentials (``lamps credentials``); ``lamps up`` maps it to a local folder.
+SECRETS_MOUNT = "/secrets/"
 #: A service labelled ``lamps.up: skip`` is compose's alone: ``lamps up`` does its job itself (learning the skill).
 SKIP_LABEL = "lamps.up"
 
@@ -183,12 +185,14 @@ def listen_ports(s: ComposeService) -> list[int]:
 
 
 def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], int] | None = None,
-             lamps_argv0: tuple[str, ...] | None = None) -> list[LocalService]:
+             lamps_argv0: tuple[str, ...] | None = None, secrets: Path | None = None) -> list[LocalService]:
     """The services as local processes (see the module docstring).
 
     port_of : (service, container port) -> local port; missing ones get
     :func:`free_port`. lamps_argv0 : what replaces ``lamps`` in commands
     (default: this interpreter running the console script's module).
+    secrets : the local folder that stands for the containers' ``/secrets``
+    (the cell's credentials) in environment values.
     """
     lamps = lamps_argv0 or (sys.executable, "-m", "interfaces.cli")
     host_of: dict[str, str] = {}
@@ -217,6 +221,9 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
     out = []
     for s in services:
         env = dict(s.environment)
+        if secrets is not None:
+            env = {k: (str(secrets / v[len(SECRETS_MOUNT):]) if v.startswith(SECRETS_MOUNT) else v)
+                   for k, v in env.items()}
         for key in ("LAMPS_ZENOH_LISTEN", "LAMPS_ZENOH_CONNECT"):
             if env.get(key):
                 # two names of one service (robot, camera) become one endpoint, once

@@ -165,3 +165,39 @@ def test_the_rules_hold_for_peers_that_connect_through_another_service(creds):
         op.publish(keys.controller_estop_release, _estop(False, "operator"))
         assert wait_sample(releases, what="the operator's release, through the controller's endpoint").source == "operator"
         assert commands.received == 0
+
+
+def test_the_bridge_config_lets_the_authenticated_adapter_connect_and_an_unauthenticated_bridge_does_not(creds):
+    """zenoh-bridge-ros2dds is not ours: compose starts it with ``-c /secrets/zenoh-bridge.json5`` so that the
+    adapter (authenticated as the robot side) can open a link to it. Here a Zenoh session opened from that very
+    file (its dictionary path pointed at this test's folder) stands for the bridge."""
+    import json
+
+    import zenoh
+
+    from interfaces.credentials import BRIDGE_CONFIG
+
+    rid = f"acl{free_port()}"
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    cfg = json.loads((creds / BRIDGE_CONFIG).read_text())
+    assert cfg["transport"]["auth"]["usrpwd"]["user"] == "robot"
+    cfg["transport"]["auth"]["usrpwd"]["dictionary_file"] = str(creds / DICTIONARY)
+    local = creds / "bridge-local.json5"
+    local.write_text(json.dumps(cfg))
+    conf = zenoh.Config.from_file(str(local))
+    conf.insert_json5("listen/endpoints", json.dumps([ep]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(conf) as bridge, ServiceNode("robot", _settings(creds, "robot", rid, connect=[ep])) as adapter:
+        wait_for(lambda: list(adapter.session.info.peers_zid()), 5.0, "the adapter's link to the bridge")
+        got = []
+        sub = bridge.declare_subscriber("lbr/command/torque", lambda s: got.append(s))
+        wait_subscribed(adapter.session, "lbr/command/torque")
+        adapter.session.put("lbr/command/torque", b"cdr")
+        wait_for(lambda: got, 5.0, "the adapter's command at the bridge")
+        sub.undeclare()
+    plain = ZenohSettings(listen=(f"tcp/127.0.0.1:{free_port()}",), robot_id=rid)
+    with ServiceNode("bridge", plain) as b2, \
+            ServiceNode("robot", _settings(creds, "robot", rid, connect=list(plain.listen))) as a2:
+        time.sleep(1.0)
+        assert not list(a2.session.info.peers_zid()), "without credentials on the bridge there is no link"
+        assert not list(b2.session.info.peers_zid())

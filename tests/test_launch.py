@@ -49,7 +49,7 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
             assert s.labels.get("lamps.up") == "skip" and "--no-multicast-scouting" in s.command
             continue
         assert s.command[0] == "lamps" and s.command[1] in COMMANDS, s.command
-        if s.name == "skill":  # the one-shot learning service talks to nobody
+        if s.name in ("skill", "credentials"):  # the one-shot services talk to nobody
             continue
         assert s.environment["LAMPS_ZENOH_MULTICAST"] == "false" and s.environment["LAMPS_ZENOH_MODE"] == "peer"
         for ep in s.environment.get("LAMPS_ZENOH_CONNECT", "").split(","):
@@ -80,7 +80,26 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
     assert services["skill"].command[:2] == ("lamps", "demo") and "/skills/bundled" in services["skill"].command
     assert "skill" in services["controller"].depends_on
     assert [s.name for s in run_locally(list(services.values()))] == [n for n in services
-                                                                      if n not in ("skill", "bridge")]
+                                                                      if n not in ("skill", "bridge", "credentials")]
+
+
+def test_every_zenoh_service_of_every_profile_joins_as_its_role_with_access_control_on(tmp_path):
+    from interfaces.access import ROLES
+
+    services = load_compose(COMPOSE, {})
+    roles = {"sim": "robot", "lbr-peer": "robot", "robot-lbr-sim": "robot", "robot-lbr": "robot",
+             "controller": "controller", "perception": "perception", "recorder": "recorder"}
+    for name, role in roles.items():
+        env = services[name].environment
+        assert env["LAMPS_ZENOH_USER"] == role and role in ROLES, name
+        assert env["LAMPS_ZENOH_PASSWORD_FILE"] == f"/secrets/{role}.password", name
+        assert env["LAMPS_ZENOH_ACCESS_CONTROL"] == "true", name
+        assert "./secrets:/secrets:ro" in services[name].volumes, name
+    assert services["credentials"].command[1:] == ("credentials", "/secrets", "--if-missing")
+    local = {s.name: s for s in localize(run_locally(active(services, ("sim",))), secrets=tmp_path / "c")}
+    assert local["controller"].environment["LAMPS_ZENOH_PASSWORD_FILE"] == str(tmp_path / "c" / "controller.password")
+    off = load_compose(COMPOSE, {"LAMPS_ACCESS_CONTROL": "false"})
+    assert off["controller"].environment["LAMPS_ZENOH_ACCESS_CONTROL"] == "false"
 
 
 def test_every_compose_service_config_is_accepted_by_its_own_check(tmp_path, learned_skill_file):
@@ -243,6 +262,8 @@ def test_lamps_up_default_cleans_a_wall_board_and_reports_it(tmp_path):
     assert set(json.loads((out / "run.json").read_text())["services"]) == {"sim", "controller", "perception"}
     assert "learn/fig4_reachability.png" in report["plots"] and (out / "learn" / "skill.json").is_file()
     assert "outcome cleaned" in r.stdout
+    secret = out / "credentials" / "controller.password"  # the cell ran authenticated, access control on
+    assert secret.is_file() and secret.stat().st_mode & 0o077 == 0
     print(f"lamps up (wall): {time.monotonic() - t0:.0f} s wall, {report['sim_time_s']:.1f} s robot time, "
           f"removed {report['dirt_removed_fraction']:.2%}")
     # `lamps report` rebuilds the same report from the recording alone
