@@ -74,11 +74,23 @@ def _write_report(out: Path, keys=None) -> int:
 
 def report_main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="lamps report", description=(
-        "Rebuild RUN_DIR/report.json and the plots from RUN_DIR/recording.mcap (and run.json if present)."))
+        "Rebuild RUN_DIR/report.json and the plots from RUN_DIR/recording.mcap (and run.json if present); a run "
+        "whose recorder died (only recording.mcap.partial) is recovered first, up to the crash."))
     p.add_argument("run_dir", metavar="RUN_DIR")
     a = p.parse_args(argv)
+    from .record import RECORDING, recover_recording
+
     run = Path(a.run_dir)
-    if not (run / "recording.mcap").is_file():
-        print(f"lamps report: error: {run}: no recording.mcap (is this a run folder?)", file=sys.stderr)
+    final, partial = run / RECORDING, run / (RECORDING + ".partial")
+    if not final.is_file() and partial.is_file():  # the recorder died: keep what reached the disk
+        try:
+            n = recover_recording(partial, final)
+        except OSError as exc:
+            print(f"lamps report: error: cannot recover {partial}: {exc}", file=sys.stderr)
+            return 1
+        print(f"lamps report: the recorder did not finish; recovered {n} messages from {partial.name} into "
+              f"{final.name}", flush=True)
+    if not final.is_file():
+        print(f"lamps report: error: {run}: no {RECORDING} (is this a run folder?)", file=sys.stderr)
         return 1
     return _write_report(run)
