@@ -32,7 +32,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "record every key into an MCAP file; report.json and plots when stopped",
     ),
     "report": ("launch.record_cli:report_main", "rebuild a run's report.json and plots from its recording"),
-    "credentials": ("interfaces.credentials:main", "make a cell's per-role passwords for Zenoh authentication and access control"),
+    "credentials": ("interfaces.credentials:main",
+                    "make a cell's per-role passwords for Zenoh authentication and access control"),
     "bench": ("launch.bench:main", "run every benchmark into bench.json and a markdown page (a source checkout)"),
 }
 

@@ -163,7 +163,8 @@ def test_the_rules_hold_for_peers_that_connect_through_another_service(creds):
         rogue.publish(keys.controller_estop, _estop(True, "rogue barrier"))
         wait_sample(engages, lambda e: e.source == "rogue barrier", what="the rogue's allowed e-stop")
         op.publish(keys.controller_estop_release, _estop(False, "operator"))
-        assert wait_sample(releases, what="the operator's release, through the controller's endpoint").source == "operator"
+        release = wait_sample(releases, what="the operator's release, through the controller's endpoint")
+        assert release.source == "operator"
         assert commands.received == 0
 
 

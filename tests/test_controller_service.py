@@ -23,8 +23,8 @@ from lampskit.core.skill import PeriodicEntry
 from controller.params import ControllerParams
 from controller.service import ControllerService
 from interfaces.config import ZenohSettings
-from interfaces.messages import (ControllerTrace, Capabilities, ControllerStatus, Estop, Pose, RobotState, ServiceStatus,
-                                 SimTruth)
+from interfaces.messages import (Capabilities, ControllerStatus, ControllerTrace, Estop, Pose, RobotState,
+                                 ServiceStatus, SimTruth)
 from interfaces.session import ServiceNode
 
 from .zenoh_helpers import REPO, SimProcess, free_port, latest_status, wait_for, wait_sample, wait_subscribed
