@@ -274,7 +274,7 @@ def _stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_star
     codes = {}
     for c in reversed([c for c in children if c.name != "recorder"]):
         codes[c.name] = c.stop()
-    run = {**ended, "duration_s": time.monotonic() - t_start, "services": codes,
+    run = {**ended, "ended_wall_ns": time.time_ns(), "duration_s": time.monotonic() - t_start, "services": codes,
            "key_prefix": f"lamps/{cell.robot_id}", "skill": str(cell.skill),
            "options": {k: v for k, v in vars(a).items()}}
     write_text_atomic(cell.out / "run.json", json.dumps(run, indent=1) + "\n")

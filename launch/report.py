@@ -19,7 +19,8 @@
   one-tick change in the 5 ticks around it (<= ~1: continuous).
 * ``tracking_rms_m``: in-plane reference vs measured pad while wiping.
 * ``loop_timing``: the controller's last reported loop statistics.
-* ``faults``: every entry into PAUSED, FAULT or ESTOP (robot time, phase, reason).
+* ``faults``: every entry into PAUSED, FAULT or ESTOP (wall time, phase, reason), and the launcher's end
+  of the run when a service died, failed or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
 * ``services``: exit codes from the launcher (if any); ``counters``: the
   last status counters of each service; ``plots``: the PNG files written.
 """
@@ -121,7 +122,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report.update(_force_section(run.tr, run.col, run.truth, run.cap_n))
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
-    report["faults"] = _faults_section(run.status)
+    report["faults"] = _faults_section(run.status) + _cell_faults(run.launcher)
     report["final_phase"] = run.status[-1]["phase"] if run.status else "none"
     report["outcome"] = _outcome(report["final_phase"], report["dirt_removed_fraction"], run.launcher.get("outcome"))
     report["services"] = run.launcher.get("services", {})
@@ -198,6 +199,14 @@ def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n
             "junction_step_ratio_max": ratio,
             "tracking_rms_m": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else 0.0,
             "trace_ticks": len(tr)}
+
+
+def _cell_faults(launcher: dict) -> list[dict[str, Any]]:
+    """The launcher's ending as a fault when it was one (a service died or failed, the run timed out)."""
+    if launcher.get("outcome") not in ("failed", "timeout"):
+        return []
+    return [{"wall_ns": int(launcher.get("ended_wall_ns", 0)), "phase": "CELL",
+             "reason": str(launcher.get("why", launcher["outcome"]))[:500]}]
 
 
 def _faults_section(status: list[dict]) -> list[dict[str, Any]]:

@@ -432,4 +432,7 @@ def test_a_service_dying_mid_run_stops_the_others_and_is_named(tmp_path, learned
     run = json.loads((out / "run.json").read_text())
     assert run["outcome"] == "failed" and run["services"]["perception"] == -9
     assert all(_nobody_listens(base + i) for i in range(3))
-    assert (out / "recording.mcap").is_file() and json.loads((out / "report.json").read_text())["outcome"] == "failed"
+    report = json.loads((out / "report.json").read_text())
+    assert (out / "recording.mcap").is_file() and report["outcome"] == "failed"
+    cell = [f for f in report["faults"] if f["phase"] == "CELL"]  # the death is a fault with a time and a reason
+    assert len(cell) == 1 and "perception exited with code -9" in cell[0]["reason"] and cell[0]["wall_ns"] > 0
