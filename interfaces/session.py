@@ -166,8 +166,10 @@ class Inbox(Generic[M]):
     def get(self, timeout_s: float) -> M | None:
         """The oldest sample not yet taken, waiting up to ``timeout_s``; None on timeout."""
         with self._ready:
-            if not self._queue and not self._ready.wait_for(lambda: bool(self._queue), timeout_s):
-                return None
+            if not self._queue:
+                # a poll (timeout 0, every cycle of a 1 kHz loop) must not pay for a waiter: ~1 us, not 3
+                if timeout_s <= 0.0 or not self._ready.wait_for(lambda: bool(self._queue), timeout_s):
+                    return None
             return self._queue.popleft()
 
     def close(self) -> None:

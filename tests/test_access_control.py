@@ -40,6 +40,17 @@ def _settings(creds, role: str, rid: str, listen=(), connect=(), password: str |
                          password_file=str(pw), credentials_file=str(creds / DICTIONARY), access_control=True)
 
 
+def _robot_readers(robot: ServiceNode, *senders: ServiceNode):
+    """(commands, e-stop engages, releases) inboxes on ``robot``, once every sender knows they are subscribed."""
+    keys = robot.keys
+    readers = (robot.inbox(keys.robot_command, TorqueCommand), robot.inbox(keys.controller_estop, Estop),
+               robot.inbox(keys.controller_estop_release, Estop))
+    for node in senders:
+        for key in (keys.robot_command, keys.controller_estop, keys.controller_estop_release):
+            wait_subscribed(node.session, key)
+    return readers
+
+
 def _cmd(seq: int) -> TorqueCommand:
     return TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=[0.0] * 7)
 
@@ -97,12 +108,7 @@ def test_only_the_controller_moves_the_arm_and_only_the_operator_releases_the_es
             ServiceNode("perception", _settings(creds, "perception", rid, connect=[ep])) as rogue, \
             ServiceNode("operator", _settings(creds, "operator", rid, connect=[ep])) as op:
         keys = robot.keys
-        commands = robot.inbox(keys.robot_command, TorqueCommand)
-        engages = robot.inbox(keys.controller_estop, Estop)
-        releases = robot.inbox(keys.controller_estop_release, Estop)
-        for session in (ctl.session, rogue.session, op.session):
-            for key in (keys.robot_command, keys.controller_estop, keys.controller_estop_release):
-                wait_subscribed(session, key)
+        commands, engages, releases = _robot_readers(robot, ctl, rogue, op)
         # a perception peer commands torques and releases the e-stop: both dropped at the robot's ingress
         for seq in range(100, 120):
             rogue.publish(keys.robot_command, _cmd(seq))
@@ -153,12 +159,7 @@ def test_the_rules_hold_for_peers_that_connect_through_another_service(creds):
             ServiceNode("perception", _settings(creds, "perception", rid, connect=[ep2])) as rogue, \
             ServiceNode("operator", _settings(creds, "operator", rid, connect=[ep2])) as op:
         keys = robot.keys
-        commands = robot.inbox(keys.robot_command, TorqueCommand)
-        releases = robot.inbox(keys.controller_estop_release, Estop)
-        engages = robot.inbox(keys.controller_estop, Estop)
-        for session in (ctl.session, rogue.session, op.session):
-            for key in (keys.robot_command, keys.controller_estop_release, keys.controller_estop):
-                wait_subscribed(session, key)
+        commands, engages, releases = _robot_readers(robot, ctl, rogue, op)
         rogue.publish(keys.robot_command, _cmd(100))
         rogue.publish(keys.controller_estop, _estop(True, "rogue barrier"))
         wait_sample(engages, lambda e: e.source == "rogue barrier", what="the rogue's allowed e-stop")
