@@ -10,7 +10,10 @@ Per tick:
 
 1. pad pose and twist from Pinocchio; in the board frame: (x, y, h),
    in-plane speed, normal force from the measured contact wrench;
-2. force cap watch (filtered force above the cap -> executor fault: lift off);
+2. watches (executor fault, lift off): filtered force above the cap; a
+   joint torque neither the last applied command nor the measured contact
+   explains (:class:`~controller.control.watch.DisturbanceWatch`); contact
+   lost while pressing;
 3. executor setpoint -> world reference (position, orientation, twist,
    acceleration); in contact the normal is force-regulated (PI + feed-forward);
 4. impedance torque with the pose error clipped, the stiffness ramped in
@@ -32,6 +35,7 @@ from .control.force import NormalForceRegulator
 from .control.impedance import Kinematics, Reference, TaskShaping, impedance_torque, task_modes, task_stiffness
 from .control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
                              speed_excess_force)
+from .control.watch import ContactWatch, DisturbanceWatch
 from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
 from .params import ControllerParams
@@ -131,6 +135,11 @@ class ControllerCore:
         self._modes_age = 0
         self._modes_scale = -1.0
         self.kin = Kinematics(self.model)
+        watch = params.limits
+        self.disturbance = DisturbanceWatch(watch.disturbance_share * lim.tau_max, watch.disturbance_filter_s,
+                                            watch.disturbance_persist_s)
+        self._applied = np.zeros(self.model.nq)
+        self.contact_watch = ContactWatch(f.contact_threshold_n, f.contact_loss_s)
 
     def restart(self) -> None:
         """The robot came back after a loss: hold where it is, ramp the gains in again, re-approach."""
@@ -139,17 +148,21 @@ class ControllerCore:
         self._since_start_s = 0.0
         self.force.reset()
         self.override.reset()
+        self.disturbance.reset()
         self.executor.restart()
 
     def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
-             dt_s: float, tau_max_nm: np.ndarray | None = None) -> np.ndarray:
+             dt_s: float, tau_max_nm: np.ndarray | None = None, applied_nm: np.ndarray | None = None) -> np.ndarray:
         """Torques (7,) [Nm] to send for the measured state (an internal buffer: copy to keep).
 
         q, dq : (7,) [rad], [rad/s]; wrench : (6,) contact wrench on the pad
         (world axes, force first) [N, Nm]; gravity_compensated : the robot
         adds gravity itself; dt_s : time since the last tick [s];
         tau_max_nm : (7,) the robot's declared torque limits (the tighter
-        of these and the description's apply).
+        of these and the description's apply); applied_nm : (7,) the torques
+        this controller sent that the robot applied over the last ``dt_s``
+        (without gravity when the robot adds it), None when unknown (a hold,
+        a skipped state): what the disturbance watch checks the motion against.
         """
         self.time_s += dt_s
         if self.q_rest is None:
@@ -158,6 +171,7 @@ class ControllerCore:
         if tau_max_nm is not None:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
+        self._watch_disturbance(kin, dq, wrench, gravity_compensated, dt_s, applied_nm)
         board = self.executor.board
         if board is None:
             self._hold_reference(kin)
@@ -175,6 +189,25 @@ class ControllerCore:
         if self.trace is not None:
             self._record(sp, kin.p, board)
         return tau
+
+    def _watch_disturbance(self, kin: Kinematics, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
+                           dt_s: float, applied_nm: np.ndarray | None) -> None:
+        """Fault when the arm moves in a way the applied command and the measured contact do not explain."""
+        watch = self.disturbance
+        if applied_nm is None:
+            watch.skip(dq)
+            return
+        applied = self._applied
+        applied[:] = applied_nm
+        if gravity_compensated:
+            applied += kin.g
+        if watch.update(kin.M, kin.nle, kin.J, dq, applied, wrench, dt_s):
+            j = watch.worst_joint()
+            self.executor.fault(f"unexplained joint torque: A{j + 1} {watch.tau_d[j]:+.1f} Nm (limit "
+                                f"{watch.limit[j]:.0f} Nm for {watch.persist_s * 1000:.0f} ms): the arm is not "
+                                "moving as commanded (another controller's torques? a collision the force sensor "
+                                "does not see?)")
+            watch.reset()
 
     def _hold_reference(self, kin: Kinematics) -> None:
         """No board yet: the executor waits and the reference holds the pose of the first such tick."""
@@ -234,10 +267,16 @@ class ControllerCore:
             in_contact = self.normal_force_n > self.p.force.contact_threshold_n
             self.press_n = self.force.command(sp.force_n, self.normal_force_n, dt_s, in_contact)
             shaping.press_n = self.press_n
+            if self.contact_watch.update(sp.force_n, self.normal_force_n, dt_s):
+                self.contact_watch.lost_s = 0.0
+                self.executor.fault(f"contact lost: {self.normal_force_n:.1f} N measured for "
+                                    f"{self.contact_watch.persist_s * 1000:.0f} ms while pressing "
+                                    f"{sp.force_n:.1f} N (board gone? pad off? force sensor?)")
         else:
             shaping.force_axis = None
             self.press_n = 0.0
             self.force.reset()
+            self.contact_watch.lost_s = 0.0
 
     def _shape_task(self, kin: Kinematics, dt_s: float) -> None:
         """Stiffness ramped in (smoothstep from 20 %) since the (re)start; a brake above the speed limit."""

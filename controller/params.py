@@ -49,7 +49,9 @@ class ForceParams:
     force that counts as touching the board while descending [N];
     normal_damping_1_s : damping of motion along the normal while
     force-controlled [1/s, times the task inertia]; ramp_s : time the target
-    ramps in and out over [s].
+    ramps in and out over [s]; contact_loss_s : while pressing, a measured
+    force under the contact threshold for this long is a fault (contact
+    lost) [s].
     """
 
     target_n: float = 10.0
@@ -61,9 +63,11 @@ class ForceParams:
     normal_damping_1_s: float = 40.0
     ramp_s: float = 0.3
     filter_s: float = 0.005
+    contact_loss_s: float = 0.3
 
     def __post_init__(self) -> None:
         s = "controller.force"
+        _range(s, "contact_loss_s", self.contact_loss_s, 0.01, 10.0)
         _range(s, "cap_n", self.cap_n, 1.0, 150.0)
         _range(s, "target_n", self.target_n, 0.5, 150.0)
         if self.target_n >= self.cap_n:
@@ -92,7 +96,12 @@ class LimitParams:
     both below the real-robot adapter's guard (0.8 of the limit);
     max_position_error_m, max_rotation_error_rad : the pose error is clipped
     to these (bounded pull towards a far reference); gain_ramp_s : the
-    stiffness ramps up over this long after (re)starting [s].
+    stiffness ramps up over this long after (re)starting [s];
+    disturbance_share : a joint torque that neither the command nor the
+    measured contact explains (:mod:`controller.control.watch`), filtered
+    over disturbance_filter_s [s], above this share of the joint's torque
+    limit for disturbance_persist_s [s] is a fault (the arm is not doing
+    what it was told); 10 turns the watch off.
     """
 
     torque_rate_nm_per_ms: float = 1.0
@@ -107,9 +116,15 @@ class LimitParams:
     max_position_error_m: float = 0.05
     max_rotation_error_rad: float = 0.3
     gain_ramp_s: float = 0.5
+    disturbance_share: float = 0.1
+    disturbance_filter_s: float = 0.02
+    disturbance_persist_s: float = 0.05
 
     def __post_init__(self) -> None:
         s = "controller.limits"
+        _range(s, "disturbance_share", self.disturbance_share, 0.02, 10.0)
+        _range(s, "disturbance_filter_s", self.disturbance_filter_s, 0.001, 1.0)
+        _range(s, "disturbance_persist_s", self.disturbance_persist_s, 0.0, 5.0)
         _range(s, "torque_rate_nm_per_ms", self.torque_rate_nm_per_ms, 0.01, 50.0)
         _range(s, "joint_margin_rad", self.joint_margin_rad, 0.01, 0.5)
         _range(s, "joint_margin_stiffness_nm_rad", self.joint_margin_stiffness_nm_rad, 0.0, 5000.0)

@@ -46,6 +46,9 @@ from .params import ControllerParams
 log = logging.getLogger(__name__)
 
 SERVICE = "controller"
+#: How many answers are kept to look up the one a robot state says it applied (>= the states a real-time
+#: robot may run ahead of its answers).
+SENT_RING = 64
 
 
 class ControllerService:
@@ -68,6 +71,10 @@ class ControllerService:
         self._last_seq = -1
         self._last_robot_ns: int | None = None
         self._last_command: TorqueCommand | None = None
+        # the torques sent for the last SENT_RING states (row seq % SENT_RING; -1: a hold), for the disturbance watch
+        self._sent_tau = np.zeros((SENT_RING, core.model.nq))
+        self._sent_seq = np.full(SENT_RING, -1, dtype=np.int64)
+        self._session_id = str(node.session.zid())  # the robot side serves one controller session
         self._stains_clock = None
         self._lost = False
         self._ever_state = False
@@ -183,6 +190,7 @@ class ControllerService:
     def _control(self, state: RobotState, dt: float) -> np.ndarray | None:
         """Torques answering ``state``, or None when the tick failed (then the answer is ``hold``)."""
         self._ever_state = True
+        applied = self._applied(state)
         self._last_seq = state.seq
         self.ticks += 1
         q = np.asarray(state.q_rad)
@@ -190,7 +198,8 @@ class ControllerService:
         wrench = np.asarray(state.wrench_world)
         caps = state.capabilities
         try:
-            tau = self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm))
+            tau = self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm),
+                                 applied)
         except Exception as exc:  # a bug or an absurd state must not end the loop: fault, count, go on
             self.counters["tick_errors"] += 1
             log.exception("control tick failed")
@@ -204,6 +213,15 @@ class ControllerService:
             return None
         return tau
 
+    def _applied(self, state: RobotState) -> np.ndarray | None:
+        """The torques of ours the robot applied between the last answered state and ``state``; None when that is
+        not one known command (a hold, a state in between not seen, an answer no longer kept)."""
+        c = state.command_seq
+        if c < 0 or self._last_seq < 0 or state.seq != self._last_seq + 1:
+            return None
+        row = c % SENT_RING
+        return self._sent_tau[row] if self._sent_seq[row] == c else None
+
     def _usable(self, state: RobotState | None) -> RobotState | None:
         """``state`` if this robot model can use it (checked before its seq counts for anything), else None."""
         if state is not None and len(state.q_rad) != self._nq:
@@ -214,11 +232,16 @@ class ControllerService:
     def _send(self, seq: int, tau: np.ndarray | None) -> None:
         """Answer state ``seq``: the torques, or (``tau`` None: the tick failed) ``hold``, which the robot side
         applies by braking; the controller never goes silent on a state it has taken."""
+        row = seq % SENT_RING
         if tau is None:
             self.counters["holds_sent"] += 1
-            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=[0.0] * self._nq, mode=HOLD)
+            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=[0.0] * self._nq, mode=HOLD,
+                                session=self._session_id)
+            self._sent_seq[row] = -1
         else:
-            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau.tolist())
+            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau.tolist(), session=self._session_id)
+            self._sent_tau[row] = tau
+            self._sent_seq[row] = seq
         self._last_command = cmd
         self.node.publish(self.keys.robot_command, cmd)
 
@@ -256,6 +279,7 @@ class ControllerService:
         self._last_robot_ns = None
         self._last_seq = -1
         self._last_command = None
+        self._sent_seq[:] = -1  # a new robot counts its states from 0 again
         self._stains_clock = None  # a new sim's clock starts again
         self.core.restart()
 

@@ -168,6 +168,10 @@ class RobotState(Message, frozen=True):
     board exerts on the eraser, world axes. ``seq`` counts steps;
     ``robot_time_ns`` is the robot side's own clock (simulated time in the
     sim), which a lock-step controller uses as its time base.
+    ``command_seq`` is the ``seq`` of the command the robot applied over the
+    cycle that ended in this state, -1 when it applied none of the
+    controller's (it held, braked, or was e-stopped): what lets the
+    controller check that the arm moved as it was told.
     """
 
     seq: int
@@ -179,6 +183,7 @@ class RobotState(Message, frozen=True):
     capabilities: Capabilities
     robot_time_ns: int = 0
     wall_ns: int = 0
+    command_seq: int = -1
 
     def __post_init__(self) -> None:
         names = ("q_rad", "dq_rad_s", "tau_nm")
@@ -198,12 +203,15 @@ class TorqueCommand(Message, frozen=True):
 
     tau_nm : (n,) joint torques [Nm] (without gravity when the robot
     compensates it). mode ``"hold"``: brake and hold position, torques ignored.
+    ``session``: the sending controller's session (its Zenoh id); the robot
+    side serves one controller session at a time.
     """
 
     seq: int
     stamp_ns: int
     tau_nm: list[float]
     mode: Name = "torque"
+    session: Name = ""
 
     def __post_init__(self) -> None:
         _finite("tau_nm", self.tau_nm)

@@ -25,6 +25,13 @@ whatever commands arrive, until a release on ``controller/estop/release``
 (the operator's key under access control; a release on the engage key is
 ignored and counted). The status says ``estop=engaged`` and why.
 
+Commands are bound to one controller session (``TorqueCommand.session``):
+the first to command is served; another session's commands are dropped and
+counted (``commands_from_another_controller``) until the served one has
+been silent for ``rebind_after_s``, when the newcomer (a restarted
+controller) takes over, logged and counted. The robot side holds in the
+meantime (stale commands brake).
+
 Every command passes the :class:`~robot.gate.CommandGate` first; undecodable
 payloads, wrong lengths, out-of-sequence answers and late commands are
 dropped and counted by reason. Status (counters, loop timing) goes to the
@@ -59,7 +66,8 @@ class ServerParams:
     rate_hz : the real-time rate [Hz]; stale_limit_s : a command older than this is not applied [s];
     republish_s : lock-step re-send period of an unanswered state [s]; max_steps : stop after this
     many written cycles (0: never); status_rate_hz : status publications per second (wall);
-    tau_rate_nm_s : the gate's torque-rate limit [Nm/s].
+    tau_rate_nm_s : the gate's torque-rate limit [Nm/s]; rebind_after_s : another controller session is
+    served only after the served one has sent nothing for this long [s].
     """
 
     mode: str = "lockstep"
@@ -69,6 +77,7 @@ class ServerParams:
     max_steps: int = 0
     status_rate_hz: float = 10.0
     tau_rate_nm_s: float = DEFAULT_TAU_RATE_NM_S
+    rebind_after_s: float = 0.5
 
 
 class RobotServer:
@@ -97,10 +106,13 @@ class RobotServer:
         self._n_latency = 0
         self.steps = 0
         self.braked = True
+        self.applied_seq = -1  # the seq of the controller's command written in the last cycle; -1: none (a hold)
         self._sources: list = []
         self._status_period_s = 1.0 / params.status_rate_hz
         self._next_status = 0.0
         self.estop_reason: str | None = None
+        self.controller: str | None = None  # the controller session served
+        self._controller_seen_ns = 0
         self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
         self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
 
@@ -137,9 +149,11 @@ class RobotServer:
                 else:
                     self.counters["estop_releases_ignored_on_the_engage_key"] += 1
 
-    def _apply(self, command: np.ndarray | str) -> None:
-        """Write ``command`` (gated torques, or ``"hold"``) to the port: one cycle (a hold while e-stopped)."""
+    def _apply(self, command: np.ndarray | str, seq: int = -1) -> None:
+        """Write ``command`` (gated torques answering state ``seq``, or ``"hold"``) to the port: one cycle (a hold
+        while e-stopped). The next state reports ``seq`` as applied, or -1 when the cycle was a hold."""
         self._poll_estop()
+        self.applied_seq = -1
         if self.estop_reason is not None:
             if not isinstance(command, str):
                 self.counters["commands_held_for_estop"] += 1
@@ -153,7 +167,24 @@ class RobotServer:
         else:
             self.port.write(command)
             self.braked = False
+            self.applied_seq = seq
         self.steps += 1
+
+    def _from_served_controller(self, cmd: TorqueCommand) -> bool:
+        """True for a command of the controller session served (binding the first; re-binding to a newcomer only
+        after the served one has been silent for ``rebind_after_s``); another session's command is counted."""
+        now = time.monotonic_ns()
+        if cmd.session != self.controller:
+            if self.controller is not None and now - self._controller_seen_ns < self.p.rebind_after_s * 1e9:
+                self.counters["commands_from_another_controller"] += 1
+                return False
+            if self.controller is not None:
+                self.counters["controller_changes"] += 1
+            log.warning("serving controller session %s%s", cmd.session[:40] or "?",
+                        "" if self.controller is None else f" (after {self.controller[:40] or '?'} fell silent)")
+            self.controller = cmd.session
+        self._controller_seen_ns = now
+        return True
 
     def _in_sequence(self, cmd: TorqueCommand, seq: int) -> bool:
         if cmd.seq != seq:
@@ -178,13 +209,13 @@ class RobotServer:
                 self.publish_state()
                 self.counters["states_republished"] += 1
                 last_pub = now
-            if cmd is None or not self._in_sequence(cmd, self.steps):
+            if cmd is None or not self._from_served_controller(cmd) or not self._in_sequence(cmd, self.steps):
                 continue
             command = self.gate.accept(cmd)
             if command is None:
                 continue
             t1 = time.perf_counter_ns()
-            self._apply(command)
+            self._apply(command, cmd.seq)
             self.port.after_cycle(lockstep=True)
             t2 = time.perf_counter_ns()
             self.publish_state()
@@ -201,6 +232,7 @@ class RobotServer:
         period_ns = int(round(1e9 / self.p.rate_hz))
         stale_ns = int(self.p.stale_limit_s * 1e9)
         held: np.ndarray | str | None = None
+        held_seq = -1
         last_cmd_ns = -stale_ns - 1
         next_ns = time.monotonic_ns()
         t_prev = next_ns
@@ -208,17 +240,17 @@ class RobotServer:
         while not self.stop.is_set():
             t0 = time.monotonic_ns()
             cmd = latest.take()
-            if cmd is not None:
+            if cmd is not None and self._from_served_controller(cmd):
                 accepted = self.gate.accept(cmd, (t0 - last_cmd_ns) * 1e-9)
                 if accepted is not None:
                     held = accepted if isinstance(accepted, str) else accepted.copy()
-                    last_cmd_ns = t0
+                    held_seq, last_cmd_ns = cmd.seq, t0
             fresh = held is not None and t0 - last_cmd_ns <= stale_ns
             if not fresh and held is not None and not self.braked:
                 self.counters["stale_command_brakes"] += 1
                 log.warning("no fresh command for %.0f ms: braking", (t0 - last_cmd_ns) / 1e6)
             t1 = time.monotonic_ns()
-            self._apply(held if fresh else HOLD)
+            self._apply(held if fresh else HOLD, held_seq)
             self.port.after_cycle(lockstep=False)
             t2 = time.monotonic_ns()
             self.publish_state()
@@ -270,12 +302,14 @@ class RobotServer:
                 last_pub_ns = t0
             cmd = inbox.get(0.0)
             while cmd is not None:
-                if cmd.seq <= last_applied or not 0 <= seq - cmd.seq <= max_lag:
+                if not self._from_served_controller(cmd):
+                    pass
+                elif cmd.seq <= last_applied or not 0 <= seq - cmd.seq <= max_lag:
                     self.counters["commands_out_of_sequence"] += 1
                 else:
                     command = self.gate.accept(cmd, None if lockstep else (time.monotonic_ns() - last_good_ns) * 1e-9)
                     if command is not None:
-                        self._apply(command)
+                        self._apply(command, cmd.seq)
                         self.port.after_cycle(lockstep=lockstep)
                         last_applied = cmd.seq
                         last_good_ns = time.monotonic_ns()
@@ -301,7 +335,8 @@ class RobotServer:
         self.node.publish(self.keys.robot_state, RobotState(
             seq=self.steps if seq is None else seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
             dq_rad_s=r.dq_rad_s.tolist(), tau_nm=r.tau_nm.tolist(), wrench_world=r.wrench_world.tolist(),
-            capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns()))
+            capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns(),
+            command_seq=self.applied_seq))
 
     def status(self) -> ServiceStatus:
         counters = dict(self.counters)
@@ -319,8 +354,9 @@ class RobotServer:
             for reason, n in list(source.bad.items()):
                 counters[f"{name}_dropped: {reason}"] = n
         estop = "" if self.estop_reason is None else f" estop=engaged ({self.estop_reason})"
+        served = "" if self.controller is None else f" controller={self.controller[:12] or '?'}"
         detail = (f"mode={'clocked' if self.port.clocked else self.p.mode} step={self.steps} braked={self.braked}"
-                  f"{estop}")
+                  f"{served}{estop}")
         extra = self.port.detail()
         return ServiceStatus(service=self.service, seq=self.steps, stamp_ns=time.monotonic_ns(), counters=counters,
                              detail=f"{detail} {extra}".strip(), timing=self.stats.summary())

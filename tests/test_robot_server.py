@@ -79,9 +79,10 @@ class ServerThread:
         assert self.error is None, f"the server loop died: {self.error!r}"
 
     # -- the controller's side ---------------------------------------------------------------------
-    def command(self, seq: int, tau, mode: str = "torque") -> None:
+    def command(self, seq: int, tau, mode: str = "torque", session: str = "ctl-a") -> None:
         self.ctl.publish(self.keys.robot_command, TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(),
-                                                                tau_nm=[float(v) for v in tau], mode=mode))
+                                                                tau_nm=[float(v) for v in tau], mode=mode,
+                                                                session=session))
 
     def state(self, accept, what: str, timeout_s: float = 5.0) -> RobotState:
         return wait_sample(self.states, accept, timeout_s, what)
@@ -243,3 +244,32 @@ def test_the_robot_side_holds_while_the_estop_is_engaged_whatever_is_commanded()
         srv.state_seq(6)
         st = srv.wait_status(lambda m: m.seq == 6, "a status after the release")
         assert np.all(arm.q > 0.0) and st.counters["estop_engaged"] == 0 and "estop" not in st.detail.split()[-1]
+
+
+def test_commands_are_bound_to_the_controller_session_served_and_each_state_says_which_it_applied():
+    """A second controller (another session, even answering the right state) is dropped and counted while the one
+    served keeps commanding; once that one has been silent for ``rebind_after_s`` the newcomer (a restarted
+    controller) is served. Each state names the command applied over the cycle before it (-1: a hold)."""
+    arm = MockArm(q0_rad=np.zeros(7))
+    with ServerThread(lambda node: arm, lockstep(rebind_after_s=0.3)) as srv:
+        assert srv.state_seq(0).command_seq == -1
+        srv.command(0, [1.0] * 7, session="ctl-a")
+        assert srv.state_seq(1).command_seq == 0
+        srv.command(1, [-30.0] * 7, session="ctl-b")  # the right seq, the wrong controller
+        srv.command(1, [1.0] * 7, session="ctl-a")
+        assert srv.state_seq(2).command_seq == 1
+        st = srv.wait_status(lambda m: m.counters.get("commands_from_another_controller", 0) == 1,
+                             "the other controller's command counted")
+        assert arm.steps == 2 and np.all(arm.q > 0.0), "only ctl-a's torques moved the arm"
+        assert "controller=ctl-a" in st.detail
+        srv.command(2, [0.0] * 7, mode=HOLD, session="ctl-a")
+        assert srv.state_seq(3).command_seq == -1, "a hold applies none of the controller's torques"
+        time.sleep(0.4)  # ctl-a silent longer than rebind_after_s: ctl-b (a restarted controller) takes over
+        srv.command(3, [1.0] * 7, session="ctl-b")
+        assert srv.state_seq(4).command_seq == 3
+        srv.command(4, [1.0] * 7, session="ctl-a")  # the old session is now the other one
+        srv.command(4, [1.0] * 7, session="ctl-b")
+        srv.state_seq(5)
+        st = srv.wait_status(lambda m: m.seq == 5 and m.counters.get("commands_from_another_controller") == 2,
+                             "ctl-a dropped after the change")
+    assert st.counters["controller_changes"] == 1 and "controller=ctl-b" in st.detail

@@ -1,0 +1,118 @@
+"""Is the arm doing what it was told? Disturbance torque and contact-loss watches (pure numpy).
+
+* :class:`DisturbanceWatch` estimates, each robot cycle, the joint torque
+  that neither the command nor the measured contact explains:
+
+      tau_d = M(q) (dq_k - dq_{k-1}) / dt + nle(q, dq) - tau_applied - J^T w
+
+  (``nle`` = C dq + g; ``tau_applied`` the command the robot reports it
+  applied over the cycle, plus gravity when the robot adds it; ``w`` the
+  measured contact wrench on the pad, world axes). Low-pass filtered, it is
+  the acceleration-based form of a momentum observer: near zero while the
+  robot executes our torques, large when something else moves the arm (a
+  peer's torques, a collision the force sensor does not see, a robot that
+  brakes on its own). Cycles whose applied command is not ours or is
+  unknown (holds, skipped states) are not evaluated and restart the
+  persistence count.
+* :class:`ContactWatch` times how long the measured normal force stays
+  under the contact threshold while the setpoint presses with more than
+  twice it: contact lost (board gone, pad torn off, sensor dead).
+
+Neither allocates per call.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class DisturbanceWatch:
+    """Filtered unexplained joint torque and whether it has exceeded its limit long enough.
+
+    Parameters
+    ----------
+    limit_nm : (n,) per-joint limit on the filtered disturbance [Nm].
+    filter_s : time constant of the first-order low-pass [s].
+    persist_s : the limit must be exceeded this long (robot time) before :attr:`tripped` [s].
+    """
+
+    def __init__(self, limit_nm: np.ndarray, filter_s: float, persist_s: float) -> None:
+        self.limit = np.asarray(limit_nm, float).copy()
+        self.filter_s = float(filter_s)
+        self.persist_s = float(persist_s)
+        n = len(self.limit)
+        self.tau_d = np.zeros(n)
+        self._raw = np.zeros(n)
+        self._tmp = np.zeros(n)
+        self._dq_prev = np.zeros(n)
+        self._have_prev = False
+        self.over_s = 0.0
+        self.peak_ratio = 0.0  # largest |tau_d| / limit since the last reset (status, tuning)
+        self.tripped = False
+
+    def reset(self) -> None:
+        """Forget the history (a restart, a hold): the next cycle only stores its velocity."""
+        self.tau_d[:] = 0.0
+        self._have_prev = False
+        self.over_s = 0.0
+        self.tripped = False
+
+    def skip(self, dq: np.ndarray) -> None:
+        """A cycle whose applied torque is not known: keep its velocity as the next reference, evaluate nothing."""
+        self._dq_prev[:] = dq
+        self._have_prev = True
+        self.over_s = 0.0
+
+    def update(self, M: np.ndarray, nle: np.ndarray, J: np.ndarray, dq: np.ndarray, tau_applied: np.ndarray,
+               wrench: np.ndarray, dt_s: float) -> bool:
+        """One robot cycle of length ``dt_s`` [s] over which ``tau_applied`` (n,) [Nm] acted; True once tripped.
+
+        M : (n, n) inertia; nle : (n,) C dq + g [Nm]; J : (6, n) pad Jacobian (world-aligned);
+        dq : (n,) measured velocities at the cycle's end [rad/s]; wrench : (6,) contact wrench [N, Nm].
+        """
+        if not self._have_prev or dt_s <= 0.0:
+            self.skip(dq)
+            return self.tripped
+        raw, tmp = self._raw, self._tmp
+        np.subtract(dq, self._dq_prev, out=tmp)
+        tmp /= dt_s
+        np.matmul(M, tmp, out=raw)
+        raw += nle
+        raw -= tau_applied
+        np.matmul(J.T, wrench, out=tmp)
+        raw -= tmp
+        a = min(dt_s / (self.filter_s + dt_s), 1.0)
+        self.tau_d += a * (raw - self.tau_d)
+        self._dq_prev[:] = dq
+        np.abs(self.tau_d, out=tmp)
+        tmp /= self.limit
+        ratio = float(tmp.max())
+        self.peak_ratio = max(self.peak_ratio, ratio)
+        self.over_s = self.over_s + dt_s if ratio > 1.0 else 0.0
+        if self.over_s >= self.persist_s:
+            self.tripped = True
+        return self.tripped
+
+    def worst_joint(self) -> int:
+        """Index of the joint with the largest disturbance relative to its limit."""
+        return int(np.argmax(np.abs(self.tau_d) / self.limit))
+
+
+class ContactWatch:
+    """Time under the contact threshold while pressing; ``tripped`` after ``persist_s`` of it.
+
+    threshold_n : contact force [N]; persist_s : how long a loss may last [s].
+    """
+
+    def __init__(self, threshold_n: float, persist_s: float) -> None:
+        self.threshold_n = float(threshold_n)
+        self.persist_s = float(persist_s)
+        self.lost_s = 0.0
+
+    def update(self, pressing_n: float, measured_n: float, dt_s: float) -> bool:
+        """``pressing_n``: the setpoint's press force (0 when not in contact) [N]; True when contact is lost."""
+        if pressing_n > 2.0 * self.threshold_n and measured_n < self.threshold_n:
+            self.lost_s += dt_s
+        else:
+            self.lost_s = 0.0
+        return self.lost_s >= self.persist_s
