@@ -34,6 +34,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("launch.record_cli:report_main", "rebuild a run's report.json and plots from its recording"),
     "credentials": ("interfaces.credentials:main",
                     "make a cell's per-role passwords for Zenoh authentication and access control"),
+    "certificates": ("interfaces.certificates:main",
+                     "make a cell's CA and per-service certificates for mutual TLS between machines"),
     "bench": ("launch.bench:main", "run every benchmark into bench.json and a markdown page (a source checkout)"),
 }
 

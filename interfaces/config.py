@@ -22,7 +22,12 @@ access control (:mod:`interfaces.access`): ``user`` (the service's role),
 ``user:password``, to check the peers that connect), ``access_control``
 (true: apply the cell's access-control list; needs a user). Shorthands
 ``LAMPS_ZENOH_USER``, ``LAMPS_ZENOH_PASSWORD_FILE``,
-``LAMPS_ZENOH_CREDENTIALS_FILE``, ``LAMPS_ZENOH_ACCESS_CONTROL``.
+``LAMPS_ZENOH_CREDENTIALS_FILE``, ``LAMPS_ZENOH_ACCESS_CONTROL``; mutual TLS
+(:mod:`interfaces.certificates`): ``tls_ca`` (the cell's CA certificate),
+``tls_certificate`` and ``tls_private_key`` (the service's), all three or
+none; with them every endpoint must be ``tls/...``. Shorthands
+``LAMPS_ZENOH_TLS_CA``, ``LAMPS_ZENOH_TLS_CERTIFICATE``,
+``LAMPS_ZENOH_TLS_PRIVATE_KEY``.
 """
 
 from __future__ import annotations
@@ -51,6 +56,9 @@ _SHORTHANDS = {
     "LAMPS_ZENOH_PASSWORD_FILE": ("zenoh", "password_file"),
     "LAMPS_ZENOH_CREDENTIALS_FILE": ("zenoh", "credentials_file"),
     "LAMPS_ZENOH_ACCESS_CONTROL": ("zenoh", "access_control"),
+    "LAMPS_ZENOH_TLS_CA": ("zenoh", "tls_ca"),
+    "LAMPS_ZENOH_TLS_CERTIFICATE": ("zenoh", "tls_certificate"),
+    "LAMPS_ZENOH_TLS_PRIVATE_KEY": ("zenoh", "tls_private_key"),
 }
 
 
@@ -68,12 +76,15 @@ class ZenohSettings:
     password_file: str = ""
     credentials_file: str = ""
     access_control: bool = False
+    tls_ca: str = ""
+    tls_certificate: str = ""
+    tls_private_key: str = ""
 
     def __post_init__(self) -> None:
         for name in ("mode", "robot_id", "key_prefix"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
-        for name in ("user", "password_file", "credentials_file"):
+        for name in ("user", "password_file", "credentials_file", "tls_ca", "tls_certificate", "tls_private_key"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
         if not isinstance(self.access_control, bool):
@@ -92,6 +103,15 @@ class ZenohSettings:
             if not isinstance(value, (list, tuple)) or not all(isinstance(e, str) and "/" in e for e in value):
                 raise ConfigError(f"[zenoh] {name} must be a list of endpoints like 'tcp/127.0.0.1:7447', got {value!r}")
             object.__setattr__(self, name, tuple(value))
+        tls = (self.tls_ca, self.tls_certificate, self.tls_private_key)
+        if any(tls) and not all(tls):
+            raise ConfigError("[zenoh] mutual TLS needs all of tls_ca, tls_certificate and tls_private_key (make them "
+                              "with 'lamps certificates DIR')")
+        if all(tls):
+            plain = [e for e in (*self.listen, *self.connect) if not e.startswith("tls/")]
+            if plain:
+                raise ConfigError(f"[zenoh] with mutual TLS every endpoint must be tls/...: {plain} would let peers "
+                                  "without a certificate in")
         if not isinstance(self.multicast_scouting, bool):
             raise ConfigError(f"[zenoh] multicast_scouting must be true or false, got {self.multicast_scouting!r}")
         self.keys  # validates robot_id and key_prefix

@@ -1,7 +1,8 @@
 """Open a Zenoh session from :class:`~interfaces.config.ZenohSettings`, announce the service, read newest samples.
 
 * :func:`zenoh_config` builds the ``zenoh.Config`` (peer mode, explicit
-  endpoints, multicast scouting off unless asked for).
+  endpoints, multicast scouting off unless asked for; user-password
+  authentication, access control and mutual TLS when configured).
 * :class:`ServiceNode` is a context manager: the session plus the liveliness
   token ``<prefix>/alive/<service>``; closing it undeclares both.
 * :class:`Latest` is a subscription that keeps only the newest sample (a
@@ -56,6 +57,14 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
             {"user": settings.user, "password": password, "dictionary_file": settings.credentials_file}))
     if settings.access_control:
         cfg.insert_json5("access_control", json.dumps(cell_acl(settings.keys)))
+    if settings.tls_ca:
+        for path, what in ((settings.tls_ca, "tls_ca"), (settings.tls_certificate, "tls_certificate"),
+                           (settings.tls_private_key, "tls_private_key")):
+            _read_secret(path, what)
+        cfg.insert_json5("transport/link/tls", json.dumps({
+            "root_ca_certificate": settings.tls_ca, "enable_mtls": True,
+            "listen_certificate": settings.tls_certificate, "listen_private_key": settings.tls_private_key,
+            "connect_certificate": settings.tls_certificate, "connect_private_key": settings.tls_private_key}))
     return cfg
 
 
