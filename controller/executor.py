@@ -58,6 +58,8 @@ log = logging.getLogger(__name__)
 
 _ACTIVE = (Phase.APPROACH, Phase.WIPE, Phase.TRANSITION)
 _HALTED = (Phase.FAULT, Phase.ESTOP)
+#: The pad counts as off the board this far above it [m] (see :attr:`SkillExecutor.pad_down`).
+LIFTED_M = 0.005
 
 
 class Stage(IntEnum):
@@ -120,6 +122,7 @@ class SkillExecutor:
         self._stage = Stage.HOLD
         self._plan: Plan | None = None
         self._resume_after_lift = False
+        self._last_h = float("inf")  # the pad above the board at the last step [m]
         self._initialised = False
         self._estop: str | None = None
         self._restart_pending = False
@@ -196,6 +199,11 @@ class SkillExecutor:
         self._stage = Stage.HOLD
         self.motion.cancel_turn()
 
+    @property
+    def pad_down(self) -> bool:
+        """The pad presses, or moves less than ``LIFTED_M`` above the board: stopping now would leave it there."""
+        return self._initialised and (self._sp.contact or (self._stage != Stage.HOLD and self._last_h < LIFTED_M))
+
     def restart(self) -> None:
         """The robot came back after a loss: start over from WAIT_PEERS at the measured pose on the next step."""
         self._restart_pending = True
@@ -216,6 +224,7 @@ class SkillExecutor:
         """
         self.ticks += 1
         self.clock_s += dt_s
+        self._last_h = tool.h
         if not self._initialised or self._restart_pending:
             self._start_over(tool)
         if self.phase == Phase.WAIT_PEERS:

@@ -49,6 +49,8 @@ SERVICE = "controller"
 #: How many answers are kept to look up the one a robot state says it applied (>= the states a real-time
 #: robot may run ahead of its answers).
 SENT_RING = 64
+#: On a stop request with the pad on the board, the loop goes on this long at most [s] while it lifts off.
+LIFT_ON_STOP_S = 6.0
 
 
 class ControllerService:
@@ -74,7 +76,8 @@ class ControllerService:
         # the torques sent for the last SENT_RING states (row seq % SENT_RING; -1: a hold), for the disturbance watch
         self._sent_tau = np.zeros((SENT_RING, core.model.nq))
         self._sent_seq = np.full(SENT_RING, -1, dtype=np.int64)
-        self._session_id = str(node.session.zid())  # the robot side serves one controller session
+        self._session_id = str(node.session.zid())
+        self._stop_since: float | None = None  # the robot side serves one controller session
         self._stains_clock = None
         self._lost = False
         self._ever_state = False
@@ -108,7 +111,7 @@ class ControllerService:
         self._state_reader = states
         last_state_wall = time.monotonic()
         t_prev = time.perf_counter_ns()
-        while not self.stop.is_set():
+        while not self._exit_now():
             t0 = time.perf_counter_ns()
             state = self._usable(states.get(0.02))
             now = time.monotonic()
@@ -150,7 +153,7 @@ class ControllerService:
         robot_rate = 0.0
         next_ns = time.monotonic_ns()
         t_prev = next_ns
-        while not self.stop.is_set():
+        while not self._exit_now():
             t0 = time.monotonic_ns()
             new = self._usable(states.take())
             if new is not None:
@@ -187,6 +190,29 @@ class ControllerService:
             time.sleep((next_ns - now) / 1e9)
 
     # ------------------------------------------------------------------ pieces
+    def _exit_now(self) -> bool:
+        """After :attr:`stop` is set: True at once with the pad in the air; with it on the board (a cell stopped
+        mid-wipe), e-stop (the fast lift) first and True once lifted, or after ``LIFT_ON_STOP_S``."""
+        if not self.stop.is_set():
+            return False
+        ex = self.core.executor
+        if self._stop_since is None:
+            self._stop_since = time.monotonic()
+            if ex.pad_down and self._ever_state and not self._lost:
+                self.counters["lifts_on_stop"] += 1
+                log.warning("stop requested with the pad on the board: lifting off first (at most %.0f s)",
+                            LIFT_ON_STOP_S)
+                ex.estop("cell stopping with the pad on the board: lifting off before exit")
+                self._publish_status(force=True)
+                return False
+            return True
+        if not ex.pad_down or self._lost:
+            return True
+        if time.monotonic() - self._stop_since > LIFT_ON_STOP_S:
+            log.error("the pad did not lift off within %.0f s of the stop request: exiting anyway", LIFT_ON_STOP_S)
+            return True
+        return False
+
     def _control(self, state: RobotState, dt: float) -> np.ndarray | None:
         """Torques answering ``state``, or None when the tick failed (then the answer is ``hold``)."""
         self._ever_state = True

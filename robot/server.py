@@ -236,11 +236,19 @@ class RobotServer:
         last_cmd_ns = -stale_ns - 1
         next_ns = time.monotonic_ns()
         t_prev = next_ns
+        first_seq = 0  # after a freeze of this loop, only answers to states published since count
         self.publish_state()
         while not self.stop.is_set():
             t0 = time.monotonic_ns()
+            if t0 - t_prev > stale_ns:  # this loop itself stalled (SIGSTOP, a swap storm): whatever is held or
+                held = None  # queued answered a state from before; brake until the controller answers a new one
+                first_seq = self.steps + 1
+                self.counters["loop_freezes"] += 1
+                log.warning("robot loop frozen for %.0f ms: braking until a fresh answer", (t0 - t_prev) / 1e6)
             cmd = latest.take()
-            if cmd is not None and self._from_served_controller(cmd):
+            if cmd is not None and cmd.seq < first_seq:
+                self.counters["commands_from_before_a_freeze"] += 1
+            elif cmd is not None and self._from_served_controller(cmd):
                 accepted = self.gate.accept(cmd, (t0 - last_cmd_ns) * 1e-9)
                 if accepted is not None:
                     held = accepted if isinstance(accepted, str) else accepted.copy()

@@ -338,3 +338,25 @@ def test_check_reports_the_skill_and_the_tick_cost(learned_skill_file):
     r = _controller("--skill", str(learned_skill_file), "--check")
     assert r.returncode == 0, r.stderr
     assert "ok: skill with 3 periodic" in r.stdout and "control tick p50" in r.stdout
+
+
+def test_a_controller_stopped_mid_wipe_lifts_the_pad_off_before_it_exits(tmp_path, learned_skill):
+    """The review: perception killed, the cell stopped, the pad left pressing on the board. A stop request with the
+    pad down is an e-stop (the fast lift) the loop sees through before exiting; with the pad up it exits at once."""
+    from controller.service import LIFT_ON_STOP_S
+
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim, \
+            ControllerThread(sim, learned_skill) as ctl:
+        ctl.wait_phase(("WIPE",), 60.0)
+        assert ctl.core.normal_force_n > 5.0
+        t0 = time.monotonic()
+        ctl.service.stop.set()
+        ctl.thread.join(LIFT_ON_STOP_S + 5.0)
+        assert not ctl.thread.is_alive(), "the loop did not end"
+        took = time.monotonic() - t0
+        ex = ctl.core.executor
+        assert ex.phase == "ESTOP" and ex.reason.startswith("cell stopping with the pad on the board"), ex.reason
+        assert not ex.pad_down and ctl.service.counters["lifts_on_stop"] == 1
+        last = ctl.trace()[-1]
+        assert last[COL["force_n"]] < 0.5 and last[COL["h"]] > 0.005, (last[COL["force_n"]], last[COL["h"]])
+        assert took < LIFT_ON_STOP_S, took

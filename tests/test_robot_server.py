@@ -21,7 +21,7 @@ from interfaces.session import ServiceNode
 from robot.mock import MockArm
 from robot.server import RobotServer, ServerParams
 
-from .zenoh_helpers import free_port, wait_sample, wait_subscribed
+from .zenoh_helpers import free_port, wait_for, wait_sample, wait_subscribed
 
 
 class ServerThread:
@@ -273,3 +273,46 @@ def test_commands_are_bound_to_the_controller_session_served_and_each_state_says
         st = srv.wait_status(lambda m: m.seq == 5 and m.counters.get("commands_from_another_controller") == 2,
                              "ctl-a dropped after the change")
     assert st.counters["controller_changes"] == 1 and "controller=ctl-b" in st.detail
+
+
+class FreezingArm(MockArm):
+    """A mock arm whose write stalls the server's loop once for ``freeze_s`` when :attr:`freeze` is set."""
+
+    freeze_s = 0.15
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.freeze = threading.Event()
+        self.frozen = threading.Event()
+
+    def after_cycle(self, lockstep: bool) -> None:
+        if self.freeze.is_set():
+            self.freeze.clear()
+            self.frozen.set()
+            time.sleep(self.freeze_s)
+            self.frozen.clear()
+
+
+@pytest.mark.slow
+def test_after_its_own_loop_froze_the_robot_side_brakes_until_the_controller_answers_a_fresh_state():
+    """The review: after a sim freeze the sim applied a pre-freeze command for 3 ms. Now the held command and an
+    answer to a state from before the freeze are both dropped; the arm holds until an answer to a new state."""
+    arm = FreezingArm(q0_rad=np.zeros(7))
+    params = ServerParams(mode="realtime", rate_hz=500.0, stale_limit_s=0.05, status_rate_hz=100.0)
+    with ServerThread(lambda node: arm, params) as srv:
+        before = srv.state(lambda s: s.seq >= 10, "ten real-time cycles")
+        srv.command(before.seq, [1.0] * 7)
+        srv.state(lambda s: s.command_seq == before.seq, "the command applied")
+        arm.freeze.set()
+        wait_for(arm.frozen.is_set, what="the server's loop frozen")
+        srv.command(before.seq + 1, [1.0] * 7)  # answers a state from before the freeze, arrives during it
+        wait_for(lambda: not arm.frozen.is_set(), what="the loop running again")
+        thawed_ns = time.monotonic_ns()
+        after = srv.state(lambda s: s.stamp_ns > thawed_ns, "a state after the freeze")
+        assert after.command_seq == -1
+        later = [srv.state(lambda s, k=k: s.seq == after.seq + k, f"state {after.seq + k}") for k in (1, 2, 3)]
+        assert all(s.command_seq == -1 and s.dq_rad_s == [0.0] * 7 for s in later), "held, not driven"
+        srv.command(later[-1].seq, [1.0] * 7)
+        srv.state(lambda s: s.command_seq == later[-1].seq, "a fresh answer applied")
+        st = srv.wait_status(lambda m: m.counters.get("commands_from_before_a_freeze", 0) >= 1, "the drop counted")
+    assert st.counters["loop_freezes"] == 1, st.counters
