@@ -11,11 +11,14 @@ file (what compose and tests use):
   ``["tcp/127.0.0.1:7447"]``) and taken as a plain string if it is not one.
 * Shorthands: ``LAMPS_ROBOT_ID``, ``LAMPS_KEY_PREFIX``, ``LAMPS_ZENOH_LISTEN``
   and ``LAMPS_ZENOH_CONNECT`` (comma-separated endpoints), ``LAMPS_ZENOH_MODE``,
-  ``LAMPS_ZENOH_MULTICAST`` (``true``/``false``).
+  ``LAMPS_ZENOH_MULTICAST`` and ``LAMPS_ZENOH_GOSSIP`` (``true``/``false``).
 
 ``[zenoh]`` keys: ``mode`` (``peer`` | ``client`` | ``router``), ``listen``
 and ``connect`` (lists of endpoints such as ``tcp/127.0.0.1:7447``),
 ``multicast_scouting`` (default false: it fails in containers and CI),
+``gossip`` (default true: peers learn each other's endpoints from the
+ones they connect to and link directly; false: only the configured links,
+e.g. when a link must pass a particular network path),
 ``robot_id``, ``key_prefix`` (default ``lamps/<robot_id>``); authentication and
 access control (:mod:`interfaces.access`): ``user`` (the service's role),
 ``password_file`` (its password, one line), ``credentials_file`` (every role's
@@ -52,6 +55,7 @@ _SHORTHANDS = {
     "LAMPS_ZENOH_CONNECT": ("zenoh", "connect"),
     "LAMPS_ZENOH_MODE": ("zenoh", "mode"),
     "LAMPS_ZENOH_MULTICAST": ("zenoh", "multicast_scouting"),
+    "LAMPS_ZENOH_GOSSIP": ("zenoh", "gossip"),
     "LAMPS_ZENOH_USER": ("zenoh", "user"),
     "LAMPS_ZENOH_PASSWORD_FILE": ("zenoh", "password_file"),
     "LAMPS_ZENOH_CREDENTIALS_FILE": ("zenoh", "credentials_file"),
@@ -70,6 +74,7 @@ class ZenohSettings:
     listen: tuple[str, ...] = ()
     connect: tuple[str, ...] = ()
     multicast_scouting: bool = False
+    gossip: bool = True
     robot_id: str = DEFAULT_ROBOT_ID
     key_prefix: str = ""
     user: str = ""
@@ -112,8 +117,9 @@ class ZenohSettings:
             if plain:
                 raise ConfigError(f"[zenoh] with mutual TLS every endpoint must be tls/...: {plain} would let peers "
                                   "without a certificate in")
-        if not isinstance(self.multicast_scouting, bool):
-            raise ConfigError(f"[zenoh] multicast_scouting must be true or false, got {self.multicast_scouting!r}")
+        for name in ("multicast_scouting", "gossip"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"[zenoh] {name} must be true or false, got {getattr(self, name)!r}")
         self.keys  # validates robot_id and key_prefix
 
     @property

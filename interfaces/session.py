@@ -48,6 +48,7 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
     cfg = zenoh.Config()
     cfg.insert_json5("mode", json.dumps(settings.mode))
     cfg.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
+    cfg.insert_json5("scouting/gossip/enabled", json.dumps(settings.gossip))
     cfg.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
     cfg.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
     if settings.user:

@@ -3,7 +3,8 @@
 ``report.json`` (schema ``lamps-run-report/1``; every quantity in SI units):
 
 * ``outcome``: ``cleaned`` (controller DONE and >= 95 % of the dirt gone),
-  ``incomplete``, ``fault`` (ended in FAULT or ESTOP), or what the launcher
+  ``incomplete``, ``fault`` (ended in FAULT or ESTOP; the phase is the
+  controller's when the launcher began stopping the cell), or what the launcher
   recorded in ``run.json`` (``failed``: a service died; ``timeout``;
   ``stopped``: Ctrl-C) when that is worse.
 * ``duration_s`` (wall), ``sim_time_s`` (robot clock), ``dirt_removed_fraction``
@@ -19,8 +20,18 @@
   one-tick change in the 5 ticks around it (<= ~1: continuous).
 * ``tracking_rms_m``: in-plane reference vs measured pad while wiping.
 * ``loop_timing``: the controller's last reported loop statistics.
-* ``faults``: every entry into PAUSED, FAULT or ESTOP (wall time, phase, reason), and the launcher's end
-  of the run when a service died, failed or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
+* ``max_contact_force_n`` (the sim's truth: the physical contact force,
+  whatever the controller measured) and ``max_joint_speed_ratio`` (the
+  largest ``|dq| / dq_max`` of any joint in any recorded ``robot/state``):
+  the cell's safety, across restarts of any service.
+* ``faults``: every entry into PAUSED, FAULT or ESTOP (wall time, phase, reason); every service that went
+  silent (no status for ``SERVICE_SILENCE_S`` or four status periods: frozen, stopped or dead) or came back restarted (its status
+  count starting again), phase ``SERVICE``; a recorder that did not finish (a recording recovered from its
+  ``.partial`` file) or stalled, phase ``RECORDER``; each safety action of the robot side (a brake on stale
+  commands or after its own freeze, commands of another controller dropped, a change of the controller
+  served, commands held while e-stopped: :data:`ROBOT_EVENTS`), phase ``ROBOT``; and the launcher's end of
+  the run when a service died,
+  failed or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
 * ``services``: exit codes from the launcher (if any); ``counters``: the
   last status counters of each service; ``plots``: the PNG files written.
 """
@@ -50,6 +61,9 @@ CLEANED_FRACTION = 0.95
 TRUTH_LEVEL = 0.03
 _WIPING = (PHASE_CODES[Phase.WIPE], PHASE_CODES[Phase.TRANSITION])
 _OUTCOME_RANK = {"cleaned": 0, "incomplete": 1, "timeout": 2, "stopped": 2, "fault": 3, "failed": 4}
+#: A service whose status is not heard for this long [s], or four of its status periods if that is longer,
+#: went silent: a fault.
+SERVICE_SILENCE_S = 1.0
 
 
 def _topic(rec: dict, key: str) -> list[dict]:
@@ -122,8 +136,12 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report.update(_force_section(run.tr, run.col, run.truth, run.cap_n))
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
-    report["faults"] = _faults_section(run.status) + _cell_faults(run.launcher)
-    report["final_phase"] = run.status[-1]["phase"] if run.status else "none"
+    report.update(_safety_section(run))
+    recorder = _recorder_faults(run, run_dir)
+    faults = (_faults_section(run.status) + _service_faults(run, _recorder_stalls(run)) + _robot_events(run)
+              + recorder + _cell_faults(run.launcher))
+    report["faults"] = sorted(faults, key=lambda f: f["wall_ns"])
+    report["final_phase"] = _final_phase(run)
     report["outcome"] = _outcome(report["final_phase"], report["dirt_removed_fraction"], run.launcher.get("outcome"))
     report["services"] = run.launcher.get("services", {})
     report["counters"] = _counters_section(run)
@@ -199,6 +217,117 @@ def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n
             "junction_step_ratio_max": ratio,
             "tracking_rms_m": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else 0.0,
             "trace_ticks": len(tr)}
+
+
+def _final_phase(run: _Run) -> str:
+    """The controller's phase when the launcher began stopping the cell (what the stop itself does, e.g. the lift
+    of a pad stopped mid-wipe, is in the faults, not the outcome); the last one without a launcher."""
+    msgs = run.rec.get(run.keys.controller_status, [])
+    stopping = int(run.launcher.get("stopping_wall_ns", 0))
+    before = [m for t, m in msgs if t < stopping] if stopping else []
+    last = before[-1] if before else (msgs[-1][1] if msgs else None)
+    return last["phase"] if last else "none"
+
+
+def _safety_section(run: _Run) -> dict[str, float]:
+    """The physical contact force (sim truth) and the joint speeds (every robot state), over the whole run."""
+    from interfaces.robot_model import RobotModel
+
+    dq_max = RobotModel().limits.dq_max
+    worst = 0.0
+    for _, m in run.rec.get(run.keys.robot_state, []):
+        dq = m.get("dq_rad_s") or []
+        if len(dq) == len(dq_max):
+            worst = max(worst, float(np.max(np.abs(np.asarray(dq, float)) / dq_max)))
+    return {"max_contact_force_n": max((float(t["contact_force_n"]) for t in run.truth), default=0.0),
+            "max_joint_speed_ratio": worst}
+
+
+def _recorder_stalls(run: _Run) -> list[tuple[int, int]]:
+    """(start, end) [wall ns] of every stretch longer than ``SERVICE_SILENCE_S`` in which nothing was recorded."""
+    times = np.sort(np.fromiter((t for msgs in run.rec.values() for t, _ in msgs), dtype=np.int64))
+    if len(times) < 2:
+        return []
+    gaps = np.diff(times)
+    return [(int(times[i]), int(times[i + 1])) for i in np.flatnonzero(gaps * 1e-9 > SERVICE_SILENCE_S)]
+
+
+def _unheard_s(t0: int, t1: int, stalls: list[tuple[int, int]]) -> float:
+    """How much of (t0, t1) [wall ns] the recorder was listening [s] (a stalled recorder hears no one)."""
+    deaf = sum(max(0, min(t1, b) - max(t0, a)) for a, b in stalls)
+    return (t1 - t0 - deaf) * 1e-9
+
+
+#: Robot-side counters whose every increase is a safety action worth a line in the faults: name -> what it means.
+ROBOT_EVENTS = {
+    "stale_command_brakes": "braked: no fresh command within its stale limit",
+    "loop_freezes": "its own loop froze: braked until a fresh answer",
+    "commands_from_another_controller": "dropped commands from a controller session it does not serve",
+    "controller_changes": "now serves another controller session (the one it served fell silent)",
+    "commands_held_for_estop": "held commands while e-stopped",
+}
+
+
+def _robot_events(run: _Run) -> list[dict[str, Any]]:
+    """Each increase of a :data:`ROBOT_EVENTS` counter between two statuses of the robot side (phase ``ROBOT``)."""
+    out: list[dict[str, Any]] = []
+    for name, topic in (("sim", run.keys.sim_status), ("robot", run.keys.robot_status)):
+        prev: dict = {}
+        for t, m in run.rec.get(topic, []):
+            counters = m.get("counters", {})
+            if m.get("seq", 0) < prev.get("_seq", 0):
+                prev = {}  # a restarted robot side counts from 0 again
+            for key, text in ROBOT_EVENTS.items():
+                n = int(counters.get(key, 0))
+                if n > prev.get(key, 0):
+                    out.append({"wall_ns": t, "phase": "ROBOT", "reason": f"{name}: {text} (+{n - prev.get(key, 0)}, "
+                                f"{key} = {n})"})
+            prev = {**{k: int(counters.get(k, 0)) for k in ROBOT_EVENTS}, "_seq": m.get("seq", 0)}
+    return out
+
+
+def _service_faults(run: _Run, stalls: list[tuple[int, int]]) -> list[dict[str, Any]]:
+    """Each silence of a service's status longer than ``SERVICE_SILENCE_S`` (not counting the recorder's own stalls)
+    and each restart (its status seq going back), until the launcher began stopping the cell (services then stop
+    one by one) or the recording ends."""
+    k = run.keys
+    last_ns = max((msgs[-1][0] for msgs in run.rec.values() if msgs), default=0)
+    end_ns = min(int(run.launcher.get("stopping_wall_ns", 0)) or last_ns, last_ns) or None
+    out: list[dict[str, Any]] = []
+    for name, topic in (("sim", k.sim_status), ("robot", k.robot_status), ("controller", k.controller_status),
+                        ("perception", k.perception_status)):
+        msgs = run.rec.get(topic, [])
+        if len(msgs) < 2:
+            continue
+        # a service's own status period sets what counts as silent (the sim and perception report at 2 Hz)
+        silence_s = max(SERVICE_SILENCE_S, 4.0 * float(np.median(np.diff([t for t, _ in msgs]))) * 1e-9)
+        for (t0, m0), (t1, m1) in zip(msgs, msgs[1:]):
+            if end_ns is not None and t0 >= end_ns:
+                break
+            gap = (t1 - t0) * 1e-9
+            if gap > silence_s and _unheard_s(t0, t1, stalls) > silence_s:
+                out.append({"wall_ns": t0, "phase": "SERVICE",
+                            "reason": f"{name}: no status for {gap:.1f} s (frozen, stopped or dead)"})
+            if m1.get("seq", 0) < m0.get("seq", 0):
+                out.append({"wall_ns": t1, "phase": "SERVICE",
+                            "reason": f"{name}: restarted (status count {m0.get('seq')} -> {m1.get('seq')})"})
+        if end_ns is not None and _unheard_s(msgs[-1][0], end_ns, stalls) > silence_s:
+            out.append({"wall_ns": msgs[-1][0], "phase": "SERVICE", "reason": f"{name}: silent for the last "
+                        f"{(end_ns - msgs[-1][0]) * 1e-9:.1f} s before the cell stopped (dead or frozen)"})
+    return out
+
+
+def _recorder_faults(run: _Run, run_dir: Path) -> list[dict[str, Any]]:
+    """The recorder stalled (nothing recorded on any key for ``SERVICE_SILENCE_S``) or died (recovered recording)."""
+    out: list[dict[str, Any]] = [{"wall_ns": a, "phase": "RECORDER",
+                                  "reason": f"nothing recorded for {(b - a) * 1e-9:.1f} s (the recorder stalled)"}
+                                 for a, b in _recorder_stalls(run)]
+    if (run_dir / (RECORDING + ".partial")).is_file():
+        last_ns = max((msgs[-1][0] for msgs in run.rec.values() if msgs), default=0)
+        out.append({"wall_ns": last_ns, "phase": "RECORDER",
+                    "reason": "the recorder did not finish: the recording was recovered from its .partial file "
+                              "and ends here"})
+    return out
 
 
 def _cell_faults(launcher: dict) -> list[dict[str, Any]]:
@@ -364,6 +493,9 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     for s in report["stains"]:
         k = "no kappa" if s["kappa_s"] is None else f"kappa at {s['kappa_s']:.1f} s"
         lines.append(f"  stain {s['id']}: {s['initial_remaining']:.0%} -> {s['final_remaining']:.1%}, {k}")
+    lines.append(f"safety: contact force max {report.get('max_contact_force_n', 0.0):.1f} N (cap "
+                 f"{report['force_cap_n']:.0f} N), joint speed max {report.get('max_joint_speed_ratio', 0.0):.2f} "
+                 "of the limit")
     for f in report["faults"]:
         lines.append(f"  {f['phase']}: {f['reason']}")
     return lines
