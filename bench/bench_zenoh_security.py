@@ -1,0 +1,135 @@
+"""What authentication, access control and mutual TLS cost the 1 kHz exchange: state -> command round trip.
+
+Usage: .venv/bin/python bench/bench_zenoh_security.py [--quick] [--json OUT]
+
+Two sessions on loopback play the robot side and the controller: the robot
+side publishes a 7-joint ``RobotState``, the controller answers each with a
+``TorqueCommand`` (``ServiceNode`` publishers and an ``Inbox`` on each side,
+what the services use). The round trip (state published -> its answer
+received) is timed with ``perf_counter_ns`` over N exchanges after a
+warm-up, for each way a cell can join:
+
+- baseline ``plain TCP``: no authentication (how the benchmarks of the
+  real-time cell run);
+- ``user-password``: Zenoh's authentication only (the link's handshake);
+- ``user-password + ACL``: the cell's access-control list checked on every
+  received sample (the default under compose and ``lamps up``);
+- ``mutual TLS``, ``mutual TLS + user-password + ACL``: cells that span
+  machines.
+
+The table gives p50, p99 and mean [us] and each p50 and mean over the baseline's,
+measured in the same run, the cases interleaved in rounds (the machine's
+speed drifts).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from interfaces.certificates import CA_CERT, cert_paths, make_certificates  # noqa: E402
+from interfaces.config import ZenohSettings  # noqa: E402
+from interfaces.credentials import DICTIONARY, make_credentials, password_file  # noqa: E402
+from interfaces.messages import Capabilities, RobotState, TorqueCommand  # noqa: E402
+from interfaces.session import ServiceNode  # noqa: E402
+from launch.compose import free_port  # noqa: E402
+
+
+def _settings(role: str, rid: str, port: int, listen: bool, secrets: Path, auth: bool, acl: bool,
+              tls: bool) -> ZenohSettings:
+    ep = f"{'tls' if tls else 'tcp'}/127.0.0.1:{port}"
+    kw: dict = {"listen": (ep,)} if listen else {"connect": (ep,)}
+    if auth:
+        kw.update(user=role, password_file=str(password_file(secrets, role)),
+                  credentials_file=str(secrets / DICTIONARY), access_control=acl)
+    if tls:
+        cert, key = cert_paths(secrets, role)
+        kw.update(tls_ca=str(secrets / CA_CERT), tls_certificate=str(cert), tls_private_key=str(key))
+    return ZenohSettings(robot_id=rid, **kw)
+
+
+def _round_trips(n: int, warmup: int, secrets: Path, auth: bool, acl: bool, tls: bool) -> np.ndarray:
+    port = free_port()
+    rid = f"b{port}"
+    robot = ServiceNode("robot", _settings("robot", rid, port, True, secrets, auth, acl, tls)).__enter__()
+    ctl = ServiceNode("controller", _settings("controller", rid, port, False, secrets, auth, acl, tls)).__enter__()
+    try:
+        keys = robot.keys
+        answers = robot.inbox(keys.robot_command, TorqueCommand, maxlen=16)
+        states = ctl.inbox(keys.robot_state, RobotState, maxlen=16)
+        caps = Capabilities(True, [100.0] * 7)
+        out = np.zeros(n)
+        for i in range(-warmup - 200, n):  # the first 200 also wait for the subscriptions to propagate
+            st = RobotState(seq=i + warmup + 200, stamp_ns=0, q_rad=[0.1] * 7, dq_rad_s=[0.0] * 7, tau_nm=[0.0] * 7,
+                            wrench_world=[0.0] * 6, capabilities=caps)
+            t0 = time.perf_counter_ns()
+            robot.publish(keys.robot_state, st)
+            got = states.get(0.05 if i < -warmup else 1.0)
+            if got is None:
+                if i < -warmup:
+                    continue
+                raise RuntimeError("a state was lost on loopback")
+            ctl.publish(keys.robot_command, TorqueCommand(seq=got.seq, stamp_ns=0, tau_nm=[0.0] * 7,
+                                                          session="bench"))
+            ans = answers.get(1.0)
+            if ans is None:
+                raise RuntimeError("an answer was lost on loopback")
+            if i >= 0:
+                out[i] = (time.perf_counter_ns() - t0) / 1e3
+        return out
+    finally:
+        ctl.close()
+        robot.close()
+
+
+#: Rounds over all cases; each measures N / ROUNDS exchanges per case with a fresh pair of sessions.
+ROUNDS = 5
+CASES = (("plain TCP (baseline)", False, False, False), ("user-password", True, False, False),
+         ("user-password + ACL", True, True, False), ("mutual TLS", False, False, True),
+         ("mutual TLS + user-password + ACL", True, True, True))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--json")
+    a = ap.parse_args()
+    n, warmup = (500, 50) if a.quick else (5000, 200)
+    with tempfile.TemporaryDirectory() as tmp:
+        secrets = Path(tmp)
+        make_credentials(secrets)
+        make_certificates(secrets, names=("robot", "controller"))
+        samples: dict[str, list[np.ndarray]] = {c[0]: [] for c in CASES}
+        rng = np.random.default_rng(0)
+        for _ in range(ROUNDS):  # the cases interleaved, in a new order each round: drift hits them alike
+            for k in rng.permutation(len(CASES)):
+                name, auth, acl, tls = CASES[k]
+                samples[name].append(_round_trips(n // ROUNDS, warmup, secrets, auth, acl, tls))
+        rows = []
+        for name, parts in samples.items():
+            rt = np.concatenate(parts)
+            rows.append((name, float(np.percentile(rt, 50)), float(np.percentile(rt, 99)), float(rt.mean())))
+    base, base50 = rows[0][3], rows[0][1]
+    print(f"state -> command round trip on loopback, two sessions in one process, {n} exchanges per case "
+          f"in {ROUNDS} interleaved rounds, "
+          f"{platform.machine()}, python {platform.python_version()}\n")
+    print("| joining as | p50 [us] | p99 [us] | mean [us] | p50 / baseline p50 | mean / baseline mean |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for name, p50, p99, mean in rows:
+        print(f"| {name} | {p50:.0f} | {p99:.0f} | {mean:.0f} | {p50 / base50:.2f} | {mean / base:.2f} |")
+    if a.json:
+        Path(a.json).write_text(json.dumps({"n": n, "cases": [
+            {"name": r[0], "p50_us": r[1], "p99_us": r[2], "mean_us": r[3], "ratio": r[3] / base} for r in rows]}))
+
+
+if __name__ == "__main__":
+    main()
