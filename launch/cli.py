@@ -275,7 +275,8 @@ def _stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_star
     stopping_ns = time.time_ns()  # services go silent one by one from here on: not a fault
     for c in reversed([c for c in children if c.name != "recorder"]):
         codes[c.name] = c.stop()
-    run = {**ended, "stopping_wall_ns": stopping_ns, "ended_wall_ns": time.time_ns(), "duration_s": time.monotonic() - t_start, "services": codes,
+    run = {**ended, "stopping_wall_ns": stopping_ns, "ended_wall_ns": time.time_ns(),
+           "duration_s": time.monotonic() - t_start, "services": codes,
            "key_prefix": f"lamps/{cell.robot_id}", "skill": str(cell.skill),
            "options": {k: v for k, v in vars(a).items()}}
     write_text_atomic(cell.out / "run.json", json.dumps(run, indent=1) + "\n")

@@ -24,14 +24,14 @@
   whatever the controller measured) and ``max_joint_speed_ratio`` (the
   largest ``|dq| / dq_max`` of any joint in any recorded ``robot/state``):
   the cell's safety, across restarts of any service.
-* ``faults``: every entry into PAUSED, FAULT or ESTOP (wall time, phase, reason); every service that went
-  silent (no status for ``SERVICE_SILENCE_S`` or four status periods: frozen, stopped or dead) or came back restarted (its status
-  count starting again), phase ``SERVICE``; a recorder that did not finish (a recording recovered from its
-  ``.partial`` file) or stalled, phase ``RECORDER``; each safety action of the robot side (a brake on stale
-  commands or after its own freeze, commands of another controller dropped, a change of the controller
-  served, commands held while e-stopped: :data:`ROBOT_EVENTS`), phase ``ROBOT``; and the launcher's end of
-  the run when a service died,
-  failed or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
+* ``faults``, in time order, each with a wall time, a phase and a reason: every entry into PAUSED, FAULT
+  or ESTOP; every service that went silent (no status for ``SERVICE_SILENCE_S`` or four status periods:
+  frozen, stopped or dead) or came back restarted (its status count starting again), phase ``SERVICE``;
+  each safety action of the robot side (a brake on stale commands or after its own freeze, commands of
+  another controller dropped, a change of the controller served, commands held while e-stopped:
+  :data:`ROBOT_EVENTS`), phase ``ROBOT``; a recorder that stalled or did not finish (a recording recovered
+  from its ``.partial`` file), phase ``RECORDER``; the launcher's end of the run when a service died, failed
+  or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
 * ``services``: exit codes from the launcher (if any); ``counters``: the
   last status counters of each service; ``plots``: the PNG files written.
 """

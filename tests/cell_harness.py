@@ -1,4 +1,4 @@
-"""The whole cell for fault injection: the compose services started as ``lamps up`` starts them, and the tools to hurt it.
+"""The whole cell for fault injection: the compose services started as ``lamps up`` does, and tools to hurt it.
 
 :class:`Cell` plans the sim profile of ``docker-compose.yml`` with the
 launcher's own code (credentials, access control, free local ports), starts
