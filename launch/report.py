@@ -265,25 +265,50 @@ ROBOT_EVENTS = {
     "commands_from_another_controller": "dropped commands from a controller session it does not serve",
     "controller_changes": "now serves another controller session (the one it served fell silent)",
     "commands_held_for_estop": "held commands while e-stopped",
+    "disarms": "the real-robot adapter disarmed: no more commands to the robot",
 }
 
 
+#: Increases of one robot-side counter less than this apart [s] are one line of the faults (a burst).
+ROBOT_BURST_S = 5.0
+
+
 def _robot_events(run: _Run) -> list[dict[str, Any]]:
-    """Each increase of a :data:`ROBOT_EVENTS` counter between two statuses of the robot side (phase ``ROBOT``)."""
+    """Each burst of increases of a :data:`ROBOT_EVENTS` counter in the robot side's statuses (phase ``ROBOT``),
+    until the launcher began stopping the cell: increases less than ``ROBOT_BURST_S`` apart make one line, with
+    how many and over how long."""
     out: list[dict[str, Any]] = []
+    stopping = int(run.launcher.get("stopping_wall_ns", 0)) or None  # stopping the cell brakes and disarms it
     for name, topic in (("sim", run.keys.sim_status), ("robot", run.keys.robot_status)):
         prev: dict = {}
+        bursts: dict[str, list] = {}  # key -> [first wall ns, last wall ns, increase, detail] of the open burst
         for t, m in run.rec.get(topic, []):
+            if stopping is not None and t >= stopping:
+                break
             counters = m.get("counters", {})
             if m.get("seq", 0) < prev.get("_seq", 0):
                 prev = {}  # a restarted robot side counts from 0 again
-            for key, text in ROBOT_EVENTS.items():
+            for key in ROBOT_EVENTS:
                 n = int(counters.get(key, 0))
-                if n > prev.get(key, 0):
-                    out.append({"wall_ns": t, "phase": "ROBOT", "reason": f"{name}: {text} (+{n - prev.get(key, 0)}, "
-                                f"{key} = {n})"})
+                if n <= prev.get(key, 0):
+                    continue
+                b = bursts.get(key)
+                if b is not None and (t - b[1]) * 1e-9 < ROBOT_BURST_S:
+                    b[1], b[2] = t, b[2] + n - prev.get(key, 0)
+                else:
+                    if b is not None:
+                        out.append(_robot_line(name, key, b))
+                    bursts[key] = [t, t, n - prev.get(key, 0), m.get("detail", "")]
             prev = {**{k: int(counters.get(k, 0)) for k in ROBOT_EVENTS}, "_seq": m.get("seq", 0)}
+        out += [_robot_line(name, key, b) for key, b in bursts.items()]
     return out
+
+
+def _robot_line(name: str, key: str, burst: list) -> dict[str, Any]:
+    first, last, n, detail = burst
+    span = f" over {(last - first) * 1e-9:.1f} s" if last > first else ""
+    why = f"; {detail[detail.index('why='):][:160]}" if key == "disarms" and "why=" in detail else ""
+    return {"wall_ns": first, "phase": "ROBOT", "reason": f"{name}: {ROBOT_EVENTS[key]} ({key} +{n}{span}){why}"}
 
 
 def _service_faults(run: _Run, stalls: list[tuple[int, int]]) -> list[dict[str, Any]]:
@@ -362,9 +387,10 @@ def _outcome(final_phase: str, removed: float, told: str | None) -> str:
 
 
 def _counters_section(run: _Run) -> dict[str, dict]:
-    """The last status counters of the controller, perception and the sim."""
+    """The last status counters of the controller, perception, the sim and the robot side (an adapter)."""
     counters = {"controller": run.status[-1]["counters"] if run.status else {}}
-    for name, key in (("perception", run.keys.perception_status), ("sim", run.keys.sim_status)):
+    for name, key in (("perception", run.keys.perception_status), ("sim", run.keys.sim_status),
+                      ("robot", run.keys.robot_status)):
         msgs = _topic(run.rec, key)
         counters[name] = msgs[-1]["counters"] if msgs else {}
     return counters

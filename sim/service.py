@@ -33,14 +33,20 @@ SERVICE = "sim"
 
 
 class SimPort(RobotPort):
-    """The simulated arm as a stepped robot port; its extras (truth, camera frames) after each cycle."""
+    """The simulated arm as a stepped robot port; its extras (truth, camera frames) after each cycle.
 
-    def __init__(self, params: SimParams, node: ServiceNode, core: SimCore) -> None:
+    substeps : physics steps per cycle, the command held over them (a robot whose interface period is longer
+    than its physics step: the lbr peer at FRI 2 ms over 1 ms physics).
+    """
+
+    def __init__(self, params: SimParams, node: ServiceNode, core: SimCore, substeps: int = 1) -> None:
         self.p = params
+        self.substeps = substeps
         self.node = node
         self.keys = node.keys
         self.core = core
-        self.capabilities = Capabilities(params.gravity_compensated, core.tau_max.tolist(), "sim", params.rate_hz)
+        self.capabilities = Capabilities(params.gravity_compensated, core.tau_max.tolist(), "sim",
+                                         params.rate_hz / substeps)
         self.camera: CameraProcess | None = None
         self._camera_thread: threading.Thread | None = None
         self._extra: Counter[str] = Counter()
@@ -74,16 +80,18 @@ class SimPort(RobotPort):
         return Reading(o.q, o.dq, o.tau, o.wrench, self.core.time_ns)
 
     def write(self, tau_nm: np.ndarray) -> None:
-        self.core.step(tau_nm)
+        for _ in range(self.substeps):
+            self.core.step(tau_nm)
 
     def hold(self) -> None:
-        self.core.step(HOLD)
+        for _ in range(self.substeps):
+            self.core.step(HOLD)
 
     def after_cycle(self, lockstep: bool) -> None:
-        k = self.core.steps
-        if k % self._truth_every == 0:
+        k, n = self.core.steps, self.substeps
+        if k // self._truth_every != (k - n) // self._truth_every:  # a multiple passed in this cycle's steps
             self._publish_truth()
-        if self.camera is not None and k % self._camera_every == 0:
+        if self.camera is not None and k // self._camera_every != (k - n) // self._camera_every:
             if self.camera.dead:
                 log.error("camera renderer process ended; the sim goes on without frames")
                 self._extra["camera_renderer_died"] += 1

@@ -28,7 +28,7 @@ from interfaces.session import ServiceNode
 from robot.lbr import msgs
 from robot.lbr.msgs import SessionState
 from robot.lbr.peer import (TORQUE_COMMAND_BYTES, FriSession, LbrPeerParams, applied_torque_nm, drop_reason,
-                            external_torque_nm, sim_params_for_peer)
+                            external_torque_nm, sim_params_for_peer, substeps_for_peer)
 
 from .conftest import REPO
 from .zenoh_helpers import free_port, toml_value, wait_alive, wait_sample, wait_subscribed, write_config
@@ -64,10 +64,13 @@ def test_bad_peer_config_is_refused_with_the_key_named(table, match):
         LbrPeerParams.from_table(table)
 
 
-def test_the_arm_is_gravity_compensated_and_stepped_at_the_fri_rate_whatever_sim_says():
+def test_the_arm_is_gravity_compensated_and_each_fri_cycle_is_whole_physics_steps():
     p = LbrPeerParams(sample_time_s=0.002, mode="realtime", namespace="/robots/lbr/")
-    sim = sim_params_for_peer({"gravity_compensated": False, "rate_hz": 500.0, "seed": 3}, p)
-    assert sim.gravity_compensated and sim.rate_hz == 500.0 and sim.mode == "realtime" and sim.seed == 3
+    sim = sim_params_for_peer({"gravity_compensated": False, "seed": 3}, p)
+    assert sim.gravity_compensated and sim.rate_hz == 1000.0 and sim.mode == "realtime" and sim.seed == 3
+    assert substeps_for_peer(sim, p) == 2, "FRI 2 ms over 1 ms physics: each command held for two steps"
+    with pytest.raises(ConfigError, match="whole number of the sim's physics steps"):
+        substeps_for_peer(sim, LbrPeerParams(sample_time_s=0.0015))
     assert p.namespace == "robots/lbr" and p.robot_name == "lbr"
     assert p.topics.key(p.topics.state) == "robots/lbr/state"
 

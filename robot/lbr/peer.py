@@ -156,9 +156,19 @@ class LbrPeerParams:
 
 
 def sim_params_for_peer(sim_table: Mapping[str, Any], p: LbrPeerParams) -> SimParams:
-    """The ``[sim]`` table with what the peer decides: gravity compensated (the robot does it), its rate and mode."""
-    return SimParams.from_table({**sim_table, "gravity_compensated": True, "rate_hz": 1.0 / p.sample_time_s,
-                                 "mode": p.mode})
+    """The ``[sim]`` table with what the peer decides: gravity compensated (the robot does it) and its mode. The
+    physics keeps the sim's own step (1 ms by default); an FRI period of several steps holds each command over
+    them, as the robot's own joint loop does (:func:`substeps_for_peer`)."""
+    return SimParams.from_table({**sim_table, "gravity_compensated": True, "mode": p.mode})
+
+
+def substeps_for_peer(sim: SimParams, p: LbrPeerParams) -> int:
+    """Physics steps per FRI cycle; ConfigError unless the FRI period is a whole number of them."""
+    n = p.sample_time_s * sim.rate_hz
+    if abs(n - round(n)) > 1e-6 or round(n) < 1:
+        raise ConfigError(f"[lbr_peer] sample_time_s = {p.sample_time_s} s must be a whole number of the sim's "
+                          f"physics steps (1 / [sim] rate_hz = {1.0 / sim.rate_hz} s)")
+    return int(round(n))
 
 
 # -- the pure parts -------------------------------------------------------------------------------------
@@ -327,7 +337,8 @@ class LbrPeer:
         self.p = params
         self.node = node
         self.core = core or SimCore(sim_params)
-        self.port = SimPort(sim_params, node, self.core)
+        self.port = SimPort(sim_params, node, self.core, substeps_for_peer(sim_params, params))
+        self._cycles = 0  # FRI cycles (each of port.substeps physics steps)
         self.model = RobotModel()
         self.session = FriSession(params)
         self.counters: Counter[str] = Counter()
@@ -392,11 +403,12 @@ class LbrPeer:
             self.port.hold()
             self.counters["cycles_held"] += 1
         self._watchdog(0)
+        self._cycles += 1
         self.port.after_cycle(self._lockstep and self.session.state != SessionState.MONITORING_READY)
         self._publish_outputs()
 
     def _publish_outputs(self) -> None:
-        o, t_ns, k = self.core.out, self.core.time_ns, self.core.steps
+        o, t_ns, k = self.core.out, self.core.time_ns, self._cycles
         q_cmd, torque = self._received if self._received is not None else (o.q, self._zeros)
         if np.any(o.wrench):
             tau_ext = external_torque_nm(self.model.tcp_jacobian(o.q), o.wrench)
