@@ -6,7 +6,12 @@ Usage: .venv/bin/python bench/eval_segmentation_accuracy.py [--seeds N] [--json 
   seeds each (the ground truth comes with the generator);
 - real: the four hand-labelled demonstrations in
   ``../shared/data/wiping-demos/circular_wiping_dataset.mat`` (skipped when
-  absent; read from there, never copied).
+  absent; read from there, never copied);
+- real long takes: :data:`lampskit.learn.takes.REAL_TAKES`, several wipes
+  chained from those recordings (lift-offs and returns, spots 6-30 cm apart,
+  pauses, a shift inside a wipe), per take: true and found wiping phases,
+  frame accuracy and the largest boundary error [s] (each true wiping
+  phase's start and end against the nearest found periodic boundary).
 
 For each method (optics, kmeans, affinity) it prints the frame accuracy
 (periodic vs transitional) and how many demos got exactly the true number
@@ -30,6 +35,7 @@ from lampskit.learn.demo_io import read_demo, read_labels  # noqa: E402
 from lampskit.learn.segmentation import segment
 from lampskit.learn.segmentation_scores import frame_accuracy, true_segment_count
 from lampskit.learn.synth import synthesize_demo  # noqa: E402
+from lampskit.learn.takes import build_real_takes  # noqa: E402
 
 REAL = ROOT.parent / "shared" / "data" / "wiping-demos" / "circular_wiping_dataset.mat"
 METHODS = ("optics", "kmeans", "affinity")
@@ -71,9 +77,42 @@ def main() -> int:
         print(f"| {m} | {acc.mean():.3f} / {acc.min():.3f} | {exact}/{len(acc)} | {real} | {real_exact} |")
         out[m] = {"synthetic_accuracy": acc.tolist(), "synthetic_exact": exact,
                   "real": [r[m] for r in real_rows]}
+    if REAL.is_file():
+        out["takes"] = _takes_table()
     if a.json:
         a.json.write_text(json.dumps(out, indent=1))
     return 0
+
+
+def _boundary_error_s(seg, take) -> float:
+    """Largest distance [s] from a true wiping phase's start or end to the nearest found periodic boundary."""
+    t = take.demo.t_s
+    found = [b for s in seg.segments if s.kind == "periodic" for b in (t[s.start], t[min(s.end, len(t) - 1)])]
+    if not found:
+        return float("inf")
+    true = [t[i] for i0, i1 in take.wipes for i in (i0, i1 - 1)]
+    return max(min(abs(x - f) for f in found) for x in true)
+
+
+def _takes_table() -> dict:
+    takes = build_real_takes(str(REAL))
+    print("\nreal long takes (chained from the four recordings, lampskit/learn/takes.py)\n")
+    print("| take | samples | true wiping phases | " + " | ".join(f"{m}: found / accuracy / worst boundary [s]"
+                                                          for m in METHODS) + " |")
+    print("|---|---:|---:|" + "---|" * len(METHODS))
+    out = {}
+    for take in takes:
+        cells, out[take.name] = [], {}
+        for m in METHODS:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                seg = segment(take.demo, method=m)
+            found = sum(s.kind == "periodic" for s in seg.segments)
+            acc, err = frame_accuracy(seg, take.true_periodic), _boundary_error_s(seg, take)
+            cells.append(f"{found} / {acc:.3f} / {err:.1f}")
+            out[take.name][m] = {"found": found, "accuracy": acc, "boundary_error_s": err}
+        print(f"| {take.name} | {take.demo.n_samples} | {len(take.wipes)} | " + " | ".join(cells) + " |")
+    return out
 
 
 if __name__ == "__main__":
