@@ -223,3 +223,18 @@ def test_dbscan_labels_match_sklearn():
             ordering=np.array(r.ordering), eps=eps,
         )
         np.testing.assert_array_equal(dbscan_labels(r, eps), ref)
+
+
+def test_clusters_taking_turns_within_one_stroke_are_united_but_separate_wipes_are_not():
+    from lampskit.learn.time_runs import unite_alternating
+
+    t = np.arange(3000) * 0.01
+    # one stroke falling apart into clusters 0 and 1 every half cycle (0.8 s), short gaps between them
+    turns = [(-1, 0, 200), (0, 200, 280), (-1, 280, 285), (1, 285, 365), (0, 365, 445), (1, 445, 525),
+             (-1, 525, 1000), (2, 1000, 1600), (-1, 1600, 2000), (0, 2000, 2600), (-1, 2600, 3000)]
+    out = unite_alternating(turns, t, 0.3)
+    assert out[:5] == [(-1, 0, 200), (0, 200, 280), (-1, 280, 285), (0, 285, 525), (-1, 525, 1000)], out
+    assert (2, 1000, 1600) in out and (0, 2000, 2600) in out, "wipes apart in time stay apart"
+    # a wipe of 0, a short slide to a whole wipe of 2 and back to 0: a real visit, not a half cycle
+    visit = [(0, 0, 600), (-1, 600, 610), (2, 610, 1200), (-1, 1200, 1210), (0, 1210, 1800)]
+    assert unite_alternating(visit, t, 0.3) == visit

@@ -98,6 +98,7 @@ from lampskit.learn.time_runs import (
     refine_boundaries,
     renumber,
     runs_from_labels,
+    unite_alternating,
 )
 
 METHODS = ("optics", "kmeans", "affinity")
@@ -361,6 +362,7 @@ def _segment_impl(
     # each sample takes the label of the last kept point at or before it
     runs = runs_from_labels(point_labels[np.searchsorted(keep, np.arange(len(t)), side="right") - 1])
     if method == "optics":
+        runs = unite_alternating(runs, t, params.min_duration_s)
         runs = bridge_stays(runs, smooth)
         runs = merge_short_runs(runs, t, params.min_duration_s, transitions=True)
         runs = refine_boundaries(runs, smooth, demo.rate_hz)

@@ -47,6 +47,55 @@ def join_runs(runs: list[Run]) -> list[Run]:
     return out
 
 
+#: Clusters that take turns within one continuous motion are one: a run between two visits of a cluster, in a
+#: chain of periodic runs with gaps shorter than the minimum duration, is at most this long [s] (half of the
+#: slowest stroke period).
+ALTERNATION_MAX_S = 2.5
+
+
+def unite_alternating(runs: list[Run], t_s: np.ndarray, min_duration_s: float) -> list[Run]:
+    """Merge clusters that alternate within one continuous stroke (module docstring of segmentation, step 5).
+
+    With the threshold set by the densest spots of a long take, one elongated or shifted stroke can fall apart
+    into two or three spatial clusters visited in turn every half cycle (A B A B ...). In a chain of periodic
+    runs joined by transitional gaps shorter than ``min_duration_s``, a cluster seen again after runs that are
+    each shorter than :data:`ALTERNATION_MAX_S` is one region with everything seen in between: those clusters
+    are united everywhere (union-find). Wipes of different spots, with a real transition between them or a
+    whole wipe in between, are left apart.
+    """
+    parent: dict[int, int] = {}
+
+    def find(c: int) -> int:
+        while parent.get(c, c) != c:
+            c = parent[c]
+        return c
+
+    chain: list[Run] = []
+
+    def close_chain() -> None:
+        last_seen: dict[int, int] = {}
+        for i, (c, a, b) in enumerate(chain):
+            j = last_seen.get(find(c))
+            if j is not None and all(t_s[min(bb, len(t_s) - 1)] - t_s[aa] <= ALTERNATION_MAX_S
+                                     for _, aa, bb in chain[j + 1:i]):
+                for cc, _, _ in chain[j + 1:i]:
+                    ra, rb = find(c), find(cc)
+                    if ra != rb:
+                        parent[max(ra, rb)] = min(ra, rb)
+            last_seen[find(c)] = i
+        chain.clear()
+
+    for k, (c, a, b) in enumerate(runs):
+        if c >= 0:
+            chain.append((c, a, b))
+        elif t_s[min(b, len(t_s) - 1)] - t_s[a] >= min_duration_s or k in (0, len(runs) - 1):
+            close_chain()
+    close_chain()
+    if not parent:
+        return runs
+    return join_runs([(find(c) if c >= 0 else c, a, b) for c, a, b in runs])
+
+
 def bridge_stays(runs: list[Run], smooth: np.ndarray) -> list[Run]:
     """Join two runs of one cluster when the transitional run between them stays in the cluster's region."""
     out = list(runs)
