@@ -86,8 +86,7 @@ def test_the_builder_writes_the_same_files_that_the_readers_take(tmp_path):
 
 
 def test_every_wiping_phase_of_every_take_is_found_as_its_own_periodic_segment(takes):
-    """Issue 17's first criterion (exact counts); frame accuracy is held at what it reached (0.91-0.94; the
-    target is 0.92 on each: the late starts of the single demos, about one cycle, are what is left)."""
+    """Issue 17's criteria on the long takes: exact counts, frame accuracy >= 0.92 on each (0.949-0.971 now)."""
     from lampskit.learn.segmentation import segment
     from lampskit.learn.segmentation_scores import frame_accuracy
 
@@ -97,4 +96,4 @@ def test_every_wiping_phase_of_every_take_is_found_as_its_own_periodic_segment(t
         acc = frame_accuracy(seg, take.true_periodic)
         print(f"{take.name}: {found} of {len(take.wipes)} wiping phases, frame accuracy {acc:.3f}")
         assert found == len(take.wipes), take.name
-        assert acc >= 0.90, (take.name, acc)
+        assert acc >= 0.92, (take.name, acc)

@@ -39,7 +39,11 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
 5. **Time runs.** Per-sample labels -> runs in time. Two runs of one cluster
    are joined when the tool never leaves the cluster's region in between
    (:data:`STAY_FACTOR`); otherwise they stay two periodic segments (the
-   same region wiped twice with an excursion between). Runs shorter than
+   same region wiped twice with an excursion between). Before that, clusters
+   that take turns within one continuous stroke (one seen again after runs
+   each shorter than half the slowest period, gaps shorter than
+   ``min_duration_s``) are united: with the threshold set by the densest
+   spot of a long take, one stroke can fall apart into two. Runs shorter than
    ``min_duration_s`` are relabelled, shortest first: a short gap inside a
    cluster joins it, a short cluster run becomes transitional (or joins the
    cluster around it); a short transitional run between two different
@@ -53,7 +57,9 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
    median-filtered over ``P / 2`` and compared with ``REC_GAMMA`` (2) times
    its median over the run; the segment spans the first to the last
    stretch below that level lasting at least one period, searched from one
-   period before to one period after the run. Velocity makes the test
+   period before to one period after the run; the start then moves back
+   while the recurrence stays below ``REC_GAMMA_LOOSE`` (3) times the median
+   (hysteresis: a person's first strokes are ragged and recur less exactly). Velocity makes the test
    sensitive early: a smooth (C2) departure from a cycle shows in position
    only as ``t^3`` but in velocity as ``t^2``.
 7. **Periodicity check.** A periodic MP covers its area again and again: it

@@ -25,6 +25,8 @@ LAG_LO, LAG_HI = 0.85, 1.15
 #: A sample recurs when its (median-filtered) recurrence is below this many
 #: times the run's median recurrence.
 REC_GAMMA = 2.0
+#: ... and the recurring span extends back from its first stretch while below this many times it.
+REC_GAMMA_LOOSE = 3.0
 #: ... and an extent of at least this [m].
 MIN_EXTENT_M = 0.005
 
@@ -216,8 +218,14 @@ def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> li
         level = REC_GAMMA * float(np.median(rec[a - lo : b - lo]))
         stretches = [(s0, s1) for v, s0, s1 in runs_from_labels((rec < level).astype(int)) if v == 1 and s1 - s0 >= period]
         if stretches:
+            # hysteresis at the start: back from the first recurring stretch while below the looser level (a
+            # person's first strokes are ragged: they recur, less exactly; the end needs none)
+            loose = rec < REC_GAMMA_LOOSE / REC_GAMMA * level
+            s0, s1 = stretches[0][0], stretches[-1][1]
+            while s0 > 0 and loose[s0 - 1]:
+                s0 -= 1
             labels[a:b] = -1
-            labels[lo + stretches[0][0] : lo + stretches[-1][1]] = c
+            labels[lo + s0 : lo + s1] = c
     return runs_from_labels(labels)
 
 
