@@ -81,8 +81,9 @@ class DisturbanceWatch:
         raw -= tau_applied
         np.matmul(J.T, wrench, out=tmp)
         raw -= tmp
-        a = min(dt_s / (self.filter_s + dt_s), 1.0)
-        self.tau_d += a * (raw - self.tau_d)
+        raw -= self.tau_d  # first-order low-pass, in place: tau_d += a (raw - tau_d)
+        raw *= min(dt_s / (self.filter_s + dt_s), 1.0)
+        self.tau_d += raw
         self._dq_prev[:] = dq
         np.abs(self.tau_d, out=tmp)
         tmp /= self.limit
