@@ -200,11 +200,20 @@ class Cell:
             self.signal(name, signal.SIGCONT)
 
     def restart(self, name: str, down_s: float = 0.0) -> None:
-        """SIGKILL service ``name``, wait ``down_s``, start it again."""
+        """SIGKILL service ``name``, wait ``down_s``, start it again; the watching session starts afresh (its
+        link to the killed service may take Zenoh's reconnect back-off to come back; the services' own links
+        are what the test is about, and the recorder's show in the report)."""
         self.kill(name)
         self.children[name].stop()
         time.sleep(down_s)
         self.start(name)
+        self._watching.clear()
+        self._watcher.join(5.0)
+        self.node.close()
+        self.node = ServiceNode("operator", self.operator_settings()).__enter__()
+        self._watching.set()
+        self._watcher = threading.Thread(target=self._watch, daemon=True)
+        self._watcher.start()
 
     # -- watching ----------------------------------------------------------------------------------------
     def _watch(self) -> None:

@@ -100,9 +100,10 @@ def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recor
         cell.freeze("controller", 2.0)  # lock-step: the sim waits; nothing moves
         cell.wait_phase(WIPING + ("RETREAT", "DONE"), 30.0, since=t)
         cell.wait_phase(("WIPE",), 60.0, since=time.monotonic())
+        t = time.monotonic()
         cell.restart("controller", down_s=1.0)  # mid-wipe; the new session is served once the old one is silent
-        cell.wait_phase(("PAUSED",), 60.0)  # the new controller finds the pad pressing: lifts off first
-        cell.wait_phase(WIPING, 90.0, since=time.monotonic())
+        # the new controller lifts first if it finds the pad pressing (PAUSED), else re-approaches: both wipe on
+        cell.wait_phase(WIPING, 90.0, since=t)
         cell.freeze("recorder", 2.0)
         time.sleep(1.0)
         report = cell.finish()
@@ -110,7 +111,6 @@ def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recor
     service = _reasons(report, "SERVICE")
     assert any(r.startswith("controller: no status for") for r in service), service
     assert any(r.startswith("controller: restarted") for r in service), service
-    assert any("pad on the board" in r for r in _reasons(report, "PAUSED")), report["faults"]
     assert any("the recorder stalled" in r for r in _reasons(report, "RECORDER")), report["faults"]
     assert not any(r.startswith(("sim:", "perception:")) for r in service), "the recorder's stall is not theirs"
     sim = report["counters"]["sim"]
