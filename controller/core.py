@@ -152,7 +152,8 @@ class ControllerCore:
         self.executor.restart()
 
     def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
-             dt_s: float, tau_max_nm: np.ndarray | None = None, applied_nm: np.ndarray | None = None) -> np.ndarray:
+             dt_s: float, tau_max_nm: np.ndarray | None = None, applied_nm: np.ndarray | None = None,
+             robot_held: bool = False) -> np.ndarray:
         """Torques (7,) [Nm] to send for the measured state (an internal buffer: copy to keep).
 
         q, dq : (7,) [rad], [rad/s]; wrench : (6,) contact wrench on the pad
@@ -162,7 +163,10 @@ class ControllerCore:
         of these and the description's apply); applied_nm : (7,) the torques
         this controller sent that the robot applied over the last ``dt_s``
         (without gravity when the robot adds it), None when unknown (a hold,
-        a skipped state): what the disturbance watch checks the motion against.
+        a skipped state): what the disturbance watch checks the motion against;
+        robot_held : the robot braked over the last cycle instead of applying
+        a command (a stale or missing answer): a contact lost meanwhile is the
+        brake's doing, so the contact-loss watch starts counting again.
         """
         self.time_s += dt_s
         if self.q_rest is None:
@@ -172,6 +176,8 @@ class ControllerCore:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
         self._watch_disturbance(kin, dq, wrench, gravity_compensated, dt_s, applied_nm)
+        if robot_held:
+            self.contact_watch.lost_s = 0.0
         board = self.executor.board
         if board is None:
             self._hold_reference(kin)

@@ -225,7 +225,7 @@ class ControllerService:
         caps = state.capabilities
         try:
             tau = self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm),
-                                 applied)
+                                 applied, robot_held=state.command_seq < 0)
         except Exception as exc:  # a bug or an absurd state must not end the loop: fault, count, go on
             self.counters["tick_errors"] += 1
             log.exception("control tick failed")

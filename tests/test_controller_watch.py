@@ -125,3 +125,18 @@ def test_a_board_taken_away_under_the_pressing_pad_is_a_contact_loss_fault(learn
     core, _, fault = _run(learned_skill, {}, mid_wipe, remove_board)
     assert fault is not None and fault < 400, fault
     assert core.executor.reason.startswith("contact lost"), core.executor.reason
+
+
+def test_contact_lost_while_the_robot_braked_is_the_brakes_doing_not_a_fault(learned_skill):
+    """A link stall makes the robot side brake; the pad may lose the board meanwhile. The contact-loss watch counts
+    only while the robot applies the controller's torques (a CI run faulted 'contact lost' after a 300 ms stall)."""
+    core = ControllerCore(ControllerParams.from_table({}), learned_skill)
+    core.contact_watch.lost_s = 0.29
+    sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
+    try:
+        _stains(core, sim)
+        o = sim.out
+        core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
+    finally:
+        sim.close()
+    assert core.contact_watch.lost_s == 0.0
