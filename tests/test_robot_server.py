@@ -230,6 +230,9 @@ def test_the_robot_side_holds_while_the_estop_is_engaged_whatever_is_commanded()
         srv.state_seq(0)
         srv.ctl.publish(srv.keys.controller_estop, Estop(stamp_ns=1, engaged=True, reason="red button", source="op"))
         srv.ctl.publish(srv.keys.controller_estop, Estop(stamp_ns=2, engaged=False, reason="sneaky", source="x"))
+        # samples of two keys may arrive in either order: command only once the e-stop is seen (it is polled
+        # before every cycle; a lock-step server re-sends state 0 meanwhile, so its status comes)
+        srv.wait_status(lambda m: m.counters.get("estop_engaged") == 1, "the e-stop seen by the robot side")
         for seq in range(5):
             srv.command(seq, [40.0] * 7)
             srv.state_seq(seq + 1)
