@@ -165,8 +165,11 @@ class ControllerCore:
         (without gravity when the robot adds it), None when unknown (a hold,
         a skipped state): what the disturbance watch checks the motion against;
         robot_held : the robot braked over the last cycle instead of applying
-        a command (a stale or missing answer): a contact lost meanwhile is the
-        brake's doing, so the contact-loss watch starts counting again.
+        a command (a stale or missing answer): the skill's clock stands still
+        for that cycle (the arm did not follow, so the reference must not run
+        ahead of it: released, it would leap to catch up and bounce off the
+        board), and a contact lost meanwhile is the brake's doing, so the
+        contact-loss watch starts counting again.
         """
         self.time_s += dt_s
         if self.q_rest is None:
@@ -186,7 +189,7 @@ class ControllerCore:
             n = board.normal
             tool = self._measure_tool(board, n, kin, wrench, dt_s)
             scale = self.override_used = self.override.scale
-            sp = self.executor.step(dt_s * scale, tool)
+            sp = self.executor.step(0.0 if robot_held else dt_s * scale, tool)
             self._reference_from_setpoint(board, n, sp, tool, scale)
             self._regulate_force(n, sp, dt_s)
             self._update_override(kin, scale, dt_s)

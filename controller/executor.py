@@ -220,6 +220,8 @@ class SkillExecutor:
     def step(self, dt_s: float, tool: ToolState) -> Setpoint:
         """Advance by ``dt_s`` [s] given the measured tool (board frame); returns the setpoint (reused next tick).
 
+        ``dt_s`` 0 holds the skill where it is (the setpoint unchanged).
+
         Needs a board (:meth:`set_stains` called once); until then call :meth:`wait`.
         """
         self.ticks += 1
@@ -232,6 +234,8 @@ class SkillExecutor:
                 self.motion.hold_here(tool)
                 self._start_approach_or_done()
             return self._sp
+        if dt_s <= 0.0:
+            return self._sp  # the skill's clock stands still (the robot braked): nothing moves on
         self.motion.step_turn(dt_s)
         self._on_stage[self._stage](dt_s, tool)
         return self._sp

@@ -418,9 +418,11 @@ def test_after_the_last_pass_without_kappa_the_pad_waits_off_the_stain_for_the_c
     assert ex0.counters["looks"] == 0
 
 
-@pytest.mark.parametrize("phase, dt_s, mp", [("TRANSITION", 0.0, "transitional"), ("WIPE", 0.5, "periodic")])
+@pytest.mark.parametrize("phase, dt_s, mp", [("TRANSITION", float("nan"), "transitional"),
+                                             ("WIPE", 0.5, "periodic")])
 def test_a_runner_step_error_is_a_fault_naming_the_mp_and_the_status(learned_skill, phase, dt_s, mp):
-    """A runner refuses the step (the transitional MP needs dt > 0, the periodic one dt <= 0.1 s): FAULT, no raise."""
+    """A runner refuses the step (the transitional MP needs a finite dt, the periodic one dt <= 0.1 s): FAULT, no
+    raise. (dt 0 is no error: the skill's clock stands still while the robot brakes.)"""
     ex = SkillExecutor(learned_skill, ExecutorParams())
     arm = IdealArm()
     ex.set_stains(BOARD, stains())
@@ -430,6 +432,8 @@ def test_a_runner_step_error_is_a_fault_naming_the_mp_and_the_status(learned_ski
             break
     running = ex.current_mp
     assert ex.phase == phase and running.startswith(mp)
+    held = ex.step(0.0, arm.tool).xy.copy()
+    assert ex.phase == phase and np.array_equal(ex.step(0.0, arm.tool).xy, held), "dt 0: the setpoint stands"
     ex.step(dt_s, arm.tool)
     assert ex.phase == "FAULT" and ex.reason == f"{running} MP step failed: ERROR_INVALID_INPUT"
     log = run(ex, arm, 2.0)
