@@ -265,6 +265,7 @@ ROBOT_EVENTS = {
     "commands_from_another_controller": "dropped commands from a controller session it does not serve",
     "controller_changes": "now serves another controller session (the one it served fell silent)",
     "commands_held_for_estop": "held commands while e-stopped",
+    "joint_speed_brakes": "braked: a joint moved faster than its speed brake allows",
     "disarms": "the real-robot adapter disarmed: no more commands to the robot",
 }
 

@@ -18,16 +18,18 @@ from .port import Reading, RobotPort
 
 
 class MockArm(RobotPort):
-    """The mock arm. ``q0_rad`` (7,) start position; ``tau_max_nm`` (7,) limits; ``dt_s`` step [s]."""
+    """The mock arm. ``q0_rad`` (7,) start position; ``tau_max_nm`` (7,) limits; ``dt_s`` step [s];
+    ``dq_max_rad_s`` (7,) speed limits the server's speed brake watches (None: not declared)."""
 
     def __init__(self, q0_rad=None, tau_max_nm=None, dt_s: float = 0.001, inertia_kg_m2: float = 0.5,
-                 damping_nm_s_rad: float = 1.0) -> None:
+                 damping_nm_s_rad: float = 1.0, dq_max_rad_s=None) -> None:
         self.q = np.zeros(7) if q0_rad is None else np.array(q0_rad, float)
         self.dq = np.zeros(7)
         self.tau = np.zeros(7)
         self.dt_s, self.inertia, self.damping = dt_s, inertia_kg_m2, damping_nm_s_rad
         limits = np.full(7, 100.0) if tau_max_nm is None else np.asarray(tau_max_nm, float)
         self.capabilities = Capabilities(True, limits.tolist(), "mock", 1.0 / dt_s)
+        self.velocity_limits_rad_s = None if dq_max_rad_s is None else np.asarray(dq_max_rad_s, float)
         self.steps = 0
         self.holds = 0
 

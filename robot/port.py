@@ -57,10 +57,13 @@ class RobotPort(ABC):
         What the robot does by itself (gravity compensation, torque limits, backend name).
     clocked : bool
         True when the robot has its own clock (see the module docstring).
+    velocity_limits_rad_s : array, shape (n,), or None
+        The joints' speed limits [rad/s] the server's speed brake watches (None: the port has its own).
     """
 
     capabilities: Capabilities
     clocked: bool = False
+    velocity_limits_rad_s: np.ndarray | None = None
 
     @property
     def n_joints(self) -> int:

@@ -19,6 +19,13 @@ and reads ``robot/command`` (:class:`~interfaces.messages.TorqueCommand`):
   each answer (the lbr peer's lock-step): no deadline, the unanswered state
   is re-sent every ``republish_s``.
 
+A joint faster than ``speed_brake_share`` of its limit (ports that declare
+``velocity_limits_rad_s``: the sim), or about to be by the next cycle at its
+present acceleration, makes the robot side brake whatever is commanded, as a robot's safety controller does, until every joint is back
+under it; each such episode is counted (``joint_speed_brakes``) and logged
+with the joint. A controller starved of CPU answering late can drive a light
+wrist joint unstable; this stops it at the robot, not in the controller.
+
 The e-stop is the robot side's too: an engaging :class:`~interfaces.messages.Estop`
 on ``controller/estop`` makes every cycle a hold (:meth:`RobotPort.estop_hold`)
 whatever commands arrive, until a release on ``controller/estop/release``
@@ -67,7 +74,8 @@ class ServerParams:
     republish_s : lock-step re-send period of an unanswered state [s]; max_steps : stop after this
     many written cycles (0: never); status_rate_hz : status publications per second (wall);
     tau_rate_nm_s : the gate's torque-rate limit [Nm/s]; rebind_after_s : another controller session is
-    served only after the served one has sent nothing for this long [s].
+    served only after the served one has sent nothing for this long [s]; speed_brake_share : brake while a
+    joint moves faster than this share of its limit (ports declaring limits; 0: off).
     """
 
     mode: str = "lockstep"
@@ -78,6 +86,7 @@ class ServerParams:
     status_rate_hz: float = 10.0
     tau_rate_nm_s: float = DEFAULT_TAU_RATE_NM_S
     rebind_after_s: float = 0.5
+    speed_brake_share: float = 0.95
 
 
 class RobotServer:
@@ -113,6 +122,13 @@ class RobotServer:
         self.estop_reason: str | None = None
         self.controller: str | None = None  # the controller session served
         self._controller_seen_ns = 0
+        lim = port.velocity_limits_rad_s
+        self._speed_cap = None if lim is None or params.speed_brake_share <= 0 else \
+            np.asarray(lim, float) * params.speed_brake_share  # (n,) [rad/s]
+        self._over_speed = False  # the last published state had a joint above its cap (or about to be)
+        self._dq_prev: np.ndarray | None = None  # |dq| (n,) of the last reading [rad/s]
+        self._dq_next = None if self._speed_cap is None else np.zeros_like(self._speed_cap)
+        self._speed_braking = False
         self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
         self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
 
@@ -162,6 +178,12 @@ class RobotServer:
         elif isinstance(command, str):
             if not self.braked:
                 self.counters["holds_applied"] += 1
+            self.port.hold()
+            self.braked = True
+        elif self._over_speed:
+            if not self._speed_braking:
+                self.counters["joint_speed_brakes"] += 1
+                self._speed_braking = True
             self.port.hold()
             self.braked = True
         else:
@@ -340,11 +362,35 @@ class RobotServer:
     def publish_state(self, seq: int | None = None) -> None:
         """Publish the port's reading as state ``seq`` (default: the cycles written so far)."""
         r = self.port.read()
+        if self._speed_cap is not None:
+            self._watch_speed(r.dq_rad_s)
         self.node.publish(self.keys.robot_state, RobotState(
             seq=self.steps if seq is None else seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
             dq_rad_s=r.dq_rad_s.tolist(), tau_nm=r.tau_nm.tolist(), wrench_world=r.wrench_world.tolist(),
             capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns(),
             command_seq=self.applied_seq))
+
+    def _watch_speed(self, dq_rad_s: np.ndarray) -> None:
+        """Set whether the next cycle must brake: a joint (n,) [rad/s] above its speed cap now or, at the change
+        since the last reading, by the next one (a wrist accelerating at 200 rad/s^2 gains 0.2 rad/s a cycle);
+        logs each entry."""
+        cap, ahead = self._speed_cap, self._dq_next
+        speed = np.abs(dq_rad_s)
+        if self._dq_prev is None:
+            self._dq_prev = speed.copy()
+        np.subtract(speed, self._dq_prev, out=ahead)  # the gain in speed over the last cycle (a loss is no risk)
+        np.maximum(ahead, 0.0, out=ahead)
+        ahead += speed
+        self._dq_prev[:] = speed
+        over = bool(np.any(ahead > cap))
+        if over and not self._over_speed:
+            j = int(np.argmax(ahead / cap))
+            log.warning("A%d at %.2f rad/s (%.2f by the next cycle), over %.0f %% of its limit: braking until "
+                        "every joint is under it", j + 1, abs(float(dq_rad_s[j])), float(ahead[j]),
+                        self.p.speed_brake_share * 100)
+        elif not over:
+            self._speed_braking = False
+        self._over_speed = over
 
     def status(self) -> ServiceStatus:
         counters = dict(self.counters)

@@ -50,6 +50,7 @@ class SimCore:
         self.params = params
         model = model or RobotModel()
         self.tau_max = model.limits.tau_max.copy()
+        self.dq_max = model.limits.dq_max.copy()
         self.board = board_from_params(params.board)
         check_board(self.board, params.dirt.margin_m, model)
         self.dirt = DirtGrid(self.board.size_m, params.dirt.cell_m, make_stains(params, self.board), params.seed)

@@ -209,6 +209,8 @@ class SimParams:
     state; deterministic) or ``realtime`` (wall-clock steps, newest command
     held). rate_hz : physics and state rate. stale_limit_s : in real time, a
     command older than this makes the robot brake and hold.
+    speed_brake_share : the robot side brakes while a joint moves faster than
+    this share of its speed limit, as a robot's safety controller does (0: off).
     gravity_compensated : add gravity torques like the real iiwa's own
     controller does (declared in RobotState.capabilities).
     joint_damping_nm_s_rad : viscous joint friction. start_q_rad : start
@@ -221,6 +223,7 @@ class SimParams:
     seed: int = 0
     rate_hz: float = 1000.0
     stale_limit_s: float = 0.02
+    speed_brake_share: float = 0.95
     gravity_compensated: bool = False
     joint_damping_nm_s_rad: float = 0.2
     start_q_rad: tuple[float, ...] | None = None
@@ -242,6 +245,7 @@ class SimParams:
         check_int(s, "seed", self.seed, 0)
         _range(s, "rate_hz", self.rate_hz, 100.0, 5000.0)
         _range(s, "stale_limit_s", self.stale_limit_s, 2.0 / self.rate_hz, 1.0)
+        _range(s, "speed_brake_share", self.speed_brake_share, 0.0, 1.0)
         for name in ("gravity_compensated", "lockstep_camera_sync"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"[{s}] {name} must be true or false, got {getattr(self, name)!r}")

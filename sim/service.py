@@ -47,6 +47,7 @@ class SimPort(RobotPort):
         self.core = core
         self.capabilities = Capabilities(params.gravity_compensated, core.tau_max.tolist(), "sim",
                                          params.rate_hz / substeps)
+        self.velocity_limits_rad_s = core.dq_max
         self.camera: CameraProcess | None = None
         self._camera_thread: threading.Thread | None = None
         self._extra: Counter[str] = Counter()
@@ -143,7 +144,8 @@ class SimService:
         self.port = SimPort(params, node, self.core)
         server_params = ServerParams(mode=params.mode, rate_hz=params.rate_hz, stale_limit_s=params.stale_limit_s,
                                      republish_s=params.lockstep_republish_s, max_steps=params.max_steps,
-                                     status_rate_hz=params.status_rate_hz)
+                                     status_rate_hz=params.status_rate_hz,
+                                     speed_brake_share=params.speed_brake_share)
         self.server = RobotServer(self.port, node, server_params, SERVICE, node.keys.sim_status)
         self.stop = self.server.stop
 

@@ -319,3 +319,36 @@ def test_after_its_own_loop_froze_the_robot_side_brakes_until_the_controller_ans
         srv.state(lambda s: s.command_seq == later[-1].seq, "a fresh answer applied")
         st = srv.wait_status(lambda m: m.counters.get("commands_from_before_a_freeze", 0) >= 1, "the drop counted")
     assert st.counters["loop_freezes"] == 1, st.counters
+
+
+def test_a_joint_over_its_speed_brake_is_braked_whatever_is_commanded():
+    """A starved controller answering late once spun the sim's A6 to 7.7x its limit (CI load). The robot side
+    brakes every joint while one is (or by the next cycle will be) faster than 0.95 of its limit, counts each episode
+    and serves again after."""
+    arm = MockArm(damping_nm_s_rad=0.0, dq_max_rad_s=[1.0] * 7)
+    tau = np.array([5.0, 0, 0, 0, 0, 0, 0])  # 10 rad/s^2 on A1: over 0.95 rad/s within 96 steps
+    speeds, applied = [], []
+    with ServerThread(lambda node: arm, lockstep()) as srv:
+        for seq in range(300):
+            s = srv.state_seq(seq)
+            speeds.append(abs(s.dq_rad_s[0]))
+            applied.append(s.command_seq)
+            srv.command(seq, tau)
+        st = srv.wait_status(lambda m: m.counters.get("joint_speed_brakes", 0) >= 2, "two speed-brake episodes")
+    speeds, applied = np.array(speeds), np.array(applied)
+    over = np.flatnonzero(speeds + 0.01 > 0.95)  # 10 rad/s^2: 0.01 rad/s more by the next cycle
+    assert len(over) >= 2 and speeds.max() <= 0.95, speeds.max()
+    assert all(applied[i + 1] == -1 and speeds[i + 1] == 0.0 for i in over if i + 1 < len(speeds)), \
+        "the cycle after an over-speed state is a brake"
+    assert st.counters["joint_speed_brakes"] == len(over), (st.counters, len(over))
+    assert (applied >= 0).sum() > 250, "between the episodes the commands are applied"
+
+
+def test_without_declared_limits_there_is_no_speed_brake():
+    arm = MockArm(damping_nm_s_rad=0.0)
+    with ServerThread(lambda node: arm, lockstep()) as srv:
+        for seq in range(150):
+            s = srv.state_seq(seq)
+            srv.command(seq, [5.0, 0, 0, 0, 0, 0, 0])
+        s = srv.state_seq(150)
+    assert s.dq_rad_s[0] > 1.4 and s.command_seq == 149, "every command applied"

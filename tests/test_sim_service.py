@@ -158,7 +158,8 @@ def test_lockstep_runs_are_bit_identical_for_a_seed(tmp_path, model):
 
 @pytest.mark.parametrize("stale_limit_s, should_brake", [(0.02, True), (1.0, False)])
 def test_realtime_stale_command_makes_the_arm_brake_and_hold(tmp_path, model, stale_limit_s, should_brake):
-    cfg = {"mode": "realtime", "stale_limit_s": stale_limit_s, "camera": NO_CAMERA}
+    cfg = {"mode": "realtime", "stale_limit_s": stale_limit_s, "camera": NO_CAMERA,
+           "speed_brake_share": 0.95 if should_brake else 0.0}  # the control case: no speed brake either
     with SimProcess(tmp_path, cfg) as sim:
         states = sim.node.latest(sim.keys.robot_state, RobotState)
         first = wait_for(states.take, 10.0, "a robot state")
