@@ -84,6 +84,8 @@ def demo_data_main(argv: list[str]) -> int:
     p.add_argument("--rate", type=float, default=None, help="sample rate [Hz] (default drawn from 100-200)")
     p.add_argument("--noise", type=float, default=0.0004, help="position noise std [m] (default 0.0004)")
     p.add_argument("--revisit", action="store_true", help="wipe the first stain again at the end")
+    p.add_argument("--human", action="store_true",
+                   help="as people do in one take: lift-offs, a spot wiped again after one, a pause, a grip shift")
     p.add_argument("-o", "--output", type=Path, required=True, help="output file (.csv or .npz)")
     p.add_argument("--labels", type=Path, default=None, help="also write the true per-sample labels (CSV)")
 
@@ -95,13 +97,14 @@ def demo_data_main(argv: list[str]) -> int:
             raise LampsError(f"{a.output}: output must end in .csv or .npz")
         for path in filter(None, (a.output, a.labels)):
             _check_out_parent(path)
-        s = synthesize_demo(a.stains, a.seed, a.rate, a.noise, a.revisit)
+        s = synthesize_demo(a.stains, a.seed, a.rate, a.noise, a.revisit, a.human)
         (write_demo_csv if a.output.suffix.lower() == ".csv" else write_demo_npz)(a.output, s.demo)
         if a.labels:
             write_labels_csv(a.labels, s.demo.t_s, s.true_periodic, s.true_stain)
         print(
             f"wrote {a.output}: {s.demo.n_samples} samples, {s.demo.duration_s:.1f} s at {s.demo.rate_hz:.0f} Hz, "
-            f"{len(s.strokes)} stains" + (f"; labels {a.labels}" if a.labels else "")
+            f"{len(s.strokes)} stains, {sum(k == 'periodic' for *_, k, _ in s.segments)} wiping phases"
+            + (f"; labels {a.labels}" if a.labels else "")
         )
         return 0
 

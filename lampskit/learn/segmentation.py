@@ -51,7 +51,10 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
 6. **Boundaries by recurrence.** Spatial clusters also swallow the ends of
    transitions that spiral into and out of a stroke, so each periodic run's
    ends are moved to where the motion stops repeating itself: with the
-   run's period ``P`` (autocorrelation peak), the *recurrence* of a sample
+   run's period ``P`` (the first autocorrelation peak of the velocity
+   within 0.8 of the highest: velocity weighs the strokes over a slow
+   lift-off, and a run holding two wipes of one spot also correlates at
+   the lag between them), the *recurrence* of a sample
    is the distance, in the state ``(position, velocity / omega)`` with
    ``omega = 2 pi / P``, to the path ``P`` (+-15 %) earlier or later. It is
    median-filtered over ``P / 2`` and compared with ``REC_GAMMA`` (2) times
@@ -59,7 +62,12 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
    stretch below that level lasting at least one period, searched from one
    period before to one period after the run; the start then moves back
    while the recurrence stays below ``REC_GAMMA_LOOSE`` (3) times the median
-   (hysteresis: a person's first strokes are ragged and recur less exactly). Velocity makes the test
+   (hysteresis: a person's first strokes are ragged and recur less exactly). A sample slower than
+   ``REST_SPEED_SHARE`` (0.1) of the run's median speed does not recur (a resting tool repeats itself
+   trivially; a pause is no stroke), and recurring stretches apart by more than ``max(SPLIT_GAP_S,
+   SPLIT_GAP_PERIODS P)`` (1 s, 1.5 periods) of motion that does not recur are separate wiping phases of
+   one cluster (a lift-off and return, a pause beside the spot), while a shorter gap (a grip shift, a
+   ragged stroke) stays inside the wipe. Velocity makes the test
    sensitive early: a smooth (C2) departure from a cycle shows in position
    only as ``t^3`` but in velocity as ``t^2``.
 7. **Periodicity check.** A periodic MP covers its area again and again: it

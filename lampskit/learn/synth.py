@@ -13,13 +13,28 @@ world (robot base) frame:
   sideways bulge and a small lift that vanish to second order at the ends),
 - a *retreat* off the board and a short rest.
 
+With ``human=True`` it also does what real people do in one take (drawn
+from a second random stream, so the plain demos stay as they were):
+
+- *lift-offs*: the eraser leaves the board with the height profile of a real
+  retract (the recordings rise 12-35 cm in about a second, fastest early:
+  a beta(3, 6) velocity profile), hovers, and comes down again with the
+  mirrored, slow-landing profile of a real approach;
+- *revisits*: a spot wiped, the eraser lifted, the same spot wiped again;
+- *pauses*: at rest in the air at the top of a lift-off, or on the board
+  beside a stain, 0.6-2 s;
+- *grip shifts*: inside a wipe the stroke shrinks for half a second while
+  its centre moves 1.5-3 cm (one wiping phase, still periodic).
+
+Every such demo holds at least one of each (a revisit from two stains on).
+
 Everything is C2 in time, sampled at 100-200 Hz with timestamp jitter and
 white position noise. The true per-sample labels come with it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -30,6 +45,15 @@ from lampskit.errors import DemoError
 
 #: Board area in which stains are placed, board frame [m] (x range, y range).
 BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))
+#: How long a grip shift inside a wipe takes [s].
+GRIP_SHIFT_S = 0.5
+#: Share of a lift-off's retract spent going up before moving along the board (mirrored for the approach).
+LIFT_FIRST = 0.3
+#: Lift-off heights [m] (the recordings' retracts reach 12-35 cm) and how likely a transition is one.
+LIFT_HEIGHT_M = (0.12, 0.30)
+LIFT_SHARE = 0.35
+#: A pause's duration [s].
+PAUSE_S = (0.6, 2.0)
 
 
 @dataclass(frozen=True)
@@ -50,6 +74,10 @@ class StrokeSpec:
         Direction of the zig-zag stroke / start angle of the circle [rad].
     n_cycles : float
         Number of cycles wiped.
+    shift_m : array, shape (2,)
+        A grip shift inside the wipe: how far the stroke centre moves [m] (zeros: none).
+    shift_at : float
+        Where in the wipe the shift starts, as a share of its duration.
     """
 
     centre_m: np.ndarray
@@ -58,6 +86,8 @@ class StrokeSpec:
     amplitude_m: float
     angle_rad: float
     n_cycles: float
+    shift_m: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    shift_at: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -97,6 +127,7 @@ def synthesize_demo(
     rate_hz: float | None = None,
     noise_m: float = 0.0004,
     revisit_first: bool = False,
+    human: bool = False,
 ) -> SyntheticDemo:
     """A human-like wiping demonstration over ``n_stains`` stains.
 
@@ -113,6 +144,9 @@ def synthesize_demo(
     revisit_first : bool
         Wipe the first stain a second time at the end (same board region,
         two periodic segments at different times; its stain index repeats).
+    human : bool
+        Lift-offs, a revisit after a lift-off, pauses and a grip shift inside
+        a wipe, as real people do (see the module docstring).
     """
     if not 1 <= int(n_stains) <= 8:
         raise DemoError(f"n_stains must be between 1 and 8, got {n_stains!r}")
@@ -125,7 +159,15 @@ def synthesize_demo(
     rng = np.random.default_rng(seed)
     rate = float(rate_hz) if rate_hz is not None else float(rng.uniform(100.0, 200.0))
     strokes = _draw_strokes(int(n_stains), rng)
-    pieces = _build_pieces(strokes + strokes[:1] if revisit_first else strokes, rng)
+    order = list(range(len(strokes))) + ([0] if revisit_first else [])
+    plan = _HumanPlan.draw(order, np.random.default_rng([seed, 1])) if human else None
+    if plan is not None:
+        order = plan.order
+    wiped = [strokes[k] for k in order]
+    if plan is not None:
+        k = plan.shift_piece
+        wiped[k] = replace(wiped[k], shift_m=plan.shift_m, shift_at=plan.shift_at)
+    pieces = _build_pieces(wiped, rng, plan)
     t_end = sum(p.duration_s for p in pieces)
     dt = 1.0 / rate
     n = int(np.floor(t_end / dt))
@@ -156,10 +198,11 @@ def synthesize_demo(
     pos_world = pos_board @ T[:3, :3].T + T[:3, 3]
     q = np.tile(_quat_wxyz_tool_on_board(T[:3, :3]), (n, 1))
     centres = np.array([[*s.centre_m, 0.0] for s in strokes]) @ T[:3, :3].T + T[:3, 3]
-    if revisit_first:
-        stain[stain == len(strokes)] = 0
-        segments = [(a, b, k, 0 if s == len(strokes) else s) for a, b, k, s in segments]
-    demo = Demonstration(t, pos_world, q, source=f"synthetic(n_stains={n_stains}, seed={seed})")
+    index = np.array(order + [-1])  # a piece's stain is its place in the wiping order; -1 stays -1
+    stain = index[stain]
+    segments = [(a, b, k, int(index[s])) for a, b, k, s in segments]
+    extra = ", human" if human else ""
+    demo = Demonstration(t, pos_world, q, source=f"synthetic(n_stains={n_stains}, seed={seed}{extra})")
     return SyntheticDemo(demo, periodic, stain, centres, tuple(strokes), tuple(segments), T)
 
 
@@ -252,10 +295,23 @@ class _Stroke:
             -a0 * depth * wa**2 * np.sin(wa * t + pa),
         )
 
+    def _shift(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+        """The grip shift: the share of the centre's move done (K,) with its two time derivatives, and the
+        stroke's amplitude factor (1 - a half-depth bump while the hand moves) with its two derivatives."""
+        d = GRIP_SHIFT_S
+        u = (t - self.spec.shift_at * self.duration_s) / d
+        g, dg, ddg = _smoothstep3(u)
+        b, db, ddb = _bump3(u)
+        return g, dg / d, ddg / d**2, (1.0 - 0.5 * b, -0.5 * db / d, -0.5 * ddb / d**2)
+
     def state(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, velocity, acceleration (K, 3) in the board frame."""
         phi, dphi, ddphi = self._phase(t)
         a, da, dda = self._amp(t)
+        shifting = bool(np.any(self.spec.shift_m))
+        if shifting:
+            g, dg, ddg, (m, dm, ddm) = self._shift(t)
+            a, da, dda = a * m, da * m + a * dm, dda * m + 2 * da * dm + a * ddm
         # unit shape u(phi) and its phase derivatives, in the stroke's own axes
         if self.spec.kind == "circle":
             u = np.stack([np.cos(phi), np.sin(phi)], -1)
@@ -277,11 +333,27 @@ class _Stroke:
         for arr, offset in ((p, self.spec.centre_m), (v, 0.0), (acc, 0.0)):
             xy = arr @ R.T + offset
             out.append(np.column_stack([xy, np.zeros(len(xy))]))
+        if shifting:
+            for k, w in enumerate((g, dg, ddg)):
+                out[k][:, :2] += w[:, None] * self.spec.shift_m
         return out[0], out[1], out[2]
 
     @property
     def centre3(self) -> np.ndarray:
+        """The stroke centre where the wipe starts (3,) [m]."""
         return np.array([*self.spec.centre_m, 0.0])
+
+    @property
+    def end_centre3(self) -> np.ndarray:
+        """The stroke centre where the wipe ends (after any grip shift) (3,) [m]."""
+        return np.array([*(self.spec.centre_m + self.spec.shift_m), 0.0])
+
+    def offset(self, t: np.ndarray) -> np.ndarray:
+        """The stroke's offset from its (moving) centre (K, 3) [m], for fading it in and out of transitions."""
+        p = self.evaluate(t)
+        if np.any(self.spec.shift_m):
+            p[:, :2] -= self._shift(np.asarray(t, float))[0][:, None] * self.spec.shift_m
+        return p - self.centre3
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
         return self.state(np.asarray(t, dtype=float))[0]
@@ -308,24 +380,58 @@ class _Transition:
     next: "_Stroke | None" = None
     fade: float = 0.4
     stain: int = -1
+    profile: str = "smooth"  # "retract": off the board as a person does; "approach": back onto it
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
         t = np.asarray(t, dtype=float)
         T = self.duration_s
         s = np.clip(t / T, 0.0, 1.0)[:, None]
-        p = self.start_m + _smoothstep(s) * (self.end_m - self.start_m) + 64.0 * s**3 * (1 - s) ** 3 * self.bulge_m
+        if self.profile == "smooth":
+            p = self.start_m + _smoothstep(s) * (self.end_m - self.start_m)
+        else:  # height with a real retract's (approach's) profile; along the board mostly while up
+            rising = self.profile == "retract"
+            h = _retract(s) if rising else 1.0 - _retract(1.0 - s)
+            along = _smoothstep(np.clip((s - LIFT_FIRST) / (1 - LIFT_FIRST), 0, 1) if rising
+                                else np.clip(s / (1 - LIFT_FIRST), 0, 1))
+            d = self.end_m - self.start_m
+            p = self.start_m + along * np.array([d[0], d[1], 0.0]) + h * np.array([0.0, 0.0, d[2]])
+        p = p + 64.0 * s**3 * (1 - s) ** 3 * self.bulge_m
         if self.prev is not None:
             w = 1.0 - _smoothstep(np.clip(s / self.fade, 0.0, 1.0))
-            p = p + w * (self.prev.evaluate(self.prev.duration_s + t) - self.prev.centre3)
+            p = p + w * self.prev.offset(self.prev.duration_s + t)
         if self.next is not None:
             w = _smoothstep(np.clip((s - 1.0 + self.fade) / self.fade, 0.0, 1.0))
-            p = p + w * (self.next.evaluate(t - T) - self.next.centre3)
+            p = p + w * self.next.offset(t - T)
         return p
 
 
 def _smoothstep(s: np.ndarray) -> np.ndarray:
     """Quintic smoothstep: 0 -> 1 with zero first and second derivatives at both ends."""
     return 10 * s**3 - 15 * s**4 + 6 * s**5
+
+
+def _smoothstep3(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The smoothstep of ``u`` clipped to [0, 1] with its first and second derivatives in ``u``."""
+    s = np.clip(u, 0.0, 1.0)
+    inside = (u > 0.0) & (u < 1.0)
+    return (10 * s**3 - 15 * s**4 + 6 * s**5, np.where(inside, 30 * s**2 * (1 - s) ** 2, 0.0),
+            np.where(inside, 60 * s * (1 - s) * (1 - 2 * s), 0.0))
+
+
+def _bump3(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``64 u^3 (1-u)^3`` on [0, 1] (peak 1 at the middle, flat to second order at the ends), 0 outside, with
+    its first and second derivatives in ``u``."""
+    s = np.clip(u, 0.0, 1.0)
+    inside = (u > 0.0) & (u < 1.0)
+    return (64 * s**3 * (1 - s) ** 3, np.where(inside, 192 * s**2 * (1 - s) ** 2 * (1 - 2 * s), 0.0),
+            np.where(inside, 192 * s * (1 - s) * (2 - 10 * s + 10 * s**2), 0.0))
+
+
+def _retract(s: np.ndarray) -> np.ndarray:
+    """0 -> 1 with a beta(3, 6) velocity profile (peak at 2/7 of the move, flat to second order at both ends):
+    a real retract's height, fast off the board, slow at the top (the recordings rise half way in a third of
+    the time to the top)."""
+    return s**3 * (56 - 210 * s + 336 * s**2 - 280 * s**3 + 120 * s**4 - 21 * s**5)
 
 
 @dataclass
@@ -338,7 +444,67 @@ class _Rest:
         return np.tile(self.position_m, (len(t), 1))
 
 
-def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator) -> list:
+@dataclass
+class _HumanPlan:
+    """What a person does in one take beyond wiping (see the module docstring), drawn from its own stream.
+
+    order : stain of each wipe, in time order (a revisit repeats one); lift : per transition between wipes,
+    whether the eraser leaves the board; pause_at : the transition with a pause, pause_s its length [s];
+    shift_piece : the wipe with a grip shift, shift_m (2,) its move [m], shift_at where it starts (share).
+    """
+
+    order: list[int]
+    lift: list[bool]
+    pause_at: int
+    pause_s: float
+    shift_piece: int
+    shift_m: np.ndarray
+    shift_at: float
+    rng: np.random.Generator
+
+    @classmethod
+    def draw(cls, order: list[int], rng: np.random.Generator) -> "_HumanPlan":
+        r = int(rng.integers(0, len(order)))
+        order = order[: r + 1] + [order[r]] + order[r + 1:]  # the spot again, after a lift-off
+        lift = [bool(rng.random() < LIFT_SHARE) or i == r for i in range(len(order) - 1)]
+        angle = rng.uniform(0, 2 * np.pi)
+        return cls(order, lift, int(rng.integers(0, len(lift))), float(rng.uniform(*PAUSE_S)),
+                   int(rng.integers(0, len(order))),
+                   rng.uniform(0.015, 0.03) * np.array([np.cos(angle), np.sin(angle)]),
+                   float(rng.uniform(0.35, 0.5)), rng)
+
+
+def _lift_off(run: "_Stroke", nxt: "_Stroke", pause_s: float, rng: np.random.Generator) -> list:
+    """Retract off the board from ``run``, hover (and pause ``pause_s``), approach ``nxt``: rest-to-rest at the top."""
+    height = rng.uniform(*LIFT_HEIGHT_M)
+    a, b = run.end_centre3, nxt.centre3
+    if np.linalg.norm(b - a) < 0.02:  # the same spot again: the hand drifts a little while up
+        top_xy = a[:2] + rng.uniform(-0.04, 0.04, 2)
+    else:
+        top_xy = 0.5 * (a[:2] + b[:2])
+    top = np.array([*top_xy, height])
+    slow = np.sqrt(height / 0.2)
+    t_up = max(rng.uniform(0.9, 1.4) * slow, np.linalg.norm(top_xy - a[:2]) / 0.3)
+    t_down = max(rng.uniform(1.1, 1.7) * slow, np.linalg.norm(b[:2] - top_xy) / 0.3)
+    pieces: list = [_Transition(a, top, t_up, np.zeros(3), run, None, min(0.4, 0.35 / t_up), profile="retract")]
+    if pause_s > 0:
+        pieces.append(_Rest(top, pause_s))
+    pieces.append(_Transition(top, b, t_down, np.zeros(3), None, nxt, min(0.4, 0.35 / t_down), profile="approach"))
+    return pieces
+
+
+def _pause_on_board(run: "_Stroke", nxt: "_Stroke", pause_s: float, rng: np.random.Generator) -> list:
+    """Out of ``run`` to rest on the board beside it for ``pause_s``, then on into ``nxt``."""
+    a, b = run.end_centre3, nxt.centre3
+    side = rng.uniform(-1, 1, 2)
+    stop = np.array([*(a[:2] + 0.03 * side / max(np.linalg.norm(side), 1e-9)), 0.0])
+    t_out = float(rng.uniform(0.6, 0.9))
+    t_on = max(0.8, float(np.linalg.norm(b - stop)) / rng.uniform(0.25, 0.4))
+    return [_Transition(a, stop, t_out, np.zeros(3), run, None, min(0.4, 0.35 / t_out)), _Rest(stop, pause_s),
+            _Transition(stop, b, t_on, np.zeros(3), None, nxt, min(0.4, 0.35 / t_on))]
+
+
+def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator, plan: _HumanPlan | None = None) -> list:
     zero = np.zeros(3)
     runs = [
         _Stroke(
@@ -364,18 +530,22 @@ def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator) -> list:
     pieces.append(_Transition(home, runs[0].centre3, duration, zero.copy(), None, runs[0], 0.35 / duration))
     for k, run in enumerate(runs):
         pieces.append(run)
-        if k + 1 < len(runs):
+        if plan is not None and k + 1 < len(runs) and (plan.lift[k] or plan.pause_at == k):
+            pause = plan.pause_s if plan.pause_at == k else 0.0
+            build = _lift_off if plan.lift[k] else _pause_on_board
+            pieces.extend(build(run, runs[k + 1], pause, plan.rng))
+        elif k + 1 < len(runs):
             nxt = runs[k + 1]
-            delta = nxt.centre3 - run.centre3
+            delta = nxt.centre3 - run.end_centre3
             dist = float(np.linalg.norm(delta))
             duration = max(0.8, dist / rng.uniform(0.25, 0.4))
             side = np.cross([0.0, 0.0, 1.0], delta) / max(dist, 1e-9)
             bulge = side * rng.uniform(-0.2, 0.2) * dist + np.array([0, 0, rng.uniform(0.0, 0.01)])
             fade = min(0.4, 0.35 / duration)
-            pieces.append(_Transition(run.centre3, nxt.centre3, duration, bulge, run, nxt, fade))
+            pieces.append(_Transition(run.end_centre3, nxt.centre3, duration, bulge, run, nxt, fade))
         else:
             away = np.array([*run.spec.centre_m + rng.uniform(-0.1, 0.1, 2), rng.uniform(0.08, 0.15)])
             duration = float(rng.uniform(1.0, 1.6))
-            pieces.append(_Transition(run.centre3, away, duration, zero.copy(), run, None, 0.35 / duration))
+            pieces.append(_Transition(run.end_centre3, away, duration, zero.copy(), run, None, 0.35 / duration))
             pieces.append(_Rest(away, float(rng.uniform(0.2, 0.4))))
     return pieces

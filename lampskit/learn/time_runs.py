@@ -20,6 +20,8 @@ Run = tuple[int, int, int]  # (cluster or -1, start, end)
 STAY_FACTOR = 1.5
 #: Period search range [s].
 MIN_PERIOD_S, MAX_PERIOD_S = 0.2, 5.0
+#: An autocorrelation peak this close to the highest one is the period when it comes first.
+PEAK_SHARE = 0.8
 #: Lags compared in the recurrence, as fractions of the period.
 LAG_LO, LAG_HI = 0.85, 1.15
 #: A sample recurs when its (median-filtered) recurrence is below this many
@@ -29,6 +31,14 @@ REC_GAMMA = 2.0
 REC_GAMMA_LOOSE = 3.0
 #: ... and an extent of at least this [m].
 MIN_EXTENT_M = 0.005
+#: A sample slower than this share of its run's median speed is at rest: a resting tool repeats itself
+#: trivially, but a pause is no stroke.
+REST_SPEED_SHARE = 0.1
+#: Two recurring stretches of one run are two wiping phases when the motion between them does not recur for
+#: longer than this [s] and than :data:`SPLIT_GAP_PERIODS` periods (a lift-off and return, a pause, a walk
+#: to the spot again); a shorter gap (a grip shift, a ragged stroke) stays inside the wipe.
+SPLIT_GAP_S = 1.0
+SPLIT_GAP_PERIODS = 1.5
 
 
 def runs_from_labels(labels: np.ndarray) -> list[Run]:
@@ -159,7 +169,9 @@ def merge_short_runs(runs: list[Run], t_s: np.ndarray, min_duration_s: float, tr
 
 
 def period_samples(points: np.ndarray, rate_hz: float) -> int | None:
-    """Dominant period [samples] of ``points`` (K, d): the autocorrelation peak after its first zero."""
+    """Dominant period [samples] of ``points`` (K, d): the first autocorrelation peak after its first zero that
+    reaches :data:`PEAK_SHARE` of the highest (a run holding two wipes of one spot also correlates with itself
+    at the lag between them; the stroke's period is the first strong peak, as in pitch detection)."""
     x = points - points.mean(axis=0)
     n = len(x)
     lo = int(MIN_PERIOD_S * rate_hz)
@@ -172,7 +184,11 @@ def period_samples(points: np.ndarray, rate_hz: float) -> int | None:
     if below.size == 0 or max(lo, int(below[0])) >= hi:
         return None
     start = max(lo, int(below[0]))
-    return start + int(np.argmax(ac[start:hi]))
+    window = ac[start:hi]
+    best = float(np.max(window))
+    peaks = np.flatnonzero((window[1:-1] >= window[:-2]) & (window[1:-1] >= window[2:]) &
+                           (window[1:-1] >= PEAK_SHARE * best)) + 1
+    return start + (int(peaks[0]) if peaks.size else int(np.argmax(window)))
 
 
 def recurrence(state: np.ndarray, period: int) -> np.ndarray:
@@ -203,7 +219,7 @@ def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> li
     per = [r for r in runs if r[0] >= 0]
     for j, (c, a, b) in enumerate(per):
         labels[a:b] = c
-        period = period_samples(smooth[a:b], rate_hz)
+        period = period_samples(velocity[a:b], rate_hz)
         if period is None:
             continue
         lo = max(per[j - 1][2] if j > 0 else 0, a - period)
@@ -214,19 +230,36 @@ def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> li
         if not finite[a - lo : b - lo].any():
             continue
         rec[~finite] = np.max(rec[finite])
+        speed = np.linalg.norm(velocity[lo:hi], axis=1)
+        rec[speed < REST_SPEED_SHARE * float(np.median(speed[a - lo:b - lo]))] = np.max(rec)
         rec = median_filter(rec, size=max(1, period // 2) | 1, mode="nearest")
         level = REC_GAMMA * float(np.median(rec[a - lo : b - lo]))
         stretches = [(s0, s1) for v, s0, s1 in runs_from_labels((rec < level).astype(int)) if v == 1 and s1 - s0 >= period]
         if stretches:
-            # hysteresis at the start: back from the first recurring stretch while below the looser level (a
-            # person's first strokes are ragged: they recur, less exactly; the end needs none)
-            loose = rec < REC_GAMMA_LOOSE / REC_GAMMA * level
-            s0, s1 = stretches[0][0], stretches[-1][1]
-            while s0 > 0 and loose[s0 - 1]:
-                s0 -= 1
             labels[a:b] = -1
-            labels[lo + s0 : lo + s1] = c
+            loose = rec < REC_GAMMA_LOOSE / REC_GAMMA * level
+            split = max(SPLIT_GAP_S * rate_hz, SPLIT_GAP_PERIODS * period)
+            floor = 0
+            for s0, s1 in _wiping_phases(stretches, split):
+                # hysteresis at the start: back from the first recurring stretch while below the looser level (a
+                # person's first strokes are ragged: they recur, less exactly; the end needs none)
+                while s0 > floor and loose[s0 - 1]:
+                    s0 -= 1
+                labels[lo + s0 : lo + s1] = c
+                floor = s1
     return runs_from_labels(labels)
+
+
+def _wiping_phases(stretches: list[tuple[int, int]], split: float) -> list[tuple[int, int]]:
+    """Recurring stretches ``(start, end)`` in time order grouped into wiping phases: a gap longer than ``split``
+    [samples] separates two."""
+    phases = [stretches[0]]
+    for s0, s1 in stretches[1:]:
+        if s0 - phases[-1][1] > split:
+            phases.append((s0, s1))
+        else:
+            phases[-1] = (phases[-1][0], s1)
+    return phases
 
 
 def extent_and_ratio(points: np.ndarray) -> tuple[float, float]:
