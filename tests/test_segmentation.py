@@ -238,3 +238,19 @@ def test_clusters_taking_turns_within_one_stroke_are_united_but_separate_wipes_a
     # a wipe of 0, a short slide to a whole wipe of 2 and back to 0: a real visit, not a half cycle
     visit = [(0, 0, 600), (-1, 600, 610), (2, 610, 1200), (-1, 1200, 1210), (0, 1210, 1800)]
     assert unite_alternating(visit, t, 0.3) == visit
+
+
+def test_fig4_colours_each_bar_by_the_label_of_the_point_at_that_position_of_the_ordering():
+    """The bars used to take the label of *sample* number k (most bars got another point's colour): a valley below
+    the threshold is a cluster's points, and they must be drawn in that cluster's colour."""
+    from lampskit.figures.demo import reachability_bars
+
+    s = synthesize_demo(3, 5)
+    seg = segment(s.demo)
+    heights, labels = reachability_bars(seg)
+    assert len(heights) == len(labels) == len(seg.point_samples) and np.all(np.isfinite(heights))
+    assert np.array_equal(labels, seg.labels[seg.point_samples[seg.optics.ordering]])
+    valley = heights < seg.threshold
+    assert np.mean(labels[valley] >= 0) > 0.8, "valley bars are periodic points (the spiral-in ends are not)"
+    wrong = seg.labels[seg.optics.ordering]  # the old indexing, for contrast
+    assert np.mean(wrong[valley] >= 0) < np.mean(labels[valley] >= 0) - 0.1

@@ -39,16 +39,21 @@ def _cluster_colours(labels: np.ndarray) -> list:
     return [TRANSITIONAL_COLOUR if c < 0 else cmap(c % 10) for c in labels]
 
 
-def figure_reachability(seg: Segmentation, path: Path) -> Path:
-    """Fig. 4: reachability distance in OPTICS order, valleys = periodic MPs, with the threshold."""
-    res = seg.optics
-    order = res.ordering
-    reach = res.reachability[order]
+def reachability_bars(seg: Segmentation) -> tuple[np.ndarray, np.ndarray]:
+    """Fig. 4's bars: the reachability [m] (M,) in OPTICS order (the first, infinite, drawn at the highest) and the
+    final label of the *point at each position of the ordering* (M,) (its sample's segment; -1 transitional)."""
+    reach = seg.reachability_plot
     finite = np.isfinite(reach)
     top = np.nanmax(reach[finite]) if finite.any() else 1.0
-    labels = seg.labels[order]
+    return np.where(finite, reach, top), seg.ordering_labels
+
+
+def figure_reachability(seg: Segmentation, path: Path) -> Path:
+    """Fig. 4: reachability distance in OPTICS order, valleys = periodic MPs, with the threshold; each bar coloured
+    by the final label of the point at that position of the ordering."""
+    heights, labels = reachability_bars(seg)
     fig, ax = plt.subplots(figsize=(9, 3.5))
-    ax.bar(np.arange(len(order)), np.where(finite, reach, top), width=1.0, color=_cluster_colours(labels), linewidth=0)
+    ax.bar(np.arange(len(heights)), heights, width=1.0, color=_cluster_colours(labels), linewidth=0)
     if seg.threshold is not None:
         ax.axhline(seg.threshold, color="k", ls="--", lw=1, label=f"threshold {seg.threshold * 1000:.1f} mm")
         ax.legend(loc="upper right")
