@@ -117,7 +117,7 @@ def demo_data_main(argv: list[str]) -> int:
 
 def _add_segment_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("demo", help="demonstration file (.csv, .npz, QTM .tsv, or dataset.mat#INDEX)")
-    p.add_argument("--method", choices=("optics", "kmeans", "affinity"), default="optics")
+    p.add_argument("--method", choices=("optics", "kmeans", "affinity", "sklearn-optics"), default="optics")
     p.add_argument("--threshold", type=float, default=None, help="reachability threshold [m] (default automatic)")
     p.add_argument("--min-samples", type=int, default=None, help="OPTICS min_samples (default from the rate)")
 
@@ -206,20 +206,22 @@ def evaluate_main(argv: list[str]) -> int:
 
 
 def learn_main(argv: list[str]) -> int:
-    p = _parser("learn", "Segment a demonstration, learn its periodic and transitional MPs, save a skill file.")
-    p.add_argument("demo", help="demonstration file (.csv, .npz, QTM .tsv, or dataset.mat#INDEX)")
+    p = _parser("learn", "Segment demonstrations, learn their periodic and transitional MPs, save a skill file. "
+                         "Several demonstrations of one skill (same board, same phases in the same order) are "
+                         "fused MP by MP (GMM-GMR over all of them) and their spread recorded.")
+    p.add_argument("demo", nargs="+", help="demonstration file(s) (.csv, .npz, QTM .tsv, or dataset.mat#INDEX)")
     p.add_argument("-o", "--output", type=Path, required=True, help="skill file to write (JSON)")
-    p.add_argument("--method", choices=("optics", "kmeans", "affinity"), default="optics")
-    p.add_argument("--plots", type=Path, default=None, help="folder for the paper's Figs. 4-7 as PNG")
+    p.add_argument("--method", choices=("optics", "kmeans", "affinity", "sklearn-optics"), default="optics")
+    p.add_argument("--plots", type=Path, default=None, help="folder for the paper's Figs. 4-7 as PNG (first demo)")
 
     def body(a: argparse.Namespace) -> int:
         from lampskit.learn.demo_io import read_demo
-        from lampskit.learn.learn import learn_skill
+        from lampskit.learn.learn import learn_skill_from_demos
         from lampskit.core.skill import save_skill
 
         _check_out_parent(a.output)
-        demo = read_demo(a.demo)
-        skill, seg = learn_skill(demo, method=a.method, progress=Progress())
+        demos = [read_demo(spec) for spec in a.demo]
+        skill, segs = learn_skill_from_demos(demos, method=a.method, progress=Progress())
         save_skill(a.output, skill)
         print(_skill_summary(skill))
         print(f"wrote {a.output}")
@@ -227,7 +229,7 @@ def learn_main(argv: list[str]) -> int:
             from lampskit.figures.demo import write_figures
 
             a.plots.mkdir(parents=True, exist_ok=True)
-            for path in write_figures(demo, skill, seg, a.plots, progress=Progress()):
+            for path in write_figures(demos[0], skill, segs[0], a.plots, progress=Progress()):
                 print(f"wrote {path}")
         return 0
 
@@ -235,18 +237,25 @@ def learn_main(argv: list[str]) -> int:
 
 
 def _skill_summary(skill) -> str:
-    lines = [f"skill: {len(skill.periodic)} periodic MP(s), {len(skill.transitional)} transitional MP(s)"]
-    for e in skill.periodic:
+    spread = skill.source.get("spread", {})
+    n_demos = len(skill.source.get("demos", [])) or 1
+    lines = [f"skill: {len(skill.periodic)} periodic MP(s), {len(skill.transitional)} transitional MP(s)"
+             + (f", fused from {n_demos} demonstrations (spread: path RMS between them)" if n_demos > 1 else "")]
+    for k, e in enumerate(skill.periodic):
         mp = e.mp
-        lines.append(
-            f"  periodic  seg {e.segment:>2}: {mp.omega_rad_s / (2 * np.pi):.3f} Hz, r = {mp.amplitude_m * 100:.1f} cm,"
-            f" {e.n_cycles:.1f} cycles"
-        )
-    for e in skill.transitional:
-        lines.append(
-            f"  transit.  seg {e.segment:>2}: {e.mp.demo_duration_s:.2f} s,"
-            f" {np.linalg.norm(e.mp.demo_displacement_m) * 100:.1f} cm"
-        )
+        line = (f"  periodic  seg {e.segment:>2}: {mp.omega_rad_s / (2 * np.pi):.3f} Hz, r = {mp.amplitude_m * 100:.1f} cm,"
+                f" {e.n_cycles:.1f} cycles")
+        if spread.get("periodic"):
+            sp = spread["periodic"][k]
+            line += f"; spread {sp['path_rms_m'] * 1000:.1f} mm, {sp['freq_std_hz']:.3f} Hz"
+        lines.append(line)
+    for k, e in enumerate(skill.transitional):
+        line = (f"  transit.  seg {e.segment:>2}: {e.mp.demo_duration_s:.2f} s,"
+                f" {np.linalg.norm(e.mp.demo_displacement_m) * 100:.1f} cm")
+        if spread.get("transitional"):
+            sp = spread["transitional"][k]
+            line += f"; spread {sp['path_rms_m'] * 1000:.1f} mm, {sp['duration_std_s']:.2f} s"
+        lines.append(line)
     return "\n".join(lines)
 
 

@@ -56,6 +56,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -243,11 +244,37 @@ def learn_periodic(
             f"n_template >= 2 n_basis; got n_basis={n_basis!r}, n_components={n_components!r}, "
             f"alpha={alpha!r}, beta={beta!r}, n_template={n_template!r}"
         )
+    lab = phase_labelled(t_s, y, n_components, follow_drift)
+    grid, template, _ = periodic_template(lab.phase_rad, lab.y, n_template, lab.n_components, seed=seed)
+    return mp_from_template(grid, template, lab.n_components, lab.omega_rad_s, alpha, beta, n_basis,
+                            lab.phase_start_rad, lab.phase_end_rad, lab.n_cycles)
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseLabelled:
+    """One periodic segment, phase-labelled for the template (steps 1-2 of the module docstring).
+
+    phase_rad : (K,) phase of each resampled sample [rad] (unwrapped); y : (K, n_dims) positions [m] there (a
+    uniform cubic-spline resampling of 30 per component to :data:`MAX_GMM_SAMPLES`); omega_rad_s : mean
+    angular frequency [rad/s]; n_components : GMM size for this many samples; phase_start_rad, phase_end_rad :
+    phase at the segment's ends mod 2 pi; n_cycles : cycles in the segment.
+    """
+
+    phase_rad: np.ndarray
+    y: np.ndarray
+    omega_rad_s: float
+    n_components: int
+    phase_start_rad: float
+    phase_end_rad: float
+    n_cycles: float
+
+
+def phase_labelled(t_s: np.ndarray, y: np.ndarray, n_components: int = DEFAULT_N_COMPONENTS,
+                   follow_drift: bool = True) -> PhaseLabelled:
+    """Validate one periodic segment (times (T,) [s], positions (T, n_dims) [m]) and label it with its phase."""
     t, y = validate_segment(t_s, y)
     fit = checked_phase_fit(t, y, follow_drift)
     phase_span = float(fit.phase(t[-1]) - fit.phase(t[0]))
-    omega = phase_span / (t[-1] - t[0])
-
     # The GMM sees a uniform resampling (cubic spline) of at least 30 samples per
     # component: short, fast segments (100 samples) are upsampled, long ones
     # decimated to MAX_GMM_SAMPLES.
@@ -255,8 +282,14 @@ def learn_periodic(
     t_u = np.linspace(t[0], t[-1], n_gmm)
     y_u = CubicSpline(t, y, axis=0)(t_u)
     n_comp = max(MIN_COMPONENTS, min(int(n_components), n_gmm // 10))
-    grid, template, _ = periodic_template(fit.phase(t_u), y_u, n_template, n_comp, seed=seed)
+    return PhaseLabelled(fit.phase(t_u), y_u, phase_span / (t[-1] - t[0]), n_comp,
+                         float(fit.phase(t[0]) % TWO_PI), float(fit.phase(t[-1]) % TWO_PI), phase_span / TWO_PI)
 
+
+def mp_from_template(grid: np.ndarray, template: np.ndarray, n_comp: int, omega: float, alpha: float, beta: float,
+                     n_basis: int, phase_start_rad: float, phase_end_rad: float, n_cycles: float) -> PeriodicMP:
+    """Steps 3-4 after the GMR: low-pass the template (M, n_dims) [m] on ``grid`` (M,) [rad], anchor, amplitude,
+    the forcing target of eq. (6) at ``omega`` [rad/s] and its weights."""
     template = lowpass_periodic(template, TEMPLATE_PASS_PER_COMPONENT * n_comp, TEMPLATE_STOP_PER_COMPONENT * n_comp)
     k_last = significant_harmonics(template)
     template = lowpass_periodic(template, k_last + 0.5, k_last + 1.5)
@@ -285,7 +318,7 @@ def learn_periodic(
         beta=float(beta),
         template_phase_rad=grid,
         template_m=template,
-        phase_start_rad=float(fit.phase(t[0]) % TWO_PI),
-        phase_end_rad=float(fit.phase(t[-1]) % TWO_PI),
-        n_cycles=phase_span / TWO_PI,
+        phase_start_rad=phase_start_rad,
+        phase_end_rad=phase_end_rad,
+        n_cycles=n_cycles,
     )
