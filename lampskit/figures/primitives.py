@@ -10,6 +10,7 @@ segmentation.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -32,23 +33,44 @@ DT_S = 0.001
 CONTEXT_S = 0.6
 
 
-def _neighbours(skill: Skill) -> tuple[PeriodicEntry, TransitionalEntry, PeriodicEntry, str]:
-    """The first learned transition that joins two periodic MPs, with those two MPs and a caption note.
+@dataclass(frozen=True)
+class _Shown:
+    """The transition a figure shows: its MP, the periodic MPs around it (None: that end is the demonstration's own
+    state, off any stroke), the start and goal states ((y, v, a), each (2,)), its duration [s] and a caption note."""
 
-    Without such a transition (one stain, or transitions only at the ends),
-    the first learned transition is mapped between the first and the last
-    periodic MP, and the note says so.
-    """
+    before: PeriodicEntry | None
+    tr: TransitionalEntry
+    after: PeriodicEntry | None
+    start: tuple
+    goal: tuple
+    T: float
+    note: str
+
+
+def _shown(skill: Skill) -> _Shown:
+    """The first learned transition that joins two periodic MPs (timed as the planner would), else the first one
+    into a periodic MP (an approach) or out of one (a retract) as it was demonstrated: from the demonstration's
+    own start state, or to its own goal, over its demonstrated duration. Never a demonstrated move mapped onto
+    another one (the approach of a single-wipe demo squeezed between two phases of one stroke, 8x faster)."""
     by_segment = {e.segment: e for e in skill.periodic}
+    if not skill.transitional:
+        raise PlanningError("the skill has no transitional MP to plot")
     for tr in skill.transitional:
         before, after = by_segment.get(tr.segment - 1), by_segment.get(tr.segment + 1)
         if before is not None and after is not None:
-            return before, tr, after, f"demonstrated segment {tr.segment}"
-    if not skill.transitional:
-        raise PlanningError("the skill has no transitional MP to plot")
-    tr = skill.transitional[0]
-    note = f"no transition between two stains was demonstrated: segment {tr.segment} mapped onto this move"
-    return skill.periodic[0], tr, skill.periodic[-1], note
+            start, goal = _leaving_state(before), _entering_state(after)
+            return _Shown(before, tr, after, start, goal, _duration(skill, tr, start[0], goal[0]),
+                          f"demonstrated segment {tr.segment}")
+    ranked = sorted(skill.transitional, key=lambda e: (e.segment + 1 not in by_segment, e.segment))
+    tr = ranked[0]
+    before, after = by_segment.get(tr.segment - 1), by_segment.get(tr.segment + 1)
+    mp = tr.mp
+    start = _leaving_state(before) if before is not None else tuple(mp.demo_start)
+    goal = _entering_state(after) if after is not None else tuple(mp.demo_goal)
+    kind = "approach" if after is not None else "retract" if before is not None else "move"
+    return _Shown(before, tr, after, start, goal, float(mp.demo_duration_s),
+                  f"demonstrated {kind}, segment {tr.segment}, at its own {mp.demo_duration_s:.2f} s "
+                  "(no transition between two stains was demonstrated)")
 
 
 def _leaving_state(entry: PeriodicEntry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -65,15 +87,26 @@ def _duration(skill: Skill, tr: TransitionalEntry, start: np.ndarray, goal: np.n
     return transition_duration(skill, skill.transitional.index(tr), goal - start, PlannerParams())
 
 
-def _with_context(before: PeriodicEntry, after: PeriodicEntry, entry_phase: float, tr: TrajectorySamples):
-    """Periodic MP before, the transition, periodic MP after, on one time axis [s] (t = 0 at the start)."""
-    mp_b, mp_a = before.mp, after.mp
+def _with_context(before: PeriodicEntry | None, after: PeriodicEntry | None, entry_phase: float,
+                  tr: TrajectorySamples):
+    """Periodic MP before, the transition, periodic MP after, on one time axis [s] (t = 0 at the start); a side
+    without a periodic MP holds the transition's end state still."""
     k = int(round(CONTEXT_S / DT_S))
     t_b = -np.arange(k, 0, -1) * DT_S
-    pre = periodic_state(mp_b, mp_b.phase_end_rad + mp_b.omega_rad_s * t_b)
     T = tr.t_s[-1]
     t_a = T + np.arange(1, k + 1) * DT_S
-    post = periodic_state(mp_a, entry_phase + mp_a.omega_rad_s * (t_a - T))
+    if before is not None:
+        mp_b = before.mp
+        pre = periodic_state(mp_b, mp_b.phase_end_rad + mp_b.omega_rad_s * t_b)
+    else:
+        pre = tuple(np.repeat(x[:1], k, axis=0) * (1 if i == 0 else 0) for i, x in
+                    enumerate((tr.position_m, tr.velocity_m_s, tr.acceleration_m_s2)))
+    if after is not None:
+        mp_a = after.mp
+        post = periodic_state(mp_a, entry_phase + mp_a.omega_rad_s * (t_a - T))
+    else:
+        post = tuple(np.repeat(x[-1:], k, axis=0) * (1 if i == 0 else 0) for i, x in
+                     enumerate((tr.position_m, tr.velocity_m_s, tr.acceleration_m_s2)))
     t = np.concatenate([t_b, tr.t_s, t_a])
     rows = [np.concatenate([p, x, q]) for p, x, q in zip(pre, (tr.position_m, tr.velocity_m_s, tr.acceleration_m_s2),
                                                          post)]
@@ -87,9 +120,9 @@ def figure_transition_comparison(demo: Demonstration, skill: Skill, seg: Segment
     second-order baseline starts from (y0, v0) only, so its acceleration
     jumps at t = 0 and again at t = T; the transitional MP does not.
     """
-    before, tr_entry, after, note = _neighbours(skill)
-    start, goal = _leaving_state(before), _entering_state(after)
-    T = _duration(skill, tr_entry, start[0], goal[0])
+    shown = _shown(skill)
+    before, tr_entry, after, note = shown.before, shown.tr, shown.after, shown.note
+    start, goal, T = shown.start, shown.goal, shown.T
     s = seg.segments[tr_entry.segment]
     y_demo = skill.surface.surface_from_world(demo.position_m[s.start : s.end])[:, :2]
     tc_mp = learn_target_crossing_dmp(demo.t_s[s.start : s.end], y_demo)
@@ -108,7 +141,7 @@ def figure_transition_comparison(demo: Demonstration, skill: Skill, seg: Segment
     fig, axes = plt.subplots(3, 2, figsize=(12, 8), sharex=True)
     units = ["position [m]", "velocity [m/s]", "acceleration [m/s²]"]
     for (name, tr), style in zip(curves.items(), styles):
-        t, rows = _with_context(before, after, after.mp.phase_start_rad, tr)
+        t, rows = _with_context(before, after, after.mp.phase_start_rad if after is not None else 0.0, tr)
         for r in range(3):
             for d in range(2):
                 ax = axes[r, d]
@@ -121,12 +154,13 @@ def figure_transition_comparison(demo: Demonstration, skill: Skill, seg: Segment
         axes[r, 0].set_ylabel(units[r])
     for d, name in enumerate("xy"):
         axes[0, d].set_title(f"surface {name}")
-        axes[2, d].set_xlabel("time from the end of the previous periodic MP [s]")
+        axes[2, d].set_xlabel("time from the start of the transition [s]")
         for r in range(3):
             axes[r, d].axvline(0.0, color="k", lw=0.5)
             axes[r, d].axvline(T, color="k", lw=0.5)
     axes[0, 0].legend(loc="best", fontsize=8)
-    fig.suptitle(f"Transition between two periodic MPs (green: previous, gold: next; {note})")
+    fig.suptitle(f"Transition between two periodic MPs (green: previous, gold: next; {note})" if before and after
+                 else f"Transitional MP as demonstrated (green / gold: the periodic MP it leaves / enters; {note})")
     return save_figure(fig, path)
 
 
@@ -135,15 +169,18 @@ def figure_transition_phases(skill: Skill, path: Path, n_phases: int = 4) -> Pat
 
     Top: paths in the surface plane; bottom: acceleration magnitude over time.
     """
-    before, tr_entry, after, note = _neighbours(skill)
-    start = _leaving_state(before)
+    shown = _shown(skill)
+    before, tr_entry, after, note = shown.before, shown.tr, shown.after, shown.note
+    if after is None:
+        raise PlanningError("no learned transition enters a periodic MP: Fig. 7 has nothing to enter")
+    start = shown.start
     mp = after.mp
     phases = mp.phase_start_rad + np.arange(n_phases) * 2 * np.pi / n_phases
     cycle = periodic_rollout(mp, 2 * np.pi / mp.omega_rad_s, DT_S).position_m
     fig, axes = plt.subplots(2, n_phases, figsize=(4 * n_phases, 7))
     for k, phi in enumerate(phases):
         goal = periodic_state(mp, phi)
-        T = _duration(skill, tr_entry, start[0], goal[0])
+        T = _duration(skill, tr_entry, start[0], goal[0]) if before is not None else shown.T
         M = similarity_transform(tr_entry.mp.demo_displacement_m, goal[0] - start[0])
         tr = transitional_rollout(tr_entry.mp, start, goal, T, dt_s=DT_S, forcing_transform=M)
         t, rows = _with_context(before, after, phi, tr)
