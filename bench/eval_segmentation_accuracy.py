@@ -4,6 +4,8 @@ Usage: .venv/bin/python bench/eval_segmentation_accuracy.py [--seeds N] [--json 
 
 - synthetic: ``synthesize_demo(n, seed)`` for n = 2..6 stains and ``--seeds``
   seeds each (the ground truth comes with the generator);
+- synthetic human takes: ``synthesize_demo(n, seed, human=True)`` for n = 2..8
+  and ``--seeds`` seeds (lift-offs, a revisit, a pause, a grip shift);
 - real: the four hand-labelled demonstrations in
   ``../shared/data/wiping-demos/circular_wiping_dataset.mat`` (skipped when
   absent; read from there, never copied);
@@ -13,9 +15,11 @@ Usage: .venv/bin/python bench/eval_segmentation_accuracy.py [--seeds N] [--json 
   frame accuracy and the largest boundary error [s] (each true wiping
   phase's start and end against the nearest found periodic boundary).
 
-For each method (optics, kmeans, affinity) it prints the frame accuracy
-(periodic vs transitional) and how many demos got exactly the true number
-of periodic segments. Nothing here looks at the labels before scoring.
+For each method (optics; the baselines kmeans, affinity and sklearn-optics,
+plain scikit-learn OPTICS read at a fixed 40 mm threshold) it prints the
+frame accuracy (periodic vs transitional) and how many demos got exactly the
+true number of periodic segments, all in the same run. Nothing here looks at
+the labels before scoring.
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ from lampskit.learn.synth import synthesize_demo  # noqa: E402
 from lampskit.learn.takes import build_real_takes  # noqa: E402
 
 REAL = ROOT.parent / "shared" / "data" / "wiping-demos" / "circular_wiping_dataset.mat"
-METHODS = ("optics", "kmeans", "affinity")
+METHODS = ("optics", "kmeans", "affinity", "sklearn-optics")
 
 
 def _score(demo, truth: np.ndarray, method: str) -> tuple[float, int, int]:
@@ -54,29 +58,34 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
-    cases = [(f"synthetic {n} stains seed {s}", synthesize_demo(n, s)) for n in range(2, 7) for s in range(a.seeds)]
-    rows: dict[str, list] = {m: [] for m in METHODS}
+    sets = {"synthetic": [synthesize_demo(n, s) for n in range(2, 7) for s in range(a.seeds)],
+            "synthetic human": [synthesize_demo(n, s, human=True) for n in range(2, 9) for s in range(a.seeds)]}
+    rows: dict[str, dict[str, list]] = {m: {k: [] for k in sets} for m in METHODS}
     real_rows = []
-    for name, syn in cases:
-        for m in METHODS:
-            rows[m].append(_score(syn.demo, syn.true_periodic, m))
+    for name, cases in sets.items():
+        for syn in cases:
+            for m in METHODS:
+                rows[m][name].append(_score(syn.demo, syn.true_periodic, m))
     if REAL.is_file():
         for i in range(4):
             demo = read_demo(f"{REAL}#{i}")
             truth = read_labels(f"{REAL}#{i}", demo.n_samples)
             real_rows.append({m: _score(demo, truth, m) for m in METHODS})
-    print("| method | synthetic: mean / min frame accuracy | synthetic: exact periodic count | "
-          "real demos 0-3: frame accuracy | real: exact count |")
+    print("| method | synthetic: mean / min frame accuracy, exact count | synthetic human takes (2-8 stains): "
+          "mean / min accuracy, exact count | real demos 0-3: frame accuracy | real: exact count |")
     print("|---|---|---|---|---|")
     out = {}
     for m in METHODS:
-        acc = np.array([r[0] for r in rows[m]])
-        exact = sum(r[1] == r[2] for r in rows[m])
+        cells = []
+        for name in sets:
+            acc = np.array([r[0] for r in rows[m][name]])
+            exact = sum(r[1] == r[2] for r in rows[m][name])
+            cells.append(f"{acc.mean():.3f} / {acc.min():.3f}, {exact}/{len(acc)}")
+            out.setdefault(m, {})[name] = {"accuracy": acc.tolist(), "exact": exact}
         real = " / ".join(f"{r[m][0]:.3f}" for r in real_rows) or "absent"
         real_exact = f"{sum(r[m][1] == r[m][2] for r in real_rows)}/{len(real_rows)}" if real_rows else "-"
-        print(f"| {m} | {acc.mean():.3f} / {acc.min():.3f} | {exact}/{len(acc)} | {real} | {real_exact} |")
-        out[m] = {"synthetic_accuracy": acc.tolist(), "synthetic_exact": exact,
-                  "real": [r[m] for r in real_rows]}
+        print(f"| {m} | " + " | ".join(cells) + f" | {real} | {real_exact} |")
+        out[m]["real"] = [r[m] for r in real_rows]
     if REAL.is_file():
         out["takes"] = _takes_table()
     if a.json:

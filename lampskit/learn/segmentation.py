@@ -85,7 +85,10 @@ spaced points; every point then takes its nearest exemplar). They label
 every sample with a cluster and know no transitional points: each cluster's
 time runs become periodic segments (runs shorter than ``min_duration_s``
 join their longer neighbour), with none of steps 5-7, which is what the
-figure shows.
+figure shows. ``"sklearn-optics"`` is plain scikit-learn OPTICS on the same
+points read at a fixed threshold (:data:`FIXED_THRESHOLD_M`, 40 mm, the
+bundled demo's automatic one, unless given): noise is transitional, short
+runs are relabelled as in step 5, and none of steps 5-7's other parts run.
 """
 
 from __future__ import annotations
@@ -95,7 +98,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from lampskit.errors import SegmentationError
-from lampskit.learn.cluster_baselines import affinity_labels, kmeans_labels
+from lampskit.learn.cluster_baselines import FIXED_THRESHOLD_M, affinity_labels, kmeans_labels, sklearn_optics_labels
 from lampskit.learn.demo import Demonstration
 from lampskit.learn.optics import OpticsResult, ProgressCallback, optics
 from lampskit.learn.reachability import (
@@ -115,7 +118,7 @@ from lampskit.learn.time_runs import (
     unite_alternating,
 )
 
-METHODS = ("optics", "kmeans", "affinity")
+METHODS = ("optics", "kmeans", "affinity", "sklearn-optics")
 #: Time window setting the default ``min_samples`` [s].
 WINDOW_S = 0.5
 #: Resampled points are kept no denser than a demo sampled at this rate would give [Hz].
@@ -315,7 +318,9 @@ def segment(
         Positions ``position_m`` (T, 3) [m] at times ``t_s`` (T,) [s].
     method : str
         ``"optics"`` (the paper's method), or a baseline: ``"kmeans"``,
-        ``"affinity"``.
+        ``"affinity"``, ``"sklearn-optics"`` (scikit-learn's OPTICS cut at a
+        fixed ``threshold``, default :data:`~.cluster_baselines.FIXED_THRESHOLD_M`;
+        noise transitional, none of steps 5-7).
     min_samples, threshold, min_duration_s, min_path_ratio, n_clusters
         See :class:`SegmentationParams`; ``min_samples`` and ``threshold``
         apply to OPTICS, ``n_clusters`` to K-Means.
@@ -371,8 +376,13 @@ def _segment_impl(
         point_labels[small] = -1
     elif method == "kmeans":
         point_labels = kmeans_labels(points, params.n_clusters, cluster_progress)
-    else:
+    elif method == "affinity":
         point_labels = affinity_labels(points, cluster_progress)
+    else:
+        ms = params.min_samples if params.min_samples is not None else int(round(WINDOW_S * point_rate_hz))
+        ms = int(min(max(ms, 2), len(points)))
+        eps = float(params.threshold) if params.threshold is not None else FIXED_THRESHOLD_M
+        point_labels = sklearn_optics_labels(points, ms, eps, cluster_progress)
     # each sample takes the label of the last kept point at or before it
     runs = runs_from_labels(point_labels[np.searchsorted(keep, np.arange(len(t)), side="right") - 1])
     if method == "optics":
@@ -384,6 +394,8 @@ def _segment_impl(
         runs, rejected = check_periodic(runs, smooth, params.min_path_ratio)
         if not any(c >= 0 for c, _, _ in runs):
             raise SegmentationError(_no_periodic_message(demo, eps, ms, rejected, params.min_path_ratio))
+    elif method == "sklearn-optics":  # noise is transitional; none of steps 5-7
+        runs = merge_short_runs(runs, t, params.min_duration_s, transitions=True)
     else:
         runs = merge_short_runs(runs, t, params.min_duration_s, transitions=False)
     runs = renumber(runs)
