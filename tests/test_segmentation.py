@@ -150,6 +150,20 @@ def test_baselines_label_everything_periodic(method):
     assert d["ordering"] == [] and d["reachability"] == []
 
 
+def test_the_fixed_threshold_baseline_is_sklearn_optics_read_at_that_threshold():
+    """Plain scikit-learn OPTICS at a fixed 40 mm (the bundled demo's automatic threshold): right where it was
+    read, wrong on a denser or sparser demo; its noise points are transitional."""
+    s = synthesize_demo(3, 1)
+    seg = segment(s.demo, method="sklearn-optics")
+    _check_invariants(seg, s.demo.n_samples)
+    assert seg.method == "sklearn-optics" and seg.threshold == 0.04 and seg.optics is None
+    assert any(x.kind == "transitional" for x in seg.segments)
+    assert np.array_equal(seg.point_samples, segment(s.demo).point_samples), "the same points as ours"
+    tight = segment(s.demo, method="sklearn-optics", threshold=0.005)
+    assert segment_counts(tight)["periodic"] != segment_counts(seg)["periodic"] or \
+        frame_accuracy(tight, s.true_periodic) < frame_accuracy(seg, s.true_periodic)
+
+
 def test_kmeans_with_given_k():
     demo = synthesize_demo(2, 1).demo
     few, many = (segment_counts(segment(demo, method="kmeans", n_clusters=k)) for k in (2, 6))
@@ -160,7 +174,7 @@ def test_kmeans_with_given_k():
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"method": "dbscan"}, "unknown segmentation method 'dbscan'; valid: optics, kmeans, affinity"),
+        ({"method": "dbscan"}, "unknown segmentation method 'dbscan'; valid: optics, kmeans, affinity, sklearn-optics"),
         ({"min_samples": 1}, "min_samples must be an int >= 2"),
         ({"min_samples": 5.0}, "min_samples must be an int >= 2"),
         ({"threshold": -0.01}, "threshold must be a finite reachability > 0 m"),
