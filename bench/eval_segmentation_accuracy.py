@@ -1,6 +1,6 @@
 """Segmentation quality: frame accuracy and periodic segment counts, OPTICS vs the baselines.
 
-Usage: .venv/bin/python bench/eval_segmentation_accuracy.py [--seeds N] [--json OUT]
+Usage: .venv/bin/python bench/eval_segmentation_accuracy.py [--seeds N] [--quick] [--json OUT]
 
 - synthetic: ``synthesize_demo(n, seed)`` for n = 2..6 stains and ``--seeds``
   seeds each (the ground truth comes with the generator);
@@ -57,7 +57,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--quick", action="store_true", help="one seed (lamps bench --quick)")
     a = ap.parse_args()
+    if a.quick:
+        a.seeds = 1
     sets = {"synthetic": [synthesize_demo(n, s) for n in range(2, 7) for s in range(a.seeds)],
             "synthetic human": [synthesize_demo(n, s, human=True) for n in range(2, 9) for s in range(a.seeds)]}
     rows: dict[str, dict[str, list]] = {m: {k: [] for k in sets} for m in METHODS}

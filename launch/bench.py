@@ -23,7 +23,8 @@ from lampskit.atomic import write_text_atomic
 
 BENCH_DIR = Path(__file__).resolve().parent.parent / "bench"
 #: The benchmarks in the order they run (cheap ones first).
-SCRIPTS = ("bench_periodic_step", "bench_transitional_step", "bench_segmentation", "eval_segmentation_accuracy",
+SCRIPTS = ("bench_periodic_step", "bench_transitional_step", "bench_planner", "bench_segmentation",
+           "eval_segmentation_accuracy",
            "bench_sim", "bench_controller", "bench_robot_port", "bench_zenoh_security", "bench_perception")
 
 

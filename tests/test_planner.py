@@ -176,3 +176,45 @@ def test_custom_completion_stops_each_wipe(skill):
 def test_bad_planner_input_names_the_problem(skill, call, match):
     with pytest.raises(PlanningError, match=match):
         call(skill)
+
+
+def _length_of(order, start) -> float:
+    p = np.vstack([start] + [s.centre_m for s in order])
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+@pytest.mark.parametrize("n", [3, 5, 6, 7])
+def test_up_to_seven_stains_the_order_is_the_shortest_of_all(n):
+    import itertools
+
+    from lampskit.core.planner import Stain, order_stains
+
+    rng = np.random.default_rng(n)
+    for _ in range(5):
+        stains = [Stain(i, rng.uniform(0, 1, 2), 0.05) for i in range(n)]
+        start = rng.uniform(0, 1, 2)
+        best = min(_length_of([stains[i] for i in p], start) for p in itertools.permutations(range(n)))
+        assert _length_of(order_stains(stains, start), start) == pytest.approx(best, abs=1e-12)
+
+
+@pytest.mark.parametrize("n", [8, 30, 100])
+def test_more_stains_get_a_two_opt_local_optimum_no_longer_than_nearest_neighbour(n):
+    from lampskit.core.planner import Stain, order_stains
+
+    rng = np.random.default_rng(n)
+    stains = [Stain(i, rng.uniform(0, 1, 2), 0.05) for i in range(n)]
+    start = np.zeros(2)
+    order = order_stains(stains, start)
+    assert sorted(s.id for s in order) == list(range(n))
+    length = _length_of(order, start)
+    left, nn, here = list(stains), [], start
+    while left:
+        nxt = min(left, key=lambda s: (np.linalg.norm(s.centre_m - here), s.id))
+        nn.append(nxt)
+        left.remove(nxt)
+        here = nxt.centre_m
+    assert length <= _length_of(nn, start) + 1e-12
+    for i in range(n - 1):  # no single reversal shortens it
+        for j in range(i + 1, n):
+            cand = order[:i] + order[i:j + 1][::-1] + order[j + 1:]
+            assert _length_of(cand, start) >= length - 1e-9

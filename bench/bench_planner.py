@@ -1,0 +1,115 @@
+"""Planning time: ordering the stains and planning the wipes for 5, 7, 10, 30 and 100 stains.
+
+Usage: .venv/bin/python bench/bench_planner.py [--quick] [--json OUT]
+
+``plan()`` runs inside a controller tick when kappa flips (the executor
+re-plans over the stains still open), so its time is time taken from one
+1 kHz period. Per board size (stains uniform on a 1 m x 1 m board, start at
+a corner, 5 boards each) it prints the median and worst time of
+``order_stains`` and of the whole ``plan()``, against the baseline in the
+same run: the previous search, pure Python over ``itertools.permutations``
+(exhaustive up to 7 stains) and a first-improvement 2-opt recomputing whole
+path lengths, with the path length each finds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from lampskit.core.planner import EXACT_ORDER_MAX, Stain, order_stains, plan  # noqa: E402
+from lampskit.learn.learn import bundled_skill  # noqa: E402
+
+SIZES = (5, 7, 10, 30, 100)
+
+
+def baseline_order(stains, start_m):
+    """The search ``order_stains`` used before: Python loops over whole path lengths."""
+    pts = np.array([s.centre_m for s in stains])
+    n = len(pts)
+
+    def length(order):
+        path = np.vstack([start_m, pts[list(order)]])
+        return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+
+    if n <= EXACT_ORDER_MAX:
+        return [stains[i] for i in min(itertools.permutations(range(n)), key=length)]
+    left, order, here = set(range(n)), [], start_m
+    while left:
+        nxt = min(left, key=lambda i: (np.linalg.norm(pts[i] - here), i))
+        order.append(nxt)
+        left.remove(nxt)
+        here = pts[nxt]
+    improved = True
+    while improved:
+        improved = False
+        for i in range(n - 1):
+            for j in range(i + 1, n):
+                cand = order[:i] + order[i: j + 1][::-1] + order[j + 1:]
+                if length(cand) < length(order) - 1e-12:
+                    order, improved = cand, True
+    return [stains[i] for i in order]
+
+
+def _length(order, start) -> float:
+    p = np.vstack([start] + [s.centre_m for s in order])
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def _timed(f) -> tuple[float, object]:
+    t0 = time.perf_counter()
+    out = f()
+    return (time.perf_counter() - t0) * 1e3, out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="2 boards per size, no baseline at 100 stains")
+    ap.add_argument("--json", type=Path, default=None)
+    a = ap.parse_args()
+    skill = bundled_skill()
+    boards = 2 if a.quick else 5
+    start = np.zeros(2)
+    rows = []
+    order_stains([Stain(i, np.array([0.1 * i, 0.0]), 0.05) for i in range(7)], start)  # warm the caches
+    for n in SIZES:
+        t_order, t_plan, t_base, gain = [], [], [], []
+        for b in range(boards):
+            rng = np.random.default_rng(1000 * n + b)
+            stains = [Stain(i, rng.uniform(0.0, 1.0, 2), 0.05) for i in range(n)]
+            dt, order = _timed(lambda: order_stains(stains, start))
+            t_order.append(dt)
+            t_plan.append(_timed(lambda: plan(skill, stains, start))[0])
+            if not (a.quick and n >= 100):
+                dt_b, base = _timed(lambda: baseline_order(stains, start))
+                t_base.append(dt_b)
+                gain.append(_length(base, start) - _length(order, start))
+        rows.append({"stains": n, "order_ms_p50": float(np.median(t_order)), "order_ms_max": float(np.max(t_order)),
+                     "plan_ms_p50": float(np.median(t_plan)), "plan_ms_max": float(np.max(t_plan)),
+                     "baseline_ms_p50": float(np.median(t_base)) if t_base else None,
+                     "shorter_than_baseline_m": float(np.mean(gain)) if gain else None})
+    print("| stains | order_stains p50 / max [ms] | plan() p50 / max [ms] | baseline (previous search) p50 [ms] | "
+          "baseline / ours | path vs baseline [mm] |")
+    print("|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        base = "skipped (--quick)" if r["baseline_ms_p50"] is None else f"{r['baseline_ms_p50']:.1f}"
+        ratio = "-" if r["baseline_ms_p50"] is None else f"{r['baseline_ms_p50'] / r['order_ms_p50']:.0f}x"
+        gain = "-" if r["shorter_than_baseline_m"] is None else f"{-r['shorter_than_baseline_m'] * 1000:+.1f}"
+        print(f"| {r['stains']} | {r['order_ms_p50']:.2f} / {r['order_ms_max']:.2f} | {r['plan_ms_p50']:.2f} / "
+              f"{r['plan_ms_max']:.2f} | {base} | {ratio} | {gain} |")
+    print(f"\n{boards} boards per size; up to {EXACT_ORDER_MAX} stains both search every order (same length).")
+    if a.json:
+        a.json.write_text(json.dumps({"rows": rows, "boards": boards}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
