@@ -243,8 +243,8 @@ def _skill_summary(skill) -> str:
              + (f", fused from {n_demos} demonstrations (spread: path RMS between them)" if n_demos > 1 else "")]
     for k, e in enumerate(skill.periodic):
         mp = e.mp
-        line = (f"  periodic  seg {e.segment:>2}: {mp.omega_rad_s / (2 * np.pi):.3f} Hz, r = {mp.amplitude_m * 100:.1f} cm,"
-                f" {e.n_cycles:.1f} cycles")
+        line = (f"  periodic  seg {e.segment:>2}: {mp.omega_rad_s / (2 * np.pi):.3f} Hz, "
+                f"r = {mp.amplitude_m * 100:.1f} cm, {e.n_cycles:.1f} cycles")
         if spread.get("periodic"):
             sp = spread["periodic"][k]
             line += f"; spread {sp['path_rms_m'] * 1000:.1f} mm, {sp['freq_std_hz']:.3f} Hz"

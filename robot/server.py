@@ -21,8 +21,9 @@ and reads ``robot/command`` (:class:`~interfaces.messages.TorqueCommand`):
 
 A joint faster than ``speed_brake_share`` of its limit (ports that declare
 ``velocity_limits_rad_s``: the sim), or about to be by the next cycle at its
-present acceleration, makes the robot side brake whatever is commanded, as a robot's safety controller does, until every joint is back
-under it; each such episode is counted (``joint_speed_brakes``) and logged
+present acceleration, makes the robot side brake whatever is commanded, as a
+robot's safety controller does, until every joint is back under it; each such
+episode is counted (``joint_speed_brakes``) and logged
 with the joint. A controller starved of CPU answering late can drive a light
 wrist joint unstable; this stops it at the robot, not in the controller.
 

@@ -145,7 +145,8 @@ def test_contact_lost_while_the_robot_braked_is_the_brakes_doing_not_a_fault(lea
 def _brake_then_release(skill, held_flag: bool) -> tuple[float, float, float, Phase]:
     """Mid-wipe, the link stalls: the sim brakes for 64 ms and the controller then sees one state 64 ms on (its
     robot clock says so) flagged ``held_flag``, then normal ticks. Returns (largest reference-to-pad distance
-    over the 0.3 s before the stall and over the 0.3 s after the release [m], longest time under 2 N while the skill presses [s], final phase)."""
+    over the 0.3 s before the stall and over the 0.3 s after the release [m], longest time under 2 N while the
+    skill presses [s], final phase)."""
     core = ControllerCore(ControllerParams.from_table({}), skill)
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
     gap, lag_before, lag, lost, lost_max, after = 64, [], 0.0, 0.0, 0.0, None
