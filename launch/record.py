@@ -3,7 +3,9 @@
 One subscription on ``<prefix>/**``; the Zenoh thread only appends the raw
 sample to a queue, a writer thread decodes and writes. Each key is a channel
 (topic = the key) with JSON messages (field names as in
-``interfaces/messages.py``; ``bytes`` as base64), except camera frames,
+``interfaces/messages.py``; ``bytes`` as base64) and a JSON schema with every
+property (:mod:`launch.schemas`: the open-source Foxglove / Lichtblick
+decoders drop a channel whose schema has none), except camera frames,
 which are written as ``foxglove.CompressedImage`` (JPEG) so Foxglove shows
 them, with their pose and intrinsics on ``<key>/info``. ``log_time`` is the
 wall clock at receipt [ns]; the message's own stamps stay in the message.
@@ -41,6 +43,7 @@ from mcap.writer import Writer
 from interfaces.codec import Decoder
 from interfaces.errors import MessageDecodeError
 from interfaces.keys import Keys
+from launch.schemas import json_schema_of
 from interfaces.messages import (ArmRequest, CameraFrame, ControllerStatus, ControllerTrace, Estop, Message,
                                  RobotState, ServiceStatus, SimTruth, Stains, TorqueCommand)
 
@@ -102,6 +105,16 @@ def _jpeg_of(frame: CameraFrame) -> bytes | None:
     return buf.tobytes() if ok else None
 
 
+_RAW_SCHEMA = {"type": "object", "title": "lamps.Raw", "required": ["error", "data"],
+               "properties": {"error": {"type": "string"}, "data": {"type": "string", "contentEncoding": "base64"}}}
+
+
+def _camera_info_schema() -> dict:
+    schema = json_schema_of(CameraFrame, drop=("data",))
+    schema["title"] = "lamps.CameraFrameInfo"
+    return schema
+
+
 class McapSink:
     """Channels and schemas on demand; :meth:`write` one decoded message (or raw bytes) per call."""
 
@@ -128,7 +141,11 @@ class McapSink:
         return self._channels[topic]
 
     def write_json(self, topic: str, schema_name: str, data: Any, t_ns: int, schema: dict | None = None) -> None:
-        ch = self._channel(topic, schema_name, schema or {"type": "object", "title": schema_name})
+        """One JSON message on ``topic``; ``schema`` (full properties) is needed the first time ``schema_name``
+        is seen."""
+        if schema_name not in self._schemas and schema is None:
+            raise ValueError(f"{schema_name}: a channel needs its schema with properties the first time")
+        ch = self._channel(topic, schema_name, schema or {})
         self._seq[topic] += 1
         self._w.add_message(channel_id=ch, log_time=t_ns, publish_time=t_ns, sequence=self._seq[topic],
                             data=msgspec.json.encode(data))
@@ -144,9 +161,11 @@ class McapSink:
                                 t_ns, _COMPRESSED_IMAGE_SCHEMA)
             info = to_builtins(msg)
             info.pop("data", None)
-            self.write_json(key + "/info", "lamps.CameraFrameInfo", info, t_ns)
+            self.write_json(key + "/info", "lamps.CameraFrameInfo", info, t_ns,
+                            None if "lamps.CameraFrameInfo" in self._schemas else _camera_info_schema())
             return
-        self.write_json(key, f"lamps.{type(msg).__name__}", to_builtins(msg), t_ns)
+        name = f"lamps.{type(msg).__name__}"
+        self.write_json(key, name, to_builtins(msg), t_ns, None if name in self._schemas else json_schema_of(type(msg)))
 
     def flush(self, every_s: float = 0.0) -> None:
         """Push the complete chunks written so far to the disk (at most every ``every_s``)."""
@@ -210,7 +229,8 @@ class Recorder:
             except MessageDecodeError as exc:
                 self.counters["undecodable" if dec is not None else "unknown_key"] += 1
                 self.sink.write_json(key + "/raw", "lamps.Raw", {"error": str(exc),
-                                                                 "data": base64.b64encode(data).decode("ascii")}, t_ns)
+                                                                 "data": base64.b64encode(data).decode("ascii")}, t_ns,
+                                     _RAW_SCHEMA)
 
     def _run(self) -> None:
         while not self._stop.is_set():

@@ -19,6 +19,10 @@
   ``junction_step_ratio_max``: that change over the largest ordinary
   one-tick change in the 5 ticks around it (<= ~1: continuous).
 * ``tracking_rms_m``: in-plane reference vs measured pad while wiping.
+* ``motion_peaks``: per phase (and ``all``), the peak speed [m/s],
+  acceleration [m/s^2] and jerk [m/s^3] of the in-plane reference as
+  executed (time-scaled), over every recorded tick of the whole run; jerk from
+  consecutive ticks only (a gap, a restart or a skipped state is not one).
 * ``loop_timing``: the controller's last reported loop statistics.
 * ``max_contact_force_n`` (the sim's truth: the physical contact force,
   whatever the controller measured) and ``max_joint_speed_ratio`` (the
@@ -134,6 +138,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report.update(_progress_section(run))
     report["stains"] = _stains_section(run.truth, run.stains_msgs)
     report.update(_force_section(run.tr, run.col, run.truth, run.cap_n))
+    report["motion_peaks"] = _motion_peaks(run.tr, run.col)
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
     report.update(_safety_section(run))
@@ -217,6 +222,29 @@ def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n
             "junction_step_ratio_max": ratio,
             "tracking_rms_m": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else 0.0,
             "trace_ticks": len(tr)}
+
+
+def _motion_peaks(tr: np.ndarray, col: dict[str, int]) -> dict[str, dict[str, float]]:
+    """Peak speed, acceleration and jerk of the executed in-plane reference per phase name and over ``all``."""
+    if len(tr) < 2:
+        return {}
+    t, phase = tr[:, col["t_s"]], tr[:, col["phase"]]
+    v = np.linalg.norm(tr[:, [col["ref_vx"], col["ref_vy"]]], axis=1)
+    a_xy = tr[:, [col["ref_ax"], col["ref_ay"]]]
+    a = np.linalg.norm(a_xy, axis=1)
+    dt = np.diff(t)
+    tick = float(np.median(dt[dt > 0])) if np.any(dt > 0) else 0.0
+    consecutive = (dt > 0) & (dt <= 1.5 * tick) & (phase[1:] == phase[:-1])
+    jerk = np.zeros(len(tr))
+    jerk[1:][consecutive] = np.linalg.norm(np.diff(a_xy, axis=0)[consecutive], axis=1) / dt[consecutive]
+    names = {code: name for name, code in PHASE_CODES.items()}
+    out = {}
+    for code in [None, *sorted(set(phase.astype(int).tolist()))]:
+        sel = np.ones(len(tr), bool) if code is None else phase == code
+        out["all" if code is None else names.get(code, str(code))] = {
+            "speed_m_s": float(v[sel].max()), "accel_m_s2": float(a[sel].max()), "jerk_m_s3": float(jerk[sel].max()),
+            "ticks": int(np.count_nonzero(sel))}
+    return out
 
 
 def _final_phase(run: _Run) -> str:
@@ -520,6 +548,11 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     for s in report["stains"]:
         k = "no kappa" if s["kappa_s"] is None else f"kappa at {s['kappa_s']:.1f} s"
         lines.append(f"  stain {s['id']}: {s['initial_remaining']:.0%} -> {s['final_remaining']:.1%}, {k}")
+    peaks = report.get("motion_peaks", {})
+    moving = [(name, m) for name, m in peaks.items() if name in ("APPROACH", "TRANSITION", "WIPE", "RETREAT")]
+    if moving:
+        lines.append("reference peaks (speed m/s, accel. m/s^2, jerk m/s^3): " + "; ".join(
+            f"{name} {m['speed_m_s']:.2f} / {m['accel_m_s2']:.1f} / {m['jerk_m_s3']:.0f}" for name, m in moving))
     lines.append(f"safety: contact force max {report.get('max_contact_force_n', 0.0):.1f} N (cap "
                  f"{report['force_cap_n']:.0f} N), joint speed max {report.get('max_joint_speed_ratio', 0.0):.2f} "
                  "of the limit")

@@ -208,6 +208,25 @@ def _up(args: list[str], timeout_s: float = 300.0, env: dict | None = None) -> s
                           env={**os.environ, "MPLBACKEND": "Agg", **(env or {})}, cwd=REPO)
 
 
+def _check_channel_schemas(path: Path) -> None:
+    """Every channel's schema names its properties (Foxglove / Lichtblick drop a channel whose schema does not)
+    and every 20th message of each channel validates against it."""
+    import jsonschema
+    from mcap.reader import make_reader
+
+    validators, seen = {}, {}
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if channel.topic not in validators:
+                s = json.loads(schema.data)
+                assert s.get("properties"), f"{channel.topic}: schema {schema.name} has no properties"
+                validators[channel.topic] = jsonschema.Draft202012Validator(s)
+            seen[channel.topic] = seen.get(channel.topic, 0) + 1
+            if seen[channel.topic] % 20 == 1:
+                validators[channel.topic].validate(json.loads(message.data))
+    assert len(validators) >= 8, sorted(validators)
+
+
 def _check_run(out: Path, base: int) -> dict:
     report = json.loads((out / "report.json").read_text())
     assert report["schema"] == SCHEMA
@@ -216,6 +235,7 @@ def _check_run(out: Path, base: int) -> dict:
     for key in (keys.robot_state, keys.robot_command, keys.controller_status, keys.controller_trace,
                 keys.perception_stains, keys.sim_truth, keys.camera_frame("board")):
         assert rec.get(key), f"nothing recorded on {key}"
+    _check_channel_schemas(out / "recording.mcap")
     truth = [m for _, m in rec[keys.sim_truth]]
     # the report agrees with the simulator's truth
     assert report["outcome"] == "cleaned" and report["dirt_removed_fraction"] >= 0.95
@@ -236,6 +256,14 @@ def _check_run(out: Path, base: int) -> dict:
     assert report["max_junction_accel_jump"] <= 0.01 * peak + 0.3, (report["max_junction_accel_jump"], peak)
     assert 8.0 <= report["normal_force_mean_n"] <= 12.0 and report["time_above_cap_s"] == 0.0
     assert report["tracking_rms_m"] < 0.01 and report["faults"] == []
+    # the whole run's reference peaks per phase, recomputed here from the trace where the ticks are consecutive
+    peaks = report["motion_peaks"]
+    assert {"all", "APPROACH", "WIPE", "TRANSITION"} <= set(peaks), set(peaks)
+    speed = np.linalg.norm(tr[:, [col["ref_vx"], col["ref_vy"]]], axis=1)
+    assert peaks["all"]["speed_m_s"] == pytest.approx(float(speed.max()))
+    assert peaks["all"]["accel_m_s2"] == pytest.approx(peak)
+    assert peaks["WIPE"]["ticks"] + peaks["TRANSITION"]["ticks"] <= peaks["all"]["ticks"] == len(tr)
+    assert 0 < peaks["WIPE"]["jerk_m_s3"] < np.inf and peaks["all"]["speed_m_s"] < 0.6  # under the speed brake
     for name in ("board_before_after.png", "eraser_path.png", "timeseries.png"):
         assert (out / name).stat().st_size > 10_000, name
     # a complete MCAP file (summary and statistics, what Foxglove indexes), images as foxglove.CompressedImage
