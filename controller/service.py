@@ -33,6 +33,7 @@ import numpy as np
 
 from interfaces.messages import (HOLD, ControllerStatus, ControllerTrace, Estop, RobotState, SimTruth, Stains,
                                  TorqueCommand)
+from interfaces.loop_hygiene import LoopHygiene
 from interfaces.loop_stats import LoopStats
 from interfaces.session import ServiceNode
 from interfaces.transforms import transform_from_pose
@@ -143,6 +144,8 @@ class ControllerService:
                 break
 
     def _run_realtime(self) -> None:
+        hygiene = LoopHygiene(counts=self.counters)
+        hygiene.start()  # first: its full collection must not count as a stalled first period
         states = self.node.latest(self.keys.robot_state, RobotState)
         self._state_reader = states
         period_ns = int(round(1e9 / self.p.rate_hz))
@@ -153,41 +156,44 @@ class ControllerService:
         robot_rate = 0.0
         next_ns = time.monotonic_ns()
         t_prev = next_ns
-        while not self._exit_now():
-            t0 = time.monotonic_ns()
-            new = self._usable(states.take())
-            if new is not None:
-                if state is not None and new.seq < state.seq or self._lost:
-                    self._robot_back(new)
-                if new.capabilities.state_rate_hz != robot_rate:
-                    robot_rate = self._check_robot_rate(new.capabilities.state_rate_hz)
-                state, state_ns = new, t0
-            self._poll_estop()
-            age_ns = t0 - state_ns
-            t1 = t2 = time.monotonic_ns()
-            if state is None or age_ns > timeout_ns:
-                if state is not None:
-                    self.counters["ticks_without_fresh_state"] += 1
-                    self._check_lost(age_ns / 1e9)
-            elif state.seq == answered_seq:
-                self.counters["ticks_without_new_state"] += 1  # already answered; the robot holds that command
-            else:
-                dt = self._dt_from_robot_clock(state)  # the robot's own time, also across skipped periods
-                self._poll_stains(t0 / 1e9)
-                t1 = time.monotonic_ns()
-                tau = self._control(state, dt)
-                t2 = time.monotonic_ns()
-                self._send(state.seq, tau)
-                answered_seq = state.seq
-            self._publish_status()
-            t3 = time.monotonic_ns()
-            self.stats.add((t0 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
-            t_prev = t0
-            if self.p.max_ticks and self.ticks >= self.p.max_ticks:
-                break
-            now = time.monotonic_ns()
-            next_ns = self.stats.next_deadline(next_ns, period_ns, now)
-            time.sleep((next_ns - now) / 1e9)
+        try:
+            while not self._exit_now():
+                t0 = time.monotonic_ns()
+                new = self._usable(states.take())
+                if new is not None:
+                    if state is not None and new.seq < state.seq or self._lost:
+                        self._robot_back(new)
+                    if new.capabilities.state_rate_hz != robot_rate:
+                        robot_rate = self._check_robot_rate(new.capabilities.state_rate_hz)
+                    state, state_ns = new, t0
+                self._poll_estop()
+                age_ns = t0 - state_ns
+                t1 = t2 = time.monotonic_ns()
+                if state is None or age_ns > timeout_ns:
+                    if state is not None:
+                        self.counters["ticks_without_fresh_state"] += 1
+                        self._check_lost(age_ns / 1e9)
+                elif state.seq == answered_seq:
+                    self.counters["ticks_without_new_state"] += 1  # already answered; the robot holds that command
+                else:
+                    dt = self._dt_from_robot_clock(state)  # the robot's own time, also across skipped periods
+                    self._poll_stains(t0 / 1e9)
+                    t1 = time.monotonic_ns()
+                    tau = self._control(state, dt)
+                    t2 = time.monotonic_ns()
+                    self._send(state.seq, tau)
+                    answered_seq = state.seq
+                self._publish_status()
+                t3 = time.monotonic_ns()
+                self.stats.add((t0 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+                t_prev = t0
+                if self.p.max_ticks and self.ticks >= self.p.max_ticks:
+                    break
+                now = time.monotonic_ns()
+                next_ns = self.stats.next_deadline(next_ns, period_ns, now)
+                hygiene.wait_until(next_ns)
+        finally:
+            hygiene.stop()
 
     # ------------------------------------------------------------------ pieces
     def _exit_now(self) -> bool:

@@ -56,6 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from interfaces.loop_hygiene import LoopHygiene
 from interfaces.loop_stats import LoopStats
 from interfaces.messages import HOLD, Estop, RobotState, ServiceStatus, TorqueCommand
 from interfaces.session import ServiceNode
@@ -250,6 +251,8 @@ class RobotServer:
                 break
 
     def _run_realtime(self) -> None:
+        hygiene = LoopHygiene(counts=self.counters)
+        hygiene.start()  # first: its full collection must not count as a stalled first period
         latest = self.node.latest(self.keys.robot_command, TorqueCommand)
         self._sources = [latest]
         period_ns = int(round(1e9 / self.p.rate_hz))
@@ -261,39 +264,42 @@ class RobotServer:
         t_prev = next_ns
         first_seq = 0  # after a freeze of this loop, only answers to states published since count
         self.publish_state()
-        while not self.stop.is_set():
-            t0 = time.monotonic_ns()
-            if t0 - t_prev > stale_ns:  # this loop itself stalled (SIGSTOP, a swap storm): whatever is held or
-                held = None  # queued answered a state from before; brake until the controller answers a new one
-                first_seq = self.steps + 1
-                self.counters["loop_freezes"] += 1
-                log.warning("robot loop frozen for %.0f ms: braking until a fresh answer", (t0 - t_prev) / 1e6)
-            cmd = latest.take()
-            if cmd is not None and cmd.seq < first_seq:
-                self.counters["commands_from_before_a_freeze"] += 1
-            elif cmd is not None and self._from_served_controller(cmd):
-                accepted = self.gate.accept(cmd, (t0 - last_cmd_ns) * 1e-9)
-                if accepted is not None:
-                    held = accepted if isinstance(accepted, str) else accepted.copy()
-                    held_seq, last_cmd_ns = cmd.seq, t0
-            fresh = held is not None and t0 - last_cmd_ns <= stale_ns
-            if not fresh and held is not None and not self.braked:
-                self.counters["stale_command_brakes"] += 1
-                log.warning("no fresh command for %.0f ms: braking", (t0 - last_cmd_ns) / 1e6)
-            t1 = time.monotonic_ns()
-            self._apply(held if fresh else HOLD, held_seq)
-            self.port.after_cycle(lockstep=False)
-            t2 = time.monotonic_ns()
-            self.publish_state()
-            self._publish_status()
-            t3 = time.monotonic_ns()
-            self.stats.add((t0 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
-            t_prev = t0
-            if self.p.max_steps and self.steps >= self.p.max_steps:
-                break
-            now = time.monotonic_ns()
-            next_ns = self.stats.next_deadline(next_ns, period_ns, now)
-            time.sleep((next_ns - now) / 1e9)
+        try:
+            while not self.stop.is_set():
+                t0 = time.monotonic_ns()
+                if t0 - t_prev > stale_ns:  # this loop itself stalled (SIGSTOP, a swap storm): whatever is held or
+                    held = None  # queued answered a state from before; brake until the controller answers a new one
+                    first_seq = self.steps + 1
+                    self.counters["loop_freezes"] += 1
+                    log.warning("robot loop frozen for %.0f ms: braking until a fresh answer", (t0 - t_prev) / 1e6)
+                cmd = latest.take()
+                if cmd is not None and cmd.seq < first_seq:
+                    self.counters["commands_from_before_a_freeze"] += 1
+                elif cmd is not None and self._from_served_controller(cmd):
+                    accepted = self.gate.accept(cmd, (t0 - last_cmd_ns) * 1e-9)
+                    if accepted is not None:
+                        held = accepted if isinstance(accepted, str) else accepted.copy()
+                        held_seq, last_cmd_ns = cmd.seq, t0
+                fresh = held is not None and t0 - last_cmd_ns <= stale_ns
+                if not fresh and held is not None and not self.braked:
+                    self.counters["stale_command_brakes"] += 1
+                    log.warning("no fresh command for %.0f ms: braking", (t0 - last_cmd_ns) / 1e6)
+                t1 = time.monotonic_ns()
+                self._apply(held if fresh else HOLD, held_seq)
+                self.port.after_cycle(lockstep=False)
+                t2 = time.monotonic_ns()
+                self.publish_state()
+                self._publish_status()
+                t3 = time.monotonic_ns()
+                self.stats.add((t0 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+                t_prev = t0
+                if self.p.max_steps and self.steps >= self.p.max_steps:
+                    break
+                now = time.monotonic_ns()
+                next_ns = self.stats.next_deadline(next_ns, period_ns, now)
+                hygiene.wait_until(next_ns)
+        finally:
+            hygiene.stop()
 
     def _run_clocked(self) -> None:
         """A robot with its own clock: publish each reading as it comes, forward each answer as it arrives.
@@ -303,6 +309,8 @@ class RobotServer:
         state that got no answer before the next one is a late cycle, which the port holds (it repeats the
         last command while that is fresh). In lock-step only the answer to the current state counts.
         """
+        hygiene = LoopHygiene(counts=self.counters)
+        hygiene.start()  # first: its full collection must not age the first state
         wake = threading.Event()  # a new reading or a new command: the loop waits on both at once
         self.port.set_wake(wake)
         inbox = self.node.inbox(self.keys.robot_command, TorqueCommand, maxlen=8, wake=wake)
@@ -314,50 +322,58 @@ class RobotServer:
         seq = last_applied = -1
         last_good_ns = time.monotonic_ns()
         last_state_ns = last_pub_ns = last_good_ns
-        while not self.stop.is_set():
-            wake.wait(0.001)
-            wake.clear()
-            t0 = time.monotonic_ns()
-            if self.port.wait_reading(0.0):
-                if seq >= 0 and last_applied < seq:
-                    self.counters["commands_late"] += 1
-                    if not lockstep:
-                        self._apply(HOLD)  # this cycle is held: its answer did not come in time
-                seq += 1
-                self.publish_state(seq)
-                self.stats.add((t0 - last_state_ns) / 1e3, 0.0, 0.0, (time.monotonic_ns() - t0) / 1e3)
-                last_state_ns = last_pub_ns = t0
-            elif lockstep and seq >= 0 and last_applied < seq and t0 - last_pub_ns >= republish_ns:
-                self.publish_state(seq)  # a robot that waits for its answer (the lock-step peer): say it again
-                self.counters["states_republished"] += 1
-                last_pub_ns = t0
-            cmd = inbox.get(0.0)
-            while cmd is not None:
-                if not self._from_served_controller(cmd):
-                    pass
-                elif cmd.seq <= last_applied or not 0 <= seq - cmd.seq <= max_lag:
-                    self.counters["commands_out_of_sequence"] += 1
-                else:
-                    command = self.gate.accept(cmd, None if lockstep else (time.monotonic_ns() - last_good_ns) * 1e-9)
-                    if command is not None:
-                        self._apply(command, cmd.seq)
-                        self.port.after_cycle(lockstep=lockstep)
-                        last_applied = cmd.seq
-                        last_good_ns = time.monotonic_ns()
-                        if cmd.seq == seq:
-                            self._latency_us[self._n_latency % len(self._latency_us)] = \
-                                (last_good_ns - last_state_ns) / 1e3
-                            self._n_latency += 1
-                        else:
-                            self.counters["answers_one_or_more_states_late"] += 1
+        period_ns = int(1e9 / self.port.capabilities.state_rate_hz) if self.port.capabilities.state_rate_hz \
+            else 1_000_000
+        try:
+            while not self.stop.is_set():
+                wake.wait(0.001)
+                wake.clear()
+                t0 = time.monotonic_ns()
+                if self.port.wait_reading(0.0):
+                    if seq >= 0 and last_applied < seq:
+                        self.counters["commands_late"] += 1
+                        if not lockstep:
+                            self._apply(HOLD)  # this cycle is held: its answer did not come in time
+                    seq += 1
+                    self.publish_state(seq)
+                    self.stats.add((t0 - last_state_ns) / 1e3, 0.0, 0.0, (time.monotonic_ns() - t0) / 1e3)
+                    last_state_ns = last_pub_ns = t0
+                elif lockstep and seq >= 0 and last_applied < seq and t0 - last_pub_ns >= republish_ns:
+                    self.publish_state(seq)  # a robot that waits for its answer (the lock-step peer): say it again
+                    self.counters["states_republished"] += 1
+                    last_pub_ns = t0
                 cmd = inbox.get(0.0)
-            stale = time.monotonic_ns() - last_state_ns > stale_ns  # this state's age: a slow robot is not late
-            if not lockstep and last_applied < seq and not self.braked and stale:
-                self.counters["stale_command_brakes"] += 1
-                self._apply(HOLD)
-            self._publish_status()
-            if self.p.max_steps and self.steps >= self.p.max_steps:
-                break
+                while cmd is not None:
+                    if not self._from_served_controller(cmd):
+                        pass
+                    elif cmd.seq <= last_applied or not 0 <= seq - cmd.seq <= max_lag:
+                        self.counters["commands_out_of_sequence"] += 1
+                    else:
+                        since_s = None if lockstep else (time.monotonic_ns() - last_good_ns) * 1e-9
+                        command = self.gate.accept(cmd, since_s)
+                        if command is not None:
+                            self._apply(command, cmd.seq)
+                            self.port.after_cycle(lockstep=lockstep)
+                            last_applied = cmd.seq
+                            last_good_ns = time.monotonic_ns()
+                            if cmd.seq == seq:
+                                self._latency_us[self._n_latency % len(self._latency_us)] = \
+                                    (last_good_ns - last_state_ns) / 1e3
+                                self._n_latency += 1
+                                hygiene.collect_due(period_ns - (last_good_ns - last_state_ns))  # the slack now
+                            else:
+                                self.counters["answers_one_or_more_states_late"] += 1
+                    cmd = inbox.get(0.0)
+                stale = time.monotonic_ns() - last_state_ns > stale_ns  # this state's age: a slow robot is not late
+                if not lockstep and last_applied < seq and not self.braked and stale:
+                    self.counters["stale_command_brakes"] += 1
+                    self._apply(HOLD)
+                self._publish_status()
+                hygiene.collect_due(0)  # only a pile forces it here (no answer, no slack measured)
+                if self.p.max_steps and self.steps >= self.p.max_steps:
+                    break
+        finally:
+            hygiene.stop()
 
     # -- outputs -----------------------------------------------------------------------------------
     def publish_state(self, seq: int | None = None) -> None:
