@@ -9,6 +9,10 @@ decoders drop a channel whose schema has none), except camera frames,
 which are written as ``foxglove.CompressedImage`` (JPEG) so Foxglove shows
 them, with their pose and intrinsics on ``<key>/info``. ``log_time`` is the
 wall clock at receipt [ns]; the message's own stamps stay in the message.
+The controller trace (packed 1 kHz batches, kept whole) is also written every
+:data:`TRACE_PLOT_EVERY`-th tick as one row per message on ``<key>/plot``,
+back-dated from the batch's receipt by the controller clock, so a plot
+panel draws its columns over time.
 
 The file is written as ``recording.mcap.partial`` and renamed when finished,
 so a half-written recording is never mistaken for a whole one. It is written
@@ -105,6 +109,10 @@ def _jpeg_of(frame: CameraFrame) -> bytes | None:
     return buf.tobytes() if ok else None
 
 
+#: The controller trace is also written as plottable rows, every this many ticks (100 Hz at 1 kHz).
+TRACE_PLOT_EVERY = 10
+TRACE_PLOT_SCHEMA_NAME = "lamps.ControllerTraceRow"
+
 _RAW_SCHEMA = {"type": "object", "title": "lamps.Raw", "required": ["error", "data"],
                "properties": {"error": {"type": "string"}, "data": {"type": "string", "contentEncoding": "base64"}}}
 
@@ -166,6 +174,29 @@ class McapSink:
             return
         name = f"lamps.{type(msg).__name__}"
         self.write_json(key, name, to_builtins(msg), t_ns, None if name in self._schemas else json_schema_of(type(msg)))
+        if isinstance(msg, ControllerTrace):
+            self._write_trace_rows(key, msg, t_ns)
+
+    def _write_trace_rows(self, key: str, msg: ControllerTrace, t_ns: int) -> None:
+        """Every :data:`TRACE_PLOT_EVERY`-th tick of a trace batch as its own message on ``<key>/plot``, one
+        number per column (a series Foxglove's Plot panel draws; the batch itself stays the full record)."""
+        cols = list(msg.columns)
+        n = len(cols)
+        if n == 0 or msg.n_rows <= 0 or len(msg.data) != 8 * n * msg.n_rows:
+            return
+        rows = np.frombuffer(msg.data, "<f8").reshape(msg.n_rows, n)
+        if TRACE_PLOT_SCHEMA_NAME not in self._schemas:
+            self._schema(TRACE_PLOT_SCHEMA_NAME, {"type": "object", "title": TRACE_PLOT_SCHEMA_NAME,
+                                                  "properties": {"tick": {"type": "integer"},
+                                                                 **{c: {"type": ["number", "null"]} for c in cols}}})
+        t = rows[:, cols.index("t_s")] if "t_s" in cols else None
+        start = (-msg.first_tick) % TRACE_PLOT_EVERY
+        for k in range(start, msg.n_rows, TRACE_PLOT_EVERY):
+            row = {"tick": msg.first_tick + k}
+            row.update(zip(cols, (float(v) if np.isfinite(v) else None for v in rows[k])))
+            # each row at its own time: the batch's receipt less how much earlier the tick was (controller clock)
+            back_ns = int((t[-1] - t[k]) * 1e9) if t is not None and np.isfinite(t[-1] - t[k]) else 0
+            self.write_json(key + "/plot", TRACE_PLOT_SCHEMA_NAME, row, max(t_ns - max(back_ns, 0), 0))
 
     def flush(self, every_s: float = 0.0) -> None:
         """Push the complete chunks written so far to the disk (at most every ``every_s``)."""
