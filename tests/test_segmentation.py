@@ -52,7 +52,7 @@ def test_default_min_samples_follows_the_rate(rate_hz):
     assert frame_accuracy(seg, s.true_periodic) >= 0.95
 
 
-@pytest.mark.parametrize("rate_hz", [400.0, 1000.0])
+@pytest.mark.parametrize("rate_hz", [400.0, 1000.0, 2000.0])
 def test_fast_recordings_are_thinned_to_the_same_point_density(rate_hz):
     """Above 200 Hz the kept points are no denser than at 200 Hz: same answer, OPTICS cost bounded."""
     s = synthesize_demo(3, 7, rate_hz=rate_hz)
@@ -63,6 +63,13 @@ def test_fast_recordings_are_thinned_to_the_same_point_density(rate_hz):
     assert len(seg.point_samples) == pytest.approx(len(ref.point_samples), rel=0.25)
     assert segment_counts(seg)["periodic"] == 3
     assert frame_accuracy(seg, s.true_periodic) >= 0.95
+    # the boundaries (refined on every q-th sample, q = ceil(rate / 200)) land where the 200 Hz recording's do
+    ref_demo = synthesize_demo(3, 7, rate_hz=200.0).demo
+
+    def ends(x, demo):
+        return [demo.t_s[p.start] for p in x.periodic_segments] + [demo.t_s[p.end - 1] for p in x.periodic_segments]
+
+    assert np.max(np.abs(np.subtract(ends(seg, s.demo), ends(ref, ref_demo)))) < 0.05
 
 
 def test_same_region_wiped_twice_gives_two_segments_of_one_cluster():
