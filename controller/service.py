@@ -189,9 +189,7 @@ class ControllerService:
                 t_prev = t0
                 if self.p.max_ticks and self.ticks >= self.p.max_ticks:
                     break
-                now = time.monotonic_ns()
-                next_ns = self.stats.next_deadline(next_ns, period_ns, now)
-                hygiene.wait_until(next_ns)
+                next_ns = hygiene.next_period(self.stats, next_ns, period_ns)
         finally:
             hygiene.stop()
 

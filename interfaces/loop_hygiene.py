@@ -101,6 +101,13 @@ class LoopHygiene:
         gc.collect(generation)
         self.counts["gc_in_slack" if left_ns >= GC_SLACK_NS else "gc_forced"] += 1
 
+    def next_period(self, stats, deadline_ns: int, period_ns: int) -> int:
+        """End one period of a fixed-rate loop: the next deadline after ``deadline_ns`` (missed periods counted as
+        overruns in ``stats``, a :class:`~interfaces.loop_stats.LoopStats`, and skipped), waited for; returns it."""
+        deadline_ns = stats.next_deadline(deadline_ns, period_ns, time.monotonic_ns())
+        self.wait_until(deadline_ns)
+        return deadline_ns
+
     def wait_until(self, deadline_ns: int) -> None:
         """Spend the rest of the period: due collections if there is slack, then sleep (and spin) to
         ``deadline_ns`` (``time.monotonic_ns`` clock)."""

@@ -130,6 +130,7 @@ class RobotServer:
         self._over_speed = False  # the last published state had a joint above its cap (or about to be)
         self._dq_prev: np.ndarray | None = None  # |dq| (n,) of the last reading [rad/s]
         self._dq_next = None if self._speed_cap is None else np.zeros_like(self._speed_cap)
+        self._dq_abs = None if self._speed_cap is None else np.zeros_like(self._speed_cap)  # |dq| (n,) [rad/s]
         self._speed_braking = False
         self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
         self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
@@ -295,9 +296,7 @@ class RobotServer:
                 t_prev = t0
                 if self.p.max_steps and self.steps >= self.p.max_steps:
                     break
-                now = time.monotonic_ns()
-                next_ns = self.stats.next_deadline(next_ns, period_ns, now)
-                hygiene.wait_until(next_ns)
+                next_ns = hygiene.next_period(self.stats, next_ns, period_ns)
         finally:
             hygiene.stop()
 
@@ -391,8 +390,8 @@ class RobotServer:
         """Set whether the next cycle must brake: a joint (n,) [rad/s] above its speed cap now or, at the change
         since the last reading, by the next one (a wrist accelerating at 200 rad/s^2 gains 0.2 rad/s a cycle);
         logs each entry."""
-        cap, ahead = self._speed_cap, self._dq_next
-        speed = np.abs(dq_rad_s)
+        cap, ahead, speed = self._speed_cap, self._dq_next, self._dq_abs
+        np.abs(dq_rad_s, out=speed)
         if self._dq_prev is None:
             self._dq_prev = speed.copy()
         np.subtract(speed, self._dq_prev, out=ahead)  # the gain in speed over the last cycle (a loss is no risk)
