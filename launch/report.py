@@ -13,7 +13,10 @@
   ``initial_remaining``, ``final_remaining``, ``truth_below_level_s`` and
   ``kappa_s`` (robot time; null if never), ``kappa_latency_s``.
 * ``max_normal_force_n``, ``normal_force_mean_n`` and ``normal_force_std_n``
-  while wiping, ``time_above_cap_s`` (measured force above ``force_cap_n``).
+  while wiping, ``time_above_cap_s`` (the measured force, low-passed as the
+  controller's cap watch low-passes it (``ForceParams.filter_s``), above
+  ``force_cap_n``: what would fault the controller; a single-tick spike of the
+  measured wrench, e.g. around a robot-side brake, is not an overload).
 * ``max_junction_accel_jump`` [m/s^2]: the largest change of the in-plane
   reference acceleration across one tick at an MP junction, and
   ``junction_step_ratio_max``: that change over the largest ordinary
@@ -51,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from controller.core import PHASE_CODES
+from controller.control.force import NormalForceRegulator
 from controller.params import ForceParams
 from interfaces.keys import Keys
 from interfaces.messages import Phase
@@ -103,13 +107,14 @@ class _Run:
     truth, status : ``sim/truth`` and ``controller/status`` messages in order
     stains_msgs : ``perception/stains`` messages with a board in view
     tr : array, shape (n_ticks, n_columns), the controller trace; col : its column name -> index
-    cap_n : force cap [N] for ``time_above_cap_s``
+    cap_n : force cap [N] for ``time_above_cap_s``; filter_s : the cap watch's filter time constant [s]
     """
 
     rec: dict
     launcher: dict
     keys: Keys
     cap_n: float
+    filter_s: float
     truth: list[dict]
     status: list[dict]
     stains_msgs: list[dict]
@@ -124,7 +129,8 @@ def _read_run(run_dir: Path, keys: Keys | None = None, cap_n: float | None = Non
     keys = keys or Keys(launcher.get("key_prefix", Keys().prefix))
     cap_n = cap_n if cap_n is not None else launcher.get("force_cap_n", ForceParams().cap_n)
     cols, tr = trace_array(_topic(rec, keys.controller_trace))
-    return _Run(rec=rec, launcher=launcher, keys=keys, cap_n=cap_n, truth=_topic(rec, keys.sim_truth),
+    filter_s = float(launcher.get("force_filter_s", ForceParams().filter_s))
+    return _Run(rec=rec, launcher=launcher, keys=keys, cap_n=cap_n, filter_s=filter_s, truth=_topic(rec, keys.sim_truth),
                 status=_topic(rec, keys.controller_status),
                 stains_msgs=[m for m in _topic(rec, keys.perception_stains) if m.get("board") != "lost"],
                 tr=tr, col={c: i for i, c in enumerate(cols)})
@@ -137,7 +143,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report: dict[str, Any] = {"schema": SCHEMA, "run_dir": run_dir.name}
     report.update(_progress_section(run))
     report["stains"] = _stains_section(run.truth, run.stains_msgs)
-    report.update(_force_section(run.tr, run.col, run.truth, run.cap_n))
+    report.update(_force_section(run.tr, run.col, run.truth, run.cap_n, run.filter_s))
     report["motion_peaks"] = _motion_peaks(run.tr, run.col)
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
@@ -199,7 +205,27 @@ def _first_kappa_s(stains_msgs: list[dict], centres_board_m: np.ndarray, k: int)
     return None
 
 
-def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n: float) -> dict[str, Any]:
+def cap_watch_force(t_s: np.ndarray, force_n: np.ndarray, filter_s: float) -> np.ndarray:
+    """The measured normal force as the controller's cap watch sees it: low-passed tick by tick.
+
+    t_s, force_n : arrays, shape (n_ticks,), robot time [s] and measured normal force [N] of the trace.
+    Returns an array, shape (n_ticks,) [N]. The filter is the controller's own
+    (:meth:`NormalForceRegulator.measure`); where the robot clock goes back (a restarted controller) it
+    starts again from 0 N, as the new controller's does; a gap is bridged with its real length.
+    """
+    watch = NormalForceRegulator(0.0, 0.0, 0.0, 1.0, filter_s)
+    out = np.empty(len(force_n))
+    prev = -np.inf
+    for k, (t, f) in enumerate(zip(t_s.tolist(), force_n.tolist())):
+        if t < prev:
+            watch.filtered_n = 0.0
+        out[k] = watch.measure(f, t - prev if np.isfinite(prev) and t > prev else 0.0)
+        prev = t
+    return out
+
+
+def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n: float,
+                   filter_s: float) -> dict[str, Any]:
     """Normal force while wiping, time above the cap, MP junction steps and tracking, from the controller trace.
 
     Without a trace only the peak contact force of the sim truth is known; the rest is 0.
@@ -217,7 +243,8 @@ def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n
     return {"max_normal_force_n": float(force.max()),
             "normal_force_mean_n": float(force[wiping].mean()) if wiping.any() else 0.0,
             "normal_force_std_n": float(force[wiping].std()) if wiping.any() else 0.0,
-            "time_above_cap_s": float(np.count_nonzero(force > cap_n) * dt),
+            "time_above_cap_s": float(np.count_nonzero(cap_watch_force(tr[:, col["t_s"]], force, filter_s) > cap_n)
+                                      * dt),
             "max_junction_accel_jump": jump,
             "junction_step_ratio_max": ratio,
             "tracking_rms_m": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else 0.0,

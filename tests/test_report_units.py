@@ -1,0 +1,46 @@
+"""The report's force figures from a trace, without running a cell."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controller.control.force import NormalForceRegulator
+from controller.params import ForceParams
+from launch.report import cap_watch_force
+
+CAP_N = ForceParams().cap_n
+FILTER_S = ForceParams().filter_s
+
+
+def _ticks(n: int, t0: float = 0.0) -> np.ndarray:
+    return t0 + 1e-3 * np.arange(n)
+
+
+def test_a_single_tick_spike_of_the_measured_wrench_is_not_time_above_the_cap():
+    force = np.full(200, 10.0)
+    force[100] = 42.0  # a 1 ms brake transient as a CI run measured it (the true contact force was 27.8 N)
+    seen = cap_watch_force(_ticks(200), force, FILTER_S)
+    assert force.max() > CAP_N and seen.max() < CAP_N
+
+
+def test_a_sustained_overload_is_above_the_cap_within_a_few_ticks_and_stays_there():
+    force = np.full(300, 10.0)
+    force[100:] = 60.0
+    above = np.flatnonzero(cap_watch_force(_ticks(300), force, FILTER_S) > CAP_N)
+    assert 100 < above[0] <= 110 and np.all(np.diff(above) == 1) and above[-1] == 299
+
+
+def test_it_is_the_controllers_own_cap_watch_tick_by_tick():
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.5e-3, 3e-3, 500))
+    force = rng.uniform(0.0, 55.0, 500)
+    watch = NormalForceRegulator(0.3, 8.0, 8.0, CAP_N, FILTER_S)
+    expected = [watch.measure(f, dt) for f, dt in zip(force, np.diff(t, prepend=t[0]))]
+    np.testing.assert_allclose(cap_watch_force(t, force, FILTER_S), expected, rtol=1e-12, atol=1e-12)
+
+
+def test_a_restarted_controller_starts_its_filter_again():
+    t = np.concatenate([_ticks(50, 10.0), _ticks(50, 0.0)])  # the new controller's robot clock starts over
+    force = np.concatenate([np.full(50, 39.0), np.full(50, 5.0)])
+    seen = cap_watch_force(t, force, FILTER_S)
+    assert seen[49] > 38.0 and seen[50] == 0.0 and abs(seen[-1] - 5.0) < 0.01
