@@ -30,7 +30,11 @@ access control (:mod:`interfaces.access`): ``user`` (the service's role),
 ``tls_certificate`` and ``tls_private_key`` (the service's), all three or
 none; with them every endpoint must be ``tls/...``. Shorthands
 ``LAMPS_ZENOH_TLS_CA``, ``LAMPS_ZENOH_TLS_CERTIFICATE``,
-``LAMPS_ZENOH_TLS_PRIVATE_KEY``.
+``LAMPS_ZENOH_TLS_PRIVATE_KEY``. ``config_file`` (shorthand
+``LAMPS_ZENOH_CONFIG_FILE``): a Zenoh configuration file (JSON5, Zenoh's own
+format) to start from, for what these settings do not cover (QoS, buffers,
+interceptors such as ``downsampling``); the settings above are applied over
+it, and a file that sets one of the fields they own is refused, naming it.
 """
 
 from __future__ import annotations
@@ -63,6 +67,7 @@ _SHORTHANDS = {
     "LAMPS_ZENOH_TLS_CA": ("zenoh", "tls_ca"),
     "LAMPS_ZENOH_TLS_CERTIFICATE": ("zenoh", "tls_certificate"),
     "LAMPS_ZENOH_TLS_PRIVATE_KEY": ("zenoh", "tls_private_key"),
+    "LAMPS_ZENOH_CONFIG_FILE": ("zenoh", "config_file"),
 }
 
 
@@ -84,12 +89,14 @@ class ZenohSettings:
     tls_ca: str = ""
     tls_certificate: str = ""
     tls_private_key: str = ""
+    config_file: str = ""
 
     def __post_init__(self) -> None:
         for name in ("mode", "robot_id", "key_prefix"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
-        for name in ("user", "password_file", "credentials_file", "tls_ca", "tls_certificate", "tls_private_key"):
+        for name in ("user", "password_file", "credentials_file", "tls_ca", "tls_certificate", "tls_private_key",
+                     "config_file"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
         if not isinstance(self.access_control, bool):

@@ -43,9 +43,42 @@ BAD_SAMPLE_LOG_PERIOD_S = 5.0
 MAX_BAD_REASONS = 16
 
 
+#: Zenoh configuration paths that :class:`ZenohSettings` owns -> the ``[zenoh]`` setting that sets them.
+OWNED_PATHS = {
+    "mode": "mode", "listen/endpoints": "listen", "connect/endpoints": "connect",
+    "scouting/multicast/enabled": "multicast_scouting", "scouting/gossip/enabled": "gossip",
+    "transport/auth/usrpwd": "user, password_file, credentials_file", "access_control": "access_control",
+    "transport/link/tls": "tls_ca, tls_certificate, tls_private_key",
+}
+
+
+def _base_config(path: str) -> zenoh.Config:
+    """Zenoh's defaults, or the Zenoh configuration file ``path`` (``[zenoh] config_file``).
+
+    Raises ConfigError naming the file when it cannot be read or parsed, or when it sets a field that
+    the ``[zenoh]`` settings own (:data:`OWNED_PATHS`): one place decides endpoints, identity and access.
+    """
+    if not path:
+        return zenoh.Config()
+    if not Path(path).is_file():
+        raise ConfigError(f"[zenoh] config_file {path!r} is not a file")
+    try:
+        cfg = zenoh.Config.from_file(path)
+    except zenoh.ZError as exc:
+        why = " ".join(str(exc).split()).split(" at /")[0]  # one line, without the Rust source location
+        why = "Zenoh refused a value in it" if why.startswith("Invalid configuration") else why[:300]
+        raise ConfigError(f"[zenoh] config_file {path!r} is not a Zenoh configuration: {why}") from None
+    default = zenoh.Config()
+    owned = [f"{p} (set it with [zenoh] {name})" for p, name in OWNED_PATHS.items()
+             if cfg.get_json(p) != default.get_json(p)]
+    if owned:
+        raise ConfigError(f"[zenoh] config_file {path!r} sets what the [zenoh] settings own: {'; '.join(owned)}")
+    return cfg
+
+
 def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
-    """The ``zenoh.Config`` for ``settings``."""
-    cfg = zenoh.Config()
+    """The ``zenoh.Config`` for ``settings``: its ``config_file`` (or Zenoh's defaults) with the settings over it."""
+    cfg = _base_config(settings.config_file)
     cfg.insert_json5("mode", json.dumps(settings.mode))
     cfg.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
     cfg.insert_json5("scouting/gossip/enabled", json.dumps(settings.gossip))

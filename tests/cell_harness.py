@@ -24,6 +24,7 @@ from types import SimpleNamespace
 
 from interfaces.config import ZenohSettings
 from interfaces.credentials import DICTIONARY, password_file
+from interfaces.keys import Keys
 from interfaces.messages import ControllerStatus
 from interfaces.session import ServiceNode
 
@@ -120,10 +121,14 @@ class Cell:
     """The sim profile of the compose file as local processes (see the module docstring).
 
     mode : ``lockstep`` or ``realtime``; proxy : route the controller's link to the sim through a
-    :class:`TcpProxy` (:attr:`proxy`).
+    :class:`TcpProxy` (:attr:`proxy`); thin : service name -> {key suffix (``robot/state``): samples per
+    second}: Zenoh's own downsampling on that service's egress drops the samples of that key that come
+    sooner than 1 / rate after the last one let through (given to the service as a Zenoh configuration
+    file, ``LAMPS_ZENOH_CONFIG_FILE``).
     """
 
-    def __init__(self, out: Path, skill: Path, mode: str = "lockstep", proxy: bool = False) -> None:
+    def __init__(self, out: Path, skill: Path, mode: str = "lockstep", proxy: bool = False,
+                 thin: dict[str, dict[str, float]] | None = None) -> None:
         from launch.cli import _plan_cell
 
         self.out = out
@@ -140,10 +145,20 @@ class Cell:
             ctl = self.services["controller"]
             ctl.environment["LAMPS_ZENOH_CONNECT"] = ctl.environment["LAMPS_ZENOH_CONNECT"].replace(
                 f":{sim_port}", f":{self.proxy.port}")
+        for name, rates in (thin or {}).items():
+            self.services[name].environment["LAMPS_ZENOH_CONFIG_FILE"] = str(self._thinning_file(name, rates))
         self.phases: list[tuple[float, str, str]] = []  # (monotonic time, phase, reason) at each change
         self.status: ControllerStatus | None = None
         self._t0 = time.monotonic()
         self._watching = threading.Event()
+
+    def _thinning_file(self, service: str, rates: dict[str, float]) -> Path:
+        prefix = Keys.for_robot(self.cell.robot_id).prefix
+        rules = [{"key_expr": f"{prefix}/{suffix}", "freq": float(hz)} for suffix, hz in rates.items()]
+        path = self.out / f"zenoh-{service}.json5"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"downsampling": [{"messages": ["put"], "flows": ["egress"], "rules": rules}]}))
+        return path
 
     # -- life ------------------------------------------------------------------------------------------
     def __enter__(self) -> "Cell":

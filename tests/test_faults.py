@@ -2,7 +2,7 @@
 
 Each test starts the compose cell's sim profile (:mod:`tests.cell_harness`), lets it wipe, hurts it in
 several ways one after another (SIGKILL, SIGSTOP/SIGCONT and restarts of each service, a stalled and a cut
-link between controller and robot, rogue peers), and then asserts from the run's own ``report.json`` that
+link between controller and robot, rogue peers, samples dropped on single keys by Zenoh's downsampling), and then asserts from the run's own ``report.json`` that
 the arm stayed safe throughout (contact force never above the cap, no joint above its speed limit) and that
 the run recorded every fault with a time and a reason. The README's fault table lists the same cases.
 """
@@ -148,3 +148,20 @@ def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_contro
         assert any(what in r for r in robot), (what, robot)
     assert any("recovered from its .partial file" in r for r in _reasons(report, "RECORDER")), report["faults"]
     assert not any("silent for the last" in r for r in service), "the recorder's death is not the controller's"
+
+
+def test_realtime_cleans_the_board_with_samples_dropped_on_the_state_command_and_stains_keys(
+        tmp_path, learned_skill_file):
+    # Zenoh's own downsampling on each sender's egress: about every other state, two of three commands and
+    # all but two stains messages a second are dropped (a lossy link to a real arm, a slow perception)
+    thin = {"sim": {"robot/state": 500.0}, "controller": {"robot/command": 333.0},
+            "perception": {"perception/stains": 2.0}}
+    with Cell(tmp_path / "run", learned_skill_file, "realtime", thin=thin) as cell:
+        cell.wait_phase(("WIPE",), 120.0)
+        cell.wait_phase(("DONE",), 120.0)
+        report = cell.finish()
+    _assert_safe(report)
+    assert report["dirt_removed_fraction"] >= 0.98, report["dirt_removed_fraction"]
+    sim, ticks = report["counters"]["sim"], report["loop_timing"]["ticks"]
+    assert 0 < sim["commands_received"] < 0.4 * ticks, (sim, ticks)  # the commands really were thinned
+    assert not any(f["phase"] in ("FAULT", "ESTOP") for f in report["faults"]), report["faults"]

@@ -135,3 +135,58 @@ def test_other_prefixes_are_not_heard():
         a.publish(b.keys.controller_estop, Estop(stamp_ns=1, engaged=False, reason="mark"))
         assert wait_sample(marks, what="the mark on b's prefix").reason == "mark"
         assert states.take() is None and states.received == 0
+
+
+def _zenoh_file(path, text: str) -> str:
+    path.write_text(text)
+    return str(path)
+
+
+def test_a_zenoh_config_file_adds_what_the_settings_do_not_cover(tmp_path):
+    """Zenoh's own downsampling interceptor from the file: states on one key are thinned, other keys not."""
+    port = free_port()
+    robot = f"t{port}"
+    thin = _zenoh_file(tmp_path / "zenoh.json5", f"""{{
+      // at most 100 robot states per second leave this peer; everything else untouched
+      downsampling: [{{ messages: ["put"], flows: ["egress"],
+                        rules: [{{ key_expr: "lamps/{robot}/robot/state", freq: 100.0 }}] }}],
+    }}""")
+    a = ServiceNode("sim", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=robot, config_file=thin))
+    b = ServiceNode("controller", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=robot))
+    with a, b:
+        wait_alive(b, "sim")
+        states = b.inbox(b.keys.robot_state, RobotState, maxlen=1000)
+        commands = b.inbox(b.keys.robot_command, TorqueCommand, maxlen=1000)
+        wait_subscribed(a.session, a.keys.robot_state)
+        t0 = time.monotonic()
+        for seq in range(300):
+            a.publish(a.keys.robot_state, state(seq))
+            a.publish(a.keys.robot_command, TorqueCommand(seq=seq, stamp_ns=1, tau_nm=[0.0] * 7))
+            time.sleep(0.001)
+        elapsed = time.monotonic() - t0
+        wait_for(lambda: commands.received == 300, 5.0, "every command")
+        time.sleep(0.2)  # the thinned key has nothing more on its way; give the last sample time to land
+        n_states = states.received
+    assert 1 <= n_states <= 100 * elapsed + 2, (n_states, elapsed)
+
+
+@pytest.mark.parametrize("text, match", [
+    ('{ listen: { endpoints: ["tcp/127.0.0.1:7447"] } }', r"listen/endpoints \(set it with \[zenoh\] listen\)"),
+    ('{ mode: "router" }', r"sets what the \[zenoh\] settings own: mode"),
+    ('{ access_control: { enabled: false, default_permission: "allow" } }', "access_control"),
+    ('{ transport: { auth: { usrpwd: { user: "c", password: "p", dictionary_file: "d" } } } }',
+     "transport/auth/usrpwd"),
+    ('{ transport: { link: { tls: { root_ca_certificate: "ca.pem" } } } }', "transport/link/tls"),
+    ("{ listen: ", r"is not a Zenoh configuration: --> 1:11 .* expected array"),
+    ("{ no_such_field: 1 }", "is not a Zenoh configuration: .*unknown field `no_such_field`"),
+    ('{ transport: { auth: { usrpwd: { user: "controller" } } } }', "Zenoh refused a value in it"),
+])
+def test_a_zenoh_config_file_is_refused_naming_what_is_wrong(tmp_path, text, match):
+    from interfaces.errors import ConfigError
+    from interfaces.session import zenoh_config
+
+    path = _zenoh_file(tmp_path / "zenoh.json5", text)
+    with pytest.raises(ConfigError, match=match):
+        zenoh_config(ZenohSettings(config_file=path))
+    with pytest.raises(ConfigError, match="is not a file"):
+        zenoh_config(ZenohSettings(config_file=str(tmp_path / "missing.json5")))
