@@ -14,6 +14,13 @@ The controller trace (packed 1 kHz batches, kept whole) is also written every
 back-dated from the batch's receipt by the controller clock, so a plot
 panel draws its columns over time.
 
+A recorder started again in a run folder (a restart after a crash, or
+``docker compose restart``) continues the same recording: it carries every
+complete message of its predecessor's file (``.partial`` or finished) over
+into its own before it records anything new, writes a marker on
+:data:`RESUMED_TOPIC`, and replaces the old file only once the carried copy
+is on the disk, so nothing recorded before is lost.
+
 The file is written as ``recording.mcap.partial`` and renamed when finished,
 so a half-written recording is never mistaken for a whole one. It is written
 in small chunks (:data:`CHUNK_BYTES`) and flushed to the disk every
@@ -35,6 +42,7 @@ import threading
 import time
 import zlib
 from collections import Counter, deque
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +62,11 @@ from interfaces.messages import (ArmRequest, CameraFrame, ControllerStatus, Cont
 log = logging.getLogger(__name__)
 
 RECORDING = "recording.mcap"
+#: The topic (outside the cell's keys) where a recorder that carried an earlier recording over says so.
+RESUMED_TOPIC = "recorder/resumed"
+_RESUMED_SCHEMA = {"type": "object", "title": "lamps.RecorderResumed",
+                   "properties": {"carried_messages": {"type": "integer"}, "earlier_file": {"type": "string"},
+                                  "earlier_finished": {"type": "boolean"}, "last_earlier_ns": {"type": "integer"}}}
 #: MCAP chunk size [bytes]: small, so a crash loses little (a chunk is on the disk only once complete).
 CHUNK_BYTES = 256 * 1024
 #: The recording is pushed to the disk this often [s].
@@ -148,6 +161,32 @@ class McapSink:
                                                              schema_id=self._schema(schema_name, schema))
         return self._channels[topic]
 
+    def carry_over(self, records: McapRecords) -> int:
+        """Write every message of an earlier recording (its own times and sequence numbers), channels and schemas
+        merged by topic and name; returns how many were written."""
+        schema_ids = {}
+        for sid, sc in records.schemas.items():
+            if sc.name not in self._schemas:
+                self._schemas[sc.name] = self._w.register_schema(name=sc.name, encoding=sc.encoding, data=sc.data)
+            schema_ids[sid] = self._schemas[sc.name]
+        channel_ids = {}
+        for cid, ch in records.channels.items():
+            if (ch.schema_id in schema_ids or ch.schema_id == 0) and ch.topic not in self._channels:
+                self._channels[ch.topic] = self._w.register_channel(
+                    topic=ch.topic, message_encoding=ch.message_encoding, schema_id=schema_ids.get(ch.schema_id, 0),
+                    metadata=ch.metadata)
+            if ch.topic in self._channels:
+                channel_ids[cid] = (self._channels[ch.topic], ch.topic)
+        n = 0
+        for m in records.messages:
+            if m.channel_id in channel_ids:
+                ch, topic = channel_ids[m.channel_id]
+                self._w.add_message(channel_id=ch, log_time=m.log_time, publish_time=m.publish_time,
+                                    sequence=m.sequence, data=m.data)
+                self._seq[topic] = max(self._seq[topic], m.sequence)
+                n += 1
+        return n
+
     def write_json(self, topic: str, schema_name: str, data: Any, t_ns: int, schema: dict | None = None) -> None:
         """One JSON message on ``topic``; ``schema`` (full properties) is needed the first time ``schema_name``
         is seen."""
@@ -225,8 +264,8 @@ class Recorder:
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.partial = self.out_dir / (RECORDING + ".partial")
-        self.sink = McapSink(self.partial)
         self.counters: Counter[str] = Counter()
+        self.sink = self._open_sink()
         self._queue: deque = deque(maxlen=max_queue)
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -234,6 +273,32 @@ class Recorder:
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
         self._sub = session.declare_subscriber(f"{keys.prefix}/**", self._on_sample)
+
+    def _open_sink(self) -> McapSink:
+        """The sink at ``recording.mcap.partial``, holding first whatever an earlier recorder of this folder
+        recorded (its ``.partial`` if it died, else its finished file). The earlier file is replaced only once
+        the copy is on the disk."""
+        final = self.out_dir / RECORDING
+        earlier = self.partial if self.partial.is_file() else final if final.is_file() else None
+        if earlier is None:
+            return McapSink(self.partial)
+        records = read_records(earlier)
+        fresh = self.partial.with_name(self.partial.name + ".new")
+        sink = McapSink(fresh)
+        n = sink.carry_over(records)
+        last_ns = max((m.log_time for m in records.messages), default=0)
+        sink.write_json(RESUMED_TOPIC, "lamps.RecorderResumed",
+                        {"carried_messages": n, "earlier_file": earlier.name, "earlier_finished": earlier == final,
+                         "last_earlier_ns": last_ns}, time.time_ns(), _RESUMED_SCHEMA)
+        sink.flush()
+        os.replace(fresh, self.partial)  # the open file follows the rename
+        sink.path = self.partial
+        if earlier == final:
+            final.unlink()
+        self.counters["carried_over"] = n
+        log.warning("continuing the recording of %s: %d earlier messages carried over from %s", self.out_dir, n,
+                    earlier.name)
+        return sink
 
     def _on_sample(self, sample) -> None:  # Zenoh thread: never waits
         if len(self._queue) == self._queue.maxlen:
@@ -283,48 +348,62 @@ class Recorder:
         return final
 
 
-def recover_recording(partial: Path, final: Path) -> int:
-    """Write ``final`` (atomically) with every message of the complete records of ``partial``, an unfinished MCAP
-    (its writer died); returns how many messages were recovered. Reading stops at the first damaged or cut
-    record; what came before it is kept."""
+@dataclass
+class McapRecords:
+    """The schema, channel and message records of an MCAP file, by id (messages in file order)."""
+
+    schemas: dict
+    channels: dict
+    messages: list
+
+
+def read_records(path: Path) -> McapRecords:
+    """Every complete record of the MCAP file ``path``, finished or not (its writer died): a tolerant stream
+    read that stops at the first damaged or cut record and keeps what came before it."""
     from mcap.exceptions import McapError
     from mcap.records import Channel as ChannelRecord
     from mcap.records import Message as MessageRecord
     from mcap.records import Schema as SchemaRecord
     from mcap.stream_reader import StreamReader
 
-    from lampskit.atomic import write_atomic
-
-    schemas: dict[int, SchemaRecord] = {}
-    channels: dict[int, ChannelRecord] = {}
-    messages: list[MessageRecord] = []
-    with open(partial, "rb") as f:
+    out = McapRecords({}, {}, [])
+    with open(path, "rb") as f:
         try:
             for record in StreamReader(f, validate_crcs=True).records:
                 if isinstance(record, SchemaRecord):
-                    schemas[record.id] = record
+                    out.schemas[record.id] = record
                 elif isinstance(record, ChannelRecord):
-                    channels[record.id] = record
+                    out.channels[record.id] = record
                 elif isinstance(record, MessageRecord):
-                    messages.append(record)
+                    out.messages.append(record)
         except (McapError, EOFError, ValueError, struct.error, zlib.error, zstd.ZstdError):
             pass  # the cut: everything before it is whole (each chunk carries its own CRC)
         except Exception as exc:  # a damaged chunk can fail inside a decompressor in other ways
-            log.warning("recovering %s: stopped at %s: %s", partial, type(exc).__name__, exc)
+            log.warning("reading %s: stopped at %s: %s", path, type(exc).__name__, exc)
+    return out
+
+
+def recover_recording(partial: Path, final: Path) -> int:
+    """Write ``final`` (atomically) with every message of the complete records of ``partial``, an unfinished MCAP
+    (its writer died); returns how many messages were recovered. Reading stops at the first damaged or cut
+    record; what came before it is kept."""
+    from lampskit.atomic import write_atomic
+
+    records = read_records(partial)
 
     def write(out) -> None:
         w = Writer(out, chunk_size=CHUNK_BYTES)
         w.start(profile="", library="lamps (recovered)")
-        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in schemas.items()}
+        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in records.schemas.items()}
         channel_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), c.metadata)
-                       for cid, c in channels.items() if c.schema_id in schema_ids or c.schema_id == 0}
-        for m in messages:
+                       for cid, c in records.channels.items() if c.schema_id in schema_ids or c.schema_id == 0}
+        for m in records.messages:
             if m.channel_id in channel_ids:
                 w.add_message(channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
         w.finish()
 
     write_atomic(final, write)
-    return len(messages)
+    return len(records.messages)
 
 
 def read_recording(path: Path) -> dict[str, list[tuple[int, dict]]]:

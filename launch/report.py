@@ -36,8 +36,8 @@
   frozen, stopped or dead) or came back restarted (its status count starting again), phase ``SERVICE``;
   each safety action of the robot side (a brake on stale commands or after its own freeze, commands of
   another controller dropped, a change of the controller served, commands held while e-stopped:
-  :data:`ROBOT_EVENTS`), phase ``ROBOT``; a recorder that stalled or did not finish (a recording recovered
-  from its ``.partial`` file), phase ``RECORDER``; the launcher's end of the run when a service died, failed
+  :data:`ROBOT_EVENTS`), phase ``ROBOT``; a recorder that stalled, restarted (carrying its predecessor's
+  recording over) or did not finish (a recording recovered from its ``.partial`` file), phase ``RECORDER``; the launcher's end of the run when a service died, failed
   or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
 * ``services``: exit codes from the launcher (if any); ``counters``: the
   last status counters of each service; ``plots``: the PNG files written.
@@ -60,7 +60,7 @@ from interfaces.keys import Keys
 from interfaces.messages import Phase
 from lampskit.atomic import write_text_atomic
 
-from .record import RECORDING, read_recording, trace_array
+from .record import RECORDING, RESUMED_TOPIC, read_recording, trace_array
 
 SCHEMA = "lamps-run-report/1"
 #: Fraction of the dirt that must be gone for the outcome ``cleaned``.
@@ -403,6 +403,12 @@ def _recorder_faults(run: _Run, run_dir: Path) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = [{"wall_ns": a, "phase": "RECORDER",
                                   "reason": f"nothing recorded for {(b - a) * 1e-9:.1f} s (the recorder stalled)"}
                                  for a, b in _recorder_stalls(run)]
+    for t_ns, m in run.rec.get(RESUMED_TOPIC, []):
+        how = "had finished" if m.get("earlier_finished") else "had died"
+        out.append({"wall_ns": t_ns, "phase": "RECORDER",
+                    "reason": f"the recorder restarted {(t_ns - m.get('last_earlier_ns', t_ns)) * 1e-9:.1f} s after "
+                              f"the last earlier message (its predecessor {how}); {m.get('carried_messages', 0)} "
+                              f"earlier messages carried over from {m.get('earlier_file', '?')}"[:500]})
     if (run_dir / (RECORDING + ".partial")).is_file():
         last_ns = max((msgs[-1][0] for msgs in run.rec.values() if msgs), default=0)
         out.append({"wall_ns": last_ns, "phase": "RECORDER",

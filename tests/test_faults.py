@@ -106,12 +106,17 @@ def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recor
         cell.wait_phase(WIPING, 90.0, since=t)
         cell.freeze("recorder", 2.0)
         time.sleep(1.0)
+        cell.restart("recorder", down_s=1.0)  # the new recorder carries the dead one's recording over
+        time.sleep(2.0)
         report = cell.finish()
     _assert_safe(report)
     service = _reasons(report, "SERVICE")
     assert any(r.startswith("controller: no status for") for r in service), service
     assert any(r.startswith("controller: restarted") for r in service), service
-    assert any("the recorder stalled" in r for r in _reasons(report, "RECORDER")), report["faults"]
+    recorder = _reasons(report, "RECORDER")
+    assert any("the recorder stalled" in r for r in recorder), report["faults"]
+    assert any(r.startswith("the recorder restarted") and "(its predecessor had died)" in r for r in recorder), recorder
+    assert report["stains"] and report["dirt_removed_fraction"] > 0.0  # the recording still starts at the start
     assert not any(r.startswith(("sim:", "perception:")) for r in service), "the recorder's stall is not theirs"
     sim = report["counters"]["sim"]
     assert sim.get("controller_changes", 0) >= 1, sim

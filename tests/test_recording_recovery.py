@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 from interfaces.config import ZenohSettings
 from interfaces.messages import ServiceStatus
 from interfaces.session import ServiceNode
-from launch.record import CHUNK_BYTES, McapSink, recover_recording
+from launch.record import CHUNK_BYTES, RESUMED_TOPIC, McapSink, Recorder, read_recording, recover_recording
 
 from .zenoh_helpers import REPO, free_port, wait_for
 
@@ -80,3 +80,35 @@ def test_lamps_report_recovers_the_recording_of_a_killed_recorder(tmp_path):
                        text=True, timeout=120)
     assert "recovered" in r.stdout, r.stdout + r.stderr
     assert _messages(out / "recording.mcap") > 0.5 * i, (i, r.stdout)
+
+
+@pytest.mark.parametrize("finished", [False, True], ids=["predecessor-died", "predecessor-finished"])
+def test_a_recorder_started_again_continues_the_recording_and_loses_nothing(tmp_path, finished):
+    port = free_port()
+    settings = ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=f"rec{port}")
+    key = settings.keys.perception_status
+    earlier = tmp_path / ("recording.mcap" if finished else "recording.mcap.partial")
+    sink = McapSink(earlier)
+    for i in range(3_000):
+        sink.write(key, _status(i), 1_000_000 + i)
+    sink.flush()
+    if finished:
+        sink.finish()
+    else:  # killed: no summary; what reached the disk is what the new recorder finds
+        on_disk = recover_recording(earlier, tmp_path / "what-was-on-disk.mcap")
+    with ServiceNode("perception", settings) as node:
+        rec = Recorder(node.session, node.keys, tmp_path)
+        assert not earlier.exists() or earlier.name.endswith(".partial")  # replaced only by the carried copy
+        for i in range(3_000, 3_050):
+            node.publish(key, _status(i))
+        wait_for(lambda: rec.counters["perception/status"] == 50, 10.0, "the new statuses recorded")
+        path = rec.close()
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("recording")) == ["recording.mcap"]
+    got = read_recording(path)
+    seqs = [m["seq"] for _, m in got[key]]
+    expected = 3_000 if finished else on_disk
+    assert seqs == list(range(expected)) + list(range(3_000, 3_050)), "every earlier message, in order, then the new"
+    assert [t for t, _ in got[key][:expected]] == [1_000_000 + i for i in range(expected)], "their own times"
+    (_, marker), = got[RESUMED_TOPIC]
+    assert marker["carried_messages"] == expected and marker["earlier_finished"] is finished
+    assert marker["last_earlier_ns"] == 1_000_000 + expected - 1
