@@ -89,6 +89,8 @@ class ControllerService:
             self._stains = node.latest(self.keys.perception_stains, Stains)
         self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
         self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
+        self._robot_estop = False  # the last state said the robot side's e-stop is engaged
+        self._estop_ours = False  # our own e-stop is latched (an engage on controller/estop, not yet released)
 
     # ------------------------------------------------------------------ loops
     def run(self) -> int:
@@ -220,6 +222,8 @@ class ControllerService:
     def _control(self, state: RobotState, dt: float) -> np.ndarray | None:
         """Torques answering ``state``, or None when the tick failed (then the answer is ``hold``)."""
         self._ever_state = True
+        if state.estop != self._robot_estop:
+            self._follow_robot_estop(state.estop)
         applied = self._applied(state)
         self._last_seq = state.seq
         self.ticks += 1
@@ -358,9 +362,24 @@ class ControllerService:
                 return False
         return True
 
+    def _follow_robot_estop(self, engaged: bool) -> None:
+        """The robot side's e-stop and ours agree: while its e-stop is engaged (it holds whatever we send) we are
+        in ESTOP too, also when the engage never reached us (a lost sample, a controller started afterwards); when
+        the operator's release reaches it, we resume unless our own e-stop is still latched."""
+        self._robot_estop = engaged
+        if engaged:
+            self.counters["robot_estops_seen"] += 1
+            log.warning("the robot side reports its e-stop engaged: ESTOP until it is released")
+            if not self._estop_ours:
+                self.core.executor.estop("e-stop engaged on the robot side")
+        elif not self._estop_ours:
+            log.warning("the robot side's e-stop released")
+            self.core.executor.clear()
+
     def _poll_estop(self) -> None:
         """Engage on ``controller/estop``; release only from ``controller/estop/release`` (the operator's key under
-        access control): a release on the engage key is ignored and counted."""
+        access control): a release on the engage key is ignored and counted. A release while the robot side
+        still reports its e-stop engaged waits for it (:meth:`_follow_robot_estop`)."""
         for inbox, release_key in ((self._estops, False), (self._releases, True)):
             while True:
                 e = inbox.get(0.0)
@@ -368,11 +387,16 @@ class ControllerService:
                     break
                 if e.engaged:
                     log.warning("e-stop from %s: %s", e.source or "?", e.reason)
+                    self._estop_ours = True
                     self.core.executor.estop(f"e-stop: {e.reason}" + (f" ({e.source})" if e.source else ""))
                 elif release_key:
                     log.warning("e-stop released by %s", e.source or "?")
                     self.counters["estop_releases"] += 1
-                    self.core.executor.clear()
+                    self._estop_ours = False
+                    if self._robot_estop:
+                        self.core.executor.estop("released here; waiting for the robot side's e-stop release")
+                    else:
+                        self.core.executor.clear()
                 else:
                     self.counters["estop_releases_ignored_on_the_engage_key"] += 1
                     log.warning("e-stop release from %s on the engage key ignored (releases go to %s)",
@@ -383,7 +407,8 @@ class ControllerService:
         ex, core = self.core.executor, self.core
         counters = dict(self.counters)
         counters.update(ex.counters)
-        counters.update(torque_rate_clipped=core.shaper.clipped_rate, torque_abs_clipped=core.shaper.clipped_abs)
+        counters.update(torque_rate_clipped=core.shaper.clipped_rate, torque_abs_clipped=core.shaper.clipped_abs,
+                        robot_estop_engaged=int(self._robot_estop), estop_latched=int(self._estop_ours))
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
                              ("estop", self._estops), ("estop_release", self._releases)):
             if reader is None:

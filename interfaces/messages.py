@@ -171,7 +171,10 @@ class RobotState(Message, frozen=True):
     ``command_seq`` is the ``seq`` of the command the robot applied over the
     cycle that ended in this state, -1 when it applied none of the
     controller's (it held, braked, or was e-stopped): what lets the
-    controller check that the arm moved as it was told.
+    controller check that the arm moved as it was told. ``estop``: the
+    robot side's own e-stop is engaged (it holds whatever is commanded until
+    the operator's release reaches it); the controller keeps its phase in
+    ESTOP while it is, so the two agree.
     """
 
     seq: int
@@ -184,6 +187,7 @@ class RobotState(Message, frozen=True):
     robot_time_ns: int = 0
     wall_ns: int = 0
     command_seq: int = -1
+    estop: bool = False
 
     def __post_init__(self) -> None:
         names = ("q_rad", "dq_rad_s", "tau_nm")

@@ -384,7 +384,7 @@ class RobotServer:
             seq=self.steps if seq is None else seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
             dq_rad_s=r.dq_rad_s.tolist(), tau_nm=r.tau_nm.tolist(), wrench_world=r.wrench_world.tolist(),
             capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns(),
-            command_seq=self.applied_seq))
+            command_seq=self.applied_seq, estop=self.estop_reason is not None))
 
     def _watch_speed(self, dq_rad_s: np.ndarray) -> None:
         """Set whether the next cycle must brake: a joint (n,) [rad/s] above its speed cap now or, at the change

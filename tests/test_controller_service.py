@@ -288,6 +288,33 @@ def test_estop_holds_the_arm_on_both_sides_and_bad_samples_are_counted_not_fatal
         wait_sample(sim_status, lambda s: "estop=" not in s.detail, 5.0, "the sim released")
 
 
+def test_the_controller_follows_an_estop_that_reached_only_the_robot_side(tmp_path, learned_skill):
+    """An operator linked to the sim alone (peers do not route for each other): the controller never hears the
+    e-stop, yet its state and the robot's agree through the robot's states; the robot's release resumes it."""
+    with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim, \
+            ControllerThread(sim, learned_skill) as ctl:
+        ctl.wait_phase(("WIPE",), 60.0)
+        only_sim = ZenohSettings(connect=(f"tcp/127.0.0.1:{sim.port}",), robot_id=sim.robot_id, gossip=False)
+        with ServiceNode("operator", only_sim) as op:
+            keys = op.keys
+            for key in (keys.controller_estop, keys.controller_estop_release):
+                wait_subscribed(op.session, key, what=f"the sim reading {key}")
+            op.publish(keys.controller_estop, Estop(stamp_ns=1, engaged=True, reason="sim-side button", source="op"))
+            ctl.wait_phase(("ESTOP",), 5.0)
+            assert ctl.core.executor.reason == "e-stop engaged on the robot side"
+            status = ctl.operator.latest(keys.controller_status, ControllerStatus)
+            st = wait_sample(status, lambda m: m.phase == "ESTOP", 3.0, "a controller status saying ESTOP")
+            assert st.counters["robot_estop_engaged"] == 1 and st.counters["estop_latched"] == 0, st.counters
+            assert st.counters.get("estop_received", 0) == 0, "the e-stop itself never reached the controller"
+            t = ctl.core.time_s
+            wait_for(lambda: ctl.core.time_s > t + 1.0, 30.0, "1 s of sim time in the e-stop")
+            assert ctl.phase == "ESTOP"
+            op.publish(keys.controller_estop_release, Estop(stamp_ns=2, engaged=False, reason="ok", source="op"))
+            ctl.wait_phase(("APPROACH", "TRANSITION", "WIPE"), 10.0)
+            st = wait_sample(status, lambda m: m.phase != "ESTOP", 3.0, "a controller status after the release")
+            assert st.counters["robot_estop_engaged"] == 0
+
+
 def _until_counted(status, sends: dict) -> bool:
     """True once the newest controller status has a counter starting with each key of ``sends``.
 

@@ -235,7 +235,7 @@ def test_the_robot_side_holds_while_the_estop_is_engaged_whatever_is_commanded()
         srv.wait_status(lambda m: m.counters.get("estop_engaged") == 1, "the e-stop seen by the robot side")
         for seq in range(5):
             srv.command(seq, [40.0] * 7)
-            srv.state_seq(seq + 1)
+            assert srv.state_seq(seq + 1).estop, "every state says the robot side is e-stopped"
         st = srv.wait_status(lambda m: m.seq == 5, "a status after 5 steps")
         assert np.all(arm.q == 0.0) and arm.holds == 5, "held five cycles, not moved by 40 Nm"
         assert "estop=engaged (red button (op))" in st.detail and st.counters["estop_engaged"] == 1
@@ -244,7 +244,7 @@ def test_the_robot_side_holds_while_the_estop_is_engaged_whatever_is_commanded()
         srv.ctl.publish(srv.keys.controller_estop_release, Estop(stamp_ns=3, engaged=False, reason="ok", source="op"))
         srv.wait_status(lambda m: m.counters.get("estop_engaged") == 0, "the release seen")
         srv.command(5, [40.0] * 7)
-        srv.state_seq(6)
+        assert not srv.state_seq(6).estop
         st = srv.wait_status(lambda m: m.seq == 6, "a status after the release")
         assert np.all(arm.q > 0.0) and st.counters["estop_engaged"] == 0 and "estop" not in st.detail.split()[-1]
 
