@@ -21,6 +21,7 @@ import numpy as np
 from lampskit.errors import LampsError, SkillFileError
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
+from interfaces.priority import REALTIME, set_service_priority
 
 SERVICE = "controller"
 #: A real-time rate is refused when the control law's median tick takes more than this share of the period.
@@ -133,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s controller %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params = load(a)
+        set_service_priority(REALTIME)
         from interfaces.robot_model import RobotModel
 
         skill = load_runnable_skill(params.skill)

@@ -19,7 +19,8 @@ the robot side's, :mod:`robot.server`):
   CPU the other services of a 2-core cell need). Refused (not Linux): said in
   :attr:`LoopHygiene.report`.
 
-:attr:`LoopHygiene.report` says what was applied, for the service's status.
+:attr:`LoopHygiene.report` says what was applied, for the service's status, with
+the process's CPU priority (:mod:`interfaces.priority`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ import logging
 import sys
 import time
 from collections import Counter
+
+from . import priority
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +80,8 @@ class LoopHygiene:
         gc.disable()
         self._started = True
         self.report = f"gc in slack (frozen {gc.get_freeze_count()} objects); {_set_timer_slack(TIMER_SLACK_NS)}" + (
-            f"; spin {self.spin_ns // 1000} us" if self.spin_ns else "")
+            f"; spin {self.spin_ns // 1000} us" if self.spin_ns else "") + (f"; {priority.REPORT}" if priority.REPORT
+                                                                           else "")
         log.info("loop hygiene: %s", self.report)
 
     def stop(self) -> None:

@@ -246,7 +246,8 @@ class CameraFrame(Message, frozen=True):
     width * height * channels) or a compressed image (``jpeg``/``png``).
     T_camera_to_world : camera pose (optical frame: x right, y down, z forward).
     robot_time_ns : the robot side's clock at the moment shown (sim time for
-    simulated frames, 0 when unknown).
+    simulated frames, 0 when unknown). seq : counts this camera's frames
+    (a gap is frames a consumer did not get).
     """
 
     seq: int

@@ -16,6 +16,7 @@ import threading
 from pathlib import Path
 
 from lampskit.errors import LampsError
+from interfaces.priority import BACKGROUND, set_service_priority
 
 
 def record_main(argv: list[str] | None = None) -> int:
@@ -35,6 +36,7 @@ def record_main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     try:
         settings = zenoh_with_options(load_config(a.config).zenoh, a)
+        set_service_priority(BACKGROUND)
         from interfaces.session import ServiceNode
 
         from .record import Recorder

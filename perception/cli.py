@@ -24,6 +24,7 @@ import msgspec
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
+from interfaces.priority import BACKGROUND, set_service_priority
 
 from .params import PerceptionParams, parse_source
 
@@ -82,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s perception %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params = load(a)
+        set_service_priority(BACKGROUND)
         kind, _ = parse_source(params.source)
         if a.no_zenoh and kind == "zenoh":
             raise InterfaceError("--no-zenoh needs an offline source (--source folder:DIR, video:FILE or device:N)")

@@ -22,6 +22,7 @@ import sys
 
 from interfaces.config import add_zenoh_options, check_range, load_config, zenoh_with_options
 from interfaces.errors import ConfigError
+from interfaces.priority import REALTIME, set_service_priority
 from lampskit.errors import LampsError
 
 SERVICE = "robot"
@@ -83,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s robot %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, lbr_params, server_params = load(a)
+        set_service_priority(REALTIME)
     except LampsError as exc:
         print(f"lamps robot: error: {exc}", file=sys.stderr)
         return 1

@@ -17,6 +17,7 @@ import sys
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
+from interfaces.priority import REALTIME, set_service_priority
 
 SERVICE = "sim"
 
@@ -95,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s sim %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params = load(a)
+        set_service_priority(REALTIME)
         from .core import SimCore
 
         core = SimCore(params)

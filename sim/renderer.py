@@ -28,12 +28,14 @@ import cv2
 import numpy as np
 
 from interfaces.messages import CameraFrame
+from interfaces.priority import BACKGROUND, set_service_priority
 from interfaces.transforms import pose_from_transform
 
 from .board import Board
 from .camera import (board_cell_index, board_texture, camera_pose, composite_dirt, intrinsics_of, light_towards,
                      marker_layer, projection_matrix, view_matrix)
 from .params import SimParams
+from lampskit.errors import LampsError
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +59,10 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the sim, which then stops us in order
+    try:  # the renderer is background work: the 1 kHz loops go first (interfaces.priority)
+        set_service_priority(BACKGROUND)
+    except LampsError as exc:
+        log.warning("camera renderer priority: %s", exc)
     cam = setup.params.camera
     dirt_shm = shared_memory.SharedMemory(setup.dirt_shm)
     image_shm = shared_memory.SharedMemory(setup.image_shm)
@@ -190,13 +196,13 @@ class CameraProcess:
                 if not stop.is_set():
                     self._mark_dead()
                 return
-            seq, stamp_ns, robot_time_ns = self._pending
+            _state_seq, stamp_ns, robot_time_ns = self._pending
             data = self.image.tobytes()
             self._idle.set()
             self.render_s.append(render_s)
             del self.render_s[:-1000]
             self.rendered += 1
-            publish(CameraFrame(seq=seq, stamp_ns=stamp_ns, camera=cam.name, encoding="rgb8", data=data,
+            publish(CameraFrame(seq=self.rendered, stamp_ns=stamp_ns, camera=cam.name, encoding="rgb8", data=data,
                                 intrinsics=self.intrinsics, T_camera_to_world=pose, robot_time_ns=robot_time_ns))
 
     def close(self) -> None:

@@ -16,6 +16,7 @@ import signal
 import sys
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+from interfaces.priority import REALTIME, set_service_priority
 from lampskit.errors import LampsError
 
 PROG = "lamps lbr-peer"
@@ -58,6 +59,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s lbr-peer %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params, sim_params = load(a)
+        set_service_priority(REALTIME)
         from sim.core import SimCore
 
         core = SimCore(sim_params)

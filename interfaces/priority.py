@@ -1,0 +1,96 @@
+"""CPU priority per kind of service: the 1 kHz loops first, the background work after them.
+
+A cell runs several 1 kHz services (the controller, the robot side: the
+sim, or the lbr peer and the real-robot adapter) beside services whose work
+can wait a few milliseconds (perception, the recorder, the sim's camera
+renderer). On a machine with fewer cores than busy services, the kernel's
+fair scheduler shares the CPU by *nice* value: a thread at nice -10 gets
+about 87 times the share of one at nice +10 when both want to run. So:
+
+* :data:`REALTIME` services ask for nice :data:`REALTIME_NICE` (-10). That
+  needs ``CAP_SYS_NICE`` (root, or ``cap_add: [SYS_NICE]`` under compose);
+  refused, the service runs at its inherited nice and says so.
+* :data:`BACKGROUND` services take nice :data:`BACKGROUND_NICE` (+10);
+  lowering one's own priority is always permitted.
+
+Call :func:`set_service_priority` first thing in a service's process,
+before its Zenoh session starts threads: on Linux the nice value belongs
+to each thread, and new threads inherit their creator's (threads a library
+started at import, e.g. a BLAS pool, are set too). The environment
+variable ``LAMPS_NICE`` overrides the value for one service (an integer
+from -20 to 19), ``LAMPS_NICE=keep`` leaves the inherited one. The report
+it returns goes into the service's status (:data:`REPORT`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+
+from .errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+REALTIME = "realtime"
+BACKGROUND = "background"
+#: nice value [-20, 19] by kind of service
+REALTIME_NICE = -10
+BACKGROUND_NICE = 10
+KINDS = {REALTIME: REALTIME_NICE, BACKGROUND: BACKGROUND_NICE}
+
+#: What :func:`set_service_priority` did in this process (for status), "" before it ran.
+REPORT = ""
+
+
+def _wanted(kind: str, env: dict | os._Environ) -> int | None:
+    """The nice value to ask for (None: keep the inherited one)."""
+    if kind not in KINDS:
+        raise ConfigError(f"service priority kind must be one of {sorted(KINDS)}, got {kind!r}")
+    text = env.get("LAMPS_NICE", "").strip()
+    if not text:
+        return KINDS[kind]
+    if text == "keep":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise ConfigError(f"LAMPS_NICE must be an integer from -20 to 19 or 'keep', got {text!r}") from None
+    if not -20 <= value <= 19:
+        raise ConfigError(f"LAMPS_NICE must be an integer from -20 to 19 or 'keep', got {value}")
+    return value
+
+
+def _threads() -> list[int]:
+    """The ids of this process's threads, the calling one first (0); Linux lists them in /proc."""
+    try:
+        others = sorted(int(t) for t in os.listdir("/proc/self/task") if int(t) != threading.get_native_id())
+    except OSError:
+        others = []
+    return [0, *others]
+
+
+def set_service_priority(kind: str, env: dict | os._Environ | None = None) -> str:
+    """Set the calling thread's nice value for a service of ``kind`` (:data:`REALTIME` or :data:`BACKGROUND`);
+    returns what was done, e.g. ``"nice -10"`` or ``"nice 0 (asked -10: refused, needs CAP_SYS_NICE)"``.
+
+    Raises ConfigError for a bad ``LAMPS_NICE``; a refusal by the operating system is reported, not raised.
+    """
+    global REPORT
+    wanted = _wanted(kind, os.environ if env is None else env)
+    now = os.getpriority(os.PRIO_PROCESS, 0)
+    if wanted is None or wanted == now:
+        REPORT = f"nice {now}"
+    else:
+        try:
+            for tid in _threads():  # the calling thread first; then any a library started at import
+                os.setpriority(os.PRIO_PROCESS, tid, wanted)
+            REPORT = f"nice {wanted}"
+        except PermissionError:
+            REPORT = f"nice {now} (asked {wanted}: refused, needs CAP_SYS_NICE)"
+            log.warning("%s priority: %s", kind, REPORT)
+        except OSError as exc:
+            REPORT = f"nice {now} (asked {wanted}: {exc.strerror or exc})"
+            log.warning("%s priority: %s", kind, REPORT)
+    log.info("%s priority: %s", kind, REPORT)
+    return REPORT

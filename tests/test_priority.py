@@ -1,0 +1,71 @@
+"""CPU priority per kind of service (:mod:`interfaces.priority`), each case in its own process."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from interfaces.errors import ConfigError
+from interfaces.priority import BACKGROUND, REALTIME, _wanted
+
+from .zenoh_helpers import REPO
+
+# In a fresh interpreter: a thread started before the call (as a library's pool would be), the call, a thread
+# started after it; prints the report and every thread's nice value.
+PROBE = """
+import json, os, sys, threading
+from interfaces.priority import set_service_priority
+if len(sys.argv) > 2:
+    os.setgid(65534); os.setuid(65534)  # an unprivileged user: no CAP_SYS_NICE
+ready, done = threading.Event(), threading.Event()
+def idle():
+    ready.set(); done.wait()
+before = threading.Thread(target=idle); before.start(); ready.wait()
+report = set_service_priority(sys.argv[1])
+after_nice = []
+t = threading.Thread(target=lambda: after_nice.append(os.getpriority(os.PRIO_PROCESS, 0))); t.start(); t.join()
+nice = {int(tid): os.getpriority(os.PRIO_PROCESS, int(tid)) for tid in os.listdir("/proc/self/task")}
+done.set(); before.join()
+print(json.dumps({"report": report, "main": os.getpriority(os.PRIO_PROCESS, 0), "before": nice[before.native_id],
+                  "after": after_nice[0]}))
+"""
+
+
+def _probe(kind: str, *extra: str, env: dict | None = None) -> dict:
+    r = subprocess.run([sys.executable, "-c", PROBE, kind, *extra], cwd=REPO, capture_output=True, text=True,
+                       timeout=60, env={**os.environ, **(env or {})})
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+def test_background_services_step_back_every_thread_of_them():
+    got = _probe(BACKGROUND)
+    assert got == {"report": "nice 10", "main": 10, "before": 10, "after": 10}, got
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="raising a priority needs CAP_SYS_NICE (root here and in CI)")
+def test_real_time_services_go_first_when_permitted_and_say_so_when_not():
+    assert _probe(REALTIME) == {"report": "nice -10", "main": -10, "before": -10, "after": -10}
+    refused = _probe(REALTIME, "as-nobody")
+    assert refused["main"] == 0 and refused["report"] == "nice 0 (asked -10: refused, needs CAP_SYS_NICE)", refused
+
+
+def test_lamps_nice_overrides_or_keeps_and_a_bad_value_is_named():
+    assert _probe(BACKGROUND, env={"LAMPS_NICE": "5"})["main"] == 5
+    assert _probe(BACKGROUND, env={"LAMPS_NICE": "keep"}) == {"report": "nice 0", "main": 0, "before": 0, "after": 0}
+    assert _wanted(REALTIME, {}) == -10 and _wanted(BACKGROUND, {"LAMPS_NICE": " 19 "}) == 19
+    for bad in ("high", "-21", "20", "1.5"):
+        with pytest.raises(ConfigError, match="LAMPS_NICE must be an integer from -20 to 19 or 'keep'"):
+            _wanted(BACKGROUND, {"LAMPS_NICE": bad})
+    with pytest.raises(ConfigError, match=r"kind must be one of \['background', 'realtime'\], got 'fast'"):
+        _wanted("fast", {})
+
+
+def test_a_bad_lamps_nice_stops_a_service_at_start_up_naming_it(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "robot", "--backend", "mock"], cwd=REPO,
+                       capture_output=True, text=True, timeout=60, env={**os.environ, "LAMPS_NICE": "fast"})
+    assert r.returncode == 1 and "LAMPS_NICE must be an integer" in r.stderr, r.stderr
