@@ -206,8 +206,11 @@ class ControllerParams:
     """The whole controller.
 
     mode : ``lockstep`` (answer each robot state, time from the robot's
-    clock) or ``realtime`` (own fixed-rate clock, newest state).
-    rate_hz : control rate. skill : skill file path (required before the
+    clock) or ``realtime`` (the robot's clock drives the loop: each newest
+    state answered as it arrives; states never answered are overruns).
+    rate_hz : nominal control rate: the tick cost is checked against it at
+    start-up, and in real time the loop does its bookkeeping (e-stop, status,
+    robot-lost watch) at least this often when no state comes. skill : skill file path (required before the
     controller starts; "" only for configs that set it later). stains_from : ``perception`` or ``truth``.
     state_timeout_s : real time: a robot state older than this is not
     answered (nothing new is sent; counted); 0 = five periods. robot_lost_s : no robot state

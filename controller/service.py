@@ -146,38 +146,45 @@ class ControllerService:
                 break
 
     def _run_realtime(self) -> None:
+        """Real time, driven by the robot's clock: each state is answered as soon as it arrives (as an FRI client
+        answers each packet), so the answer's delay is the tick's cost, never a wait for a deadline of our own.
+        Without a state for a nominal period (``rate_hz``) the loop still does its bookkeeping: e-stop, status,
+        the robot-lost watch. A state that arrives while an older one is still unanswered replaces it; the states
+        never answered are counted as overruns (missed robot periods)."""
         hygiene = LoopHygiene(counts=self.counters)
         hygiene.start()  # first: its full collection must not count as a stalled first period
-        states = self.node.latest(self.keys.robot_state, RobotState)
+        states = self.node.inbox(self.keys.robot_state, RobotState, maxlen=1)  # the newest state only
         self._state_reader = states
-        period_ns = int(round(1e9 / self.p.rate_hz))
+        nominal_s = 1.0 / self.p.rate_hz
         timeout_ns = int(self.p.state_timeout_or_default_s * 1e9)
         state: RobotState | None = None
         state_ns = 0
         answered_seq = -1
-        robot_rate = 0.0
-        next_ns = time.monotonic_ns()
-        t_prev = next_ns
+        robot_period_ns = int(nominal_s * 1e9)
+        t_prev = time.monotonic_ns()
         try:
             while not self._exit_now():
+                new = self._usable(states.get(nominal_s))
                 t0 = time.monotonic_ns()
-                new = self._usable(states.take())
                 if new is not None:
                     if state is not None and new.seq < state.seq or self._lost:
                         self._robot_back(new)
-                    if new.capabilities.state_rate_hz != robot_rate:
-                        robot_rate = self._check_robot_rate(new.capabilities.state_rate_hz)
+                        answered_seq = -1
+                    rate = new.capabilities.state_rate_hz
+                    if rate > 0 and int(1e9 / rate) != robot_period_ns:
+                        robot_period_ns = int(1e9 / rate)
+                        self.counters["robot_rate_changes"] += 1
+                        log.info("the robot publishes states at %.0f Hz: this loop follows it", rate)
                     state, state_ns = new, t0
                 self._poll_estop()
-                age_ns = t0 - state_ns
                 t1 = t2 = time.monotonic_ns()
-                if state is None or age_ns > timeout_ns:
+                if state is None or t0 - state_ns > timeout_ns:
                     if state is not None:
                         self.counters["ticks_without_fresh_state"] += 1
-                        self._check_lost(age_ns / 1e9)
-                elif state.seq == answered_seq:
-                    self.counters["ticks_without_new_state"] += 1  # already answered; the robot holds that command
-                else:
+                        self._check_lost((t0 - state_ns) / 1e9)
+                elif new is not None and state.seq != answered_seq:
+                    if answered_seq >= 0 and state.seq > answered_seq + 1:
+                        self.stats.overruns += state.seq - answered_seq - 1  # robot periods left unanswered
                     dt = self._dt_from_robot_clock(state)  # the robot's own time, also across skipped periods
                     self._poll_stains(t0 / 1e9)
                     t1 = time.monotonic_ns()
@@ -185,13 +192,13 @@ class ControllerService:
                     t2 = time.monotonic_ns()
                     self._send(state.seq, tau)
                     answered_seq = state.seq
+                    t3 = time.monotonic_ns()
+                    self.stats.add((t0 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+                    t_prev = t0
                 self._publish_status()
-                t3 = time.monotonic_ns()
-                self.stats.add((t0 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
-                t_prev = t0
                 if self.p.max_ticks and self.ticks >= self.p.max_ticks:
                     break
-                next_ns = hygiene.next_period(self.stats, next_ns, period_ns)
+                hygiene.collect_due(state_ns + robot_period_ns - time.monotonic_ns())  # the slack before the next
         finally:
             hygiene.stop()
 
@@ -288,15 +295,6 @@ class ControllerService:
                 dt = measured
         self._last_robot_ns = state.robot_time_ns
         return dt
-
-    def _check_robot_rate(self, robot_hz: float) -> float:
-        """Say so (once per change) when the robot declares a state rate other than this loop's; returns it."""
-        if robot_hz > 0 and abs(robot_hz - self.p.rate_hz) > 0.1 * robot_hz:
-            self.counters["robot_state_rate_differs"] += 1
-            log.warning("the robot publishes states at %.0f Hz, this controller ticks at %.0f Hz: set "
-                        "[controller] rate_hz = %.0f (a faster loop answers the same state again, a slower one "
-                        "leaves states unanswered)", robot_hz, self.p.rate_hz, robot_hz)
-        return robot_hz
 
     def _check_lost(self, silence_s: float) -> None:
         if self._ever_state and not self._lost and silence_s >= self.p.robot_lost_s:
