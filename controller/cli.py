@@ -21,7 +21,7 @@ import numpy as np
 from lampskit.errors import LampsError, SkillFileError
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
-from interfaces.priority import REALTIME, set_service_priority
+from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 
 SERVICE = "controller"
 #: A real-time rate is refused when the control law's median tick takes more than this share of the period.
@@ -134,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s controller %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params = load(a)
-        set_service_priority(REALTIME)
+        wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         from interfaces.robot_model import RobotModel
 
         skill = load_runnable_skill(params.skill)
@@ -153,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     from .core import ControllerCore
     from .service import ControllerService
 
+    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
     try:
         node = ServiceNode(SERVICE, zenoh_settings).__enter__()
     except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint

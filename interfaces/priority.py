@@ -43,8 +43,10 @@ KINDS = {REALTIME: REALTIME_NICE, BACKGROUND: BACKGROUND_NICE}
 REPORT = ""
 
 
-def _wanted(kind: str, env: dict | os._Environ) -> int | None:
-    """The nice value to ask for (None: keep the inherited one)."""
+def wanted_nice(kind: str, env: dict | os._Environ | None = None) -> int | None:
+    """The nice value a service of ``kind`` asks for (None: keep the inherited one); ConfigError for a bad
+    ``LAMPS_NICE`` (a service checks it with the rest of its configuration, before it serves)."""
+    env = os.environ if env is None else env
     if kind not in KINDS:
         raise ConfigError(f"service priority kind must be one of {sorted(KINDS)}, got {kind!r}")
     text = env.get("LAMPS_NICE", "").strip()
@@ -77,14 +79,17 @@ def set_service_priority(kind: str, env: dict | os._Environ | None = None) -> st
     Raises ConfigError for a bad ``LAMPS_NICE``; a refusal by the operating system is reported, not raised.
     """
     global REPORT
-    wanted = _wanted(kind, os.environ if env is None else env)
+    wanted = wanted_nice(kind, env)
     now = os.getpriority(os.PRIO_PROCESS, 0)
     if wanted is None or wanted == now:
         REPORT = f"nice {now}"
     else:
         try:
             for tid in _threads():  # the calling thread first; then any a library started at import
-                os.setpriority(os.PRIO_PROCESS, tid, wanted)
+                try:
+                    os.setpriority(os.PRIO_PROCESS, tid, wanted)
+                except ProcessLookupError:
+                    pass  # a thread that ended meanwhile
             REPORT = f"nice {wanted}"
         except PermissionError:
             REPORT = f"nice {now} (asked {wanted}: refused, needs CAP_SYS_NICE)"

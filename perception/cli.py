@@ -24,7 +24,7 @@ import msgspec
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
-from interfaces.priority import BACKGROUND, set_service_priority
+from interfaces.priority import BACKGROUND, set_service_priority, wanted_nice
 
 from .params import PerceptionParams, parse_source
 
@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s perception %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params = load(a)
-        set_service_priority(BACKGROUND)
+        wanted_nice(BACKGROUND)  # a bad LAMPS_NICE is refused with the rest of the configuration
         kind, _ = parse_source(params.source)
         if a.no_zenoh and kind == "zenoh":
             raise InterfaceError("--no-zenoh needs an offline source (--source folder:DIR, video:FILE or device:N)")
@@ -100,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from .service import SERVICE, PerceptionService
 
+    set_service_priority(BACKGROUND)  # before the Zenoh session starts its threads: they inherit it
     node = None
     if not a.no_zenoh:
         try:

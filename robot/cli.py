@@ -22,7 +22,7 @@ import sys
 
 from interfaces.config import add_zenoh_options, check_range, load_config, zenoh_with_options
 from interfaces.errors import ConfigError
-from interfaces.priority import REALTIME, set_service_priority
+from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from lampskit.errors import LampsError
 
 SERVICE = "robot"
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s robot %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, lbr_params, server_params = load(a)
-        set_service_priority(REALTIME)
+        wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
     except LampsError as exc:
         print(f"lamps robot: error: {exc}", file=sys.stderr)
         return 1
@@ -96,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from .server import RobotServer
 
+    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
     try:
         node = ServiceNode(SERVICE, zenoh_settings).__enter__()
     except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint

@@ -17,7 +17,7 @@ import sys
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
-from interfaces.priority import REALTIME, set_service_priority
+from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 
 SERVICE = "sim"
 
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s sim %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params = load(a)
-        set_service_priority(REALTIME)
+        wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         from .core import SimCore
 
         core = SimCore(params)
@@ -113,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from .service import SimService
 
+    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
     try:
         node = ServiceNode(SERVICE, zenoh_settings).__enter__()
     except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint

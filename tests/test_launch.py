@@ -317,11 +317,13 @@ def test_lamps_up_on_a_horizontal_board_with_a_given_skill(tmp_path, learned_ski
 
 
 @pytest.mark.slow
-def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, learned_skill_file):
-    """--robot lbr-sim: the arm behind lbr_fri_ros2_stack's CDR messages, the real adapter, the same controller."""
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, learned_skill_file, mode):
+    """--robot lbr-sim: the arm behind lbr_fri_ros2_stack's CDR messages (at the stack's 2 ms torque-command FRI
+    period), the real adapter, the same controller; in real time on the robot's clock, camera and perception on."""
     out, base = tmp_path / "run", _port_base()
     r = _up(["--out", str(out), "--port-base", str(base), "--robot", "lbr-sim", "--skill", str(learned_skill_file),
-             "--max-duration", "400"], timeout_s=500)
+             "--mode", mode, "--max-duration", "400"], timeout_s=500)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     report = _check_run(out, base)
     assert report["dirt_removed_fraction"] >= 0.98, report["dirt_removed_fraction"]
@@ -337,7 +339,9 @@ def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, lear
     assert not any(k.startswith("states_dropped") for k in c), c
     states = [m for _, m in rec[keys.robot_state]]
     assert all(s["capabilities"]["backend"] == "lbr" and s["capabilities"]["gravity_compensated"] for s in states)
-    print(f"lamps up (lbr-sim): {report['sim_time_s']:.1f} s robot time, removed {report['dirt_removed_fraction']:.2%}")
+    assert all(s["capabilities"]["state_rate_hz"] == 500.0 for s in states[:100]), states[0]["capabilities"]
+    print(f"lamps up (lbr-sim, {mode}): {report['sim_time_s']:.1f} s robot time, "
+          f"removed {report['dirt_removed_fraction']:.2%}, controller {report['loop_timing']}")
 
 
 # ------------------------------------------------------------------------------------------ bad input

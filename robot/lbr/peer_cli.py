@@ -16,7 +16,7 @@ import signal
 import sys
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
-from interfaces.priority import REALTIME, set_service_priority
+from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from lampskit.errors import LampsError
 
 PROG = "lamps lbr-peer"
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s lbr-peer %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params, sim_params = load(a)
-        set_service_priority(REALTIME)
+        wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         from sim.core import SimCore
 
         core = SimCore(sim_params)
@@ -81,6 +81,7 @@ def _serve(zenoh_settings, params, sim_params, core) -> int:
 
     from .peer import SERVICE, LbrPeer
 
+    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
     try:
         node = ServiceNode(SERVICE, zenoh_settings).__enter__()
     except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
