@@ -16,8 +16,9 @@ Usage: .venv/bin/python bench/bench_controller.py [--quick] [--json OUT]
    no camera, stains from the sim's truth. The controller's status is
    sampled every 0.5 s; its timing percentiles cover the last 2000 ticks, so
    the table gives the median of those windowed p50 periods, the largest
-   windowed p99, the largest single period, and the overruns (missed
-   periods) at the end, also per 10,000 ticks. Baseline: a 1000 us period
+   windowed p99, the largest single period, and the overruns at the end
+   (the controller's loop is driven by the robot's states: an overrun is a
+   robot state it never answered), also per 10,000 ticks. Baseline: a 1000 us period
    with no overruns. Also the controller's final phase, its
    ``ticks_without_fresh_state`` counter, and the sim's own step period p99
    and ``stale_command_brakes`` (steps where no fresh command arrived).
