@@ -263,17 +263,21 @@ def dataclass_from_table(cls, section: str, table: Mapping[str, Any], **extra):
 
 
 def add_zenoh_options(parser) -> None:
-    """``--listen``, ``--connect`` (repeatable endpoints) and ``--robot-id`` on an argparse parser."""
+    """``--listen``, ``--connect`` (repeatable endpoints), ``--robot-id`` and ``--zenoh-config`` on an argparse
+    parser."""
     parser.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (repeatable)")
     parser.add_argument("--connect", metavar="ENDPOINT", action="append",
                         help="Zenoh endpoint to connect to (repeatable)")
     parser.add_argument("--robot-id", help="key prefix becomes lamps/<robot-id>")
+    parser.add_argument("--zenoh-config", metavar="FILE",
+                        help="a Zenoh configuration file (JSON5) to start from: QoS, buffers, interceptors "
+                             "([zenoh] config_file)")
 
 
 def zenoh_with_options(settings: ZenohSettings, args) -> ZenohSettings:
     """``settings`` with the options of :func:`add_zenoh_options` that were given (they win over the file)."""
-    over = {k: v for k, v in (("listen", args.listen), ("connect", args.connect), ("robot_id", args.robot_id))
-            if v is not None}
+    over = {k: v for k, v in (("listen", args.listen), ("connect", args.connect), ("robot_id", args.robot_id),
+                              ("config_file", getattr(args, "zenoh_config", None))) if v is not None}
     if not over:
         return settings
     return ZenohSettings(**{**{f: getattr(settings, f) for f in settings.__dataclass_fields__}, **over})

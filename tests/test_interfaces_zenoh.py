@@ -190,3 +190,15 @@ def test_a_zenoh_config_file_is_refused_naming_what_is_wrong(tmp_path, text, mat
         zenoh_config(ZenohSettings(config_file=path))
     with pytest.raises(ConfigError, match="is not a file"):
         zenoh_config(ZenohSettings(config_file=str(tmp_path / "missing.json5")))
+
+
+def test_every_service_takes_a_zenoh_config_file_on_its_command_line(tmp_path):
+    import subprocess
+    import sys
+
+    from .zenoh_helpers import REPO
+
+    missing = tmp_path / "missing.json5"
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "robot", "--backend", "mock", "--zenoh-config",
+                        str(missing)], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1 and f"config_file '{missing}' is not a file" in r.stderr, r.stderr
