@@ -40,9 +40,25 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+def version() -> str:
+    """``lamps X.Y.Z`` with the versions of the middleware and the libraries a bug report needs."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as of
+
+    def v(name: str) -> str:
+        try:
+            return of(name)
+        except PackageNotFoundError:
+            return "not installed"
+
+    return (f"lamps {v('lamps')} (python {sys.version.split()[0]}, eclipse-zenoh {v('eclipse-zenoh')}, "
+            f"pin {v('pin')}, pybullet {v('pybullet')}, numpy {v('numpy')})")
+
+
 def _usage() -> str:
     width = max(len(name) for name in COMMANDS)
-    lines = ["usage: lamps COMMAND [options]   (lamps COMMAND --help for each)", "", "commands:"]
+    lines = ["usage: lamps COMMAND [options]   (lamps COMMAND --help for each; lamps --version)", "",
+             "commands:"]
     lines += [f"  {name:<{width}}  {text}" for name, (_, text) in COMMANDS.items()]
     return "\n".join(lines)
 
@@ -52,6 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     if not args or args[0] in ("-h", "--help", "help"):
         print(_usage())
         return 0 if args else 2
+    if args[0] in ("-V", "--version"):
+        print(version())
+        return 0
     name, rest = args[0], args[1:]
     if name not in COMMANDS:
         print(f"lamps: unknown command {name!r}; valid: {', '.join(COMMANDS)}", file=sys.stderr)

@@ -237,6 +237,7 @@ class ServiceNode:
         self._readers: list[Latest | Inbox] = []
 
     def __enter__(self) -> "ServiceNode":
+        zenoh.try_init_log_from_env()  # RUST_LOG (e.g. zenoh=info) shows Zenoh's own log on stderr; unset: quiet
         self._session = zenoh.open(zenoh_config(self.settings))
         self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
         return self

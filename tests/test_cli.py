@@ -7,6 +7,7 @@ no output file (not even a partial one).
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -44,6 +45,25 @@ def test_help_lists_commands_and_unknown_command_fails(capsys):
     assert code == 0 and "segment" in out and "learn" in out
     code, _, err = run(["frobnicate"], capsys)
     assert code == 2 and "unknown command 'frobnicate'" in err
+
+
+def test_version_names_lamps_and_the_libraries_a_bug_report_needs(capsys):
+    from importlib.metadata import version
+
+    code, out, _ = run(["--version"], capsys)
+    assert code == 0 and out.startswith(f"lamps {version('lamps')} (python ")
+    assert f"eclipse-zenoh {version('eclipse-zenoh')}" in out and f"pin {version('pin')}" in out
+
+
+def test_rust_log_shows_zenohs_own_log(tmp_path):
+    code = ("from interfaces.config import ZenohSettings\nfrom interfaces.session import ServiceNode\n"
+            "with ServiceNode('sim', ZenohSettings(listen=('tcp/127.0.0.1:0',), robot_id='logtest')):\n    pass\n")
+    quiet = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60)
+    loud = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60,
+                          env={**os.environ, "RUST_LOG": "zenoh=info", "NO_COLOR": "1"})
+    assert quiet.returncode == 0 and loud.returncode == 0, quiet.stderr + loud.stderr
+    said = lambda r: r.stdout + r.stderr  # noqa: E731  (Zenoh's own log writer uses stdout)
+    assert "Zenoh can be reached at" not in said(quiet) and "Zenoh can be reached at" in said(loud), said(loud)
 
 
 def test_console_script_runs_as_a_process():
