@@ -139,12 +139,14 @@ def _camera_info_schema() -> dict:
 class McapSink:
     """Channels and schemas on demand; :meth:`write` one decoded message (or raw bytes) per call."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path | None = None, *, stream=None, library: str = "lamps") -> None:
+        """A new MCAP file at ``path``, or into the open binary ``stream`` (not closed by :meth:`finish`)."""
         self.path = path
-        self._f = open(path, "wb")
+        self._own = stream is None
+        self._f = open(path, "wb") if stream is None else stream
         self._w = Writer(self._f, chunk_size=CHUNK_BYTES)
         self._last_flush = time.monotonic()
-        self._w.start(profile="", library="lamps")
+        self._w.start(profile="", library=library)
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._seq: Counter[str] = Counter()
@@ -161,31 +163,37 @@ class McapSink:
                                                              schema_id=self._schema(schema_name, schema))
         return self._channels[topic]
 
-    def carry_over(self, records: McapRecords) -> int:
-        """Write every message of an earlier recording (its own times and sequence numbers), channels and schemas
-        merged by topic and name; returns how many were written."""
-        schema_ids = {}
-        for sid, sc in records.schemas.items():
-            if sc.name not in self._schemas:
-                self._schemas[sc.name] = self._w.register_schema(name=sc.name, encoding=sc.encoding, data=sc.data)
-            schema_ids[sid] = self._schemas[sc.name]
-        channel_ids = {}
-        for cid, ch in records.channels.items():
-            if (ch.schema_id in schema_ids or ch.schema_id == 0) and ch.topic not in self._channels:
-                self._channels[ch.topic] = self._w.register_channel(
-                    topic=ch.topic, message_encoding=ch.message_encoding, schema_id=schema_ids.get(ch.schema_id, 0),
-                    metadata=ch.metadata)
-            if ch.topic in self._channels:
-                channel_ids[cid] = (self._channels[ch.topic], ch.topic)
-        n = 0
-        for m in records.messages:
-            if m.channel_id in channel_ids:
-                ch, topic = channel_ids[m.channel_id]
-                self._w.add_message(channel_id=ch, log_time=m.log_time, publish_time=m.publish_time,
-                                    sequence=m.sequence, data=m.data)
-                self._seq[topic] = max(self._seq[topic], m.sequence)
+    def carry_over(self, path: Path) -> tuple[int, int]:
+        """Write every complete message of the earlier recording ``path`` (finished or cut), with its own times and
+        sequence numbers, channels and schemas merged by topic and name, streamed (a recording of hours never sits
+        in memory); returns (messages written, the last one's log time [ns], 0 if none)."""
+        from mcap.records import Channel as ChannelRecord
+        from mcap.records import Schema as SchemaRecord
+
+        schema_ids: dict[int, int] = {}
+        channel_ids: dict[int, tuple[int, str]] = {}
+        n = last_ns = 0
+        for rec in iter_records(path):
+            if isinstance(rec, SchemaRecord):
+                if rec.name not in self._schemas:
+                    self._schemas[rec.name] = self._w.register_schema(name=rec.name, encoding=rec.encoding,
+                                                                      data=rec.data)
+                schema_ids[rec.id] = self._schemas[rec.name]
+            elif isinstance(rec, ChannelRecord):
+                if (rec.schema_id in schema_ids or rec.schema_id == 0) and rec.topic not in self._channels:
+                    self._channels[rec.topic] = self._w.register_channel(
+                        topic=rec.topic, message_encoding=rec.message_encoding,
+                        schema_id=schema_ids.get(rec.schema_id, 0), metadata=rec.metadata)
+                if rec.topic in self._channels:
+                    channel_ids[rec.id] = (self._channels[rec.topic], rec.topic)
+            elif rec.channel_id in channel_ids:  # a message
+                ch, topic = channel_ids[rec.channel_id]
+                self._w.add_message(channel_id=ch, log_time=rec.log_time, publish_time=rec.publish_time,
+                                    sequence=rec.sequence, data=rec.data)
+                self._seq[topic] = max(self._seq[topic], rec.sequence)
                 n += 1
-        return n
+                last_ns = max(last_ns, rec.log_time)
+        return n, last_ns
 
     def write_json(self, topic: str, schema_name: str, data: Any, t_ns: int, schema: dict | None = None) -> None:
         """One JSON message on ``topic``; ``schema`` (full properties) is needed the first time ``schema_name``
@@ -247,9 +255,10 @@ class McapSink:
 
     def finish(self) -> None:
         self._w.finish()
-        self._f.flush()
-        os.fsync(self._f.fileno())
-        self._f.close()
+        if self._own:
+            self._f.flush()
+            os.fsync(self._f.fileno())
+            self._f.close()
 
 
 class Recorder:
@@ -282,11 +291,9 @@ class Recorder:
         earlier = self.partial if self.partial.is_file() else final if final.is_file() else None
         if earlier is None:
             return McapSink(self.partial)
-        records = read_records(earlier)
         fresh = self.partial.with_name(self.partial.name + ".new")
         sink = McapSink(fresh)
-        n = sink.carry_over(records)
-        last_ns = max((m.log_time for m in records.messages), default=0)
+        n, last_ns = sink.carry_over(earlier)
         sink.write_json(RESUMED_TOPIC, "lamps.RecorderResumed",
                         {"carried_messages": n, "earlier_file": earlier.name, "earlier_finished": earlier == final,
                          "last_earlier_ns": last_ns}, time.time_ns(), _RESUMED_SCHEMA)
@@ -348,62 +355,42 @@ class Recorder:
         return final
 
 
-@dataclass
-class McapRecords:
-    """The schema, channel and message records of an MCAP file, by id (messages in file order)."""
-
-    schemas: dict
-    channels: dict
-    messages: list
-
-
-def read_records(path: Path) -> McapRecords:
-    """Every complete record of the MCAP file ``path``, finished or not (its writer died): a tolerant stream
-    read that stops at the first damaged or cut record and keeps what came before it."""
+def iter_records(path: Path):
+    """Every complete Schema, Channel and Message record of the MCAP file ``path`` in file order, finished or
+    not (its writer died): a tolerant stream read that stops at the first damaged or cut record, having yielded
+    everything before it."""
     from mcap.exceptions import McapError
     from mcap.records import Channel as ChannelRecord
     from mcap.records import Message as MessageRecord
     from mcap.records import Schema as SchemaRecord
     from mcap.stream_reader import StreamReader
 
-    out = McapRecords({}, {}, [])
     with open(path, "rb") as f:
         try:
             for record in StreamReader(f, validate_crcs=True).records:
-                if isinstance(record, SchemaRecord):
-                    out.schemas[record.id] = record
-                elif isinstance(record, ChannelRecord):
-                    out.channels[record.id] = record
-                elif isinstance(record, MessageRecord):
-                    out.messages.append(record)
+                if isinstance(record, (SchemaRecord, ChannelRecord, MessageRecord)):
+                    yield record
         except (McapError, EOFError, ValueError, struct.error, zlib.error, zstd.ZstdError):
-            pass  # the cut: everything before it is whole (each chunk carries its own CRC)
+            return  # the cut: everything before it is whole (each chunk carries its own CRC)
         except Exception as exc:  # a damaged chunk can fail inside a decompressor in other ways
             log.warning("reading %s: stopped at %s: %s", path, type(exc).__name__, exc)
-    return out
 
 
 def recover_recording(partial: Path, final: Path) -> int:
     """Write ``final`` (atomically) with every message of the complete records of ``partial``, an unfinished MCAP
     (its writer died); returns how many messages were recovered. Reading stops at the first damaged or cut
-    record; what came before it is kept."""
+    record; what came before it is kept. Streamed, like :meth:`McapSink.carry_over`, which it is."""
     from lampskit.atomic import write_atomic
 
-    records = read_records(partial)
+    count = [0]
 
     def write(out) -> None:
-        w = Writer(out, chunk_size=CHUNK_BYTES)
-        w.start(profile="", library="lamps (recovered)")
-        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in records.schemas.items()}
-        channel_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), c.metadata)
-                       for cid, c in records.channels.items() if c.schema_id in schema_ids or c.schema_id == 0}
-        for m in records.messages:
-            if m.channel_id in channel_ids:
-                w.add_message(channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
-        w.finish()
+        sink = McapSink(stream=out, library="lamps (recovered)")
+        count[0], _ = sink.carry_over(partial)
+        sink.finish()
 
     write_atomic(final, write)
-    return len(records.messages)
+    return count[0]
 
 
 def read_recording(path: Path) -> dict[str, list[tuple[int, dict]]]:
