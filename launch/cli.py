@@ -69,6 +69,7 @@ def build_up_parser() -> argparse.ArgumentParser:
                    help="listen on N, N+1, ... (default: free ports); a busy port is refused before anything starts")
     p.add_argument("--robot-id", default=None, help="key prefix lamps/<robot-id> (default iiwa)")
     p.add_argument("-q", "--quiet", action="store_true", help="do not echo the services' logs")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what the launcher does")
     return p
 
 
@@ -120,7 +121,8 @@ def _learn(a, out: Path, echo, stop_requested: threading.Event) -> Path:
 
 def up_main(argv: list[str] | None = None) -> int:
     a = build_up_parser().parse_args(argv)
-    logging.basicConfig(level=logging.WARNING, format="lamps up %(levelname)s: %(message)s")
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="lamps up %(levelname)s: %(message)s")
     stop_requested = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop_requested.set())
     signal.signal(signal.SIGTERM, lambda *_: stop_requested.set())

@@ -28,9 +28,11 @@ def record_main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", required=True, metavar="DIR", help="run folder")
     p.add_argument("--config", metavar="FILE", help="TOML config with a [zenoh] table")
     p.add_argument("--no-report", action="store_true", help="only the recording")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     add_zenoh_options(p)
     a = p.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING, format="lamps record %(levelname)s: %(message)s")
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="lamps record %(levelname)s: %(message)s")
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -79,7 +81,10 @@ def report_main(argv: list[str] | None = None) -> int:
         "Rebuild RUN_DIR/report.json and the plots from RUN_DIR/recording.mcap (and run.json if present); a run "
         "whose recorder died (only recording.mcap.partial) is recovered first, up to the crash."))
     p.add_argument("run_dir", metavar="RUN_DIR")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     a = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="lamps report %(levelname)s: %(message)s")
     from .record import RECORDING, recover_recording
 
     run = Path(a.run_dir)

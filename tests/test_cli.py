@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from interfaces.cli import main
+from interfaces.cli import COMMANDS, main
 
 from .conftest import REAL_DEMOS, REPO
 
@@ -226,3 +226,10 @@ def test_readme_main_job_runs(tmp_path):
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["periodic_segments"] == summary["true_periodic_segments"]
     assert summary["segmentation_frame_accuracy"] >= 0.95
+
+
+@pytest.mark.parametrize("command", sorted(set(COMMANDS) - {"credentials", "certificates", "bench"}))
+def test_every_command_that_logs_takes_verbose(command, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main([command, "--help"])
+    assert exit_.value.code == 0 and "-v, --verbose" in capsys.readouterr().out, command
