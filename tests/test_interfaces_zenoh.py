@@ -158,16 +158,21 @@ def test_a_zenoh_config_file_adds_what_the_settings_do_not_cover(tmp_path):
         states = b.inbox(b.keys.robot_state, RobotState, maxlen=1000)
         commands = b.inbox(b.keys.robot_command, TorqueCommand, maxlen=1000)
         wait_subscribed(a.session, a.keys.robot_state)
+        wait_subscribed(a.session, a.keys.robot_command)
         t0 = time.monotonic()
         for seq in range(300):
             a.publish(a.keys.robot_state, state(seq))
             a.publish(a.keys.robot_command, TorqueCommand(seq=seq, stamp_ns=1, tau_nm=[0.0] * 7))
             time.sleep(0.001)
         elapsed = time.monotonic() - t0
-        wait_for(lambda: commands.received == 300, 5.0, "every command")
-        time.sleep(0.2)  # the thinned key has nothing more on its way; give the last sample time to land
-        n_states = states.received
-    assert 1 <= n_states <= 100 * elapsed + 2, (n_states, elapsed)
+        # until nothing more arrives for 0.2 s: a put's default congestion control drops under load, so count
+        # what arrived rather than wait for all that was sent
+        seen: list[int] = []
+        wait_for(lambda: seen.append(commands.received) or (len(seen) > 20 and seen[-1] == seen[-21]), 10.0,
+                 "the commands to stop arriving", period_s=0.01)
+        n_states, n_commands = states.received, commands.received
+    assert 1 <= n_states <= 100 * elapsed + 2, (n_states, elapsed)  # at most one per 10 ms passed
+    assert n_commands >= 0.8 * 300 and n_commands > 2.5 * n_states, (n_commands, n_states)  # the others untouched
 
 
 @pytest.mark.parametrize("text, match", [
