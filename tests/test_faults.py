@@ -39,6 +39,19 @@ def _assert_safe(report: dict) -> None:
     assert all(f["wall_ns"] > 0 and f["reason"] for f in report["faults"]), report["faults"]
 
 
+def _wait_done_for_good(cell: Cell, timeout_s: float, settle_s: float = 4.0) -> None:
+    """Until the controller is DONE and stays DONE for ``settle_s`` (a stain the arm hid from the camera shows up
+    once it has retreated, and the controller goes back for it)."""
+    end = time.monotonic() + timeout_s
+    since = time.monotonic()
+    while True:
+        cell.wait_phase(("DONE",), max(end - time.monotonic(), 0.1), since=since)
+        time.sleep(settle_s)
+        if cell.phases[-1][1] == "DONE":
+            return
+        since = time.monotonic()
+
+
 def _sim_status(cell: Cell, accept, what: str) -> ServiceStatus:
     reader = cell.node.latest(cell.node.keys.sim_status, ServiceStatus)
     return wait_sample(reader, accept, 10.0, what)
@@ -163,7 +176,7 @@ def test_realtime_cleans_the_board_with_samples_dropped_on_the_state_command_and
             "perception": {"perception/stains": 2.0}}
     with Cell(tmp_path / "run", learned_skill_file, "realtime", thin=thin) as cell:
         cell.wait_phase(("WIPE",), 120.0)
-        cell.wait_phase(("DONE",), 120.0)
+        _wait_done_for_good(cell, 180.0)
         report = cell.finish()
     _assert_safe(report)
     assert report["dirt_removed_fraction"] >= 0.98, report["dirt_removed_fraction"]
