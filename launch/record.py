@@ -42,7 +42,6 @@ import threading
 import time
 import zlib
 from collections import Counter, deque
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
