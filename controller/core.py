@@ -35,6 +35,7 @@ from .control.force import NormalForceRegulator
 from .control.impedance import Kinematics, Reference, TaskShaping, impedance_torque, task_modes, task_stiffness
 from .control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
                              speed_excess_force)
+from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
 from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
@@ -134,6 +135,8 @@ class ControllerCore:
         self._modes = None
         self._modes_age = 0
         self._modes_scale = -1.0
+        self.robot_rate_hz = 0.0  # unknown until a state says
+        self.mode_cap_rad_s = params.impedance.max_mode_frequency_rad_s
         self.kin = Kinematics(self.model)
         watch = params.limits
         self.disturbance = DisturbanceWatch(watch.disturbance_share * lim.tau_max, watch.disturbance_filter_s,
@@ -313,13 +316,22 @@ class ControllerCore:
         self.shaper(tau, min(dt_s, self._period_s), None if gravity_compensated else kin.g)
         return tau
 
+    def follow_robot_rate(self, rate_hz: float) -> None:
+        """The robot sends states at ``rate_hz`` (its declared capability): cap the task modes for that loop
+        delay (:func:`~controller.control.params.mode_frequency_cap`); the modes are recomputed at once."""
+        if rate_hz == self.robot_rate_hz:
+            return
+        self.robot_rate_hz = rate_hz
+        self.mode_cap_rad_s = mode_frequency_cap(self.p.impedance.max_mode_frequency_rad_s, rate_hz)
+        self._modes = None
+
     def _task_modes(self, kin: Kinematics):
         scale = self.shaping.stiffness_scale
         self._modes_age += 1
         if self._modes is None or self._modes_age >= MODES_EVERY_TICKS or scale != self._modes_scale:
             imp = self.p.impedance
             self._modes = task_modes(kin.Lambda, task_stiffness(imp, scale), imp.damping_factor,
-                                     imp.max_mode_frequency_rad_s)
+                                     self.mode_cap_rad_s)
             self._modes_age, self._modes_scale = 0, scale
         return self._modes
 

@@ -238,6 +238,10 @@ class ControllerService:
         dq = np.asarray(state.dq_rad_s)
         wrench = np.asarray(state.wrench_world)
         caps = state.capabilities
+        if caps.state_rate_hz != self.core.robot_rate_hz:
+            self.core.follow_robot_rate(caps.state_rate_hz)
+            log.info("robot states at %.0f Hz: task modes capped at %.0f rad/s", caps.state_rate_hz,
+                     self.core.mode_cap_rad_s)
         try:
             tau = self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm),
                                  applied, robot_held=state.command_seq < 0)

@@ -9,8 +9,9 @@ import pytest
 import scipy.linalg
 
 from controller.control.impedance import Kinematics, Reference, impedance_torque, pose_error, task_modes
-from controller.control.params import ControlConfigError, ImpedanceParams
+from controller.control.params import ControlConfigError, ImpedanceParams, mode_frequency_cap
 from interfaces.robot_model import RobotModel
+from robot.lbr.guards import VelocityFilter
 from sim.core import SimCore
 from sim.params import SimParams
 
@@ -110,6 +111,49 @@ def test_the_law_holds_a_pose_with_three_periods_of_loop_delay_on_a_gravity_comp
         assert np.all(np.abs(core.out.dq) < 1e-2), core.out.dq  # settled (the posture drifts slowly)
     finally:
         core.close()
+
+
+def test_the_mode_cap_scales_with_the_robot_period_and_never_rises_above_the_configured_one():
+    assert mode_frequency_cap(120.0, 1000.0) == pytest.approx(120.0)
+    assert mode_frequency_cap(120.0, 500.0) == pytest.approx(60.0)  # FRI at 2 ms
+    assert mode_frequency_cap(120.0, 2000.0) == pytest.approx(120.0)
+    assert mode_frequency_cap(120.0, 0.0) == pytest.approx(120.0)  # rate not declared
+
+
+def _hold_pose_at_500_hz(model, cap_rad_s: float) -> tuple[float, float]:
+    """A 500 Hz robot (each command held for two 1 ms physics steps) answered two periods late, with the
+    velocity estimated from positions as the lbr adapter does: (final pad position error [m], final max joint
+    speed [rad/s]) after 2.5 s holding a pose 3 cm and 0.15 rad off the start."""
+    core = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
+    try:
+        imp = ImpedanceParams(max_mode_frequency_rad_s=cap_rad_s)
+        q0 = core.out.q.copy()
+        p0, R0 = model.tcp_pose(q0)
+        ref = Reference(p0 + np.array([0.02, -0.02, 0.01]), R0 @ pin.exp3(np.array([0.0, 0.0, 0.15])))
+        velocity = VelocityFilter(7, 80.0)
+        pending = [np.zeros(7)] * 2
+        t_ns = 0
+        for _ in range(1250):
+            dq = velocity.update(core.out.q, t_ns).copy()
+            terms = impedance_torque(model, core.out.q, dq, ref, imp, q0, False)
+            pending.append(np.clip(terms.tau_nm, -core.tau_max, core.tau_max))
+            tau = pending.pop(0)
+            for _ in range(2):
+                core.step(tau)
+                t_ns += 1_000_000
+        return float(np.linalg.norm(model.tcp_pose(core.out.q)[0] - ref.p_m)), float(np.max(np.abs(core.out.dq)))
+    finally:
+        core.close()
+
+
+@pytest.mark.slow
+def test_a_500_hz_robot_with_estimated_velocity_needs_the_scaled_mode_cap(model):
+    """The lbr path (FRI at 2 ms, velocity from positions, an answer two periods late): the cap scaled for
+    500 Hz settles; the 1 kHz cap spins the wrist up (real-time lbr-sim runs tripped the adapter's speed guard)."""
+    error_m, speed = _hold_pose_at_500_hz(model, mode_frequency_cap(120.0, 500.0))
+    assert error_m < 1e-3 and speed < 1e-2, (error_m, speed)
+    error_m, speed = _hold_pose_at_500_hz(model, 120.0)
+    assert error_m > 1e-2 or speed > 1.0, (error_m, speed)
 
 
 @pytest.mark.parametrize("add_gravity", [True, False])

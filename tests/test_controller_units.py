@@ -472,3 +472,28 @@ def test_speed_override_slows_to_the_share_holds_the_peak_and_recovers_slowly():
     for _ in range(2000):  # an absurd demand (a singularity): never slower than min_scale
         s = ov.update(np.array([0.0, 1e6]), 0.001)
     assert s == pytest.approx(0.1)
+
+
+def test_the_controller_caps_its_task_modes_for_the_robot_state_rate(learned_skill):
+    """A robot declaring 500 Hz (FRI at 2 ms) gets half the configured cap on every task mode, at once; 1 kHz
+    and an undeclared rate keep the configured one."""
+    import scipy.linalg
+
+    from controller.core import ControllerCore
+    from controller.control.impedance import Kinematics
+
+    core = ControllerCore(ControllerParams(), learned_skill)
+    kin = Kinematics(core.model).update(np.array([0.2, 0.5, -0.3, -1.3, 0.4, 0.8, -0.2]), np.zeros(7))
+
+    def fastest_mode_rad_s() -> float:
+        modes = core._task_modes(kin)
+        return float(np.sqrt(scipy.linalg.eigh(modes.stiffness(), kin.Lambda, eigvals_only=True).max()))
+
+    configured = core.p.impedance.max_mode_frequency_rad_s
+    assert fastest_mode_rad_s() == pytest.approx(configured, rel=1e-6)  # the wrist's spin is capped
+    core.follow_robot_rate(500.0)
+    assert core.mode_cap_rad_s == pytest.approx(configured / 2)
+    assert fastest_mode_rad_s() == pytest.approx(configured / 2, rel=1e-6)
+    for rate in (1000.0, 0.0):
+        core.follow_robot_rate(rate)
+        assert fastest_mode_rad_s() == pytest.approx(configured, rel=1e-6)

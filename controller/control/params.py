@@ -18,6 +18,23 @@ def _positive(name: str, value: float, hi: float = float("inf"), zero_ok: bool =
         raise ControlConfigError(f"{name} must satisfy {lo} {name} <= {hi}, got {value!r}")
 
 
+#: The robot state period [s] for which ``ImpedanceParams.max_mode_frequency_rad_s`` is set.
+REFERENCE_PERIOD_S = 1e-3
+
+
+def mode_frequency_cap(max_mode_frequency_rad_s: float, robot_rate_hz: float) -> float:
+    """The cap on the task modes' natural frequency [rad/s] for a robot sending states at ``robot_rate_hz``.
+
+    The loop's round trip (state -> command applied) is about a robot period plus the tick; the delay margin
+    of a damped mode depends on the frequency times that delay, so a slower robot gets a proportionally lower
+    cap (500 Hz: half). A faster robot keeps the configured cap (the tick does not get faster); an unknown
+    rate (0) too.
+    """
+    if robot_rate_hz <= 0:
+        return max_mode_frequency_rad_s
+    return max_mode_frequency_rad_s * min(1.0, robot_rate_hz * REFERENCE_PERIOD_S)
+
+
 @dataclass(frozen=True)
 class ImpedanceParams:
     """Cartesian impedance at the pad centre (world axes).
@@ -30,6 +47,9 @@ class ImpedanceParams:
     natural frequency [rad/s]: a mode above it (the spin of a light wrist on
     K_r) gets the stiffness that puts it there. The loop's delay sets it:
     keep it times the round trip (state -> command applied) below ~0.35.
+    It holds for a robot that sends a state every ``REFERENCE_PERIOD_S``
+    (1 ms); a robot with a longer period T gets it times 1 ms / T
+    (:func:`mode_frequency_cap`), since its round trip is that much longer.
     nullspace_stiffness_nm_rad : posture spring K_n [Nm/rad] (its damping
     is critical for a unit inertia, scaled by M) pulling towards the rest posture.
     """
