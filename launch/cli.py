@@ -267,7 +267,8 @@ def _start_services(cell: _Cell, echo, children: list) -> None:
 
 
 def _stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_start: float) -> None:
-    """Stop the services in reverse start order, write ``run.json``, then stop the recorder (its report reads it).
+    """Stop the services (the loops in reverse start order), write ``run.json``, then stop the recorder (its report
+    reads it).
 
     ended : ``outcome`` and ``why`` of the run, the first fields of ``run.json``
     """
@@ -275,7 +276,18 @@ def _stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_star
 
     codes = {}
     stopping_ns = time.time_ns()  # services go silent one by one from here on: not a fault
-    for c in reversed([c for c in children if c.name != "recorder"]):
+    services = [c for c in children if c.name != "recorder"]
+    loops = {s.name for s in cell.services if s.loop}
+    # the background services (nice +10) get almost no CPU while the loops (nice -10) spin, as a lock-step cell
+    # does to the end: they are asked first and waited for last, once the loops are gone (a starved perception
+    # once took over the 10 s before SIGKILL); the loops stop in reverse start order (the controller lifts the
+    # pad before its robot goes)
+    background = [c for c in services if c.name not in loops]
+    for c in background:
+        c.terminate()
+    for c in reversed([c for c in services if c.name in loops]):
+        codes[c.name] = c.stop()
+    for c in background:
         codes[c.name] = c.stop()
     run = {**ended, "stopping_wall_ns": stopping_ns, "ended_wall_ns": time.time_ns(),
            "duration_s": time.monotonic() - t_start, "services": codes,

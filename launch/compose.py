@@ -44,6 +44,7 @@ class ComposeService:
     aliases: tuple[str, ...] = ()
     volumes: tuple[str, ...] = ()
     labels: dict[str, str] = field(default_factory=dict)
+    cap_add: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,7 @@ class LocalService:
     argv: tuple[str, ...]
     environment: dict[str, str]
     listen_ports: tuple[int, ...] = field(default=())
+    loop: bool = False  # a fixed-rate loop (granted SYS_NICE): it runs, and stops, ahead of the others
 
 
 def substitute(text: str, variables: Mapping[str, str]) -> str:
@@ -126,7 +128,8 @@ def load_compose(path: str | os.PathLike = DEFAULT_COMPOSE, variables: Mapping[s
             raise ConfigError(f"{where}: labels must be a mapping or a list")
         labels = {str(k): substitute(str(v), variables) for k, v in labels_raw.items()}
         out[name] = ComposeService(name, tuple(substitute(c, variables) for c in cmd), env, deps,
-                                   _strings(svc.get("profiles"), f"{where}: profiles"), aliases, vols, labels)
+                                   _strings(svc.get("profiles"), f"{where}: profiles"), aliases, vols, labels,
+                                   _strings(svc.get("cap_add"), f"{where}: cap_add"))
     for s in out.values():
         for d in s.depends_on:
             if d not in out:
@@ -229,5 +232,6 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
                 # two names of one service (robot, camera) become one endpoint, once
                 env[key] = ",".join(dict.fromkeys(endpoint(e, s.name) for e in env[key].split(",") if e.strip()))
         argv = (*lamps, *s.command[1:]) if s.command[0] == "lamps" else s.command
-        out.append(LocalService(s.name, tuple(argv), env, tuple(ports[(s.name, p)] for p in listen_ports(s))))
+        out.append(LocalService(s.name, tuple(argv), env, tuple(ports[(s.name, p)] for p in listen_ports(s)),
+                                "SYS_NICE" in s.cap_add))
     return out

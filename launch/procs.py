@@ -68,13 +68,18 @@ class Child:
                 return line.strip()
         return self.tail[-1].strip() if self.tail else "(no output)"
 
-    def stop(self, timeout_s: float = 10.0) -> int:
-        """SIGTERM to the group, SIGKILL after ``timeout_s``; returns the exit code."""
+    def terminate(self) -> None:
+        """SIGTERM to the group, without waiting (:meth:`stop` waits, and kills)."""
         if self.proc.poll() is None:
             try:
                 os.killpg(self.proc.pid, signal.SIGTERM)
             except ProcessLookupError:
                 pass
+
+    def stop(self, timeout_s: float = 10.0) -> int:
+        """SIGTERM to the group, SIGKILL after ``timeout_s``; returns the exit code."""
+        if self.proc.poll() is None:
+            self.terminate()
             try:
                 self.proc.wait(timeout_s)
             except subprocess.TimeoutExpired:

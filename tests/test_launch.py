@@ -135,6 +135,9 @@ def test_localize_maps_service_names_to_loopback_and_listen_ports_to_local_ones(
     assert lbr["perception"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21001,tcp/127.0.0.1:21003"
     assert lbr["recorder"].environment["LAMPS_ZENOH_CONNECT"] == \
         "tcp/127.0.0.1:21002,tcp/127.0.0.1:21001,tcp/127.0.0.1:21003,tcp/127.0.0.1:21004"
+    # the fixed-rate loops (granted SYS_NICE) stop in order; the others are asked first, waited for last
+    assert {n for n, s in local.items() if s.loop} == {"sim", "controller"}
+    assert {n for n, s in lbr.items() if s.loop} == {"lbr-peer", "robot-lbr-sim", "controller"}
 
 
 @pytest.mark.parametrize("text, match", [
