@@ -27,7 +27,7 @@ from interfaces.robot_model import RobotModel
 from interfaces.session import ServiceNode
 from robot.lbr import msgs
 from robot.lbr.msgs import SessionState
-from robot.lbr.peer import (TORQUE_COMMAND_BYTES, FriSession, LbrPeerParams, applied_torque_nm, drop_reason,
+from robot.lbr.peer import (TORQUE_COMMAND_BYTES, CommandBox, FriSession, LbrPeerParams, applied_torque_nm, drop_reason,
                             external_torque_nm, sim_params_for_peer, substeps_for_peer)
 
 from .conftest import REPO
@@ -136,6 +136,49 @@ def test_dropped_commands_are_classified_by_reason():
     nan = msgs.encode_torque_command(np.zeros(7), np.array([0, 0, np.nan, 0, 0, 0, 0]))
     assert [reason(r) for r in (b"garbage", b"", six, good[:60], nan)] == \
         ["not_cdr", "not_cdr", "wrong_length", "wrong_length", "non_finite"]
+
+
+@pytest.mark.parametrize("channel", [False, True], ids=["callback (lock-step)", "ring channel (real time)"])
+def test_the_command_box_keeps_the_newest_valid_command_and_counts_the_bad_ones(channel):
+    """Over a real Zenoh session pair: valid commands in order, the newest taken, garbage and NaN counted by
+    reason; the real-time box takes its samples from Zenoh's ring without a Python callback."""
+    port = free_port()
+    listen = ServiceNode("test-listen", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",))).__enter__()
+    talk = ServiceNode("test-talk", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",))).__enter__()
+    key = "lbr/command/torque"
+    box = CommandBox(listen.session, key, maxlen=8, channel=channel)
+    try:
+        wait_subscribed(talk.session, key)
+        nan = np.zeros(7)
+        nan[2] = np.nan
+        for raw in (msgs.encode_torque_command(np.zeros(7), np.full(7, 1.0)), b"garbage",
+                    msgs.encode_torque_command(np.zeros(7), nan),
+                    msgs.encode_torque_command(np.zeros(7), np.full(7, 2.0))):
+            talk.session.put(key, raw)
+        if channel:
+            with pytest.raises(RuntimeError, match="callback box"):
+                box.get(0.1)
+        # the callback box fills by itself; the ring is drained by the loop's own calls, in as many as it takes
+        taken, valid = None, 0
+        deadline = time.monotonic() + 5.0
+        while box.counters()["commands_received"] < 4 and time.monotonic() < deadline:
+            if channel:
+                command, superseded = box.newest()
+                if command is not None:
+                    taken, valid = command, valid + 1 + superseded
+            time.sleep(0.01)
+        if not channel:
+            taken, superseded = box.newest()
+            valid = 1 + superseded
+        assert taken is not None and taken[1].tolist() == [2.0] * 7 and valid == 2, (taken, valid)
+        c = box.counters()
+        assert c["commands_received"] == 4 and c["commands_dropped_not_cdr"] == 1 \
+            and c["commands_dropped_non_finite"] == 1, c
+        assert box.newest() == (None, 0)
+    finally:
+        box.close()
+        talk.close()
+        listen.close()
 
 
 # -- the command line ---------------------------------------------------------------------------------------

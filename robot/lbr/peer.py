@@ -65,6 +65,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import zenoh
 
 from interfaces.config import check_range, dataclass_from_table
 from interfaces.errors import ConfigError
@@ -255,12 +256,17 @@ def drop_reason(raw: bytes, exc: LbrWireError) -> str:
 
 
 class CommandBox:
-    """``LBRTorqueCommand`` samples of one key, decoded in Zenoh's thread; bad ones counted by reason, dropped.
+    """``LBRTorqueCommand`` samples of one key; bad ones counted by reason, dropped.
 
-    Lock-step waits for the oldest with :meth:`get`; real time takes the newest with :meth:`newest`.
+    Lock-step waits for the oldest with :meth:`get` (decoded in Zenoh's thread, handed over under a lock).
+    Real time (``channel=True``) takes the newest with :meth:`newest`: Zenoh queues the raw samples in a ring
+    of ``maxlen`` without Python, and the loop decodes them itself. A Python callback needs the GIL, which the
+    simulator's step holds (PyBullet does not release it): with a busy loop a command could wait up to
+    the interpreter's switch interval (5 ms) per sample, and they piled up (a 100 ms pile-up tripped the
+    watchdog in a real-time run).
     """
 
-    def __init__(self, session, key: str, maxlen: int = 64) -> None:
+    def __init__(self, session, key: str, maxlen: int = 64, channel: bool = False) -> None:
         self.key = key
         self.received = 0
         self.overflowed = 0
@@ -268,12 +274,16 @@ class CommandBox:
         self._queue: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=maxlen)
         self._ready = threading.Condition()
         self._last_log = -float("inf")
-        self._sub = session.declare_subscriber(key, self._on_sample)
+        self._channel = channel
+        if channel:
+            self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(maxlen))
+        else:
+            self._sub = session.declare_subscriber(key, self._on_sample)
 
-    def _on_sample(self, sample) -> None:
-        raw = sample.payload.to_bytes()
+    def _decode(self, raw: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+        """The command in ``raw``, or None (counted by reason, logged at most every few seconds)."""
         try:
-            command = decode_torque_command(raw)
+            return decode_torque_command(raw)
         except LbrWireError as exc:
             with self._ready:
                 self.received += 1
@@ -283,6 +293,11 @@ class CommandBox:
                 self._last_log = now
                 log.warning("dropped a torque command on %s (%d so far): %s", self.key,
                             sum(self.dropped.values()), exc)
+            return None
+
+    def _on_sample(self, sample) -> None:
+        command = self._decode(sample.payload.to_bytes())
+        if command is None:
             return
         with self._ready:
             self.received += 1
@@ -292,14 +307,25 @@ class CommandBox:
             self._ready.notify()
 
     def get(self, timeout_s: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """The oldest valid command not yet taken, waiting up to ``timeout_s``; None on timeout."""
+        """The oldest valid command not yet taken, waiting up to ``timeout_s``; None on timeout (lock-step)."""
+        if self._channel:
+            raise RuntimeError("CommandBox.get needs the callback box (channel=False)")
         with self._ready:
             if not self._queue and not self._ready.wait_for(lambda: bool(self._queue), timeout_s):
                 return None
             return self._queue.popleft()
 
     def newest(self) -> tuple[tuple[np.ndarray, np.ndarray] | None, int]:
-        """(the newest valid command or None, how many older ones it superseded); never blocks."""
+        """(the newest valid command or None, how many older valid ones it superseded); never blocks."""
+        if self._channel:
+            newest, valid = None, 0
+            while (sample := self._sub.try_recv()) is not None:
+                command = self._decode(sample.payload.to_bytes())
+                if command is not None:
+                    newest, valid = command, valid + 1
+            with self._ready:
+                self.received += valid
+            return newest, max(valid - 1, 0)
         with self._ready:
             if not self._queue:
                 return None, 0
@@ -349,7 +375,7 @@ class LbrPeer:
         self._pub_state = raw.declare_publisher(topics.key(topics.state))
         self._pub_wrench = raw.declare_publisher(topics.key(topics.wrench))
         self._pub_joints = raw.declare_publisher(topics.key(topics.joint_states))
-        self.commands = CommandBox(raw, topics.key(topics.torque_command))
+        self.commands = CommandBox(raw, topics.key(topics.torque_command), channel=not self._lockstep)
         self._active: tuple[np.ndarray, np.ndarray] | None = None  # the held command while commanding
         self._received: tuple[np.ndarray, np.ndarray] | None = None  # the last valid command, for the state
         self._wrench_every = max(round(1.0 / (params.sample_time_s * params.wrench_rate_hz)), 1)
