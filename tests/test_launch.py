@@ -230,7 +230,7 @@ def _check_channel_schemas(path: Path) -> None:
     assert len(validators) >= 8, sorted(validators)
 
 
-def _check_run(out: Path, base: int) -> dict:
+def _check_run(out: Path, base: int, robot_brakes_ok: bool = False) -> dict:
     report = json.loads((out / "report.json").read_text())
     assert report["schema"] == SCHEMA
     rec = read_recording(out / "recording.mcap")
@@ -258,7 +258,11 @@ def _check_run(out: Path, base: int) -> dict:
     assert report["junction_step_ratio_max"] <= 3.0, report["junction_step_ratio_max"]
     assert report["max_junction_accel_jump"] <= 0.01 * peak + 0.3, (report["max_junction_accel_jump"], peak)
     assert 8.0 <= report["normal_force_mean_n"] <= 12.0 and report["time_above_cap_s"] == 0.0
-    assert report["tracking_rms_m"] < 0.01 and report["faults"] == []
+    # real time on two shared cores: an answer now and then misses the robot's stale limit and the robot side
+    # brakes a cycle; that is reported (phase ROBOT), never a fault of the skill
+    faults = [f for f in report["faults"] if not (robot_brakes_ok and f["phase"] == "ROBOT"
+                                                     and f["reason"].startswith("robot: braked: no fresh command"))]
+    assert report["tracking_rms_m"] < 0.01 and faults == [], faults
     # the whole run's reference peaks per phase, recomputed here from the trace where the ticks are consecutive
     peaks = report["motion_peaks"]
     assert {"all", "APPROACH", "WIPE", "TRANSITION"} <= set(peaks), set(peaks)
@@ -320,7 +324,7 @@ def test_lamps_up_on_a_horizontal_board_with_a_given_skill(tmp_path, learned_ski
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("mode", ["lockstep"])  # real time: 3 of 4 seeds here (README "Real-robot path"), not CI
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
 def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, learned_skill_file, mode):
     """--robot lbr-sim: the arm behind lbr_fri_ros2_stack's CDR messages (at the stack's 2 ms torque-command FRI
     period), the real adapter, the same controller."""
@@ -328,7 +332,7 @@ def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, lear
     r = _up(["--out", str(out), "--port-base", str(base), "--robot", "lbr-sim", "--skill", str(learned_skill_file),
              "--mode", mode, "--max-duration", "400"], timeout_s=500)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
-    report = _check_run(out, base)
+    report = _check_run(out, base, robot_brakes_ok=mode == "realtime")
     assert report["dirt_removed_fraction"] >= 0.98, report["dirt_removed_fraction"]
     run = json.loads((out / "run.json").read_text())
     assert run["services"] == {"lbr-peer": 0, "robot-lbr-sim": 0, "controller": 0, "perception": 0}, run
@@ -340,6 +344,7 @@ def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, lear
     c = statuses[-1]["counters"]
     assert c["arms"] == 1 and c["commands_sent"] > 10_000 and "guard_trips" not in c, c
     assert not any(k.startswith("states_dropped") for k in c), c
+    assert c.get("stale_command_brakes", 0) <= 0.01 * c["states_received"], c  # braked cycles: under 1 %
     states = [m for _, m in rec[keys.robot_state]]
     assert all(s["capabilities"]["backend"] == "lbr" and s["capabilities"]["gravity_compensated"] for s in states)
     assert all(s["capabilities"]["state_rate_hz"] == 500.0 for s in states[:100]), states[0]["capabilities"]
