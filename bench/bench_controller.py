@@ -131,11 +131,11 @@ def free_port() -> int:
 class Proc:
     """A service subprocess with its output in a temporary file; ``stop()`` is SIGINT, then kill after 20 s."""
 
-    def __init__(self, name: str, cmd: list[str], log_dir: Path) -> None:
+    def __init__(self, name: str, cmd: list[str], log_dir: Path, env: dict[str, str] | None = None) -> None:
         self.name = name
         self.log_path = log_dir / f"{name}.log"
         self._log = open(self.log_path, "w+")  # noqa: SIM115 (open for the process's life)
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        env = dict(os.environ, PYTHONUNBUFFERED="1", **(env or {}))
         self.proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT, text=True)
 
     def output(self) -> str:
@@ -175,8 +175,9 @@ def _robot_side(robot: str, mode: str, p1: int, rid: str, bridge: int) -> list[t
 
 
 @contextlib.contextmanager
-def sim_and_controller(mode: str, robot: str = "sim"):
-    """(node, robot-side Proc, controller Proc, refusals) once all are alive; all stopped on exit.
+def sim_and_controller(mode: str, robot: str = "sim", env: dict[str, str] | None = None):
+    """(node, robot-side Proc, controller Proc, refusals) once all are alive; all stopped on exit. env : added
+    to every process's environment.
 
     robot ``"sim"``: ``lamps sim``; ``"lbr"``: ``lamps lbr-peer`` (the arm behind lbr_fri_ros2_stack's
     CDR keys) and ``lamps robot --backend lbr --arm`` in front of it. The controller sees ``robot/*`` alike.
@@ -192,10 +193,10 @@ def sim_and_controller(mode: str, robot: str = "sim"):
         stack.callback(lambda: [p.stop() for p in reversed(procs)])
         side = _robot_side(robot, mode, p1, rid, bridge)
         for name, cmd, _ in side:
-            procs.append(Proc(name, cmd, Path(tmp)))
+            procs.append(Proc(name, cmd, Path(tmp), env))
             time.sleep(0.5)  # let each listener come up before the next one dials it
         n_side = len(procs)
-        procs.append(Proc("controller", ctl_cmd, Path(tmp)))
+        procs.append(Proc("controller", ctl_cmd, Path(tmp), env))
         ends = (p1, p2) if robot == "sim" else (p1, p2, bridge)  # the peer has the truth and the sim status
         settings = ZenohSettings(connect=tuple(f"tcp/127.0.0.1:{p}" for p in ends), robot_id=rid)
         node = stack.enter_context(ServiceNode("bench", settings))
@@ -209,7 +210,7 @@ def sim_and_controller(mode: str, robot: str = "sim"):
                 refusals.append(ctl.output().strip().splitlines()[-1])
                 print(f"note: controller refused to start ({refusals[-1]}); starting it again", file=sys.stderr)
                 ctl.stop()
-                procs.append(Proc(f"controller{len(refusals)}", ctl_cmd, Path(tmp)))
+                procs.append(Proc(f"controller{len(refusals)}", ctl_cmd, Path(tmp), env))
                 continue
             for p in (*procs[:n_side], procs[-1]):
                 p.check()
@@ -223,8 +224,13 @@ def sim_and_controller(mode: str, robot: str = "sim"):
 
 
 # ---------------------------------------------------------------------------------------------- 2. real time
-def bench_realtime(duration_s: float, robot: str = "sim") -> dict:
-    with sim_and_controller("realtime", robot) as (node, sim, ctl, refusals):
+#: The baseline of the real-time run: the loops' threads left under the fair scheduler (nice -10 still applies).
+NO_RT = {"LAMPS_RT_PRIORITY": "off", "LAMPS_MLOCK": "off"}
+NO_RT_LABEL = "LAMPS_RT_PRIORITY=off LAMPS_MLOCK=off"
+
+
+def bench_realtime(duration_s: float, robot: str = "sim", env: dict[str, str] | None = None) -> dict:
+    with sim_and_controller("realtime", robot, env) as (node, sim, ctl, refusals):
         status = node.latest(node.keys.controller_status, ControllerStatus)
         sim_status = node.latest(node.keys.sim_status, ServiceStatus)
         robot_status = node.latest(node.keys.robot_status, ServiceStatus)
@@ -350,25 +356,32 @@ def print_report(res: dict, cmd: str) -> None:
           "\n|---|---|---|---|")
     print(f"| whole wipe, {tk['wall_s']:.1f} s wall | {tk['loop_ticks_per_s']:.0f} | {tk['loop_x_realtime']:.2f} | "
           f"{', '.join(f'{r:.1%}' for r in tk['remaining'])} |")
-    rt = res["realtime"]
-    print(f"\n| real-time mode over Zenoh, {rt['duration_s']:.0f} s ({rt['samples']} status samples) | value |"
-          f"\n|---|---|")
-    rows = [("controller period p50 (median of windows) us", _fmt(rt["period_p50_us_median"])),
-            ("controller period p99 (max of windows) us", _fmt(rt["period_p99_us_max"])),
-            ("controller period max us", _fmt(rt["period_max_us"])),
-            ("controller read / update / write p99 (max of windows) us",
-             f"{rt['read_p99_us_max']:.0f} / {rt['update_p99_us_max']:.0f} / {rt['write_p99_us_max']:.0f}"),
-            ("controller overruns / ticks", f"{rt['overruns']} / {rt['ticks']}"),
-            ("controller overruns per 10,000 ticks", f"{rt['overruns_per_10k']:.1f}"),
-            ("controller ticks_without_fresh_state", "0 (never counted)" if rt["ticks_without_fresh_state"] is None
-             else str(rt["ticks_without_fresh_state"])),
-            ("controller start-up refusals (rate check, retried)", str(len(rt["start_refusals"]))),
-            ("controller final phase", rt["phase"] + (f" ({rt['reason']})" if rt["reason"] else "")),
-            ("sim period p99 / max us", f"{_fmt(rt['sim_period_p99_us'])} / {_fmt(rt['sim_period_max_us'])}"),
-            ("sim overruns / steps", f"{_fmt(rt['sim_overruns'], 'd')} / {_fmt(rt['sim_ticks'], 'd')}"),
-            ("sim stale_command_brakes", _fmt(rt["stale_command_brakes"], "d"))]
-    for label, v in rows:
-        print(f"| {label} | {v} |")
+    rt, base = res["realtime"], res["realtime_no_rt"]
+    print(f"\n| real-time mode over Zenoh, {rt['duration_s']:.0f} s each ({rt['samples']} / {base['samples']} status "
+          f"samples) | loop threads SCHED_FIFO, memory locked (default) | baseline: {NO_RT_LABEL} |\n|---|---|---|")
+
+    def rows(rt: dict) -> list[tuple[str, str]]:
+        c = rt["counters"]
+        return [("controller loop thread", f"FIFO {c.get('loop_sched_fifo_priority', 0)}, memory "
+                 + ("locked" if c.get("loop_memory_locked") else "not locked")
+                 if c.get("loop_sched_fifo_priority") else "SCHED_OTHER, nice -10"),
+                ("controller period p50 (median of windows) us", _fmt(rt["period_p50_us_median"])),
+                ("controller period p99 (max of windows) us", _fmt(rt["period_p99_us_max"])),
+                ("controller period max us", _fmt(rt["period_max_us"])),
+                ("controller read / update / write p99 (max of windows) us",
+                 f"{rt['read_p99_us_max']:.0f} / {rt['update_p99_us_max']:.0f} / {rt['write_p99_us_max']:.0f}"),
+                ("controller overruns / ticks", f"{rt['overruns']} / {rt['ticks']}"),
+                ("controller overruns per 10,000 ticks", f"{rt['overruns_per_10k']:.1f}"),
+                ("controller ticks_without_fresh_state", "0 (never counted)"
+                 if rt["ticks_without_fresh_state"] is None else str(rt["ticks_without_fresh_state"])),
+                ("controller start-up refusals (rate check, retried)", str(len(rt["start_refusals"]))),
+                ("controller final phase", rt["phase"] + (f" ({rt['reason']})" if rt["reason"] else "")),
+                ("sim period p99 / max us", f"{_fmt(rt['sim_period_p99_us'])} / {_fmt(rt['sim_period_max_us'])}"),
+                ("sim overruns / steps", f"{_fmt(rt['sim_overruns'], 'd')} / {_fmt(rt['sim_ticks'], 'd')}"),
+                ("sim stale_command_brakes", _fmt(rt["stale_command_brakes"], "d"))]
+
+    for (label, v), (_, b) in zip(rows(rt), rows(base)):
+        print(f"| {label} | {v} | {b} |")
     print("\nreal-time phases (s since start): " + ", ".join(
         f"{t:.1f} {ph}" + (f" ({why})" if why else "") for t, ph, why in rt["timeline"]))
     lk = res["lockstep"]
@@ -400,6 +413,7 @@ def main() -> int:
         skill = bundled_skill()
         res["tick"] = bench_tick(skill)
         res["realtime"] = bench_realtime(10.0 if a.quick else 60.0)
+        res["realtime_no_rt"] = bench_realtime(10.0 if a.quick else 60.0, env=NO_RT)
         res["lockstep"] = bench_lockstep(120.0)
     except BenchError as exc:
         print(f"bench_controller: {exc}", file=sys.stderr)

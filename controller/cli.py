@@ -22,6 +22,7 @@ from lampskit.errors import LampsError, SkillFileError
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
+from interfaces.realtime import RealtimeRequest
 
 SERVICE = "controller"
 #: A real-time rate is refused when the control law's median tick takes more than this share of the period.
@@ -135,6 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         zenoh_settings, params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
+        RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
         from interfaces.robot_model import RobotModel
 
         skill = load_runnable_skill(params.skill)

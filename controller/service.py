@@ -152,7 +152,7 @@ class ControllerService:
         the robot-lost watch. A state that arrives while an older one is still unanswered replaces it; the states
         never answered are counted as overruns (missed robot periods)."""
         hygiene = LoopHygiene(counts=self.counters)
-        hygiene.start()  # first: its full collection must not count as a stalled first period
+        hygiene.start(realtime=True)  # first: its full collection must not count as a stalled first period
         states = self.node.inbox(self.keys.robot_state, RobotState, maxlen=1)  # the newest state only
         self._state_reader = states
         nominal_s = 1.0 / self.p.rate_hz

@@ -18,6 +18,11 @@ the robot side's, :mod:`robot.server`):
   before the deadline are spun (0 by default: a spinning thread takes the
   CPU the other services of a 2-core cell need). Refused (not Linux): said in
   :attr:`LoopHygiene.report`.
+* **Real-time scheduling** (a wall- or robot-clocked loop in a real-time
+  service's process, not lock-step): ``SCHED_FIFO`` for the loop's thread,
+  locked memory, CPU affinity if asked (:mod:`interfaces.realtime`); counted
+  as ``loop_sched_fifo_priority`` (0: refused or off) and
+  ``loop_memory_locked`` in the service's status counters.
 
 :attr:`LoopHygiene.report` says what was applied, for the service's status, with
 the process's CPU priority (:mod:`interfaces.priority`).
@@ -34,6 +39,8 @@ import time
 from collections import Counter
 
 from . import priority
+from .errors import ConfigError
+from .realtime import apply_realtime
 
 log = logging.getLogger(__name__)
 
@@ -73,15 +80,30 @@ class LoopHygiene:
         self._was_enabled = gc.isenabled()
         self._started = False
 
-    def start(self) -> None:
-        """Collect and freeze what exists, take the collector over, fine sleeps for the calling thread."""
+    def start(self, realtime: bool = False) -> None:
+        """Collect and freeze what exists, take the collector over, fine sleeps for the calling thread; with
+        ``realtime`` (a loop on a wall or robot clock, not lock-step) in a process set up as a real-time
+        service (:func:`~interfaces.priority.set_service_priority`), also real-time scheduling, locked memory
+        and the CPUs asked for (:func:`~interfaces.realtime.apply_realtime`); a test running a loop in its own
+        process is left alone."""
         gc.collect()
         gc.freeze()
         gc.disable()
         self._started = True
-        self.report = f"gc in slack (frozen {gc.get_freeze_count()} objects); {_set_timer_slack(TIMER_SLACK_NS)}" + (
-            f"; spin {self.spin_ns // 1000} us" if self.spin_ns else "") + (f"; {priority.REPORT}" if priority.REPORT
-                                                                           else "")
+        rt = ""
+        if realtime and priority.KIND == priority.REALTIME:  # a service's process, not a test running a loop
+            try:
+                result = apply_realtime()
+                rt = "; " + result.report
+                for name, value in result.counters().items():
+                    self.counts[name] = value
+            except ConfigError as exc:  # the service's CLI checks these first; an in-process loop says it here
+                rt = f"; real-time scheduling not applied: {exc}"
+                log.warning("loop hygiene: %s", exc)
+        spin = f"; spin {self.spin_ns // 1000} us" if self.spin_ns else ""
+        nice = f"; {priority.REPORT}" if priority.REPORT else ""
+        self.report = (f"gc in slack (frozen {gc.get_freeze_count()} objects); {_set_timer_slack(TIMER_SLACK_NS)}"
+                       f"{rt}{spin}{nice}")
         log.info("loop hygiene: %s", self.report)
 
     def stop(self) -> None:

@@ -41,6 +41,8 @@ KINDS = {REALTIME: REALTIME_NICE, BACKGROUND: BACKGROUND_NICE}
 
 #: What :func:`set_service_priority` did in this process (for status), "" before it ran.
 REPORT = ""
+#: The kind of service this process was set up as by :func:`set_service_priority` ("" before: a test, a tool).
+KIND = ""
 
 
 def wanted_nice(kind: str, env: dict | os._Environ | None = None) -> int | None:
@@ -78,8 +80,9 @@ def set_service_priority(kind: str, env: dict | os._Environ | None = None) -> st
 
     Raises ConfigError for a bad ``LAMPS_NICE``; a refusal by the operating system is reported, not raised.
     """
-    global REPORT
+    global REPORT, KIND
     wanted = wanted_nice(kind, env)
+    KIND = kind
     now = os.getpriority(os.PRIO_PROCESS, 0)
     if wanted is None or wanted == now:
         REPORT = f"nice {now}"

@@ -23,6 +23,7 @@ import sys
 from interfaces.config import add_zenoh_options, check_range, load_config, zenoh_with_options
 from interfaces.errors import ConfigError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
+from interfaces.realtime import RealtimeRequest
 from lampskit.errors import LampsError
 
 SERVICE = "robot"
@@ -85,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         zenoh_settings, lbr_params, server_params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
+        RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
     except LampsError as exc:
         print(f"lamps robot: error: {exc}", file=sys.stderr)
         return 1

@@ -253,7 +253,7 @@ class RobotServer:
 
     def _run_realtime(self) -> None:
         hygiene = LoopHygiene(counts=self.counters)
-        hygiene.start()  # first: its full collection must not count as a stalled first period
+        hygiene.start(realtime=True)  # first: its full collection must not count as a stalled first period
         latest = self.node.latest(self.keys.robot_command, TorqueCommand)
         self._sources = [latest]
         period_ns = int(round(1e9 / self.p.rate_hz))
@@ -309,7 +309,7 @@ class RobotServer:
         last command while that is fresh). In lock-step only the answer to the current state counts.
         """
         hygiene = LoopHygiene(counts=self.counters)
-        hygiene.start()  # first: its full collection must not age the first state
+        hygiene.start(realtime=self.p.mode != "lockstep")  # first: its full collection must not age the first state
         wake = threading.Event()  # a new reading or a new command: the loop waits on both at once
         self.port.set_wake(wake)
         inbox = self.node.inbox(self.keys.robot_command, TorqueCommand, maxlen=8, wake=wake)

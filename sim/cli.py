@@ -18,6 +18,7 @@ from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
+from interfaces.realtime import RealtimeRequest
 
 SERVICE = "sim"
 
@@ -97,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         zenoh_settings, params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
+        RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
         from .core import SimCore
 
         core = SimCore(params)

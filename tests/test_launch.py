@@ -345,6 +345,10 @@ def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, lear
     assert c["arms"] == 1 and c["commands_sent"] > 10_000 and "guard_trips" not in c, c
     assert not any(k.startswith("states_dropped") for k in c), c
     assert c.get("stale_command_brakes", 0) <= 0.01 * c["states_received"], c  # braked cycles: under 1 %
+    if mode == "lockstep":  # a lock-step loop never sleeps: it stays under the fair scheduler
+        assert "loop_sched_fifo_priority" not in c, c
+    elif os.geteuid() == 0:  # real time, allowed: the adapter's loop thread is SCHED_FIFO, its memory locked
+        assert c["loop_sched_fifo_priority"] == 10 and c["loop_memory_locked"] == 1, c
     states = [m for _, m in rec[keys.robot_state]]
     assert all(s["capabilities"]["backend"] == "lbr" and s["capabilities"]["gravity_compensated"] for s in states)
     assert all(s["capabilities"]["state_rate_hz"] == 500.0 for s in states[:100]), states[0]["capabilities"]

@@ -17,6 +17,7 @@ import sys
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
+from interfaces.realtime import RealtimeRequest
 from lampskit.errors import LampsError
 
 PROG = "lamps lbr-peer"
@@ -60,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         zenoh_settings, params, sim_params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
+        RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
         from sim.core import SimCore
 
         core = SimCore(sim_params)

@@ -1,0 +1,164 @@
+"""Real-time scheduling, locked memory and CPU affinity for the thread of a 1 kHz loop.
+
+Nice values (:mod:`interfaces.priority`) only weigh the fair scheduler's
+shares: a nice -10 loop that wakes while another process runs still waits
+for that process's slice to end. A thread under ``SCHED_FIFO`` preempts
+every ordinary thread the moment it wakes, which is what a loop owing the
+robot an answer every millisecond needs; it sleeps between periods, so the
+others keep the CPU meanwhile (and the kernel's real-time throttling keeps
+5 % for them should a loop ever spin). Only the loop's thread is raised:
+Zenoh's threads, which hand it the robot's states, stay at the service's
+nice value.
+
+:func:`apply_realtime` is called by :class:`~interfaces.loop_hygiene.LoopHygiene`
+on the loop's thread when the loop starts. What it asks for, from the
+environment (one service at a time, like ``LAMPS_NICE``):
+
+* ``LAMPS_RT_PRIORITY``: ``SCHED_FIFO`` priority 1-98 for the loop's thread
+  (default :data:`DEFAULT_PRIORITY`), or ``off``. Needs ``CAP_SYS_NICE``
+  (root, or ``cap_add: [SYS_NICE]`` under compose).
+* ``LAMPS_MLOCK``: ``on`` (default) locks the process's memory
+  (``mlockall(MCL_CURRENT | MCL_FUTURE)``: no page fault in the loop waits
+  for the disk), ``off`` does not. Needs ``CAP_IPC_LOCK`` or a memlock
+  limit above the process's size (compose: ``ulimits: memlock: -1``).
+* ``LAMPS_CPUS``: CPUs the loop's thread may run on, e.g. ``1`` or ``2,3``
+  (default: any; on a machine with a core to spare, give each loop its own).
+
+A refusal by the operating system is reported (the returned text goes into
+the service's status), never raised; a malformed value is a ConfigError
+naming the variable.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import logging
+import os
+import sys
+from dataclasses import dataclass
+
+from .errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+#: SCHED_FIFO priority of a loop's thread: above ordinary threads, far below the kernel's own (50: IRQ threads).
+DEFAULT_PRIORITY = 10
+_MCL_CURRENT, _MCL_FUTURE = 1, 2
+
+
+@dataclass(frozen=True)
+class RealtimeRequest:
+    """What a loop's thread asks for. priority : SCHED_FIFO priority (None: stay SCHED_OTHER); lock_memory :
+    mlockall; cpus : allowed CPUs (None: any)."""
+
+    priority: int | None = DEFAULT_PRIORITY
+    lock_memory: bool = True
+    cpus: frozenset[int] | None = None
+
+    @classmethod
+    def from_env(cls, env: dict | os._Environ | None = None) -> RealtimeRequest:
+        """Read ``LAMPS_RT_PRIORITY``, ``LAMPS_MLOCK`` and ``LAMPS_CPUS``; ConfigError names a bad one."""
+        env = os.environ if env is None else env
+        text = env.get("LAMPS_RT_PRIORITY", "").strip().lower()
+        priority: int | None = DEFAULT_PRIORITY
+        if text == "off":
+            priority = None
+        elif text:
+            try:
+                priority = int(text)
+            except ValueError:
+                priority = -1
+            if not 1 <= priority <= 98:
+                raise ConfigError(f"LAMPS_RT_PRIORITY must be an integer from 1 to 98 or 'off', got {text!r}")
+        mlock = env.get("LAMPS_MLOCK", "").strip().lower() or "on"
+        if mlock not in ("on", "off"):
+            raise ConfigError(f"LAMPS_MLOCK must be 'on' or 'off', got {mlock!r}")
+        cpus_text = env.get("LAMPS_CPUS", "").strip()
+        cpus = None
+        if cpus_text:
+            try:
+                cpus = frozenset(int(c) for c in cpus_text.split(","))
+            except ValueError:
+                cpus = frozenset({-1})
+            if not cpus or min(cpus) < 0:
+                raise ConfigError(f"LAMPS_CPUS must be CPU numbers separated by commas (e.g. 1 or 2,3), "
+                                  f"got {cpus_text!r}")
+        return cls(priority, mlock == "on", cpus)
+
+
+def _libc():
+    return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+
+
+@dataclass(frozen=True)
+class RealtimeResult:
+    """What :func:`apply_realtime` got. fifo_priority : the thread's SCHED_FIFO priority (0: SCHED_OTHER);
+    memory_locked : mlockall succeeded; report : one line saying it all, refusals with their reason."""
+
+    fifo_priority: int
+    memory_locked: bool
+    report: str
+
+    def counters(self) -> dict[str, int]:
+        """For a service's status counters."""
+        return {"loop_sched_fifo_priority": self.fifo_priority, "loop_memory_locked": int(self.memory_locked)}
+
+
+def apply_realtime(request: RealtimeRequest | None = None) -> RealtimeResult:
+    """Apply ``request`` (default: from the environment) to the calling thread and process; the report reads
+    e.g. ``"SCHED_FIFO 10; memory locked"`` or ``"SCHED_OTHER (asked FIFO 10: refused, needs CAP_SYS_NICE);
+    ..."``. Not on Linux: nothing applied, and said."""
+    request = RealtimeRequest.from_env() if request is None else request
+    if not sys.platform.startswith("linux"):
+        return RealtimeResult(0, False, f"real-time scheduling: not on Linux ({sys.platform})")
+    fifo = _fifo(request.priority)
+    mlock = _mlock(request.lock_memory)
+    parts = [fifo, mlock]
+    if request.cpus is not None:
+        parts.append(_affinity(request.cpus))
+    report = "; ".join(parts)
+    log.info("loop thread: %s", report)
+    return RealtimeResult(request.priority if fifo.startswith("SCHED_FIFO") else 0, mlock == "memory locked",
+                          report)
+
+
+def _fifo(priority: int | None) -> str:
+    if priority is None:
+        return "SCHED_OTHER (LAMPS_RT_PRIORITY=off)"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))  # 0: the calling thread (Linux)
+    except PermissionError:
+        text = f"SCHED_OTHER (asked FIFO {priority}: refused, needs CAP_SYS_NICE)"
+        log.warning("loop thread: %s", text)
+        return text
+    except OSError as exc:
+        text = f"SCHED_OTHER (asked FIFO {priority}: {exc.strerror or exc})"
+        log.warning("loop thread: %s", text)
+        return text
+    return f"SCHED_FIFO {priority}"
+
+
+def _mlock(lock: bool) -> str:
+    if not lock:
+        return "memory not locked (LAMPS_MLOCK=off)"
+    try:
+        libc = _libc()
+        if libc.mlockall(_MCL_CURRENT | _MCL_FUTURE) != 0:
+            errno = ctypes.get_errno()
+            text = f"memory not locked (mlockall: {os.strerror(errno)}; needs CAP_IPC_LOCK or ulimit -l unlimited)"
+            log.warning("loop thread: %s", text)
+            return text
+    except (OSError, AttributeError) as exc:
+        return f"memory not locked (mlockall unavailable: {exc})"
+    return "memory locked"
+
+
+def _affinity(cpus: frozenset[int]) -> str:
+    try:
+        os.sched_setaffinity(0, cpus)
+    except OSError as exc:
+        text = f"CPUs any (asked {sorted(cpus)}: {exc.strerror or exc})"
+        log.warning("loop thread: %s", text)
+        return text
+    return f"CPUs {','.join(str(c) for c in sorted(cpus))}"

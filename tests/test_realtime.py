@@ -1,0 +1,91 @@
+"""Real-time scheduling for a loop's thread: what the environment asks, what the operating system grants.
+
+Applied in child processes (a loop's process), never in the test runner's own.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import subprocess
+import sys
+
+import pytest
+
+from interfaces.errors import ConfigError
+from interfaces.realtime import DEFAULT_PRIORITY, RealtimeRequest
+
+from .conftest import REPO
+
+CHILD = """
+import os, threading
+from interfaces.realtime import RealtimeRequest, apply_realtime
+result = apply_realtime(RealtimeRequest({priority}, {mlock}, {cpus}))
+policy = os.sched_getscheduler(0)
+print(result.report)
+print(result.fifo_priority, int(result.memory_locked), int(policy == os.SCHED_FIFO),
+      os.sched_getparam(0).sched_priority, ",".join(map(str, sorted(os.sched_getaffinity(0)))))
+"""
+
+
+_PR_CAPBSET_DROP, _CAP_IPC_LOCK, _CAP_SYS_NICE = 24, 14, 23
+
+
+def _drop_capabilities() -> None:
+    """In the child before exec: take CAP_SYS_NICE and CAP_IPC_LOCK out of the bounding set, so that even
+    root's program starts without them (a container without ``cap_add: [SYS_NICE]``)."""
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    for cap in (_CAP_SYS_NICE, _CAP_IPC_LOCK):
+        if libc.prctl(_PR_CAPBSET_DROP, cap, 0, 0, 0) != 0:
+            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+def _child(priority, mlock, cpus, unprivileged: bool = False) -> tuple[str, list[str]]:
+    code = CHILD.format(priority=priority, mlock=mlock, cpus=cpus)
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=60,
+                       preexec_fn=_drop_capabilities if unprivileged else None)
+    assert r.returncode == 0, r.stderr
+    report, numbers = r.stdout.strip().splitlines()[-2:]
+    return report, numbers.split()
+
+
+def test_the_environment_asks_fifo_10_and_locked_memory_by_default_and_each_can_be_changed():
+    assert RealtimeRequest.from_env({}) == RealtimeRequest(DEFAULT_PRIORITY, True, None)
+    assert RealtimeRequest.from_env({"LAMPS_RT_PRIORITY": "off", "LAMPS_MLOCK": "off"}) == \
+        RealtimeRequest(None, False, None)
+    assert RealtimeRequest.from_env({"LAMPS_RT_PRIORITY": "42", "LAMPS_CPUS": "1,0"}) == \
+        RealtimeRequest(42, True, frozenset({0, 1}))
+
+
+@pytest.mark.parametrize("env, match", [
+    ({"LAMPS_RT_PRIORITY": "99"}, "LAMPS_RT_PRIORITY must be an integer from 1 to 98 or 'off', got '99'"),
+    ({"LAMPS_RT_PRIORITY": "high"}, "LAMPS_RT_PRIORITY must be .* got 'high'"),
+    ({"LAMPS_MLOCK": "yes"}, "LAMPS_MLOCK must be 'on' or 'off', got 'yes'"),
+    ({"LAMPS_CPUS": "1;2"}, "LAMPS_CPUS must be CPU numbers separated by commas"),
+    ({"LAMPS_CPUS": "-1"}, "LAMPS_CPUS must be CPU numbers"),
+])
+def test_a_bad_request_names_the_variable(env, match):
+    with pytest.raises(ConfigError, match=match):
+        RealtimeRequest.from_env(env)
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="granting SCHED_FIFO and mlockall needs root here")
+def test_as_root_the_loop_thread_gets_fifo_locked_memory_and_its_cpu():
+    report, (fifo, locked, is_fifo, prio, cpus) = _child(10, True, "frozenset({0})")
+    assert report == "SCHED_FIFO 10; memory locked; CPUs 0"
+    assert (fifo, locked, is_fifo, prio, cpus) == ("10", "1", "1", "10", "0")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="capability bounding sets are Linux's")
+def test_without_the_capabilities_the_loop_says_what_was_refused_and_runs_on():
+    report, (fifo, locked, is_fifo, prio, cpus) = _child(10, True, "None", unprivileged=True)
+    assert "SCHED_OTHER (asked FIFO 10: refused, needs CAP_SYS_NICE)" in report
+    assert "memory not locked (mlockall:" in report and "ulimit -l unlimited" in report
+    assert (fifo, locked, is_fifo) == ("0", "0", "0")
+
+
+def test_off_means_nothing_is_asked():
+    report, (fifo, locked, is_fifo, prio, cpus) = _child(None, False, "None")
+    assert report == "SCHED_OTHER (LAMPS_RT_PRIORITY=off); memory not locked (LAMPS_MLOCK=off)"
+    assert (fifo, locked, is_fifo) == ("0", "0", "0")
