@@ -4,7 +4,14 @@
   endpoints, multicast scouting off unless asked for; user-password
   authentication, access control and mutual TLS when configured).
 * :class:`ServiceNode` is a context manager: the session plus the liveliness
-  token ``<prefix>/alive/<service>``; closing it undeclares both.
+  token ``<prefix>/alive/<service>``; closing it undeclares both. Its
+  publishers carry the key's quality of service (:func:`publisher_qos`):
+  the control path (robot states and commands) is sent at once (express,
+  not batched), at Zenoh's real-time priority (ahead of camera frames on a
+  shared link) and dropped rather than queued when a link is congested (a
+  late state or command is worth nothing: the next one replaces it); the
+  e-stop has the same priority but is never dropped; camera frames go at
+  the lowest data priority.
 * :class:`Latest` is a subscription that keeps only the newest sample (a
   one-slot ring channel): the Zenoh thread never waits for the loop, and
   :meth:`Latest.take` never blocks. Bad payloads are counted per reason,
@@ -221,6 +228,22 @@ class Inbox(Generic[M]):
             self._sub = None
 
 
+#: Zenoh publisher options of the 1 kHz control path: at once, first, never queued behind a congested link.
+CONTROL_QOS = {"express": True, "priority": zenoh.Priority.REAL_TIME, "congestion_control": zenoh.CongestionControl.DROP}
+
+
+def publisher_qos(keys: Keys, key: str) -> dict:
+    """Zenoh ``declare_publisher`` options for ``key`` of the cell (see the module docstring); {} by default."""
+    if key in (keys.robot_state, keys.robot_command):
+        return CONTROL_QOS
+    if key in (keys.controller_estop, keys.controller_estop_release):
+        return {"express": True, "priority": zenoh.Priority.REAL_TIME,
+                "congestion_control": zenoh.CongestionControl.BLOCK}
+    if zenoh.KeyExpr(keys.camera_frames).intersects(zenoh.KeyExpr(key)):
+        return {"priority": zenoh.Priority.DATA_LOW}
+    return {}
+
+
 class ServiceNode:
     """A service's presence on the network: session, liveliness token, publishers, newest-sample readers.
 
@@ -252,10 +275,10 @@ class ServiceNode:
         return self._session
 
     def publish(self, key: str, msg: Message) -> None:
-        """Encode and put ``msg`` on ``key`` (publisher declared on first use, then reused)."""
+        """Encode and put ``msg`` on ``key`` (publisher declared on first use with the key's QoS, then reused)."""
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._publishers[key] = self.session.declare_publisher(key)
+            pub = self._publishers[key] = self.session.declare_publisher(key, **publisher_qos(self.keys, key))
         pub.put(encode(msg))
 
     def latest(self, key: str, msg_type: type[M]) -> Latest[M]:

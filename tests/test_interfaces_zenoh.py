@@ -8,8 +8,8 @@ import pytest
 
 from interfaces.codec import encode
 from interfaces.config import ZenohSettings
-from interfaces.messages import Capabilities, Estop, RobotState, TorqueCommand
-from interfaces.session import ServiceNode
+from interfaces.messages import Capabilities, Estop, RobotState, ServiceStatus, TorqueCommand
+from interfaces.session import ServiceNode, publisher_qos
 
 from .zenoh_helpers import free_port, wait_alive, wait_for, wait_gone, wait_sample, wait_subscribed
 
@@ -207,3 +207,29 @@ def test_every_service_takes_a_zenoh_config_file_on_its_command_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "interfaces.cli", "robot", "--backend", "mock", "--zenoh-config",
                         str(missing)], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and f"config_file '{missing}' is not a file" in r.stderr, r.stderr
+
+
+def test_the_control_path_is_sent_express_at_real_time_priority_and_camera_frames_last(peers):
+    """What a subscriber on the other end sees of each sample's QoS: robot states and commands express at
+    REAL_TIME, the e-stop REAL_TIME too, camera frames DATA_LOW, the rest Zenoh's default."""
+    import zenoh
+
+    sim, ctrl = peers
+    k = sim.keys
+    seen: dict[str, tuple] = {}
+    sub = ctrl.session.declare_subscriber(f"{k.prefix}/**", lambda s: seen.setdefault(str(s.key_expr),
+                                                                                    (s.priority, s.express)))
+    try:
+        wait_subscribed(sim.session, k.robot_state)
+        sim.publish(k.robot_state, state(1))
+        sim.publish(k.robot_command, TorqueCommand(seq=1, stamp_ns=1, tau_nm=[0.0] * 7))
+        sim.publish(k.controller_estop, Estop(stamp_ns=1, engaged=True, reason="qos", source="test"))
+        sim.publish(k.sim_status, ServiceStatus(service="sim", seq=1, stamp_ns=1))
+        wait_for(lambda: len(seen) >= 4, what="four samples")
+    finally:
+        sub.undeclare()
+    assert seen[k.robot_state] == seen[k.robot_command] == (zenoh.Priority.REAL_TIME, True)
+    assert seen[k.controller_estop] == (zenoh.Priority.REAL_TIME, True)
+    assert seen[k.sim_status] == (zenoh.Priority.DATA, False)
+    assert publisher_qos(k, k.camera_frame("board")) == {"priority": zenoh.Priority.DATA_LOW}
+    assert publisher_qos(k, k.camera_frame("board") + "/info") == {}

@@ -39,7 +39,7 @@ import numpy as np
 
 from interfaces.messages import ArmRequest, Capabilities
 from interfaces.robot_model import RobotModel
-from interfaces.session import ServiceNode
+from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.port import Reading, RobotPort
 
 from .guards import GuardLimits, VelocityFilter, guard_trip
@@ -96,7 +96,7 @@ class LbrPort(RobotPort):
                       s.declare_subscriber(topics.key(topics.joint_states), self._on_joint_states)]
         if params.wrench_source == "stack":
             self._subs.append(s.declare_subscriber(topics.key(topics.wrench), self._on_wrench))
-        self._command_pub = s.declare_publisher(topics.key(topics.torque_command))
+        self._command_pub = s.declare_publisher(topics.key(topics.torque_command), **CONTROL_QOS)  # at once, first
         self._arm_requests = node.latest(node.keys.robot_arm, ArmRequest)
 
     # -- network callbacks (Zenoh's thread: decode, count, hand over) ------------------------------

@@ -74,7 +74,7 @@ from interfaces.messages import ServiceStatus
 from interfaces import priority
 from interfaces.realtime import apply_realtime
 from interfaces.robot_model import RobotModel
-from interfaces.session import ServiceNode
+from interfaces.session import CONTROL_QOS, ServiceNode
 from sim.core import SimCore
 from sim.params import SimParams
 from sim.service import SimPort
@@ -374,7 +374,7 @@ class LbrPeer:
         self.stop = threading.Event()
         self._lockstep = params.mode == "lockstep"
         topics, raw = params.topics, node.session
-        self._pub_state = raw.declare_publisher(topics.key(topics.state))
+        self._pub_state = raw.declare_publisher(topics.key(topics.state), **CONTROL_QOS)  # the FRI packet: first
         self._pub_wrench = raw.declare_publisher(topics.key(topics.wrench))
         self._pub_joints = raw.declare_publisher(topics.key(topics.joint_states))
         self.commands = CommandBox(raw, topics.key(topics.torque_command), channel=not self._lockstep)
