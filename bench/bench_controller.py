@@ -22,6 +22,10 @@ Usage: .venv/bin/python bench/bench_controller.py [--quick] [--json OUT]
    with no overruns. Also the controller's final phase, its
    ``ticks_without_fresh_state`` counter, and the sim's own step period p99
    and ``stale_command_brakes`` (steps where no fresh command arrived).
+   Run twice: the loops' threads SCHED_FIFO with locked memory (the default), then the baseline with
+   both off (``LAMPS_RT_PRIORITY=off LAMPS_MLOCK=off``). Then the floor: the same sim against
+   ``bench/minimal_controller.py`` (the controller's set-up, Zenoh path and loop with a tick that answers
+   zeros at once), the same duration; the ratios say what the controller's tick adds.
 3. Lock-step real-time factor of the whole closed loop: the same two
    processes in ``--mode lockstep`` (each sim step waits for the command
    answering its state) until the controller reports DONE (at most 120 s).
@@ -289,6 +293,43 @@ def bench_realtime(duration_s: float, robot: str = "sim", env: dict[str, str] | 
             "robot_detail": None if last_robot is None else last_robot.detail}
 
 
+def bench_minimal(duration_s: float) -> dict:
+    """The floor: ``lamps sim`` (real time, gravity compensated) against ``bench/minimal_controller.py``, the
+    controller's loop, set-up and Zenoh path with a tick that only answers zeros (its figures over the whole
+    run, from the first state; the sim's status at the end)."""
+    p1 = free_port()
+    rid = f"bench{p1}"
+    with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
+        procs: list[Proc] = []
+        stack.callback(lambda: [p.stop() for p in reversed(procs)])
+        procs.append(Proc("sim", [sys.executable, "-m", "sim.cli", "--mode", "realtime", "--no-camera",
+                                  "--gravity-compensated", "--listen", f"tcp/127.0.0.1:{p1}", "--robot-id", rid],
+                          Path(tmp)))
+        node = stack.enter_context(ServiceNode("bench", ZenohSettings(connect=(f"tcp/127.0.0.1:{p1}",),
+                                                                      robot_id=rid)))
+        end = time.monotonic() + 60.0
+        while "sim" not in node.alive_services(0.5):
+            procs[0].check()
+            if time.monotonic() > end:
+                raise BenchError("the sim was not alive after 60 s:\n" + procs[0].output())
+        sim_status = node.latest(node.keys.sim_status, ServiceStatus)
+        ctl = subprocess.run([sys.executable, str(REPO / "bench" / "minimal_controller.py"), "--connect",
+                              f"tcp/127.0.0.1:{p1}", "--robot-id", rid, "--seconds", str(duration_s)],
+                             cwd=REPO, capture_output=True, text=True, timeout=duration_s + 120)
+        if ctl.returncode != 0:
+            raise BenchError(f"the minimal controller failed:\n{ctl.stdout}{ctl.stderr}")
+        res = json.loads(ctl.stdout.strip().splitlines()[-1])
+        last_sim, end = None, time.monotonic() + 1.5  # the sim's status comes at 2 Hz
+        while time.monotonic() < end:
+            last_sim = sim_status.take() or last_sim
+            time.sleep(0.05)
+    res["sim_period_p99_us"] = None if last_sim is None else last_sim.timing.period_p99_us
+    res["sim_overruns_per_10k"] = None if last_sim is None else \
+        1e4 * last_sim.timing.overruns / max(last_sim.timing.ticks, 1)
+    res["stale_command_brakes"] = None if last_sim is None else last_sim.counters.get("stale_command_brakes", 0)
+    return res
+
+
 # ---------------------------------------------------------------------------------------------- 3. lock step
 def bench_lockstep(timeout_s: float, robot: str = "sim") -> dict:
     with sim_and_controller("lockstep", robot) as (node, sim, ctl, refusals):
@@ -382,6 +423,18 @@ def print_report(res: dict, cmd: str) -> None:
 
     for (label, v), (_, b) in zip(rows(rt), rows(base)):
         print(f"| {label} | {v} | {b} |")
+    mn = res["minimal"]
+    print(f"\n| the floor: the same loop with a minimal tick (bench/minimal_controller.py, zeros answered at once), "
+          f"{mn['ticks']} states | value | the controller above / floor |\n|---|---|---|")
+    for label, key, fmt in (("period p99 us", "period_p99_us", ".0f"), ("period max us", "period_max_us", ".0f"),
+                            ("states unanswered per 10,000", "overruns_per_10k", ".1f")):
+        ref = {"period_p99_us": rt["period_p99_us_max"], "period_max_us": rt["period_max_us"],
+               "overruns_per_10k": rt["overruns_per_10k"]}[key]
+        ratio = "n/a" if not mn[key] else f"{ref / mn[key]:.2f}x"
+        print(f"| {label} | {format(mn[key], fmt)} | {ratio} |")
+    print(f"| loop thread | FIFO {mn['counters'].get('loop_sched_fifo_priority', 0)} | - |")
+    print(f"| sim period p99 us / overruns per 10,000 / stale brakes | {_fmt(mn['sim_period_p99_us'])} / "
+          f"{_fmt(mn['sim_overruns_per_10k'], '.1f')} / {_fmt(mn['stale_command_brakes'], 'd')} | - |")
     print("\nreal-time phases (s since start): " + ", ".join(
         f"{t:.1f} {ph}" + (f" ({why})" if why else "") for t, ph, why in rt["timeline"]))
     lk = res["lockstep"]
@@ -414,6 +467,7 @@ def main() -> int:
         res["tick"] = bench_tick(skill)
         res["realtime"] = bench_realtime(10.0 if a.quick else 60.0)
         res["realtime_no_rt"] = bench_realtime(10.0 if a.quick else 60.0, env=NO_RT)
+        res["minimal"] = bench_minimal(10.0 if a.quick else 60.0)
         res["lockstep"] = bench_lockstep(120.0)
     except BenchError as exc:
         print(f"bench_controller: {exc}", file=sys.stderr)
