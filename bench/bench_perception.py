@@ -57,7 +57,7 @@ def render(tmp: Path, model: RobotModel, cfg: dict, steps: int) -> list[CameraFr
 def bench_frames(frames: list[CameraFrame], repeat: int = 3) -> dict:
     cv2.setNumThreads(1)
     stages: dict[str, list[float]] = {}
-    totals, dbscan_ms, ours_ms = [], [], []
+    totals, dbscan_ms, ours_ms, found = [], [], [], []
     for _ in range(repeat):
         p = Perception(PerceptionParams())
         for msg in frames:
@@ -67,6 +67,8 @@ def bench_frames(frames: list[CameraFrame], repeat: int = 3) -> dict:
             totals.append((time.perf_counter() - t0) * 1e3)
             for k, v in r.timing_ms.items():
                 stages.setdefault(k, []).append(v)
+            if r.stains is not None:
+                found.append(len(r.stains.stains))
             if r.ink is not None:
                 mask = r.ink.stain
                 link = p.tracker.link_px
@@ -85,7 +87,16 @@ def bench_frames(frames: list[CameraFrame], repeat: int = 3) -> dict:
         "stages_p50_ms": {k: float(np.percentile(v, 50)) for k, v in stages.items()},
         "clustering_p50_ms": float(np.percentile(ours_ms, 50)), "dbscan_p50_ms": float(np.percentile(dbscan_ms, 50)),
         "dbscan_over_ours": float(np.percentile(dbscan_ms, 50) / max(np.percentile(ours_ms, 50), 1e-6)),
+        "stains_found_median": float(np.median(found)) if found else 0.0,
     }
+
+
+def grid_stains(n_x: int, n_y: int, board_m=(0.8, 0.6), margin_m: float = 0.13, size_m: float = 0.045) -> list[dict]:
+    """``n_x * n_y`` stains on a grid over the wall board (board frame), as ``[sim.dirt] stain`` tables."""
+    xs = np.linspace(margin_m, board_m[0] - margin_m, n_x)
+    ys = np.linspace(margin_m, board_m[1] - margin_m, n_y)
+    return [{"centre_m": [float(x), float(y)], "size_m": size_m, "aspect": 1.3, "angle_deg": float(30 * (i % 4))}
+            for i, (x, y) in enumerate((x, y) for y in ys for x in xs)]
 
 
 def bench_closed_loop(tmp: Path) -> dict:
@@ -115,6 +126,13 @@ def markdown(result: dict) -> str:
         st = r["stages_p50_ms"]
         out.append(f"| {label} | {r['p50_ms']:.1f} | {r['p99_ms']:.1f} | {r['fps_one_core_p50']:.1f} | "
                    f"{st['board']:.1f} / {st['rectify']:.1f} / {st['classify']:.1f} / {st['track']:.1f} |")
+    out += ["", "| scale: per frame, arm parked, stains on a grid | stains found (median) | p50 [ms] | p99 [ms] | "
+            "classify / track p50 [ms] |", "|---|---:|---:|---:|---|"]
+    for key, label in (("frames_3_stains", "3 stains"), ("frames_20_stains", "20 stains")):
+        r = result[key]
+        st = r["stages_p50_ms"]
+        out.append(f"| {label} | {r['stains_found_median']:.0f} | {r['p50_ms']:.1f} | {r['p99_ms']:.1f} | "
+                   f"{st['classify']:.1f} / {st['track']:.1f} |")
     r = result["frames_arm_parked"]
     out += ["", "| clustering of the stain pixels | p50 [ms] | baseline, same frames |", "|---|---:|---|",
             f"| ours (dilation + connected components) | {r['clustering_p50_ms']:.2f} | scikit-learn DBSCAN "
@@ -142,7 +160,10 @@ def main() -> int:
         tmp = Path(tmp)
         parked = render(tmp, model, {"seed": 0, "start_q_rad": PARKED_Q, "dirt": {"stains": 4}}, 3000)
         arm = render(tmp, model, {"seed": 0, "dirt": {"stains": 4}}, 3000)
+        three = render(tmp, model, {"seed": 0, "start_q_rad": PARKED_Q, "dirt": {"stain": grid_stains(3, 1)}}, 2000)
+        twenty = render(tmp, model, {"seed": 0, "start_q_rad": PARKED_Q, "dirt": {"stain": grid_stains(5, 4)}}, 2000)
         result = {"frames_arm_parked": bench_frames(parked), "frames_arm_over_board": bench_frames(arm),
+                  "frames_3_stains": bench_frames(three), "frames_20_stains": bench_frames(twenty),
                   "closed_loop": bench_closed_loop(tmp)}
     print(markdown(result))
     if a.json:
