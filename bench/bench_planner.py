@@ -70,6 +70,57 @@ def _timed(f) -> tuple[float, object]:
     return (time.perf_counter() - t0) * 1e3, out
 
 
+def ticks_during_replan(skill, stains, start, switch_interval_s: float | None, ticks_after: int = 20) -> dict:
+    """A 1 kHz loop of control-law ticks (the impedance law on the arm: Pinocchio and numpy, as in the
+    controller) while ``plan()`` runs: in the tick (``switch_interval_s`` None: the tick that re-plans takes
+    the whole plan), or on a planner thread (the real-time controller's way) with that GIL switch interval.
+    Returns the worst tick [ms] (from its deadline to its end: what the robot waits for) over the plan and
+    ``ticks_after`` more periods, and the periods the plan took."""
+    import concurrent.futures
+
+    from controller.control.impedance import Reference, impedance_torque
+    from controller.control.params import ImpedanceParams
+    from interfaces.robot_model import RobotModel
+
+    model, imp = RobotModel(), ImpedanceParams()
+    q = np.array([0.2, 0.5, -0.3, -1.3, 0.4, 0.8, -0.2])
+    dq, q_rest = np.zeros(7), q.copy()
+    ref = Reference(model.tcp_pose(q)[0] + 0.01, model.tcp_pose(q)[1])
+
+    def tick() -> None:
+        impedance_torque(model, q, dq, ref, imp, q_rest, False)
+
+    for _ in range(50):
+        tick()
+    previous = sys.getswitchinterval()
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+    pool.submit(lambda: None).result()
+    worst, periods = 0.0, 0
+    try:
+        if switch_interval_s is not None:
+            sys.setswitchinterval(switch_interval_s)
+        deadline = time.perf_counter()
+        future = None
+        left = ticks_after
+        while left > 0:
+            deadline += 1e-3
+            time.sleep(max(deadline - time.perf_counter(), 0.0))
+            if periods == 0:
+                if switch_interval_s is None:
+                    plan(skill, stains, start)  # the re-plan inside the tick
+                else:
+                    future = pool.submit(plan, skill, stains, start)
+            tick()
+            worst = max(worst, time.perf_counter() - deadline)  # from the period's start to the tick's end
+            periods += 1
+            if future is None or future.done():
+                left -= 1
+    finally:
+        sys.setswitchinterval(previous)
+        pool.shutdown()
+    return {"worst_tick_ms": worst * 1e3, "periods": periods - ticks_after}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2 boards per size, no baseline at 100 stains")
@@ -106,8 +157,27 @@ def main() -> int:
         print(f"| {r['stains']} | {r['order_ms_p50']:.2f} / {r['order_ms_max']:.2f} | {r['plan_ms_p50']:.2f} / "
               f"{r['plan_ms_max']:.2f} | {base} | {ratio} | {gain} |")
     print(f"\n{boards} boards per size; up to {EXACT_ORDER_MAX} stains both search every order (same length).")
+    from controller.service import SWITCH_INTERVAL_S
+
+    replan = []
+    for n in (7, 30, 100):
+        rng = np.random.default_rng(1000 * n)
+        stains = [Stain(i, rng.uniform(0.0, 1.0, 2), 0.05) for i in range(n)]
+        rounds = [(ticks_during_replan(skill, stains, start, None),
+                   ticks_during_replan(skill, stains, start, SWITCH_INTERVAL_S)) for _ in range(boards)]
+        inline = [r[0]["worst_tick_ms"] for r in rounds]
+        thread = [r[1]["worst_tick_ms"] for r in rounds]
+        replan.append({"stains": n, "inline_ms": inline, "thread_ms": thread,
+                       "thread_periods": [r[1]["periods"] for r in rounds]})
+    print(f"\n| re-plan during a 1 kHz loop of control-law ticks ({boards} rounds) | worst tick, plan in the tick: "
+          f"median / max [ms] | plan on the planner thread (GIL switch {SWITCH_INTERVAL_S * 1e3:.1f} ms): median "
+          f"/ max [ms] | periods the plan took there |\n|---:|---:|---:|---:|")
+    for r in replan:
+        print(f"| {r['stains']} stains | {np.median(r['inline_ms']):.2f} / {max(r['inline_ms']):.2f} | "
+              f"{np.median(r['thread_ms']):.2f} / {max(r['thread_ms']):.2f} | {int(np.median(r['thread_periods']))} |")
+    print("\nworst tick: from the start of its 1 ms period to the end of its control law (budget 1 ms)")
     if a.json:
-        a.json.write_text(json.dumps({"rows": rows, "boards": boards}, indent=1))
+        a.json.write_text(json.dumps({"rows": rows, "boards": boards, "replan": replan}, indent=1))
     return 0
 
 

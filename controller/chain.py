@@ -13,6 +13,11 @@
 * LEAVE j: re-planned over the stains open *now* (appeared, vanished or
   done ones included), the periodic MP runs on until its phase heads for
   the next stain (:func:`~lampskit.core.planner.exit_phase_delay`).
+* REPLAN j (only with :attr:`MpChain.background`, the real-time loop): the
+  re-plan runs on a planner thread, off the 1 kHz path, while the periodic
+  MP goes on wiping j; the tick that finds it done hands it over and goes
+  on as LEAVE. Without it (lock-step: deterministic) the re-plan runs in
+  the tick.
 
 :meth:`MpChain.update` returns a :class:`ChainResult`; a runner's error
 status or a failed plan is :attr:`ChainResult.ERROR` with the reason in
@@ -22,6 +27,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
+from concurrent.futures import Executor, Future
 from enum import IntEnum
 
 import numpy as np
@@ -55,6 +61,7 @@ class ChainStep(IntEnum):
     TRANSIT = 0  #: a transitional MP into the stain's periodic MP
     WIPE = 1  #: the periodic MP until the stain is done
     LEAVE = 2  #: the periodic MP until its phase heads for the next stain
+    REPLAN = 3  #: the periodic MP while the re-plan runs on the planner thread
 
 
 class MpChain:
@@ -91,9 +98,12 @@ class MpChain:
         self._entry: TransitionSpec | None = None
         self._next: Wipe | None = None
         self._leave_at = 0.0
+        #: where re-plans run (a one-thread executor), or None: in the tick
+        self.background: Executor | None = None
+        self._pending: Future | None = None
         self._wipe_t = 0.0
         self._on_step = {ChainStep.TRANSIT: self._on_transit, ChainStep.WIPE: self._on_wipe,
-                         ChainStep.LEAVE: self._on_leave}
+                         ChainStep.LEAVE: self._on_leave, ChainStep.REPLAN: self._on_replan}
 
     @property
     def current_mp(self) -> str:
@@ -104,6 +114,7 @@ class MpChain:
 
     def start(self, plan_: Plan, reference: Setpoint) -> ChainResult:
         """Into the plan's first wipe from the reference's in-plane state: TRANSITION or ERROR."""
+        self._pending = None  # a re-plan of a chain left earlier (a stop, a fault) is of no use any more
         self._plan = plan_
         return self._start_transition(plan_.wipes[0], reference)
 
@@ -147,6 +158,8 @@ class MpChain:
             return ChainResult.WORKING
         if self._choose_next(runner, book, clock_s) == ChainResult.ERROR:
             return ChainResult.ERROR
+        if self.step == ChainStep.REPLAN:
+            return ChainResult.WORKING
         return self._leave_when_due(runner, reference)
 
     def _on_leave(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
@@ -202,18 +215,53 @@ class MpChain:
         return True
 
     def _choose_next(self, runner: PeriodicRunner, book: StainBook, clock_s: float) -> ChainResult:
-        """Re-plan over the stains open now; keep wiping until the phase heads for the next one."""
+        """Re-plan over the stains open now (in the tick, or handed to :attr:`background`); keep wiping until
+        the phase heads for the next one."""
         current = self.wipe.stain.id
         open_stains = [s for s in book.open_stains(clock_s) if s.id != current]
         self._next = None
+        if not open_stains:
+            return self._leave_towards(runner, None)
+        start = runner.position_m.copy()
+        if self.background is not None:
+            self._pending = self.background.submit(plan, self.skill, open_stains, start, self.planner)
+            self.step = ChainStep.REPLAN
+            return ChainResult.WORKING
+        try:
+            new_plan = plan(self.skill, open_stains, start, self.planner)
+        except PlanningError as exc:
+            return self._failed(f"planning failed: {exc}")
+        return self._leave_towards(runner, new_plan)
+
+    def _on_replan(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+        """Wipe on while the planner thread works; take its plan at the first tick it is done."""
+        runner = self._runner
+        status = runner.update(dt_s)
+        if status < 0:
+            return self._checked(status)
+        self._wipe_t += dt_s
+        pending = self._pending
+        if pending is None or not pending.done():
+            self.counters["ticks_waiting_for_a_plan"] += 1
+            return ChainResult.WORKING
+        self._pending = None
+        try:
+            new_plan = pending.result()
+        except PlanningError as exc:
+            return self._failed(f"planning failed: {exc}")
+        except Exception as exc:  # a bug in the planner thread is a failed plan, not a dead loop
+            return self._failed(f"planning failed: {type(exc).__name__}: {exc}")
+        if self._leave_towards(runner, new_plan) == ChainResult.ERROR:
+            return ChainResult.ERROR
+        return self._leave_when_due(runner, reference)
+
+    def _leave_towards(self, runner: PeriodicRunner, new_plan: Plan | None) -> ChainResult:
+        """LEAVE: the periodic MP runs on until its phase heads for the plan's first stain (or ends the chain)."""
         towards = None
-        if open_stains:
-            try:
-                self._plan = plan(self.skill, open_stains, runner.position_m.copy(), self.planner)
-            except PlanningError as exc:
-                return self._failed(f"planning failed: {exc}")
+        if new_plan is not None:
+            self._plan = new_plan
             self.counters["replans"] += 1
-            self._next = self._plan.wipes[0]
+            self._next = new_plan.wipes[0]
             towards = self._next.anchor_m
         delay = 0.0 if towards is None else exit_phase_delay(self.skill, self.wipe, runner.phase_rad, towards)
         self._leave_at = runner.phase_unwrapped_rad + delay

@@ -25,9 +25,11 @@ from __future__ import annotations
 
 import gc
 import logging
+import sys
 import threading
 import time
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -52,6 +54,8 @@ SERVICE = "controller"
 SENT_RING = 64
 #: On a stop request with the pad on the board, the loop goes on this long at most [s] while it lifts off.
 LIFT_ON_STOP_S = 6.0
+#: How long a thread of the real-time controller may hold the GIL while another waits for it [s].
+SWITCH_INTERVAL_S = 2e-4
 
 
 class ControllerService:
@@ -151,6 +155,7 @@ class ControllerService:
         Without a state for a nominal period (``rate_hz``) the loop still does its bookkeeping: e-stop, status,
         the robot-lost watch. A state that arrives while an older one is still unanswered replaces it; the states
         never answered are counted as overruns (missed robot periods)."""
+        planner = self._start_planner_thread()
         hygiene = LoopHygiene(counts=self.counters)
         hygiene.start(realtime=True)  # first: its full collection must not count as a stalled first period
         states = self.node.inbox(self.keys.robot_state, RobotState, maxlen=1)  # the newest state only
@@ -201,6 +206,9 @@ class ControllerService:
                 hygiene.collect_due(state_ns + robot_period_ns - time.monotonic_ns())  # the slack before the next
         finally:
             hygiene.stop()
+            self.core.executor.chain.background = None
+            planner.shutdown(wait=False, cancel_futures=True)
+            sys.setswitchinterval(self._switch_interval_s)
 
     # ------------------------------------------------------------------ pieces
     def _exit_now(self) -> bool:
@@ -225,6 +233,18 @@ class ControllerService:
             log.error("the pad did not lift off within %.0f s of the stop request: exiting anyway", LIFT_ON_STOP_S)
             return True
         return False
+
+    def _start_planner_thread(self) -> ThreadPoolExecutor:
+        """The chain's re-plans off the 1 kHz path: one thread, started here, before the loop's thread turns
+        real-time (a thread inherits its creator's scheduling); the interpreter switches threads every
+        :data:`SWITCH_INTERVAL_S` so that a plan in progress holds the GIL from a waking tick that long at most
+        (Python's default, 5 ms, is five periods)."""
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lamps-planner")
+        pool.submit(lambda: None).result()  # its thread exists from now on
+        self._switch_interval_s = sys.getswitchinterval()  # given back when the loop ends
+        sys.setswitchinterval(SWITCH_INTERVAL_S)
+        self.core.executor.chain.background = pool
+        return pool
 
     def _control(self, state: RobotState, dt: float) -> np.ndarray | None:
         """Torques answering ``state``, or None when the tick failed (then the answer is ``hold``)."""

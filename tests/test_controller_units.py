@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import concurrent.futures
+import threading
+
 import numpy as np
 import pytest
 
 from controller.control.force import NormalForceRegulator
 from controller.control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
                                        speed_excess_force)
+from controller.chain import ChainStep
 from controller.executor import SkillExecutor
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
 from controller.motion import OrientationBlend, Quintic, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
 from interfaces.errors import ConfigError
+from lampskit.errors import PlanningError
 from interfaces.transforms import tool_rotation_on_board
 
 
@@ -497,3 +502,84 @@ def test_the_controller_caps_its_task_modes_for_the_robot_state_rate(learned_ski
     for rate in (1000.0, 0.0):
         core.follow_robot_rate(rate)
         assert fastest_mode_rad_s() == pytest.approx(configured, rel=1e-6)
+
+
+class _SlowPlans(concurrent.futures.ThreadPoolExecutor):
+    """The planner thread, slowed: each plan is handed back only after the loop ran ``ticks`` more ticks (a
+    long re-plan on a loaded machine), and the plans made are kept."""
+
+    def __init__(self, ticks: int) -> None:
+        super().__init__(max_workers=1)
+        self.ticks, self.plans, self.release = ticks, [], threading.Event()
+
+    def submit(self, fn, *args, **kwargs):
+        def slow():
+            result = fn(*args, **kwargs)
+            self.release.wait(10.0)
+            self.release.clear()
+            self.plans.append([w.stain.id for w in result.wipes])
+            return result
+        return super().submit(slow)
+
+
+def test_the_real_time_chain_re_plans_on_the_planner_thread_and_wipes_on_meanwhile(learned_skill):
+    """With a planner thread (the real-time loop's), a re-plan never runs in the tick: the stain's periodic MP
+    goes on until the plan comes back, then the chain leaves towards the plan's first stain as in the tick,
+    the junctions as continuous. A failed plan is a FAULT naming it, not an exception in the loop."""
+    def wipe(ex: SkillExecutor, release_after: int | None) -> tuple[list, dict, int]:
+        arm = IdealArm()
+        ex.set_stains(BOARD, stains())
+        wiped: dict[int, int] = {}
+        waiting = [0]
+
+        def tick(k, ex):
+            if ex.phase == "WIPE":
+                wiped[ex.stain_id] = wiped.get(ex.stain_id, 0) + 1
+            if k % 100 == 0:
+                ex.set_stains(BOARD, stains(tuple(wiped.get(i, 0) > 2000 for i in range(3))))
+            release = getattr(ex.chain.background, "release", None)
+            if ex.chain.step == ChainStep.REPLAN:
+                waiting[0] += 1
+                if release is not None and waiting[0] % release_after == 0:
+                    release.set()
+
+        return run(ex, arm, 30.0, tick), ex.counters, waiting[0]
+
+    inline = SkillExecutor(learned_skill, ExecutorParams())
+    log_inline, _, _ = wipe(inline, None)
+    threaded = SkillExecutor(learned_skill, ExecutorParams())
+    threaded.chain.background = pool = _SlowPlans(0)
+    try:
+        log_threaded, counters, waited = wipe(threaded, 25)
+    finally:
+        pool.shutdown()
+    seq = [p for p in phases(log_threaded) if p != "WAIT_PEERS"]
+    assert seq == ["APPROACH", "TRANSITION", "WIPE", "TRANSITION", "WIPE", "TRANSITION", "WIPE", "RETREAT", "DONE"]
+    # the same stains in the same order as the re-plans in the tick; each waited for ~25 ticks, wiping
+    visits = lambda log: [s for i, (p, s, *_) in enumerate(log) if p == "TRANSITION" and log[i - 1][0] != p]
+    assert visits(log_threaded) == visits(log_inline)
+    assert pool.plans and counters["replans"] == len(pool.plans) == inline.counters["replans"]
+    assert counters["ticks_waiting_for_a_plan"] >= 24 * len(pool.plans) and waited >= 24 * len(pool.plans)
+    a = np.array([e[4] for e in log_threaded])
+    steps = np.linalg.norm(np.diff(a, axis=0), axis=1)
+    for j in threaded.junction_ticks:
+        around = np.concatenate([steps[j - 7 : j - 2], steps[j : j + 5]])
+        assert steps[j - 2] <= 3.0 * around.max() + 1e-3, (j, steps[j - 2], around.max())
+
+    # a plan that fails on the planner thread
+    failing = SkillExecutor(learned_skill, ExecutorParams())
+    failing.chain.background = broken = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+    try:
+        import controller.chain as chain_module
+
+        def bad_plan(*args, **kwargs):
+            raise PlanningError("no order found (test)")
+
+        real_plan, chain_module.plan = chain_module.plan, bad_plan
+        try:
+            log_failing, _, _ = wipe(failing, 1)
+        finally:
+            chain_module.plan = real_plan
+    finally:
+        broken.shutdown()
+    assert "FAULT" in phases(log_failing) and "planning failed: no order found (test)" in failing.reason
