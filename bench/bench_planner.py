@@ -25,6 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from controller.planner_thread import SWITCH_INTERVAL_S, PlannerThread  # noqa: E402
 from lampskit.core.planner import EXACT_ORDER_MAX, Stain, order_stains, plan  # noqa: E402
 from lampskit.learn.learn import bundled_skill  # noqa: E402
 
@@ -70,14 +71,12 @@ def _timed(f) -> tuple[float, object]:
     return (time.perf_counter() - t0) * 1e3, out
 
 
-def ticks_during_replan(skill, stains, start, switch_interval_s: float | None, ticks_after: int = 20) -> dict:
+def ticks_during_replan(skill, stains, start, threaded: bool, ticks_after: int = 20) -> dict:
     """A 1 kHz loop of control-law ticks (the impedance law on the arm: Pinocchio and numpy, as in the
-    controller) while ``plan()`` runs: in the tick (``switch_interval_s`` None: the tick that re-plans takes
-    the whole plan), or on a planner thread (the real-time controller's way) with that GIL switch interval.
+    controller) while ``plan()`` runs: in the tick (the tick that re-plans takes the whole plan), or
+    ``threaded`` on the real-time controller's :class:`~controller.planner_thread.PlannerThread`.
     Returns the worst tick [ms] (from its deadline to its end: what the robot waits for) over the plan and
     ``ticks_after`` more periods, and the periods the plan took."""
-    import concurrent.futures
-
     from controller.control.impedance import Reference, impedance_torque
     from controller.control.params import ImpedanceParams
     from interfaces.robot_model import RobotModel
@@ -92,13 +91,9 @@ def ticks_during_replan(skill, stains, start, switch_interval_s: float | None, t
 
     for _ in range(50):
         tick()
-    previous = sys.getswitchinterval()
-    pool = concurrent.futures.ThreadPoolExecutor(max_workers=1)
-    pool.submit(lambda: None).result()
+    pool = PlannerThread()
     worst, periods = 0.0, 0
     try:
-        if switch_interval_s is not None:
-            sys.setswitchinterval(switch_interval_s)
         deadline = time.perf_counter()
         future = None
         left = ticks_after
@@ -106,7 +101,7 @@ def ticks_during_replan(skill, stains, start, switch_interval_s: float | None, t
             deadline += 1e-3
             time.sleep(max(deadline - time.perf_counter(), 0.0))
             if periods == 0:
-                if switch_interval_s is None:
+                if not threaded:
                     plan(skill, stains, start)  # the re-plan inside the tick
                 else:
                     future = pool.submit(plan, skill, stains, start)
@@ -116,7 +111,6 @@ def ticks_during_replan(skill, stains, start, switch_interval_s: float | None, t
             if future is None or future.done():
                 left -= 1
     finally:
-        sys.setswitchinterval(previous)
         pool.shutdown()
     return {"worst_tick_ms": worst * 1e3, "periods": periods - ticks_after}
 
@@ -157,14 +151,13 @@ def main() -> int:
         print(f"| {r['stains']} | {r['order_ms_p50']:.2f} / {r['order_ms_max']:.2f} | {r['plan_ms_p50']:.2f} / "
               f"{r['plan_ms_max']:.2f} | {base} | {ratio} | {gain} |")
     print(f"\n{boards} boards per size; up to {EXACT_ORDER_MAX} stains both search every order (same length).")
-    from controller.service import SWITCH_INTERVAL_S
 
     replan = []
     for n in (7, 30, 100):
         rng = np.random.default_rng(1000 * n)
         stains = [Stain(i, rng.uniform(0.0, 1.0, 2), 0.05) for i in range(n)]
-        rounds = [(ticks_during_replan(skill, stains, start, None),
-                   ticks_during_replan(skill, stains, start, SWITCH_INTERVAL_S)) for _ in range(boards)]
+        rounds = [(ticks_during_replan(skill, stains, start, False),
+                   ticks_during_replan(skill, stains, start, True)) for _ in range(boards)]
         inline = [r[0]["worst_tick_ms"] for r in rounds]
         thread = [r[1]["worst_tick_ms"] for r in rounds]
         replan.append({"stains": n, "inline_ms": inline, "thread_ms": thread,

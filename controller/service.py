@@ -25,11 +25,9 @@ from __future__ import annotations
 
 import gc
 import logging
-import sys
 import threading
 import time
 from collections import Counter
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -45,6 +43,7 @@ from lampskit.errors import PlanningError
 from .core import TRACE_COLUMNS, ControllerCore
 from .executor_types import BoardPose, StainState
 from .params import ControllerParams
+from .planner_thread import PlannerThread
 
 log = logging.getLogger(__name__)
 
@@ -54,8 +53,6 @@ SERVICE = "controller"
 SENT_RING = 64
 #: On a stop request with the pad on the board, the loop goes on this long at most [s] while it lifts off.
 LIFT_ON_STOP_S = 6.0
-#: How long a thread of the real-time controller may hold the GIL while another waits for it [s].
-SWITCH_INTERVAL_S = 2e-4
 
 
 class ControllerService:
@@ -208,7 +205,6 @@ class ControllerService:
             hygiene.stop()
             self.core.executor.chain.background = None
             planner.shutdown(wait=False, cancel_futures=True)
-            sys.setswitchinterval(self._switch_interval_s)
 
     # ------------------------------------------------------------------ pieces
     def _exit_now(self) -> bool:
@@ -234,15 +230,10 @@ class ControllerService:
             return True
         return False
 
-    def _start_planner_thread(self) -> ThreadPoolExecutor:
-        """The chain's re-plans off the 1 kHz path: one thread, started here, before the loop's thread turns
-        real-time (a thread inherits its creator's scheduling); the interpreter switches threads every
-        :data:`SWITCH_INTERVAL_S` so that a plan in progress holds the GIL from a waking tick that long at most
-        (Python's default, 5 ms, is five periods)."""
-        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lamps-planner")
-        pool.submit(lambda: None).result()  # its thread exists from now on
-        self._switch_interval_s = sys.getswitchinterval()  # given back when the loop ends
-        sys.setswitchinterval(SWITCH_INTERVAL_S)
+    def _start_planner_thread(self) -> PlannerThread:
+        """The chain's re-plans off the 1 kHz path (:mod:`controller.planner_thread`), its thread started here,
+        before the loop's thread turns real-time."""
+        pool = PlannerThread()
         self.core.executor.chain.background = pool
         return pool
 

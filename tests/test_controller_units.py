@@ -583,3 +583,27 @@ def test_the_real_time_chain_re_plans_on_the_planner_thread_and_wipes_on_meanwhi
     finally:
         broken.shutdown()
     assert "FAULT" in phases(log_failing) and "planning failed: no order found (test)" in failing.reason
+
+
+def test_the_planner_thread_exists_at_once_and_shortens_the_switch_interval_only_while_planning():
+    import sys
+
+    from controller.planner_thread import SWITCH_INTERVAL_S, PlannerThread
+
+    normal = sys.getswitchinterval()
+    pool = PlannerThread()
+    try:
+        assert any(t.name.startswith("lamps-planner") for t in threading.enumerate())  # before any plan
+        go = threading.Event()
+        future = pool.submit(lambda: go.wait(5.0) and sys.getswitchinterval())
+        assert sys.getswitchinterval() == pytest.approx(SWITCH_INTERVAL_S)
+        go.set()
+        assert future.result(5.0) == pytest.approx(SWITCH_INTERVAL_S)
+        for _ in range(100):  # the done callback runs right after the result is set
+            if sys.getswitchinterval() == normal:
+                break
+            threading.Event().wait(0.01)
+        assert sys.getswitchinterval() == normal
+    finally:
+        pool.shutdown()
+        sys.setswitchinterval(normal)
