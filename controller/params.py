@@ -102,6 +102,11 @@ class LimitParams:
     over disturbance_filter_s [s], above this share of the joint's torque
     limit for disturbance_persist_s [s] is a fault (the arm is not doing
     what it was told); 10 turns the watch off.
+        overload_share : in real time, a share of the robot's states left
+    unanswered (filtered over overload_filter_s [s] of robot time) above this
+    for overload_persist_s [s] is a fault: the loop cannot keep up, so the
+    pad lifts off under control instead of wiping on with stale torques
+    (1 = off).
     """
 
     torque_rate_nm_per_ms: float = 1.0
@@ -119,12 +124,18 @@ class LimitParams:
     disturbance_share: float = 0.1
     disturbance_filter_s: float = 0.02
     disturbance_persist_s: float = 0.05
+    overload_share: float = 0.3
+    overload_filter_s: float = 0.5
+    overload_persist_s: float = 1.0
 
     def __post_init__(self) -> None:
         s = "controller.limits"
         _range(s, "disturbance_share", self.disturbance_share, 0.02, 10.0)
         _range(s, "disturbance_filter_s", self.disturbance_filter_s, 0.001, 1.0)
         _range(s, "disturbance_persist_s", self.disturbance_persist_s, 0.0, 5.0)
+        _range(s, "overload_share", self.overload_share, 0.01, 1.0)
+        _range(s, "overload_filter_s", self.overload_filter_s, 0.01, 10.0)
+        _range(s, "overload_persist_s", self.overload_persist_s, 0.0, 60.0)
         _range(s, "torque_rate_nm_per_ms", self.torque_rate_nm_per_ms, 0.01, 50.0)
         _range(s, "joint_margin_rad", self.joint_margin_rad, 0.01, 0.5)
         _range(s, "joint_margin_stiffness_nm_rad", self.joint_margin_stiffness_nm_rad, 0.0, 5000.0)

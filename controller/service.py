@@ -40,6 +40,7 @@ from interfaces.transforms import transform_from_pose
 
 from lampskit.errors import PlanningError
 
+from .control.watch import OverloadWatch
 from .core import TRACE_COLUMNS, ControllerCore
 from .executor_types import BoardPose, StainState
 from .params import ControllerParams
@@ -80,6 +81,8 @@ class ControllerService:
         self._sent_seq = np.full(SENT_RING, -1, dtype=np.int64)
         self._session_id = str(node.session.zid())
         self._stop_since: float | None = None  # the robot side serves one controller session
+        lim = params.limits
+        self._overload = OverloadWatch(lim.overload_share, lim.overload_filter_s, lim.overload_persist_s)
         self._stains_clock = None
         self._lost = False
         self._ever_state = False
@@ -185,9 +188,12 @@ class ControllerService:
                         self.counters["ticks_without_fresh_state"] += 1
                         self._check_lost((t0 - state_ns) / 1e9)
                 elif new is not None and state.seq != answered_seq:
-                    if answered_seq >= 0 and state.seq > answered_seq + 1:
-                        self.stats.overruns += state.seq - answered_seq - 1  # robot periods left unanswered
+                    missed = state.seq - answered_seq - 1 if answered_seq >= 0 else 0
+                    if missed > 0:
+                        self.stats.overruns += missed  # robot periods left unanswered
                     dt = self._dt_from_robot_clock(state)  # the robot's own time, also across skipped periods
+                    if self._overload.update(max(missed, 0), dt):
+                        self._overloaded()
                     self._poll_stains(t0 / 1e9)
                     t1 = time.monotonic_ns()
                     tau = self._control(state, dt)
@@ -318,10 +324,19 @@ class ControllerService:
             self.core.executor.robot_lost(f"no robot state for {silence_s * 1000:.0f} ms")
             self._publish_status(force=True)
 
+    def _overloaded(self) -> None:
+        """Too many robot states unanswered for too long: FAULT, which lifts the pad off (the loop still runs,
+        slower); the watch starts over, so an overload that persists after a clear trips again."""
+        self.counters["overload_trips"] += 1
+        log.error("%s", self._overload.reason())
+        self.core.executor.fault(self._overload.reason())
+        self._overload.reset()
+
     def _robot_back(self, state: RobotState) -> None:
         log.warning("robot states back (seq %d after %d): restarting from the measured pose", state.seq,
                     self._last_seq)
         self.counters["robot_restarts"] += 1
+        self._overload.reset()
         self._lost = False
         self._last_robot_ns = None
         self._last_seq = -1

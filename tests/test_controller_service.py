@@ -397,3 +397,32 @@ def test_a_controller_stopped_mid_wipe_lifts_the_pad_off_before_it_exits(tmp_pat
         last = ctl.trace()[-1]
         assert last[COL["force_n"]] < 0.5 and last[COL["h"]] > 0.005, (last[COL["force_n"]], last[COL["h"]])
         assert took < LIFT_ON_STOP_S, took
+
+
+@pytest.mark.slow
+def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp_path, learned_skill):
+    """Graceful degradation: the real-time controller, its tick slowed to miss two robot states in three while it
+    wipes, faults on the overload watch (not on the force cap) and lifts the pad off at the reduced rate."""
+    with SimProcess(tmp_path, {"mode": "realtime", "camera": NO_CAMERA}) as sim:
+        with ControllerThread(sim, learned_skill, {"mode": "realtime"}) as ctl:
+            truth = ctl.operator.latest(ctl.operator.keys.sim_truth, SimTruth)
+            ctl.wait_phase(("WIPE",), 60.0)
+            wait_for(lambda: ctl.core.executor.phase == "WIPE" and ctl.core.normal_force_n > 5.0, 10.0,
+                     "pressing in WIPE")
+            tick = ctl.core.tick
+
+            def slow_tick(*args, **kwargs):
+                time.sleep(0.0025)  # a CPU that cannot keep up: an answer every ~3 robot periods
+                return tick(*args, **kwargs)
+
+            ctl.core.tick = slow_tick
+            t0 = time.monotonic()
+            ctl.wait_phase(("FAULT",), 20.0)
+            reason = ctl.core.executor.reason
+            assert reason.startswith("overload: ") and "unanswered" in reason, reason
+            assert 1.0 <= time.monotonic() - t0 <= 10.0
+            # the pad comes off the board while the loop still runs slowly, and the force never reached the cap
+            lifted = wait_sample(truth, lambda m: m.contact_force_n == 0.0, 20.0, "the pad off the board")
+            assert lifted.contact_force_n == 0.0
+            assert ctl.service.counters["overload_trips"] >= 1
+            assert "force cap" not in reason and ctl.core.executor.counters["faults"] == 1

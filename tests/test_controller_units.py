@@ -121,6 +121,7 @@ def test_force_regulator_reaches_the_target_on_a_spring_and_respects_the_cap():
     ({"stains_from": "camera"}, "stains_from must be one of"),
     ({"executor": {"standoff_m": 2.0}}, "standoff_m"),
     ({"limits": {"torque_rate_nm_per_ms": 0.0}}, "torque_rate_nm_per_ms"),
+    ({"limits": {"overload_share": 0.0}}, "overload_share"),
     ({"planner": {"order": "random"}}, "order must be"),
     ({"force": {"gain": 1.0}}, r"unknown key\(s\) \['gain'\]"),
     ({"impedance": 3}, r"\[controller.impedance\] must be a table"),
@@ -607,3 +608,31 @@ def test_the_planner_thread_exists_at_once_and_shortens_the_switch_interval_only
     finally:
         pool.shutdown()
         sys.setswitchinterval(normal)
+
+
+def test_the_overload_watch_trips_on_a_sustained_share_of_unanswered_states_only():
+    from controller.control.watch import OverloadWatch
+
+    w = OverloadWatch(max_share=0.3, filter_s=0.5, persist_s=1.0)
+    for _ in range(5000):  # 5 s at 1 kHz with one state in 20 unanswered (5 %): never
+        assert not w.update(0, 0.001) or False
+        if _ % 20 == 0:
+            assert not w.update(1, 0.002)
+    assert w.share < 0.1 and not w.tripped
+    for _ in range(300):  # a 0.6 s burst of every other state unanswered: over the limit, but not for 1 s
+        w.update(1, 0.002)
+    assert w.share > 0.3 and not w.tripped
+    for _ in range(1000):  # back to normal
+        w.update(0, 0.001)
+    assert w.share < 0.05 and w.over_s == 0.0
+    t = 0.0
+    while not w.update(1, 0.002):  # sustained: half the states unanswered
+        t += 0.002
+        assert t < 3.0
+    assert 1.0 <= t <= 2.0, t  # the filter's rise, then the 1 s persistence
+    assert "overload: " in w.reason() and "limit 30% for 1 s" in w.reason()
+    w.reset()
+    assert not w.tripped and w.share == 0.0
+    off = OverloadWatch(max_share=1.0, filter_s=0.5, persist_s=0.0)
+    assert not any(off.update(10, 0.011) for _ in range(1000))  # 1 = off
+

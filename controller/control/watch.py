@@ -117,3 +117,52 @@ class ContactWatch:
         else:
             self.lost_s = 0.0
         return self.lost_s >= self.persist_s
+
+
+class OverloadWatch:
+    """The share of the robot's states a real-time loop left unanswered, low-passed over robot time, and whether
+    it has stayed above its limit long enough.
+
+    A loop that misses more and more periods (a starved CPU, a slow tick) answers with ever staler torques;
+    past this watch it should stop wiping and lift off under control, which it still can at a reduced rate.
+
+    Parameters
+    ----------
+    max_share : limit on the filtered share (0-1; 1 never trips). filter_s : time constant of the first-order
+    low-pass [s]. persist_s : above the limit this long (robot time) before :attr:`tripped` [s].
+    """
+
+    def __init__(self, max_share: float, filter_s: float, persist_s: float) -> None:
+        self.max_share = float(max_share)
+        self.filter_s = float(filter_s)
+        self.persist_s = float(persist_s)
+        self.share = 0.0
+        self.over_s = 0.0
+        self.peak_share = 0.0
+        self.tripped = False
+
+    def reset(self) -> None:
+        """Forget the history (a restart of the robot, a new loop)."""
+        self.share = self.over_s = 0.0
+        self.tripped = False
+
+    def update(self, missed: int, dt_s: float) -> bool:
+        """One answered state after ``missed`` unanswered ones, ``dt_s`` [s] of robot time since the last answered
+        one; True once tripped (it stays so until :meth:`reset`)."""
+        if dt_s <= 0.0:
+            return self.tripped
+        x = missed / (missed + 1.0)
+        self.share += min(1.0, dt_s / self.filter_s) * (x - self.share)
+        self.peak_share = max(self.peak_share, self.share)
+        if self.share > self.max_share and self.max_share < 1.0:
+            self.over_s += dt_s
+            if self.over_s >= self.persist_s:
+                self.tripped = True
+        else:
+            self.over_s = 0.0
+        return self.tripped
+
+    def reason(self) -> str:
+        return (f"overload: {self.share:.0%} of the robot's states left unanswered (limit {self.max_share:.0%} for "
+                f"{self.persist_s:g} s): the controller cannot keep up with the robot; lifted off")
+
