@@ -165,6 +165,7 @@ class ControllerService:
         state: RobotState | None = None
         state_ns = 0
         answered_seq = -1
+        replaced_seen = 0
         robot_period_ns = int(nominal_s * 1e9)
         t_prev = time.monotonic_ns()
         try:
@@ -192,7 +193,10 @@ class ControllerService:
                     if missed > 0:
                         self.stats.overruns += missed  # robot periods left unanswered
                     dt = self._dt_from_robot_clock(state)  # the robot's own time, also across skipped periods
-                    if self._overload.update(max(missed, 0), dt):
+                    # the overload is ours: states that came while an older one waited (a state lost on the way
+                    # never came: not this loop's fault)
+                    ours, replaced_seen = states.replaced - replaced_seen, states.replaced
+                    if self._overload.update(ours, dt):
                         self._overloaded()
                     self._poll_stains(t0 / 1e9)
                     t1 = time.monotonic_ns()
@@ -325,7 +329,7 @@ class ControllerService:
             self._publish_status(force=True)
 
     def _overloaded(self) -> None:
-        """Too many robot states unanswered for too long: FAULT, which lifts the pad off (the loop still runs,
+        """Too many robot states came while an older one waited, for too long: FAULT, which lifts the pad off (the loop still runs,
         slower); the watch starts over, so an overload that persists after a clear trips again."""
         self.counters["overload_trips"] += 1
         log.error("%s", self._overload.reason())

@@ -195,6 +195,7 @@ class Inbox(Generic[M]):
         self._bad = _BadSamples(key)
         self.bad = self._bad.bad
         self.received = 0
+        self.replaced = 0  #: samples pushed out unread by newer ones (the reader did not keep up)
         self._sub = session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
@@ -208,6 +209,8 @@ class Inbox(Generic[M]):
             return
         with self._ready:
             self.received += 1
+            if len(self._queue) == self._queue.maxlen:
+                self.replaced += 1  # the oldest waiting sample goes unread
             self._queue.append(msg)
             self._ready.notify()
         if self._wake is not None:
