@@ -71,8 +71,6 @@ from interfaces.config import check_range, dataclass_from_table
 from interfaces.errors import ConfigError
 from interfaces.loop_stats import LoopStats
 from interfaces.messages import ServiceStatus
-from interfaces import priority
-from interfaces.realtime import apply_realtime
 from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
 from sim.core import SimCore
@@ -457,9 +455,9 @@ class LbrPeer:
 
     # -- loops ------------------------------------------------------------------------------------------
     def _run_realtime(self) -> None:
-        if priority.KIND == priority.REALTIME:  # the lamps lbr-peer process (a robot keeps its period: so should
-            for name, value in apply_realtime().counters().items():  # its stand-in); not a test's in-process peer
-                self.counters[name] = value
+        # no SCHED_FIFO here (the loops of the controller and the adapter have it): the peer's loop is the
+        # simulator, busy for most of each FRI period, and as a FIFO thread it starved the Zenoh threads of
+        # every process on its core (a CI run: commands 100 ms late, the peer's FRI watchdog tripped)
         period_ns = _ns(self.p.sample_time_s)
         next_ns = time.monotonic_ns()
         while not self.stop.is_set():
