@@ -329,8 +329,9 @@ class ControllerService:
             self._publish_status(force=True)
 
     def _overloaded(self) -> None:
-        """Too many robot states came while an older one waited, for too long: FAULT, which lifts the pad off (the loop still runs,
-        slower); the watch starts over, so an overload that persists after a clear trips again."""
+        """Too many robot states came while an older one waited, for too long: FAULT, which lifts the pad off
+        (the loop still runs, slower); the watch starts over, so an overload that persists after a clear trips
+        again."""
         self.counters["overload_trips"] += 1
         log.error("%s", self._overload.reason())
         self.core.executor.fault(self._overload.reason())
