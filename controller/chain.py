@@ -148,12 +148,18 @@ class MpChain:
             return self._start_wipe(runner.overrun_s)
         return ChainResult.WORKING
 
-    def _on_wipe(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
-        runner = self._runner
-        status = runner.update(dt_s)
+    def _wipe_on(self, dt_s: float) -> ChainResult | None:
+        """The stain's periodic MP ``dt_s`` [s] further (WIPE and REPLAN); ERROR on a runner error, else None."""
+        status = self._runner.update(dt_s)
         if status < 0:
             return self._checked(status)
         self._wipe_t += dt_s
+        return None
+
+    def _on_wipe(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+        runner = self._runner
+        if (failed := self._wipe_on(dt_s)) is not None:
+            return failed
         if not self._pass_over(book, clock_s):
             return ChainResult.WORKING
         if self._choose_next(runner, book, clock_s) == ChainResult.ERROR:
@@ -236,10 +242,8 @@ class MpChain:
     def _on_replan(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
         """Wipe on while the planner thread works; take its plan at the first tick it is done."""
         runner = self._runner
-        status = runner.update(dt_s)
-        if status < 0:
-            return self._checked(status)
-        self._wipe_t += dt_s
+        if (failed := self._wipe_on(dt_s)) is not None:
+            return failed
         pending = self._pending
         if pending is None or not pending.done():
             self.counters["ticks_waiting_for_a_plan"] += 1
