@@ -275,3 +275,37 @@ def test_fig4_colours_each_bar_by_the_label_of_the_point_at_that_position_of_the
     assert np.mean(labels[valley] >= 0) > 0.8, "valley bars are periodic points (the spiral-in ends are not)"
     wrong = seg.labels[seg.optics.ordering]  # the old indexing, for contrast
     assert np.mean(wrong[valley] >= 0) < np.mean(labels[valley] >= 0) - 0.1
+
+
+def _touch_down_then_strokes(arrive: str) -> tuple[np.ndarray, np.ndarray, int]:
+    """A tool reaching a board (z = 0), then circles of 5 cm at 0.2 m/s: positions (K, 3) [m], speeds (K,) [m/s]
+    at 100 Hz, and the index where the circles start. ``arrive``: "press" comes down along the normal and
+    presses for 0.6 s at 2 cm/s before the first stroke (as in real demo 0); "slide" arrives along the board at
+    stroke speed."""
+    rate = 100.0
+    w = 0.2 / 0.05
+    t = np.arange(int(6 * 2 * np.pi / w * rate)) / rate
+    circles = np.c_[0.05 * np.cos(w * t), 0.05 * np.sin(w * t), np.zeros_like(t)]
+    start = circles[0]
+    if arrive == "press":
+        press = start + np.c_[np.zeros(60), -np.linspace(0.012, 0.0, 60), np.zeros(60)]
+        down = start + press[0] - start + np.c_[np.zeros(40), np.zeros(40), np.linspace(0.08, 0.001, 40)]
+        lead = np.vstack([down, press])
+    else:
+        lead = start + np.c_[np.linspace(-0.3, -0.002, 80), np.zeros(80), np.zeros(80)]
+    points = np.vstack([lead, circles])
+    speed = np.r_[np.linalg.norm(np.diff(points, axis=0), axis=1) * rate, 0.2]
+    return points, speed, len(lead)
+
+
+def test_a_wipe_starts_where_the_tool_settles_on_the_surface_not_where_a_slide_enters_it():
+    from lampskit.learn.time_runs import settle_start
+
+    points, speed, first_stroke = _touch_down_then_strokes("press")
+    start = settle_start(points, speed, first_stroke, len(points), 0)
+    # the 60 pressing samples are the wipe's, the descent at 0.2 m/s is not
+    assert start == first_stroke - 60, start
+    # never before the previous wiping phase
+    assert settle_start(points, speed, first_stroke, len(points), first_stroke - 20) == first_stroke - 20
+    points, speed, first_stroke = _touch_down_then_strokes("slide")
+    assert settle_start(points, speed, first_stroke, len(points), 0) == first_stroke

@@ -62,7 +62,9 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
    stretch below that level lasting at least one period, searched from one
    period before to one period after the run; the start then moves back
    while the recurrence stays below ``REC_GAMMA_LOOSE`` (3) times the median
-   (hysteresis: a person's first strokes are ragged and recur less exactly). A sample slower than
+   (hysteresis: a person's first strokes are ragged and recur less exactly), and on over the touch-down and
+   press before the first stroke while the tool stays on the strokes' fitted plane, inside their footprint
+   and slower than half their median speed (``time_runs.settle_start``). A sample slower than
    ``REST_SPEED_SHARE`` (0.1) of the run's median speed does not recur (a resting tool repeats itself
    trivially; a pause is no stroke), and recurring stretches apart by more than ``max(SPLIT_GAP_S,
    SPLIT_GAP_PERIODS P)`` (1 s, 1.5 periods) of motion that does not recur are separate wiping phases of

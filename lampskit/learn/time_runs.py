@@ -39,6 +39,17 @@ REST_SPEED_SHARE = 0.1
 #: to the spot again); a shorter gap (a grip shift, a ragged stroke) stays inside the wipe.
 SPLIT_GAP_S = 1.0
 SPLIT_GAP_PERIODS = 1.5
+#: A wipe starts where the tool settles onto the wiped surface, before its strokes recur: the start moves back
+#: while the tool stays within the band of heights above the plane fitted to the recurring strokes and within
+#: their footprint on it (both the :data:`SURFACE_QUANTILE` of the strokes' own spread, times
+#: :data:`SURFACE_MARGIN`), moving slowly. A person touches down, presses and only then strokes; an approach is
+#: off the surface, a move arriving along the board comes at stroke speed.
+SURFACE_QUANTILE = 0.95
+SURFACE_MARGIN = 1.2
+#: ... with a floor on the height band [m] (sensor noise on a flat, well-fitted stroke).
+SURFACE_BAND_MIN_M = 0.005
+#: ... and while the tool is slower than this share of the strokes' median speed (settling, pressing).
+SETTLE_SPEED_SHARE = 0.5
 
 
 def runs_from_labels(labels: np.ndarray) -> list[Run]:
@@ -245,9 +256,50 @@ def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> li
                 # person's first strokes are ragged: they recur, less exactly; the end needs none)
                 while s0 > floor and loose[s0 - 1]:
                     s0 -= 1
+                s0 = settle_start(smooth[lo:hi], speed, s0, s1, floor)
                 labels[lo + s0 : lo + s1] = c
                 floor = s1
     return runs_from_labels(labels)
+
+
+def settle_start(points: np.ndarray, speed: np.ndarray, s0: int, s1: int, floor: int) -> int:
+    """Index where the tool settled onto the surface of the strokes ``points[s0:s1]``, at most ``s0``.
+
+    Parameters
+    ----------
+    points : array, shape (K, 3)
+        Smoothed tool positions [m], any frame.
+    speed : array, shape (K,)
+        Tool speed [m/s] at those samples.
+    s0, s1 : int
+        The recurring strokes' span in ``points``.
+    floor : int
+        The start never moves before this index (the end of the previous wiping phase).
+
+    The plane is the least-squares plane of the strokes. The start moves back while the tool is on it
+    (``|height| <= band``), inside the strokes' footprint (``in-plane distance to their centre <= reach``)
+    and slower than :data:`SETTLE_SPEED_SHARE` of their median speed: touching down and pressing before the
+    first stroke, which is part of the wipe; a move that arrives along the board at stroke speed is not.
+    """
+    strokes = points[s0:s1]
+    if s0 <= floor or len(strokes) < 3:
+        return s0
+    centre = strokes.mean(axis=0)
+    _, _, vt = np.linalg.svd(strokes - centre, full_matrices=False)
+    normal = vt[2]
+
+    def height_and_reach(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rel = p - centre
+        h = rel @ normal
+        return np.abs(h), np.linalg.norm(rel - h[:, None] * normal, axis=1)
+
+    h, r = height_and_reach(strokes)
+    band = max(SURFACE_BAND_MIN_M, SURFACE_MARGIN * float(np.quantile(h, SURFACE_QUANTILE)))
+    reach = SURFACE_MARGIN * float(np.quantile(r, SURFACE_QUANTILE))
+    slow = SETTLE_SPEED_SHARE * float(np.median(speed[s0:s1]))
+    h, r = height_and_reach(points[floor:s0])
+    off = np.flatnonzero((h > band) | (r > reach) | (speed[floor:s0] > slow))
+    return floor + (int(off[-1]) + 1 if off.size else 0)
 
 
 def _wiping_phases(stretches: list[tuple[int, int]], split: float) -> list[tuple[int, int]]:
