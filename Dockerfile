@@ -31,8 +31,12 @@ COPY launch ./launch
 COPY config ./config
 RUN pip install --no-deps . && lamps --help > /dev/null
 
-RUN mkdir -p /runs /skills && chown lamps:lamps /runs
+# the compiled control law (numba) is cached where the service user can write, and filled at build time
+ENV NUMBA_CACHE_DIR=/var/cache/lamps-numba
+RUN mkdir -p /runs /skills /var/cache/lamps-numba && chown lamps:lamps /runs /var/cache/lamps-numba
 USER lamps
+RUN python -c "from controller.core import ControllerCore; from controller.params import ControllerParams; \
+from lampskit.learn.learn import bundled_skill; ControllerCore(ControllerParams.from_table({}), bundled_skill())"
 # Zenoh endpoints of the services (each listens on its own)
 EXPOSE 7447 7448 7449
 CMD ["lamps", "--help"]

@@ -10,7 +10,10 @@ Usage: .venv/bin/python bench/bench_controller.py [--quick] [--json OUT]
    every 100 ticks. p50 / p99 / max [us] over all ticks, and split into WIPE
    ticks and the rest. Baseline: the 1000 us period at 1 kHz. The same run
    also gives the in-process closed-loop speed (sim step + controller tick
-   per wall second): the ceiling for item 3.
+   per wall second): the ceiling for item 3. Then the arm's terms and the impedance law alone on every
+   5th state of that run: compiled (``Kinematics.update`` + ``impedance_torque`` into preallocated
+   terms) against the numpy formulation it replaced (``tests/numpy_law.py``), interleaved; the ratio
+   of the medians and the largest torque difference.
 2. Real-time mode over Zenoh for 60 s (10 s with --quick): ``lamps sim`` and
    ``lamps controller`` each in their own process, both ``--mode realtime``,
    no camera, stains from the sim's truth. The controller's status is
@@ -56,6 +59,8 @@ sys.path.insert(0, str(REPO))
 
 from lampskit.core.skill import save_skill  # noqa: E402
 from lampskit.learn.learn import bundled_skill  # noqa: E402
+from controller.control.impedance import (Kinematics, Reference, TaskShaping, impedance_torque,  # noqa: E402
+                                          new_terms, task_modes, task_stiffness)
 from controller.core import ControllerCore  # noqa: E402
 from controller.executor_types import BoardPose, StainState  # noqa: E402
 from controller.params import ControllerParams  # noqa: E402
@@ -66,6 +71,8 @@ from sim.core import SimCore  # noqa: E402
 from sim.params import SimParams  # noqa: E402
 
 MAX_TICKS = 20_000
+#: Every this many ticks the in-process run keeps the state for the law-alone comparison.
+LAW_STATE_EVERY = 5
 STAINS_EVERY = 100
 SAMPLE_S = 0.5
 #: The controller's start-up refusal of a rate its tick timing check says it cannot hold; retried this often.
@@ -97,6 +104,7 @@ def bench_tick(skill) -> dict:
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}}))
     core = ControllerCore(ControllerParams.from_table({}), skill)
     times = np.zeros(MAX_TICKS, np.int64)
+    states: list[tuple[np.ndarray, np.ndarray]] = []
     phases: list[str] = []
     n = 0
     t_wall = time.perf_counter()
@@ -109,6 +117,8 @@ def bench_tick(skill) -> dict:
             tau = core.tick(o.q, o.dq, o.wrench, False, 0.001)
             times[n] = time.perf_counter_ns() - t0
             phases.append(core.executor.phase)
+            if n % LAW_STATE_EVERY == 0:
+                states.append((o.q.copy(), o.dq.copy()))
             sim.step(tau.copy())
             n += 1
         wall = time.perf_counter() - t_wall
@@ -122,7 +132,36 @@ def bench_tick(skill) -> dict:
         per_phase[name] = _stats_us(times[np.array([p == name for p in phases], bool)])
     return {"all": _stats_us(times), "wipe": _stats_us(times[wipe]), "other": _stats_us(times[~wipe]),
             "per_phase": per_phase, "final_phase": core.executor.phase, "ticks": n, "wall_s": wall,
-            "loop_ticks_per_s": n / wall, "loop_x_realtime": n / wall / 1000.0, "remaining": remaining}
+            "loop_ticks_per_s": n / wall, "loop_x_realtime": n / wall / 1000.0, "remaining": remaining,
+            "law": bench_law(core, states)}
+
+
+def bench_law(core: ControllerCore, states: list[tuple[np.ndarray, np.ndarray]]) -> dict:
+    """The arm's terms and the impedance law alone on the run's states: compiled (the controller's
+    ``Kinematics.update`` + ``impedance_torque`` into preallocated terms) against the numpy formulation it
+    replaced (``tests/numpy_law.py``), interleaved state by state; the largest torque difference too."""
+    from tests.numpy_law import numpy_kinematics, numpy_law
+
+    model, imp = core.model, core.p.impedance
+    kin = Kinematics(model)
+    terms = new_terms(kin)
+    shaping = TaskShaping(force_axis=np.array([0.0, 0.0, 1.0]), press_n=10.0, normal_damping_1_s=20.0)
+    compiled, numpy_ns, worst = [], [], 0.0
+    for q, dq in states:
+        kin.update(q, dq)
+        ref = Reference(kin.p + 0.005, kin.R.copy(), np.full(6, 0.05), np.full(6, 0.5))
+        modes = task_modes(kin.Lambda, task_stiffness(imp), imp.damping_factor, imp.max_mode_frequency_rad_s)
+        t0 = time.perf_counter_ns()
+        kin.update(q, dq)
+        impedance_torque(model, q, dq, ref, imp, q, False, shaping, kin, modes, terms)
+        t1 = time.perf_counter_ns()
+        tau = numpy_law(numpy_kinematics(model, q, dq), q, dq, ref, imp, q, False, shaping, modes)[0]
+        t2 = time.perf_counter_ns()
+        compiled.append(t1 - t0)
+        numpy_ns.append(t2 - t1)
+        worst = max(worst, float(np.max(np.abs(tau - terms.tau_nm))))
+    c, b = _stats_us(np.array(compiled)), _stats_us(np.array(numpy_ns))
+    return {"compiled": c, "numpy": b, "ratio_p50": b["p50_us"] / c["p50_us"], "max_tau_diff_nm": worst}
 
 
 # ---------------------------------------------------------------------------------------------- processes
@@ -393,6 +432,15 @@ def print_report(res: dict, cmd: str) -> None:
     for name, r in tk["per_phase"].items():
         print(f"| &nbsp;&nbsp;phase {name} | {r['ticks']} | {r['p50_us']:.0f} | {r['p99_us']:.0f} | "
               f"{r['max_us']:.0f} |")
+    law = tk["law"]
+    print(f"\n| the arm's terms + impedance law alone, {law['compiled']['ticks']} states of the run | p50 us | p99 us "
+          f"| max us |\n|---|---|---|---|")
+    for label, key in (("compiled (Kinematics.update + impedance_torque)", "compiled"),
+                       ("baseline: the numpy formulation (tests/numpy_law.py)", "numpy")):
+        r = law[key]
+        print(f"| {label} | {r['p50_us']:.1f} | {r['p99_us']:.1f} | {r['max_us']:.0f} |")
+    print(f"| numpy / compiled (p50); largest torque difference | {law['ratio_p50']:.1f}x | "
+          f"{law['max_tau_diff_nm']:.1e} Nm | |")
     print("\n| in-process closed loop (SimCore.step + tick) | ticks/s | x real time (1 kHz) | stains left |"
           "\n|---|---|---|---|")
     print(f"| whole wipe, {tk['wall_s']:.1f} s wall | {tk['loop_ticks_per_s']:.0f} | {tk['loop_x_realtime']:.2f} | "

@@ -32,9 +32,11 @@ from interfaces.messages import Phase
 from interfaces.robot_model import RobotModel
 
 from .control.force import NormalForceRegulator
-from .control.impedance import Kinematics, Reference, TaskShaping, impedance_torque, task_modes, task_stiffness
-from .control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
-                             speed_excess_force)
+from .control.impedance import (Kinematics, Reference, TaskModes, TaskShaping, impedance_torque, new_terms,
+                                task_modes, task_stiffness)
+from .control.kernels import (joint_demand_into, largest_share, limit_torque, reference_into, tool_in_board,
+                              trace_row)
+from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
 from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
 from .executor import SkillExecutor
@@ -125,24 +127,68 @@ class ControllerCore:
         n_trace = max(params.trace_ticks, int(5 * params.rate_hz) if params.publish_trace else 0)
         self.trace = Trace(n_trace) if n_trace else None
         self._tau = np.zeros(self.model.nq)
-        self._brake = np.zeros(self.model.nq)
         self._period_s = 1.0 / params.rate_hz
         self._speed_onset = params.limits.joint_speed_share * self.model.limits.dq_max
         self.override = SpeedOverride(self.model.limits.dq_max, params.limits.reference_joint_speed_share)
         self._demand = np.zeros(self.model.nq)
-        self._twist_ahead = np.zeros(6)
+        self._demand_work = np.zeros((2, 6))
+        self._board: BoardPose | None = None
+        self._board_R = np.eye(3)
+        self._board_origin = np.zeros(3)
         self.override_used = 1.0
         self._modes = None
+        self._modes_out = TaskModes(np.zeros((6, 6)), np.zeros(6), np.zeros(6))
         self._modes_age = 0
         self._modes_scale = -1.0
         self.robot_rate_hz = 0.0  # unknown until a state says
         self.mode_cap_rad_s = params.impedance.max_mode_frequency_rad_s
         self.kin = Kinematics(self.model)
+        self._terms = new_terms(self.kin)
+        self._limit_work = np.zeros((2, self.model.nq))
+        self._q = np.zeros(self.model.nq)
+        self._dq = np.zeros(self.model.nq)
+        self._wrench = np.zeros(6)
+        self._extra_force = np.zeros(3)
+        self._xyh = np.zeros(3)
+        self._v_board = np.zeros(3)
+        self._no_setpoint = Setpoint()
         watch = params.limits
         self.disturbance = DisturbanceWatch(watch.disturbance_share * lim.tau_max, watch.disturbance_filter_s,
                                             watch.disturbance_persist_s)
         self._applied = np.zeros(self.model.nq)
         self.contact_watch = ContactWatch(f.contact_threshold_n, f.contact_loss_s)
+        self._compile_law()
+
+    def _compile_law(self) -> None:
+        """Compile the law's kernels for the argument types the tick passes them (or load them from numba's
+        cache): the first tick must not wait a second or more for the compiler. Leaves no state behind."""
+        lim = self.model.limits
+        q = self._q
+        q[:] = 0.5 * (lim.q_min + lim.q_max)
+        kin = self.kin.update(q, self._dq)
+        imp = self.p.impedance
+        modes = task_modes(kin.Lambda, task_stiffness(imp), imp.damping_factor, self.mode_cap_rad_s,
+                           self._modes_out)
+        shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3))
+        impedance_torque(self.model, q, self._dq, Reference(), imp, q, True, shaping, kin, modes, self._terms)
+        limit_torque(self._tau, q, self._dq, lim.q_min, lim.q_max, 0.1, 0.0, 0.0, self._speed_onset, 0.0, kin.M,
+                     self._tau.copy(), self.shaper.tau_max, 1.0, kin.g, True, self._limit_work)
+        self._tau[:] = 0.0
+        sp = Setpoint()
+        reference_into(self._board_origin, self._board_R, sp.xy, 0.0, sp.v_xy, 0.0, sp.a_xy, 0.0, sp.R, sp.omega,
+                       sp.domega, 1.0, self.ref.p_m, self.ref.R, self.ref.twist, self.ref.accel)
+        joint_demand_into(kin.M_inv, kin.J, kin.Lambda, self.ref.twist, self.ref.accel, 1.0, OVERRIDE_LOOKAHEAD_S,
+                          self._demand, self._demand_work)
+        self.disturbance.compile(kin)
+        largest_share(self._demand, self.override.inv_dq_max)
+        tool_in_board(self._board_origin, self._board_R, kin.p, kin.twist, self._wrench, self._xyh, self._v_board)
+        if self.trace is not None:
+            row = self.trace.data[0]
+            trace_row(row, 0.0, 0.0, True, sp.xy, sp.v_xy, sp.a_xy, 1.0, self._xyh, 0.0, self.ref.p_m, kin.p, 0.0,
+                      0.0)
+            row[:] = 0.0
+        self.ref.p_m[:] = 0.0
+        self.ref.R[:] = np.eye(3)
 
     def restart(self) -> None:
         """The robot came back after a loss: hold where it is, ramp the gains in again, re-approach."""
@@ -175,6 +221,10 @@ class ControllerCore:
         contact-loss watch starts counting again.
         """
         self.time_s += dt_s
+        self._q[:] = q  # the compiled law sees the same array types every tick (no recompilation)
+        self._dq[:] = dq
+        self._wrench[:] = wrench
+        q, dq, wrench = self._q, self._dq, self._wrench
         if self.q_rest is None:
             self.q_rest = q.copy()
             self.shaper.reset(None)
@@ -199,7 +249,7 @@ class ControllerCore:
         self._shape_task(kin, dt_s)
         tau = self._torque(q, dq, kin, gravity_compensated, dt_s)
         if self.trace is not None:
-            self._record(sp, kin.p, board)
+            self._record(sp, kin.p)
         return tau
 
     def _watch_disturbance(self, kin: Kinematics, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
@@ -236,39 +286,39 @@ class ControllerCore:
     def _measure_tool(self, board: BoardPose, n: np.ndarray, kin: Kinematics, wrench: np.ndarray,
                       dt_s: float) -> ToolState:
         """The pad in the board frame, the force along the normal ``n`` (3,) (filtered; over the cap: a fault)."""
-        xyh = board.to_board(kin.p)
-        vb = board.R.T @ kin.twist[:3]
-        self.normal_force_n = float(wrench[:3] @ n)
+        self._use_board(board)
+        xyh, vb = self._xyh, self._v_board
+        self.normal_force_n = tool_in_board(self._board_origin, self._board_R, kin.p, kin.twist, wrench, xyh, vb)
         self.force.measure(self.normal_force_n, dt_s)
         ex = self.executor
         if self.force.over_cap and ex.phase not in _HALTED:
             ex.fault(f"normal force {self.force.filtered_n:.1f} N above the cap {self.p.force.cap_n:.0f} N")
+        # views of the controller's buffers: the executor copies what it keeps
         return ToolState(xyh[:2], float(xyh[2]), vb[:2], float(vb[2]), kin.R, self.normal_force_n)
+
+    def _use_board(self, board: BoardPose) -> None:
+        """Copy a new board's pose into the controller's own arrays (the kernels always see the same types)."""
+        if board is not self._board:
+            self._board = board
+            self._board_R[:] = board.R
+            self._board_origin[:] = board.origin_m
 
     def _reference_from_setpoint(self, board: BoardPose, n: np.ndarray, sp: Setpoint, tool: ToolState,
                                  scale: float) -> None:
         """The world reference of the board-frame setpoint, its rates at the time ``scale`` (velocities x scale,
-        accelerations x scale^2); in contact, the measured height and no normal motion."""
+        accelerations x scale^2); in contact, the measured height and no normal motion. One compiled call."""
         ref = self.ref
-        h = tool.h if sp.contact else sp.h
-        s2 = scale * scale
-        ref.p_m[:] = board.origin_m + board.R[:, 0] * sp.xy[0] + board.R[:, 1] * sp.xy[1] + n * h
-        ref.R[:] = sp.R
-        ref.twist[:3] = board.R[:, :2] @ sp.v_xy + n * (0.0 if sp.contact else sp.v_h)
-        ref.twist[:3] *= scale
-        np.multiply(sp.omega, scale, out=ref.twist[3:])
-        ref.accel[:3] = board.R[:, :2] @ sp.a_xy + n * (0.0 if sp.contact else sp.a_h)
-        ref.accel[:3] *= s2
-        np.multiply(sp.domega, s2, out=ref.accel[3:])
+        c = sp.contact
+        reference_into(self._board_origin, self._board_R, sp.xy, float(tool.h if c else sp.h), sp.v_xy,
+                       0.0 if c else float(sp.v_h), sp.a_xy, 0.0 if c else float(sp.a_h), sp.R, sp.omega,
+                       sp.domega, float(scale), ref.p_m, ref.R, ref.twist, ref.accel)
 
     def _update_override(self, kin: Kinematics, scale: float, dt_s: float) -> None:
         """The time scale of the next tick from the joint speeds the unscaled reference asks for (the least-inertia
         ones, ``M^-1 J^T Lambda v``), looking ``OVERRIDE_LOOKAHEAD_S`` ahead along its acceleration."""
-        v = self._twist_ahead
-        np.multiply(self.ref.accel, OVERRIDE_LOOKAHEAD_S / scale, out=v)  # the unscaled acceleration x lookahead
-        v += self.ref.twist
-        v /= scale  # unscaled: twist / s + accel / s^2 * lookahead
-        np.matmul(kin.M_inv, kin.J.T @ (kin.Lambda @ v), out=self._demand)
+        ref = self.ref
+        joint_demand_into(kin.M_inv, kin.J, kin.Lambda, ref.twist, ref.accel, float(scale), OVERRIDE_LOOKAHEAD_S,
+                          self._demand, self._demand_work)
         self.override.update(self._demand, dt_s)
 
     def _regulate_force(self, n: np.ndarray, sp: Setpoint, dt_s: float) -> None:
@@ -297,23 +347,27 @@ class ControllerCore:
         s = 1.0 if ramp <= 0 else min(self._since_start_s / ramp, 1.0)
         self.shaping.stiffness_scale = 0.2 + 0.8 * s * s * (3.0 - 2.0 * s)
         lim = self.p.limits
-        self.shaping.extra_force_n = speed_excess_force(kin.twist[:3], lim.max_speed_m_s, lim.speed_brake_gain_n_s_m)
+        self.shaping.extra_force_n = speed_excess_force(kin.twist, lim.max_speed_m_s, lim.speed_brake_gain_n_s_m,
+                                                        self._extra_force)
 
     def _torque(self, q: np.ndarray, dq: np.ndarray, kin: Kinematics, gravity_compensated: bool,
                 dt_s: float) -> np.ndarray:
-        """Impedance torque plus the joint-limit repulsion, then the absolute and rate limits (gravity outside)."""
+        """Impedance torque plus the joint-limit repulsion and the joint-speed brake, then the rate and absolute
+        limits (gravity outside the rate limit): two compiled calls, no allocation."""
         model, lim = self.model, self.p.limits
         terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.q_rest, not gravity_compensated,
-                                 self.shaping, kin, self._task_modes(kin))
+                                 self.shaping, kin, self._task_modes(kin), self._terms)
         self.last_terms = terms
         tau = self._tau
         tau[:] = terms.tau_nm
-        tau += joint_margin_torque(q, dq, model.limits.q_min, model.limits.q_max, lim.joint_margin_rad,
-                                   lim.joint_margin_stiffness_nm_rad, lim.joint_margin_damping_nm_s_rad)
-        tau += joint_speed_brake_torque(dq, self._speed_onset, lim.joint_speed_brake_1_s, np.diag(kin.M), self._brake)
         # the robot steps from one command to the next within one of its cycles, however long the controller
         # took: the rate limit is per answer (at most one nominal period's worth), not per elapsed time
-        self.shaper(tau, min(dt_s, self._period_s), None if gravity_compensated else kin.g)
+        shaper = self.shaper
+        hit = limit_torque(tau, q, dq, model.limits.q_min, model.limits.q_max, lim.joint_margin_rad,
+                           lim.joint_margin_stiffness_nm_rad, lim.joint_margin_damping_nm_s_rad, self._speed_onset,
+                           lim.joint_speed_brake_1_s, kin.M, shaper.prev, shaper.tau_max,
+                           shaper.rate * min(dt_s, self._period_s), kin.g, not gravity_compensated, self._limit_work)
+        shaper.count(hit)
         return tau
 
     def follow_robot_rate(self, rate_hz: float) -> None:
@@ -331,19 +385,13 @@ class ControllerCore:
         if self._modes is None or self._modes_age >= MODES_EVERY_TICKS or scale != self._modes_scale:
             imp = self.p.impedance
             self._modes = task_modes(kin.Lambda, task_stiffness(imp, scale), imp.damping_factor,
-                                     self.mode_cap_rad_s)
+                                     self.mode_cap_rad_s, self._modes_out)
             self._modes_age, self._modes_scale = 0, scale
         return self._modes
 
-    def _record(self, sp: Setpoint | None, p: np.ndarray, board: BoardPose | None) -> None:
-        r = self.trace.row()
-        r[0], r[1] = self.time_s, PHASE_CODES.get(self.executor.phase, -1)
-        if sp is not None:
-            s = self.override_used  # the reference's rates as executed (time-scaled)
-            r[2:4] = sp.xy
-            np.multiply(sp.v_xy, s, out=r[4:6])
-            np.multiply(sp.a_xy, s * s, out=r[6:8])
-            r[8:11] = board.to_board(p)
-            r[19] = float(sp.contact)
-        r[11:14], r[14:17] = self.ref.p_m, p
-        r[17], r[18], r[20] = self.normal_force_n, self.press_n, self.override_used
+    def _record(self, sp: Setpoint | None, p: np.ndarray) -> None:
+        has_sp = sp is not None
+        sp = sp or self._no_setpoint
+        trace_row(self.trace.row(), self.time_s, float(PHASE_CODES.get(self.executor.phase, -1)), has_sp, sp.xy,
+                  sp.v_xy, sp.a_xy, self.override_used, self._xyh, float(sp.contact), self.ref.p_m, p,
+                  self.normal_force_n, self.press_n)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 import pinocchio as pin
 
@@ -54,20 +55,28 @@ class Quintic:
         return self.time_s >= self.T - 1e-12
 
     def update(self, dt_s: float) -> None:
-        """Advance by ``dt_s`` [s] and refresh position, velocity, acceleration."""
+        """Advance by ``dt_s`` [s] and refresh position, velocity, acceleration (one compiled call)."""
         self.time_s += dt_s
-        t = self.time_s
-        if t >= self.T:
-            u = t - self.T
-            p1, v1, a1 = self.goal
-            self.position[:] = p1 + v1 * u + 0.5 * a1 * u * u
-            self.velocity[:] = v1 + a1 * u
-            self.acceleration[:] = a1
-            return
-        c = self._c
-        self.position[:] = c[0] + t * (c[1] + t * (c[2] + t * (c[3] + t * (c[4] + t * c[5]))))
-        self.velocity[:] = c[1] + t * (2 * c[2] + t * (3 * c[3] + t * (4 * c[4] + t * 5 * c[5])))
-        self.acceleration[:] = 2 * c[2] + t * (6 * c[3] + t * (12 * c[4] + t * 20 * c[5]))
+        p1, v1, a1 = self.goal
+        _quintic_into(self._c, self.time_s, self.T, p1, v1, a1, self.position, self.velocity, self.acceleration)
+
+
+@nb.njit(cache=True, nogil=True)
+def _quintic_into(c: np.ndarray, t: float, T: float, p1: np.ndarray, v1: np.ndarray, a1: np.ndarray,
+                  position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray) -> None:
+    """x, dx, ddx (n,) of ``x(t) = sum c_k t^k`` (c (6, n)) for t < T; after T the goal (p1, v1, a1 (n,)) held
+    at constant acceleration."""
+    if t >= T:
+        u = t - T
+        for i in range(position.shape[0]):
+            position[i] = p1[i] + v1[i] * u + 0.5 * a1[i] * u * u
+            velocity[i] = v1[i] + a1[i] * u
+            acceleration[i] = a1[i]
+        return
+    for i in range(position.shape[0]):
+        position[i] = c[0, i] + t * (c[1, i] + t * (c[2, i] + t * (c[3, i] + t * (c[4, i] + t * c[5, i]))))
+        velocity[i] = c[1, i] + t * (2 * c[2, i] + t * (3 * c[3, i] + t * (4 * c[4, i] + t * 5 * c[5, i])))
+        acceleration[i] = 2 * c[2, i] + t * (6 * c[3, i] + t * (12 * c[4, i] + t * 20 * c[5, i]))
 
 
 def rest_to_rest(p0: np.ndarray, p1: np.ndarray, mean_speed_m_s: float, min_duration_s: float = 0.2) -> Quintic:
@@ -164,3 +173,8 @@ class OrientationBlend:
 def orientation_duration(R0: np.ndarray, R1: np.ndarray, mean_rate_rad_s: float) -> float:
     """Time [s] to turn from R0 to R1 at a mean angular speed."""
     return float(np.linalg.norm(pin.log3(np.asarray(R0).T @ np.asarray(R1)))) / mean_rate_rad_s
+
+
+# compiled (or loaded from numba's cache) on import, for the arrays a Quintic makes: the first free motion starts
+# inside a control tick, which must not wait for the compiler
+Quintic((np.zeros(3),) * 3, (np.ones(3), np.zeros(3), np.zeros(3)), 1.0).update(0.5)

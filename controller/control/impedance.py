@@ -39,7 +39,11 @@ import pinocchio as pin
 
 from interfaces.robot_model import RobotModel
 
+from .kernels import impedance_into, kinematics_terms, task_modes_into
 from .params import ImpedanceParams
+
+#: Regularisation of the task inertia's inverse: Lambda = (J M^-1 J^T + eps I)^-1 stays finite at singularities.
+LAMBDA_EPS = 1e-6
 
 
 @dataclass
@@ -59,44 +63,41 @@ class Kinematics:
     pad Jacobian (world-aligned, linear rows first), ``p`` (3,) [m], ``R``
     (3, 3), ``twist`` (6,) = J dq, ``nle`` (7,) = C dq + g, ``g`` (7,)
     gravity, ``drift`` (6,) = dJ dq, ``Lambda`` (6, 6) task inertia. The
-    arrays are refreshed in place.
+    arrays are preallocated and refreshed in place (keep a copy to compare
+    ticks); the arithmetic after Pinocchio is one compiled call
+    (:func:`~.kernels.kinematics_terms`).
     """
 
     def __init__(self, model: RobotModel) -> None:
         self.model = model
-        self._lower = np.tril_indices(model.nq, -1)
-        self._zeros = np.zeros(model.nq)
-        self._eps = 1e-6 * np.eye(6)
-        self.M = self.M_inv = self.J = self.Lambda = None
+        n = model.nq
+        self.M = np.zeros((n, n))
+        self.M_inv = np.zeros((n, n))
+        self.J = np.zeros((6, n))
+        self.Lambda = np.zeros((6, 6))
         self.p = np.zeros(3)
         self.R = np.eye(3)
         self.twist = np.zeros(6)
-        self.nle = np.zeros(model.nq)
-        self.g = np.zeros(model.nq)
+        self.nle = np.zeros(n)
+        self.g = np.zeros(n)
         self.drift = np.zeros(6)
+        self._A = np.zeros((6, 6))
+        self._L = np.zeros((6, 6))
 
     def update(self, q: np.ndarray, dq: np.ndarray) -> "Kinematics":
         m, d, f = self.model.model, self.model.data, self.model.tcp_id
-        pin.computeAllTerms(m, d, q, dq)  # M, nle, g, joint Jacobians, placements
-        M = d.M.copy()
-        M[self._lower] = M.T[self._lower]  # older Pinocchio fills the upper triangle only
-        self.M = M
-        M_inv = pin.computeMinverse(m, d, q).copy()
-        M_inv[self._lower] = M_inv.T[self._lower]
-        self.M_inv = M_inv
-        pin.updateFramePlacements(m, d)
-        oMf = d.oMf[f]
-        self.p[:] = oMf.translation
-        self.R[:] = oMf.rotation
-        self.J = J = pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED)
-        np.matmul(J, dq, out=self.twist)
-        self.nle[:] = d.nle
-        self.g[:] = d.g
-        pin.forwardKinematics(m, d, q, dq, self._zeros)
+        # M, nle, g, joint Jacobians, placements, and the joint accelerations at zero joint acceleration
+        pin.computeAllTerms(m, d, q, dq)
+        M_inv = pin.computeMinverse(m, d, q)
+        oMf = pin.updateFramePlacement(m, d, f)
+        # dJ dq: the pad's classical acceleration at zero joint acceleration (computeAllTerms' forward pass)
         acc = pin.getFrameClassicalAcceleration(m, d, f, pin.LOCAL_WORLD_ALIGNED)
-        self.drift[:3] = acc.linear
-        self.drift[3:] = acc.angular
-        self.Lambda = np.linalg.inv(J @ M_inv @ J.T + self._eps)
+        if not kinematics_terms(d.M, M_inv, pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED), dq, LAMBDA_EPS,
+                                oMf.translation, oMf.rotation, d.nle, d.g, acc.vector, self.M, self.M_inv, self.J,
+                                self.Lambda, self.twist, self.p, self.R, self.nle, self.g, self.drift,
+                                self._A, self._L):
+            # only with non-finite inputs (the matrix is SPD by construction): what numpy makes of them
+            self.Lambda[:] = np.linalg.inv(self.J @ self.M_inv @ self.J.T + LAMBDA_EPS * np.eye(6))
         return self
 
 
@@ -114,6 +115,9 @@ class ImpedanceTerms:
     twist: np.ndarray
     Lambda: np.ndarray
     J: np.ndarray
+    _work: np.ndarray = field(default=None, repr=False)  # the kernel's scratch, (7, max(n, 6))
+    _axis: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)  # shaping's vectors, copied
+    _extra: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
 
 
 def pose_error(p_ref: np.ndarray, R_ref: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -180,7 +184,8 @@ def task_stiffness(params: ImpedanceParams, scale: float = 1.0) -> np.ndarray:
     return scale * np.array([params.stiffness_n_m] * 3 + [params.stiffness_nm_rad] * 3)
 
 
-def task_modes(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float) -> TaskModes:
+def task_modes(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float,
+               out: TaskModes | None = None) -> TaskModes:
     """The modes of task mass ``Lam`` (6, 6) on diagonal stiffness ``K`` (6,), capped and damped.
 
     With S = diag(sqrt(K)) and ``S^-1 Lam S^-1 = U diag(m) U^T``, B = S U:
@@ -188,23 +193,20 @@ def task_modes(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: flo
     A mode faster than ``max_omega_rad_s`` gets stiffness ``max_omega^2 m_i``
     (it then rings at exactly the cap); every mode gets damping
     ``2 zeta sqrt(k_i m_i)``. Without a capped mode K is ``diag(K)`` exactly.
+    out : modes to overwrite (the 1 kHz path) instead of new arrays. One compiled call
+    (:func:`~.kernels.task_modes_into`).
     """
-    s = np.sqrt(K)
-    m, U = np.linalg.eigh(Lam / np.outer(s, s))
-    m = np.clip(m, 1e-12, None)
-    k = np.minimum(1.0, max_omega_rad_s * max_omega_rad_s * m)
-    return TaskModes(s[:, None] * U, k, 2.0 * zeta * np.sqrt(k * m))
-
-
-def _clip_norm(v: np.ndarray, limit: float) -> None:
-    n = float(np.linalg.norm(v))
-    if n > limit:
-        v *= limit / n
+    if out is None:
+        out = TaskModes(np.zeros((6, 6)), np.zeros(6), np.zeros(6))
+    task_modes_into(np.ascontiguousarray(Lam, float), np.ascontiguousarray(K, float), float(zeta),
+                    float(max_omega_rad_s), out.B, out.k, out.d)
+    return out
 
 
 def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Reference, params: ImpedanceParams,
                      q_rest: np.ndarray, add_gravity: bool, shaping: TaskShaping = _PLAIN,
-                     kin: Kinematics | None = None, modes: TaskModes | None = None) -> ImpedanceTerms:
+                     kin: Kinematics | None = None, modes: TaskModes | None = None,
+                     out: ImpedanceTerms | None = None) -> ImpedanceTerms:
     """Joint torques (7,) [Nm] of the impedance law at state ``q``, ``dq`` (see the module docstring).
 
     With ``shaping.force_axis = n`` the translational error, twist error
@@ -213,34 +215,39 @@ def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Refe
     kin : the arm's :class:`Kinematics` already updated at (q, dq) this
     tick (computed here when None). modes : :func:`task_modes` of this
     stiffness (with ``shaping.stiffness_scale``) on a recent Lambda (the
-    modes change slowly with the pose; computed here when None).
+    modes change slowly with the pose; computed here when None). out : the
+    terms of an earlier call (:func:`new_terms`) to write into instead of
+    allocating (the 1 kHz path); its ``p_m``, ``R``, ``twist``, ``Lambda``
+    and ``J`` are then ``kin``'s own arrays. The arithmetic is one compiled
+    call (:func:`~.kernels.impedance_into`).
     """
     if kin is None:
         kin = Kinematics(model).update(q, dq)
-    M, M_inv, J, Lam, twist = kin.M, kin.M_inv, kin.J, kin.Lambda, kin.twist
-    e = pose_error(ref.p_m, ref.R, kin.p, kin.R)
-    _clip_norm(e[:3], shaping.max_position_error_m)
-    _clip_norm(e[3:], shaping.max_rotation_error_rad)
-    de = ref.twist - twist
-    a = ref.accel - kin.drift
-    n = shaping.force_axis
-    if n is not None:
-        for v in (e, de, a):
-            v[:3] -= (v[:3] @ n) * n
     if modes is None:
-        modes = task_modes(Lam, task_stiffness(params, shaping.stiffness_scale), params.damping_factor,
+        modes = task_modes(kin.Lambda, task_stiffness(params, shaping.stiffness_scale), params.damping_factor,
                            params.max_mode_frequency_rad_s)
-    F = modes.wrench(e, de) + Lam @ a
-    if n is not None:
-        lam_n = float(n @ Lam[:3, :3] @ n)
-        F[:3] -= (shaping.press_n + lam_n * shaping.normal_damping_1_s * float(twist[:3] @ n)) * n
-    if shaping.extra_force_n is not None:
-        F[:3] += shaping.extra_force_n
-    kn = params.nullspace_stiffness_nm_rad
-    tau0 = M @ (kn * (q_rest - q) - 2.0 * np.sqrt(kn) * dq)
-    # N^T tau0 = tau0 - J^T Jbar^T tau0 with Jbar^T = Lambda J M^-1
-    tau_null = tau0 - J.T @ (Lam @ (J @ (M_inv @ tau0)))
-    tau = J.T @ F + tau_null + kin.nle
-    if not add_gravity:
-        tau -= kin.g
-    return ImpedanceTerms(tau, F, e, de, tau_null, kin.p.copy(), kin.R.copy(), twist.copy(), Lam, J)
+    if out is None:
+        out = new_terms(kin)
+        out.p_m, out.R, out.twist, out.Lambda, out.J = (kin.p.copy(), kin.R.copy(), kin.twist.copy(),
+                                                       kin.Lambda.copy(), kin.J.copy())
+    axis, extra = shaping.force_axis, shaping.extra_force_n
+    if axis is not None:  # into the terms' own buffers: the kernel then always sees the same array types
+        out._axis[:] = axis
+    if extra is not None:
+        out._extra[:] = extra
+    impedance_into(kin.M, kin.M_inv, kin.J, kin.Lambda, kin.twist, kin.drift, kin.nle, kin.g, kin.p, kin.R,
+                   ref.p_m, ref.R, ref.twist, ref.accel,
+                   out._axis, axis is not None, float(shaping.press_n),
+                   float(shaping.normal_damping_1_s), float(shaping.max_position_error_m),
+                   float(shaping.max_rotation_error_rad), out._extra, extra is not None,
+                   modes.B, modes.k, modes.d, float(params.nullspace_stiffness_nm_rad), q_rest, q, dq,
+                   bool(add_gravity),
+                   out.tau_nm, out.wrench_task, out.pose_error, out.twist_error, out.tau_nullspace, out._work)
+    return out
+
+
+def new_terms(kin: Kinematics) -> ImpedanceTerms:
+    """Preallocated :class:`ImpedanceTerms` for :func:`impedance_torque`'s ``out`` (pose arrays: ``kin``'s)."""
+    n = kin.model.nq
+    return ImpedanceTerms(np.zeros(n), np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(n), kin.p, kin.R,
+                          kin.twist, kin.Lambda, kin.J, np.zeros((7, max(n, 6))))

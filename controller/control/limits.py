@@ -1,4 +1,5 @@
-"""Safety shaping of the commanded torques and the task wrench (pure numpy, allocation-light).
+"""Safety shaping of the commanded torques and the task wrench (allocation-light; the per-joint formulas are
+compiled, :mod:`.kernels`, and the 1 kHz tick runs them fused in :func:`~.kernels.limit_torque`).
 
 * :class:`TorqueShaper`: absolute joint torque limits and a torque *rate*
   limit (about 1 Nm per ms on the iiwa) on the controller's part of the
@@ -20,7 +21,11 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from .kernels import largest_share, margin_torque_into, shape_into, speed_brake_into
 
 
 class TorqueShaper:
@@ -43,8 +48,6 @@ class TorqueShaper:
         self.tau_max = np.asarray(tau_max_nm, float).copy()
         self.rate = float(rate_nm_s)
         self.prev = np.zeros_like(self.tau_max)
-        self._lo = np.empty_like(self.tau_max)
-        self._hi = np.empty_like(self.tau_max)
         self.clipped_abs = 0
         self.clipped_rate = 0
 
@@ -59,25 +62,20 @@ class TorqueShaper:
         gravity); the rate limit applies to ``tau_nm - offset_nm``, the
         absolute limit to the sum.
         """
-        step = self.rate * dt_s
-        if offset_nm is not None:
-            tau_nm -= offset_nm
-        np.subtract(self.prev, step, out=self._lo)
-        np.add(self.prev, step, out=self._hi)
-        if np.any(tau_nm < self._lo) or np.any(tau_nm > self._hi):
-            self.clipped_rate += 1
-            np.clip(tau_nm, self._lo, self._hi, out=tau_nm)
-        self.prev[:] = tau_nm
-        if offset_nm is not None:
-            tau_nm += offset_nm
-        if np.any(np.abs(tau_nm) > self.tau_max):
-            self.clipped_abs += 1
-            np.clip(tau_nm, -self.tau_max, self.tau_max, out=tau_nm)
-            if offset_nm is not None:  # what was really sent, so the next step starts from it
-                np.subtract(tau_nm, offset_nm, out=self.prev)
-            else:
-                self.prev[:] = tau_nm
+        hit = shape_into(tau_nm, self.prev, self.tau_max, self.rate * dt_s,
+                         _NO_OFFSET if offset_nm is None else offset_nm, offset_nm is not None)
+        self.count(hit)
         return tau_nm
+
+    def count(self, hit: int) -> None:
+        """Count a tick's clipping from :func:`~.kernels.shape_into`'s bit set (1 rate, 2 absolute)."""
+        if hit & 1:
+            self.clipped_rate += 1
+        if hit & 2:
+            self.clipped_abs += 1
+
+
+_NO_OFFSET = np.zeros(0)
 
 
 def joint_margin_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, margin_rad: float,
@@ -89,13 +87,10 @@ def joint_margin_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max:
     the margin (continuous at its edge in position, the damping starts with
     the depth so it is continuous too).
     """
-    lower_depth = np.clip(q_min + margin_rad - q, 0.0, None)
-    upper_depth = np.clip(q - (q_max - margin_rad), 0.0, None)
-    frac_lo = np.minimum(lower_depth / margin_rad, 1.0)
-    frac_hi = np.minimum(upper_depth / margin_rad, 1.0)
-    tau = stiffness_nm_rad * (lower_depth - upper_depth)
-    tau -= damping_nm_s_rad * (frac_lo * np.minimum(dq, 0.0) + frac_hi * np.maximum(dq, 0.0))
-    return tau
+    out = np.empty(len(q))
+    margin_torque_into(np.asarray(q, float), np.asarray(dq, float), np.asarray(q_min, float),
+                       np.asarray(q_max, float), float(margin_rad), float(stiffness_nm_rad), float(damping_nm_s_rad), out)
+    return out
 
 
 def saturate_norm(v: np.ndarray, max_norm: float) -> bool:
@@ -107,12 +102,19 @@ def saturate_norm(v: np.ndarray, max_norm: float) -> bool:
     return False
 
 
-def speed_excess_force(v_m_s: np.ndarray, max_speed_m_s: float, gain_n_s_m: float) -> np.ndarray:
-    """(3,) force [N] braking the pad's speed beyond ``max_speed_m_s`` (zero below it)."""
-    speed = float(np.linalg.norm(v_m_s))
+def speed_excess_force(v_m_s: np.ndarray, max_speed_m_s: float, gain_n_s_m: float,
+                       out: np.ndarray | None = None) -> np.ndarray:
+    """(3,) force [N] braking the pad's speed beyond ``max_speed_m_s`` (zero below it); into ``out`` when given."""
+    if out is None:
+        out = np.zeros(3)
+    vx, vy, vz = float(v_m_s[0]), float(v_m_s[1]), float(v_m_s[2])
+    speed = math.sqrt(vx * vx + vy * vy + vz * vz)
     if speed <= max_speed_m_s:
-        return np.zeros(3)
-    return -gain_n_s_m * (speed - max_speed_m_s) * v_m_s / speed
+        out[:] = 0.0
+        return out
+    f = -gain_n_s_m * (speed - max_speed_m_s) / speed
+    out[0], out[1], out[2] = f * vx, f * vy, f * vz
+    return out
 
 
 def joint_speed_brake_torque(dq: np.ndarray, onset_rad_s: np.ndarray, rate_1_s: float, inertia_kg_m2: np.ndarray,
@@ -123,12 +125,7 @@ def joint_speed_brake_torque(dq: np.ndarray, onset_rad_s: np.ndarray, rate_1_s: 
     rate_1_s : how fast the excess decays on the joint's own inertia [1/s];
     inertia_kg_m2 : (n,) the diagonal of the joint-space inertia M [kg m^2].
     """
-    np.abs(dq, out=out)
-    out -= onset_rad_s
-    np.maximum(out, 0.0, out=out)
-    out *= np.sign(dq)
-    out *= inertia_kg_m2
-    out *= -rate_1_s
+    speed_brake_into(dq, onset_rad_s, float(rate_1_s), inertia_kg_m2, out)
     return out
 
 
@@ -151,12 +148,17 @@ class SpeedOverride:
     min_scale : the slowest the skill runs. down_rate_1_s, up_rate_1_s : how fast the scale may change [1/s].
     release_1_s : how fast the held peak demand falls [share/s].
 
+    The caller may also cap the scale with :attr:`load_cap` (a loop that cannot keep up with the robot slows the
+    motion: :func:`load_scale`); the cap is reached through the same rate limits.
+
     Attributes
     ----------
     scale : float
         The current scale. demand_share : float, the held peak of the unscaled demand over the limits.
     slowed_ticks : int
-        Ticks with ``scale < 1``.
+        Ticks with ``scale < 1``. load_limited_ticks : int, ticks on which :attr:`load_cap` set the target.
+    load_cap : float
+        Upper bound on the target scale, in (0, 1] (1: none).
     """
 
     def __init__(self, dq_max_rad_s: np.ndarray, share: float, min_scale: float = 0.05,
@@ -170,7 +172,8 @@ class SpeedOverride:
         self.scale = 1.0
         self.demand_share = 0.0
         self.slowed_ticks = 0
-        self._ratio = np.zeros_like(self.inv_dq_max)
+        self.load_cap = 1.0
+        self.load_limited_ticks = 0
 
     def reset(self) -> None:
         self.scale = 1.0
@@ -178,13 +181,26 @@ class SpeedOverride:
 
     def update(self, demand_rad_s: np.ndarray, dt_s: float) -> float:
         """The scale for the next tick, given the joint speeds (n,) the unscaled reference needs now."""
-        np.multiply(np.abs(demand_rad_s), self.inv_dq_max, out=self._ratio)
-        r = max(float(self._ratio.max()), self.demand_share - self.release * dt_s)
+        r = max(largest_share(demand_rad_s, self.inv_dq_max), self.demand_share - self.release * dt_s)
         self.demand_share = r
         target = 1.0 if r <= self.share else max(self.share / r, self.min_scale)
+        if self.load_cap < target:
+            target = max(self.load_cap, self.min_scale)
+            self.load_limited_ticks += 1
         s = self.scale
         s = max(target, s - self.down * dt_s) if target < s else min(target, s + self.up * dt_s)
         self.scale = s
         if s < 1.0:
             self.slowed_ticks += 1
         return s
+
+
+def load_scale(unanswered_share: float, onset_share: float, limit_share: float, min_scale: float) -> float:
+    """The skill's time scale for a loop that leaves ``unanswered_share`` (0-1, filtered) of the robot's states
+    unanswered: 1 up to ``onset_share``, falling linearly to ``min_scale`` at ``limit_share`` (where the overload
+    watch ends the run) and held there. Slower motion needs smaller torque changes per answer, so the stale
+    answers of a starved loop matter less and the force does not spike."""
+    if unanswered_share <= onset_share:
+        return 1.0
+    x = min(1.0, (unanswered_share - onset_share) / max(limit_share - onset_share, 1e-9))
+    return 1.0 - x * (1.0 - min_scale)

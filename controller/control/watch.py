@@ -18,12 +18,14 @@
   under the contact threshold while the setpoint presses with more than
   twice it: contact lost (board gone, pad torn off, sensor dead).
 
-Neither allocates per call.
+Neither allocates per call; the disturbance arithmetic is one compiled call (:mod:`.kernels`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from .kernels import disturbance_into
 
 
 class DisturbanceWatch:
@@ -43,7 +45,6 @@ class DisturbanceWatch:
         n = len(self.limit)
         self.tau_d = np.zeros(n)
         self._raw = np.zeros(n)
-        self._tmp = np.zeros(n)
         self._dq_prev = np.zeros(n)
         self._have_prev = False
         self.over_s = 0.0
@@ -73,26 +74,20 @@ class DisturbanceWatch:
         if not self._have_prev or dt_s <= 0.0:
             self.skip(dq)
             return self.tripped
-        raw, tmp = self._raw, self._tmp
-        np.subtract(dq, self._dq_prev, out=tmp)
-        tmp /= dt_s
-        np.matmul(M, tmp, out=raw)
-        raw += nle
-        raw -= tau_applied
-        np.matmul(J.T, wrench, out=tmp)
-        raw -= tmp
-        raw -= self.tau_d  # first-order low-pass, in place: tau_d += a (raw - tau_d)
-        raw *= min(dt_s / (self.filter_s + dt_s), 1.0)
-        self.tau_d += raw
-        self._dq_prev[:] = dq
-        np.abs(self.tau_d, out=tmp)
-        tmp /= self.limit
-        ratio = float(tmp.max())
+        ratio = disturbance_into(M, nle, J, dq, self._dq_prev, tau_applied, wrench, float(dt_s),
+                                 min(dt_s / (self.filter_s + dt_s), 1.0), self.tau_d, self.limit, self._raw)
         self.peak_ratio = max(self.peak_ratio, ratio)
         self.over_s = self.over_s + dt_s if ratio > 1.0 else 0.0
         if self.over_s >= self.persist_s:
             self.tripped = True
         return self.tripped
+
+    def compile(self, kin) -> None:
+        """Compile the kernel for the arrays a controller passes (its :class:`~.impedance.Kinematics` ``kin``,
+        own (n,) and (6,) buffers) without touching the watch's state."""
+        n = len(self.limit)
+        disturbance_into(kin.M, kin.nle, kin.J, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(6), 0.001, 0.5,
+                         np.zeros(n), self.limit, np.zeros(n))
 
     def worst_joint(self) -> int:
         """Index of the joint with the largest disturbance relative to its limit."""

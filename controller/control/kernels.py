@@ -1,0 +1,522 @@
+"""The control law's arithmetic, compiled (numba): one call per stage of the 1 kHz tick.
+
+The law works on 6- and 7-vectors and 6x6 / 7x7 matrices. As numpy
+expressions each of its ~60 small operations costs 0.5-5 us of call and
+allocation overhead for a few dozen flops, which was most of a tick
+(Pinocchio's own algorithms take about 7 us). Here each stage is one
+compiled function that writes into arrays the caller preallocated:
+
+* :func:`kinematics_terms`: M and M^-1 symmetrised from their upper
+  triangles, the pad twist ``J dq`` and the task inertia
+  ``Lambda = (J M^-1 J^T + eps I)^-1`` (Cholesky, the matrix is SPD);
+* :func:`impedance_into`: the impedance law of :mod:`.impedance`
+  (pose error with the rotation logarithm, force axis, modal stiffness and
+  damping, feed-forward, consistent nullspace posture, gravity);
+* :func:`limit_torque`: joint-limit repulsion, joint-speed brake, then the
+  torque rate and absolute limits of :class:`~.limits.TorqueShaper`;
+* the pieces they use (:func:`log3_into`, :func:`margin_torque_into`,
+  :func:`speed_brake_into`, :func:`shape_into`) are compiled functions
+  too, and the numpy-facing API of :mod:`.limits` calls them, so there is
+  one implementation of each formula.
+
+``fastmath`` stays off: results equal the numpy formulation to rounding
+(tests compare them). ``cache=True`` keeps the machine code beside this file
+(``__pycache__``, or ``NUMBA_CACHE_DIR``), so a machine compiles them once;
+a :class:`~controller.core.ControllerCore` calls each kernel with the array
+types its tick will pass when it is made, so no tick waits for the compiler
+(``tests/test_kernels.py`` checks that a closed loop adds no signature).
+``nogil`` lets the planner thread run while a kernel computes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+_jit = nb.njit(cache=True, nogil=True)
+
+
+@_jit
+def spd_inverse_into(A: np.ndarray, out: np.ndarray, L: np.ndarray) -> bool:
+    """``out = A^-1`` for a symmetric positive definite ``A`` (n, n) by Cholesky; ``L`` (n, n) is scratch.
+
+    Returns False (``out`` undefined) when ``A`` is not positive definite.
+    """
+    n = A.shape[0]
+    L[:, :] = 0.0
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    # L^-1 in place of out's lower triangle (column by column: forward substitution on unit vectors)
+    out[:, :] = 0.0
+    for j in range(n):
+        out[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for k in range(j, i):
+                s -= L[i, k] * out[k, j]
+            out[i, j] = s / L[i, i]
+    # A^-1 = L^-T L^-1, symmetric: fill the lower triangle from sums over the rows below, then mirror
+    for i in range(n):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(i, n):
+                s += out[k, i] * out[k, j]
+            L[i, j] = s
+    for i in range(n):
+        for j in range(i + 1):
+            out[i, j] = L[i, j]
+            out[j, i] = L[i, j]
+    return True
+
+
+@_jit
+def kinematics_terms(M_upper: np.ndarray, Minv_upper: np.ndarray, J_pin: np.ndarray, dq: np.ndarray, eps: float,
+                     p_pin: np.ndarray, R_pin: np.ndarray, nle_pin: np.ndarray, g_pin: np.ndarray,
+                     drift_pin: np.ndarray, M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray,
+                     twist: np.ndarray, p: np.ndarray, R: np.ndarray, nle: np.ndarray, g: np.ndarray,
+                     drift: np.ndarray, A: np.ndarray, L: np.ndarray) -> bool:
+    """The law's arm terms from Pinocchio's outputs (``*_pin``, read as they are), written into the caller's arrays.
+
+    M_upper, Minv_upper : (n, n) inertia and its inverse, upper triangles valid (older Pinocchio fills only
+    those); J_pin : (6, n) pad Jacobian, world-aligned; dq : (n,) [rad/s]; eps : regularisation of the task
+    inertia's inverse; p_pin (3,) [m], R_pin (3, 3): pad pose; nle_pin, g_pin (n,) [Nm]; drift_pin (6,): dJ dq.
+    Out: M, M_inv (n, n) symmetric; J, p, R, nle, g, drift copied; Lam (6, 6) = (J M^-1 J^T + eps I)^-1;
+    twist (6,) = J dq. A, L (6, 6): scratch. Returns False when Lam could not be formed (not positive definite).
+    """
+    n = M.shape[0]
+    for i in range(3):
+        p[i] = p_pin[i]
+        for j in range(3):
+            R[i, j] = R_pin[i, j]
+    for i in range(n):
+        nle[i] = nle_pin[i]
+        g[i] = g_pin[i]
+    for r in range(6):
+        drift[r] = drift_pin[r]
+        for j in range(n):
+            J[r, j] = J_pin[r, j]
+    for i in range(n):
+        for j in range(i, n):
+            M[i, j] = M_upper[i, j]
+            M[j, i] = M_upper[i, j]
+            M_inv[i, j] = Minv_upper[i, j]
+            M_inv[j, i] = Minv_upper[i, j]
+    for r in range(6):
+        s = 0.0
+        for j in range(n):
+            s += J[r, j] * dq[j]
+        twist[r] = s
+    # A = J M^-1 J^T + eps I: L holds M^-1 J^T's rows as scratch would not fit (n x 6); go row by row
+    for r in range(6):
+        for c in range(r, 6):
+            s = 0.0
+            for i in range(n):
+                ji = 0.0
+                for j in range(n):
+                    ji += M_inv[i, j] * J[c, j]
+                s += J[r, i] * ji
+            A[r, c] = s
+            A[c, r] = s
+        A[r, r] += eps
+    return spd_inverse_into(A, Lam, L)
+
+
+@_jit
+def log3_into(R: np.ndarray, out: np.ndarray) -> None:
+    """The rotation vector (3,) [rad] of the rotation matrix ``R`` (3, 3): ``exp3(out) = R``, angle in [0, pi].
+
+    Matches ``pinocchio.log3`` to rounding: the axis-angle formula away from 0 and pi, its Taylor series
+    near 0, and the axis from the diagonal near pi (where ``R - R^T`` vanishes).
+    """
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    c = min(1.0, max(-1.0, 0.5 * (tr - 1.0)))
+    theta = math.acos(c)
+    wx = R[2, 1] - R[1, 2]
+    wy = R[0, 2] - R[2, 0]
+    wz = R[1, 0] - R[0, 1]
+    if theta < 1e-4:
+        f = 0.5 * (1.0 + theta * theta / 6.0)  # theta / (2 sin theta)
+    elif theta < math.pi - 1e-3:
+        f = 0.5 * theta / math.sin(theta)
+    else:
+        # near pi, where R - R^T vanishes: (R + R^T) / 2 = c I + (1 - c) a a^T gives the axis a from the
+        # largest diagonal entry and its row; the sign (free at pi itself) from sin(theta) a = (R - R^T)^vee / 2
+        d = 1.0 - c
+        k = 0
+        if R[1, 1] > R[k, k]:
+            k = 1
+        if R[2, 2] > R[k, k]:
+            k = 2
+        ak = math.sqrt(max(0.0, (R[k, k] - c) / d))
+        ax = np.empty(3)
+        for j in range(3):
+            ax[j] = ak if j == k else 0.5 * (R[k, j] + R[j, k]) / (d * ak)
+        if ax[0] * wx + ax[1] * wy + ax[2] * wz < 0.0:
+            theta = -theta
+        norm = math.sqrt(ax[0] * ax[0] + ax[1] * ax[1] + ax[2] * ax[2])
+        for j in range(3):
+            out[j] = theta * ax[j] / norm
+        return
+    out[0] = f * wx
+    out[1] = f * wy
+    out[2] = f * wz
+
+
+@_jit
+def _clip_norm3(v: np.ndarray, o: int, limit: float) -> None:
+    n = math.sqrt(v[o] * v[o] + v[o + 1] * v[o + 1] + v[o + 2] * v[o + 2])
+    if n > limit:
+        f = limit / n
+        v[o] *= f
+        v[o + 1] *= f
+        v[o + 2] *= f
+
+
+@_jit
+def _remove_along(v: np.ndarray, n: np.ndarray) -> None:
+    s = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
+    for i in range(3):
+        v[i] -= s * n[i]
+
+
+@_jit
+def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray, twist: np.ndarray,
+                   drift: np.ndarray, nle: np.ndarray, g: np.ndarray, p: np.ndarray, R: np.ndarray,
+                   p_ref: np.ndarray, R_ref: np.ndarray, twist_ref: np.ndarray, accel_ref: np.ndarray,
+                   force_axis: np.ndarray, use_axis: bool, press_n: float, normal_damping_1_s: float,
+                   max_position_error_m: float, max_rotation_error_rad: float,
+                   extra_force_n: np.ndarray, use_extra: bool,
+                   B: np.ndarray, k: np.ndarray, d: np.ndarray, kn: float, q_rest: np.ndarray, q: np.ndarray,
+                   dq: np.ndarray, add_gravity: bool,
+                   tau: np.ndarray, F: np.ndarray, e: np.ndarray, de: np.ndarray, tau_null: np.ndarray,
+                   work: np.ndarray) -> None:
+    """The impedance law of :mod:`.impedance` (its module docstring has the equations), written in place.
+
+    Inputs as :func:`~.impedance.impedance_torque` takes them, unpacked: the arm's terms (M, M_inv (n, n);
+    J (6, n); Lam (6, 6); twist, drift (6,); nle, g (n,); p (3,) [m]; R (3, 3)), the reference, the
+    task shaping (``use_axis`` / ``use_extra`` say whether ``force_axis`` / ``extra_force_n`` apply), the
+    modes (B (6, 6), k, d (6,)), the posture stiffness ``kn`` [Nm/rad] and rest pose, the state.
+    Out: tau (n,) [Nm], F (6,) task wrench, e (6,) pose error, de (6,) twist error, tau_null (n,).
+    work : (7, max(n, 6)) scratch.
+    """
+    n = M.shape[0]
+    a = work[0]
+    mod = work[1]
+    t1 = work[2]
+    # pose error [p_ref - p ; log(R_ref R^T)], clipped
+    for i in range(3):
+        e[i] = p_ref[i] - p[i]
+    Rrel = work[4:7, :3]  # R_ref R^T
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for m in range(3):
+                s += R_ref[i, m] * R[j, m]
+            Rrel[i, j] = s
+    log3_into(Rrel, e[3:])
+    _clip_norm3(e, 0, max_position_error_m)
+    _clip_norm3(e, 3, max_rotation_error_rad)
+    for i in range(6):
+        de[i] = twist_ref[i] - twist[i]
+        a[i] = accel_ref[i] - drift[i]
+    if use_axis:
+        _remove_along(e, force_axis)
+        _remove_along(de, force_axis)
+        _remove_along(a, force_axis)
+    # F = B (k * (B^T e) + d * (B^T de)) + Lam a
+    for i in range(6):
+        se = 0.0
+        sd = 0.0
+        for j in range(6):
+            se += B[j, i] * e[j]
+            sd += B[j, i] * de[j]
+        mod[i] = k[i] * se + d[i] * sd
+    for i in range(6):
+        s = 0.0
+        for j in range(6):
+            s += B[i, j] * mod[j]
+        la = 0.0
+        for j in range(6):
+            la += Lam[i, j] * a[j]
+        F[i] = s + la
+    if use_axis:
+        lam_n = 0.0
+        vn = 0.0
+        for i in range(3):
+            vn += twist[i] * force_axis[i]
+            for j in range(3):
+                lam_n += force_axis[i] * Lam[i, j] * force_axis[j]
+        f = press_n + lam_n * normal_damping_1_s * vn
+        for i in range(3):
+            F[i] -= f * force_axis[i]
+    if use_extra:
+        for i in range(3):
+            F[i] += extra_force_n[i]
+    # posture tau0 = M (kn (q_rest - q) - 2 sqrt(kn) dq); N^T tau0 = tau0 - J^T Lam J M^-1 tau0
+    c = 2.0 * math.sqrt(kn)
+    for i in range(n):
+        t1[i] = kn * (q_rest[i] - q[i]) - c * dq[i]
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += M[i, j] * t1[j]
+        tau_null[i] = s  # tau0, for now
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += M_inv[i, j] * tau_null[j]
+        t1[i] = s  # M^-1 tau0
+    for r in range(6):
+        s = 0.0
+        for j in range(n):
+            s += J[r, j] * t1[j]
+        mod[r] = s  # J M^-1 tau0
+    for r in range(6):
+        s = 0.0
+        for j in range(6):
+            s += Lam[r, j] * mod[j]
+        a[r] = s  # Lam J M^-1 tau0
+    for i in range(n):
+        s = 0.0
+        sf = 0.0
+        for r in range(6):
+            s += J[r, i] * a[r]
+            sf += J[r, i] * F[r]
+        tau_null[i] -= s
+        tau[i] = sf + tau_null[i] + nle[i]
+        if not add_gravity:
+            tau[i] -= g[i]
+
+
+@_jit
+def margin_torque_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, margin_rad: float,
+                       stiffness_nm_rad: float, damping_nm_s_rad: float, out: np.ndarray) -> None:
+    """``out`` (n,) = the joint-limit repulsion of :func:`~.limits.joint_margin_torque`."""
+    for i in range(q.shape[0]):
+        lo = max(q_min[i] + margin_rad - q[i], 0.0)
+        hi = max(q[i] - (q_max[i] - margin_rad), 0.0)
+        t = stiffness_nm_rad * (lo - hi)
+        t -= damping_nm_s_rad * (min(lo / margin_rad, 1.0) * min(dq[i], 0.0) +
+                                 min(hi / margin_rad, 1.0) * max(dq[i], 0.0))
+        out[i] = t
+
+
+@_jit
+def speed_brake_into(dq: np.ndarray, onset_rad_s: np.ndarray, rate_1_s: float, inertia_kg_m2: np.ndarray,
+                     out: np.ndarray) -> None:
+    """``out`` (n,) = the joint-speed brake of :func:`~.limits.joint_speed_brake_torque`."""
+    for i in range(dq.shape[0]):
+        x = max(abs(dq[i]) - onset_rad_s[i], 0.0)
+        sign = 1.0 if dq[i] > 0.0 else (-1.0 if dq[i] < 0.0 else 0.0)
+        out[i] = -rate_1_s * (x * sign * inertia_kg_m2[i])
+
+
+@_jit
+def shape_into(tau: np.ndarray, prev: np.ndarray, tau_max: np.ndarray, step: float, offset: np.ndarray,
+               use_offset: bool) -> int:
+    """Rate then absolute limits of :class:`~.limits.TorqueShaper` on ``tau`` (n,) in place; ``prev`` updated.
+
+    Returns a bit set: 1 when the rate limit clipped a joint, 2 when the absolute limit did.
+    """
+    n = tau.shape[0]
+    hit = 0
+    for i in range(n):
+        t = tau[i] - offset[i] if use_offset else tau[i]
+        lo = prev[i] - step
+        hi = prev[i] + step
+        if t < lo or t > hi:
+            hit |= 1
+        tau[i] = t
+    for i in range(n):
+        if hit & 1:
+            tau[i] = min(max(tau[i], prev[i] - step), prev[i] + step)
+    for i in range(n):
+        prev[i] = tau[i]
+        if use_offset:
+            tau[i] += offset[i]
+        if abs(tau[i]) > tau_max[i]:
+            hit |= 2
+    if hit & 2:
+        for i in range(n):
+            tau[i] = min(max(tau[i], -tau_max[i]), tau_max[i])
+            prev[i] = tau[i] - offset[i] if use_offset else tau[i]
+    return hit
+
+
+@_jit
+def limit_torque(tau: np.ndarray, q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray,
+                 margin_rad: float, margin_stiffness: float, margin_damping: float, onset_rad_s: np.ndarray,
+                 brake_1_s: float, M: np.ndarray, prev: np.ndarray, tau_max: np.ndarray, step: float,
+                 gravity: np.ndarray, use_gravity: bool, work: np.ndarray) -> int:
+    """``tau`` (n,) [Nm] plus the joint-limit repulsion and the joint-speed brake (on M's diagonal), then shaped
+    (:func:`shape_into`, ``gravity`` outside the rate limit when ``use_gravity``). work : (2, n) scratch.
+    Returns :func:`shape_into`'s bit set."""
+    n = tau.shape[0]
+    margin = work[0]
+    brake = work[1]
+    margin_torque_into(q, dq, q_min, q_max, margin_rad, margin_stiffness, margin_damping, margin)
+    for i in range(n):
+        brake[i] = M[i, i]
+    speed_brake_into(dq, onset_rad_s, brake_1_s, brake, brake)
+    for i in range(n):
+        tau[i] += margin[i]
+        tau[i] += brake[i]
+    return shape_into(tau, prev, tau_max, step, gravity, use_gravity)
+
+
+@_jit
+def disturbance_into(M: np.ndarray, nle: np.ndarray, J: np.ndarray, dq: np.ndarray, dq_prev: np.ndarray,
+                     tau_applied: np.ndarray, wrench: np.ndarray, dt_s: float, gain: float, tau_d: np.ndarray,
+                     limit: np.ndarray, raw: np.ndarray) -> float:
+    """One cycle of :class:`~.watch.DisturbanceWatch`: ``tau_d += gain (raw - tau_d)`` with
+    ``raw = M (dq - dq_prev) / dt + nle - tau_applied - J^T wrench`` (all (n,) [Nm]; J (6, n)); ``dq_prev``
+    becomes ``dq``. Returns ``max |tau_d| / limit``. raw : (n,) scratch."""
+    n = dq.shape[0]
+    for i in range(n):
+        raw[i] = (dq[i] - dq_prev[i]) / dt_s
+    ratio = 0.0
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += M[i, j] * raw[j]
+        w = 0.0
+        for r in range(6):
+            w += J[r, i] * wrench[r]
+        x = s + nle[i] - tau_applied[i] - w
+        tau_d[i] += (x - tau_d[i]) * gain
+        ratio = max(ratio, abs(tau_d[i]) / limit[i])
+    for i in range(n):
+        dq_prev[i] = dq[i]
+    return ratio
+
+
+@_jit
+def task_modes_into(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float, B: np.ndarray,
+                    k: np.ndarray, d: np.ndarray) -> None:
+    """The modes of :func:`~.impedance.task_modes` into ``B`` (6, 6), ``k``, ``d`` (6,): eigen-decomposition of
+    ``S^-1 Lam S^-1`` (S = diag(sqrt(K))), modal stiffness capped at ``max_omega^2 m``, damping ``2 zeta sqrt(k m)``."""
+    s = np.sqrt(K)
+    m, U = np.linalg.eigh(Lam / np.outer(s, s))
+    for i in range(6):
+        mi = max(m[i], 1e-12)
+        ki = min(1.0, max_omega_rad_s * max_omega_rad_s * mi)
+        k[i] = ki
+        d[i] = 2.0 * zeta * math.sqrt(ki * mi)
+        for r in range(6):
+            B[r, i] = s[r] * U[r, i]
+
+
+@_jit
+def reference_into(origin: np.ndarray, R_board: np.ndarray, xy: np.ndarray, h: float, v_xy: np.ndarray,
+                   v_h: float, a_xy: np.ndarray, a_h: float, R_sp: np.ndarray, omega: np.ndarray,
+                   domega: np.ndarray, scale: float, p_ref: np.ndarray, R_ref: np.ndarray, twist_ref: np.ndarray,
+                   accel_ref: np.ndarray) -> None:
+    """The world reference of a board-frame setpoint at the time scale ``scale``.
+
+    origin (3,) [m], R_board (3, 3): the board (its third axis the outward normal); xy, v_xy, a_xy (2,) and h,
+    v_h, a_h: the in-plane and normal position [m], velocity, acceleration; R_sp (3, 3), omega, domega (3,):
+    orientation and its rates. Out: p_ref (3,), R_ref (3, 3), twist_ref and accel_ref (6,), velocities times
+    ``scale`` and accelerations times ``scale^2``.
+    """
+    s2 = scale * scale
+    for i in range(3):
+        p_ref[i] = origin[i] + R_board[i, 0] * xy[0] + R_board[i, 1] * xy[1] + R_board[i, 2] * h
+        twist_ref[i] = (R_board[i, 0] * v_xy[0] + R_board[i, 1] * v_xy[1] + R_board[i, 2] * v_h) * scale
+        twist_ref[3 + i] = omega[i] * scale
+        accel_ref[i] = (R_board[i, 0] * a_xy[0] + R_board[i, 1] * a_xy[1] + R_board[i, 2] * a_h) * s2
+        accel_ref[3 + i] = domega[i] * s2
+        for j in range(3):
+            R_ref[i, j] = R_sp[i, j]
+
+
+@_jit
+def joint_demand_into(M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray, twist_ref: np.ndarray,
+                      accel_ref: np.ndarray, scale: float, lookahead_s: float, demand: np.ndarray,
+                      work: np.ndarray) -> None:
+    """Joint speeds (n,) [rad/s] the *unscaled* reference asks for, looking ``lookahead_s`` ahead along its
+    acceleration: ``M^-1 J^T Lam v`` with ``v = twist_ref / scale + accel_ref / scale^2 * lookahead`` (the
+    reference is stored time-scaled). work : (2, 6) scratch."""
+    n = demand.shape[0]
+    v = work[0]
+    w = work[1]
+    for r in range(6):
+        v[r] = (accel_ref[r] * (lookahead_s / scale) + twist_ref[r]) / scale
+    for r in range(6):
+        s = 0.0
+        for c in range(6):
+            s += Lam[r, c] * v[c]
+        w[r] = s
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            jt = 0.0
+            for r in range(6):
+                jt += J[r, j] * w[r]
+            s += M_inv[i, j] * jt
+        demand[i] = s
+
+
+@_jit
+def largest_share(x: np.ndarray, inv_limit: np.ndarray) -> float:
+    """``max_i |x_i| * inv_limit_i`` over (n,) arrays."""
+    r = 0.0
+    for i in range(x.shape[0]):
+        r = max(r, abs(x[i]) * inv_limit[i])
+    return r
+
+
+@_jit
+def tool_in_board(origin: np.ndarray, R_board: np.ndarray, p: np.ndarray, twist: np.ndarray, wrench: np.ndarray,
+                  xyh: np.ndarray, v_board: np.ndarray) -> float:
+    """The pad at world ``p`` (3,) [m] moving with ``twist`` (6,) in the board frame (origin (3,), axes R_board
+    (3, 3), third the outward normal): ``xyh`` (3,) = R_board^T (p - origin), ``v_board`` (3,) = R_board^T v.
+    Returns the normal force [N], ``wrench[:3] . normal`` (positive when the board pushes the pad back)."""
+    f = 0.0
+    for j in range(3):
+        x = 0.0
+        v = 0.0
+        for i in range(3):
+            x += (p[i] - origin[i]) * R_board[i, j]
+            v += R_board[i, j] * twist[i]
+        xyh[j] = x
+        v_board[j] = v
+        f += wrench[j] * R_board[j, 2]
+    return f
+
+
+@_jit
+def trace_row(r: np.ndarray, t_s: float, phase: float, has_setpoint: bool, xy: np.ndarray, v_xy: np.ndarray,
+              a_xy: np.ndarray, scale: float, xyh: np.ndarray, contact: float, p_ref: np.ndarray, p: np.ndarray,
+              force_n: float, press_n: float) -> None:
+    """One row of the controller's trace (its columns: ``controller.core.TRACE_COLUMNS``); the in-plane rates
+    as executed (velocity x scale, acceleration x scale^2). Without a setpoint, columns 2-10 and 19 stay."""
+    r[0] = t_s
+    r[1] = phase
+    if has_setpoint:
+        s2 = scale * scale
+        for i in range(2):
+            r[2 + i] = xy[i]
+            r[4 + i] = v_xy[i] * scale
+            r[6 + i] = a_xy[i] * s2
+        for i in range(3):
+            r[8 + i] = xyh[i]
+        r[19] = contact
+    for i in range(3):
+        r[11 + i] = p_ref[i]
+        r[14 + i] = p[i]
+    r[17] = force_n
+    r[18] = press_n
+    r[20] = scale
+

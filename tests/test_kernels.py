@@ -1,0 +1,225 @@
+"""The compiled control law against its numpy formulation, and no compilation inside a tick.
+
+The oracle (``tests/numpy_law.py``) is the law as it was written in numpy
+before it was compiled (``controller/control/kernels.py``): the same
+equations, one numpy expression each. Every kernel must agree with it to rounding on random
+states, with and without a force axis, a speed brake, gravity.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from controller.control import kernels
+from controller.control.impedance import (Kinematics, Reference, TaskShaping, impedance_torque, task_modes,
+                                          task_stiffness)
+from controller.control.limits import TorqueShaper
+from controller.control.params import ImpedanceParams
+from controller.control.watch import DisturbanceWatch
+from interfaces.robot_model import RobotModel
+
+from .numpy_law import numpy_kinematics, numpy_law, numpy_modes
+
+RNG = np.random.default_rng(7)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return RobotModel()
+
+
+def _random_state(model, rng):
+    lim = model.limits
+    q = lim.q_min + (lim.q_max - lim.q_min) * rng.uniform(0.15, 0.85, model.nq)
+    return q, rng.normal(0.0, 0.5, model.nq)
+
+
+# ---------------------------------------------------------------------------------------------- the kernels
+@pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-5, 1e-3, 0.4, 1.5, 2.9, np.pi - 2e-3, np.pi - 1e-5, np.pi])
+def test_log3_matches_pinocchio_over_the_whole_range(angle):
+    for _ in range(20):
+        axis = RNG.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R = pin.exp3(angle * axis)
+        out = np.zeros(3)
+        kernels.log3_into(R, out)
+        ref = pin.log3(R)
+        if angle > np.pi - 1e-3:  # at pi, w and -w are the same rotation
+            assert np.allclose(pin.exp3(out), R, atol=1e-9) and abs(np.linalg.norm(out) - angle) < 1e-6
+        else:
+            np.testing.assert_allclose(out, ref, atol=1e-12)
+
+
+def test_spd_inverse_matches_numpy_and_refuses_an_indefinite_matrix():
+    for _ in range(50):
+        X = RNG.normal(size=(6, 6))
+        A = X @ X.T + 1e-3 * np.eye(6)
+        out, L = np.zeros((6, 6)), np.zeros((6, 6))
+        assert kernels.spd_inverse_into(A, out, L)
+        np.testing.assert_allclose(out, np.linalg.inv(A), rtol=1e-9, atol=1e-9 * np.abs(np.linalg.inv(A)).max())
+    assert not kernels.spd_inverse_into(-np.eye(6), out, L)
+
+
+def test_kinematics_equal_the_numpy_formulation(model):
+    kin = Kinematics(model)
+    for _ in range(30):
+        q, dq = _random_state(model, RNG)
+        kin.update(q, dq)
+        ref = numpy_kinematics(model, q, dq)
+        for name, want in ref.items():
+            got = getattr(kin, name)
+            np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-10 * max(1.0, np.abs(want).max()),
+                                       err_msg=name)
+
+
+@pytest.mark.parametrize("axis", [False, True])
+@pytest.mark.parametrize("extra", [False, True])
+@pytest.mark.parametrize("gravity", [False, True])
+def test_the_impedance_law_equals_the_numpy_formulation(model, axis, extra, gravity):
+    params = ImpedanceParams(nullspace_stiffness_nm_rad=30.0)
+    kin = Kinematics(model)
+    for _ in range(20):
+        q, dq = _random_state(model, RNG)
+        kin.update(q, dq)
+        ref = Reference(kin.p + RNG.normal(0, 0.03, 3), pin.exp3(RNG.normal(0, 0.3, 3)) @ kin.R,
+                        RNG.normal(0, 0.2, 6), RNG.normal(0, 2.0, 6))
+        n = RNG.normal(size=3)
+        shaping = TaskShaping(force_axis=n / np.linalg.norm(n) if axis else None, press_n=8.0,
+                              normal_damping_1_s=20.0, stiffness_scale=0.7, max_position_error_m=0.02,
+                              max_rotation_error_rad=0.2, extra_force_n=RNG.normal(0, 5, 3) if extra else None)
+        modes = task_modes(kin.Lambda, task_stiffness(params, 0.7), params.damping_factor, 80.0)
+        q_rest = q + RNG.normal(0, 0.2, model.nq)
+        terms = impedance_torque(model, q, dq, ref, params, q_rest, gravity, shaping, kin, modes)
+        want = numpy_law(numpy_kinematics(model, q, dq), q, dq, ref, params, q_rest, gravity, shaping, modes)
+        for got, w, name in zip((terms.tau_nm, terms.wrench_task, terms.pose_error, terms.twist_error,
+                                 terms.tau_nullspace), want, ("tau", "F", "e", "de", "tau_null")):
+            np.testing.assert_allclose(got, w, rtol=1e-9, atol=1e-9 * max(1.0, np.abs(w).max()), err_msg=name)
+
+
+def test_task_modes_give_the_numpy_stiffness_and_damping(model):
+    kin = Kinematics(model)
+    for cap in (40.0, 120.0, 1e6):
+        q, dq = _random_state(model, RNG)
+        kin.update(q, dq)
+        K = task_stiffness(ImpedanceParams())
+        modes = task_modes(kin.Lambda, K, 0.8, cap)
+        K_want, D_want = numpy_modes(kin.Lambda, K, 0.8, cap)
+        np.testing.assert_allclose(modes.stiffness(), K_want, rtol=1e-8, atol=1e-8 * np.abs(K_want).max())
+        np.testing.assert_allclose(modes.damping(), D_want, rtol=1e-8, atol=1e-8 * np.abs(D_want).max())
+
+
+def test_limits_equal_the_numpy_formulation(model):
+    lim = model.limits
+    n = model.nq
+    for gravity in (False, True):
+        shaper = TorqueShaper(lim.tau_max, 1000.0)
+        prev = RNG.normal(0, 20, n)
+        shaper.prev[:] = prev
+        q = lim.q_max - RNG.uniform(0.0, 0.2, n)  # some joints inside the margin
+        dq = RNG.normal(0, 1.5, n)
+        tau = RNG.normal(0, 60, n)
+        M_diag = RNG.uniform(0.05, 2.0, n)
+        g = RNG.normal(0, 30, n)
+        onset = 0.8 * lim.dq_max
+        # numpy: repulsion, brake, then the rate limit on tau - g and the absolute limit on the sum
+        lo_d = np.clip(lim.q_min + 0.1 - q, 0.0, None)
+        hi_d = np.clip(q - (lim.q_max - 0.1), 0.0, None)
+        want = tau + 300.0 * (lo_d - hi_d) - 10.0 * (np.minimum(lo_d / 0.1, 1) * np.minimum(dq, 0)
+                                                     + np.minimum(hi_d / 0.1, 1) * np.maximum(dq, 0))
+        want += -50.0 * np.maximum(np.abs(dq) - onset, 0.0) * np.sign(dq) * M_diag
+        off = g if gravity else np.zeros(n)
+        want = np.clip(want - off, prev - 1.0, prev + 1.0) + off
+        want = np.clip(want, -lim.tau_max, lim.tau_max)
+        got = tau.copy()
+        hit = kernels.limit_torque(got, q, dq, lim.q_min, lim.q_max, 0.1, 300.0, 10.0, onset, 50.0, np.diag(M_diag),
+                                   shaper.prev, shaper.tau_max, 1.0, g, gravity, np.zeros((2, n)))
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(shaper.prev, want - off, atol=1e-9)
+        assert hit & 1  # 60 Nm from a random previous command is always more than 1 Nm away
+
+
+def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model):
+    kin = Kinematics(model)
+    q, dq = _random_state(model, RNG)
+    kin.update(q, dq)
+    n = model.nq
+    # disturbance: one low-pass step of M (dq - dq_prev) / dt + nle - applied - J^T w
+    watch = DisturbanceWatch(np.full(n, 30.0), 0.02, 0.05)
+    dq_prev = dq + RNG.normal(0, 0.01, n)
+    watch.skip(dq_prev)
+    applied, wrench = RNG.normal(0, 10, n), RNG.normal(0, 5, 6)
+    watch.update(kin.M, kin.nle, kin.J, dq, applied, wrench, 0.001)
+    raw = kin.M @ ((dq - dq_prev) / 0.001) + kin.nle - applied - kin.J.T @ wrench
+    np.testing.assert_allclose(watch.tau_d, raw * (0.001 / 0.021), rtol=1e-10)
+    # reference of a board-frame setpoint, time-scaled
+    Rb = pin.exp3(RNG.normal(0, 1, 3))
+    origin = RNG.normal(0, 1, 3)
+    xy, v, a = RNG.normal(size=2), RNG.normal(size=2), RNG.normal(size=2)
+    om, dom = RNG.normal(size=3), RNG.normal(size=3)
+    p, R, tw, ac = np.zeros(3), np.zeros((3, 3)), np.zeros(6), np.zeros(6)
+    kernels.reference_into(origin, Rb, xy, 0.01, v, 0.2, a, 0.3, Rb, om, dom, 0.6, p, R, tw, ac)
+    np.testing.assert_allclose(p, origin + Rb @ np.r_[xy, 0.01], atol=1e-14)
+    np.testing.assert_allclose(tw, np.r_[Rb @ np.r_[v, 0.2], om] * 0.6, atol=1e-14)
+    np.testing.assert_allclose(ac, np.r_[Rb @ np.r_[a, 0.3], dom] * 0.36, atol=1e-14)
+    # the joint speeds the unscaled reference asks for
+    demand = np.zeros(n)
+    kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, tw, ac, 0.6, 0.1, demand, np.zeros((2, 6)))
+    np.testing.assert_allclose(demand, kin.M_inv @ kin.J.T @ kin.Lambda @ (tw / 0.6 + ac / 0.36 * 0.1), rtol=1e-9)
+    # the pad in the board frame and the normal force
+    xyh, vb = np.zeros(3), np.zeros(3)
+    f = kernels.tool_in_board(origin, Rb, kin.p, kin.twist, wrench, xyh, vb)
+    np.testing.assert_allclose(xyh, (kin.p - origin) @ Rb, atol=1e-14)
+    np.testing.assert_allclose(vb, Rb.T @ kin.twist[:3], atol=1e-14)
+    assert f == pytest.approx(wrench[:3] @ Rb[:, 2], abs=1e-14)
+
+
+def test_no_kernel_compiles_inside_a_tick():
+    """A controller compiles (or loads) every kernel it uses when it is made: a closed-loop approach, contact and
+    wiping against the simulator then adds no compiled signature (a new one would stall a tick for seconds)."""
+    script = textwrap.dedent("""
+        import numpy as np
+        from numba.core.registry import CPUDispatcher
+        import controller.control.kernels as K, controller.motion as motion
+        from controller.core import ControllerCore
+        from controller.executor_types import BoardPose, StainState
+        from controller.params import ControllerParams
+        from lampskit.learn.learn import bundled_skill
+        from sim.core import SimCore
+        from sim.params import SimParams
+
+        def signatures():
+            found = {}
+            for mod in (K, motion):
+                for name, obj in vars(mod).items():
+                    if isinstance(obj, CPUDispatcher):
+                        found[f"{mod.__name__}.{name}"] = len(obj.signatures)
+            return found
+
+        sim = SimCore(SimParams.from_table({"camera": {"enabled": False}}))
+        core = ControllerCore(ControllerParams.from_table({"trace_ticks": 100}), bundled_skill())
+        before = signatures()
+        phases = set()
+        for n in range(4000):
+            if n % 100 == 0:
+                board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
+                core.executor.set_stains(board, [StainState(s.id, np.array(s.centre_m), s.size_m, False)
+                                                 for s in sim.dirt.stains])
+            o = sim.out
+            tau = core.tick(o.q, o.dq, o.wrench, False, 0.001, applied_nm=None if n == 0 else tau_prev)
+            tau_prev = tau.copy()
+            phases.add(str(core.executor.phase))
+            sim.step(tau_prev)
+        sim.close()
+        after = signatures()
+        print(sorted(phases))
+        assert after == before, {k: (before.get(k), v) for k, v in after.items() if before.get(k) != v}
+        assert any("WIPE" in p for p in phases), phases
+    """)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
