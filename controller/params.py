@@ -106,7 +106,9 @@ class LimitParams:
     unanswered (filtered over overload_filter_s [s] of robot time) above this
     for overload_persist_s [s] is a fault: the loop cannot keep up, so the
     pad lifts off under control instead of wiping on with stale torques
-    (1 = off).
+    (1 = off). Before that the motion slows: above overload_slow_share the
+    skill's time scale falls linearly to overload_min_scale at
+    overload_share (:func:`controller.control.limits.load_scale`).
     """
 
     torque_rate_nm_per_ms: float = 1.0
@@ -127,6 +129,8 @@ class LimitParams:
     overload_share: float = 0.3
     overload_filter_s: float = 0.5
     overload_persist_s: float = 1.0
+    overload_slow_share: float = 0.05
+    overload_min_scale: float = 0.4
 
     def __post_init__(self) -> None:
         s = "controller.limits"
@@ -136,6 +140,11 @@ class LimitParams:
         _range(s, "overload_share", self.overload_share, 0.01, 1.0)
         _range(s, "overload_filter_s", self.overload_filter_s, 0.01, 10.0)
         _range(s, "overload_persist_s", self.overload_persist_s, 0.0, 60.0)
+        _range(s, "overload_slow_share", self.overload_slow_share, 0.0, 1.0)
+        _range(s, "overload_min_scale", self.overload_min_scale, 0.05, 1.0)
+        if self.overload_slow_share >= self.overload_share:
+            raise ControlConfigError(f"{s}.overload_slow_share must be below overload_share ({self.overload_share:g}), "
+                              f"got {self.overload_slow_share:g}: the motion slows before the overload ends the run")
         _range(s, "torque_rate_nm_per_ms", self.torque_rate_nm_per_ms, 0.01, 50.0)
         _range(s, "joint_margin_rad", self.joint_margin_rad, 0.01, 0.5)
         _range(s, "joint_margin_stiffness_nm_rad", self.joint_margin_stiffness_nm_rad, 0.0, 5000.0)

@@ -40,6 +40,7 @@ from interfaces.transforms import transform_from_pose
 
 from lampskit.errors import PlanningError
 
+from .control.limits import load_scale
 from .control.watch import OverloadWatch
 from .core import TRACE_COLUMNS, ControllerCore
 from .executor_types import BoardPose, StainState
@@ -198,6 +199,9 @@ class ControllerService:
                     ours, replaced_seen = states.replaced - replaced_seen, states.replaced
                     if self._overload.update(ours, dt):
                         self._overloaded()
+                    lim = self.p.limits
+                    self.core.override.load_cap = load_scale(self._overload.share, lim.overload_slow_share,
+                                                             lim.overload_share, lim.overload_min_scale)
                     self._poll_stains(t0 / 1e9)
                     t1 = time.monotonic_ns()
                     tau = self._control(state, dt)
@@ -441,7 +445,8 @@ class ControllerService:
         counters = dict(self.counters)
         counters.update(ex.counters)
         counters.update(torque_rate_clipped=core.shaper.clipped_rate, torque_abs_clipped=core.shaper.clipped_abs,
-                        robot_estop_engaged=int(self._robot_estop), estop_latched=int(self._estop_ours))
+                        robot_estop_engaged=int(self._robot_estop), estop_latched=int(self._estop_ours),
+                        overload_slowed_ticks=core.override.load_limited_ticks)
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
                              ("estop", self._estops), ("estop_release", self._releases)):
             if reader is None:

@@ -342,7 +342,6 @@ def _controller(*args: str, timeout: float = 120.0) -> subprocess.CompletedProce
 @pytest.mark.parametrize("config, match", [
     ("[controller.impedance]\nstiffness_n_m = -5.0\n", "stiffness_n_m must satisfy 0 <"),
     ("[controller.force]\ntarget_n = 45.0\n", "target_n (45.0 N) must be below cap_n (40.0 N)"),
-    ("[controller]\nmode = \"realtime\"\nrate_hz = 10000.0\n", "cannot be held on this machine"),
     ("[controller\n", "not valid TOML"),
 ])
 def test_bad_config_is_refused_at_start_up(tmp_path, learned_skill_file, config, match):
@@ -351,6 +350,24 @@ def test_bad_config_is_refused_at_start_up(tmp_path, learned_skill_file, config,
     r = _controller("--config", str(path), "--skill", str(learned_skill_file), "--check")
     assert r.returncode == 1, r.stdout + r.stderr
     assert match in r.stderr and r.stderr.startswith("lamps controller: error:"), r.stderr
+
+
+def test_a_rate_whose_period_the_tick_cannot_fit_is_refused(monkeypatch, learned_skill):
+    """The start-up check measures the tick (since the law was compiled, even 10 kHz fits here: a slow
+    machine is stood in for by the measurement) and refuses a real-time rate it cannot hold, naming it."""
+    import controller.cli as cli
+    from controller.params import ControllerParams
+    from interfaces.errors import InterfaceError
+    from interfaces.robot_model import RobotModel
+
+    params = ControllerParams.from_table({"mode": "realtime", "rate_hz": 1000.0})
+    model = RobotModel()
+    assert "period 1000 us" in cli.check_rate(params, learned_skill, model)  # the real tick fits
+    monkeypatch.setattr(cli, "tick_cost_us", lambda *a, **k: np.full(300, 800.0))
+    with pytest.raises(InterfaceError, match=r"rate_hz = 1000 cannot be held on this machine.*takes 800 us"):
+        cli.check_rate(params, learned_skill, model)
+    lockstep = ControllerParams.from_table({"mode": "lockstep", "rate_hz": 1000.0})
+    assert "800 us" in cli.check_rate(lockstep, learned_skill, model)  # lock-step has no deadline to miss
 
 
 @pytest.mark.parametrize("content, match", [
@@ -426,3 +443,6 @@ def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp
             assert lifted.contact_force_n == 0.0
             assert ctl.service.counters["overload_trips"] >= 1
             assert "force cap" not in reason and ctl.core.executor.counters["faults"] == 1
+            # before the fault the motion slowed with the load (the speed override's load cap set the pace)
+            assert ctl.core.override.load_limited_ticks > 0
+            assert ctl.service.status().counters["overload_slowed_ticks"] == ctl.core.override.load_limited_ticks

@@ -480,6 +480,36 @@ def test_speed_override_slows_to_the_share_holds_the_peak_and_recovers_slowly():
     assert s == pytest.approx(0.1)
 
 
+def test_a_loop_that_cannot_keep_up_slows_the_motion_smoothly_before_the_overload_ends_it():
+    from controller.control.limits import load_scale
+
+    assert load_scale(0.0, 0.05, 0.3, 0.4) == 1.0 and load_scale(0.05, 0.05, 0.3, 0.4) == 1.0
+    assert load_scale(0.175, 0.05, 0.3, 0.4) == pytest.approx(0.7)  # half-way: half-way down
+    assert load_scale(0.3, 0.05, 0.3, 0.4) == pytest.approx(0.4) and load_scale(0.9, 0.05, 0.3, 0.4) == 0.4
+    shares = np.linspace(0.0, 0.5, 51)
+    assert np.all(np.diff([load_scale(x, 0.05, 0.3, 0.4) for x in shares]) <= 0.0)  # never faster with more load
+    ov = SpeedOverride(np.ones(2), share=0.5, min_scale=0.1, down_rate_1_s=8.0, up_rate_1_s=0.5)
+    ov.load_cap = 0.4
+    scales = [ov.update(np.zeros(2), 0.001) for _ in range(200)]
+    assert scales[-1] == pytest.approx(0.4) and ov.load_limited_ticks == 200
+    assert max(abs(np.diff(scales))) <= 8.0 * 0.001 + 1e-12, "the scale moves at the override's rate, no jump"
+    ov.load_cap = 1.0  # the load is gone: back up at the slow rate
+    scales = [ov.update(np.zeros(2), 0.001) for _ in range(2000)]
+    assert scales[0] == pytest.approx(0.4005) and scales[-1] == 1.0
+    # a demand that asks for less than the load allows: the demand sets the pace, not the load
+    ov.load_cap = 0.8
+    for _ in range(3000):
+        s = ov.update(np.array([0.0, 2.0]), 0.001)
+    assert s == pytest.approx(0.25) and ov.load_limited_ticks == 200
+
+
+def test_the_slowing_starts_below_the_overload_limit():
+    from controller.params import ControllerParams
+
+    with pytest.raises(ConfigError, match="overload_slow_share must be below overload_share"):
+        ControllerParams.from_table({"limits": {"overload_slow_share": 0.3, "overload_share": 0.3}})
+
+
 def test_the_controller_caps_its_task_modes_for_the_robot_state_rate(learned_skill):
     """A robot declaring 500 Hz (FRI at 2 ms) gets half the configured cap on every task mode, at once; 1 kHz
     and an undeclared rate keep the configured one."""
