@@ -118,7 +118,7 @@ def kinematics_terms(M_upper: np.ndarray, Minv_upper: np.ndarray, J_pin: np.ndar
         for j in range(n):
             s += J[r, j] * dq[j]
         twist[r] = s
-    # A = J M^-1 J^T + eps I: L holds M^-1 J^T's rows as scratch would not fit (n x 6); go row by row
+    # A = J M^-1 J^T + eps I, its upper triangle summed entry by entry (about 7,000 flops: no scratch needed)
     for r in range(6):
         for c in range(r, 6):
             s = 0.0
@@ -160,14 +160,13 @@ def log3_into(R: np.ndarray, out: np.ndarray) -> None:
         if R[2, 2] > R[k, k]:
             k = 2
         ak = math.sqrt(max(0.0, (R[k, k] - c) / d))
-        ax = np.empty(3)
         for j in range(3):
-            ax[j] = ak if j == k else 0.5 * (R[k, j] + R[j, k]) / (d * ak)
-        if ax[0] * wx + ax[1] * wy + ax[2] * wz < 0.0:
+            out[j] = ak if j == k else 0.5 * (R[k, j] + R[j, k]) / (d * ak)
+        if out[0] * wx + out[1] * wy + out[2] * wz < 0.0:
             theta = -theta
-        norm = math.sqrt(ax[0] * ax[0] + ax[1] * ax[1] + ax[2] * ax[2])
+        norm = math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
         for j in range(3):
-            out[j] = theta * ax[j] / norm
+            out[j] *= theta / norm
         return
     out[0] = f * wx
     out[1] = f * wy
