@@ -61,7 +61,7 @@ class Quintic:
         _quintic_into(self._c, self.time_s, self.T, p1, v1, a1, self.position, self.velocity, self.acceleration)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True)  # keeps the GIL, as controller/control/kernels.py explains
 def _quintic_into(c: np.ndarray, t: float, T: float, p1: np.ndarray, v1: np.ndarray, a1: np.ndarray,
                   position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray) -> None:
     """x, dx, ddx (n,) of ``x(t) = sum c_k t^k`` (c (6, n)) for t < T; after T the goal (p1, v1, a1 (n,)) held

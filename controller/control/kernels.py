@@ -25,7 +25,11 @@ compiled function that writes into arrays the caller preallocated:
 a :class:`~controller.core.ControllerCore` calls each kernel with the array
 types its tick will pass when it is made, so no tick waits for the compiler
 (``tests/test_kernels.py`` checks that a closed loop adds no signature).
-``nogil`` lets the planner thread run while a kernel computes.
+The kernels keep the GIL (no ``nogil``): each takes microseconds, and a
+1 kHz thread that let go of the GIL that often would hand it to whichever
+Python thread waits (Zenoh callbacks, the planner) and wait up to a switch
+interval to get it back. (Whether it did could not be told apart from the
+run-to-run spread of the real-time cell on two shared cores.)
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ import math
 import numba as nb
 import numpy as np
 
-_jit = nb.njit(cache=True, nogil=True)
+_jit = nb.njit(cache=True)  # keeps the GIL: see the module docstring
 
 
 @_jit
