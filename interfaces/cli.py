@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "record every key into an MCAP file; report.json and plots when stopped",
     ),
     "report": ("launch.record_cli:report_main", "rebuild a run's report.json and plots from its recording"),
+    "campaign": ("launch.campaign:main", "many seeded cells, several at once: success, time against a lower bound, peaks"),
     "credentials": ("interfaces.credentials:main",
                     "make a cell's per-role passwords for Zenoh authentication and access control"),
     "certificates": ("interfaces.certificates:main",

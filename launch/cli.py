@@ -73,7 +73,7 @@ def build_up_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _board_env(board: str) -> dict[str, str]:
+def board_env(board: str) -> dict[str, str]:
     """Compose variables and service environment for ``--board``."""
     if board in BOARDS:
         return {"LAMPS_BOARD": BOARDS[board]}
@@ -137,7 +137,7 @@ def _up(a, stop_requested: threading.Event) -> int:
     from .compose import DEFAULT_COMPOSE, load_compose
 
     _check_options(a)
-    board_env = _board_env(a.board)
+    board_vars = board_env(a.board)
     out = _new_run_folder(a.out)
     echo = None if a.quiet else _print
     compose_path = Path(a.compose) if a.compose else DEFAULT_COMPOSE
@@ -146,7 +146,7 @@ def _up(a, stop_requested: threading.Event) -> int:
 
     t_start = time.monotonic()
     skill = _learn(a, out, echo, stop_requested)
-    cell = _plan_cell(a, compose_path, board_env, skill, out)
+    cell = _plan_cell(a, compose_path, board_vars, skill, out)
     why = _run_cell(cell, a, echo, stop_requested, t_start)
     return _show_report(out, why)
 
@@ -181,13 +181,13 @@ class _Cell:
     access_control: bool
 
 
-def _plan_cell(a, compose_path: Path, board_env: dict[str, str], skill: Path, out: Path) -> _Cell:
+def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, out: Path) -> _Cell:
     """The compose file read with the run's variables, its active services localised on their ports."""
     from .compose import active, load_compose, localize, run_locally
 
     from interfaces.credentials import make_credentials
 
-    variables = _compose_variables(a, board_env, skill, out)
+    variables = _compose_variables(a, board_vars, skill, out)
     profiles = tuple(p for p in variables.get("COMPOSE_PROFILES", "sim").split(",") if p)
     services = run_locally(active(load_compose(compose_path, variables), profiles))
     credentials = out / "credentials"
@@ -196,16 +196,16 @@ def _plan_cell(a, compose_path: Path, board_env: dict[str, str], skill: Path, ou
     robot_id = next((s.environment.get("LAMPS_ROBOT_ID") for s in local if s.environment.get("LAMPS_ROBOT_ID")),
                     "iiwa")
     access = any(s.environment.get("LAMPS_ZENOH_ACCESS_CONTROL", "false").lower() == "true" for s in local)
-    return _Cell(services=local, env={k: v for k, v in board_env.items() if k.startswith("LAMPS__")},
+    return _Cell(services=local, env={k: v for k, v in board_vars.items() if k.startswith("LAMPS__")},
                  robot_id=robot_id, skill=skill, out=out, credentials=credentials, access_control=access)
 
 
-def _compose_variables(a, board_env: dict[str, str], skill: Path, out: Path) -> dict[str, str]:
+def _compose_variables(a, board_vars: dict[str, str], skill: Path, out: Path) -> dict[str, str]:
     """The environment plus the ``LAMPS_*`` variables docker-compose.yml substitutes, from the options."""
     variables = dict(os.environ)
     variables["COMPOSE_PROFILES"] = a.robot
     variables.update(LAMPS_SEED=str(a.seed), LAMPS_STAINS=str(a.stains), LAMPS_MODE=a.mode, LAMPS_SKILL=str(skill),
-                     LAMPS_OUT=str(out), **{k: v for k, v in board_env.items() if k == "LAMPS_BOARD"})
+                     LAMPS_OUT=str(out), **{k: v for k, v in board_vars.items() if k == "LAMPS_BOARD"})
     if a.robot_id:
         variables["LAMPS_ROBOT_ID"] = a.robot_id
     return variables

@@ -426,12 +426,12 @@ def test_lamps_bench_collects_the_benchmarks_into_json_and_markdown(tmp_path):
 
 
 def test_a_board_pose_file_becomes_the_sims_board_table(tmp_path):
-    from launch.cli import UpError, _board_env
+    from launch.cli import UpError, board_env
 
     f = tmp_path / "board.toml"
     f.write_text('[board]\npreset = "custom"\norigin_m = [0.7, 0.3, 0.2]\nquat_wxyz = [0.5, -0.5, -0.5, 0.5]\n'
                  'size_m = [0.6, 0.5]\n')
-    env = _board_env(str(f))
+    env = board_env(str(f))
     assert env["LAMPS__SIM__BOARD__PRESET"] == '"custom"' and env["LAMPS__SIM__BOARD__SIZE_M"] == "[0.6, 0.5]"
     from interfaces.config import load_config
     from sim.params import SimParams
@@ -439,10 +439,10 @@ def test_a_board_pose_file_becomes_the_sims_board_table(tmp_path):
     board = load_config(None, env=env).table("sim")["board"]
     assert board["origin_m"] == [0.7, 0.3, 0.2]
     SimParams.from_table({"board": board})  # the sim accepts it
-    assert _board_env("horizontal") == {"LAMPS_BOARD": "table"}
+    assert board_env("horizontal") == {"LAMPS_BOARD": "table"}
     f.write_text("[other]\nx = 1\n")
     with pytest.raises(UpError, match="no \\[board\\] table"):
-        _board_env(str(f))
+        board_env(str(f))
 
 
 def _pid_listening_on(port: int) -> int | None:

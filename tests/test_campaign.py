@@ -1,0 +1,115 @@
+"""``lamps campaign``: seeded cells run whole, several at once, summed up against a lower bound on the robot time."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from launch.campaign import (CampaignError, Cell, cell_stains, cells_of, lower_bound_s, mst_length_m, parse_range,
+                             row_of, summarize)
+
+REPO = Path(__file__).resolve().parent.parent
+TILTED = REPO / "config" / "boards" / "tilted.toml"
+
+
+@pytest.mark.parametrize("text, want", [("0-3", [0, 1, 2, 3]), ("5", [5]), ("1,4,7-9", [1, 4, 7, 8, 9]),
+                                        ("3-3,2", [2, 3])])
+def test_ranges(text, want):
+    assert parse_range(text, "seeds") == want
+
+
+@pytest.mark.parametrize("text", ["5-2", "a", "1-b", "-1", ""])
+def test_bad_ranges_are_refused_naming_the_part(text):
+    with pytest.raises(CampaignError, match="--seeds"):
+        parse_range(text, "seeds")
+
+
+def test_each_seed_cycles_through_stain_counts_and_boards_the_same_whatever_else_runs():
+    cells = cells_of([0, 1, 2, 3, 7], [1, 2, 3], ["wall", "table"])
+    assert cells[:4] == [Cell(0, 1, "wall"), Cell(1, 2, "table"), Cell(2, 3, "wall"), Cell(3, 1, "table")]
+    assert cells[4] == Cell(7, 2, "table") == cells_of([7], [1, 2, 3], ["wall", "table"])[0]
+    with pytest.raises(CampaignError):
+        cells_of([], [1], ["wall"])
+
+
+def test_the_lower_bound_is_the_swept_area_plus_the_shortest_network_at_the_speed_limit():
+    centres = np.array([[0.0, 0.0], [0.3, 0.0], [0.3, 0.4], [0.0, 0.4]])
+    assert mst_length_m(centres) == pytest.approx(0.3 + 0.3 + 0.4)  # a rectangle: three sides
+    assert mst_length_m(centres[:1]) == 0.0
+    bound = lower_bound_s([0.01, 0.02], centres[:2], 0.1, 0.5)
+    assert bound == pytest.approx(0.03 / (0.1 * 0.5) + 0.3 / 0.5)
+    with pytest.raises(CampaignError):
+        lower_bound_s([0.01], centres[:1], 0.0, 0.5)
+
+
+def test_cell_stains_are_the_ones_the_sim_makes_for_that_seed_and_board():
+    from sim.board import board_from_params
+    from sim.core import make_stains
+    from sim.params import SimParams
+
+    areas, centres = cell_stains(Cell(4, 3, "table"), {"preset": "table"})
+    params = SimParams.from_table({"seed": 4, "dirt": {"stains": 3}, "board": {"preset": "table"}})
+    truth = make_stains(params, board_from_params(params.board))
+    np.testing.assert_allclose(centres, [s.centre_m for s in truth])
+    assert areas == pytest.approx([math.pi / 4 * s.size_m ** 2 / s.aspect for s in truth])
+
+
+def _report(removed: float, robot_s: float, faults=()):
+    return {"outcome": "cleaned" if removed >= 0.95 else "incomplete", "dirt_removed_fraction": removed,
+            "sim_time_s": robot_s, "max_contact_force_n": 12.0, "motion_peaks": {"all": {"jerk_m_s3": 300.0,
+                                                                                         "speed_m_s": 0.4}},
+            "faults": [{"phase": p, "reason": r} for p, r in faults]}
+
+
+def test_rows_and_summary_count_success_faults_and_cells_without_a_report():
+    rows = [row_of(Cell(0, 1, "wall"), _report(1.0, 20.0), 10.0, "a"),
+            row_of(Cell(1, 2, "wall"), _report(0.97, 30.0), 10.0, "b"),  # below 98 %: ran, not a success
+            row_of(Cell(2, 1, "table"), _report(1.0, 25.0, [("ROBOT", "braked"), ("FAULT", "force cap")]), 5.0, "c"),
+            row_of(Cell(3, 1, "table"), _report(1.0, 40.0, [("ROBOT", "braked")]), 8.0, "d"),
+            row_of(Cell(4, 1, "wall"), None, 7.0, "e", why="lamps up: error: port busy")]
+    assert [r["success"] for r in rows] == [True, False, False, True, False]
+    assert rows[2]["faults"] == 1 and rows[2]["robot_events"] == 1 and rows[2]["fault_reasons"] == ["force cap"]
+    s = summarize(rows)
+    assert s["all"]["runs"] == 5 and s["all"]["success_rate"] == pytest.approx(0.4) and s["all"]["no_report"] == 1
+    assert s["wall"]["dirt_removed_min"] == pytest.approx(0.97) and s["wall"]["time_over_bound_median"] == 2.5
+    assert s["table"]["faults"] == 1 and s["table"]["time_over_bound_max"] == pytest.approx(5.0)
+
+
+def _campaign(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "interfaces.cli", "campaign", *args], cwd=REPO,
+                          capture_output=True, text=True, timeout=timeout, env={**os.environ, "MPLBACKEND": "Agg"})
+
+
+@pytest.mark.parametrize("args, match", [(["--seeds", "3-1"], "--seeds '3-1'"), (["--stains", "0-2"], "at least one"),
+                                         (["--boards", "wall,moon"], "'moon' is not one of"),
+                                         (["--jobs", "0"], "--jobs must be >= 1")])
+def test_bad_options_are_one_line_errors_before_anything_runs(tmp_path, args, match):
+    r = _campaign(*args, "--out", str(tmp_path / "c"), timeout=60)
+    assert r.returncode == 1 and match in r.stderr and r.stderr.startswith("lamps campaign: error:"), r.stderr
+    assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.slow
+def test_a_small_campaign_runs_its_cells_at_once_and_writes_the_table(tmp_path, learned_skill_file):
+    """Two seeded one-stain cells on the wall board, both at once, each a whole cell in lock-step."""
+    out = tmp_path / "campaign"
+    r = _campaign("--seeds", "0-1", "--stains", "1", "--boards", "wall", "--jobs", "2", "--skill",
+                  str(learned_skill_file), "--out", str(out))
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    result = json.loads((out / "campaign.json").read_text())
+    assert [c["name"] for c in result["cells"]] == ["wall-s0-n1", "wall-s1-n1"]
+    for c in result["cells"]:
+        assert c["success"] and c["dirt_removed"] >= 0.98 and c["faults"] == 0, c
+        assert c["robot_time_s"] > c["lower_bound_s"] > 0  # a bound, and one no run beats
+        assert (Path(c["run_dir"]) / "report.json").is_file()
+    assert result["summary"]["all"]["success_rate"] == 1.0
+    md = (out / "campaign.md").read_text()
+    assert "| all | 2 | 100% |" in md and "wall-s1-n1" in md
+    assert (out / "campaign.png").stat().st_size > 10_000
