@@ -14,7 +14,10 @@ each; the motions are :mod:`controller.free_motion` and the MP chain
 -> WIPE(i) -> TRANSITION(i -> j) -> ... -> RETREAT -> DONE, with
 PAUSED(reason), FAULT(reason) and ESTOP reachable from any phase.
 
-* APPROACH: fly (quintic, pad turning flat) to ``standoff_m`` above the
+* APPROACH: first (after each start of the robot) a survey: fly to
+  ``standoff_m`` above the look point of the whole board, where the arm
+  hides none of it from the camera, and wait ``survey_s`` for the stains;
+  then plan and fly (quintic, pad turning flat) to ``standoff_m`` above the
   first stain of the plan, descend until the measured force passes
   ``contact_threshold_n``, ramp the force up to its target.
 * TRANSITION(j), WIPE(j): the learned MPs chained over the stains
@@ -75,6 +78,7 @@ class Stage(IntEnum):
     LIFT = 7  #: up to the standoff height
     HOLD = 8  #: at rest
     LOOK = 9  #: at the standoff height off the stains awaiting kappa
+    SURVEY = 10  #: before the first approach: to the look point of the whole board, then wait for the stains
 
 
 class SkillExecutor:
@@ -126,10 +130,12 @@ class SkillExecutor:
         self._initialised = False
         self._estop: str | None = None
         self._restart_pending = False
+        self._surveyed = False
+        self._survey_until_s = float("inf")
         self._on_stage = {Stage.FLY: self._on_fly, Stage.DESCEND: self._on_descend, Stage.CREEP: self._on_creep,
                           Stage.PRESS: self._on_press, Stage.CHAIN: self._on_chain, Stage.UNPRESS: self._on_unpress,
                           Stage.BRAKE: self._on_brake, Stage.LIFT: self._on_lift, Stage.HOLD: self._on_hold,
-                          Stage.LOOK: self._on_look}
+                          Stage.LOOK: self._on_look, Stage.SURVEY: self._on_survey}
         self._on_chain_result = {ChainResult.TRANSITION: self._entered_transition,
                                  ChainResult.WIPE: self._entered_wipe, ChainResult.FINISHED: self._begin_retreat,
                                  ChainResult.ERROR: self._chain_failed}
@@ -205,8 +211,10 @@ class SkillExecutor:
         return self._initialised and (self._sp.contact or (self._stage != Stage.HOLD and self._last_h < LIFTED_M))
 
     def restart(self) -> None:
-        """The robot came back after a loss: start over from WAIT_PEERS at the measured pose on the next step."""
+        """The robot came back after a loss: start over from WAIT_PEERS at the measured pose on the next step (and
+        survey the board again: the arm may be anywhere)."""
         self._restart_pending = True
+        self._surveyed = False
 
     # ------------------------------------------------------------------ the tick
     def wait(self) -> None:
@@ -232,7 +240,7 @@ class SkillExecutor:
         if self.phase == Phase.WAIT_PEERS:
             if self.stains_fresh and self._estop is None:
                 self.motion.hold_here(tool)
-                self._start_approach_or_done()
+                self._survey_or_start()
             return self._sp
         if dt_s <= 0.0:
             return self._sp  # the skill's clock stands still (the robot braked): nothing moves on
@@ -310,6 +318,14 @@ class SkillExecutor:
             self.book.looked_at(self.clock_s)  # perception gets its full recheck_s from here
             self._done()
 
+    def _on_survey(self, dt: float, tool: ToolState) -> None:
+        if self._survey_until_s == float("inf"):
+            if self.motion.move(dt) and not self.motion.turning:
+                self._survey_until_s = self.clock_s + self.p.survey_s  # perception's time to see the board
+                self.current_mp = "survey: looking"
+        elif self.clock_s >= self._survey_until_s:
+            self._start_approach_or_done()
+
     def _on_hold(self, dt: float, tool: ToolState) -> None:
         self.motion.rest_in_plane()
         if self.phase == Phase.PAUSED and self.stains_fresh:
@@ -327,6 +343,20 @@ class SkillExecutor:
             self._stage, self.current_mp = Stage.HOLD, "hold"
             return
         self._start_approach_or_done()
+
+    def _survey_or_start(self) -> None:
+        """The first start after (re)starting: survey the board first (:attr:`ExecutorParams.survey_s`), so a stain
+        the arm hid from the camera at its start pose is in the plan; later starts plan at once."""
+        if self._surveyed or self.p.survey_s <= 0.0 or self.p.look_clearance_m <= 0.0 or self.board is None:
+            self._start_approach_or_done()
+            return
+        self._surveyed = True
+        self._survey_until_s = float("inf")
+        self.counters["surveys"] += 1
+        self._set_phase(Phase.APPROACH, "")
+        self.stain_id, self.current_mp = -1, "survey"
+        self.motion.fly_to_survey(self.board)
+        self._stage = Stage.SURVEY
 
     def _start_approach_or_done(self) -> None:
         """Plan over the open stains and fly to the first; DONE if nothing is left to wipe."""

@@ -150,6 +150,13 @@ class FreeMotion:
         self._mover = vertical_move(sp.xy, h0, goal_h, T, v0)
         sp.h, sp.v_h, sp.a_h = h0, v0, 0.0
 
+    def fly_to_survey(self, board: BoardPose) -> None:
+        """To ``standoff_m`` above the look point of the whole board (:func:`look_point` of its corners), turning the
+        pad flat: from there the arm hides none of the board from the camera."""
+        w, h = (float(x) for x in board.size_m)
+        corners = [np.array(c) for c in ((0.0, 0.0), (w, 0.0), (0.0, h), (w, h))]
+        self.fly_to_hover(look_point(board, corners, [0.0] * 4, self.p.look_clearance_m), board)
+
     def fly_to_look(self, board: BoardPose, pending: list[StainState]) -> bool:
         """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there.
 

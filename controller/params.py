@@ -182,7 +182,12 @@ class ExecutorParams:
     estop_ramp_s : force ramp-down on an e-stop [s]; contact_search_m : how
     far below the expected surface the descent goes before it gives up [m];
     creep_height_m : height above the board from which the descent slows
-    to ``descend_speed_m_s`` (peak) to touch softly [m].
+    to ``descend_speed_m_s`` (peak) to touch softly [m]; survey_s : before
+    the first approach the pad flies to the look point of the whole board
+    (``look_clearance_m`` beyond its edge on the robot base's side, where the
+    arm hides none of it from the camera) and waits this long for perception
+    to report every stain before the skill is planned [s] (0: plan over the
+    stains reported at the start, wherever the arm is).
     """
 
     standoff_m: float = 0.04
@@ -200,6 +205,7 @@ class ExecutorParams:
     stop_s: float = 0.3
     estop_ramp_s: float = 0.1
     contact_search_m: float = 0.03
+    survey_s: float = 1.0
 
     def __post_init__(self) -> None:
         s = "controller.executor"
@@ -219,6 +225,7 @@ class ExecutorParams:
         _range(s, "estop_ramp_s", self.estop_ramp_s, 0.01, 1.0)
         _range(s, "contact_search_m", self.contact_search_m, 0.005, 0.2)
         _range(s, "creep_height_m", self.creep_height_m, 0.001, self.standoff_m)
+        _range(s, "survey_s", self.survey_s, 0.0, 60.0)
 
 
 @dataclass(frozen=True)

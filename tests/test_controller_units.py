@@ -223,7 +223,7 @@ def test_executor_chains_the_stains_until_kappa_then_retreats(learned_skill):
 
 
 def test_stale_stains_pause_off_the_board_and_fresh_ones_resume(learned_skill):
-    ex = SkillExecutor(learned_skill, ExecutorParams())
+    ex = SkillExecutor(learned_skill, ExecutorParams(survey_s=0.0))
     arm = IdealArm()
     ex.set_stains(BOARD, stains())
     run(ex, arm, 6.0)
@@ -271,7 +271,7 @@ def test_a_vanished_stain_is_not_visited_and_new_stains_after_done_are(learned_s
 
 
 def test_no_contact_below_the_board_is_a_fault_not_a_crash(learned_skill):
-    ex = SkillExecutor(learned_skill, ExecutorParams())
+    ex = SkillExecutor(learned_skill, ExecutorParams(survey_s=0.0))
     arm = IdealArm()
     arm.follow = lambda sp: _no_board(arm.tool, sp)
     ex.set_stains(BOARD, stains())
@@ -282,6 +282,38 @@ def test_no_contact_below_the_board_is_a_fault_not_a_crash(learned_skill):
 def _no_board(t: ToolState, sp) -> ToolState:
     t.xy, t.v_xy, t.R, t.h, t.force_n = sp.xy.copy(), sp.v_xy.copy(), sp.R.copy(), sp.h, 0.0
     return t
+
+
+def test_the_first_approach_surveys_the_whole_board_so_a_stain_hidden_at_the_start_is_planned(learned_skill):
+    """Before the first plan the pad flies to the look point of the whole board and waits ``survey_s``; a stain
+    reported only then (the arm hid it at its start pose) is in the first plan: one approach, one retreat."""
+    p = ExecutorParams(survey_s=1.0)
+    ex = SkillExecutor(learned_skill, p)
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains()[:2])  # the third is hidden by the arm
+    log = run(ex, arm, 0.5)
+    assert ex.phase == "APPROACH" and ex.current_mp.startswith("survey") and ex.counters["surveys"] == 1
+    corners = [np.array(c) for c in ((0.0, 0.0), (0.8, 0.0), (0.0, 0.6), (0.8, 0.6))]
+    goal = look_point(BOARD, corners, [0.0] * 4, p.look_clearance_m)
+    seen = run(ex, arm, 3.0, on_tick=lambda k, e: e.set_stains(BOARD, stains()) if k == 0 else None)
+    arrived = [e for e in log + seen if np.linalg.norm(e[2] - goal) < 1e-6 and abs(e[7] - p.standoff_m) < 1e-6]
+    assert arrived, "the pad reached standoff above the whole board's look point"
+    wiped: dict[int, int] = {}
+
+    def judge(k: int, e: SkillExecutor) -> None:  # kappa once a stain had 2 s of wiping
+        if e.phase == "WIPE":
+            wiped[e.stain_id] = wiped.get(e.stain_id, 0) + 1
+        if k % 50 == 0:
+            e.set_stains(BOARD, stains(tuple(wiped.get(i, 0) > 2000 for i in range(3))))
+
+    log += seen + run(ex, arm, 120.0, on_tick=judge)
+    assert ex.counters["plans"] == 1 and ex.counters["phase_retreat"] == 1 and ex.phase == "DONE"
+    assert {e[1] for e in log if e[0] == "WIPE"} == {0, 1, 2}, "the stain seen during the survey was wiped"
+    # without the survey the plan is made at once over what is reported (and a restart surveys again)
+    ex0 = SkillExecutor(learned_skill, ExecutorParams(survey_s=0.0))
+    ex0.set_stains(BOARD, stains()[:2])
+    run(ex0, IdealArm(), 0.01)
+    assert ex0.current_mp == "approach" and ex0.counters["surveys"] == 0
 
 
 def test_an_estop_engaged_again_while_lifting_after_a_release_holds(learned_skill):
@@ -347,7 +379,7 @@ def test_a_pause_while_descending_fast_never_drives_the_pad_into_the_board(learn
 
 
 def test_a_moved_board_is_adopted_while_holding_without_moving_the_held_pose(learned_skill):
-    ex = SkillExecutor(learned_skill, ExecutorParams())
+    ex = SkillExecutor(learned_skill, ExecutorParams(survey_s=0.0))
     arm = IdealArm()
     ex.set_stains(BOARD, [])
     run(ex, arm, 0.5)
@@ -361,7 +393,7 @@ def test_a_moved_board_is_adopted_while_holding_without_moving_the_held_pose(lea
 
 def test_a_stain_without_kappa_gets_another_pass_after_the_others_and_a_recheck(learned_skill):
     """The eraser hides the stain from the camera: after a pass it is left, judged, and wiped again if still open."""
-    ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, recheck_s=1.0, max_passes=3))
+    ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, recheck_s=1.0, max_passes=3, survey_s=0.0))
     arm = IdealArm()
     ex.set_stains(BOARD, stains()[:2])
     log = run(ex, arm, 25.0)
@@ -371,7 +403,7 @@ def test_a_stain_without_kappa_gets_another_pass_after_the_others_and_a_recheck(
     assert all(a != b for a, b in zip(visits, visits[1:])), visits
     assert sorted(visits) == [0, 0, 0, 1, 1, 1], visits
     assert ex.counters["wipe_timeouts"] == 6 and ex.phase == "DONE"
-    ex2 = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, recheck_s=1.0, max_passes=3))
+    ex2 = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, recheck_s=1.0, max_passes=3, survey_s=0.0))
     ex2.set_stains(BOARD, stains()[:1])
     log = run(ex2, arm, 6.0)
     # alone on the board: lifted off after the pass, a fresh view; kappa from it ends the job
