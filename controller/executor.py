@@ -346,8 +346,13 @@ class SkillExecutor:
 
     def _survey_or_start(self) -> None:
         """The first start after (re)starting: survey the board first (:attr:`ExecutorParams.survey_s`), so a stain
-        the arm hid from the camera at its start pose is in the plan; later starts plan at once."""
-        if self._surveyed or self.p.survey_s <= 0.0 or self.p.look_clearance_m <= 0.0 or self.board is None:
+        the arm hid from the camera at its start pose is in the plan; later starts plan at once, and so does a start
+        on a board whose every reported stain is already judged clean (a controller restarted after the job: it
+        holds still, DONE)."""
+        stains = self.book.stains.values()
+        all_judged_clean = bool(stains) and all(st.kappa for st in stains)
+        if self._surveyed or self.p.survey_s <= 0.0 or self.p.look_clearance_m <= 0.0 or self.board is None \
+                or all_judged_clean:
             self._start_approach_or_done()
             return
         self._surveyed = True

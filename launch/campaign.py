@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import concurrent.futures
 import json
+import logging
 import math
 import os
 import subprocess
@@ -49,6 +50,7 @@ FAULT_PHASES = ("FAULT", "ESTOP", "CELL", "SERVICE")
 #: Cell k listens on ports from PORT_BASE + (k mod PORT_SLOTS) * PORT_STRIDE (a cell uses fewer than 10).
 PORT_BASE, PORT_SLOTS, PORT_STRIDE = 23000, 200, 10
 BOARD_NAMES = ("wall", "table", "vertical", "horizontal")
+log = logging.getLogger(__name__)
 
 
 class CampaignError(LampsError):
@@ -223,6 +225,7 @@ def _board_table(board: str) -> dict[str, Any]:
 def _learn_skill(out: Path) -> Path:
     """The bundled demo learned once, as ``lamps up`` learns it by default."""
     learn = out / "learn"
+    log.info("learning the bundled demo into %s", learn)
     r = subprocess.run([sys.executable, "-m", "interfaces.cli", "demo", "--stains", "3", "--seed", "0", "--out",
                         str(learn)], capture_output=True, text=True, env={**os.environ, "MPLBACKEND": "Agg"})
     if r.returncode != 0 or not (learn / "skill.json").is_file():
@@ -240,6 +243,7 @@ def _run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float)
                 "--board", cell.board, "--skill", str(skill), "--out", str(run_dir), "--mode", "lockstep",
                 "--port-base", str(base + attempt * PORT_SLOTS * PORT_STRIDE), "--max-duration", str(max_duration_s),
                 "-q"]
+        log.info("cell %s: %s", cell.name, " ".join(argv[2:]))
         r = subprocess.run(argv, capture_output=True, text=True, env={**os.environ, "MPLBACKEND": "Agg"},
                            timeout=max_duration_s + 120)
         report = run_dir / "report.json"
@@ -326,11 +330,14 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--skill", default=None, help="skill file (default: learn the bundled demo once)")
     ap.add_argument("--max-duration", type=float, default=600.0, help="give a cell up after S s wall (default 600)")
     ap.add_argument("--out", default=None, help="campaign folder (default runs/campaign-<time>)")
+    ap.add_argument("-v", "--verbose", action="store_true", help="log what the campaign does")
     return ap
 
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="lamps campaign %(levelname)s: %(message)s")
     try:
         seeds, stains = parse_range(a.seeds, "seeds"), parse_range(a.stains, "stains")
         if 0 in stains:

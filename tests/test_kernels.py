@@ -202,7 +202,8 @@ def test_no_kernel_compiles_inside_a_tick():
             return found
 
         sim = SimCore(SimParams.from_table({"camera": {"enabled": False}}))
-        core = ControllerCore(ControllerParams.from_table({"trace_ticks": 100}), bundled_skill())
+        core = ControllerCore(ControllerParams.from_table({"trace_ticks": 100, "executor": {"survey_s": 0.0}}),
+                              bundled_skill())
         before = signatures()
         phases = set()
         for n in range(4000):

@@ -250,13 +250,18 @@ def _check_run(out: Path, base: int, robot_brakes_ok: bool = False) -> dict:
     assert [s["final_remaining"] for s in report["stains"]] == truth[-1]["remaining"]
     assert len(report["stains"]) == 3 and all(s["kappa_s"] is not None for s in report["stains"])
     assert all(s["truth_below_level_s"] <= s["kappa_s"] for s in report["stains"])
-    # the MP junctions: the reference acceleration steps no more than an ordinary tick does (skill issue bound:
-    # continuous to the tick) and no more than 1 % of the peak reference acceleration above it
+    # the MP junctions: the reference acceleration steps no more than an ordinary tick does (continuous to the
+    # tick) and no more than 1 % of the peak reference acceleration above it; an ordinary tick's step is the
+    # run's own (99.9th percentile of every one-tick step: the few junctions are not in it), at least 0.3 m/s^2
+    # (a 2 ms robot cycle under a transition's jerk of a few hundred m/s^3 steps that much every cycle)
     cols, tr = trace_array([m for _, m in rec[keys.controller_trace]])
     col = {c: i for i, c in enumerate(cols)}
-    peak = float(np.max(np.linalg.norm(tr[:, [col["ref_ax"], col["ref_ay"]]], axis=1)))
+    acc = tr[:, [col["ref_ax"], col["ref_ay"]]]
+    peak = float(np.max(np.linalg.norm(acc, axis=1)))
+    ordinary = max(0.3, float(np.percentile(np.linalg.norm(np.diff(acc, axis=0), axis=1), 99.9)))
     assert report["junction_step_ratio_max"] <= 3.0, report["junction_step_ratio_max"]
-    assert report["max_junction_accel_jump"] <= 0.01 * peak + 0.3, (report["max_junction_accel_jump"], peak)
+    assert report["max_junction_accel_jump"] <= 0.01 * peak + ordinary, (report["max_junction_accel_jump"], peak,
+                                                                          ordinary)
     assert 8.0 <= report["normal_force_mean_n"] <= 12.0 and report["time_above_cap_s"] == 0.0
     # real time on two shared cores: an answer now and then misses the robot's stale limit and the robot side
     # brakes a cycle; that is reported (phase ROBOT), never a fault of the skill
