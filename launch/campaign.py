@@ -31,6 +31,7 @@ import json
 import logging
 import math
 import os
+import random
 import subprocess
 import sys
 import time
@@ -47,8 +48,10 @@ from lampskit.errors import LampsError
 CLEAN_SHARE = 0.98
 #: Report fault phases that count as a fault of the cell (ROBOT events, e.g. a brake on a stale command, do not).
 FAULT_PHASES = ("FAULT", "ESTOP", "CELL", "SERVICE")
-#: Cell k listens on ports from PORT_BASE + (k mod PORT_SLOTS) * PORT_STRIDE (a cell uses fewer than 10).
-PORT_BASE, PORT_SLOTS, PORT_STRIDE = 23000, 200, 10
+#: Cell k listens on ports from base + (k mod PORT_SLOTS) * PORT_STRIDE (a cell uses fewer than 10), base one of
+#: PORT_BASES picked per campaign (ports a campaign just closed stay unbindable for a minute); a busy port moves
+#: the cell PORT_SLOTS * PORT_STRIDE up. All below the kernel's ephemeral range (32768).
+PORT_BASES, PORT_SLOTS, PORT_STRIDE = (20000, 23000, 26000), 100, 10
 BOARD_NAMES = ("wall", "table", "vertical", "horizontal")
 log = logging.getLogger(__name__)
 
@@ -233,12 +236,13 @@ def _learn_skill(out: Path) -> Path:
     return learn / "skill.json"
 
 
-def _run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float) -> tuple[dict | None, str, str]:
+def _run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
+              port_base: int) -> tuple[dict | None, str, str]:
     """``lamps up`` for one cell: (its report or None, its run folder, why there is none)."""
     run_dir = out / "cells" / cell.name
-    base = PORT_BASE + (k % PORT_SLOTS) * PORT_STRIDE
+    base = port_base + (k % PORT_SLOTS) * PORT_STRIDE
     why = ""
-    for attempt in range(2):  # a port taken by something else: once more on another range
+    for attempt in range(3):  # a port taken by something else: again on another range
         argv = [sys.executable, "-m", "interfaces.cli", "up", "--seed", str(cell.seed), "--stains", str(cell.stains),
                 "--board", cell.board, "--skill", str(skill), "--out", str(run_dir), "--mode", "lockstep",
                 "--port-base", str(base + attempt * PORT_SLOTS * PORT_STRIDE), "--max-duration", str(max_duration_s),
@@ -250,7 +254,7 @@ def _run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float)
         if report.is_file():
             return json.loads(report.read_text()), str(run_dir), ""
         why = (r.stderr.strip().splitlines() or [f"exit {r.returncode}"])[-1]
-        if "busy" not in why:
+        if "already in use" not in why:
             break
     return None, str(run_dir), why
 
@@ -299,7 +303,8 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
     rows: list[dict[str, Any] | None] = [None] * len(cells)
     t0 = time.monotonic()
     with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-        futures = {pool.submit(_run_cell, k, c, skill, out, max_duration_s): k for k, c in enumerate(cells)}
+        port_base = random.choice(PORT_BASES)
+        futures = {pool.submit(_run_cell, k, c, skill, out, max_duration_s, port_base): k for k, c in enumerate(cells)}
         for fut in concurrent.futures.as_completed(futures):
             k = futures[fut]
             report, run_dir, why = fut.result()
