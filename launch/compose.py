@@ -1,34 +1,49 @@
 """docker-compose.yml as the one description of the cell, run as local processes.
 
-:func:`load_compose` reads the services (command, environment, depends_on,
-profiles, network aliases) and substitutes ``${VAR}`` / ``${VAR:-default}``
-from a variables mapping, as ``docker compose`` does. :func:`localize` turns
-them into :class:`LocalService` processes for this machine: service host
-names and aliases become ``127.0.0.1``, every Zenoh port a service listens
-on becomes a local port (free ones by default, so several cells and the
-tests can run side by side), and ``lamps`` becomes this interpreter's entry
-point. Nothing else changes: ``lamps up`` and the compose tests run exactly
-the commands and environments the containers get.
+:func:`compose_model` reads the services (command, environment, depends_on,
+profiles, network aliases) the way ``docker compose`` itself does: from
+``docker compose config --format json`` when Compose v2 is installed, and
+otherwise from :func:`load_compose`, a reader that implements compose's
+variable interpolation (``$VAR``, ``${VAR}``, ``${VAR:-d}``, ``${VAR-d}``,
+``${VAR:?err}``, ``${VAR?err}``, ``${VAR:+x}``, ``${VAR+x}``, nesting,
+``$$``) and its ``.env`` file (beside the compose file; the environment
+wins), and refuses what it does not implement, naming it. The active
+profiles come from ``COMPOSE_PROFILES`` (environment, then ``.env``).
+
+:func:`localize` turns the services into :class:`LocalService` processes for
+this machine: service host names and aliases become ``127.0.0.1``, every
+Zenoh port a service listens on becomes a local port (free ones by default,
+so several cells and the tests can run side by side), and ``lamps`` becomes
+this interpreter's entry point. Nothing else changes: ``lamps up`` and the
+compose tests run exactly the commands and environments the containers get.
 """
 
 from __future__ import annotations
 
+import json
+import logging
 import os
 import re
+import shutil
 import socket
+import subprocess
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 import yaml
 
 from interfaces.errors import ConfigError
 
+log = logging.getLogger(__name__)
+
 #: The compose file next to the packages (a source checkout or the image's /opt/lamps).
 DEFAULT_COMPOSE = Path(__file__).resolve().parent.parent / "docker-compose.yml"
+#: ``LAMPS_COMPOSE_READER``: auto (docker compose when installed), docker (required) or builtin.
+READERS = ("auto", "docker", "builtin")
 
-_VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::?-([^}]*))?\}")
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _ENDPOINT = re.compile(r"^(tcp|udp)/([^:/,]+):(\d+)$")
 
 
@@ -48,6 +63,19 @@ class ComposeService:
 
 
 @dataclass(frozen=True)
+class ComposeModel:
+    """Every service of the file (all profiles), the active profiles, and who read it."""
+
+    services: dict[str, ComposeService]
+    profiles: tuple[str, ...]
+    reader: str  # "docker compose <version>" or "builtin"
+
+    def active(self) -> list["ComposeService"]:
+        """The services compose starts with :attr:`profiles`, dependencies first."""
+        return active(self.services, self.profiles)
+
+
+@dataclass(frozen=True)
 class LocalService:
     """A compose service as a local process: argv and the environment it adds to ours."""
 
@@ -58,18 +86,201 @@ class LocalService:
     loop: bool = False  # a fixed-rate loop (granted SYS_NICE): it runs, and stops, ahead of the others
 
 
+# ------------------------------------------------------------------------------------------------ interpolation
+
+def interpolate(text: str, variables: Mapping[str, str], where: str = "compose") -> str:
+    """``text`` with compose's variable syntax resolved from ``variables`` (see the module docstring).
+
+    An unset variable without a default is "" (as compose, with a warning in
+    the log); a ``$`` followed by neither a name, ``{`` nor ``$`` stays a
+    ``$``; a default ends where compose ends it (:func:`_braced`).
+    Raises ConfigError for ``${VAR:?err}`` / ``${VAR?err}`` of an unset (or,
+    with ``:``, empty) variable, an unclosed ``${``, a ``${`` not followed by
+    a name, and operators compose does not know (``${VAR:=x}``,
+    ``${VAR#x}`` ...), each naming ``where``.
+    """
+    return _interp(text, 0, variables, where)
+
+
+def _interp(text: str, i: int, variables: Mapping[str, str], where: str) -> str:
+    """Interpolate ``text`` from ``i`` on."""
+    out: list[str] = []
+    n = len(text)
+    while i < n:
+        c = text[i]
+        if c != "$":
+            out.append(c)
+            i += 1
+            continue
+        if i + 1 < n and text[i + 1] == "$":
+            out.append("$")
+            i += 2
+            continue
+        if i + 1 < n and text[i + 1] == "{":
+            value, i = _braced(text, i, variables, where)
+            out.append(value)
+            continue
+        m = _NAME.match(text, i + 1)
+        if m is None:  # "$5", "$-", a "$" at the end: a plain dollar sign, as compose reads it
+            out.append("$")
+            i += 1
+            continue
+        out.append(_lookup(m.group(0), variables, where))
+        i = m.end()
+    return "".join(out)
+
+
+def _closing_brace(s: str) -> int:
+    """Index in ``s`` (which starts with ``${``) of the brace that closes it, compose's way, or -1.
+
+    Every ``{`` opens one level and hides the character after it, every ``}``
+    closes one: odd, but what decides where compose ends a default.
+    """
+    depth, i = 0, 0
+    while i < len(s):
+        if s[i] == "}":
+            depth -= 1
+            if depth == 0:
+                return i
+        if s[i] == "{":
+            depth += 1
+            i += 1
+        i += 1
+    return -1
+
+
+def _braced(text: str, start: int, variables: Mapping[str, str], where: str) -> tuple[str, int]:
+    """``${...}`` beginning at ``start`` (its ``$``); returns (value, index after what it consumed).
+
+    As compose: the expression first reaches the last ``}`` of its line (a
+    greedy match), then ends at :func:`_closing_brace` when that is inside;
+    the operator is the one right after the name; the argument is itself
+    interpolated.
+    """
+    m = _NAME.match(text, start + 2)
+    line_end = text.find("\n", start)
+    line_end = len(text) if line_end < 0 else line_end
+    last = text.rfind("}", start, line_end)
+    op = next((o for o in (":-", ":?", ":+", "-", "?", "+") if m and text.startswith(o, m.end())), None)
+    if m is None or last < 0 or (op is None and (m.end() >= len(text) or text[m.end()] != "}")):
+        bad = text[start:start + 12]
+        raise ConfigError(f"{where}: invalid interpolation format in {text!r} at {bad!r} (compose knows $NAME, "
+                          f"${{NAME}} and ${{NAME}} with :- - :? ? :+ +; write $$ for a literal $)")
+    name = m.group(0)
+    if op is None:
+        return _lookup(name, variables, where), m.end() + 1
+    greedy = text[start:last + 1]
+    close = _closing_brace(greedy)
+    end = start + (close if close > -1 else len(greedy) - 1)  # index of the closing brace
+    arg_text = text[m.end() + len(op):end]
+    value = variables.get(name)
+    missing = value is None or (op.startswith(":") and value == "")
+    if op.endswith("-"):
+        result = _interp(arg_text, 0, variables, where) if missing else value
+    elif op.endswith("?"):
+        if missing:
+            reason = _interp(arg_text, 0, variables, where)
+            raise ConfigError(f"{where}: required variable {name} is missing a value" + (f": {reason}" if reason else ""))
+        result = value
+    else:  # "+"
+        result = (value or "") if missing else _interp(arg_text, 0, variables, where)
+    return result, end + 1
+
+
+def _lookup(name: str, variables: Mapping[str, str], where: str) -> str:
+    value = variables.get(name)
+    if value is None:
+        log.warning("%s: the %s variable is not set; defaulting to a blank string", where, name)
+        return ""
+    return value
+
+
 def substitute(text: str, variables: Mapping[str, str]) -> str:
-    """``${VAR}``, ``${VAR-default}`` and ``${VAR:-default}`` as compose resolves them (unset -> default or "")."""
+    """:func:`interpolate` (kept for callers of the first reader)."""
+    return interpolate(text, variables)
 
-    def one(m: re.Match) -> str:
-        name, default = m.group(1), m.group(2)
-        value = variables.get(name)
-        if value is None or (value == "" and ":-" in m.group(0)):
-            return default if default is not None else ""
-        return value
 
-    return _VAR.sub(one, text)
+def _interpolate_tree(node: Any, variables: Mapping[str, str], where: str) -> Any:
+    """Every string value of a parsed YAML tree interpolated (keys are not, as compose)."""
+    if isinstance(node, str):
+        return interpolate(node, variables, where)
+    if isinstance(node, dict):
+        return {k: _interpolate_tree(v, variables, f"{where}.{k}") for k, v in node.items()}
+    if isinstance(node, list):
+        return [_interpolate_tree(v, variables, where) for v in node]
+    return node
 
+
+# ----------------------------------------------------------------------------------------------------- .env
+
+def read_dotenv(path: Path, environment: Mapping[str, str]) -> dict[str, str]:
+    """The variables of a compose ``.env`` file ({} when there is none).
+
+    Implemented: blank and ``#`` lines, ``[export ]KEY=VALUE``; unquoted
+    values (trimmed, `` #`` starts a comment, interpolated), ``'single'``
+    (literal) and ``"double"`` quoted ones (``\\n \\t \\" \\\\`` escapes,
+    interpolated) on one line. Interpolation sees the environment first, then
+    the file's earlier keys. Anything else (a line without ``=``, a quote not
+    closed on its line) is refused with file and line.
+    """
+    if not path.is_file():
+        return {}
+    out: dict[str, str] = {}
+    for no, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        where = f"{path}:{no}"
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        if line.startswith("export "):
+            line = line[len("export "):].lstrip()
+        key, eq, rest = line.partition("=")
+        key = key.strip()
+        if not eq or not _NAME.fullmatch(key):
+            raise ConfigError(f"{where}: expected KEY=VALUE, got {raw!r}")
+        rest = rest.strip()
+        seen = {**out, **environment}
+        if rest.startswith("'"):
+            end = rest.find("'", 1)
+            if end < 0:
+                raise ConfigError(f"{where}: the single quote is not closed on its line (multi-line values are not "
+                                  f"implemented; use docker compose)")
+            value = rest[1:end]
+            tail = rest[end + 1:].strip()
+        elif rest.startswith('"'):
+            chars, i = [], 1
+            while i < len(rest) and rest[i] != '"':
+                if rest[i] == "\\" and i + 1 < len(rest):
+                    chars.append({"n": "\n", "t": "\t", '"': '"', "\\": "\\"}.get(rest[i + 1], "\\" + rest[i + 1]))
+                    i += 2
+                    continue
+                chars.append(rest[i])
+                i += 1
+            if i >= len(rest):
+                raise ConfigError(f"{where}: the double quote is not closed on its line (multi-line values are not "
+                                  f"implemented; use docker compose)")
+            value = interpolate("".join(chars), seen, where)
+            tail = rest[i + 1:].strip()
+        else:
+            cut = re.search(r"\s#", rest)
+            value = interpolate((rest[:cut.start()] if cut else rest).strip(), seen, where)
+            tail = ""
+        if tail and not tail.startswith("#"):
+            raise ConfigError(f"{where}: unexpected {tail!r} after the quoted value")
+        out[key] = value
+    return out
+
+
+def compose_variables(path: Path, environment: Mapping[str, str]) -> dict[str, str]:
+    """What a compose file's interpolation sees: its ``.env`` (beside it), overridden by the environment."""
+    return {**read_dotenv(path.parent / ".env", environment), **environment}
+
+
+def active_profiles(variables: Mapping[str, str]) -> tuple[str, ...]:
+    """``COMPOSE_PROFILES`` as a tuple (``*``: every profile)."""
+    return tuple(p.strip() for p in variables.get("COMPOSE_PROFILES", "").split(",") if p.strip())
+
+
+# --------------------------------------------------------------------------------------------------- readers
 
 def _strings(value, what: str) -> tuple[str, ...]:
     if value is None:
@@ -81,15 +292,73 @@ def _strings(value, what: str) -> tuple[str, ...]:
     raise ConfigError(f"{what} must be a string or a list of strings, got {value!r}")
 
 
+def _volume_text(v) -> str:
+    """A volume as its short form ``source:target[:ro]`` (compose's JSON gives mappings)."""
+    if isinstance(v, dict):
+        return f"{v.get('source', '')}:{v.get('target', '')}" + (":ro" if v.get("read_only") else "")
+    return str(v)
+
+
+def _service(name: str, svc, where: str, variables: Mapping[str, str]) -> ComposeService:
+    """One service mapping (already interpolated) as a ComposeService."""
+    if not isinstance(svc, dict):
+        raise ConfigError(f"{where} must be a mapping")
+    cmd = svc.get("command")
+    if not isinstance(cmd, list) or not cmd or not all(isinstance(c, str) for c in cmd):
+        raise ConfigError(f"{where}: command must be a non-empty list of strings (exec form), got {cmd!r}")
+    env_raw = svc.get("environment") or {}
+    if isinstance(env_raw, list):
+        env_raw = dict(e.split("=", 1) if "=" in e else (e, variables.get(e)) for e in env_raw)
+    if not isinstance(env_raw, dict):
+        raise ConfigError(f"{where}: environment must be a mapping or a list")
+    # KEY with no value takes the variable's value, or is left out when unset (as compose)
+    env = {str(k): str(v if v is not None else variables.get(str(k)))
+           for k, v in env_raw.items() if v is not None or str(k) in variables}
+    deps_raw = svc.get("depends_on") or []
+    # sorted, as compose's own model has them (the start order is the same whichever reader read the file)
+    if isinstance(deps_raw, dict):
+        deps = tuple(sorted(str(d) for d in deps_raw))
+    else:
+        deps = tuple(sorted(_strings(deps_raw, f"{where}: depends_on")))
+    nets = svc.get("networks") or {}
+    aliases: tuple[str, ...] = ()
+    if isinstance(nets, dict):
+        for net in nets.values():
+            if isinstance(net, dict):
+                aliases += _strings(net.get("aliases"), f"{where}: aliases")
+    labels_raw = svc.get("labels") or {}
+    if isinstance(labels_raw, list):
+        labels_raw = dict(e.split("=", 1) if "=" in e else (e, "") for e in labels_raw)
+    if not isinstance(labels_raw, dict):
+        raise ConfigError(f"{where}: labels must be a mapping or a list")
+    return ComposeService(name, tuple(cmd), env, deps, _strings(svc.get("profiles"), f"{where}: profiles"),
+                          aliases, tuple(_volume_text(v) for v in (svc.get("volumes") or ())),
+                          {str(k): str(v) for k, v in labels_raw.items()},
+                          _strings(svc.get("cap_add"), f"{where}: cap_add"))
+
+
+def _check_dependencies(services: dict[str, ComposeService], raw: Mapping[str, Any], p: Path) -> None:
+    """Every required dependency names a service of the file (``required: false`` ones may be absent)."""
+    for s in services.values():
+        deps = (raw.get(s.name) or {}).get("depends_on") or {}
+        for d in s.depends_on:
+            optional = isinstance(deps, dict) and isinstance(deps.get(d), dict) and deps[d].get("required") is False
+            if d not in services and not optional:
+                raise ConfigError(f"{p}: service {s.name!r} depends on unknown service {d!r}")
+
+
 def load_compose(path: str | os.PathLike = DEFAULT_COMPOSE, variables: Mapping[str, str] | None = None
                  ) -> dict[str, ComposeService]:
-    """The services of a compose file, in file order, with ``variables`` (default: ours) substituted.
+    """Every service of a compose file (all profiles), in file order, interpolated: the built-in reader.
 
+    variables : what interpolation sees (default: :func:`compose_variables`
+    of this environment, i.e. ``.env`` beside the file overridden by ours).
     Raises ConfigError naming the file and the problem (missing, not YAML,
-    no services, a command that is not a list, an unknown dependency).
+    no services, a command that is not a list, an unknown dependency, an
+    interpolation compose would refuse or that this reader does not implement).
     """
     p = Path(path)
-    variables = dict(os.environ if variables is None else variables)
+    variables = compose_variables(p, os.environ) if variables is None else dict(variables)
     try:
         data = yaml.safe_load(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -98,43 +367,85 @@ def load_compose(path: str | os.PathLike = DEFAULT_COMPOSE, variables: Mapping[s
         raise ConfigError(f"{p}: not valid YAML ({exc})") from None
     if not isinstance(data, dict) or not isinstance(data.get("services"), dict) or not data["services"]:
         raise ConfigError(f"{p}: no services")
-    out: dict[str, ComposeService] = {}
-    for name, svc in data["services"].items():
-        where = f"{p}: service {name!r}"
-        if not isinstance(svc, dict):
-            raise ConfigError(f"{where} must be a mapping")
-        cmd = svc.get("command")
-        if not isinstance(cmd, list) or not cmd or not all(isinstance(c, str) for c in cmd):
-            raise ConfigError(f"{where}: command must be a non-empty list of strings (exec form), got {cmd!r}")
-        env_raw = svc.get("environment") or {}
-        if isinstance(env_raw, list):
-            env_raw = dict(e.split("=", 1) if "=" in e else (e, variables.get(e, "")) for e in env_raw)
-        if not isinstance(env_raw, dict):
-            raise ConfigError(f"{where}: environment must be a mapping or a list")
-        env = {str(k): substitute("" if v is None else str(v), variables) for k, v in env_raw.items()}
-        deps = svc.get("depends_on") or []
-        deps = tuple(deps) if isinstance(deps, (list, dict)) else _strings(deps, f"{where}: depends_on")
-        nets = svc.get("networks") or {}
-        aliases: tuple[str, ...] = ()
-        if isinstance(nets, dict):
-            for net in nets.values():
-                if isinstance(net, dict):
-                    aliases += _strings(net.get("aliases"), f"{where}: aliases")
-        vols = tuple(substitute(str(v), variables) for v in (svc.get("volumes") or ()))
-        labels_raw = svc.get("labels") or {}
-        if isinstance(labels_raw, list):
-            labels_raw = dict(e.split("=", 1) if "=" in e else (e, "") for e in labels_raw)
-        if not isinstance(labels_raw, dict):
-            raise ConfigError(f"{where}: labels must be a mapping or a list")
-        labels = {str(k): substitute(str(v), variables) for k, v in labels_raw.items()}
-        out[name] = ComposeService(name, tuple(substitute(c, variables) for c in cmd), env, deps,
-                                   _strings(svc.get("profiles"), f"{where}: profiles"), aliases, vols, labels,
-                                   _strings(svc.get("cap_add"), f"{where}: cap_add"))
-    for s in out.values():
-        for d in s.depends_on:
-            if d not in out:
-                raise ConfigError(f"{p}: service {s.name!r} depends on unknown service {d!r}")
+    raw = _interpolate_tree(data["services"], variables, f"{p}: services")
+    out = {name: _service(name, svc, f"{p}: service {name!r}", variables) for name, svc in raw.items()}
+    _check_dependencies(out, raw, p)
     return out
+
+
+def docker_compose_version() -> str | None:
+    """``docker compose version --short`` when Compose v2 is installed, else None."""
+    if shutil.which("docker") is None:
+        return None
+    try:
+        r = subprocess.run(["docker", "compose", "version", "--short"], capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return r.stdout.strip() if r.returncode == 0 and r.stdout.strip() else None
+
+
+def load_with_docker(path: Path, variables: Mapping[str, str]) -> dict[str, ComposeService]:
+    """Every service (all profiles) as ``docker compose config --format json`` resolves them.
+
+    variables : the environment compose runs with (it reads ``.env`` itself).
+    Raises ConfigError with compose's own message when it refuses the file.
+    """
+    env = {**variables, "COMPOSE_PROFILES": "*"}
+    env.pop("COMPOSE_FILE", None)
+    r = subprocess.run(["docker", "compose", "-f", str(path), "--project-directory", str(path.parent), "config",
+                        "--format", "json", "--no-path-resolution"], capture_output=True, text=True, env=env,
+                       timeout=60)
+    if r.returncode != 0:
+        raise ConfigError(f"{path}: docker compose config refused it: {r.stderr.strip() or r.stdout.strip()}")
+    data = _unescape(json.loads(r.stdout))  # compose writes every "$" of a resolved value as "$$"
+    raw = data.get("services") or {}
+    if not raw:
+        raise ConfigError(f"{path}: no services")
+    # compose sorts the services by name: keep the file's order (start order breaks ties by it)
+    try:
+        order = list((yaml.safe_load(path.read_text(encoding="utf-8")) or {}).get("services") or {})
+    except yaml.YAMLError:
+        order = []
+    names = [n for n in order if n in raw] + sorted(n for n in raw if n not in order)
+    out = {n: _service(n, raw[n], f"{path}: service {n!r}", env) for n in names}
+    _check_dependencies(out, raw, path)
+    return out
+
+
+def _unescape(node: Any) -> Any:
+    if isinstance(node, str):
+        return node.replace("$$", "$")
+    if isinstance(node, dict):
+        return {k: _unescape(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_unescape(v) for v in node]
+    return node
+
+
+def compose_model(path: str | os.PathLike = DEFAULT_COMPOSE, environment: Mapping[str, str] | None = None,
+                  reader: str | None = None) -> ComposeModel:
+    """The cell's compose model: services from Compose itself when installed, else the built-in reader.
+
+    environment : the shell environment compose would see (default: ours);
+    COMPOSE_PROFILES there, or in ``.env``, picks the active profiles.
+    reader : one of :data:`READERS` (default ``$LAMPS_COMPOSE_READER`` or auto).
+    """
+    p = Path(path)
+    environment = dict(os.environ if environment is None else environment)
+    reader = reader or environment.get("LAMPS_COMPOSE_READER") or "auto"
+    if reader not in READERS:
+        raise ConfigError(f"LAMPS_COMPOSE_READER must be one of {', '.join(READERS)}, got {reader!r}")
+    if not p.is_file():
+        raise ConfigError(f"{p}: no such compose file")
+    variables = compose_variables(p, environment)
+    profiles = active_profiles(variables)
+    version = docker_compose_version() if reader != "builtin" else None
+    if reader == "docker" and version is None:
+        raise ConfigError("LAMPS_COMPOSE_READER=docker, but `docker compose version` does not answer "
+                          "(install Compose v2 as a docker CLI plugin)")
+    if version is not None:
+        return ComposeModel(load_with_docker(p, environment), profiles, f"docker compose {version}")
+    return ComposeModel(load_compose(p, variables), profiles, "builtin")
 
 
 #: Where the containers find the cell's credentials (``lamps credentials``); ``lamps up`` maps it to a local folder.
@@ -150,7 +461,7 @@ def run_locally(services: list[ComposeService]) -> list[ComposeService]:
 
 def active(services: Mapping[str, ComposeService], profiles: tuple[str, ...]) -> list[ComposeService]:
     """Services compose starts with ``profiles`` enabled, dependencies first (file order otherwise)."""
-    on = [s for s in services.values() if not s.profiles or set(s.profiles) & set(profiles)]
+    on = [s for s in services.values() if not s.profiles or "*" in profiles or set(s.profiles) & set(profiles)]
     names = {s.name for s in on}
     ordered: list[ComposeService] = []
     seen: set[str] = set()
