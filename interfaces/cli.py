@@ -33,6 +33,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "report": ("launch.record_cli:report_main", "rebuild a run's report.json and plots from its recording"),
     "campaign": ("launch.campaign:main", "many seeded cells, several at once: success, time against a lower bound, peaks"),
+    "health": ("launch.health:main", "is this service ready (its Zenoh endpoints accept connections)? compose's probe"),
+    "folders": ("launch.folders:main", "make the cell's host folders and give them to the service user (compose)"),
     "credentials": ("interfaces.credentials:main",
                     "make a cell's per-role passwords for Zenoh authentication and access control"),
     "certificates": ("interfaces.certificates:main",

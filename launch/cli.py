@@ -29,11 +29,7 @@ from lampskit.errors import LampsError
 #: ``--robot``: the compose profile of the robot side (``real`` needs a robot and is compose's alone).
 ROBOTS = ("sim", "lbr-sim")
 BOARDS = {"vertical": "wall", "wall": "wall", "horizontal": "table", "table": "table"}
-#: The controller DONE this long (wall) ends the run (longer than the executor's 1 s recheck, after which a
-#: stain still without kappa would be wiped again).
-SETTLE_S = 2.5
-#: FAULT or ESTOP held this long (wall) ends the run.
-FAULT_HOLD_S = 5.0
+from .run_end import RunEnd
 
 
 class UpError(LampsError):
@@ -57,9 +53,10 @@ def build_up_parser() -> argparse.ArgumentParser:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' (default: learn the bundled demo)")
     src.add_argument("--demo", metavar="FILE", help="learn this demonstration first (CSV, NPZ, TSV, MAT#i)")
-    p.add_argument("--robot", choices=ROBOTS, default="sim",
-                   help="the robot side: sim (PyBullet, default) or lbr-sim (the same arm behind lbr_fri_ros2_stack's "
-                        "messages, driven by the real-robot adapter)")
+    p.add_argument("--robot", choices=ROBOTS, default=None,
+                   help="the robot side: sim (PyBullet) or lbr-sim (the same arm behind lbr_fri_ros2_stack's "
+                        "messages, driven by the real-robot adapter); default: COMPOSE_PROFILES of the environment "
+                        "or the compose file's .env (sim)")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: deterministic, as fast as the machine goes (default); realtime: 1 kHz wall clock")
     p.add_argument("--max-duration", type=float, default=600.0, metavar="S", help="give up after S s wall (default 600)")
@@ -134,7 +131,7 @@ def up_main(argv: list[str] | None = None) -> int:
 
 
 def _up(a, stop_requested: threading.Event) -> int:
-    from .compose import DEFAULT_COMPOSE, load_compose
+    from .compose import DEFAULT_COMPOSE, compose_model
 
     _check_options(a)
     board_vars = board_env(a.board)
@@ -142,7 +139,9 @@ def _up(a, stop_requested: threading.Event) -> int:
     echo = None if a.quiet else _print
     compose_path = Path(a.compose) if a.compose else DEFAULT_COMPOSE
     # read the compose file before learning: a broken one should not cost the learning time
-    load_compose(compose_path, dict(os.environ))
+    model = compose_model(compose_path, dict(os.environ))
+    if a.verbose:
+        _print(f"lamps up: {compose_path} read by {model.reader}")
 
     t_start = time.monotonic()
     skill = _learn(a, out, echo, stop_requested)
@@ -183,13 +182,17 @@ class _Cell:
 
 def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, out: Path) -> _Cell:
     """The compose file read with the run's variables, its active services localised on their ports."""
-    from .compose import active, load_compose, localize, run_locally
+    from .compose import compose_model, localize, run_locally
 
     from interfaces.credentials import make_credentials
 
-    variables = _compose_variables(a, board_vars, skill, out)
-    profiles = tuple(p for p in variables.get("COMPOSE_PROFILES", "sim").split(",") if p)
-    services = run_locally(active(load_compose(compose_path, variables), profiles))
+    model = compose_model(compose_path, _compose_variables(a, board_vars, skill, out))
+    services = run_locally(model.active())
+    sides = [s.name for s in services if "robot" in s.aliases]
+    if len(sides) != 1:
+        raise UpError(f"{compose_path}: profiles {','.join(model.profiles) or '(none)'} give "
+                      f"{len(sides)} robot sides ({', '.join(sides) or 'none'}); choose one with --robot "
+                      f"{'|'.join(ROBOTS)} or COMPOSE_PROFILES")
     credentials = out / "credentials"
     make_credentials(credentials, if_missing=True)  # a new run folder: new passwords for this run
     local = localize(services, _port_map(services, a.port_base), secrets=credentials)
@@ -203,7 +206,10 @@ def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, o
 def _compose_variables(a, board_vars: dict[str, str], skill: Path, out: Path) -> dict[str, str]:
     """The environment plus the ``LAMPS_*`` variables docker-compose.yml substitutes, from the options."""
     variables = dict(os.environ)
-    variables["COMPOSE_PROFILES"] = a.robot
+    if a.robot:
+        variables["COMPOSE_PROFILES"] = a.robot
+    # the recorder runs until lamps up stops it (it writes the report after run.json)
+    variables["LAMPS_RECORD_UNTIL"] = "stopped"
     variables.update(LAMPS_SEED=str(a.seed), LAMPS_STAINS=str(a.stains), LAMPS_MODE=a.mode, LAMPS_SKILL=str(skill),
                      LAMPS_OUT=str(out), **{k: v for k, v in board_vars.items() if k == "LAMPS_BOARD"})
     if a.robot_id:
@@ -348,7 +354,7 @@ def _watch(cell: _Cell, children, max_duration_s: float, stop_requested) -> tupl
         truth = node.latest(keys.sim_truth, SimTruth)
         stains = node.latest(keys.perception_stains, Stains)
         st = tr = sn = None
-        done_since = fault_since = None
+        end = RunEnd()
         first_dirt = None
         next_print = 0.0
         while True:
@@ -366,13 +372,9 @@ def _watch(cell: _Cell, children, max_duration_s: float, stop_requested) -> tupl
                 first_dirt = tr.total_dirt
             sn = stains.take() or sn
             if st is not None:
-                # DONE longer than the executor's recheck: nothing waits for another pass
-                done_since = (done_since or now) if st.phase == Phase.DONE else None
-                fault_since = (fault_since or now) if st.phase in (Phase.FAULT, Phase.ESTOP) else None
-                if done_since is not None and now - done_since >= SETTLE_S:
-                    return "done", "the controller is DONE"
-                if fault_since is not None and now - fault_since >= FAULT_HOLD_S:
-                    return "fault", f"controller {st.phase}: {st.reason}"
+                ended = end.update(st.phase, st.reason, now)
+                if ended is not None:
+                    return ended
             if now >= next_print:
                 next_print = now + 2.0
                 _print(_progress(now - t0, st, tr, sn, first_dirt))

@@ -2,7 +2,11 @@
 
 ``lamps record`` subscribes every key of the cell and writes
 ``DIR/recording.mcap`` (:mod:`launch.record`) until SIGTERM or Ctrl-C, then
-``DIR/report.json`` and the plots (:mod:`launch.report`). ``lamps report``
+``DIR/report.json`` and the plots (:mod:`launch.report`); with ``--until
+done`` it also ends by itself once the controller is DONE (or stays in
+FAULT / ESTOP), exiting 0 only when the report says cleaned, so
+``docker compose up --exit-code-from recorder`` runs one job and says how it
+went. ``lamps report``
 rebuilds the report and plots of a run folder from its recording alone.
 """
 
@@ -28,11 +32,18 @@ def record_main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", required=True, metavar="DIR", help="run folder")
     p.add_argument("--config", metavar="FILE", help="TOML config with a [zenoh] table")
     p.add_argument("--no-report", action="store_true", help="only the recording")
+    p.add_argument("--until", choices=("stopped", "done"), default="stopped",
+                   help="stopped: record until SIGTERM / Ctrl-C (default); done: also end once the controller is "
+                        "DONE (or in FAULT / ESTOP), exit 0 only if the report says cleaned")
+    p.add_argument("--max-duration", type=float, default=None, metavar="S",
+                   help="with --until done: end after S seconds (wall) whatever the controller does")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     add_zenoh_options(p)
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="lamps record %(levelname)s: %(message)s")
+    if a.max_duration is not None and not (a.max_duration > 0 and a.max_duration < float("inf")):
+        p.error(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -53,14 +64,45 @@ def record_main(argv: list[str] | None = None) -> int:
     out = Path(a.out)
     try:
         rec = Recorder(node.session, settings.keys, out)
-        stop.wait()
+        ended = _wait_for_end(node, stop, a.max_duration) if a.until == "done" else (stop.wait(), None)[1]
         path = rec.close()
     finally:
         node.close()
-    print(f"recorded {sum(rec.counters.values())} messages into {path}", flush=True)
+    print(f"recorded {sum(rec.counters.values())} messages into {path}"
+          + (f"; the run ended: {ended[1]}" if ended else ""), flush=True)
     if a.no_report:
         return 0
-    return _write_report(out, settings.keys)
+    code = _write_report(out, settings.keys)
+    if a.until == "done" and code == 0:
+        import json
+
+        outcome = json.loads((out / "report.json").read_text()).get("outcome")
+        if outcome != "cleaned":
+            print(f"lamps record: the board was not cleaned ({outcome})", file=sys.stderr)
+            return 3
+    return code
+
+
+def _wait_for_end(node, stop: threading.Event, max_duration_s: float | None) -> tuple[str, str] | None:
+    """Until stopped (None), or the run's end as :class:`launch.run_end.RunEnd` judges it (outcome, why)."""
+    import time
+
+    from interfaces.messages import ControllerStatus
+
+    from .run_end import RunEnd
+
+    status = node.latest(node.keys.controller_status, ControllerStatus)
+    end, t0, st = RunEnd(), time.monotonic(), None
+    while not stop.wait(0.1):
+        now = time.monotonic()
+        if max_duration_s is not None and now - t0 > max_duration_s:
+            return "timeout", f"not finished after --max-duration {max_duration_s:g} s"
+        st = status.take() or st
+        if st is not None:
+            ended = end.update(st.phase, st.reason, now)
+            if ended is not None:
+                return ended
+    return None
 
 
 def _write_report(out: Path, keys=None) -> int:

@@ -49,7 +49,7 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
             assert s.labels.get("lamps.up") == "skip" and "--no-multicast-scouting" in s.command
             continue
         assert s.command[0] == "lamps" and s.command[1] in COMMANDS, s.command
-        if s.name in ("skill", "credentials"):  # the one-shot services talk to nobody
+        if s.name in ("skill", "credentials", "folders"):  # the one-shot services talk to nobody
             continue
         assert s.environment["LAMPS_ZENOH_MULTICAST"] == "false" and s.environment["LAMPS_ZENOH_MODE"] == "peer"
         for ep in s.environment.get("LAMPS_ZENOH_CONNECT", "").split(","):
@@ -80,7 +80,8 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
     assert services["skill"].command[:2] == ("lamps", "demo") and "/skills/bundled" in services["skill"].command
     assert "skill" in services["controller"].depends_on
     assert [s.name for s in run_locally(list(services.values()))] == [n for n in services
-                                                                      if n not in ("skill", "bridge", "credentials")]
+                                                                      if n not in ("skill", "bridge", "credentials",
+                                                                                   "folders")]
 
 
 def test_every_zenoh_service_of_every_profile_joins_as_its_role_with_access_control_on(tmp_path):

