@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "launch.record_cli:record_main",
         "record every key into an MCAP file; report.json and plots when stopped",
     ),
+    "foxglove": ("launch.live:main", "serve the running cell to the Foxglove app over its WebSocket protocol"),
     "report": ("launch.record_cli:report_main", "rebuild a run's report.json and plots from its recording"),
     "campaign": ("launch.campaign:main", "many seeded cells, several at once: success, time against a lower bound, peaks"),
     "health": ("launch.health:main", "is this service ready (its Zenoh endpoints accept connections)? compose's probe"),

@@ -21,7 +21,7 @@ import sys
 import threading
 import time
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from lampskit.errors import LampsError
@@ -57,6 +57,9 @@ def build_up_parser() -> argparse.ArgumentParser:
                    help="the robot side: sim (PyBullet) or lbr-sim (the same arm behind lbr_fri_ros2_stack's "
                         "messages, driven by the real-robot adapter); default: COMPOSE_PROFILES of the environment "
                         "or the compose file's .env (sim)")
+    p.add_argument("--foxglove", nargs="?", type=int, const=8765, default=None, metavar="PORT",
+                   help="also serve the cell live to the Foxglove app on ws://127.0.0.1:PORT (default 8765; the "
+                        "compose profile foxglove)")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: deterministic, as fast as the machine goes (default); realtime: 1 kHz wall clock")
     p.add_argument("--max-duration", type=float, default=600.0, metavar="S", help="give up after S s wall (default 600)")
@@ -156,6 +159,11 @@ def _check_options(a) -> None:
         raise UpError(f"--stains must be in [0, 50], got {a.stains}")
     if not (a.max_duration > 0 and math.isfinite(a.max_duration)):
         raise UpError(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
+    if a.foxglove is not None:
+        if not 0 < a.foxglove < 65536:
+            raise UpError(f"--foxglove PORT must be in 1..65535, got {a.foxglove}")
+        if _port_busy(a.foxglove):
+            raise UpError(f"--foxglove {a.foxglove}: the port is already in use (give another)")
 
 
 def _new_run_folder(out_option: str | None) -> Path:
@@ -187,6 +195,8 @@ def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, o
     from interfaces.credentials import make_credentials
 
     model = compose_model(compose_path, _compose_variables(a, board_vars, skill, out))
+    if a.foxglove is not None:
+        model = replace(model, profiles=(*model.profiles, "foxglove"))
     services = run_locally(model.active())
     sides = [s.name for s in services if "robot" in s.aliases]
     if len(sides) != 1:
@@ -214,6 +224,8 @@ def _compose_variables(a, board_vars: dict[str, str], skill: Path, out: Path) ->
                      LAMPS_OUT=str(out), **{k: v for k, v in board_vars.items() if k == "LAMPS_BOARD"})
     if a.robot_id:
         variables["LAMPS_ROBOT_ID"] = a.robot_id
+    if a.foxglove is not None:
+        variables["LAMPS_FOXGLOVE_PORT"] = str(a.foxglove)
     return variables
 
 
@@ -244,6 +256,9 @@ def _run_cell(cell: _Cell, a, echo, stop_requested: threading.Event, t_start: fl
     try:
         _start_services(cell, echo, children)
         _print(f"lamps up: {', '.join(c.name for c in children)} running; run folder {cell.out}")
+        if a.foxglove is not None:
+            _print(f"lamps up: live in Foxglove: Open connection ws://127.0.0.1:{a.foxglove} "
+                   f"(layout config/foxglove/lamps.json)")
         outcome, why = _watch(cell, children, a.max_duration, stop_requested)
     except UpError as exc:
         outcome, why = "failed", str(exc)

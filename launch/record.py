@@ -12,7 +12,11 @@ wall clock at receipt [ns]; the message's own stamps stay in the message.
 The controller trace (packed 1 kHz batches, kept whole) is also written every
 :data:`TRACE_PLOT_EVERY`-th tick as one row per message on ``<key>/plot``,
 back-dated from the batch's receipt by the controller clock, so a plot
-panel draws its columns over time.
+panel draws its columns over time. The 3D scene and the image overlays
+(:mod:`launch.scene`: transforms of the arm's links, the pad, the board and
+the cameras; the arm's shapes; the board and its stains; camera
+calibrations and stain outlines on the images) are Foxglove's own typed
+messages (protobuf, schemas from ``foxglove-sdk``).
 
 A recorder started again in a run folder (a restart after a crash, or
 ``docker compose restart``) continues the same recording: it carries every
@@ -135,6 +139,55 @@ def _camera_info_schema() -> dict:
     return schema
 
 
+def json_records(key: str, msg: Message, t_ns: int):
+    """The JSON channel messages one cell message makes: (topic, schema name, schema (a callable: built only
+    when a channel is new), JSON-able data, log time [ns]).
+
+    Camera frames -> ``foxglove.CompressedImage`` (JPEG) on the key and their pose and intrinsics on
+    ``<key>/info``; every other message -> ``lamps.<Type>`` on its key; a controller trace batch also -> every
+    :data:`TRACE_PLOT_EVERY`-th tick on ``<key>/plot``. The recorder and the live view (``lamps foxglove``) both
+    use it, so what Foxglove shows live is what the recording holds.
+    """
+    if isinstance(msg, CameraFrame):
+        jpeg = _jpeg_of(msg)
+        stamp = msg.robot_time_ns or msg.stamp_ns
+        if jpeg is not None:
+            yield (key, "foxglove.CompressedImage", lambda: _COMPRESSED_IMAGE_SCHEMA,
+                   {"timestamp": {"sec": stamp // 10**9, "nsec": stamp % 10**9}, "frame_id": msg.camera,
+                    "data": base64.b64encode(jpeg).decode("ascii"), "format": "jpeg"}, t_ns)
+        info = to_builtins(msg)
+        info.pop("data", None)
+        yield key + "/info", "lamps.CameraFrameInfo", _camera_info_schema, info, t_ns
+        return
+    name = f"lamps.{type(msg).__name__}"
+    yield key, name, lambda: json_schema_of(type(msg)), to_builtins(msg), t_ns
+    if isinstance(msg, ControllerTrace):
+        yield from _trace_rows(key, msg, t_ns)
+
+
+def _trace_rows(key: str, msg: ControllerTrace, t_ns: int):
+    """Every :data:`TRACE_PLOT_EVERY`-th tick of a trace batch as its own message on ``<key>/plot``, one number
+    per column (a series Foxglove's Plot panel draws; the batch itself stays the full record)."""
+    cols = list(msg.columns)
+    n = len(cols)
+    if n == 0 or msg.n_rows <= 0 or len(msg.data) != 8 * n * msg.n_rows:
+        return
+    rows = np.frombuffer(msg.data, "<f8").reshape(msg.n_rows, n)
+
+    def schema() -> dict:
+        return {"type": "object", "title": TRACE_PLOT_SCHEMA_NAME,
+                "properties": {"tick": {"type": "integer"}, **{c: {"type": ["number", "null"]} for c in cols}}}
+
+    t = rows[:, cols.index("t_s")] if "t_s" in cols else None
+    start = (-msg.first_tick) % TRACE_PLOT_EVERY
+    for k in range(start, msg.n_rows, TRACE_PLOT_EVERY):
+        row = {"tick": msg.first_tick + k}
+        row.update(zip(cols, (float(v) if np.isfinite(v) else None for v in rows[k])))
+        # each row at its own time: the batch's receipt less how much earlier the tick was (controller clock)
+        back_ns = int((t[-1] - t[k]) * 1e9) if t is not None and np.isfinite(t[-1] - t[k]) else 0
+        yield key + "/plot", TRACE_PLOT_SCHEMA_NAME, schema, row, max(t_ns - max(back_ns, 0), 0)
+
+
 class McapSink:
     """Channels and schemas on demand; :meth:`write` one decoded message (or raw bytes) per call."""
 
@@ -161,6 +214,19 @@ class McapSink:
             self._channels[topic] = self._w.register_channel(topic=topic, message_encoding="json",
                                                              schema_id=self._schema(schema_name, schema))
         return self._channels[topic]
+
+    def write_typed(self, topic: str, msg, t_ns: int) -> None:
+        """One Foxglove typed message (``foxglove.messages.*``) on ``topic``, protobuf with the SDK's schema."""
+        if topic not in self._channels:
+            schema = type(msg).get_schema()
+            if schema.name not in self._schemas:
+                self._schemas[schema.name] = self._w.register_schema(name=schema.name, encoding=schema.encoding,
+                                                                     data=bytes(schema.data))
+            self._channels[topic] = self._w.register_channel(topic=topic, message_encoding=schema.encoding,
+                                                             schema_id=self._schemas[schema.name])
+        self._seq[topic] += 1
+        self._w.add_message(channel_id=self._channels[topic], log_time=t_ns, publish_time=t_ns,
+                            sequence=self._seq[topic], data=msg.encode())
 
     def carry_over(self, path: Path) -> tuple[int, int]:
         """Write every complete message of the earlier recording ``path`` (finished or cut), with its own times and
@@ -205,44 +271,9 @@ class McapSink:
                             data=msgspec.json.encode(data))
 
     def write(self, key: str, msg: Message, t_ns: int) -> None:
-        if isinstance(msg, CameraFrame):
-            jpeg = _jpeg_of(msg)
-            stamp = msg.robot_time_ns or msg.stamp_ns
-            if jpeg is not None:
-                self.write_json(key, "foxglove.CompressedImage",
-                                {"timestamp": {"sec": stamp // 10**9, "nsec": stamp % 10**9}, "frame_id": msg.camera,
-                                 "data": base64.b64encode(jpeg).decode("ascii"), "format": "jpeg"},
-                                t_ns, _COMPRESSED_IMAGE_SCHEMA)
-            info = to_builtins(msg)
-            info.pop("data", None)
-            self.write_json(key + "/info", "lamps.CameraFrameInfo", info, t_ns,
-                            None if "lamps.CameraFrameInfo" in self._schemas else _camera_info_schema())
-            return
-        name = f"lamps.{type(msg).__name__}"
-        self.write_json(key, name, to_builtins(msg), t_ns, None if name in self._schemas else json_schema_of(type(msg)))
-        if isinstance(msg, ControllerTrace):
-            self._write_trace_rows(key, msg, t_ns)
-
-    def _write_trace_rows(self, key: str, msg: ControllerTrace, t_ns: int) -> None:
-        """Every :data:`TRACE_PLOT_EVERY`-th tick of a trace batch as its own message on ``<key>/plot``, one
-        number per column (a series Foxglove's Plot panel draws; the batch itself stays the full record)."""
-        cols = list(msg.columns)
-        n = len(cols)
-        if n == 0 or msg.n_rows <= 0 or len(msg.data) != 8 * n * msg.n_rows:
-            return
-        rows = np.frombuffer(msg.data, "<f8").reshape(msg.n_rows, n)
-        if TRACE_PLOT_SCHEMA_NAME not in self._schemas:
-            self._schema(TRACE_PLOT_SCHEMA_NAME, {"type": "object", "title": TRACE_PLOT_SCHEMA_NAME,
-                                                  "properties": {"tick": {"type": "integer"},
-                                                                 **{c: {"type": ["number", "null"]} for c in cols}}})
-        t = rows[:, cols.index("t_s")] if "t_s" in cols else None
-        start = (-msg.first_tick) % TRACE_PLOT_EVERY
-        for k in range(start, msg.n_rows, TRACE_PLOT_EVERY):
-            row = {"tick": msg.first_tick + k}
-            row.update(zip(cols, (float(v) if np.isfinite(v) else None for v in rows[k])))
-            # each row at its own time: the batch's receipt less how much earlier the tick was (controller clock)
-            back_ns = int((t[-1] - t[k]) * 1e9) if t is not None and np.isfinite(t[-1] - t[k]) else 0
-            self.write_json(key + "/plot", TRACE_PLOT_SCHEMA_NAME, row, max(t_ns - max(back_ns, 0), 0))
+        """``msg`` received on ``key`` at ``t_ns``, as the JSON channels of :func:`json_records`."""
+        for topic, name, schema, data, t in json_records(key, msg, t_ns):
+            self.write_json(topic, name, data, t, None if name in self._schemas else schema())
 
     def flush(self, every_s: float = 0.0) -> None:
         """Push the complete chunks written so far to the disk (at most every ``every_s``)."""
@@ -278,6 +309,9 @@ class Recorder:
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._decoders: dict[str, Decoder | None] = {}
+        from .scene import SceneBuilder
+
+        self.scene = SceneBuilder(keys)
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
         self._sub = session.declare_subscriber(f"{keys.prefix}/**", self._on_sample)
@@ -326,8 +360,11 @@ class Recorder:
             try:
                 if dec is None:
                     raise MessageDecodeError("no message type for this key")
-                self.sink.write(key, dec(data), t_ns)
+                msg = dec(data)
+                self.sink.write(key, msg, t_ns)
                 self.counters[short] += 1
+                for topic, scene_msg in self.scene.on_message(key, msg, t_ns):
+                    self.sink.write_typed(topic, scene_msg, t_ns)
             except MessageDecodeError as exc:
                 self.counters["undecodable" if dec is not None else "unknown_key"] += 1
                 self.sink.write_json(key + "/raw", "lamps.Raw", {"error": str(exc),
@@ -393,13 +430,15 @@ def recover_recording(partial: Path, final: Path) -> int:
 
 
 def read_recording(path: Path) -> dict[str, list[tuple[int, dict]]]:
-    """Every message of a recording by topic: [(log_time_ns, JSON object)], in log-time order."""
+    """Every JSON message of a recording by topic: [(log_time_ns, JSON object)], in log-time order (the scene's
+    typed protobuf channels are left out)."""
     from mcap.reader import make_reader
 
     out: dict[str, list[tuple[int, dict]]] = {}
     with open(path, "rb") as f:
         for _schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
-            out.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data)))
+            if channel.message_encoding == "json":
+                out.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data)))
     return out
 
 

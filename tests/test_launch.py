@@ -213,22 +213,28 @@ def _up(args: list[str], timeout_s: float = 300.0, env: dict | None = None) -> s
 
 
 def _check_channel_schemas(path: Path) -> None:
-    """Every channel's schema names its properties (Foxglove / Lichtblick drop a channel whose schema does not)
-    and every 20th message of each channel validates against it."""
-    import jsonschema
-    from mcap.reader import make_reader
+    """Every channel's schema is one a Foxglove app decodes (JSON with properties, or Foxglove's protobuf types)
+    and every 20th message of each channel validates against it; the 3D scene and the image overlays are there."""
+    from .mcap_check import check_recording
 
-    validators, seen = {}, {}
-    with open(path, "rb") as f:
-        for schema, channel, message in make_reader(f).iter_messages():
-            if channel.topic not in validators:
-                s = json.loads(schema.data)
-                assert s.get("properties"), f"{channel.topic}: schema {schema.name} has no properties"
-                validators[channel.topic] = jsonschema.Draft202012Validator(s)
-            seen[channel.topic] = seen.get(channel.topic, 0) + 1
-            if seen[channel.topic] % 20 == 1:
-                validators[channel.topic].validate(json.loads(message.data))
-    assert len(validators) >= 8, sorted(validators)
+    channels = check_recording(path)
+    assert len(channels) >= 8, sorted(channels)
+    keys = Keys()
+    scene = {t: name for t, (name, _) in channels.items()}
+    assert scene[f"{keys.prefix}/scene/tf"] == "foxglove.FrameTransforms"
+    assert scene[f"{keys.prefix}/scene/robot"] == scene[f"{keys.prefix}/scene/board"] == "foxglove.SceneUpdate"
+    camera = keys.camera_frame("board")
+    assert scene[camera] == "foxglove.CompressedImage"
+    assert scene[f"{camera}/calibration"] == "foxglove.CameraCalibration"
+    assert scene[f"{camera}/annotations"] == "foxglove.ImageAnnotations"
+    # the layout in the repository shows only what a run records
+    from launch.layout import cell_layout
+
+    from .mcap_check import check_layout_against
+
+    layout = json.loads((REPO / "config" / "foxglove" / "lamps.json").read_text())
+    assert layout == cell_layout(), "config/foxglove/lamps.json is stale: lamps foxglove --write-layout it"
+    check_layout_against(path, layout)
 
 
 def _check_run(out: Path, base: int, robot_brakes_ok: bool = False) -> dict:
@@ -319,13 +325,40 @@ def test_lamps_up_default_cleans_a_wall_board_and_reports_it(tmp_path):
 
 @pytest.mark.slow
 def test_lamps_up_on_a_horizontal_board_with_a_given_skill(tmp_path, learned_skill_file):
-    out, base = tmp_path / "run", _port_base()
-    r = _up(["--out", str(out), "--port-base", str(base), "--board", "horizontal", "--skill", str(learned_skill_file),
-             "--seed", "1", "--max-duration", "240"])
-    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    """... served live to a Foxglove client meanwhile (lamps up --foxglove: the compose profile foxglove)."""
+    from .test_live_view import _check, _Client
+    from .zenoh_helpers import free_port, wait_for
+
+    out, base, ws_port = tmp_path / "run", _port_base(), free_port()
+    proc = subprocess.Popen([*LAMPS, "up", "-q", "--out", str(out), "--port-base", str(base), "--board", "horizontal",
+                             "--skill", str(learned_skill_file), "--seed", "1", "--max-duration", "240",
+                             "--foxglove", str(ws_port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "MPLBACKEND": "Agg"}, cwd=REPO)
+    try:
+        def connected():
+            try:
+                return _Client(ws_port, "foxglove.websocket.v1")
+            except OSError:
+                return None
+        client = wait_for(connected, 120.0, "the live view's WebSocket server", period_s=0.5)
+        keys = Keys()
+        live = [keys.controller_status, f"{keys.prefix}/scene/tf", f"{keys.prefix}/scene/board",
+                f"{keys.camera_frame('board')}/annotations"]
+        wait_for(lambda: client.pump(0.5) or all(t in client.channels for t in live), 120.0, f"advertised {live}")
+        client.subscribe(live)
+        wait_for(lambda: client.pump(0.5) or all(client.got.get(t) for t in live), 60.0, f"live messages on {live}")
+        for t in live:
+            _check(client.channels[t], client.got[t][-1])
+        client.ws.close()
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stdout[-3000:] + stderr[-3000:]
     report = _check_run(out, base)
     run = json.loads((out / "run.json").read_text())
     assert run["options"]["board"] == "horizontal" and not (out / "learn").exists()
+    assert run["services"]["foxglove"] == 0 and run["options"]["foxglove"] == ws_port
     print(f"lamps up (table): {report['sim_time_s']:.1f} s robot time, removed {report['dirt_removed_fraction']:.2%}")
 
 

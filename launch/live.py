@@ -1,0 +1,221 @@
+"""``lamps foxglove``: the running cell served live to the Foxglove app over its WebSocket protocol.
+
+It subscribes every key of the cell as the recorder does and publishes what
+the recording would hold (:func:`launch.record.json_records`: the cell's
+messages as JSON with full schemas, camera frames as
+``foxglove.CompressedImage``, the controller trace as plottable rows) and the
+3D scene and image overlays of :mod:`launch.scene` (Foxglove's typed messages
+from ``foxglove-sdk``), through :class:`launch.ws_server.FoxgloveWsServer`
+(Foxglove's WebSocket protocol, for the Foxglove app and Lichtblick alike).
+Open the app, "Open connection", ``ws://<host>:8765``, and load
+``config/foxglove/lamps.json``.
+
+The Zenoh thread only queues the raw sample; a worker thread decodes,
+converts and logs. Each topic is thinned to at most ``--max-rate`` messages
+per second (the 1 kHz states and commands; a viewer needs no more), and a
+full queue drops the oldest samples (counted): a slow viewer never slows
+the cell. Nothing is written to disk.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import logging
+import signal
+import sys
+import threading
+import time
+from collections import Counter, deque
+
+from lampskit.errors import LampsError
+
+log = logging.getLogger(__name__)
+
+#: The WebSocket port Foxglove's app connects to by default.
+DEFAULT_PORT = 8765
+
+
+class LiveView:
+    """Subscribes ``<prefix>/**`` on ``session`` and serves it on a Foxglove WebSocket server until :meth:`close`.
+
+    counters : samples logged per topic kind, ``thinned`` (above the rate), ``undecodable``, ``unknown_key``,
+    ``dropped_queue_full``.
+    """
+
+    def __init__(self, session, keys, host: str = "127.0.0.1", port: int = DEFAULT_PORT, max_rate_hz: float = 100.0,
+                 max_queue: int = 20_000) -> None:
+        from .scene import SceneBuilder
+        from .ws_server import FoxgloveWsServer
+
+        if not max_rate_hz > 0:
+            raise ValueError(f"max_rate_hz must be positive, got {max_rate_hz}")
+        self.keys = keys
+        self.counters: Counter[str] = Counter()
+        self._min_gap_ns = int(1e9 / max_rate_hz)
+        self._last_ns: dict[str, int] = {}
+        self._channels: dict[str, int] = {}  # topic -> channel id
+        self.scene = SceneBuilder(keys)
+        self._decoders: dict = {}
+        self._queue: deque = deque(maxlen=max_queue)
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self.server = FoxgloveWsServer(f"LAMPS cell {keys.prefix}", host, port)
+        self.port = self.server.port
+        self._thread = threading.Thread(target=self._run, name="foxglove-live", daemon=True)
+        self._thread.start()
+        self._sub = session.declare_subscriber(f"{keys.prefix}/**", self._on_sample)
+
+    def _on_sample(self, sample) -> None:  # Zenoh thread: never waits
+        if len(self._queue) == self._queue.maxlen:
+            self.counters["dropped_queue_full"] += 1
+        self._queue.append((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+        self._wake.set()
+
+    def _channel(self, topic: str, make) -> int:
+        """The id of ``topic``'s channel; ``make()`` -> (encoding, schema name, schema text, schema encoding)."""
+        cid = self._channels.get(topic)
+        if cid is None:
+            cid = self._channels[topic] = self.server.add_channel(topic, *make())
+        return cid
+
+    def _thin(self, topic: str, t_ns: int) -> bool:
+        """Whether ``topic`` already had a message within the rate's gap (then this one is left out)."""
+        last = self._last_ns.get(topic)
+        if last is not None and 0 <= t_ns - last < self._min_gap_ns:
+            self.counters["thinned"] += 1
+            return True
+        self._last_ns[topic] = t_ns
+        return False
+
+    def _publish(self, key: str, data: bytes, t_ns: int) -> None:
+        import msgspec
+
+        from interfaces.codec import Decoder
+        from interfaces.errors import MessageDecodeError
+
+        from .record import json_records, message_type_of
+
+        if key not in self._decoders:
+            t = message_type_of(self.keys, key)
+            self._decoders[key] = Decoder(t) if t is not None else None
+        dec = self._decoders[key]
+        if dec is None:
+            self.counters["unknown_key"] += 1
+            return
+        try:
+            msg = dec(data)
+        except MessageDecodeError:
+            self.counters["undecodable"] += 1
+            return
+        for topic, scene_msg in self.scene.on_message(key, msg, t_ns):  # thinned by the builder itself
+            def typed(m=scene_msg):
+                schema = type(m).get_schema()
+                return "protobuf", schema.name, base64.b64encode(bytes(schema.data)).decode("ascii"), "protobuf"
+            self.server.send(self._channel(topic, typed), t_ns, scene_msg.encode())
+        if self._thin(key, t_ns):
+            return
+        for topic, name, schema, payload, t in json_records(key, msg, t_ns):
+            cid = self._channel(topic, lambda: ("json", name, json.dumps(schema()), "jsonschema"))
+            self.server.send(cid, t, msgspec.json.encode(payload))
+        self.counters[key[len(self.keys.prefix) + 1:]] += 1
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait(0.1)
+            self._wake.clear()
+            while self._queue:
+                key, data, t_ns = self._queue.popleft()
+                try:
+                    self._publish(key, data, t_ns)
+                except Exception:  # a bad message never ends the view: counted and logged
+                    self.counters["failed"] += 1
+                    log.exception("live view: cannot publish a sample of %s", key)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self._stop.set()
+        self._wake.set()
+        self._thread.join(10.0)
+        self.server.stop()
+
+
+def main(argv: list[str] | None = None) -> int:
+    from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+    from interfaces.priority import BACKGROUND, set_service_priority
+
+    p = argparse.ArgumentParser(prog="lamps foxglove", description=(
+        "Serve the running cell to the Foxglove app over its WebSocket protocol (open ws://HOST:PORT in the app; "
+        "layout: config/foxglove/lamps.json) until stopped (SIGTERM or Ctrl-C)."))
+    p.add_argument("--host", default="127.0.0.1", help="address to serve on (0.0.0.0 in a container)")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"WebSocket port (default {DEFAULT_PORT})")
+    p.add_argument("--max-rate", type=float, default=100.0, metavar="HZ",
+                   help="at most this many messages per second per topic (default 100)")
+    p.add_argument("--write-layout", metavar="FILE",
+                   help="only write the cell's Foxglove layout (3D scene, camera with stains, force, tracking, "
+                        "phase, joints) for this --robot-id and --camera to FILE, then exit")
+    p.add_argument("--camera", default="board", help="the camera the layout's image panel shows (default board)")
+    p.add_argument("--config", metavar="FILE", help="TOML config with a [zenoh] table")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    add_zenoh_options(p)
+    a = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="lamps foxglove %(levelname)s: %(message)s")
+    if a.write_layout:
+        return _write_layout(a)
+    if not 0 < a.port < 65536:
+        p.error(f"--port must be in 1..65535, got {a.port}")
+    if not a.max_rate > 0:
+        p.error(f"--max-rate must be positive, got {a.max_rate}")
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        settings = zenoh_with_options(load_config(a.config).zenoh, a)
+        set_service_priority(BACKGROUND)
+        from interfaces.session import ServiceNode
+
+        node = ServiceNode("foxglove", settings).__enter__()
+    except LampsError as exc:
+        print(f"lamps foxglove: error: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # zenoh's own error type for a bad endpoint
+        print(f"lamps foxglove: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return 1
+    try:
+        try:
+            view = LiveView(node.session, settings.keys, a.host, a.port, a.max_rate)
+        except RuntimeError as exc:  # the port is taken, or the address is not ours
+            print(f"lamps foxglove: error: cannot serve on {a.host}:{a.port} ({exc})", file=sys.stderr)
+            return 1
+        print(f"lamps foxglove: serving the cell on ws://{a.host}:{view.port} (Foxglove: Open connection)",
+              flush=True)
+        stop.wait()
+        view.close()
+    finally:
+        node.close()
+    log.info("live view counters: %s", dict(view.counters))
+    return 0
+
+
+def _write_layout(a) -> int:
+    from pathlib import Path
+
+    from interfaces.keys import Keys
+    from lampskit.atomic import write_text_atomic
+
+    from .layout import cell_layout
+
+    try:
+        keys = Keys.for_robot(a.robot_id) if a.robot_id else Keys()
+        write_text_atomic(Path(a.write_layout), json.dumps(cell_layout(keys, a.camera), indent=1) + "\n")
+    except (OSError, ValueError) as exc:
+        print(f"lamps foxglove: error: cannot write the layout: {exc}", file=sys.stderr)
+        return 1
+    print(f"wrote the Foxglove layout of {keys.prefix} to {a.write_layout} (Foxglove / Lichtblick: Import layout)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,161 @@
+"""``lamps foxglove``: the cell over Zenoh, served on Foxglove's WebSocket protocol, read by a real client.
+
+A real Zenoh session publishes the cell's messages on loopback; the live view
+(its own session and WebSocket server) serves them; a WebSocket client
+speaking ``foxglove.websocket.v1`` (Lichtblick's) or ``foxglove.sdk.v1``
+(current Foxglove apps') subscribes and checks every message it gets against
+the schema the server advertised (JSON Schema, or Foxglove's protobuf types).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import struct
+import time
+
+import jsonschema
+import numpy as np
+import pytest
+from websockets.sync.client import connect
+
+from interfaces.config import ZenohSettings
+from interfaces.messages import (CameraFrame, CameraIntrinsics, Capabilities, ControllerStatus, RobotState)
+from interfaces.session import ServiceNode
+from launch.live import LiveView
+
+from .mcap_check import _protobuf_class
+from .test_scene import _camera, _stains
+from .zenoh_helpers import free_port, wait_for, wait_subscribed
+
+pytestmark = pytest.mark.slow
+
+
+def _state(i: int) -> RobotState:
+    return RobotState(seq=i, stamp_ns=i * 10**6, q_rad=[float(0.1 * np.sin(i * 1e-3))] * 7, dq_rad_s=[0.0] * 7,
+                      tau_nm=[0.0] * 7, wrench_world=[0.0] * 6,
+                      capabilities=Capabilities(True, [100.0] * 7, "sim", 1000.0), robot_time_ns=i * 10**6)
+
+
+def _frame() -> CameraFrame:
+    f = _camera()
+    k = CameraIntrinsics(fx=50.0, fy=50.0, cx=32.0, cy=24.0, width=64, height=48)
+    return CameraFrame(seq=1, stamp_ns=1, camera="board", encoding="rgb8", data=bytes(64 * 48 * 3), intrinsics=k,
+                       T_camera_to_world=f.T_camera_to_world, robot_time_ns=1)
+
+
+class _Client:
+    """A Foxglove WebSocket protocol client: advertised channels by topic, subscriptions, message frames."""
+
+    def __init__(self, port: int, subprotocol: str) -> None:
+        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=[subprotocol], open_timeout=10)
+        assert self.ws.subprotocol == subprotocol
+        self.channels: dict[str, dict] = {}
+        self.by_sub: dict[int, dict] = {}
+        self.got: dict[str, list[bytes]] = {}
+        self.server_info = None
+
+    def pump(self, timeout_s: float = 0.2) -> None:
+        end = time.monotonic() + timeout_s
+        while (left := end - time.monotonic()) > 0:
+            try:
+                frame = self.ws.recv(timeout=left)
+            except TimeoutError:
+                return
+            if isinstance(frame, str):
+                msg = json.loads(frame)
+                if msg["op"] == "serverInfo":
+                    self.server_info = msg
+                elif msg["op"] == "advertise":
+                    for ch in msg["channels"]:
+                        self.channels[ch["topic"]] = ch
+            elif frame[0] == 0x01:  # message data: opcode, subscription id u32, log time u64, payload
+                sub, _t = struct.unpack_from("<IQ", frame, 1)
+                self.got.setdefault(self.by_sub[sub]["topic"], []).append(bytes(frame[13:]))
+
+    def subscribe(self, topics: list[str]) -> None:
+        subs = []
+        for i, topic in enumerate(topics, start=len(self.by_sub) + 1):
+            self.by_sub[i] = self.channels[topic]
+            subs.append({"id": i, "channelId": self.channels[topic]["id"]})
+        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+
+
+def _check(channel: dict, payload: bytes) -> None:
+    """The payload is what the advertised schema says (JSON Schema with properties, or a protobuf type)."""
+    if channel["encoding"] == "json":
+        schema = json.loads(channel["schema"])
+        assert schema.get("properties"), channel["topic"]
+        jsonschema.validate(json.loads(payload), schema)
+    else:
+        assert channel["encoding"] == "protobuf" and channel["schemaEncoding"] == "protobuf"
+        cls = _protobuf_class(channel["schemaName"], base64.b64decode(channel["schema"]))
+        assert cls.FromString(payload).ListFields(), channel["topic"]
+
+
+@pytest.mark.parametrize("subprotocol", ["foxglove.websocket.v1", "foxglove.sdk.v1"])
+def test_the_live_view_serves_the_cell_and_its_scene_to_a_foxglove_client(subprotocol):
+    zport, wport = free_port(), free_port()
+    pub = ServiceNode("sim", ZenohSettings(listen=(f"tcp/127.0.0.1:{zport}",))).__enter__()
+    view_node = ServiceNode("foxglove", ZenohSettings(connect=(f"tcp/127.0.0.1:{zport}",))).__enter__()
+    view = LiveView(view_node.session, view_node.keys, port=wport, max_rate_hz=100.0)
+    client = None
+    try:
+        keys = pub.keys
+        wait_subscribed(pub.session, keys.robot_state, what="the live view's subscription")
+        camera_key = keys.camera_frame("board")
+        status = ControllerStatus(seq=1, stamp_ns=1, phase="WIPE", current_mp="periodic 0")
+
+        bursts = iter(range(10**6))
+
+        def publish_all() -> None:
+            """A camera frame, 50 states 1 ms apart (robot time goes on), the stains, a status."""
+            i0 = next(bursts) * 500
+            pub.publish(camera_key, _frame())
+            for i in range(i0, i0 + 50):
+                pub.publish(keys.robot_state, _state(i))
+            pub.publish(keys.perception_stains, _stains())
+            pub.publish(keys.controller_status, status)
+
+        client = _Client(view.port, subprotocol)
+        wanted = [keys.robot_state, keys.controller_status, keys.perception_stains, camera_key,
+                  f"{keys.prefix}/scene/tf", f"{keys.prefix}/scene/robot", f"{keys.prefix}/scene/board",
+                  f"{camera_key}/calibration", f"{camera_key}/annotations"]
+
+        def advertised():
+            publish_all()
+            client.pump()
+            return all(t in client.channels for t in wanted)
+        try:
+            wait_for(advertised, 15.0, f"advertisements of {wanted}")
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}: got {sorted(client.channels)}, server info {client.server_info}; view "
+                                 f"{dict(view.counters)}, clients {view.server.clients}") from None
+        assert client.server_info is not None and "LAMPS" in client.server_info["name"]
+        client.subscribe(wanted)
+
+        def received():
+            publish_all()
+            client.pump(0.3)
+            return all(client.got.get(t) for t in wanted)
+        try:
+            wait_for(received, 20.0, "a message on every subscribed topic", period_s=0.0)
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}: got {sorted(client.got)}; view {dict(view.counters)}") from None
+        for topic in wanted:
+            for payload in client.got[topic][:3]:
+                _check(client.channels[topic], payload)
+        names = {t: client.channels[t]["schemaName"] for t in wanted}
+        assert names[f"{keys.prefix}/scene/tf"] == "foxglove.FrameTransforms"
+        assert names[camera_key] == "foxglove.CompressedImage"
+        assert names[f"{camera_key}/annotations"] == "foxglove.ImageAnnotations"
+        # the 1 kHz states are thinned to the rate asked for: 50 states in 50 ms give about 5
+        per_burst = len(client.got[keys.robot_state])
+        assert view.counters["thinned"] > 0 and per_burst < 0.3 * 50 * len(client.got[keys.controller_status])
+        assert view.counters["failed"] == 0 and view.server.clients == 1
+    finally:
+        if client is not None:
+            client.ws.close()
+        view.close()
+        view_node.close()
+        pub.close()
