@@ -17,8 +17,12 @@ from datetime import datetime
 
 import pytest
 
+from interfaces.keys import Keys
+
 from .conftest import REPO
 from .docker_helpers import base_image, ensure_docker
+from .test_live_view import _check, _Client
+from .zenoh_helpers import free_port, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.docker]
 
@@ -34,6 +38,18 @@ def _limit(which: int) -> str:
     return "-1" if hard == resource.RLIM_INFINITY else str(hard)
 
 
+def _connect(port: int):
+    """A client that got the server's hello, or None (docker's port proxy accepts before the service listens)."""
+    from websockets.exceptions import WebSocketException
+
+    try:
+        client = _Client(port, "foxglove.sdk.v1")
+        client.pump(2.0)
+    except (OSError, EOFError, WebSocketException):
+        return None
+    return client if client.server_info is not None else None
+
+
 def _started(container: str) -> datetime:
     """When the container started (its engine's clock; nanosecond text cut to microseconds)."""
     out = subprocess.run(["docker", "inspect", "-f", "{{.State.StartedAt}}", container], capture_output=True,
@@ -47,8 +63,10 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
     host = tmp_path / "cell"
     host.mkdir()
     project = f"lampstest{uuid.uuid4().hex[:8]}"
+    ws_port = free_port()
     env = {**os.environ, "LAMPS_BASE_IMAGE": base_image(), "LAMPS_HOST_DIR": str(host),
-           "LAMPS_RECORD_UNTIL": "done", "LAMPS_SEED": "3", "LAMPS_STAINS": "1", "COMPOSE_PROFILES": "sim",
+           "LAMPS_RECORD_UNTIL": "done", "LAMPS_SEED": "3", "LAMPS_STAINS": "1", "COMPOSE_PROFILES": "sim,foxglove",
+           "LAMPS_FOXGLOVE_PORT": str(ws_port),
            "LAMPS_MEMLOCK_BYTES": _limit(resource.RLIMIT_MEMLOCK), "LAMPS_RTPRIO_MAX": _limit(resource.RLIMIT_RTPRIO)}
     env.pop("COMPOSE_FILE", None)
     try:
@@ -56,6 +74,14 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
         assert built.returncode == 0, f"docker compose build failed:\n{built.stderr[-4000:]}"
         up = _compose(project, env, "up", "-d", timeout=900)
         assert up.returncode == 0, f"docker compose up failed:\n{up.stderr[-4000:]}"
+        # the live view (profile foxglove) serves the running cell on the host's port
+        client = wait_for(lambda: _connect(ws_port), 120.0, "the foxglove service's WebSocket port", period_s=1.0)
+        tf = f"{Keys().prefix}/scene/tf"
+        wait_for(lambda: client.pump(0.5) or tf in client.channels, 120.0, f"{tf} advertised")
+        client.subscribe([tf])
+        wait_for(lambda: client.pump(0.5) or client.got.get(tf), 60.0, f"live {tf}")
+        _check(client.channels[tf], client.got[tf][0])
+        client.ws.close()
         waited = _compose(project, env, "wait", "recorder", timeout=900)
         logs = _compose(project, env, "logs", "--no-color", "--tail", "40").stdout
         assert waited.returncode == 0 and waited.stdout.strip().endswith("0"), \
@@ -78,9 +104,10 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
         assert (host / "skills" / "bundled" / "skill.json").is_file()
 
         # Docker's start order is lamps up's: each after the one it needs was healthy
-        names = {s: f"{project}-{s}-1" for s in ("sim", "controller", "perception", "recorder")}
+        names = {s: f"{project}-{s}-1" for s in ("sim", "controller", "perception", "recorder", "foxglove")}
         started = {s: _started(c) for s, c in names.items()}
         assert started["sim"] < started["controller"] < started["perception"] < started["recorder"], started
+        assert started["perception"] < started["foxglove"], started
     finally:
         down = _compose(project, env, "down", "--volumes", "--remove-orphans", "--timeout", "30", timeout=300)
         assert down.returncode == 0, down.stderr
