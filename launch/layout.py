@@ -26,7 +26,8 @@ from typing import Any
 from interfaces.keys import Keys
 
 #: (panel id, title) of every panel, in reading order.
-PANELS = ("3D!scene", "Image!camera", "Plot!force", "Plot!tracking", "StateTransitions!phase", "Plot!joints")
+PANELS = ("3D!scene", "Image!camera", "Plot!force", "Plot!tracking", "StateTransitions!phase", "Plot!joints",
+          "Plot!torques")
 
 
 def _series(path: str, label: str, color: str | None = None) -> dict:
@@ -83,9 +84,15 @@ def cell_layout(keys: Keys | None = None, camera: str = "board") -> dict[str, An
             "isSynced": True,
         },
         "Plot!joints": {
-            "title": "Joints: position [rad], velocity [rad/s], torque / 100 [Nm]",
+            "title": "Joints: position [rad], velocity [rad/s]",
             "paths": [*(_series(f"{state}.q_rad[{i}]", f"q{i + 1}") for i in range(7)),
                       *(_series(f"{state}.dq_rad_s[{i}]", f"dq{i + 1}") for i in range(7))],
+            "showLegend": True, "legendDisplay": "floating", "isSynced": True, "xAxisVal": "timestamp",
+        },
+        "Plot!torques": {
+            "title": "Joint torques: commanded vs measured [Nm]",
+            "paths": [*(_series(f"{keys.robot_command}.tau_nm[{i}]", f"command {i + 1}") for i in range(7)),
+                      *(_series(f"{state}.tau_nm[{i}]", f"measured {i + 1}") for i in range(7))],
             "showLegend": True, "legendDisplay": "floating", "isSynced": True, "xAxisVal": "timestamp",
         },
     }
@@ -94,8 +101,10 @@ def cell_layout(keys: Keys | None = None, camera: str = "board") -> dict[str, An
         "first": {"direction": "column", "splitPercentage": 60, "first": "3D!scene", "second": "Image!camera"},
         "second": {"direction": "column", "splitPercentage": 30, "first": "Plot!force",
                    "second": {"direction": "column", "splitPercentage": 40, "first": "Plot!tracking",
-                              "second": {"direction": "column", "splitPercentage": 35,
-                                         "first": "StateTransitions!phase", "second": "Plot!joints"}}},
+                              "second": {"direction": "column", "splitPercentage": 30,
+                                         "first": "StateTransitions!phase",
+                                         "second": {"direction": "row", "splitPercentage": 50,
+                                                    "first": "Plot!joints", "second": "Plot!torques"}}}},
     }
     return {"configById": config, "layout": mosaic, "globalVariables": {}, "userNodes": {},
             "playbackConfig": {"speed": 1.0}}

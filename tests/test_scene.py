@@ -134,3 +134,23 @@ def test_the_scene_is_recorded_as_foxglove_typed_messages_that_parse_with_their_
     channels = check_recording(path, every=1)
     assert {name for name, _ in channels.values()} == {"foxglove.FrameTransforms", "foxglove.SceneUpdate",
                                                        "foxglove.CameraCalibration", "foxglove.ImageAnnotations"}
+
+
+def test_the_layout_places_every_panel_once_and_the_file_is_current():
+    import json
+
+    from launch.layout import PANELS, cell_layout, layout_paths
+
+    from .conftest import REPO
+
+    def ids(node):
+        return [node] if isinstance(node, str) else ids(node["first"]) + ids(node["second"])
+
+    layout = cell_layout()
+    assert sorted(ids(layout["layout"])) == sorted(layout["configById"]) == sorted(PANELS)
+    assert json.loads((REPO / "config" / "foxglove" / "lamps.json").read_text()) == layout
+    topics, paths = layout_paths(layout)
+    assert {f"{KEYS.prefix}/scene/tf", f"{CAMERA_KEY}/annotations", f"{KEYS.controller_trace}/plot"} <= topics
+    assert (KEYS.robot_command, "tau_nm", 6) in paths
+    other = cell_layout(Keys.for_robot("left"), camera="side")
+    assert other["configById"]["Image!camera"]["imageMode"]["imageTopic"] == "lamps/left/camera/side/frame"
