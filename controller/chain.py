@@ -17,7 +17,12 @@
   re-plan runs on a planner thread, off the 1 kHz path, while the periodic
   MP goes on wiping j; the tick that finds it done hands it over and goes
   on as LEAVE. Without it (lock-step: deterministic) the re-plan runs in
-  the tick.
+  the tick. So does the search for the next transition's duration within
+  the kinematic bounds (:func:`~lampskit.core.planner.bounded_duration`,
+  a few ms): in real time it runs on the planner thread during LEAVE, for
+  the state the periodic MP will have at its exit phase, and the exit tick
+  plans the transition from the real state with that duration (in the
+  tick only if the thread is late: ``transitions_searched_in_tick``).
 
 :meth:`MpChain.update` returns a :class:`ChainResult`; a runner's error
 status or a failed plan is :attr:`ChainResult.ERROR` with the reason in
@@ -32,6 +37,7 @@ from enum import IntEnum
 
 import numpy as np
 
+from lampskit.core.periodic import periodic_state
 from lampskit.core.periodic_runner import PeriodicRunner
 from lampskit.core.planner import (Plan, PlannerParams, TransitionSpec, Wipe, exit_phase_delay, plan,
                                    plan_transition)
@@ -43,6 +49,11 @@ from .executor_types import Setpoint
 from .stain_book import StainBook
 
 log = logging.getLogger(__name__)
+
+
+def _bounded_duration_of(skill: Skill, plan_: Plan, wipe: Wipe, start) -> float:
+    """The planner thread's job: the duration of the transition from ``start`` into ``wipe``, within the bounds."""
+    return plan_transition(skill, plan_, wipe, start).duration_s
 
 
 class ChainResult(IntEnum):
@@ -101,6 +112,7 @@ class MpChain:
         #: where re-plans run (a one-thread executor), or None: in the tick
         self.background: Executor | None = None
         self._pending: Future | None = None
+        self._duration: Future | None = None  # the next transition's bounded duration, from the planner thread
         self._wipe_t = 0.0
         self._on_step = {ChainStep.TRANSIT: self._on_transit, ChainStep.WIPE: self._on_wipe,
                          ChainStep.LEAVE: self._on_leave, ChainStep.REPLAN: self._on_replan}
@@ -114,7 +126,7 @@ class MpChain:
 
     def start(self, plan_: Plan, reference: Setpoint) -> ChainResult:
         """Into the plan's first wipe from the reference's in-plane state: TRANSITION or ERROR."""
-        self._pending = None  # a re-plan of a chain left earlier (a stop, a fault) is of no use any more
+        self._pending = self._duration = None  # a re-plan of a chain left earlier (a stop, a fault): of no use
         self._plan = plan_
         return self._start_transition(plan_.wipes[0], reference)
 
@@ -177,8 +189,16 @@ class MpChain:
     # ------------------------------------------------------------------ hand-overs
     def _start_transition(self, wipe: Wipe, reference: Setpoint) -> ChainResult:
         r = reference
+        duration, self._duration = self._duration, None
+        if duration is not None and duration.done() and duration.exception() is None:
+            duration = duration.result()
+        else:
+            if duration is not None:
+                self.counters["transitions_searched_in_tick"] += 1
+            duration = None
         try:
-            spec = plan_transition(self.skill, self._plan, wipe, (r.xy.copy(), r.v_xy.copy(), r.a_xy.copy()))
+            spec = plan_transition(self.skill, self._plan, wipe, (r.xy.copy(), r.v_xy.copy(), r.a_xy.copy()),
+                                   duration)
             runner = TransitionalRunner(self.skill.transitional[spec.transitional_index].mp, spec.start, spec.goal,
                                         spec.duration_s, forcing_transform=spec.forcing_transform)
         except PlanningError as exc:
@@ -270,6 +290,14 @@ class MpChain:
         delay = 0.0 if towards is None else exit_phase_delay(self.skill, self.wipe, runner.phase_rad, towards)
         self._leave_at = runner.phase_unwrapped_rad + delay
         self.step = ChainStep.LEAVE
+        self._duration = None
+        if self.background is not None and self._next is not None:
+            # the state at the exit phase, on the limit cycle the runner follows: what the transition starts from
+            mp = self.skill.periodic[self.wipe.periodic_index].mp
+            exit_state = periodic_state(mp, runner.phase_rad + delay, runner.anchor_m.copy(), runner.amplitude_m,
+                                        runner.omega_rad_s)
+            self._duration = self.background.submit(_bounded_duration_of, self.skill, self._plan, self._next,
+                                                    tuple(np.array(x) for x in exit_state))
         return ChainResult.WORKING
 
     def _leave_when_due(self, runner: PeriodicRunner, reference: Setpoint) -> ChainResult:

@@ -10,7 +10,7 @@ import pytest
 from lampskit.errors import PlanningError
 from lampskit.learn.learn import learn_skill
 from lampskit.core.periodic import periodic_state
-from lampskit.core.planner import PlannerParams, Stain, entry_phase, exit_phase_delay, order_stains, plan
+from lampskit.core.planner import Plan, PlannerParams, Stain, entry_phase, exit_phase_delay, order_stains, plan
 from lampskit.core.rollout import junction_step_ratios, rollout
 from lampskit.learn.synth import synthesize_demo
 
@@ -218,3 +218,67 @@ def test_more_stains_get_a_two_opt_local_optimum_no_longer_than_nearest_neighbou
         for j in range(i + 1, n):
             cand = order[:i] + order[i:j + 1][::-1] + order[j + 1:]
             assert _length_of(cand, start) >= length - 1e-9
+
+
+def _peaks(ro, mask) -> tuple[float, float, float]:
+    """Peak speed, acceleration and jerk of a rollout's samples where ``mask`` (jerk: 1 kHz differences)."""
+    v = np.linalg.norm(ro.velocity_m_s, axis=1)
+    a = np.linalg.norm(ro.acceleration_m_s2, axis=1)
+    j = np.r_[0.0, np.linalg.norm(np.diff(ro.acceleration_m_s2, axis=0), axis=1) / np.diff(ro.t_s)]
+    return float(v[mask].max()), float(a[mask].max()), float(j[mask].max())
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_every_planned_mp_stays_inside_the_kinematic_bounds(skill, seed):
+    """1-6 stains of 3-22 cm anywhere on the board: the executed 1 kHz reference of every wipe and transition
+    stays inside the planner's speed, acceleration and jerk bounds (measured on the rollout, not the plan)."""
+    from lampskit.core.planner import BOUND_SHARE
+
+    rng = np.random.default_rng(100 + seed)
+    stains = [Stain(i, rng.uniform([0.05, 0.05], [0.65, 0.4]), float(rng.uniform(0.03, 0.22)))
+              for i in range(int(rng.integers(1, 7)))]
+    params = PlannerParams()
+    ro = rollout(skill, plan(skill, stains, np.zeros(2), params), (np.zeros(2),) * 3)
+    for kind in ("periodic", "transitional"):
+        v, a, j = _peaks(ro, ro.kind == kind)
+        assert v <= params.max_speed_m_s and a <= params.max_accel_m_s2 and j <= params.max_jerk_m_s3, (kind, v, a, j)
+    assert all(s.within_limits for s in ro.transitions)
+    assert all(max(s.peaks[0] / params.max_speed_m_s, (s.peaks[1] / params.max_accel_m_s2) ** 0.5,
+                   (s.peaks[2] / params.max_jerk_m_s3) ** (1 / 3)) <= BOUND_SHARE + 1e-9 for s in ro.transitions)
+    ratios = junction_step_ratios(ro)
+    assert np.all(ratios[:, 2] < 3.0), ratios  # still continuous in acceleration at every hand-over
+
+
+def test_without_the_bounds_a_big_stain_is_wiped_too_fast_and_the_bounds_cap_omega(skill):
+    """A 20 cm stain: at the learned Omega the wipe runs at over 0.9 m/s; the bounds cap Omega exactly where the
+    binding peak meets its bound, and lengthen the transition rather than sharpen it."""
+    from lampskit.core.planner import bounded_omega, cycle_peaks, plan_transition
+
+    stains = [Stain(0, np.array([0.3, 0.25]), 0.2), Stain(1, np.array([0.6, 0.1]), 0.05)]
+    loose = PlannerParams(max_speed_m_s=2.0, max_accel_m_s2=50.0, max_jerk_m_s3=5000.0)
+    fast = rollout(skill, plan(skill, stains, np.zeros(2), loose), (np.zeros(2),) * 3)
+    assert _peaks(fast, fast.kind == "periodic")[0] > 0.9  # the controller brakes at 0.6 m/s
+    params = PlannerParams()
+    p = plan(skill, stains, np.zeros(2), params)
+    w = p.wipes[0] if p.wipes[0].stain.id == 0 else p.wipes[1]
+    mp = skill.periodic[w.periodic_index].mp
+    cap = bounded_omega(mp, w.amplitude_m, params)
+    v, a, j = cycle_peaks(mp, w.amplitude_m, cap)
+    assert max(v / params.max_speed_m_s, a / params.max_accel_m_s2, j / params.max_jerk_m_s3) == pytest.approx(1.0)
+    assert w.omega_rad_s < mp.omega_rad_s and w.omega_rad_s <= cap
+    start = (np.zeros(2),) * 3
+    bounded = plan_transition(skill, p, p.wipes[0], start)
+    free = plan_transition(skill, Plan(p.wipes, loose), p.wipes[0], start)
+    assert bounded.duration_s >= free.duration_s and bounded.within_limits
+    # a duration given (found on the planner thread) is used as it is, without a search
+    given = plan_transition(skill, p, p.wipes[0], start, duration_s=2.5)
+    assert given.duration_s == 2.5 and given.goal[0] == pytest.approx(bounded.goal[0])
+    with pytest.raises(PlanningError, match="duration_s"):
+        plan_transition(skill, p, p.wipes[0], start, duration_s=-1.0)
+
+
+@pytest.mark.parametrize("field, value", [("max_speed_m_s", 0.0), ("max_accel_m_s2", -1.0), ("max_jerk_m_s3", 1e9),
+                                          ("max_transition_stretch", 0.5)])
+def test_bad_bounds_are_refused_naming_them(field, value):
+    with pytest.raises(PlanningError, match=field):
+        PlannerParams(**{field: value})

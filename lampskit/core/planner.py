@@ -15,6 +15,14 @@ board plane) and the tool's current state, the planner
    closed form at that phase; the learned transitional MP whose
    demonstrated move is most alike is mapped onto the new move by a
    rotation and uniform scale of its forcing term.
+4. keeps every MP inside the kinematic bounds (``max_speed_m_s``,
+   ``max_accel_m_s2``, ``max_jerk_m_s3`` of the in-plane reference): a
+   periodic MP's Omega is capped so its limit cycle's peak speed,
+   acceleration and jerk at its amplitude stay within them
+   (:func:`bounded_omega`), and a transition is lengthened until its
+   closed-form trajectory does (:func:`bounded_duration`). Position,
+   velocity and acceleration stay continuous at every junction: only
+   durations and frequencies change, never the boundary states.
 
 All positions here are in-plane board coordinates (x, y) [m]; the normal
 direction belongs to the force controller. :func:`lampskit.core.rollout.rollout`
@@ -34,6 +42,8 @@ import numpy as np
 from lampskit.errors import PlanningError
 from lampskit.core.periodic import periodic_state
 from lampskit.core.skill import Skill
+from lampskit.core.transitional_plan import evaluate as evaluate_transition
+from lampskit.core.transitional_plan import plan_transition as plan_transition_mp
 from lampskit.core.transitional_plan import similarity_transform
 
 #: Up to this many stains the visiting order is found by exhaustive search.
@@ -88,6 +98,15 @@ class PlannerParams:
         transitions rather than faster ones.
     order : str
         ``"shortest"`` (reorder to shorten travel) or ``"given"``.
+    max_speed_m_s, max_accel_m_s2, max_jerk_m_s3 : float
+        Kinematic bounds of the planned in-plane reference [m/s, m/s^2,
+        m/s^3]: below the controller's 0.6 m/s brake, and what an iiwa
+        pressing an eraser takes smoothly (a demonstrated wipe peaks near
+        2.5 m/s^2 and 40 m/s^3).
+    max_transition_stretch : float
+        A transition is lengthened at most this many times its planned
+        duration to meet the bounds (boundary states that violate them
+        cannot be met by any duration: the best one is kept and counted).
     """
 
     amplitude_fraction: float = 0.5
@@ -97,8 +116,17 @@ class PlannerParams:
     min_transition_s: float = 0.6
     max_transition_speed_m_s: float = 0.8
     order: str = "shortest"
+    max_speed_m_s: float = 0.5
+    max_accel_m_s2: float = 4.0
+    max_jerk_m_s3: float = 100.0
+    max_transition_stretch: float = 4.0
 
     def __post_init__(self) -> None:
+        for name, lo, hi in (("max_speed_m_s", 0.01, 2.0), ("max_accel_m_s2", 0.05, 50.0),
+                             ("max_jerk_m_s3", 0.5, 5000.0), ("max_transition_stretch", 1.0, 20.0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and lo <= v <= hi):
+                raise PlanningError(f"{name} must be in [{lo}, {hi}], got {v!r}")
         if not 0 < self.amplitude_fraction <= 2:
             raise PlanningError(f"amplitude_fraction must be in (0, 2], got {self.amplitude_fraction}")
         if not 0 < self.min_amplitude_m <= self.max_amplitude_m:
@@ -148,6 +176,8 @@ class TransitionSpec:
     duration_s: float
     entry_phase_rad: float
     forcing_transform: np.ndarray
+    peaks: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: planned peak speed, accel., jerk [m/s, m/s^2, m/s^3]
+    within_limits: bool = True  #: False: no duration up to the stretch limit met the bounds (the best was kept)
 
 
 def plan(
@@ -172,8 +202,74 @@ def plan(
     for s in ordered:
         r = float(np.clip(params.amplitude_fraction * s.size_m, params.min_amplitude_m, params.max_amplitude_m))
         k = int(np.argmin(np.abs(np.log(amplitudes / r))))
-        wipes.append(Wipe(s, k, s.centre_m.copy(), r, skill.periodic[k].mp.omega_rad_s))
+        mp = skill.periodic[k].mp
+        wipes.append(Wipe(s, k, s.centre_m.copy(), r, min(mp.omega_rad_s, bounded_omega(mp, r, params,
+                                                                                         PERIODIC_MARGIN))))
     return Plan(tuple(wipes), params)
+
+
+#: A periodic MP is kept this far inside the bounds: a transition ends in its state, and needs some room.
+PERIODIC_MARGIN = 0.85
+#: Phases sampled on a limit cycle to find its peaks.
+_CYCLE_SAMPLES = 720
+#: A transition is planned to this share of the bounds: its sampled peaks miss a little between samples.
+BOUND_SHARE = 0.97
+#: Time step [s] at which a transition's closed form is sampled to find its peaks.
+PEAK_DT_S = 0.004
+
+
+def cycle_peaks(mp, amplitude_m: float, omega_rad_s: float) -> tuple[float, float, float]:
+    """Peak speed, acceleration and jerk [m/s, m/s^2, m/s^3] on ``mp``'s limit cycle at that amplitude and
+    frequency (closed form; jerk by a central difference of the acceleration in phase)."""
+    phases = np.linspace(0.0, 2 * np.pi, _CYCLE_SAMPLES, endpoint=False)
+    _, vel, acc = periodic_state(mp, phases, None, amplitude_m, omega_rad_s)
+    dphi = phases[1] - phases[0]
+    jerk = (np.roll(acc, -1, axis=0) - np.roll(acc, 1, axis=0)) / (2 * dphi) * omega_rad_s
+    return (float(np.linalg.norm(vel, axis=1).max()), float(np.linalg.norm(acc, axis=1).max()),
+            float(np.linalg.norm(jerk, axis=1).max()))
+
+
+def bounded_omega(mp, amplitude_m: float, params: PlannerParams, share: float = 1.0) -> float:
+    """The largest Omega [rad/s] at which ``mp``'s limit cycle of amplitude ``amplitude_m`` stays within
+    ``share`` of the planner's bounds: speed scales with Omega, acceleration with its square, jerk with its
+    cube."""
+    v1, a1, j1 = cycle_peaks(mp, amplitude_m, 1.0)
+    return float(min(share * params.max_speed_m_s / max(v1, 1e-12),
+                     np.sqrt(share * params.max_accel_m_s2 / max(a1, 1e-12)),
+                     np.cbrt(share * params.max_jerk_m_s3 / max(j1, 1e-12))))
+
+
+def trajectory_peaks(tp) -> tuple[float, float, float]:
+    """Peak speed, acceleration and jerk of a planned transition (``transitional_plan.TransitionPlan``), its
+    closed form sampled every :data:`PEAK_DT_S` from start to end (jerk: differences of the acceleration)."""
+    n = max(int(np.ceil(tp.duration_s / PEAK_DT_S)), 4)
+    smp = evaluate_transition(tp, np.linspace(0.0, tp.duration_s, n + 1))
+    jerk = np.diff(smp.acceleration_m_s2, axis=0) / (tp.duration_s / n)
+    return (float(np.linalg.norm(smp.velocity_m_s, axis=1).max()),
+            float(np.linalg.norm(smp.acceleration_m_s2, axis=1).max()), float(np.linalg.norm(jerk, axis=1).max()))
+
+
+def bounded_duration(mp, start, goal, duration_s: float, transform: np.ndarray, params: PlannerParams
+                     ) -> tuple[float, tuple[float, float, float], bool]:
+    """(duration [s], its peaks, whether within the bounds) of a transition lengthened from ``duration_s`` until
+    its peaks are within the planner's bounds, at most ``max_transition_stretch`` times.
+
+    Stretching time by k divides the learned part's speed by k, acceleration by k^2, jerk by k^3; the
+    boundary states do not scale, so each step re-evaluates (a few closed-form samplings, ~1 ms each).
+    """
+    T, longest = duration_s, duration_s * params.max_transition_stretch
+    best = None
+    for _ in range(12):
+        peaks = trajectory_peaks(plan_transition_mp(mp, start, goal, T, transform))
+        excess = max(peaks[0] / params.max_speed_m_s, np.sqrt(peaks[1] / params.max_accel_m_s2),
+                     np.cbrt(peaks[2] / params.max_jerk_m_s3))
+        if best is None or excess < best[2]:
+            best = (T, peaks, excess)
+        if excess <= BOUND_SHARE or T >= longest - 1e-9:
+            break
+        T = min(longest, T * float(np.clip(excess / BOUND_SHARE, 1.05, 2.0)))
+    T, peaks, excess = best
+    return T, peaks, bool(excess <= 1.0)
 
 
 def order_stains(stains: Sequence[Stain], start_m: np.ndarray) -> list[Stain]:
@@ -283,6 +379,7 @@ def plan_transition(
     plan_: Plan,
     wipe: Wipe,
     start: tuple[np.ndarray, np.ndarray, np.ndarray],
+    duration_s: float | None = None,
 ) -> TransitionSpec:
     """The transitional MP from the tool's current state into ``wipe``'s periodic MP.
 
@@ -290,6 +387,11 @@ def plan_transition(
     ----------
     start : (position, velocity, acceleration), arrays of shape (2,)
         The tool's reference state now [m, m/s, m/s^2].
+    duration_s : float, optional
+        Use this duration [s] (found earlier by :func:`bounded_duration`
+        for a state this one is close to, e.g. on a planner thread) instead
+        of searching it now: the search costs a few milliseconds, the rest
+        well under one.
     """
     y0, v0, a0 = (np.asarray(x, dtype=float).reshape(2) for x in start)
     phase = entry_phase(skill, wipe, y0)
@@ -298,7 +400,14 @@ def plan_transition(
     move = goal[0] - y0
     index, transform = _pick_transitional(skill, move)
     duration = transition_duration(skill, index, move, plan_.params)
-    return TransitionSpec(index, (y0, v0, a0), tuple(np.asarray(g, float) for g in goal), duration, phase, transform)
+    goal = tuple(np.asarray(g, float) for g in goal)
+    if duration_s is not None:
+        if not (np.isfinite(duration_s) and duration_s > 0):
+            raise PlanningError(f"duration_s must be a positive number of seconds, got {duration_s!r}")
+        return TransitionSpec(index, (y0, v0, a0), goal, float(duration_s), phase, transform, (np.nan,) * 3, True)
+    duration, peaks, ok = bounded_duration(skill.transitional[index].mp, (y0, v0, a0), goal, duration, transform,
+                                           plan_.params)
+    return TransitionSpec(index, (y0, v0, a0), goal, duration, phase, transform, peaks, ok)
 
 
 def transition_duration(skill: Skill, index: int, move_m: np.ndarray, params: PlannerParams) -> float:
