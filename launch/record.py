@@ -149,11 +149,13 @@ def json_records(key: str, msg: Message, t_ns: int):
     use it, so what Foxglove shows live is what the recording holds.
     """
     if isinstance(msg, CameraFrame):
+        from .scene import camera_frame_id
+
         jpeg = _jpeg_of(msg)
-        stamp = msg.robot_time_ns or msg.stamp_ns
+        stamp = t_ns  # the receipt time, the clock of the scene's transforms and overlays (the robot's is in /info)
         if jpeg is not None:
             yield (key, "foxglove.CompressedImage", lambda: _COMPRESSED_IMAGE_SCHEMA,
-                   {"timestamp": {"sec": stamp // 10**9, "nsec": stamp % 10**9}, "frame_id": msg.camera,
+                   {"timestamp": {"sec": stamp // 10**9, "nsec": stamp % 10**9}, "frame_id": camera_frame_id(msg.camera),
                     "data": base64.b64encode(jpeg).decode("ascii"), "format": "jpeg"}, t_ns)
         info = to_builtins(msg)
         info.pop("data", None)

@@ -8,7 +8,8 @@ written by the recorder into the MCAP file and served live by
 * ``<prefix>/scene/tf`` (``foxglove.FrameTransforms``, every
   :data:`TF_PERIOD_S` of robot time): ``world`` (the robot base) to each
   link of the arm (forward kinematics of the URDF with Pinocchio), to the
-  pad (``tcp``), to the board and to each camera (its optical frame);
+  pad (``tcp``), to the board and to each camera (its optical frame,
+  ``camera_<name>``: :func:`camera_frame_id`);
 * ``<prefix>/scene/robot`` (``foxglove.SceneUpdate``): the arm's visual
   geometry from the URDF (cylinders, boxes, spheres in their link frames,
   frame-locked, so the transforms move them), re-sent every
@@ -24,8 +25,10 @@ written by the recorder into the MCAP file and served live by
 Frames: ``world`` is the robot base frame of ``interfaces/transforms.py``;
 the board frame has its origin at a corner, x along the width, y along the
 height, z out of the board; camera frames are optical (x right, y down, z
-forward). Units: metres, radians; timestamps are the robot's clock (sim
-time in simulation) when known, else the message's stamp.
+forward). Units: metres, radians. Timestamps are when the message was
+received (the recording's log time, the live view's now), so Foxglove finds
+every transform, shape and image on one clock; the robot's own clock stays
+in the cell's messages.
 """
 
 from __future__ import annotations
@@ -60,6 +63,11 @@ _BOARD_WHITE = fm.Color(r=0.95, g=0.95, b=0.95, a=0.6)
 
 def _colour(rgb: tuple[float, float, float], a: float = 0.8) -> fm.Color:
     return fm.Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
+
+
+def camera_frame_id(camera: str) -> str:
+    """The frame of camera ``camera`` (its optical frame) in the scene and on its images."""
+    return f"camera_{camera}"
 
 
 def _stamp(t_ns: int) -> fm.Timestamp:
@@ -171,11 +179,11 @@ class SceneBuilder:
     def on_message(self, key: str, msg, t_ns: int) -> list[tuple[str, fm.FoxgloveMessage]]:
         """The scene messages ``msg`` (received on ``key`` at wall time ``t_ns``) makes due."""
         if isinstance(msg, RobotState):
-            return self._on_state(msg)
+            return self._on_state(msg, t_ns)
         if isinstance(msg, Stains):
-            return self._on_stains(msg)
+            return self._on_stains(msg, t_ns)
         if isinstance(msg, CameraFrame):
-            return self._on_frame(key, msg)
+            return self._on_frame(key, msg, t_ns)
         return []
 
     def _due(self, what: str, t_ns: int) -> bool:
@@ -187,11 +195,11 @@ class SceneBuilder:
 
     # -------------------------------------------------------------------------------------------- the arm
 
-    def _on_state(self, st: RobotState) -> list:
-        t_ns = st.robot_time_ns or st.stamp_ns
-        if self._last_tf_ns is not None and 0 <= t_ns - self._last_tf_ns < TF_PERIOD_S * 1e9:
+    def _on_state(self, st: RobotState, t_ns: int) -> list:
+        robot_ns = st.robot_time_ns or st.stamp_ns  # thinned on the robot's clock (a lock-step cell runs faster)
+        if self._last_tf_ns is not None and 0 <= robot_ns - self._last_tf_ns < TF_PERIOD_S * 1e9:
             return []
-        self._last_tf_ns = t_ns
+        self._last_tf_ns = robot_ns
         out = [(self.topic_tf, self.arm_transforms(np.asarray(st.q_rad, float), t_ns))]
         if self._due("robot", t_ns):
             out.append((self.topic_robot, self.arm_geometry(t_ns)))
@@ -231,8 +239,7 @@ class SceneBuilder:
 
     # ------------------------------------------------------------------------------------ board and stains
 
-    def _on_stains(self, s: Stains) -> list:
-        t_ns = s.robot_time_ns or s.stamp_ns
+    def _on_stains(self, s: Stains, t_ns: int) -> list:
         out = [(self.topic_tf, self.board_transform(s, t_ns)), (self.topic_board, self.board_scene(s, t_ns))]
         for key, frame in self._cameras.items():
             out.append((f"{key}/annotations", self.image_annotations(s, frame, t_ns)))
@@ -281,12 +288,11 @@ class SceneBuilder:
 
     # ------------------------------------------------------------------------------------------- cameras
 
-    def _on_frame(self, key: str, f: CameraFrame) -> list:
+    def _on_frame(self, key: str, f: CameraFrame, t_ns: int) -> list:
         self._cameras[key] = f
-        t_ns = f.robot_time_ns or f.stamp_ns
         p, R = _pose_matrix(f.T_camera_to_world)
         out = [(self.topic_tf, fm.FrameTransforms(transforms=[fm.FrameTransform(
-            timestamp=_stamp(t_ns), parent_frame_id=WORLD, child_frame_id=f.camera,
+            timestamp=_stamp(t_ns), parent_frame_id=WORLD, child_frame_id=camera_frame_id(f.camera),
             translation=fm.Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])), rotation=_quat_xyzw(R))]))]
         out.append((f"{key}/calibration", self.calibration(f, t_ns)))
         return out
@@ -296,7 +302,7 @@ class SceneBuilder:
         """The pinhole of ``f`` (no distortion) in its optical frame, named as the image's frame_id."""
         k = f.intrinsics
         return fm.CameraCalibration(
-            timestamp=_stamp(t_ns), frame_id=f.camera, width=k.width, height=k.height, distortion_model="plumb_bob",
+            timestamp=_stamp(t_ns), frame_id=camera_frame_id(f.camera), width=k.width, height=k.height, distortion_model="plumb_bob",
             D=[0.0] * 5, K=[k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
             R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], P=[k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0,
                                                                 1.0, 0.0])

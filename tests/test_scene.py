@@ -109,8 +109,10 @@ def test_stain_outlines_are_projected_into_the_camera_image():
     assert uv[0] == pytest.approx((320.0, 240.0)) and uv[1] == pytest.approx((370.0, 240.0))
     b = SceneBuilder(KEYS)
     out = _out(b.on_message(CAMERA_KEY, f, 0))
+    tf = out[f"{KEYS.prefix}/scene/tf"].transforms[0]
+    assert tf.child_frame_id == "camera_board" != "board"  # a camera named like the board is not the board
     cal = out[f"{CAMERA_KEY}/calibration"]
-    assert (cal.width, cal.height, cal.frame_id) == (640, 480, "board") and list(cal.K)[:3] == [500.0, 0.0, 320.0]
+    assert (cal.width, cal.height, cal.frame_id) == (640, 480, "camera_board") and list(cal.K)[:3] == [500.0, 0.0, 320.0]
     ann = _out(b.on_message(KEYS.perception_stains, _stains(), 0))[f"{CAMERA_KEY}/annotations"]
     assert len(ann.points) == 2 and len(ann.texts) == 2
     # stain centre (0.3, 0.2) on the board -> world (1.0, 0.0, 0.5): the principal point; extents 0.1 x 0.05 m at
