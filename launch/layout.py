@@ -47,8 +47,8 @@ def cell_layout(keys: Keys | None = None, camera: str = "board") -> dict[str, An
     config = {
         "3D!scene": {
             "followTf": "world", "followMode": "follow-pose",
-            "cameraState": {"distance": 2.2, "perspective": True, "phi": 60, "thetaOffset": 135,
-                            "target": [0.5, 0, 0.4], "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1],
+            "cameraState": {"distance": 2.0, "perspective": True, "phi": 60, "thetaOffset": 90,
+                            "target": [0.55, 0, 0.6], "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1],
                             "fovy": 45, "near": 0.01, "far": 100},
             "scene": {"transforms": {"showLabel": False, "axisScale": 0.5}},
             "transforms": {"frame:world": {"visible": True}},
@@ -69,14 +69,16 @@ def cell_layout(keys: Keys | None = None, camera: str = "board") -> dict[str, An
             "paths": [_series(f"{trace}.force_n", "measured", "#e8552f"),
                       _series(f"{trace}.press_n", "press command", "#4e98e2"),
                       _series(f"{status}.normal_force_n", "status (10 Hz)", "#a0a0a0")],
-            "showLegend": True, "legendDisplay": "floating", "isSynced": True, "xAxisVal": "timestamp",
+            "showLegend": True, "legendDisplay": "left", "sidebarDimension": 150, "isSynced": True,
+            "xAxisVal": "timestamp",
         },
         "Plot!tracking": {
             "title": "Pad in the board frame: reference vs measured [m]",
             "paths": [_series(f"{trace}.ref_x", "x reference", "#4e98e2"), _series(f"{trace}.x", "x", "#1f5f9f"),
                       _series(f"{trace}.ref_y", "y reference", "#f5a742"), _series(f"{trace}.y", "y", "#b06d10"),
                       _series(f"{trace}.h", "height above the board", "#6cbd5a")],
-            "showLegend": True, "legendDisplay": "floating", "isSynced": True, "xAxisVal": "timestamp",
+            "showLegend": True, "legendDisplay": "left", "sidebarDimension": 150, "isSynced": True,
+            "xAxisVal": "timestamp",
         },
         "StateTransitions!phase": {
             "paths": [{"value": f"{status}.phase", "timestampMethod": "receiveTime", "label": "phase"},
@@ -87,13 +89,15 @@ def cell_layout(keys: Keys | None = None, camera: str = "board") -> dict[str, An
             "title": "Joints: position [rad], velocity [rad/s]",
             "paths": [*(_series(f"{state}.q_rad[{i}]", f"q{i + 1}") for i in range(7)),
                       *(_series(f"{state}.dq_rad_s[{i}]", f"dq{i + 1}") for i in range(7))],
-            "showLegend": True, "legendDisplay": "floating", "isSynced": True, "xAxisVal": "timestamp",
+            "showLegend": True, "legendDisplay": "left", "sidebarDimension": 150, "isSynced": True,
+            "xAxisVal": "timestamp",
         },
         "Plot!torques": {
             "title": "Joint torques: commanded vs measured [Nm]",
             "paths": [*(_series(f"{keys.robot_command}.tau_nm[{i}]", f"command {i + 1}") for i in range(7)),
                       *(_series(f"{state}.tau_nm[{i}]", f"measured {i + 1}") for i in range(7))],
-            "showLegend": True, "legendDisplay": "floating", "isSynced": True, "xAxisVal": "timestamp",
+            "showLegend": True, "legendDisplay": "left", "sidebarDimension": 150, "isSynced": True,
+            "xAxisVal": "timestamp",
         },
     }
     mosaic = {

@@ -178,13 +178,15 @@ def _trace_rows(key: str, msg: ControllerTrace, t_ns: int):
 
     def schema() -> dict:
         return {"type": "object", "title": TRACE_PLOT_SCHEMA_NAME,
-                "properties": {"tick": {"type": "integer"}, **{c: {"type": ["number", "null"]} for c in cols}}}
+                "properties": {"tick": {"type": "integer"}, **{c: {"type": "number"} for c in cols}}}
 
     t = rows[:, cols.index("t_s")] if "t_s" in cols else None
     start = (-msg.first_tick) % TRACE_PLOT_EVERY
     for k in range(start, msg.n_rows, TRACE_PLOT_EVERY):
+        # a value that is not finite is left out (a gap in the plot): JSON has no NaN, and a plain "number" type
+        # is what Foxglove / Lichtblick build a plottable field from (a ["number", "null"] union is not)
         row = {"tick": msg.first_tick + k}
-        row.update(zip(cols, (float(v) if np.isfinite(v) else None for v in rows[k])))
+        row.update((c, float(v)) for c, v in zip(cols, rows[k]) if np.isfinite(v))
         # each row at its own time: the batch's receipt less how much earlier the tick was (controller clock)
         back_ns = int((t[-1] - t[k]) * 1e9) if t is not None and np.isfinite(t[-1] - t[k]) else 0
         yield key + "/plot", TRACE_PLOT_SCHEMA_NAME, schema, row, max(t_ns - max(back_ns, 0), 0)
