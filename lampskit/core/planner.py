@@ -229,11 +229,25 @@ def cycle_peaks(mp, amplitude_m: float, omega_rad_s: float) -> tuple[float, floa
             float(np.linalg.norm(jerk, axis=1).max()))
 
 
+_UNIT_PEAKS: dict[int, tuple] = {}  # id(mp) -> (mp, its peaks at r = 1 m, Omega = 1 rad/s)
+
+
+def unit_cycle_peaks(mp) -> tuple[float, float, float]:
+    """:func:`cycle_peaks` at amplitude 1 m and Omega 1 rad/s, computed once per MP (the limit cycle scales
+    linearly with r: peaks at r are r times these)."""
+    hit = _UNIT_PEAKS.get(id(mp))
+    if hit is None or hit[0] is not mp:  # the MP itself is kept, so its id is not reused meanwhile
+        if len(_UNIT_PEAKS) > 256:
+            _UNIT_PEAKS.clear()
+        hit = _UNIT_PEAKS[id(mp)] = (mp, cycle_peaks(mp, 1.0, 1.0))
+    return hit[1]
+
+
 def bounded_omega(mp, amplitude_m: float, params: PlannerParams, share: float = 1.0) -> float:
     """The largest Omega [rad/s] at which ``mp``'s limit cycle of amplitude ``amplitude_m`` stays within
     ``share`` of the planner's bounds: speed scales with Omega, acceleration with its square, jerk with its
-    cube."""
-    v1, a1, j1 = cycle_peaks(mp, amplitude_m, 1.0)
+    cube, each linearly with the amplitude."""
+    v1, a1, j1 = (amplitude_m * x for x in unit_cycle_peaks(mp))
     return float(min(share * params.max_speed_m_s / max(v1, 1e-12),
                      np.sqrt(share * params.max_accel_m_s2 / max(a1, 1e-12)),
                      np.cbrt(share * params.max_jerk_m_s3 / max(j1, 1e-12))))
