@@ -132,7 +132,7 @@ class Cell:
         from launch.cli import _plan_cell
 
         self.out = out
-        self.a = SimpleNamespace(robot="sim", seed=0, stains=3, mode=mode, robot_id=f"f{free_port()}",
+        self.a = SimpleNamespace(robot="sim", foxglove=None, seed=0, stains=3, mode=mode, robot_id=f"f{free_port()}",
                                  port_base=None, skill=str(skill), max_duration=0.0, quiet=True)
         self.cell = _plan_cell(self.a, COMPOSE, {}, Path(skill), out)
         self.services = {s.name: s for s in self.cell.services}

@@ -21,9 +21,9 @@ def _feed_stains(core: ControllerCore, sim: SimCore) -> None:
     core.executor.set_stains(board, stains)
 
 
-def _run(learned_skill, limits: dict) -> tuple[ControllerCore, np.ndarray, np.ndarray]:
+def _run(learned_skill, limits: dict, planner: dict | None = None) -> tuple[ControllerCore, np.ndarray, np.ndarray]:
     """(controller, remaining dirt per stain, peak |dq| / dq_max per joint) of one gravity-compensated run."""
-    params = ControllerParams.from_table({"trace_ticks": 30_000, "limits": limits})
+    params = ControllerParams.from_table({"trace_ticks": 30_000, "limits": limits, "planner": planner or {}})
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
     core = ControllerCore(params, learned_skill)
     dq_max = RobotModel().limits.dq_max
@@ -46,12 +46,14 @@ def _run(learned_skill, limits: dict) -> tuple[ControllerCore, np.ndarray, np.nd
 
 @pytest.mark.slow
 def test_the_default_skill_keeps_every_joint_below_the_real_robot_adapters_speed_guard(learned_skill):
-    """The transitions ask for up to 0.64 m/s at the pad; unscaled, that drives joint A3 to ~0.9 of its speed limit,
-    which the lbr adapter's guard (0.8) refuses. The speed override slows the skill where it would ask a joint for
-    more than 0.6 of its limit, without stopping it: the board is still cleaned."""
+    """Planned without kinematic bounds the transitions ask for up to 0.64 m/s at the pad; unscaled, that drives
+    joint A3 to ~0.9 of its speed limit, which the lbr adapter's guard (0.8) refuses. The planner's bounds and the
+    speed override (it slows the skill where it would ask a joint for more than 0.6 of its limit, without
+    stopping it) keep every joint below the guard, and the board is still cleaned."""
     guard = LbrParams().max_joint_speed_scale
-    _, _, unbounded = _run(learned_skill, {"reference_joint_speed_share": 10.0, "joint_speed_brake_1_s": 0.0})
-    assert unbounded.max() > guard, f"the baseline without override and brake: {np.round(unbounded, 2)}"
+    loose = {"max_speed_m_s": 2.0, "max_accel_m_s2": 50.0, "max_jerk_m_s3": 5000.0}
+    _, _, unbounded = _run(learned_skill, {"reference_joint_speed_share": 10.0, "joint_speed_brake_1_s": 0.0}, loose)
+    assert unbounded.max() > guard, f"the baseline without bounds, override and brake: {np.round(unbounded, 2)}"
     core, remaining, peak = _run(learned_skill, {})
     assert core.executor.phase == "DONE", core.executor.reason
     assert max(remaining) < 0.05, remaining
