@@ -26,7 +26,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from controller.planner_thread import SWITCH_INTERVAL_S, PlannerThread  # noqa: E402
-from lampskit.core.planner import EXACT_ORDER_MAX, Stain, order_stains, plan  # noqa: E402
+from lampskit.core.planner import (EXACT_ORDER_MAX, Plan, PlannerParams, Stain, order_stains, plan,  # noqa: E402
+                                   plan_transition)
 from lampskit.learn.learn import bundled_skill  # noqa: E402
 
 SIZES = (5, 7, 10, 30, 100)
@@ -115,6 +116,24 @@ def ticks_during_replan(skill, stains, start, threaded: bool, ticks_after: int =
     return {"worst_tick_ms": worst * 1e3, "periods": periods - ticks_after}
 
 
+def transition_costs(skill, boards: int) -> dict[str, list[float]]:
+    """Wall time [ms] of planning each transition of random plans: bounded search, given duration, no bounds."""
+    loose = PlannerParams(max_speed_m_s=2.0, max_accel_m_s2=50.0, max_jerk_m_s3=5000.0)
+    rest = (np.zeros(2),) * 3
+    out: dict[str, list[float]] = {"search": [], "given": [], "unbounded": []}
+    for b in range(boards):
+        rng = np.random.default_rng(7000 + b)
+        stains = [Stain(i, rng.uniform([0.05, 0.05], [0.65, 0.4]), float(rng.uniform(0.03, 0.22)))
+                  for i in range(int(rng.integers(1, 7)))]
+        p = plan(skill, stains, np.zeros(2))
+        for w in p.wipes:
+            dt, spec = _timed(lambda: plan_transition(skill, p, w, rest))
+            out["search"].append(dt)
+            out["given"].append(_timed(lambda: plan_transition(skill, p, w, rest, spec.duration_s))[0])
+            out["unbounded"].append(_timed(lambda: plan_transition(skill, Plan(p.wipes, loose), w, rest))[0])
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2 boards per size, no baseline at 100 stains")
@@ -169,8 +188,19 @@ def main() -> int:
         print(f"| {r['stains']} stains | {np.median(r['inline_ms']):.2f} / {max(r['inline_ms']):.2f} | "
               f"{np.median(r['thread_ms']):.2f} / {max(r['thread_ms']):.2f} | {int(np.median(r['thread_periods']))} |")
     print("\nworst tick: from the start of its 1 ms period to the end of its control law (budget 1 ms)")
+
+    transitions = transition_costs(skill, 8 if a.quick else 40)
+    print("\n| planning one transition into a stain (random boards of 1-6 stains of 3-22 cm, from rest) | p50 / max "
+          "[ms] |\n|---|---:|")
+    for name, label in (("search", "with the search for a duration within the kinematic bounds (lock-step: in the "
+                                   "tick; real time: on the planner thread)"),
+                        ("given", "with the duration given (real time: the exit tick)"),
+                        ("unbounded", "baseline: the duration as demonstrated, no bounds (the previous planner)")):
+        t = transitions[name]
+        print(f"| {label} | {np.median(t):.2f} / {max(t):.2f} |")
     if a.json:
-        a.json.write_text(json.dumps({"rows": rows, "boards": boards, "replan": replan}, indent=1))
+        a.json.write_text(json.dumps({"rows": rows, "boards": boards, "replan": replan,
+                                      "transitions_ms": transitions}, indent=1))
     return 0
 
 
