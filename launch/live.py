@@ -23,13 +23,10 @@ import argparse
 import base64
 import json
 import logging
-import signal
 import sys
 import threading
 import time
 from collections import Counter, deque
-
-from lampskit.errors import LampsError
 
 log = logging.getLogger(__name__)
 
@@ -142,8 +139,7 @@ class LiveView:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
-    from interfaces.priority import BACKGROUND, set_service_priority
+    from interfaces.config import add_zenoh_options
 
     p = argparse.ArgumentParser(prog="lamps foxglove", description=(
         "Serve the running cell to the Foxglove app over its WebSocket protocol (open ws://HOST:PORT in the app; "
@@ -168,21 +164,12 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--port must be in 1..65535, got {a.port}")
     if not a.max_rate > 0:
         p.error(f"--max-rate must be positive, got {a.max_rate}")
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    try:
-        settings = zenoh_with_options(load_config(a.config).zenoh, a)
-        set_service_priority(BACKGROUND)
-        from interfaces.session import ServiceNode
+    from .background_node import open_background_node
 
-        node = ServiceNode("foxglove", settings).__enter__()
-    except LampsError as exc:
-        print(f"lamps foxglove: error: {exc}", file=sys.stderr)
+    opened = open_background_node("lamps foxglove", "foxglove", a)
+    if opened is None:
         return 1
-    except Exception as exc:  # zenoh's own error type for a bad endpoint
-        print(f"lamps foxglove: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-        return 1
+    node, settings, stop = opened
     try:
         try:
             view = LiveView(node.session, settings.keys, a.host, a.port, a.max_rate)

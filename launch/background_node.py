@@ -1,0 +1,40 @@
+"""Opening the Zenoh node of a background service (the recorder, the live view): shared start-up steps.
+
+Stop on SIGTERM / Ctrl-C (an Event), background CPU priority, the settings
+from ``--config`` and the Zenoh options, and the node; a failure is printed
+with the command's name and None returned, so the command exits 1.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+
+from lampskit.errors import LampsError
+
+
+def open_background_node(prog: str, service: str, args) -> tuple[object, object, threading.Event] | None:
+    """(node, settings, stop event) for ``service``, or None after printing ``<prog>: error: ...``.
+
+    args : parsed options with ``config`` and the options of ``interfaces.config.add_zenoh_options``.
+    """
+    from interfaces.config import load_config, zenoh_with_options
+    from interfaces.priority import BACKGROUND, set_service_priority
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        settings = zenoh_with_options(load_config(args.config).zenoh, args)
+        set_service_priority(BACKGROUND)
+        from interfaces.session import ServiceNode
+
+        node = ServiceNode(service, settings).__enter__()
+    except LampsError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return None
+    except Exception as exc:  # zenoh's own error type for a bad endpoint
+        print(f"{prog}: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return None
+    return node, settings, stop
