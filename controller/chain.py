@@ -9,7 +9,12 @@
 * WIPE j: the periodic MP anchored at the stain's centre and scaled to its
   size, until the stain is done (kappa, vanished, or one pass of
   ``wipe_timeout_s``); a stain that moves meanwhile moves the anchor
-  through the MP's ramp (:meth:`MpChain.follow_stain`).
+  through the MP's ramp (:meth:`MpChain.adapt`). With adaptive wiping
+  (:attr:`PlannerParams.adaptive`) the MP follows the ink that remains:
+  anchor at its centre, r shrinking with its extent, the stroke stretched
+  and turned to its shape, Omega as fast as the bounds allow at that r
+  (:func:`~lampskit.core.planner.adapted_wipe`), every change through the
+  runner's critically damped ramps.
 * LEAVE j: re-planned over the stains open *now* (appeared, vanished or
   done ones included), the periodic MP runs on until its phase heads for
   the next stain (:func:`~lampskit.core.planner.exit_phase_delay`).
@@ -39,7 +44,7 @@ import numpy as np
 
 from lampskit.core.periodic import periodic_state
 from lampskit.core.periodic_runner import PeriodicRunner
-from lampskit.core.planner import (Plan, PlannerParams, TransitionSpec, Wipe, exit_phase_delay, plan,
+from lampskit.core.planner import (Plan, PlannerParams, TransitionSpec, Wipe, adapted_wipe, exit_phase_delay, plan,
                                    plan_transition)
 from lampskit.core.skill import Skill
 from lampskit.core.transitional_runner import TransitionalRunner
@@ -49,6 +54,11 @@ from .executor_types import Setpoint
 from .stain_book import StainBook
 
 log = logging.getLogger(__name__)
+
+#: Adaptive wiping re-targets the periodic MP at most this often [s] (perception reports ~10-30 times a second)...
+ADAPT_EVERY_S = 0.5
+#: ...and only for a change of the anchor [m], of r or Omega (relative) or of the stroke (Frobenius) above these.
+ADAPT_MIN_MOVE_M, ADAPT_MIN_RATIO, ADAPT_MIN_STROKE = 0.003, 0.08, 0.08
 
 
 def _bounded_duration_of(skill: Skill, plan_: Plan, wipe: Wipe, start) -> float:
@@ -90,7 +100,7 @@ class MpChain:
     Attributes
     ----------
     wipe : Wipe or None
-        The stain being wiped or transitioned to.
+        The stain being wiped or transitioned to (while wiping adaptively: the running targets).
     step : ChainStep
     error : str
         Why the last :attr:`ChainResult.ERROR`.
@@ -114,6 +124,8 @@ class MpChain:
         self._pending: Future | None = None
         self._duration: Future | None = None  # the next transition's bounded duration, from the planner thread
         self._wipe_t = 0.0
+        self._planned: Wipe | None = None  # the wipe as planned (adaptive wiping never exceeds its r)
+        self._adapted_at = -np.inf
         self._on_step = {ChainStep.TRANSIT: self._on_transit, ChainStep.WIPE: self._on_wipe,
                          ChainStep.LEAVE: self._on_leave, ChainStep.REPLAN: self._on_replan}
 
@@ -143,12 +155,36 @@ class MpChain:
         reference.xy[:], reference.v_xy[:], reference.a_xy[:] = r.position_m, r.velocity_m_s, r.acceleration_m_s2
         return result
 
-    def follow_stain(self, book: StainBook) -> ChainResult | None:
-        """Re-anchor the periodic MP (through its ramp) at the wiped stain if it moved over 2 mm; None if not."""
-        s = book.stains.get(self.wipe.stain.id)
-        if s is None or not np.linalg.norm(s.centre_m - self._runner.anchor_m) > 0.002:
+    def adapt(self, book: StainBook, clock_s: float) -> ChainResult | None:
+        """A fresh view while wiping at ``clock_s`` [s]: adaptive wiping re-targets the periodic MP at the ink
+        that remains (see the module docstring); fixed wiping re-anchors it (through its ramp) at the stain's
+        centre if that moved over 2 mm. None if nothing changed."""
+        if self.step != ChainStep.WIPE:
             return None
-        return self._checked(self._runner.set_targets(anchor_m=s.centre_m))
+        s = book.stains.get(self.wipe.stain.id)
+        if s is None:
+            return None
+        if not self.planner.adaptive:
+            if not np.linalg.norm(s.centre_m - self._runner.anchor_m) > 0.002:
+                return None
+            return self._checked(self._runner.set_targets(anchor_m=s.centre_m))
+        if s.ink is None or clock_s - self._adapted_at < ADAPT_EVERY_S:
+            return None
+        new, old = adapted_wipe(self.skill, self._planned, self.wipe, s.ink, self.planner), self.wipe
+        eye = np.eye(2)
+        stroke_change = np.linalg.norm((eye if new.stroke is None else new.stroke)
+                                       - (eye if old.stroke is None else old.stroke))
+        if not (np.linalg.norm(new.anchor_m - old.anchor_m) > ADAPT_MIN_MOVE_M
+                or abs(new.amplitude_m / old.amplitude_m - 1.0) > ADAPT_MIN_RATIO
+                or abs(new.omega_rad_s / old.omega_rad_s - 1.0) > ADAPT_MIN_RATIO
+                or stroke_change > ADAPT_MIN_STROKE):
+            return None
+        self._adapted_at = clock_s
+        self.counters["adaptations"] += 1
+        self.wipe = new
+        stroke = new.stroke if new.stroke is not None else (eye if old.stroke is not None else None)
+        return self._checked(self._runner.set_targets(anchor_m=new.anchor_m, amplitude_m=new.amplitude_m,
+                                                      omega_rad_s=new.omega_rad_s, stroke=stroke))
 
     # ------------------------------------------------------------------ one handler per step
     def _on_transit(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
@@ -213,10 +249,12 @@ class MpChain:
         try:
             runner = PeriodicRunner(self.skill.periodic[wipe.periodic_index].mp, wipe.anchor_m, wipe.amplitude_m,
                                     wipe.omega_rad_s, entry.entry_phase_rad, start_position_m=entry.goal[0],
-                                    start_velocity_m_s=entry.goal[1])
+                                    start_velocity_m_s=entry.goal[1], stroke=wipe.stroke)
         except PlanningError as exc:
             return self._failed(f"cannot start the periodic MP {wipe.periodic_index} on stain {wipe.stain.id}: {exc}")
         self._runner = runner
+        self._planned = wipe
+        self._adapted_at = -np.inf
         self._wipe_t = 0.0
         self._leave_at = np.inf
         self.step = ChainStep.WIPE
@@ -244,7 +282,7 @@ class MpChain:
         """Re-plan over the stains open now (in the tick, or handed to :attr:`background`); keep wiping until
         the phase heads for the next one."""
         current = self.wipe.stain.id
-        open_stains = [s for s in book.open_stains(clock_s) if s.id != current]
+        open_stains = [s for s in book.open_stains(clock_s, by_ink=self.planner.adaptive) if s.id != current]
         self._next = None
         if not open_stains:
             return self._leave_towards(runner, None)
@@ -295,7 +333,7 @@ class MpChain:
             # the state at the exit phase, on the limit cycle the runner follows: what the transition starts from
             mp = self.skill.periodic[self.wipe.periodic_index].mp
             exit_state = periodic_state(mp, runner.phase_rad + delay, runner.anchor_m.copy(), runner.amplitude_m,
-                                        runner.omega_rad_s)
+                                        runner.omega_rad_s, None if self.wipe.stroke is None else runner.stroke)
             self._duration = self.background.submit(_bounded_duration_of, self.skill, self._plan, self._next,
                                                     tuple(np.array(x) for x in exit_state))
         return ChainResult.WORKING

@@ -150,7 +150,7 @@ class SkillExecutor:
         self.stains_fresh = True
         if self.book.update(stains, self.clock_s) and self.phase in _ACTIVE:
             self.counters["stain_set_changes"] += 1
-        moved = self.chain.follow_stain(self.book) if self.phase == Phase.WIPE else None
+        moved = self.chain.adapt(self.book, self.clock_s) if self.phase == Phase.WIPE else None
         if moved is not None:
             self.counters["anchor_moves"] += 1
             if moved == ChainResult.ERROR:
@@ -365,7 +365,7 @@ class SkillExecutor:
 
     def _start_approach_or_done(self) -> None:
         """Plan over the open stains and fly to the first; DONE if nothing is left to wipe."""
-        open_stains = self.book.open_stains(self.clock_s)
+        open_stains = self.book.open_stains(self.clock_s, by_ink=self.planner.adaptive)
         self._resume_after_lift = False
         if not open_stains:
             self._done()

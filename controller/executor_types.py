@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lampskit.core.planner import Stain
+
 
 @dataclass(frozen=True)
 class BoardPose:
@@ -45,12 +47,17 @@ class BoardPose:
 
 @dataclass(frozen=True)
 class StainState:
-    """One stain as the executor knows it: id, centre (2,) in the board plane [m], size [m], kappa (done)."""
+    """One stain as the executor knows it: id, centre (2,) in the board plane [m], size [m] (along its main axis),
+    kappa (done); width [m] across the main axis (0: not known), main axis [rad] from board x; ``ink``: the shape
+    of the ink that remains of it (centre, size, width, axis; None: not reported)."""
 
     id: int
     centre_m: np.ndarray
     size_m: float
     kappa: bool
+    width_m: float = 0.0
+    axis_rad: float = 0.0
+    ink: Stain | None = None
 
 
 @dataclass

@@ -31,13 +31,14 @@ from collections import Counter
 
 import numpy as np
 
-from interfaces.messages import (HOLD, ControllerStatus, ControllerTrace, Estop, RobotState, SimTruth, Stains,
-                                 TorqueCommand)
+from interfaces.messages import (HOLD, ControllerStatus, ControllerTrace, Estop, RobotState, SimTruth,
+                                 StainObservation, Stains, TorqueCommand)
 from interfaces.loop_hygiene import LoopHygiene
 from interfaces.loop_stats import LoopStats
 from interfaces.session import ServiceNode
 from interfaces.transforms import transform_from_pose
 
+from lampskit.core.planner import Stain
 from lampskit.errors import PlanningError
 
 from .control.limits import load_scale
@@ -388,7 +389,7 @@ class ControllerService:
             self.counters["stains_unknown"] += 1
             return None
         board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), msg.board_size_m)
-        stains = [StainState(s.id, np.asarray(s.centre_board_m, float), s.size_m, s.kappa) for s in msg.stains]
+        stains = [_stain_state(s) for s in msg.stains]
         return (board, stains) if self._stains_ok(stains) else None
 
     def _stains_ok(self, stains: list[StainState]) -> bool:
@@ -478,3 +479,11 @@ class ControllerService:
         self.node.publish(self.keys.controller_trace, ControllerTrace(
             seq=self._trace_seq, stamp_ns=time.monotonic_ns(), columns=list(TRACE_COLUMNS), first_tick=first,
             n_rows=len(rows), data=rows.astype("<f8").tobytes(), dropped=dropped))
+
+
+def _stain_state(s: StainObservation) -> StainState:
+    """The executor's view of one observed stain: centre, size, width and axis, and the ink left (if reported)."""
+    ink = None
+    if len(s.ink_centre_board_m) == 2 and s.ink_size_m > 0:
+        ink = Stain(s.id, np.asarray(s.ink_centre_board_m, float), s.ink_size_m, s.ink_width_m, s.ink_axis_board_rad)
+    return StainState(s.id, np.asarray(s.centre_board_m, float), s.size_m, s.kappa, s.width_m, s.axis_board_rad, ink)

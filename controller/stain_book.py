@@ -63,9 +63,14 @@ class StainBook:
             return True
         return False
 
-    def open_stains(self, clock_s: float) -> list[Stain]:
-        """The stains to wipe at ``clock_s`` [s]: without kappa, not given up, not waiting for a recheck."""
-        return [Stain(s.id, s.centre_m, s.size_m) for s in self.stains.values()
+    def open_stains(self, clock_s: float, by_ink: bool = False) -> list[Stain]:
+        """The stains to wipe at ``clock_s`` [s]: without kappa, not given up, not waiting for a recheck.
+
+        ``by_ink``: a stain whose remaining ink perception reports is given by that ink's shape (centre, size,
+        width, axis), not the whole stain's (adaptive wiping: a stain wiped before is planned for what is left).
+        """
+        return [(s.ink if by_ink and s.ink is not None else Stain(s.id, s.centre_m, s.size_m, s.width_m, s.axis_rad))
+                for s in self.stains.values()
                 if not s.kappa and s.id not in self._given_up
                 and clock_s - self._left_at.get(s.id, -math.inf) >= self.recheck_s]
 

@@ -276,7 +276,12 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
     (robot base) frame; size_m: larger extent [m]; extent_board_m (2,) along
     board x and y [m]; remaining: dirt left relative to the first sighting,
     visible: fraction of the stain not occluded, both in [0, 1]; kappa:
-    wiping of this stain is complete.
+    wiping of this stain is complete. Optional (older senders leave them
+    out): width_m across the main axis [m] (0: not known), axis_board_rad
+    the main axis from board x [rad]; the ink that remains of the stain
+    (what wiping has not lifted yet, hidden parts as last seen):
+    ink_centre_board_m (2,) (empty: none left or not known), ink_size_m,
+    ink_width_m [m], ink_axis_board_rad [rad].
     """
 
     id: int
@@ -287,6 +292,12 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
     remaining: float
     visible: float
     kappa: bool
+    width_m: float = 0.0
+    axis_board_rad: float = 0.0
+    ink_centre_board_m: list[float] = msgspec.field(default_factory=list)
+    ink_size_m: float = 0.0
+    ink_width_m: float = 0.0
+    ink_axis_board_rad: float = 0.0
 
     def __post_init__(self) -> None:
         _finite("centre_board_m", self.centre_board_m, 2)
@@ -295,6 +306,15 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
         _finite("size_m", (self.size_m,))
         if self.size_m <= 0:
             raise ValueError(f"size_m must be positive, got {self.size_m}")
+        _finite("width_m, axis_board_rad, ink_size_m, ink_width_m, ink_axis_board_rad",
+                (self.width_m, self.axis_board_rad, self.ink_size_m, self.ink_width_m, self.ink_axis_board_rad))
+        if self.width_m < 0 or self.ink_width_m < 0 or self.ink_size_m < 0:
+            raise ValueError(f"widths and ink_size_m must be >= 0, got {self.width_m}, {self.ink_width_m}, "
+                             f"{self.ink_size_m}")
+        if self.ink_centre_board_m:
+            _finite("ink_centre_board_m", self.ink_centre_board_m, 2)
+            if self.ink_size_m <= 0:
+                raise ValueError("ink_size_m must be positive when ink_centre_board_m is given")
         for name, v in (("remaining", self.remaining), ("visible", self.visible)):
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {v!r}")

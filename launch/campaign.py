@@ -1,11 +1,13 @@
 """A campaign of seeded cells: many boards run whole, several at once, summed up in a table and plots.
 
-``lamps campaign --seeds 0-49 --stains 1-6 --boards wall,table,config/boards/tilted.toml``
+``lamps campaign --seeds 0-49 --stains 1-6 --boards wall,table,config/boards/tilted.toml --wiping fixed,adaptive``
 
 Cell k runs seed ``s`` (the k-th of ``--seeds``) with ``lo + s mod (hi - lo + 1)``
 stains of ``--stains lo-hi`` on board ``boards[s mod len(boards)]``, so every board
 and every stain count is covered in turn and a cell is the same whatever else
-the campaign holds. Each cell is ``lamps up`` in lock-step (deterministic for
+the campaign holds; each seed runs once per ``--wiping`` mode (``fixed``: the
+periodic MP set once per stain; ``adaptive``: shaped to the stain and
+following its ink, ``[controller.planner] adaptive``). Each cell is ``lamps up`` in lock-step (deterministic for
 its seed) with the skill learned once, in its own run folder under
 ``OUT/cells/``; up to ``--jobs`` run at once, each on its own ports.
 
@@ -18,9 +20,12 @@ any path through them) at that speed. A cell *succeeds* when it removed at
 least :data:`CLEAN_SHARE` of its dirt and nothing faulted.
 
 Writes ``campaign.json`` (every cell, the summary), ``campaign.md`` (the table
-per board and over all) and ``campaign.png`` (robot time against the lower
-bound, dirt removed per cell), each atomically. Exit 0 when every cell left a
-report (whatever it shows), 1 with the reason otherwise.
+per board and wiping mode, and over all) and ``campaign.png`` (robot time
+against the lower bound, dirt removed per cell), each atomically. Exit 0 when
+every cell left a report (whatever it shows), 1 with the reason otherwise.
+``--summarize DIR [DIR ...]`` runs nothing: it reads the cells of earlier
+campaigns (their ``campaign.json`` and each cell's ``report.json`` as it is
+now) and writes one table of them all into ``--out``.
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ FAULT_PHASES = ("FAULT", "ESTOP", "CELL", "SERVICE")
 #: the cell PORT_SLOTS * PORT_STRIDE up. All below the kernel's ephemeral range (32768).
 PORT_BASES, PORT_SLOTS, PORT_STRIDE = (20000, 23000, 26000), 100, 10
 BOARD_NAMES = ("wall", "table", "vertical", "horizontal")
+WIPINGS = ("fixed", "adaptive")
 log = logging.getLogger(__name__)
 
 
@@ -62,15 +68,16 @@ class CampaignError(LampsError):
 
 @dataclass(frozen=True)
 class Cell:
-    """One seeded board: ``seed``, ``stains`` (count), ``board`` (preset name or TOML file)."""
+    """One seeded board: ``seed``, ``stains`` (count), ``board`` (preset name or TOML file), ``wiping`` mode."""
 
     seed: int
     stains: int
     board: str
+    wiping: str = "fixed"
 
     @property
     def name(self) -> str:
-        return f"{Path(self.board).stem}-s{self.seed}-n{self.stains}"
+        return f"{Path(self.board).stem}-s{self.seed}-n{self.stains}" + ("-adaptive" if self.wiping == "adaptive" else "")
 
 
 # ---------------------------------------------------------------------------------------------- pure parts
@@ -90,11 +97,16 @@ def parse_range(text: str, what: str) -> list[int]:
     return sorted(out)
 
 
-def cells_of(seeds: list[int], stains: list[int], boards: list[str]) -> list[Cell]:
-    """The campaign's cells: seed s gets ``stains[s mod len]`` stains on ``boards[s mod len]``."""
-    if not seeds or not stains or not boards:
-        raise CampaignError("a campaign needs at least one seed, one stain count and one board")
-    return [Cell(s, stains[s % len(stains)], boards[s % len(boards)]) for s in seeds]
+def cells_of(seeds: list[int], stains: list[int], boards: list[str], wipings: tuple[str, ...] = ("fixed",)
+             ) -> list[Cell]:
+    """The campaign's cells: seed s gets ``stains[s mod len]`` stains on ``boards[s mod len]``, once per wiping
+    mode."""
+    if not seeds or not stains or not boards or not wipings:
+        raise CampaignError("a campaign needs at least one seed, one stain count, one board and one wiping mode")
+    bad = [w for w in wipings if w not in WIPINGS]
+    if bad:
+        raise CampaignError(f"--wiping: {bad[0]!r} is not one of {WIPINGS}")
+    return [Cell(s, stains[s % len(stains)], boards[s % len(boards)], w) for s in seeds for w in wipings]
 
 
 def mst_length_m(points: np.ndarray) -> float:
@@ -165,8 +177,9 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     to the lower bound (median), peak force and jerk (max), faults (sum), cells without a report."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in rows:
-        groups.setdefault(Path(r["board"]).stem, []).append(r)
-        groups.setdefault("all", []).append(r)
+        wiping = r.get("wiping", "fixed")
+        groups.setdefault(f"{Path(r['board']).stem} {wiping}", []).append(r)
+        groups.setdefault(f"all {wiping}", []).append(r)
     out = {}
     for name, rs in groups.items():
         ran = [r for r in rs if r["outcome"] != "no report"]
@@ -193,7 +206,7 @@ def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], com
             "| time / lower bound median (max) | peak contact force max [N] | peak jerk max [m/s^3] | faults |"
             " no report |\n|---|---:|---:|---|---:|---|---:|---:|---:|---:|")
     lines = [head]
-    for name in sorted(summary, key=lambda n: (n == "all", n)):
+    for name in sorted(summary, key=lambda n: (n.startswith("all "), n.split()[-1], n)):
         s = summary[name]
         lines.append(f"| {name} | {s['runs']} | {s['success_rate']:.0%} | {s['dirt_removed_median']:.1%} / "
                      f"{s['dirt_removed_min']:.1%} | {s['robot_time_median_s']:.1f} | {s['time_over_bound_median']:.2f} "
@@ -248,8 +261,9 @@ def _run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
                 "--port-base", str(base + attempt * PORT_SLOTS * PORT_STRIDE), "--max-duration", str(max_duration_s),
                 "-q"]
         log.info("cell %s: %s", cell.name, " ".join(argv[2:]))
-        r = subprocess.run(argv, capture_output=True, text=True, env={**os.environ, "MPLBACKEND": "Agg"},
-                           timeout=max_duration_s + 120)
+        env = {**os.environ, "MPLBACKEND": "Agg",
+               "LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true" if cell.wiping == "adaptive" else "false"}
+        r = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=max_duration_s + 120)
         report = run_dir / "report.json"
         if report.is_file():
             return json.loads(report.read_text()), str(run_dir), ""
@@ -331,6 +345,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--boards", default="wall,table",
                     help="boards, cycled over the seeds: wall, table or a board TOML file (lamps up --board), "
                          "comma-separated (default wall,table)")
+    ap.add_argument("--wiping", default="fixed",
+                    help="wiping modes, each seed runs once per mode: fixed, adaptive or fixed,adaptive (default fixed)")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="cells at once (default: the CPUs)")
     ap.add_argument("--skill", default=None, help="skill file (default: learn the bundled demo once)")
     ap.add_argument("--max-duration", type=float, default=600.0, help="give a cell up after S s wall (default 600)")
@@ -361,7 +377,8 @@ def main(argv: list[str] | None = None) -> int:
             if not skill.is_file():
                 raise CampaignError(f"--skill {a.skill}: no such file")
         out = Path(a.out or f"runs/campaign-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
-        cells = cells_of(seeds, stains, boards)
+        wipings = tuple(w.strip() for w in a.wiping.split(",") if w.strip())
+        cells = cells_of(seeds, stains, boards, wipings)
         command = "lamps campaign " + " ".join(argv if argv is not None else sys.argv[1:])
         result = run_campaign(cells, out, a.jobs, skill, a.max_duration, command)
     except LampsError as exc:

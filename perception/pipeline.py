@@ -111,7 +111,7 @@ class Perception:
         self.grid = BoardGrid(est.size_m, self.p.board.resolution_m)
         looked_at = self.grid.looked_at(self.p.board.edge_margin_m, MARKER_MARGIN_M)
         self.classifier = InkClassifier(self.p.ink, looked_at, self.p.board.resolution_m)
-        self.tracker = StainTracker(self.grid, self.p.stains, self.p.kappa)
+        self.tracker = StainTracker(self.grid, self.p.stains, self.p.kappa, self.p.ink.stain_level)
 
     def _message(self, est: BoardEstimate, frame: Frame, lost: bool) -> Stains:
         T = est.T_board_to_world
@@ -121,11 +121,17 @@ class Perception:
                 continue
             c = tr.shape.centre_m
             world = T[:3, :3] @ np.array([c[0], c[1], 0.0]) + T[:3, 3]
+            ink = tr.ink
             out.append(StainObservation(
                 id=tr.id, centre_board_m=[float(c[0]), float(c[1])], centre_world_m=world.tolist(),
                 size_m=float(tr.shape.size_m), extent_board_m=[float(v) for v in tr.shape.extent_m],
                 remaining=float(tr.remaining), visible=0.0 if lost else float(tr.visible),
-                kappa=False if lost else bool(tr.kappa)))
+                kappa=False if lost else bool(tr.kappa), width_m=float(tr.shape.width_m),
+                axis_board_rad=float(tr.shape.axis_rad),
+                ink_centre_board_m=[] if ink is None else [float(ink.centre_m[0]), float(ink.centre_m[1])],
+                ink_size_m=0.0 if ink is None else float(ink.size_m),
+                ink_width_m=0.0 if ink is None else float(ink.width_m),
+                ink_axis_board_rad=0.0 if ink is None else float(ink.axis_rad)))
         self._seq += 1
         return Stains(seq=self._seq, stamp_ns=time.monotonic_ns(), T_board_to_world=pose_from_transform(T),
                       board_size_m=[float(v) for v in est.size_m], stains=out, board=est.state,

@@ -18,7 +18,9 @@ Fractions of a stain::
     seen      = pixels observed within memory_s / region pixels
 
 so a pixel the arm or the eraser hides keeps its last observation and never
-turns clean by being hidden; kappa (:class:`~perception.kappa.KappaLatch`)
+turns clean by being hidden. The *ink* of a stain is its region's pixels
+whose last observation still holds ink (``d_last >= ink_level``): its
+shape (centre, size, width, axis) is what adaptive wiping follows. kappa (:class:`~perception.kappa.KappaLatch`)
 needs ``seen >= min_seen``.
 """
 
@@ -60,6 +62,7 @@ class Track:
     latch: KappaLatch
     box: tuple[int, int, int, int]
     shape: Shape | None = None
+    ink: Shape | None = None
     remaining: float = 1.0
     visible: float = 0.0
     seen: float = 0.0
@@ -80,8 +83,9 @@ def _box_of(mask: np.ndarray, pad: int) -> tuple[int, int, int, int]:
 class StainTracker:
     """All stains of one board; :meth:`update` once per classified frame."""
 
-    def __init__(self, grid: BoardGrid, stains: StainParams, kappa: KappaParams) -> None:
+    def __init__(self, grid: BoardGrid, stains: StainParams, kappa: KappaParams, ink_level: float = 0.3) -> None:
         self.grid = grid
+        self.ink_level = ink_level  # darkness from which a pixel's last observation counts as ink left
         self.p = stains
         self.kp = kappa
         res = grid.resolution_m
@@ -142,6 +146,8 @@ class StainTracker:
         rows, cols = np.nonzero(core)
         if rows.size:
             tr.shape = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m)
+        rows, cols = np.nonzero(reg & (d_last >= self.ink_level))
+        tr.ink = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m) if rows.size else None
 
     def _detect(self, free: np.ndarray, ink: InkMap, visible: np.ndarray, t_s: float) -> None:
         """New clusters: candidates until seen for ``confirm_s``, then stains."""

@@ -77,9 +77,21 @@ def test_rows_and_summary_count_success_faults_and_cells_without_a_report():
     assert [r["success"] for r in rows] == [True, False, False, True, False]
     assert rows[2]["faults"] == 1 and rows[2]["robot_events"] == 1 and rows[2]["fault_reasons"] == ["force cap"]
     s = summarize(rows)
-    assert s["all"]["runs"] == 5 and s["all"]["success_rate"] == pytest.approx(0.4) and s["all"]["no_report"] == 1
-    assert s["wall"]["dirt_removed_min"] == pytest.approx(0.97) and s["wall"]["time_over_bound_median"] == 2.5
-    assert s["table"]["faults"] == 1 and s["table"]["time_over_bound_max"] == pytest.approx(5.0)
+    assert s["all fixed"]["runs"] == 5 and s["all fixed"]["success_rate"] == pytest.approx(0.4)
+    assert s["all fixed"]["no_report"] == 1
+    assert s["wall fixed"]["dirt_removed_min"] == pytest.approx(0.97)
+    assert s["wall fixed"]["time_over_bound_median"] == 2.5
+    assert s["table fixed"]["faults"] == 1 and s["table fixed"]["time_over_bound_max"] == pytest.approx(5.0)
+    both = summarize(rows + [row_of(Cell(0, 1, "wall", "adaptive"), _report(1.0, 15.0), 10.0, "f")])
+    assert both["all adaptive"]["runs"] == 1 and both["wall adaptive"]["robot_time_median_s"] == 15.0
+    assert both["all fixed"]["runs"] == 5
+
+
+def test_each_seed_runs_once_per_wiping_mode_under_its_own_name():
+    cells = cells_of([0, 1], [1, 2], ["wall"], ("fixed", "adaptive"))
+    assert [c.name for c in cells] == ["wall-s0-n1", "wall-s0-n1-adaptive", "wall-s1-n2", "wall-s1-n2-adaptive"]
+    with pytest.raises(CampaignError, match="'sloppy' is not one of"):
+        cells_of([0], [1], ["wall"], ("sloppy",))
 
 
 def _campaign(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess:

@@ -152,6 +152,7 @@ def periodic_state(
     anchor_m: np.ndarray | None = None,
     amplitude_m: float | None = None,
     omega_rad_s: float | None = None,
+    stroke: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Position, velocity and acceleration on the DMP's limit cycle at a phase.
 
@@ -166,6 +167,8 @@ def periodic_state(
         r [m]; default ``mp.amplitude_m``.
     omega_rad_s : float, optional
         Omega [rad/s]; default ``mp.omega_rad_s``.
+    stroke : array, shape (n_dims, n_dims), optional
+        A linear map of the cycle about y_m (stretch and turn, :func:`stroke_matrix`); default the identity.
 
     Returns
     -------
@@ -181,15 +184,18 @@ def periodic_state(
     phase = np.asarray(phase_rad, dtype=float)
     if phase.ndim > 1 or not np.isfinite(phase).all():
         raise PlanningError(f"phase_rad must be a finite scalar or 1-D array, got shape {phase.shape}")
-    return periodic_state_unchecked(mp.limit_cycle, phase, anchor, amp, omega)
+    if stroke is not None:
+        stroke = check_stroke(stroke, mp.n_dims)
+    return periodic_state_unchecked(mp.limit_cycle, phase, anchor, amp, omega, stroke)
 
 
-def periodic_state_unchecked(limit_cycle, phase, anchor, amp, omega):
+def periodic_state_unchecked(limit_cycle, phase, anchor, amp, omega, stroke=None):
     """:func:`periodic_state` without checks, for the runners' hot path.
 
     ``limit_cycle`` is :attr:`PeriodicMP.limit_cycle`, (K+1, 3 n_dims) complex;
     ``phase`` [rad] a scalar or (P,) array; ``anchor`` (n_dims,) [m]; ``amp``
-    [m]; ``omega`` [rad/s]. Returns position, velocity, acceleration as there.
+    [m]; ``omega`` [rad/s]; ``stroke`` (n_dims, n_dims) or None. Returns
+    position, velocity, acceleration as there.
     """
     stacked = limit_cycle
     n = stacked.shape[1] // 3
@@ -197,7 +203,58 @@ def periodic_state_unchecked(limit_cycle, phase, anchor, amp, omega):
     e = np.exp(1j * np.multiply.outer(phase, k))
     out = (e @ stacked).real
     s, ds, dds = out[..., :n], out[..., n : 2 * n], out[..., 2 * n :]
+    if stroke is not None:  # eqs. (1)-(2) are linear: a constant map of the forcing maps the whole cycle
+        s, ds, dds = s @ stroke.T, ds @ stroke.T, dds @ stroke.T
     return anchor + amp * s, (omega * amp) * ds, (omega * omega * amp) * dds
+
+
+#: A stroke may stretch the learned cycle at most this much along any direction.
+MAX_STROKE_GAIN = 4.0
+
+
+def check_stroke(stroke, n_dims: int) -> np.ndarray:
+    """``stroke`` as a finite (n_dims, n_dims) array of spectral norm in (0, MAX_STROKE_GAIN]; PlanningError if not."""
+    S = np.asarray(stroke, dtype=float)
+    if S.shape != (n_dims, n_dims) or not np.isfinite(S).all():
+        raise PlanningError(f"stroke must be a finite ({n_dims}, {n_dims}) matrix, got {stroke!r}")
+    gain = float(np.linalg.norm(S, 2))
+    if not 0.0 < gain <= MAX_STROKE_GAIN:
+        raise PlanningError(f"stroke must stretch by (0, {MAX_STROKE_GAIN}], its norm is {gain:.3g}")
+    return S
+
+
+def rotation_2d(angle_rad: float) -> np.ndarray:
+    """(2, 2) rotation by ``angle_rad`` [rad]."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, -s], [s, c]])
+
+
+def stroke_matrix(cycle_axis_rad: float, target_axis_rad: float, across: float) -> np.ndarray:
+    """The (2, 2) stroke turning a cycle's main axis (``cycle_axis_rad``) onto ``target_axis_rad`` [rad] (both in
+    the board plane) and scaling the cycle across its main axis by ``across`` (> 0): ``R(target) diag(1, across)
+    R(cycle)^T``. Spectral norm max(1, across); the identity for equal axes and ``across`` 1."""
+    if not (math.isfinite(across) and 0.0 < across <= MAX_STROKE_GAIN):
+        raise PlanningError(f"across must be in (0, {MAX_STROKE_GAIN}], got {across!r}")
+    return rotation_2d(target_axis_rad) @ np.diag([1.0, across]) @ rotation_2d(cycle_axis_rad).T
+
+
+def cycle_shape(mp: "PeriodicMP", samples: int = 360) -> tuple[float, float]:
+    """(main axis [rad] in (-pi/2, pi/2], aspect in (0, 1]) of ``mp``'s limit cycle (2-D): the direction of
+    largest spread of its positions and the ratio of its extents across and along that direction."""
+    if mp.n_dims != 2:
+        raise PlanningError(f"a cycle's shape needs a 2-D MP, this one has {mp.n_dims} dimensions")
+    pos, _, _ = periodic_state_unchecked(mp.limit_cycle, np.linspace(0.0, TWO_PI, samples, endpoint=False),
+                                         np.zeros(2), 1.0, 1.0)
+    pos = pos - pos.mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov(pos.T))
+    main = vecs[:, -1]
+    along, across = np.ptp(pos @ main), np.ptp(pos @ vecs[:, 0])
+    axis = math.atan2(main[1], main[0])
+    if axis <= -math.pi / 2:
+        axis += math.pi
+    elif axis > math.pi / 2:
+        axis -= math.pi
+    return axis, float(np.clip(across / max(along, 1e-12), 1e-3, 1.0))
 
 
 def check_execution_params(mp, anchor_m, amplitude_m, omega_rad_s):

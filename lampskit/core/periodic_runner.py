@@ -24,7 +24,8 @@ from typing import NamedTuple
 import numpy as np
 
 from lampskit.errors import PlanningError
-from lampskit.core.periodic import TWO_PI, PeriodicMP, check_execution_params, periodic_state_unchecked
+from lampskit.core.periodic import (TWO_PI, PeriodicMP, check_execution_params, check_stroke,
+                                    periodic_state_unchecked)
 
 #: Default time constant tau of the critically damped parameter filters [s]: a step
 #: in a target is 90 % done after 3.9 tau (0.78 s), with no overshoot.
@@ -91,10 +92,11 @@ def _step_coefficients(a: float, alpha: float, beta: float) -> tuple[float, ...]
 
 
 def _start_state(mp: PeriodicMP, phase: float, anchor: np.ndarray, amp: float, omega: float,
-                 start_position_m, start_velocity_m_s) -> tuple[np.ndarray, np.ndarray]:
+                 start_position_m, start_velocity_m_s, stroke=None) -> tuple[np.ndarray, np.ndarray]:
     """Position and velocity (n_dims,) to start from: the limit cycle's at ``phase`` unless given (checked)."""
     n = mp.n_dims
-    pos0, vel0, _ = periodic_state_unchecked(mp.limit_cycle, np.asarray(phase % TWO_PI), anchor, amp, omega)
+    pos0, vel0, _ = periodic_state_unchecked(mp.limit_cycle, np.asarray(phase % TWO_PI), anchor, amp, omega,
+                                             stroke)
     for name, value in (("start_position_m", start_position_m), ("start_velocity_m_s", start_velocity_m_s)):
         if value is not None and (np.shape(value) != (n,) or not np.isfinite(value).all()):
             raise PlanningError(f"{name} must be a finite array of shape ({n},), got {value!r}")
@@ -111,9 +113,15 @@ class PeriodicRunner:
     Build once, then call :meth:`update` every cycle; read
     :attr:`position_m`, :attr:`velocity_m_s`, :attr:`acceleration_m_s2`
     (arrays of shape (n_dims,), overwritten in place: copy to keep) and
-    :attr:`phase_rad`. :meth:`set_targets` moves y_m, r and Omega to new
-    values through critically damped filters of time constant
+    :attr:`phase_rad`. :meth:`set_targets` moves y_m, r, Omega and the
+    stroke to new values through critically damped filters of time constant
     ``ramp_time_constant_s`` (0 = jump at once).
+
+    The *stroke* S (n_dims, n_dims) maps the learned cycle about y_m
+    (stretch and turn it, :func:`~lampskit.core.periodic.stroke_matrix`):
+    the forcing is ``r S F(phi)``, so with S constant the limit cycle is
+    ``y_m + r S s(phi)``; a changing S goes through the same filters, and
+    position, velocity and acceleration stay continuous.
 
     Parameters
     ----------
@@ -130,6 +138,8 @@ class PeriodicRunner:
         Initial state [m], [m/s]; each defaults to the limit cycle at the start phase.
     ramp_time_constant_s : float
         Time constant of the parameter filters [s], >= 0.
+    stroke : array, shape (n_dims, n_dims), optional
+        Initial stroke; default none (the identity, and no extra work per step until :meth:`set_targets` gives one).
 
     Attributes
     ----------
@@ -160,16 +170,19 @@ class PeriodicRunner:
         start_position_m: np.ndarray | None = None,
         start_velocity_m_s: np.ndarray | None = None,
         ramp_time_constant_s: float = DEFAULT_RAMP_TIME_CONSTANT_S,
+        stroke: np.ndarray | None = None,
     ) -> None:
         anchor, amp, omega = check_execution_params(mp, anchor_m, amplitude_m, omega_rad_s)
+        if stroke is not None:
+            stroke = check_stroke(stroke, mp.n_dims)
         phase = mp.phase_start_rad if start_phase_rad is None else float(start_phase_rad)
         if not math.isfinite(phase):
             raise PlanningError(f"start_phase_rad must be finite, got {start_phase_rad!r}")
         tau = float(ramp_time_constant_s)
         if not (math.isfinite(tau) and tau >= 0):
             raise PlanningError(f"ramp_time_constant_s must be finite and >= 0 s, got {ramp_time_constant_s!r}")
-        pos0, vel0 = _start_state(mp, phase, anchor, amp, omega, start_position_m, start_velocity_m_s)
-        self._allocate(mp, anchor, amp, omega, tau, pos0, vel0)
+        pos0, vel0 = _start_state(mp, phase, anchor, amp, omega, start_position_m, start_velocity_m_s, stroke)
+        self._allocate(mp, anchor, amp, omega, tau, pos0, vel0, stroke)
         self.phase_rad = phase % TWO_PI
         self.cycles = int(phase // TWO_PI)
         self.time_s = 0.0
@@ -178,7 +191,7 @@ class PeriodicRunner:
         self._write_outputs(self._z)
 
     def _allocate(self, mp: PeriodicMP, anchor: np.ndarray, amp: float, omega: float, tau: float,
-                  pos0: np.ndarray, vel0: np.ndarray) -> None:
+                  pos0: np.ndarray, vel0: np.ndarray, stroke: np.ndarray | None) -> None:
         """Every buffer the step uses, allocated once; the state set to ``pos0``, ``vel0`` (n_dims,)."""
         n = mp.n_dims
         self.mp = mp
@@ -194,13 +207,17 @@ class PeriodicRunner:
         self._psi = np.empty(mp.n_basis)
         self._num = np.empty(n + 1)
         self._omega_f = 0.0 if tau == 0 else 1.0 / tau
-        # Effective parameters and their filters. Columns: y_m (n), r, Omega;
-        # targets (n + 2,); filter state rows: error (value - target), rate.
+        # Effective parameters and their filters. Columns: y_m (n), r, Omega, the stroke's entries (n n, row-major);
+        # targets (n + 2 + n n,); filter state rows: error (value - target), rate.
         self._ym = anchor.copy()
         self._r, self._omega = amp, omega
-        self._targets = np.concatenate([anchor, [amp, omega]])
-        self._ev = np.zeros((2, n + 2))
-        self._ev_next = np.zeros((2, n + 2))
+        self._has_stroke = stroke is not None  # without one the step skips the map (bit for bit as before strokes)
+        self._S = np.eye(n) if stroke is None else stroke.copy()
+        self._S_flat = self._S.reshape(-1)  # a view
+        self._f_raw = np.empty(n)
+        self._targets = np.concatenate([anchor, [amp, omega], self._S_flat])
+        self._ev = np.zeros((2, n + 2 + n * n))
+        self._ev_next = np.zeros((2, n + 2 + n * n))
         self._filter_map = np.empty((2, 2))
         self._filter_dt = math.nan
         self._delta = np.empty(n)
@@ -240,8 +257,13 @@ class PeriodicRunner:
         return self._omega
 
     @property
+    def stroke(self) -> np.ndarray:
+        """Effective stroke S, shape (n_dims, n_dims) (a copy; the identity when none was given)."""
+        return self._S.copy()
+
+    @property
     def is_ramping(self) -> bool:
-        """True while y_m, r or Omega still move toward their targets."""
+        """True while y_m, r, Omega or the stroke still move toward their targets."""
         return self._ramping
 
     @property
@@ -250,12 +272,14 @@ class PeriodicRunner:
         return self.cycles * TWO_PI + self.phase_rad
 
     def set_targets(
-        self, *, anchor_m: np.ndarray | None = None, amplitude_m: float | None = None, omega_rad_s: float | None = None
+        self, *, anchor_m: np.ndarray | None = None, amplitude_m: float | None = None,
+        omega_rad_s: float | None = None, stroke: np.ndarray | None = None,
     ) -> PeriodicStatus:
-        """New targets for y_m [m] (n_dims,), r [m], Omega [rad/s]; None keeps a target.
+        """New targets for y_m [m] (n_dims,), r [m], Omega [rad/s], the stroke (n_dims, n_dims); None keeps a target.
 
         Returns ERROR_INVALID_INPUT (and changes nothing) for a wrong shape,
-        a non-finite value or a non-positive amplitude / frequency.
+        a non-finite value, a non-positive amplitude / frequency or a stroke
+        outside :func:`~lampskit.core.periodic.check_stroke`.
         """
         if anchor_m is not None:
             anchor = np.asarray(anchor_m, dtype=float)
@@ -264,6 +288,11 @@ class PeriodicRunner:
         for value in (amplitude_m, omega_rad_s):
             if value is not None and not (math.isfinite(value) and value > 0):
                 return PeriodicStatus.ERROR_INVALID_INPUT
+        if stroke is not None:
+            try:
+                stroke = check_stroke(stroke, self.n_dims)
+            except PlanningError:
+                return PeriodicStatus.ERROR_INVALID_INPUT
         n, targets = self.n_dims, self._targets
         if anchor_m is not None:
             targets[:n] = anchor
@@ -271,12 +300,16 @@ class PeriodicRunner:
             targets[n] = float(amplitude_m)
         if omega_rad_s is not None:
             targets[n + 1] = float(omega_rad_s)
+        if stroke is not None:
+            targets[n + 2:] = stroke.reshape(-1)
+            self._has_stroke = True
         if self._omega_f == 0.0:  # no ramp: jump now
             self._snap_to_targets()
         else:
             self._ev[0, :n] = self._ym - targets[:n]
             self._ev[0, n] = self._r - targets[n]
             self._ev[0, n + 1] = self._omega - targets[n + 1]
+            np.subtract(self._S_flat, targets[n + 2:], out=self._ev[0, n + 2:])
             self._ramping = True
         return PeriodicStatus.WORKING
 
@@ -312,14 +345,18 @@ class PeriodicRunner:
         return PeriodicStatus.WORKING
 
     def _forcing_into(self, phase: float, out: np.ndarray) -> None:
-        """Eq. (4) with r = 1 at ``phase`` into ``out`` (n,), without allocating."""
+        """Eq. (4) with r = 1 at ``phase``, mapped by the stroke, into ``out`` (n,), without allocating."""
         cs, psi, num = self._cs, self._psi, self._num
         cs[0] = math.cos(phase)
         cs[1] = math.sin(phase)
         np.dot(cs, self._h3, out=psi)
         np.exp(psi, out=psi)
         np.dot(psi, self._w1, out=num)
-        np.divide(num[:-1], num[-1], out=out)
+        if self._has_stroke:
+            np.divide(num[:-1], num[-1], out=self._f_raw)
+            np.dot(self._S, self._f_raw, out=out)
+        else:
+            np.divide(num[:-1], num[-1], out=out)
 
     def _write_outputs(self, z: np.ndarray) -> None:
         """[pos - y_m, vel, acc] = [[1, 0, 0], [0, W, 0], [-ab W^2, -a W^2, r W^2]] @ (x1, x2, F)."""
@@ -351,13 +388,16 @@ class PeriodicRunner:
         self._z[0] -= self._delta
         self._r = float(self._targets[n] + ev_next[0, n])
         self._omega = float(self._targets[n + 1] + ev_next[0, n + 1])
+        if self._has_stroke:
+            np.add(self._targets[n + 2:], ev_next[0, n + 2:], out=self._S_flat)
         self._ev, self._ev_next = ev_next, ev
         self._settle_countdown -= 1
         if self._settle_countdown <= 0:
             self._settle_countdown = 32
             scale = self._targets[n]  # amplitude for y_m and r, Omega for Omega
             err = np.abs(ev_next[0]) + np.abs(ev_next[1]) / w
-            if err[: n + 1].max() < 1e-9 * scale and err[n + 1] < 1e-9 * self._targets[n + 1]:
+            if err[: n + 1].max() < 1e-9 * scale and err[n + 1] < 1e-9 * self._targets[n + 1] \
+                    and err[n + 2:].max() < 1e-9:
                 self._snap_to_targets()
 
     def _snap_to_targets(self) -> None:
@@ -365,6 +405,7 @@ class PeriodicRunner:
         self._z[0] -= targets[:n] - self._ym
         self._ym[:] = targets[:n]
         self._r, self._omega = float(targets[n]), float(targets[n + 1])
+        self._S_flat[:] = targets[n + 2:]
         self._ev[:] = 0.0
         self._ramping = False
 

@@ -23,6 +23,12 @@ board plane) and the tool's current state, the planner
    closed-form trajectory does (:func:`bounded_duration`). Position,
    velocity and acceleration stay continuous at every junction: only
    durations and frequencies change, never the boundary states.
+5. with ``adaptive`` on, shapes each wipe to its stain (:func:`wipe_shape`):
+   the learned MP is picked by the stain's aspect as well as its size, and
+   its cycle is stretched across and turned to the stain's main axis by a
+   *stroke* (:func:`~lampskit.core.periodic.stroke_matrix`); while wiping,
+   the executor moves anchor, r, stroke and Omega after the ink that
+   remains (:func:`adapted_wipe`).
 
 All positions here are in-plane board coordinates (x, y) [m]; the normal
 direction belongs to the force controller. :func:`lampskit.core.rollout.rollout`
@@ -40,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lampskit.errors import PlanningError
-from lampskit.core.periodic import periodic_state
+from lampskit.core.periodic import cycle_shape, periodic_state, stroke_matrix
 from lampskit.core.skill import Skill
 from lampskit.core.transitional_plan import evaluate as evaluate_transition
 from lampskit.core.transitional_plan import plan_transition as plan_transition_mp
@@ -63,12 +69,18 @@ class Stain:
     centre_m : array, shape (2,)
         Centre in the board plane [m].
     size_m : float
-        Extent of the stain [m] (its larger side).
+        Extent of the stain [m] along its main axis (its larger side).
+    width_m : float
+        Extent across the main axis [m]; 0 = not known (taken as round).
+    axis_rad : float
+        Direction of the main axis in the board plane [rad] (from board x).
     """
 
     id: int
     centre_m: np.ndarray
     size_m: float
+    width_m: float = 0.0
+    axis_rad: float = 0.0
 
     def __post_init__(self) -> None:
         c = np.asarray(self.centre_m, dtype=float).reshape(-1)
@@ -76,7 +88,15 @@ class Stain:
             raise PlanningError(f"stain {self.id}: centre_m must be 2 finite numbers, got {self.centre_m!r}")
         if not (np.isfinite(self.size_m) and self.size_m > 0):
             raise PlanningError(f"stain {self.id}: size_m must be a positive number, got {self.size_m!r}")
+        if not (np.isfinite(self.width_m) and self.width_m >= 0 and np.isfinite(self.axis_rad)):
+            raise PlanningError(f"stain {self.id}: width_m must be >= 0 and axis_rad finite, got "
+                                f"{self.width_m!r}, {self.axis_rad!r}")
         object.__setattr__(self, "centre_m", c)
+
+    @property
+    def aspect(self) -> float:
+        """Width over size in (0, 1]; 1 when the width is not known."""
+        return 1.0 if self.width_m <= 0 else float(np.clip(self.width_m / self.size_m, 1e-3, 1.0))
 
 
 @dataclass(frozen=True)
@@ -107,6 +127,16 @@ class PlannerParams:
         A transition is lengthened at most this many times its planned
         duration to meet the bounds (boundary states that violate them
         cannot be met by any duration: the best one is kept and counted).
+    adaptive : bool
+        Shape each wipe to its stain and adapt it while wiping (see the
+        module docstring, point 5); False: a round stroke of the size alone,
+        set once per stain ("fixed" wiping).
+    round_aspect : float
+        With ``adaptive``, a stain (or ink) whose width over size is at
+        least this is wiped with the learned, unstretched cycle.
+    min_stroke_aspect : float
+        The narrowest stroke: the cycle is squeezed across the main axis to
+        no less than this share of its length.
     """
 
     amplitude_fraction: float = 0.5
@@ -120,8 +150,16 @@ class PlannerParams:
     max_accel_m_s2: float = 4.0
     max_jerk_m_s3: float = 100.0
     max_transition_stretch: float = 4.0
+    adaptive: bool = False
+    round_aspect: float = 0.8
+    min_stroke_aspect: float = 0.35
 
     def __post_init__(self) -> None:
+        if not isinstance(self.adaptive, bool):
+            raise PlanningError(f"adaptive must be true or false, got {self.adaptive!r}")
+        if not 0.05 <= self.min_stroke_aspect <= self.round_aspect <= 1.0:
+            raise PlanningError(f"need 0.05 <= min_stroke_aspect <= round_aspect <= 1, got "
+                                f"{self.min_stroke_aspect!r}, {self.round_aspect!r}")
         for name, lo, hi in (("max_speed_m_s", 0.01, 2.0), ("max_accel_m_s2", 0.05, 50.0),
                              ("max_jerk_m_s3", 0.5, 5000.0), ("max_transition_stretch", 1.0, 20.0)):
             v = getattr(self, name)
@@ -145,13 +183,20 @@ class PlannerParams:
 
 @dataclass(frozen=True)
 class Wipe:
-    """One periodic MP of the plan: which learned MP, where and how big."""
+    """One periodic MP of the plan: which learned MP, where (anchor (2,) [m]), how big (r [m]), how fast (Omega
+    [rad/s]) and, with adaptive wiping, its stroke (2, 2) (None: the learned cycle as it is)."""
 
     stain: Stain
     periodic_index: int
     anchor_m: np.ndarray
     amplitude_m: float
     omega_rad_s: float
+    stroke: np.ndarray | None = None
+
+    @property
+    def stroke_gain(self) -> float:
+        """How much the stroke stretches the cycle at most (its spectral norm; 1 without one)."""
+        return 1.0 if self.stroke is None else float(np.linalg.norm(self.stroke, 2))
 
 
 @dataclass(frozen=True)
@@ -201,11 +246,81 @@ def plan(
     wipes = []
     for s in ordered:
         r = float(np.clip(params.amplitude_fraction * s.size_m, params.min_amplitude_m, params.max_amplitude_m))
-        k = int(np.argmin(np.abs(np.log(amplitudes / r))))
+        if params.adaptive:
+            k, stroke = wipe_shape(skill, r, s.aspect, s.axis_rad, params)
+            gain = float(np.linalg.norm(stroke, 2)) if stroke is not None else 1.0
+        else:
+            k, stroke, gain = int(np.argmin(np.abs(np.log(amplitudes / r)))), None, 1.0
         mp = skill.periodic[k].mp
-        wipes.append(Wipe(s, k, s.centre_m.copy(), r, min(mp.omega_rad_s, bounded_omega(mp, r, params,
-                                                                                         PERIODIC_MARGIN))))
+        omega = min(mp.omega_rad_s, bounded_omega(mp, r * gain, params, PERIODIC_MARGIN))
+        wipes.append(Wipe(s, k, s.centre_m.copy(), r, omega, stroke))
     return Plan(tuple(wipes), params)
+
+
+_SHAPES: dict[int, tuple] = {}  # id(mp) -> (mp, cycle_shape(mp))
+
+
+def _cycle_shape_cached(mp) -> tuple[float, float]:
+    hit = _SHAPES.get(id(mp))
+    if hit is None or hit[0] is not mp:
+        if len(_SHAPES) > 256:
+            _SHAPES.clear()
+        hit = _SHAPES[id(mp)] = (mp, cycle_shape(mp))
+    return hit[1]
+
+
+def wipe_shape(skill: Skill, amplitude_m: float, aspect: float, axis_rad: float, params: PlannerParams
+               ) -> tuple[int, np.ndarray | None]:
+    """(learned periodic MP, stroke (2, 2) or None) for a stain (or ink) of main-axis amplitude ``amplitude_m``
+    [m], width over length ``aspect`` in (0, 1] and main axis ``axis_rad`` [rad].
+
+    The MP minimises ``|log(r_k / r)| + |log(aspect_k / aspect')|`` (size and shape alike count), with
+    ``aspect'`` the stroke's aspect (``aspect`` clipped to ``[min_stroke_aspect, 1]``, 1 from ``round_aspect``
+    up). A round stain keeps the learned cycle (None); an elongated one gets the cycle turned onto its main axis
+    and squeezed across it to ``aspect'`` (an MP round within ``round_aspect`` is not turned, only squeezed, so the
+    stroke is symmetric)."""
+    want = 1.0 if aspect >= params.round_aspect else max(aspect, params.min_stroke_aspect)
+    shapes = [_cycle_shape_cached(e.mp) for e in skill.periodic]
+    cost = [abs(np.log(e.mp.amplitude_m / amplitude_m)) + abs(np.log(a / want))
+            for e, (_, a) in zip(skill.periodic, shapes)]
+    k = int(np.argmin(cost))
+    if want == 1.0:
+        return k, None
+    cycle_axis, cycle_aspect = shapes[k]
+    if cycle_aspect >= params.round_aspect:
+        cycle_axis = axis_rad  # a round cycle: squeeze it along the stain's axes, do not turn it
+    across = float(np.clip(want / cycle_aspect, params.min_stroke_aspect, 1.0 / cycle_aspect))
+    return k, stroke_matrix(cycle_axis, axis_rad, across)
+
+
+#: One adaptation changes r and Omega by at most this factor: while the filters ramp both, r Omega^k passes
+#: through values above either end's, by less than the periodic margin leaves for that.
+MAX_ADAPT_STEP = 1.5
+
+
+def adapted_wipe(skill: Skill, planned: Wipe, running: Wipe, ink: Stain, params: PlannerParams) -> Wipe:
+    """The wipe's new targets for the ink that remains of its stain (``ink``: centre, size, width, axis).
+
+    Anchor at the ink's centre; r from the ink's size as :func:`plan` sizes a stain, never above the
+    ``planned`` r and at least the ``running`` r / :data:`MAX_ADAPT_STEP`; the stroke from the ink's shape;
+    Omega within the bounds at the new r and stroke (at most the MP's own and :data:`MAX_ADAPT_STEP` times the
+    running Omega). The learned MP stays the one the wipe runs."""
+    r_new = float(np.clip(params.amplitude_fraction * ink.size_m, params.min_amplitude_m, params.max_amplitude_m))
+    r_new = float(np.clip(r_new, running.amplitude_m / MAX_ADAPT_STEP, planned.amplitude_m))
+    wipe = planned
+    mp = skill.periodic[wipe.periodic_index].mp
+    want = 1.0 if ink.aspect >= params.round_aspect else max(ink.aspect, params.min_stroke_aspect)
+    stroke = None
+    if want < 1.0:
+        cycle_axis, cycle_aspect = _cycle_shape_cached(mp)
+        if cycle_aspect >= params.round_aspect:
+            cycle_axis = ink.axis_rad
+        stroke = stroke_matrix(cycle_axis, ink.axis_rad, float(np.clip(want / cycle_aspect, params.min_stroke_aspect,
+                                                                       1.0 / cycle_aspect)))
+    gain = 1.0 if stroke is None else float(np.linalg.norm(stroke, 2))
+    omega = min(mp.omega_rad_s, bounded_omega(mp, r_new * gain, params, PERIODIC_MARGIN),
+                MAX_ADAPT_STEP * running.omega_rad_s)
+    return Wipe(wipe.stain, wipe.periodic_index, ink.centre_m.copy(), r_new, omega, stroke)
 
 
 #: A periodic MP is kept this far inside the bounds: a transition ends in its state, and needs some room.
@@ -355,7 +470,7 @@ def entry_phase(skill: Skill, wipe: Wipe, from_m: np.ndarray, n_candidates: int 
     """
     mp = skill.periodic[wipe.periodic_index].mp
     phases = np.linspace(0.0, 2 * np.pi, n_candidates, endpoint=False)
-    pos, vel, _ = periodic_state(mp, phases, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s)
+    pos, vel, _ = periodic_state(mp, phases, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s, wipe.stroke)
     to = pos - from_m
     dist = np.linalg.norm(to, axis=1)
     align = np.einsum("ij,ij->i", vel, to) / np.maximum(np.linalg.norm(vel, axis=1) * dist, 1e-12)
@@ -382,7 +497,8 @@ def exit_phase_delay(skill: Skill, wipe: Wipe, phase_rad: float, towards_m: np.n
     """
     mp = skill.periodic[wipe.periodic_index].mp
     delays = np.linspace(0.0, 2 * np.pi, n_candidates, endpoint=False)
-    pos, vel, _ = periodic_state(mp, phase_rad + delays, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s)
+    pos, vel, _ = periodic_state(mp, phase_rad + delays, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s,
+                                 wipe.stroke)
     to = np.asarray(towards_m, dtype=float) - pos
     align = np.einsum("ij,ij->i", vel, to) / np.maximum(np.linalg.norm(vel, axis=1) * np.linalg.norm(to, axis=1), 1e-12)
     return float(delays[int(np.argmax(align >= align.max() - 0.05))])
@@ -410,7 +526,7 @@ def plan_transition(
     y0, v0, a0 = (np.asarray(x, dtype=float).reshape(2) for x in start)
     phase = entry_phase(skill, wipe, y0)
     mp = skill.periodic[wipe.periodic_index].mp
-    goal = periodic_state(mp, phase, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s)
+    goal = periodic_state(mp, phase, wipe.anchor_m, wipe.amplitude_m, wipe.omega_rad_s, wipe.stroke)
     move = goal[0] - y0
     index, transform = _pick_transitional(skill, move)
     duration = transition_duration(skill, index, move, plan_.params)
