@@ -16,8 +16,14 @@ contact force, peak jerk of the executed reference, faults, and a **lower
 bound** on the robot time (:func:`lower_bound_s`): the stains' dirt area swept
 by the pad's long side at the controller's Cartesian speed limit, plus the
 shortest network joining the stains (a minimum spanning tree, no longer than
-any path through them) at that speed. A cell *succeeds* when it removed at
-least :data:`CLEAN_SHARE` of its dirt and nothing faulted.
+any path through them) at that speed. That bound leaves out everything a run
+does besides sweeping and travelling, so a second one, the **cell bound**
+(:func:`cell_bound_s`), adds the run's fixed moves as it executed them (the
+APPROACH and RETREAT phases: survey flight and look, approach, touch-down,
+force ramps, lift-off, flight back; the same whatever the wiping) and counts
+the sliding the felt needs (:func:`felt_path_m`) at the planner's speed
+bound. A cell *succeeds* when it removed at least :data:`CLEAN_SHARE` of its
+dirt and nothing faulted.
 
 Writes ``campaign.json`` (every cell, the summary), ``campaign.md`` (the table
 per board and wiping mode, and over all) and ``campaign.png`` (robot time
@@ -140,6 +146,39 @@ def lower_bound_s(areas_m2: list[float], centres_m: np.ndarray, pad_width_m: flo
     return float(sum(areas_m2)) / (pad_width_m * speed_m_s) + mst_length_m(np.asarray(centres_m, float)) / speed_m_s
 
 
+def felt_path_m(area_m2: float, pad_area_m2: float, rate_per_n_m: float, force_over_threshold_n: float,
+                level: float) -> float:
+    """The shortest path [m] the pad must slide to bring a stain of ``area_m2`` down to ``level`` under the sim's
+    removal law ``d <- d exp(-k (F - F0) ds)``: every point needs ``L = ln(1 / level) / (k (F - F0))`` of sliding
+    under it, and a metre of path slides the pad's area over at most ``pad_area_m2``: ``L max(1, A / a_pad)``."""
+    if min(pad_area_m2, rate_per_n_m, force_over_threshold_n) <= 0 or not 0 < level < 1:
+        raise CampaignError("felt_path_m needs a positive pad area, rate and force over the threshold, level in (0, 1)")
+    slide = math.log(1.0 / level) / (rate_per_n_m * force_over_threshold_n)
+    return slide * max(1.0, area_m2 / pad_area_m2)
+
+
+def cell_bound_s(fixed_moves_s: float, areas_m2: list[float], centres_m: np.ndarray, felt: dict[str, float],
+                 speed_m_s: float) -> float:
+    """The cell bound [s]: the run's fixed moves (APPROACH + RETREAT as executed) + each stain's
+    :func:`felt_path_m` + the stains' minimum spanning tree, both at ``speed_m_s``. ``felt``: ``pad_area_m2``,
+    ``rate_per_n_m``, ``force_over_threshold_n``, ``level``."""
+    wipe = sum(felt_path_m(a, **felt) for a in areas_m2)
+    return fixed_moves_s + (wipe + mst_length_m(np.asarray(centres_m, float))) / speed_m_s
+
+
+def felt_model() -> dict[str, float]:
+    """The sim's removal law at the controller's wiping force, and the report's level of a wiped stain."""
+    from controller.params import ControllerParams
+    from interfaces.description import PAD_SIZE_M
+    from sim.params import SimParams
+
+    from .report import TRUTH_LEVEL
+
+    dirt, force = SimParams.from_table({}).dirt, ControllerParams.from_table({}).force
+    return {"pad_area_m2": PAD_SIZE_M[0] * PAD_SIZE_M[1], "rate_per_n_m": dirt.rate_per_n_m,
+            "force_over_threshold_n": force.target_n - dirt.threshold_force_n, "level": TRUTH_LEVEL}
+
+
 def cell_stains(cell: Cell, board_table: dict[str, Any]) -> tuple[list[float], np.ndarray]:
     """The stains the sim makes for ``cell`` (the sim's own seeded generator): areas [m^2] (ellipses of the
     stain's extent and aspect) and centres (n, 2) [m]."""
@@ -153,17 +192,28 @@ def cell_stains(cell: Cell, board_table: dict[str, Any]) -> tuple[list[float], n
     return areas, np.array([s.centre_m for s in stains], float).reshape(-1, 2)
 
 
-def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: str, why: str = "") -> dict[str, Any]:
-    """One table row: the cell, what its report says (None: it left no report, ``why``) and its lower bound."""
+def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: str, why: str = "",
+           stains: tuple[list[float], np.ndarray] | None = None, felt: dict[str, float] | None = None,
+           speed_m_s: float = 0.5) -> dict[str, Any]:
+    """One table row: the cell, what its report says (None: it left no report, ``why``), its lower bound and,
+    given its ``stains`` (areas, centres) and the ``felt`` model, its cell bound at ``speed_m_s``."""
     row: dict[str, Any] = {**asdict(cell), "name": cell.name, "run_dir": run_dir, "lower_bound_s": bound_s}
     if report is None:
         return {**row, "outcome": "no report", "success": False, "why": why}
+    phases = report.get("phase_time_s") or {}
+    fixed = float(phases.get("APPROACH", 0.0) + phases.get("RETREAT", 0.0))
+    cell_b = cell_bound_s(fixed, *stains, felt, speed_m_s) if stains is not None and felt and phases else float("nan")
     faults = [f for f in report.get("faults", []) if f.get("phase") in FAULT_PHASES]
     removed = float(report.get("dirt_removed_fraction", 0.0))
     robot_s = float(report.get("sim_time_s", float("nan")))
     peaks = (report.get("motion_peaks") or {}).get("all", {})
     return {**row, "outcome": report.get("outcome", "?"), "dirt_removed": removed, "robot_time_s": robot_s,
             "time_over_bound": robot_s / bound_s if bound_s > 0 else float("nan"),
+            "phase_time_s": phases, "fixed_moves_s": fixed, "cell_bound_s": cell_b,
+            "time_over_cell_bound": robot_s / cell_b if cell_b > 0 else float("nan"),
+            "wipe_s": float(phases.get("WIPE", float("nan"))), "transition_s": float(phases.get("TRANSITION", float("nan"))),
+            "time_per_stain_s": (robot_s - fixed) / cell.stains,
+            "peak_accel_m_s2": float(peaks.get("accel_m_s2", float("nan"))),
             "peak_contact_force_n": float(report.get("max_contact_force_n", float("nan"))),
             "peak_jerk_m_s3": float(peaks.get("jerk_m_s3", float("nan"))),
             "peak_speed_m_s": float(peaks.get("speed_m_s", float("nan"))),
@@ -194,6 +244,10 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
                      "dirt_removed_median": med("dirt_removed"),
                      "dirt_removed_min": float(min(r["dirt_removed"] for r in ran)) if ran else float("nan"),
                      "robot_time_median_s": med("robot_time_s"), "time_over_bound_median": med("time_over_bound"),
+                     "time_over_cell_bound_median": med("time_over_cell_bound"),
+                     "time_over_cell_bound_max": top("time_over_cell_bound"),
+                     "time_per_stain_median_s": med("time_per_stain_s"),
+                     "peak_speed_max_m_s": top("peak_speed_m_s"), "peak_accel_max_m_s2": top("peak_accel_m_s2"),
                      "time_over_bound_max": top("time_over_bound"), "peak_contact_force_max_n": top("peak_contact_force_n"),
                      "peak_jerk_max_m_s3": top("peak_jerk_m_s3"), "faults": sum(r["faults"] for r in ran),
                      "no_report": len(rs) - len(ran)}
@@ -201,25 +255,32 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
 
 
 def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], command: str) -> str:
-    """The campaign's table (per board, then over all) and one line per cell."""
-    head = ("| board | runs | success (>= 98 % removed, no fault) | dirt removed median / min | robot time median [s] "
-            "| time / lower bound median (max) | peak contact force max [N] | peak jerk max [m/s^3] | faults |"
-            " no report |\n|---|---:|---:|---|---:|---|---:|---:|---:|---:|")
+    """The campaign's table (per board and wiping mode, then over all) and one line per cell."""
+    head = ("| board, wiping | runs | success (>= 98 % removed, no fault) | dirt removed median / min "
+            "| robot time median [s] | time per stain median [s] | time / cell bound median (max) "
+            "| time / lower bound median | peak speed / accel. / jerk max [m/s, m/s^2, m/s^3] "
+            "| peak contact force max [N] | faults | no report |\n"
+            "|---|---:|---:|---|---:|---:|---|---:|---|---:|---:|---:|")
     lines = [head]
     for name in sorted(summary, key=lambda n: (n.startswith("all "), n.split()[-1], n)):
         s = summary[name]
         lines.append(f"| {name} | {s['runs']} | {s['success_rate']:.0%} | {s['dirt_removed_median']:.1%} / "
-                     f"{s['dirt_removed_min']:.1%} | {s['robot_time_median_s']:.1f} | {s['time_over_bound_median']:.2f} "
-                     f"({s['time_over_bound_max']:.2f}) | {s['peak_contact_force_max_n']:.1f} | "
-                     f"{s['peak_jerk_max_m_s3']:.0f} | {s['faults']} | {s['no_report']} |")
-    lines += ["", "| cell | outcome | removed | robot time [s] | lower bound [s] | peak force [N] | peak jerk [m/s^3] | "
-              "faults |", "|---|---|---:|---:|---:|---:|---:|---|"]
+                     f"{s['dirt_removed_min']:.1%} | {s['robot_time_median_s']:.1f} | "
+                     f"{s.get('time_per_stain_median_s', float('nan')):.1f} | "
+                     f"{s.get('time_over_cell_bound_median', float('nan')):.2f} "
+                     f"({s.get('time_over_cell_bound_max', float('nan')):.2f}) | {s['time_over_bound_median']:.1f} | "
+                     f"{s.get('peak_speed_max_m_s', float('nan')):.2f} / {s.get('peak_accel_max_m_s2', float('nan')):.2f} / "
+                     f"{s['peak_jerk_max_m_s3']:.0f} | {s['peak_contact_force_max_n']:.1f} | {s['faults']} | "
+                     f"{s['no_report']} |")
+    lines += ["", "| cell | outcome | removed | robot time [s] | cell bound [s] | lower bound [s] | peak force [N] "
+              "| peak jerk [m/s^3] | faults |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
         if r["outcome"] == "no report":
-            lines.append(f"| {r['name']} | no report: {r['why']} | - | - | {r['lower_bound_s']:.1f} | - | - | - |")
+            lines.append(f"| {r['name']} | no report: {r['why']} | - | - | - | {r['lower_bound_s']:.1f} | - | - | - |")
             continue
         lines.append(f"| {r['name']} | {r['outcome']} | {r['dirt_removed']:.1%} | {r['robot_time_s']:.1f} | "
-                     f"{r['lower_bound_s']:.1f} | {r['peak_contact_force_n']:.1f} | {r['peak_jerk_m_s3']:.0f} | "
+                     f"{r.get('cell_bound_s', float('nan')):.1f} | {r['lower_bound_s']:.1f} | "
+                     f"{r['peak_contact_force_n']:.1f} | {r['peak_jerk_m_s3']:.0f} | "
                      f"{'; '.join(r['fault_reasons']) or '-'} |")
     return "\n".join(lines) + f"\n\nreproduce: {command}\n"
 
@@ -274,7 +335,8 @@ def _run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
 
 
 def plot(rows: list[dict[str, Any]], path: Path) -> None:
-    """Robot time against its lower bound per board (with 1x and 2x lines), and dirt removed per cell."""
+    """Robot time against its cell bound per board and wiping mode (with 1x and 2x lines), and dirt removed per
+    cell."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -283,15 +345,19 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     from lampskit.atomic import write_atomic
 
     ran = [r for r in rows if r["outcome"] != "no report"]
+    bound = [r.get("cell_bound_s", float("nan")) for r in ran]
+    key = "cell_bound_s" if ran and np.isfinite(bound).all() else "lower_bound_s"
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for board in sorted({Path(r["board"]).stem for r in ran}):
-        rs = [r for r in ran if Path(r["board"]).stem == board]
-        ax1.scatter([r["lower_bound_s"] for r in rs], [r["robot_time_s"] for r in rs], label=board, s=18)
-    top = max([r["lower_bound_s"] for r in ran] + [1.0])
+    for group in sorted({f"{Path(r['board']).stem} {r.get('wiping', 'fixed')}" for r in ran}):
+        rs = [r for r in ran if f"{Path(r['board']).stem} {r.get('wiping', 'fixed')}" == group]
+        ax1.scatter([r[key] for r in rs], [r["robot_time_s"] for r in rs], label=group, s=16,
+                    marker="o" if group.endswith("fixed") else "^")
+    top = max([r[key] for r in ran] + [1.0])
     for f, style in ((1.0, "k-"), (2.0, "k--")):
         ax1.plot([0, top], [0, f * top], style, lw=0.8, label=f"{f:g}x the bound")
-    ax1.set(xlabel="lower bound [s]", ylabel="robot time [s]", title="robot time against its lower bound")
-    ax1.legend(fontsize=8)
+    what = "cell bound" if key == "cell_bound_s" else "lower bound"
+    ax1.set(xlabel=f"{what} [s]", ylabel="robot time [s]", title=f"robot time against its {what}")
+    ax1.legend(fontsize=7)
     ax2.bar(range(len(ran)), [100 * r["dirt_removed"] for r in ran],
             color=["tab:green" if r["success"] else "tab:red" for r in ran])
     ax2.axhline(100 * CLEAN_SHARE, color="k", lw=0.8)
@@ -302,17 +368,36 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
+def _bounds(cells: list[Cell]) -> tuple[dict[Cell, tuple], dict[Cell, float], dict[str, float], float, float]:
+    """Per cell its stains (areas, centres) and lower bound; the felt model; the planner's speed bound and the
+    pad's width."""
+    from controller.params import ControllerParams
+    from interfaces.description import PAD_SIZE_M
+    from lampskit.core.planner import PlannerParams
+
+    tables = {b: _board_table(b) for b in dict.fromkeys(c.board for c in cells)}
+    speed, pad = ControllerParams.from_table({}).limits.max_speed_m_s, max(PAD_SIZE_M)
+    stains = {c: cell_stains(c, tables[c.board]) for c in cells}
+    return (stains, {c: lower_bound_s(*stains[c], pad, speed) for c in cells}, felt_model(),
+            PlannerParams().max_speed_m_s, pad)
+
+
+def _write_outputs(out: Path, rows: list[dict[str, Any]], command: str, extra: dict[str, Any]) -> dict[str, Any]:
+    summary = summarize(rows)
+    result = {"schema": "lamps-campaign/1", "command": command, "clean_share": CLEAN_SHARE, **extra,
+              "summary": summary, "cells": rows}
+    out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out / "campaign.json", json.dumps(result, indent=1) + "\n")
+    write_text_atomic(out / "campaign.md", markdown(summary, rows, command))
+    plot(rows, out / "campaign.png")
+    return result
+
+
 def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, max_duration_s: float,
                  command: str, echo=print) -> dict[str, Any]:
     """Run every cell (``jobs`` at once), write campaign.json, .md and .png into ``out``; returns the json."""
-    from controller.params import ControllerParams
-    from interfaces.description import PAD_SIZE_M
-
     out.mkdir(parents=True, exist_ok=True)
-    tables = {b: _board_table(b) for b in dict.fromkeys(c.board for c in cells)}
-    speed = ControllerParams.from_table({}).limits.max_speed_m_s
-    pad = max(PAD_SIZE_M)
-    bounds = {c: lower_bound_s(*cell_stains(c, tables[c.board]), pad, speed) for c in cells}
+    stains, bounds, felt, v_plan, pad = _bounds(cells)
     skill = skill or _learn_skill(out)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
     t0 = time.monotonic()
@@ -322,20 +407,42 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
         for fut in concurrent.futures.as_completed(futures):
             k = futures[fut]
             report, run_dir, why = fut.result()
-            rows[k] = row_of(cells[k], report, bounds[cells[k]], run_dir, why)
+            rows[k] = row_of(cells[k], report, bounds[cells[k]], run_dir, why, stains[cells[k]], felt, v_plan)
             r = rows[k]
             echo(f"[{sum(x is not None for x in rows)}/{len(cells)} {time.monotonic() - t0:.0f} s] {cells[k].name}: "
                  + (f"no report ({why})" if report is None else
                     f"{r['outcome']}, {r['dirt_removed']:.1%} removed in {r['robot_time_s']:.1f} s "
-                    f"({r['time_over_bound']:.2f}x the bound)"))
+                    f"({r['time_over_cell_bound']:.2f}x the cell bound)"))
     done = [r for r in rows if r is not None]
-    summary = summarize(done)
-    result = {"schema": "lamps-campaign/1", "command": command, "clean_share": CLEAN_SHARE,
-              "speed_limit_m_s": speed, "pad_width_m": pad, "summary": summary, "cells": done}
-    write_text_atomic(out / "campaign.json", json.dumps(result, indent=1) + "\n")
-    write_text_atomic(out / "campaign.md", markdown(summary, done, command))
-    plot(done, out / "campaign.png")
-    return result
+    return _write_outputs(out, done, command, {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan})
+
+
+def summarize_campaigns(dirs: list[Path], out: Path, command: str) -> dict[str, Any]:
+    """One table of earlier campaigns' cells (``DIR/campaign.json``), each cell's ``report.json`` as it is now
+    (rebuilt by ``lamps report`` after the report gained a field, say) and today's bounds."""
+    entries = []
+    for d in dirs:
+        path = d / "campaign.json"
+        try:
+            data = json.loads(path.read_text())
+            cells = [(Cell(int(c["seed"]), int(c["stains"]), str(c["board"]), str(c.get("wiping", "fixed"))),
+                      str(c["run_dir"])) for c in data["cells"]]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise CampaignError(f"--summarize {d}: cannot read {path.name}: {exc}") from None
+        entries += cells
+    names = [c.name for c, _ in entries]
+    if len(set(names)) != len(names):
+        raise CampaignError("--summarize: the campaigns share cells (" + next(n for n in names if names.count(n) > 1)
+                            + "): give each cell once")
+    stains, bounds, felt, v_plan, pad = _bounds([c for c, _ in entries])
+    rows = []
+    for cell, run_dir in entries:
+        report_path = Path(run_dir) / "report.json"
+        report = json.loads(report_path.read_text()) if report_path.is_file() else None
+        rows.append(row_of(cell, report, bounds[cell], run_dir, "" if report else "no report.json", stains[cell],
+                           felt, v_plan))
+    return _write_outputs(out, rows, command, {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan,
+                                               "from": [str(d) for d in dirs]})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -351,6 +458,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--skill", default=None, help="skill file (default: learn the bundled demo once)")
     ap.add_argument("--max-duration", type=float, default=600.0, help="give a cell up after S s wall (default 600)")
     ap.add_argument("--out", default=None, help="campaign folder (default runs/campaign-<time>)")
+    ap.add_argument("--summarize", nargs="+", metavar="DIR", default=None,
+                    help="run nothing: one table of these campaign folders' cells, into --out")
     ap.add_argument("-v", "--verbose", action="store_true", help="log what the campaign does")
     return ap
 
@@ -360,6 +469,15 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="lamps campaign %(levelname)s: %(message)s")
     try:
+        if a.summarize:
+            if not a.out:
+                raise CampaignError("--summarize needs --out (the folder of the joint table)")
+            out = Path(a.out).resolve()
+            command = "lamps campaign " + " ".join(argv if argv is not None else sys.argv[1:])
+            result = summarize_campaigns([Path(d).resolve() for d in a.summarize], out, command)
+            print(markdown(result["summary"], [], "").split("\n\n")[0])
+            print(f"campaign: {out / 'campaign.md'}, {out / 'campaign.json'}, {out / 'campaign.png'}")
+            return 0
         seeds, stains = parse_range(a.seeds, "seeds"), parse_range(a.stains, "stains")
         if 0 in stains:
             raise CampaignError(f"--stains {a.stains!r}: a cell needs at least one stain")

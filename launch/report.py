@@ -26,6 +26,9 @@
   acceleration [m/s^2] and jerk [m/s^3] of the in-plane reference as
   executed (time-scaled), over every recorded tick of the whole run; jerk from
   consecutive ticks only (a gap, a restart or a skipped state is not one).
+* ``phase_time_s``: robot time [s] spent in each controller phase (and
+  ``all``), summed over consecutive recorded ticks: where a run's time goes
+  (APPROACH holds the survey's flight and look).
 * ``loop_timing``: the controller's last reported loop statistics.
 * ``max_contact_force_n`` (the sim's truth: the physical contact force,
   whatever the controller measured) and ``max_joint_speed_ratio`` (the
@@ -145,6 +148,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report["stains"] = _stains_section(run.truth, run.stains_msgs)
     report.update(_force_section(run.tr, run.col, run.truth, run.cap_n, run.filter_s))
     report["motion_peaks"] = _motion_peaks(run.tr, run.col)
+    report["phase_time_s"] = phase_times(run.tr, run.col)
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
     report.update(_safety_section(run))
@@ -271,6 +275,21 @@ def _motion_peaks(tr: np.ndarray, col: dict[str, int]) -> dict[str, dict[str, fl
         out["all" if code is None else names.get(code, str(code))] = {
             "speed_m_s": float(v[sel].max()), "accel_m_s2": float(a[sel].max()), "jerk_m_s3": float(jerk[sel].max()),
             "ticks": int(np.count_nonzero(sel))}
+    return out
+
+
+def phase_times(tr: np.ndarray, col: dict[str, int]) -> dict[str, float]:
+    """Robot time [s] per phase name and ``all``: each interval between consecutive recorded ticks (at most 1.5
+    ordinary ticks apart: a gap is nobody's) counts for the phase of its first tick."""
+    if len(tr) < 2:
+        return {}
+    t, phase = tr[:, col["t_s"]], tr[:, col["phase"]].astype(int)
+    dt = np.diff(t)
+    tick = float(np.median(dt[dt > 0])) if np.any(dt > 0) else 0.0
+    dt = np.where((dt > 0) & (dt <= 1.5 * tick), dt, 0.0)
+    names = {code: name for name, code in PHASE_CODES.items()}
+    out = {names.get(c, str(c)): float(dt[phase[:-1] == c].sum()) for c in sorted(set(phase[:-1].tolist()))}
+    out["all"] = float(dt.sum())
     return out
 
 
