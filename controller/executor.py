@@ -10,7 +10,7 @@ direction is force-regulated and ``h`` is unused.
 A state machine over :class:`~interfaces.messages.Phase` (what the cell
 sees) and :class:`Stage` (the motion running inside a phase, one handler
 each; the motions are :mod:`controller.free_motion` and the MP chain
-:mod:`controller.chain`): INIT -> WAIT_PEERS -> APPROACH -> TRANSITION(i)
+:mod:`lampskit.core.chain`): INIT -> WAIT_PEERS -> APPROACH -> TRANSITION(i)
 -> WIPE(i) -> TRANSITION(i -> j) -> ... -> RETREAT -> DONE, with
 PAUSED(reason), FAULT(reason) and ESTOP reachable from any phase.
 
@@ -21,7 +21,7 @@ PAUSED(reason), FAULT(reason) and ESTOP reachable from any phase.
   first stain of the plan, descend until the measured force passes
   ``contact_threshold_n``, ramp the force up to its target.
 * TRANSITION(j), WIPE(j): the learned MPs chained over the stains
-  (:mod:`controller.chain`): continuous in acceleration at every junction,
+  (:mod:`lampskit.core.chain`): continuous in acceleration at every junction,
   re-planned over the stains open whenever the next one is picked, the
   anchor following a stain that moves; a stain left without kappa waits
   for a recheck (:mod:`controller.stain_book`).
@@ -51,7 +51,7 @@ from lampskit.core.planner import Plan, PlannerParams, plan
 from lampskit.core.skill import Skill
 from interfaces.messages import Phase
 
-from .chain import ChainResult, MpChain
+from lampskit.core.chain import ChainResult, MpChain
 from .executor_types import BoardPose, Setpoint, StainState, ToolState
 from .free_motion import FreeMotion
 from .params import ExecutorParams, ForceParams
@@ -72,7 +72,7 @@ class Stage(IntEnum):
     DESCEND = 1  #: down to the creep height (air mode: to the air height)
     CREEP = 2  #: slowly on towards and past the surface until contact
     PRESS = 3  #: force ramp up to its target, at rest
-    CHAIN = 4  #: the learned MPs over the stains (:class:`~controller.chain.MpChain`)
+    CHAIN = 4  #: the learned MPs over the stains (:class:`~lampskit.core.chain.MpChain`)
     UNPRESS = 5  #: in contact: in-plane motion to rest while the force ramps out
     BRAKE = 6  #: in the air: x, y and h to rest together
     LIFT = 7  #: up to the standoff height

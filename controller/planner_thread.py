@@ -1,4 +1,4 @@
-"""The real-time controller's planner thread: re-plans off the 1 kHz path (see :mod:`controller.chain`).
+"""The real-time controller's planner thread: re-plans off the 1 kHz path (see :mod:`lampskit.core.chain`).
 
 Python runs one thread at a time; a thread that wants the interpreter
 waits until the running one lets go, which a busy thread does every

@@ -11,7 +11,7 @@ import pytest
 from controller.control.force import NormalForceRegulator
 from controller.control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
                                        speed_excess_force)
-from controller.chain import ChainStep
+from lampskit.core.chain import ChainStep
 from controller.executor import SkillExecutor
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
 from controller.motion import OrientationBlend, Quintic, brake_to_rest
@@ -641,7 +641,7 @@ def test_the_real_time_chain_re_plans_on_the_planner_thread_and_wipes_on_meanwhi
     failing = SkillExecutor(learned_skill, ExecutorParams())
     failing.chain.background = broken = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     try:
-        import controller.chain as chain_module
+        import lampskit.core.chain as chain_module
 
         def bad_plan(*args, **kwargs):
             raise PlanningError("no order found (test)")

@@ -1,23 +1,23 @@
 """A plan executed offline at a fixed rate: the reference the robot would follow, sample by sample.
 
-:func:`rollout` chains the plan's transitional and periodic MPs with the same
-runners the executor steps at 1 kHz (:mod:`lampskit.core.transitional_runner`,
-:mod:`lampskit.core.periodic_runner`), for ``lamps plan``, the figures and the
-tests; :func:`junction_step_ratios` measures how continuous the hand-overs are.
+:func:`rollout` steps the executor's own MP chain (:class:`~lampskit.core.chain.MpChain`,
+the one implementation of chaining) through the plan with a stand-in for kappa
+(a number of cycles per stain), for ``lamps plan``, the figures and the tests;
+:func:`junction_step_ratios` measures how continuous the hand-overs are.
 """
 
 from __future__ import annotations
 
+import math
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from lampskit.core.periodic_runner import PeriodicRunner
-from lampskit.core.planner import Plan, TransitionSpec, Wipe, exit_phase_delay, plan_transition
+from lampskit.core.chain import ChainResult, ChainStep, MpChain
+from lampskit.core.planner import Plan, Stain, TransitionSpec, Wipe
 from lampskit.core.skill import Skill
-from lampskit.core.transitional import TransitionStatus
-from lampskit.core.transitional_runner import TransitionalRunner
 from lampskit.errors import PlanningError
 
 
@@ -49,6 +49,10 @@ class Rollout:
     transitions: tuple[TransitionSpec, ...]
 
 
+#: A rollout gives up after this many samples (a stand-in for kappa that never says done).
+MAX_SAMPLES = 5_000_000
+
+
 def rollout(
     skill: Skill,
     plan_: Plan,
@@ -58,29 +62,43 @@ def rollout(
     cycles_per_stain: float | None = None,
     is_done: Callable[[Wipe, float], bool] | None = None,
 ) -> Rollout:
-    """Execute ``plan_`` from ``start`` at ``1/dt_s`` Hz.
+    """Execute ``plan_`` from ``start`` at ``1/dt_s`` Hz with the executor's MP chain.
 
     Each stain is wiped until ``is_done(wipe, cycles_done)`` (kappa's stand-in)
     is true; by default after ``cycles_per_stain`` cycles (default: the mean
     demonstrated count, at least 2); then, unless it is the last, until the
-    phase heads for the next stain (:func:`exit_phase_delay`). The first
-    sample is ``start`` at t = 0; the rollout ends on the last stain's
-    periodic MP (lifting off and retreating are the controller's).
+    phase heads for the next stain of the plan. The first sample is ``start``
+    at t = 0; the rollout ends on the last stain's periodic MP (lifting off and
+    retreating are the controller's). As in the executor, the tick in which a
+    transition starts holds the reference it starts from.
     """
     if not 1e-4 <= dt_s <= 0.02:
         raise PlanningError(f"dt_s must be in [0.0001, 0.02] s, got {dt_s}")
     if is_done is None:
         is_done = _after_cycles(_cycles_per_stain(skill, cycles_per_stain))
-    rec = _Recorder(dt_s)
-    specs = []
-    state = tuple(np.asarray(x, dtype=float).reshape(2) for x in start)
-    next_centres = {a.stain.id: b.stain.centre_m for a, b in zip(plan_.wipes, plan_.wipes[1:])}
-    for wipe in plan_.wipes:
-        spec = plan_transition(skill, plan_, wipe, state)
-        specs.append(spec)
-        overrun_s = _run_transition(rec, skill, spec, wipe.stain.id)
-        periodic = _run_wipe(rec, skill, wipe, spec, overrun_s, is_done, next_centres.get(wipe.stain.id))
-        state = (periodic.position_m.copy(), periodic.velocity_m_s.copy(), periodic.acceleration_m_s2.copy())
+    chain = MpChain(skill, plan_.params, math.inf, Counter(), follow_plan=True)
+    book = _PlanBook(plan_, chain, is_done)
+    ref = _Reference(*(np.asarray(x, dtype=float).reshape(2).copy() for x in start))
+    rec = _Recorder()
+    rec.record(0.0, ref, "transitional", plan_.wipes[0].stain.id)
+    if chain.start(plan_, ref) == ChainResult.ERROR:
+        raise PlanningError(chain.error)
+    specs, clock = [chain.entry], 0.0
+    for k in range(1, MAX_SAMPLES):
+        result = chain.update(dt_s, ref, book, clock)
+        clock = k * dt_s
+        if result == ChainResult.ERROR:
+            raise PlanningError(chain.error)
+        if result == ChainResult.FINISHED:
+            break
+        if result == ChainResult.TRANSITION:
+            specs.append(chain.entry)
+        if result in (ChainResult.TRANSITION, ChainResult.WIPE):
+            rec.junctions.append(len(rec.t_s))
+        kind = "transitional" if chain.step == ChainStep.TRANSIT else "periodic"
+        rec.record(clock, ref, kind, chain.wipe.stain.id)
+    else:
+        raise PlanningError(f"the rollout did not end within {MAX_SAMPLES} samples: is_done never said done")
     return rec.result(tuple(specs))
 
 
@@ -97,11 +115,51 @@ def _after_cycles(n: float) -> Callable[[Wipe, float], bool]:
     return lambda wipe, cycles: cycles >= n
 
 
+@dataclass
+class _Reference:
+    """The rollout's in-plane reference (what the executor's setpoint is to the chain)."""
+
+    xy: np.ndarray
+    v_xy: np.ndarray
+    a_xy: np.ndarray
+
+
+@dataclass
+class _StainView:
+    centre_m: np.ndarray
+    ink: Stain | None = None
+
+
+class _PlanBook:
+    """The plan's stains for the chain, with ``is_done(wipe, cycles)`` standing in for kappa: a stain is done once
+    the chain has wiped it long enough (and stays done)."""
+
+    max_passes = 1
+
+    def __init__(self, plan_: Plan, chain: MpChain, is_done: Callable[[Wipe, float], bool]) -> None:
+        self._plan, self._chain, self._is_done = plan_, chain, is_done
+        self.stains = {w.stain.id: _StainView(w.stain.centre_m) for w in plan_.wipes}
+        self._done: set[int] = set()
+
+    def is_done(self, stain_id: int) -> bool:
+        chain = self._chain
+        if stain_id not in self._done and chain.wipe is not None and chain.wipe.stain.id == stain_id \
+                and chain.step != ChainStep.TRANSIT and self._is_done(chain.wipe, chain.cycles_wiped):
+            self._done.add(stain_id)
+        return stain_id in self._done
+
+    def end_pass(self, stain_id: int, clock_s: float) -> bool:  # no timeout offline: never called
+        self._done.add(stain_id)
+        return True
+
+    def open_stains(self, clock_s: float, by_ink: bool = False) -> list[Stain]:
+        return [w.stain for w in self._plan.wipes if w.stain.id not in self._done]
+
+
 class _Recorder:
     """The rollout's samples as they are produced, and where one MP handed over to the next."""
 
-    def __init__(self, dt_s: float) -> None:
-        self.dt_s, self.t = dt_s, 0.0
+    def __init__(self) -> None:
         self.t_s: list[float] = []
         self.p: list[np.ndarray] = []
         self.v: list[np.ndarray] = []
@@ -110,65 +168,17 @@ class _Recorder:
         self.stain: list[int] = []
         self.junctions: list[int] = []
 
-    def record(self, runner, kind: str, stain_id: int) -> None:
-        self.t_s.append(self.t)
-        self.p.append(runner.position_m.copy())
-        self.v.append(runner.velocity_m_s.copy())
-        self.a.append(runner.acceleration_m_s2.copy())
+    def record(self, t: float, ref: _Reference, kind: str, stain_id: int) -> None:
+        self.t_s.append(t)
+        self.p.append(ref.xy.copy())
+        self.v.append(ref.v_xy.copy())
+        self.a.append(ref.a_xy.copy())
         self.kind.append(kind)
         self.stain.append(stain_id)
 
-    def junction(self) -> None:
-        self.junctions.append(len(self.t_s))
-
     def result(self, specs: tuple[TransitionSpec, ...]) -> Rollout:
         return Rollout(np.array(self.t_s), np.array(self.p), np.array(self.v), np.array(self.a),
-                       np.array(self.kind), np.array(self.stain), tuple(self.junctions[1:]), specs)
-
-
-def _run_transition(rec: _Recorder, skill: Skill, spec: TransitionSpec, stain_id: int) -> float:
-    """Run one transitional MP to its end; returns how far [s] the last tick went past its duration."""
-    trans = TransitionalRunner(skill.transitional[spec.transitional_index].mp, spec.start, spec.goal,
-                               spec.duration_s, forcing_transform=spec.forcing_transform)
-    rec.junction()
-    if not rec.t_s:
-        rec.record(trans, "transitional", stain_id)  # the start state, t = 0
-    while (status := trans.update(rec.dt_s)) == TransitionStatus.WORKING:
-        rec.t += rec.dt_s
-        rec.record(trans, "transitional", stain_id)
-    if status != TransitionStatus.FINISHED:
-        raise PlanningError(f"the transition into stain {stain_id} failed: {status.name}")
-    rec.t += rec.dt_s
-    return trans.overrun_s
-
-
-def _run_wipe(rec: _Recorder, skill: Skill, wipe: Wipe, spec: TransitionSpec, overrun_s: float,
-              is_done: Callable[[Wipe, float], bool], towards_m: np.ndarray | None) -> PeriodicRunner:
-    """Wipe one stain until ``is_done``, then on until the phase heads for ``towards_m`` (None: the last)."""
-    # hand over at the goal (g1, g2) and entry phase, then advance by the time the last tick went past T
-    periodic = PeriodicRunner(skill.periodic[wipe.periodic_index].mp, wipe.anchor_m, wipe.amplitude_m,
-                              wipe.omega_rad_s, spec.entry_phase_rad, start_position_m=spec.goal[0],
-                              start_velocity_m_s=spec.goal[1])
-    phase0 = periodic.phase_unwrapped_rad
-    if overrun_s > 0.0:
-        periodic.update(overrun_s)
-    rec.junction()
-    rec.record(periodic, "periodic", wipe.stain.id)
-    while not is_done(wipe, (periodic.phase_unwrapped_rad - phase0) / (2 * np.pi)):
-        _periodic_tick(rec, periodic, wipe.stain.id)
-    delay = 0.0 if towards_m is None else exit_phase_delay(skill, wipe, periodic.phase_rad, towards_m)
-    leave_at = periodic.phase_unwrapped_rad + delay
-    while periodic.phase_unwrapped_rad < leave_at:
-        _periodic_tick(rec, periodic, wipe.stain.id)
-    return periodic
-
-
-def _periodic_tick(rec: _Recorder, periodic: PeriodicRunner, stain_id: int) -> None:
-    status = periodic.update(rec.dt_s)
-    if status < 0:
-        raise PlanningError(f"the periodic MP of stain {stain_id} failed: {status.name}")
-    rec.t += rec.dt_s
-    rec.record(periodic, "periodic", stain_id)
+                       np.array(self.kind), np.array(self.stain), tuple(self.junctions), specs)
 
 
 def junction_step_ratios(ro: Rollout, window: int = 5) -> np.ndarray:

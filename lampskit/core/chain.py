@@ -1,5 +1,10 @@
 """The chain of learned MPs over the stains, one control tick at a time (ruckig style).
 
+The one implementation of MP chaining: the controller's skill executor steps
+it at 1 kHz against perception's kappa, and :func:`lampskit.core.rollout.rollout`
+(``lamps plan``, the figures, the benchmarks and tests) steps it offline with
+a stand-in for kappa, so what is plotted is what the robot runs.
+
 :class:`MpChain` drives the in-plane reference while the pad wipes:
 
 * TRANSIT into stain j: the learned transitional MP from the current
@@ -16,8 +21,9 @@
   (:func:`~lampskit.core.planner.adapted_wipe`), every change through the
   runner's critically damped ramps.
 * LEAVE j: re-planned over the stains open *now* (appeared, vanished or
-  done ones included), the periodic MP runs on until its phase heads for
-  the next stain (:func:`~lampskit.core.planner.exit_phase_delay`).
+  done ones included; with ``follow_plan`` the plan's own order instead, as
+  the offline rollout runs it), the periodic MP runs on until its phase
+  heads for the next stain (:func:`~lampskit.core.planner.exit_phase_delay`).
 * REPLAN j (only with :attr:`MpChain.background`, the real-time loop): the
   re-plan runs on a planner thread, off the 1 kHz path, while the periodic
   MP goes on wiping j; the tick that finds it done hands it over and goes
@@ -37,23 +43,52 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
+from collections.abc import Mapping
 from concurrent.futures import Executor, Future
 from enum import IntEnum
+from typing import Protocol
 
 import numpy as np
 
 from lampskit.core.periodic import periodic_state
 from lampskit.core.periodic_runner import PeriodicRunner
-from lampskit.core.planner import (Plan, PlannerParams, TransitionSpec, Wipe, adapted_wipe, exit_phase_delay, plan,
-                                   plan_transition)
+from lampskit.core.planner import (Plan, PlannerParams, Stain, TransitionSpec, Wipe, adapted_wipe, exit_phase_delay,
+                                   plan, plan_transition)
 from lampskit.core.skill import Skill
 from lampskit.core.transitional_runner import TransitionalRunner
 from lampskit.errors import PlanningError
 
-from .executor_types import Setpoint
-from .stain_book import StainBook
-
 log = logging.getLogger(__name__)
+
+
+class Reference(Protocol):
+    """The in-plane reference the chain reads and writes (the executor's setpoint): arrays of shape (2,) in the
+    board plane [m, m/s, m/s^2]."""
+
+    xy: np.ndarray
+    v_xy: np.ndarray
+    a_xy: np.ndarray
+
+
+class StainView(Protocol):
+    """One stain as the chain reads it: centre (2,) [m] and, for adaptive wiping, the ink left (or None)."""
+
+    centre_m: np.ndarray
+    ink: Stain | None
+
+
+class Book(Protocol):
+    """What the chain asks about the stains (the executor's :class:`controller.stain_book.StainBook`, or the
+    rollout's plan with a stand-in for kappa)."""
+
+    stains: Mapping[int, StainView]
+    max_passes: int
+
+    def is_done(self, stain_id: int) -> bool: ...
+
+    def end_pass(self, stain_id: int, clock_s: float) -> bool: ...
+
+    def open_stains(self, clock_s: float, by_ink: bool = False) -> list[Stain]: ...
 
 #: Adaptive wiping re-targets the periodic MP at most this often [s] (perception reports ~10-30 times a second)...
 ADAPT_EVERY_S = 0.5
@@ -96,6 +131,9 @@ class MpChain:
         One pass over a stain without kappa lasts this long [s].
     counters : Counter
         Shared with the executor: ``replans``, ``wipe_timeouts``.
+    follow_plan : bool
+        After each stain go on with the plan's next open stain, in the plan's order (the offline rollout);
+        False: re-plan over the stains open now (the executor).
 
     Attributes
     ----------
@@ -106,8 +144,10 @@ class MpChain:
         Why the last :attr:`ChainResult.ERROR`.
     """
 
-    def __init__(self, skill: Skill, planner: PlannerParams, wipe_timeout_s: float, counters: Counter[str]) -> None:
+    def __init__(self, skill: Skill, planner: PlannerParams, wipe_timeout_s: float, counters: Counter[str],
+                 follow_plan: bool = False) -> None:
         self.skill = skill
+        self.follow_plan = follow_plan
         self.planner = planner
         self.wipe_timeout_s = wipe_timeout_s
         self.counters = counters
@@ -125,9 +165,22 @@ class MpChain:
         self._duration: Future | None = None  # the next transition's bounded duration, from the planner thread
         self._wipe_t = 0.0
         self._planned: Wipe | None = None  # the wipe as planned (adaptive wiping never exceeds its r)
+        self._wipe_phase0 = 0.0
         self._adapted_at = -np.inf
         self._on_step = {ChainStep.TRANSIT: self._on_transit, ChainStep.WIPE: self._on_wipe,
                          ChainStep.LEAVE: self._on_leave, ChainStep.REPLAN: self._on_replan}
+
+    @property
+    def entry(self) -> TransitionSpec | None:
+        """The spec of the last transition started (into :attr:`wipe`)."""
+        return self._entry
+
+    @property
+    def cycles_wiped(self) -> float:
+        """Cycles of the periodic MP run on the current stain since its transition ended (0 before)."""
+        if self.step == ChainStep.TRANSIT:
+            return 0.0
+        return (self._runner.phase_unwrapped_rad - self._wipe_phase0) / (2 * np.pi)
 
     @property
     def current_mp(self) -> str:
@@ -136,13 +189,13 @@ class MpChain:
             return f"transitional {self._entry.transitional_index}"
         return f"periodic {self.wipe.periodic_index}"
 
-    def start(self, plan_: Plan, reference: Setpoint) -> ChainResult:
+    def start(self, plan_: Plan, reference: Reference) -> ChainResult:
         """Into the plan's first wipe from the reference's in-plane state: TRANSITION or ERROR."""
         self._pending = self._duration = None  # a re-plan of a chain left earlier (a stop, a fault): of no use
         self._plan = plan_
         return self._start_transition(plan_.wipes[0], reference)
 
-    def update(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+    def update(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
         """Advance by ``dt_s`` [s] at ``clock_s`` [s] and write the in-plane reference (not on ERROR or FINISHED).
 
         A transition starting in this tick starts from ``reference`` as the
@@ -155,7 +208,7 @@ class MpChain:
         reference.xy[:], reference.v_xy[:], reference.a_xy[:] = r.position_m, r.velocity_m_s, r.acceleration_m_s2
         return result
 
-    def adapt(self, book: StainBook, clock_s: float) -> ChainResult | None:
+    def adapt(self, book: Book, clock_s: float) -> ChainResult | None:
         """A fresh view while wiping at ``clock_s`` [s]: adaptive wiping re-targets the periodic MP at the ink
         that remains (see the module docstring); fixed wiping re-anchors it (through its ramp) at the stain's
         centre if that moved over 2 mm. None if nothing changed."""
@@ -187,7 +240,7 @@ class MpChain:
                                                       omega_rad_s=new.omega_rad_s, stroke=stroke))
 
     # ------------------------------------------------------------------ one handler per step
-    def _on_transit(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+    def _on_transit(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
         runner = self._runner
         status = runner.update(dt_s)
         if status < 0:
@@ -204,7 +257,7 @@ class MpChain:
         self._wipe_t += dt_s
         return None
 
-    def _on_wipe(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+    def _on_wipe(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
         runner = self._runner
         if (failed := self._wipe_on(dt_s)) is not None:
             return failed
@@ -216,14 +269,14 @@ class MpChain:
             return ChainResult.WORKING
         return self._leave_when_due(runner, reference)
 
-    def _on_leave(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+    def _on_leave(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
         status = self._runner.update(dt_s)
         if status < 0:
             return self._checked(status)
         return self._leave_when_due(self._runner, reference)
 
     # ------------------------------------------------------------------ hand-overs
-    def _start_transition(self, wipe: Wipe, reference: Setpoint) -> ChainResult:
+    def _start_transition(self, wipe: Wipe, reference: Reference) -> ChainResult:
         r = reference
         duration, self._duration = self._duration, None
         if duration is not None and duration.done() and duration.exception() is None:
@@ -254,6 +307,7 @@ class MpChain:
             return self._failed(f"cannot start the periodic MP {wipe.periodic_index} on stain {wipe.stain.id}: {exc}")
         self._runner = runner
         self._planned = wipe
+        self._wipe_phase0 = runner.phase_unwrapped_rad
         self._adapted_at = -np.inf
         self._wipe_t = 0.0
         self._leave_at = np.inf
@@ -264,7 +318,7 @@ class MpChain:
                 return self._checked(status)
         return ChainResult.WIPE
 
-    def _pass_over(self, book: StainBook, clock_s: float) -> bool:
+    def _pass_over(self, book: Book, clock_s: float) -> bool:
         """The stain has kappa, has vanished, or this pass timed out (then it waits for a recheck)."""
         sid = self.wipe.stain.id
         if book.is_done(sid):
@@ -278,7 +332,7 @@ class MpChain:
             log.info("stain %d: no kappa after %.1f s, back to it later", sid, self._wipe_t)
         return True
 
-    def _choose_next(self, runner: PeriodicRunner, book: StainBook, clock_s: float) -> ChainResult:
+    def _choose_next(self, runner: PeriodicRunner, book: Book, clock_s: float) -> ChainResult:
         """Re-plan over the stains open now (in the tick, or handed to :attr:`background`); keep wiping until
         the phase heads for the next one."""
         current = self.wipe.stain.id
@@ -286,6 +340,11 @@ class MpChain:
         self._next = None
         if not open_stains:
             return self._leave_towards(runner, None)
+        if self.follow_plan:  # the plan's next open stains, in its order
+            ids, wipes = {s.id for s in open_stains}, self._plan.wipes
+            k = next((i for i, w in enumerate(wipes) if w.stain.id == current), -1)
+            rest = tuple(w for w in wipes[k + 1:] + wipes[:max(k, 0)] if w.stain.id in ids)
+            return self._leave_towards(runner, Plan(rest, self._plan.params) if rest else None)
         start = runner.position_m.copy()
         if self.background is not None:
             self._pending = self.background.submit(plan, self.skill, open_stains, start, self.planner)
@@ -297,7 +356,7 @@ class MpChain:
             return self._failed(f"planning failed: {exc}")
         return self._leave_towards(runner, new_plan)
 
-    def _on_replan(self, dt_s: float, reference: Setpoint, book: StainBook, clock_s: float) -> ChainResult:
+    def _on_replan(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
         """Wipe on while the planner thread works; take its plan at the first tick it is done."""
         runner = self._runner
         if (failed := self._wipe_on(dt_s)) is not None:
@@ -338,7 +397,7 @@ class MpChain:
                                                     tuple(np.array(x) for x in exit_state))
         return ChainResult.WORKING
 
-    def _leave_when_due(self, runner: PeriodicRunner, reference: Setpoint) -> ChainResult:
+    def _leave_when_due(self, runner: PeriodicRunner, reference: Reference) -> ChainResult:
         """Once the phase reaches the exit phase: into the next stain, or FINISHED after the last."""
         if runner.phase_unwrapped_rad < self._leave_at:
             return ChainResult.WORKING
