@@ -9,6 +9,7 @@ commands are exercised end to end over real Zenoh.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import socket
@@ -21,12 +22,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from controller.core import PHASE_CODES
 from interfaces.cli import COMMANDS
 from interfaces.errors import ConfigError
 from interfaces.keys import Keys
+from interfaces.messages import Phase
 from launch.compose import active, free_port, load_compose, localize, run_locally, substitute
 from launch.record import read_recording, trace_array
 from launch.report import SCHEMA, build_report
+from lampskit.core.planner import PlannerParams
 
 from .conftest import REPO
 
@@ -237,7 +241,7 @@ def _check_channel_schemas(path: Path) -> None:
     check_layout_against(path, layout)
 
 
-def _check_run(out: Path, base: int, robot_brakes_ok: bool = False) -> dict:
+def _check_run(out: Path, base: int, robot_brakes_ok: bool = False, stains: int = 3) -> dict:
     report = json.loads((out / "report.json").read_text())
     assert report["schema"] == SCHEMA
     rec = read_recording(out / "recording.mcap")
@@ -252,10 +256,10 @@ def _check_run(out: Path, base: int, robot_brakes_ok: bool = False) -> dict:
     # all the dirt is in the stains, so the fraction of it left is the stains' fractions left averaged with
     # their dirt as weights (a mediant): it lies between the least and the most wiped stain's
     left = [r1 / r0 for r0, r1 in zip(truth[0]["remaining"], truth[-1]["remaining"])]
-    assert 1 - max(left) - 1e-9 <= report["dirt_removed_fraction"] <= 1 - min(left) + 1e-9, \
+    assert 1 - max(left) - 1e-6 <= report["dirt_removed_fraction"] <= 1 - min(left) + 1e-6, \
         (report["dirt_removed_fraction"], left)
     assert [s["final_remaining"] for s in report["stains"]] == truth[-1]["remaining"]
-    assert len(report["stains"]) == 3 and all(s["kappa_s"] is not None for s in report["stains"])
+    assert len(report["stains"]) == stains and all(s["kappa_s"] is not None for s in report["stains"])
     assert all(s["truth_below_level_s"] <= s["kappa_s"] for s in report["stains"])
     # the MP junctions: the reference acceleration steps no more than an ordinary tick does (continuous to the
     # tick) and no more than 1 % of the peak reference acceleration above it; an ordinary tick's step is the
@@ -321,6 +325,34 @@ def test_lamps_up_default_cleans_a_wall_board_and_reports_it(tmp_path):
     assert r.returncode == 0, r.stderr
     again = json.loads((out / "report.json").read_text())
     assert again == first and (out / "eraser_path.png").is_file()
+
+
+@pytest.mark.slow
+def test_adaptive_wiping_cleans_a_long_slanted_streak_with_a_stroke_along_it(tmp_path, learned_skill_file):
+    """One 16 cm streak, three times as long as wide, at 30 degrees: the adaptive stroke is stretched and turned
+    along it and follows the ink; the fixed round stroke of its size leaves its ends (86.9 % removed when last
+    run, against 99.0 %: README)."""
+    out, base = tmp_path / "run", _port_base()
+    env = {"LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true",
+           "LAMPS__SIM__DIRT__STAIN": "[{centre_m = [0.45, 0.3], size_m = 0.16, aspect = 3.0, angle_deg = 30.0}]"}
+    r = _up(["--out", str(out), "--port-base", str(base), "--skill", str(learned_skill_file), "--max-duration", "240"],
+            env=env)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    report = _check_run(out, base, stains=1)
+    assert report["dirt_removed_fraction"] >= 0.97, report["dirt_removed_fraction"]  # 98.7-99.0 % when last run
+    assert report["counters"]["controller"]["adaptations"] >= 1
+    planner = PlannerParams()
+    for phase, peaks in report["motion_peaks"].items():  # the whole run inside the planner's bounds
+        assert peaks["speed_m_s"] <= planner.max_speed_m_s and peaks["accel_m_s2"] <= planner.max_accel_m_s2, phase
+        assert peaks["jerk_m_s3"] <= planner.max_jerk_m_s3, phase
+    # the pad's path while wiping lies along the streak
+    cols, tr = trace_array([m for _, m in read_recording(out / "recording.mcap")[Keys().controller_trace]])
+    col = {c: i for i, c in enumerate(cols)}
+    wiping = tr[:, col["phase"]] == PHASE_CODES[Phase.WIPE]
+    xy = tr[wiping][:, [col["ref_x"], col["ref_y"]]]
+    _, vecs = np.linalg.eigh(np.cov((xy - xy.mean(axis=0)).T))
+    along = math.degrees(math.atan2(vecs[1, -1], vecs[0, -1])) % 180.0
+    assert min(abs(along - 30.0), 180.0 - abs(along - 30.0)) < 12.0, along
 
 
 @pytest.mark.slow
