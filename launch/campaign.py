@@ -19,8 +19,10 @@ shortest network joining the stains (a minimum spanning tree, no longer than
 any path through them) at that speed. That bound leaves out everything a run
 does besides sweeping and travelling, so a second one, the **cell bound**
 (:func:`cell_bound_s`), adds the run's fixed moves as it executed them (the
-APPROACH and RETREAT phases: survey flight and look, approach, touch-down,
-force ramps, lift-off, flight back; the same whatever the wiping) and counts
+robot time before the skill's first transition: waiting for the peers, the
+survey's flight and look, the approach, touch-down and force ramp; and the
+RETREAT phase: ramp-out, lift-off, flight back; the same whatever the
+wiping) and counts
 the sliding the felt needs (:func:`felt_path_m`) at the planner's speed
 bound. A cell *succeeds* when it removed at least :data:`CLEAN_SHARE` of its
 dirt and nothing faulted.
@@ -159,7 +161,7 @@ def felt_path_m(area_m2: float, pad_area_m2: float, rate_per_n_m: float, force_o
 
 def cell_bound_s(fixed_moves_s: float, areas_m2: list[float], centres_m: np.ndarray, felt: dict[str, float],
                  speed_m_s: float) -> float:
-    """The cell bound [s]: the run's fixed moves (APPROACH + RETREAT as executed) + each stain's
+    """The cell bound [s]: the run's fixed moves (before the skill's start + RETREAT, as executed) + each stain's
     :func:`felt_path_m` + the stains' minimum spanning tree, both at ``speed_m_s``. ``felt``: ``pad_area_m2``,
     ``rate_per_n_m``, ``force_over_threshold_n``, ``level``."""
     wipe = sum(felt_path_m(a, **felt) for a in areas_m2)
@@ -201,8 +203,10 @@ def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: s
     if report is None:
         return {**row, "outcome": "no report", "success": False, "why": why}
     phases = report.get("phase_time_s") or {}
-    fixed = float(phases.get("APPROACH", 0.0) + phases.get("RETREAT", 0.0))
-    cell_b = cell_bound_s(fixed, *stains, felt, speed_m_s) if stains is not None and felt and phases else float("nan")
+    start = report.get("skill_start_s")
+    fixed = float(start) + float(phases.get("RETREAT", 0.0)) if start is not None and phases else float("nan")
+    cell_b = cell_bound_s(fixed, *stains, felt, speed_m_s) if stains is not None and felt and fixed == fixed \
+        else float("nan")
     faults = [f for f in report.get("faults", []) if f.get("phase") in FAULT_PHASES]
     removed = float(report.get("dirt_removed_fraction", 0.0))
     robot_s = float(report.get("sim_time_s", float("nan")))

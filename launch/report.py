@@ -28,7 +28,10 @@
   consecutive ticks only (a gap, a restart or a skipped state is not one).
 * ``phase_time_s``: robot time [s] spent in each controller phase (and
   ``all``), summed over consecutive recorded ticks: where a run's time goes
-  (APPROACH holds the survey's flight and look).
+  (APPROACH holds the survey's flight and look); ``skill_start_s``: the
+  robot time of the first TRANSITION or WIPE tick (the start of the skill,
+  after waiting for the peers, the survey and the approach; null if never),
+  exact even when the recording began late.
 * ``loop_timing``: the controller's last reported loop statistics.
 * ``max_contact_force_n`` (the sim's truth: the physical contact force,
   whatever the controller measured) and ``max_joint_speed_ratio`` (the
@@ -149,6 +152,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report.update(_force_section(run.tr, run.col, run.truth, run.cap_n, run.filter_s))
     report["motion_peaks"] = _motion_peaks(run.tr, run.col)
     report["phase_time_s"] = phase_times(run.tr, run.col)
+    report["skill_start_s"] = skill_start(run.tr, run.col)
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
     report.update(_safety_section(run))
@@ -291,6 +295,14 @@ def phase_times(tr: np.ndarray, col: dict[str, int]) -> dict[str, float]:
     out = {names.get(c, str(c)): float(dt[phase[:-1] == c].sum()) for c in sorted(set(phase[:-1].tolist()))}
     out["all"] = float(dt.sum())
     return out
+
+
+def skill_start(tr: np.ndarray, col: dict[str, int]) -> float | None:
+    """Robot time [s] of the first recorded TRANSITION or WIPE tick (None if there is none)."""
+    if not len(tr):
+        return None
+    hit = np.flatnonzero(np.isin(tr[:, col["phase"]].astype(int), _WIPING))
+    return float(tr[hit[0], col["t_s"]]) if hit.size else None
 
 
 def _final_phase(run: _Run) -> str:

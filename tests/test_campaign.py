@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from launch.campaign import (CampaignError, Cell, cell_stains, cells_of, lower_bound_s, mst_length_m, parse_range,
-                             row_of, summarize)
+from launch.campaign import (CampaignError, Cell, cell_bound_s, cell_stains, cells_of, felt_model, felt_path_m,
+                             lower_bound_s, mst_length_m, parse_range, row_of, summarize)
 
 REPO = Path(__file__).resolve().parent.parent
 TILTED = REPO / "config" / "boards" / "tilted.toml"
@@ -68,6 +68,43 @@ def _report(removed: float, robot_s: float, faults=()):
             "faults": [{"phase": p, "reason": r} for p, r in faults]}
 
 
+def test_the_felt_needs_its_sliding_under_every_point_and_the_cell_bound_adds_the_fixed_moves():
+    felt = {"pad_area_m2": 0.006, "rate_per_n_m": 2.0, "force_over_threshold_n": 8.0, "level": 0.03}
+    slide = math.log(1 / 0.03) / 16.0  # 0.219 m under every point
+    assert felt_path_m(0.001, **felt) == pytest.approx(slide)  # smaller than the pad: one slide's length
+    assert felt_path_m(0.012, **felt) == pytest.approx(2 * slide)  # twice the pad's area: twice the path
+    centres = np.array([[0.0, 0.0], [0.3, 0.0]])
+    assert cell_bound_s(9.0, [0.001, 0.012], centres, felt, 0.5) == pytest.approx(9.0 + (3 * slide + 0.3) / 0.5)
+    with pytest.raises(CampaignError):
+        felt_path_m(0.01, 0.0, 2.0, 8.0, 0.03)
+
+
+def test_a_row_takes_the_fixed_moves_from_the_skill_start_and_the_retreat():
+    report = {**_report(1.0, 20.0), "skill_start_s": 7.0, "phase_time_s": {"RETREAT": 3.0, "WIPE": 8.0}}
+    felt = felt_model()
+    stains = ([0.002], np.array([[0.2, 0.2]]))
+    row = row_of(Cell(0, 1, "wall"), report, 0.5, "a", stains=stains, felt=felt, speed_m_s=0.5)
+    assert row["fixed_moves_s"] == 10.0 and row["time_per_stain_s"] == 10.0
+    assert row["cell_bound_s"] == pytest.approx(cell_bound_s(10.0, *stains, felt, 0.5))
+    assert row["time_over_cell_bound"] == pytest.approx(20.0 / row["cell_bound_s"])
+    old = row_of(Cell(0, 1, "wall"), _report(1.0, 20.0), 0.5, "a", stains=stains, felt=felt)
+    assert math.isnan(old["cell_bound_s"])  # a report from before the skill start was reported: no bound
+
+
+def test_phase_times_and_the_skill_start_come_from_the_trace():
+    from controller.core import PHASE_CODES
+    from launch.report import phase_times, skill_start
+
+    col = {"t_s": 0, "phase": 1}
+    codes = [PHASE_CODES["APPROACH"]] * 3 + [PHASE_CODES["TRANSITION"]] * 2 + [PHASE_CODES["WIPE"]] * 3
+    t = [2.0, 2.001, 2.002, 2.003, 2.004, 2.5, 2.501, 2.502]  # a gap of half a second (nobody's)
+    tr = np.column_stack([t, codes])
+    times = phase_times(tr, col)
+    assert times["APPROACH"] == pytest.approx(0.003) and times["TRANSITION"] == pytest.approx(0.001)
+    assert times["WIPE"] == pytest.approx(0.002) and times["all"] == pytest.approx(0.006)
+    assert skill_start(tr, col) == 2.003 and skill_start(tr[:3], col) is None
+
+
 def test_rows_and_summary_count_success_faults_and_cells_without_a_report():
     rows = [row_of(Cell(0, 1, "wall"), _report(1.0, 20.0), 10.0, "a"),
             row_of(Cell(1, 2, "wall"), _report(0.97, 30.0), 10.0, "b"),  # below 98 %: ran, not a success
@@ -110,18 +147,28 @@ def test_bad_options_are_one_line_errors_before_anything_runs(tmp_path, args, ma
 
 @pytest.mark.slow
 def test_a_small_campaign_runs_its_cells_at_once_and_writes_the_table(tmp_path, learned_skill_file):
-    """Two seeded one-stain cells on the wall board, both at once, each a whole cell in lock-step."""
+    """One seeded one-stain cell on the wall board, fixed and adaptive at once, each a whole cell in lock-step;
+    then --summarize tables the campaign again from its folder."""
     out = tmp_path / "campaign"
-    r = _campaign("--seeds", "0-1", "--stains", "1", "--boards", "wall", "--jobs", "2", "--skill",
-                  str(learned_skill_file), "--out", str(out))
+    r = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed,adaptive", "--jobs", "2",
+                  "--skill", str(learned_skill_file), "--out", str(out))
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     result = json.loads((out / "campaign.json").read_text())
-    assert [c["name"] for c in result["cells"]] == ["wall-s0-n1", "wall-s1-n1"]
+    assert [c["name"] for c in result["cells"]] == ["wall-s0-n1", "wall-s0-n1-adaptive"]
     for c in result["cells"]:
         assert c["success"] and c["dirt_removed"] >= 0.98 and c["faults"] == 0, c
-        assert c["robot_time_s"] > c["lower_bound_s"] > 0  # a bound, and one no run beats
+        assert c["robot_time_s"] > c["cell_bound_s"] > c["fixed_moves_s"] > 0  # a bound, and one no run beats
+        assert c["cell_bound_s"] > c["lower_bound_s"] > 0
         assert (Path(c["run_dir"]) / "report.json").is_file()
-    assert result["summary"]["all"]["success_rate"] == 1.0
+    report = json.loads((Path(result["cells"][1]["run_dir"]) / "report.json").read_text())
+    assert report["counters"]["controller"].get("adaptations", 0) >= 1  # the adaptive cell adapted
+    assert result["summary"]["all fixed"]["success_rate"] == result["summary"]["all adaptive"]["success_rate"] == 1.0
     md = (out / "campaign.md").read_text()
-    assert "| all | 2 | 100% |" in md and "wall-s1-n1" in md
+    assert "| all fixed | 1 | 100% |" in md and "| all adaptive | 1 | 100% |" in md and "wall-s0-n1-adaptive" in md
     assert (out / "campaign.png").stat().st_size > 10_000
+    again = _campaign("--summarize", str(out), "--out", str(tmp_path / "joint"))
+    assert again.returncode == 0, again.stderr
+    joint = json.loads((tmp_path / "joint" / "campaign.json").read_text())
+    assert joint["summary"] == result["summary"] and joint["from"] == [str(out)]
+    twice = _campaign("--summarize", str(out), str(out), "--out", str(tmp_path / "twice"))
+    assert twice.returncode == 1 and "share cells (wall-s0-n1)" in twice.stderr
