@@ -26,8 +26,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from controller.planner_thread import SWITCH_INTERVAL_S, PlannerThread  # noqa: E402
-from lampskit.core.planner import (EXACT_ORDER_MAX, Plan, PlannerParams, Stain, order_stains, plan,  # noqa: E402
-                                   plan_transition)
+from lampskit.core.planner import (EXACT_ORDER_MAX, Plan, PlannerParams, Stain, adapted_wipe,  # noqa: E402
+                                   order_stains, plan, plan_transition)
 from lampskit.learn.learn import bundled_skill  # noqa: E402
 
 SIZES = (5, 7, 10, 30, 100)
@@ -120,12 +120,16 @@ def transition_costs(skill, boards: int) -> dict[str, list[float]]:
     """Wall time [ms] of planning each transition of random plans: bounded search, given duration, no bounds."""
     loose = PlannerParams(max_speed_m_s=2.0, max_accel_m_s2=50.0, max_jerk_m_s3=5000.0)
     rest = (np.zeros(2),) * 3
-    out: dict[str, list[float]] = {"search": [], "given": [], "unbounded": []}
+    out: dict[str, list[float]] = {"search": [], "given": [], "unbounded": [], "adapt": []}
     for b in range(boards):
         rng = np.random.default_rng(7000 + b)
         stains = [Stain(i, rng.uniform([0.05, 0.05], [0.65, 0.4]), float(rng.uniform(0.03, 0.22)))
                   for i in range(int(rng.integers(1, 7)))]
         p = plan(skill, stains, np.zeros(2))
+        for w in p.wipes:  # adaptive wiping's re-target at an elongated ink left of the stain
+            ink = Stain(w.stain.id, w.stain.centre_m + 0.01, 0.5 * w.stain.size_m, 0.2 * w.stain.size_m,
+                        float(rng.uniform(-1.5, 1.5)))
+            out["adapt"].append(_timed(lambda: adapted_wipe(skill, w, w, ink, p.params))[0])
         for w in p.wipes:
             dt, spec = _timed(lambda: plan_transition(skill, p, w, rest))
             out["search"].append(dt)
@@ -195,7 +199,9 @@ def main() -> int:
     for name, label in (("search", "with the search for a duration within the kinematic bounds (lock-step: in the "
                                    "tick; real time: on the planner thread)"),
                         ("given", "with the duration given (real time: the exit tick)"),
-                        ("unbounded", "baseline: the duration as demonstrated, no bounds (the previous planner)")):
+                        ("unbounded", "baseline: the duration as demonstrated, no bounds (the previous planner)"),
+                        ("adapt", "adaptive wiping: re-targeting a wipe at the ink left (in the tick that takes a "
+                                  "perception message, at most every 0.5 s)")):
         t = transitions[name]
         print(f"| {label} | {np.median(t):.2f} / {max(t):.2f} |")
     if a.json:

@@ -85,7 +85,8 @@ class Cell:
 
     @property
     def name(self) -> str:
-        return f"{Path(self.board).stem}-s{self.seed}-n{self.stains}" + ("-adaptive" if self.wiping == "adaptive" else "")
+        suffix = "-adaptive" if self.wiping == "adaptive" else ""
+        return f"{Path(self.board).stem}-s{self.seed}-n{self.stains}{suffix}"
 
 
 # ---------------------------------------------------------------------------------------------- pure parts
@@ -215,7 +216,8 @@ def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: s
             "time_over_bound": robot_s / bound_s if bound_s > 0 else float("nan"),
             "phase_time_s": phases, "fixed_moves_s": fixed, "cell_bound_s": cell_b,
             "time_over_cell_bound": robot_s / cell_b if cell_b > 0 else float("nan"),
-            "wipe_s": float(phases.get("WIPE", float("nan"))), "transition_s": float(phases.get("TRANSITION", float("nan"))),
+            "wipe_s": float(phases.get("WIPE", float("nan"))),
+            "transition_s": float(phases.get("TRANSITION", float("nan"))),
             "time_per_stain_s": (robot_s - fixed) / cell.stains,
             "peak_accel_m_s2": float(peaks.get("accel_m_s2", float("nan"))),
             "peak_contact_force_n": float(report.get("max_contact_force_n", float("nan"))),
@@ -273,7 +275,8 @@ def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], com
                      f"{s.get('time_per_stain_median_s', float('nan')):.1f} | "
                      f"{s.get('time_over_cell_bound_median', float('nan')):.2f} "
                      f"({s.get('time_over_cell_bound_max', float('nan')):.2f}) | {s['time_over_bound_median']:.1f} | "
-                     f"{s.get('peak_speed_max_m_s', float('nan')):.2f} / {s.get('peak_accel_max_m_s2', float('nan')):.2f} / "
+                     f"{s.get('peak_speed_max_m_s', float('nan')):.2f} / "
+                     f"{s.get('peak_accel_max_m_s2', float('nan')):.2f} / "
                      f"{s['peak_jerk_max_m_s3']:.0f} | {s['peak_contact_force_max_n']:.1f} | {s['faults']} | "
                      f"{s['no_report']} |")
     lines += ["", "| cell | outcome | removed | robot time [s] | cell bound [s] | lower bound [s] | peak force [N] "
