@@ -20,7 +20,9 @@ Fractions of a stain::
 so a pixel the arm or the eraser hides keeps its last observation and never
 turns clean by being hidden. The *ink* of a stain is its region's pixels
 whose last observation still holds ink (``d_last >= ink_level``): its
-shape (centre, size, width, axis) is what adaptive wiping follows. kappa (:class:`~perception.kappa.KappaLatch`)
+shape (centre, size, width, axis) is what adaptive wiping follows,
+refreshed every :data:`INK_EVERY_S` (the controller re-targets at most
+every 0.5 s; a shape costs ~0.1-0.3 ms per stain). kappa (:class:`~perception.kappa.KappaLatch`)
 needs ``seen >= min_seen``.
 """
 
@@ -38,6 +40,9 @@ from .cluster import cluster_pixels, disc
 from .kappa import KappaLatch
 from .params import KappaParams, StainParams
 from .rectify import BoardGrid
+
+#: The shape of a stain's remaining ink is refreshed at most this often [s].
+INK_EVERY_S = 0.2
 
 
 @dataclass
@@ -63,6 +68,7 @@ class Track:
     box: tuple[int, int, int, int]
     shape: Shape | None = None
     ink: Shape | None = None
+    ink_t: float = -np.inf
     remaining: float = 1.0
     visible: float = 0.0
     seen: float = 0.0
@@ -146,8 +152,10 @@ class StainTracker:
         rows, cols = np.nonzero(core)
         if rows.size:
             tr.shape = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m)
-        rows, cols = np.nonzero(reg & (d_last >= self.ink_level))
-        tr.ink = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m) if rows.size else None
+        if t_s - tr.ink_t >= INK_EVERY_S or t_s < tr.ink_t:
+            tr.ink_t = t_s
+            rows, cols = np.nonzero(reg & (d_last >= self.ink_level))
+            tr.ink = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m) if rows.size else None
 
     def _detect(self, free: np.ndarray, ink: InkMap, visible: np.ndarray, t_s: float) -> None:
         """New clusters: candidates until seen for ``confirm_s``, then stains."""

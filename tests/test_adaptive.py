@@ -278,16 +278,18 @@ def test_perception_tracks_the_ink_that_remains_and_keeps_hidden_ink_as_last_see
     (tr,) = tracker.tracks
     assert tr.ink.size_m == pytest.approx(0.12, abs=0.006) and _angle_diff(tr.ink.axis_rad, 0.0) < 0.05
     d[:, 50:80] = 0.0  # the left half wiped
-    tracker.update(frame(d), 0.2)
+    tracker.update(frame(d), 0.15)
+    assert tr.ink.size_m == pytest.approx(0.12, abs=0.006)  # refreshed every INK_EVERY_S, not every frame
+    tracker.update(frame(d), 0.3)
     assert tr.ink.size_m == pytest.approx(0.06, abs=0.006)
     assert tr.ink.centre_m[0] == pytest.approx(grid.xy_of(np.array([75]), np.array([95]))[0, 0], abs=0.003)
     assert tr.shape.size_m == pytest.approx(0.12, abs=0.006)  # the stain itself is as first seen
     hidden = np.zeros_like(looked)
     hidden[:, 90:] = True  # the eraser over the right half: its ink stays as last seen
     d[:, 80:] = 0.0
-    tracker.update(frame(d, hidden), 0.3)
+    tracker.update(frame(d, hidden), 0.6)
     assert tr.ink is not None and tr.ink.size_m == pytest.approx(0.04, abs=0.006)
-    tracker.update(frame(d), 0.4)  # seen again, clean: no ink left
+    tracker.update(frame(d), 0.9)  # seen again, clean: no ink left
     assert tr.ink is None
 
 
