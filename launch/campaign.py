@@ -459,9 +459,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--boards", default="wall,table",
                     help="boards, cycled over the seeds: wall, table or a board TOML file (lamps up --board), "
                          "comma-separated (default wall,table)")
-    ap.add_argument("--wiping", default="adaptive",
+    ap.add_argument("--wiping", default="fixed",
                     help="wiping modes, each seed runs once per mode: fixed, adaptive or fixed,adaptive (default "
-                         "adaptive, the controller's default)")
+                         "fixed, the controller's default)")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="cells at once (default: the CPUs)")
     ap.add_argument("--skill", default=None, help="skill file (default: learn the bundled demo once)")
     ap.add_argument("--max-duration", type=float, default=600.0, help="give a cell up after S s wall (default 600)")

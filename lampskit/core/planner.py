@@ -129,8 +129,10 @@ class PlannerParams:
         cannot be met by any duration: the best one is kept and counted).
     adaptive : bool
         Shape each wipe to its stain and adapt it while wiping (see the
-        module docstring, point 5; the default); False: the learned cycle
-        scaled to the stain's size, set once per stain ("fixed" wiping).
+        module docstring, point 5); False (the default until adaptive wiping
+        has run on the real-time real-robot path without a guard trip): the
+        learned cycle scaled to the stain's size, set once per stain
+        ("fixed" wiping).
     round_aspect : float
         With ``adaptive``, a stain (or ink) whose width over size is at
         least this is wiped with the learned, unstretched cycle.
@@ -150,7 +152,7 @@ class PlannerParams:
     max_accel_m_s2: float = 4.0
     max_jerk_m_s3: float = 100.0
     max_transition_stretch: float = 4.0
-    adaptive: bool = True
+    adaptive: bool = False
     round_aspect: float = 0.8
     min_stroke_aspect: float = 0.35
 
