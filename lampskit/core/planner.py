@@ -281,18 +281,29 @@ def wipe_shape(skill: Skill, amplitude_m: float, aspect: float, axis_rad: float,
     up). A round stain keeps the learned cycle (None); an elongated one gets the cycle turned onto its main axis
     and squeezed across it to ``aspect'`` (an MP round within ``round_aspect`` is not turned, only squeezed, so the
     stroke is symmetric)."""
-    want = 1.0 if aspect >= params.round_aspect else max(aspect, params.min_stroke_aspect)
+    want = _stroke_aspect(aspect, params)
     shapes = [_cycle_shape_cached(e.mp) for e in skill.periodic]
     cost = [abs(np.log(e.mp.amplitude_m / amplitude_m)) + abs(np.log(a / want))
             for e, (_, a) in zip(skill.periodic, shapes)]
     k = int(np.argmin(cost))
+    return k, _stroke(shapes[k], want, axis_rad, params)
+
+
+def _stroke_aspect(aspect: float, params: PlannerParams) -> float:
+    """The stroke's width over length for a stain (or ink) of ``aspect``: 1 from ``round_aspect`` up."""
+    return 1.0 if aspect >= params.round_aspect else max(aspect, params.min_stroke_aspect)
+
+
+def _stroke(cycle: tuple[float, float], want: float, axis_rad: float, params: PlannerParams) -> np.ndarray | None:
+    """The stroke giving a cycle of (main axis, aspect) ``cycle`` the aspect ``want`` along ``axis_rad``; None
+    for a round stroke."""
     if want == 1.0:
-        return k, None
-    cycle_axis, cycle_aspect = shapes[k]
+        return None
+    cycle_axis, cycle_aspect = cycle
     if cycle_aspect >= params.round_aspect:
         cycle_axis = axis_rad  # a round cycle: squeeze it along the stain's axes, do not turn it
     across = float(np.clip(want / cycle_aspect, params.min_stroke_aspect, 1.0 / cycle_aspect))
-    return k, stroke_matrix(cycle_axis, axis_rad, across)
+    return stroke_matrix(cycle_axis, axis_rad, across)
 
 
 #: One adaptation changes r and Omega by at most this factor: while the filters ramp both, r Omega^k passes
@@ -311,14 +322,7 @@ def adapted_wipe(skill: Skill, planned: Wipe, running: Wipe, ink: Stain, params:
     r_new = float(np.clip(r_new, running.amplitude_m / MAX_ADAPT_STEP, planned.amplitude_m))
     wipe = planned
     mp = skill.periodic[wipe.periodic_index].mp
-    want = 1.0 if ink.aspect >= params.round_aspect else max(ink.aspect, params.min_stroke_aspect)
-    stroke = None
-    if want < 1.0:
-        cycle_axis, cycle_aspect = _cycle_shape_cached(mp)
-        if cycle_aspect >= params.round_aspect:
-            cycle_axis = ink.axis_rad
-        stroke = stroke_matrix(cycle_axis, ink.axis_rad, float(np.clip(want / cycle_aspect, params.min_stroke_aspect,
-                                                                       1.0 / cycle_aspect)))
+    stroke = _stroke(_cycle_shape_cached(mp), _stroke_aspect(ink.aspect, params), ink.axis_rad, params)
     gain = 1.0 if stroke is None else float(np.linalg.norm(stroke, 2))
     omega = min(mp.omega_rad_s, bounded_omega(mp, r_new * gain, params, PERIODIC_MARGIN),
                 MAX_ADAPT_STEP * running.omega_rad_s)
