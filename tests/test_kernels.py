@@ -169,14 +169,43 @@ def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model):
     np.testing.assert_allclose(ac, np.r_[Rb @ np.r_[a, 0.3], dom] * 0.36, atol=1e-14)
     # the joint speeds the unscaled reference asks for
     demand = np.zeros(n)
-    kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, tw, ac, 0.6, 0.1, demand, np.zeros((2, 6)))
-    np.testing.assert_allclose(demand, kin.M_inv @ kin.J.T @ kin.Lambda @ (tw / 0.6 + ac / 0.36 * 0.1), rtol=1e-9)
+    kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, tw, ac, 0.6, 0.1, demand, np.zeros((3, 6)))
+    u, b = tw / 0.6, ac / 0.36
+    v = np.zeros(6)
+    for k in (slice(0, 3), slice(3, 6)):  # each part along u + 0.1 b, as fast as u speeds up along itself
+        w, su = u[k] + 0.1 * b[k], np.linalg.norm(u[k])
+        v[k] = w / np.linalg.norm(w) * max(su, su + 0.1 * (u[k] @ b[k]) / su)
+    np.testing.assert_allclose(demand, kin.M_inv @ kin.J.T @ kin.Lambda @ v, rtol=1e-9)
     # the pad in the board frame and the normal force
     xyh, vb = np.zeros(3), np.zeros(3)
     f = kernels.tool_in_board(origin, Rb, kin.p, kin.twist, wrench, xyh, vb)
     np.testing.assert_allclose(xyh, (kin.p - origin) @ Rb, atol=1e-14)
     np.testing.assert_allclose(vb, Rb.T @ kin.twist[:3], atol=1e-14)
     assert f == pytest.approx(wrench[:3] @ Rb[:, 2], abs=1e-14)
+
+
+def test_the_speed_demand_looks_ahead_along_the_motion_not_around_a_curve(model):
+    """The override's look-ahead: a straight acceleration raises the predicted speed by ``lookahead a``; a circle
+    at constant speed (acceleration across the motion) keeps its speed, only turned ahead (a linear extrapolation
+    would over-state it by sqrt(1 + (lookahead Omega)^2), 1.4x at 10 rad/s); from rest it is ``lookahead a``; a
+    braking motion asks for its speed now."""
+    kin = Kinematics(model)
+    kin.update(np.array([0.3, 0.7, -0.2, -1.5, 0.4, 0.9, 0.1]), np.zeros(model.nq))
+    A = kin.M_inv @ kin.J.T @ kin.Lambda
+
+    def demand(twist, accel):
+        out = np.zeros(model.nq)
+        kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, np.asarray(twist, float), np.asarray(accel, float),
+                                  1.0, 0.1, out, np.zeros((3, 6)))
+        return out
+
+    along = demand([0.3, 0, 0, 0, 0, 0], [2.0, 0, 0, 0, 0, 0])
+    np.testing.assert_allclose(along, A @ [0.5, 0, 0, 0, 0, 0], rtol=1e-9)
+    turning = demand([0.3, 0, 0, 0, 0, 0], [0, 3.0, 0, 0, 0, 0])  # r = 3 cm at 10 rad/s
+    np.testing.assert_allclose(turning, A @ (np.r_[0.3, 0.3 * 0.1 * 10, 0, 0, 0, 0] / np.sqrt(2)), rtol=1e-9)
+    np.testing.assert_allclose(demand(np.zeros(6), [0, 0, 0, 0, 0, 4.0]), A @ [0, 0, 0, 0, 0, 0.4], rtol=1e-9)
+    np.testing.assert_allclose(demand([0, 0.3, 0, 0, 0, 0], [0, -2.0, 0, 0, 0, 0]), A @ [0, 0.3, 0, 0, 0, 0],
+                               rtol=1e-9)
 
 
 def test_no_kernel_compiles_inside_a_tick():

@@ -445,17 +445,47 @@ def reference_into(origin: np.ndarray, R_board: np.ndarray, xy: np.ndarray, h: f
 
 
 @_jit
+def _predicted_rate_into(u: np.ndarray, b: np.ndarray, k: int, lookahead_s: float, out: np.ndarray) -> None:
+    """``out[k:k+3]``: the rate 3-vector ``u[k:k+3]`` predicted ``lookahead_s`` [s] ahead given its derivative
+    ``b[k:k+3]``, see :func:`joint_demand_into`."""
+    su, sw, ub = 0.0, 0.0, 0.0
+    for i in range(k, k + 3):
+        w = u[i] + lookahead_s * b[i]
+        su += u[i] * u[i]
+        sw += w * w
+        ub += u[i] * b[i]
+    su, sw = math.sqrt(su), math.sqrt(sw)
+    if su > 1e-9:
+        speed = max(su, su + lookahead_s * ub / su)  # the magnitude grows with the tangential part only
+    else:
+        speed = sw  # from rest: along the acceleration
+    f = speed / sw if sw > 1e-12 else 1.0
+    for i in range(k, k + 3):
+        out[i] = (u[i] + lookahead_s * b[i]) * f if sw > 1e-12 else u[i]
+
+
+@_jit
 def joint_demand_into(M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray, twist_ref: np.ndarray,
                       accel_ref: np.ndarray, scale: float, lookahead_s: float, demand: np.ndarray,
                       work: np.ndarray) -> None:
     """Joint speeds (n,) [rad/s] the *unscaled* reference asks for, looking ``lookahead_s`` ahead along its
-    acceleration: ``M^-1 J^T Lam v`` with ``v = twist_ref / scale + accel_ref / scale^2 * lookahead`` (the
-    reference is stored time-scaled). work : (2, 6) scratch."""
+    acceleration: ``M^-1 J^T Lam v``; ``v`` is the unscaled twist ``u = twist_ref / scale`` predicted ahead with
+    ``b = accel_ref / scale^2`` (the reference is stored time-scaled), its linear and angular parts each pointing
+    along ``u + lookahead b`` with the magnitude ``max(|u|, |u| + lookahead (u . b) / |u|)``: the speed grows
+    only by the acceleration along the motion. (``|u + lookahead b|`` itself would count the turning of a
+    curved path as speeding up: on a circle at Omega it over-states the speed by ``sqrt(1 + (lookahead
+    Omega)^2)``, 1.4-1.8x at wiping rates, and the override would slow the wiping by that much for nothing.)
+    From rest ``v = lookahead b``. work : (3, 6) scratch."""
     n = demand.shape[0]
-    v = work[0]
-    w = work[1]
+    u = work[0]
+    v = work[1]
+    w = work[2]
+    inv = 1.0 / scale
     for r in range(6):
-        v[r] = (accel_ref[r] * (lookahead_s / scale) + twist_ref[r]) / scale
+        u[r] = twist_ref[r] * inv
+        w[r] = accel_ref[r] * inv * inv
+    _predicted_rate_into(u, w, 0, lookahead_s, v)
+    _predicted_rate_into(u, w, 3, lookahead_s, v)
     for r in range(6):
         s = 0.0
         for c in range(6):
