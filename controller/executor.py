@@ -121,7 +121,7 @@ class SkillExecutor:
         self.book = StainBook(self.p.recheck_s, self.p.max_passes)
         self.stains_fresh = False
         self.motion = FreeMotion(self.p, self.f)
-        self.chain = MpChain(skill, self.planner, self.p.wipe_timeout_s, self.counters)
+        self.chain = MpChain(skill, self.planner, self.p.wipe_timeout_s, self.counters, pass_cycles=self.p.pass_cycles)
         self._sp = self.motion.setpoint
         self._stage = Stage.HOLD
         self._plan: Plan | None = None

@@ -169,7 +169,11 @@ class ExecutorParams:
     turn_rate_rad_s : mean angular speed of free moves [rad/s];
     wipe_timeout_s : one pass over a stain lasts at most this long without
     kappa [s] (the eraser hides the stain from the camera: it is judged once
-    the pad has left); recheck_s : a stain left without kappa is wiped again
+    the pad has left); pass_cycles : ... and at most this many cycles of the
+    periodic MP (the felt cleans a stain in about as many cycles whatever its
+    size and speed: in the simulated cells the dirt fell below kappa's level
+    after 1.4-2.4 cycles of a pass; the periodic MP wipes on for up to one
+    more cycle until its phase heads for the next stain); recheck_s : a stain left without kappa is wiped again
     only after this long [s] (perception's time to look at it), after the
     others; max_passes : passes before a stain is given up;
     look_clearance_m : after the last pass with stains still without kappa,
@@ -196,6 +200,7 @@ class ExecutorParams:
     creep_height_m: float = 0.008
     turn_rate_rad_s: float = 0.6
     wipe_timeout_s: float = 2.5
+    pass_cycles: float = 3.0
     recheck_s: float = 1.0
     max_passes: int = 6
     look_clearance_m: float = 0.1
@@ -214,6 +219,7 @@ class ExecutorParams:
         _range(s, "descend_speed_m_s", self.descend_speed_m_s, 0.005, 0.3)
         _range(s, "turn_rate_rad_s", self.turn_rate_rad_s, 0.05, 3.0)
         _range(s, "wipe_timeout_s", self.wipe_timeout_s, 0.5, 3600.0)
+        _range(s, "pass_cycles", self.pass_cycles, 0.5, 1e6)
         _range(s, "recheck_s", self.recheck_s, 0.0, 60.0)
         check_int(s, "max_passes", self.max_passes, 1, 100)
         _range(s, "look_clearance_m", self.look_clearance_m, 0.0, 1.0)

@@ -2,8 +2,11 @@
 
 A camera cannot see a stain under the eraser, so a stain left without
 kappa after a pass is passed over until ``recheck_s`` after that pass
-(perception looks at it meanwhile) and wiped again after the others, at
-most ``max_passes`` times; then it is given up.
+(perception looks at it meanwhile) and wiped again after the others (it
+is open only while no stain with fewer passes is: kappa often comes
+seconds after the pad has left, once the arm no longer hides the stain,
+and a stain wiped clean but not yet confirmed should not be wiped again
+while others wait), at most ``max_passes`` times; then it is given up.
 """
 
 from __future__ import annotations
@@ -64,15 +67,18 @@ class StainBook:
         return False
 
     def open_stains(self, clock_s: float, by_ink: bool = False) -> list[Stain]:
-        """The stains to wipe at ``clock_s`` [s]: without kappa, not given up, not waiting for a recheck.
+        """The stains to wipe at ``clock_s`` [s]: without kappa, not given up, not waiting for a recheck, and of
+        those the ones passed over least often (a stain is wiped again only after the others).
 
         ``by_ink``: a stain whose remaining ink perception reports is given by that ink's shape (centre, size,
         width, axis), not the whole stain's (adaptive wiping: a stain wiped before is planned for what is left).
         """
+        ready = [s for s in self.stains.values()
+                 if not s.kappa and s.id not in self._given_up
+                 and clock_s - self._left_at.get(s.id, -math.inf) >= self.recheck_s]
+        fewest = min((self._passes[s.id] for s in ready), default=0)
         return [(s.ink if by_ink and s.ink is not None else Stain(s.id, s.centre_m, s.size_m, s.width_m, s.axis_rad))
-                for s in self.stains.values()
-                if not s.kappa and s.id not in self._given_up
-                and clock_s - self._left_at.get(s.id, -math.inf) >= self.recheck_s]
+                for s in ready if self._passes[s.id] == fewest]
 
     def open_ids(self, clock_s: float) -> set[int]:
         return {s.id for s in self.open_stains(clock_s)}

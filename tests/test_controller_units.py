@@ -14,6 +14,7 @@ from controller.control.limits import (SpeedOverride, TorqueShaper, joint_margin
 from lampskit.core.chain import ChainStep
 from controller.executor import SkillExecutor
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
+from controller.stain_book import StainBook
 from controller.motion import OrientationBlend, Quintic, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
 from interfaces.errors import ConfigError
@@ -193,7 +194,7 @@ def phases(log) -> list[str]:
 
 
 def test_executor_chains_the_stains_until_kappa_then_retreats(learned_skill):
-    ex = SkillExecutor(learned_skill, ExecutorParams())
+    ex = SkillExecutor(learned_skill, ExecutorParams(pass_cycles=1e6))  # kappa, 2 s in, ends each pass
     arm = IdealArm()
     ex.set_stains(BOARD, stains())
     wiped: dict[int, int] = {}
@@ -412,6 +413,41 @@ def test_a_stain_without_kappa_gets_another_pass_after_the_others_and_a_recheck(
     assert ex2.phase == "DONE" and ex2.counters["wipe_timeouts"] >= 1
 
 
+def test_a_stain_passed_without_kappa_waits_until_no_stain_has_fewer_passes():
+    """kappa comes seconds after the pad has left (once the arm no longer hides the stain): a stain wiped once is
+    not wiped again, however long ago, while a stain not yet wiped is open; then it is, after ``recheck_s``."""
+    book = StainBook(recheck_s=1.0, max_passes=3)
+    a, b, c = (StainState(i, np.array([0.1 + 0.2 * i, 0.2]), 0.05, False) for i in range(3))
+    book.update([a, b, c], 0.0)
+    assert book.open_ids(0.0) == {0, 1, 2}
+    assert not book.end_pass(0, 1.0)
+    assert book.open_ids(1.5) == {1, 2} and book.open_ids(30.0) == {1, 2}
+    book.end_pass(1, 2.0)
+    book.update([a, b, StainState(2, c.centre_m, c.size_m, True)], 3.0)  # c done: a and b have one pass each
+    assert book.open_ids(3.0) == {0, 1} and book.open_ids(2.5) == {0}
+    book.end_pass(0, 4.0)
+    assert book.open_ids(10.0) == {1}
+    done_c = StainState(2, c.centre_m, c.size_m, True)
+    book.update([a, StainState(1, b.centre_m, b.size_m, True), done_c], 10.0)
+    assert book.open_ids(10.0) == {0}
+
+
+def test_a_pass_ends_after_pass_cycles_of_the_periodic_mp(learned_skill):
+    """Without kappa a pass lasts ``pass_cycles`` cycles (or ``wipe_timeout_s``, whichever comes first)."""
+    for cycles in (1.5, 3.0):
+        ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=60.0, pass_cycles=cycles, max_passes=1,
+                                                         survey_s=0.0))
+        arm = IdealArm()
+        ex.set_stains(BOARD, stains()[:1])
+        ended = []
+        run(ex, arm, 15.0, on_tick=lambda k, e: ended.append(e.chain.cycles_wiped)
+            if not ended and e.counters["wipe_timeouts"] else None)
+        assert ex.counters["wipe_timeouts"] == 1 and ex.phase == "DONE"
+        assert ended and cycles <= ended[0] < cycles + 0.05, (cycles, ended)
+    with pytest.raises(ConfigError, match="pass_cycles"):
+        ExecutorParams(pass_cycles=0.0)
+
+
 def test_look_point_is_beyond_the_stains_towards_the_robot_base_and_on_the_board():
     base_xy = BOARD.to_board(np.zeros(3))[:2]
     c = np.array([0.5, 0.3])
@@ -614,9 +650,10 @@ def test_the_real_time_chain_re_plans_on_the_planner_thread_and_wipes_on_meanwhi
 
         return run(ex, arm, 30.0, tick), ex.counters, waiting[0]
 
-    inline = SkillExecutor(learned_skill, ExecutorParams())
+    params = ExecutorParams(pass_cycles=1e6)  # kappa, 2 s in, ends each pass
+    inline = SkillExecutor(learned_skill, params)
     log_inline, _, _ = wipe(inline, None)
-    threaded = SkillExecutor(learned_skill, ExecutorParams())
+    threaded = SkillExecutor(learned_skill, params)
     threaded.chain.background = pool = _SlowPlans(0)
     try:
         log_threaded, counters, waited = wipe(threaded, 25)

@@ -13,7 +13,7 @@ a stand-in for kappa, so what is plotted is what the robot runs.
   so the reference is continuous in acceleration at both junctions.
 * WIPE j: the periodic MP anchored at the stain's centre and scaled to its
   size, until the stain is done (kappa, vanished, or one pass of
-  ``wipe_timeout_s``); a stain that moves meanwhile moves the anchor
+  ``wipe_timeout_s`` or ``pass_cycles`` cycles, whichever comes first); a stain that moves meanwhile moves the anchor
   through the MP's ramp (:meth:`MpChain.adapt`). With adaptive wiping
   (:attr:`PlannerParams.adaptive`) the MP follows the ink that remains:
   anchor at its centre, r shrinking with its extent, the stroke stretched
@@ -128,7 +128,9 @@ class MpChain:
     skill : Skill
     planner : PlannerParams
     wipe_timeout_s : float
-        One pass over a stain without kappa lasts this long [s].
+        One pass over a stain without kappa lasts at most this long [s]...
+    pass_cycles : float
+        ... and at most this many cycles of the periodic MP (inf: no limit).
     counters : Counter
         Shared with the executor: ``replans``, ``wipe_timeouts``.
     follow_plan : bool
@@ -145,11 +147,12 @@ class MpChain:
     """
 
     def __init__(self, skill: Skill, planner: PlannerParams, wipe_timeout_s: float, counters: Counter[str],
-                 follow_plan: bool = False) -> None:
+                 follow_plan: bool = False, pass_cycles: float = np.inf) -> None:
         self.skill = skill
         self.follow_plan = follow_plan
         self.planner = planner
         self.wipe_timeout_s = wipe_timeout_s
+        self.pass_cycles = pass_cycles
         self.counters = counters
         self.wipe: Wipe | None = None
         self.step = ChainStep.TRANSIT
@@ -319,17 +322,19 @@ class MpChain:
         return ChainResult.WIPE
 
     def _pass_over(self, book: Book, clock_s: float) -> bool:
-        """The stain has kappa, has vanished, or this pass timed out (then it waits for a recheck)."""
+        """The stain has kappa, has vanished, or this pass is over (``wipe_timeout_s`` or ``pass_cycles``; then it
+        waits for a recheck)."""
         sid = self.wipe.stain.id
         if book.is_done(sid):
             return True
-        if self._wipe_t < self.wipe_timeout_s:
+        cycles = self.cycles_wiped
+        if self._wipe_t < self.wipe_timeout_s and cycles < self.pass_cycles:
             return False
         self.counters["wipe_timeouts"] += 1
         if book.end_pass(sid, clock_s):
             log.warning("stain %d: no kappa after %d passes, giving up", sid, book.max_passes)
         else:
-            log.info("stain %d: no kappa after %.1f s, back to it later", sid, self._wipe_t)
+            log.info("stain %d: no kappa after %.1f s (%.1f cycles), back to it later", sid, self._wipe_t, cycles)
         return True
 
     def _choose_next(self, runner: PeriodicRunner, book: Book, clock_s: float) -> ChainResult:
