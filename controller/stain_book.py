@@ -66,15 +66,16 @@ class StainBook:
             return True
         return False
 
-    def open_stains(self, clock_s: float, by_ink: bool = False) -> list[Stain]:
-        """The stains to wipe at ``clock_s`` [s]: without kappa, not given up, not waiting for a recheck, and of
-        those the ones passed over least often (a stain is wiped again only after the others).
+    def open_stains(self, clock_s: float, by_ink: bool = False, exclude: int | None = None) -> list[Stain]:
+        """The stains to wipe at ``clock_s`` [s]: without kappa, not given up, not waiting for a recheck, not
+        ``exclude`` (the stain just left), and of those the ones passed over least often (a stain is wiped again
+        only after the others).
 
         ``by_ink``: a stain whose remaining ink perception reports is given by that ink's shape (centre, size,
         width, axis), not the whole stain's (adaptive wiping: a stain wiped before is planned for what is left).
         """
         ready = [s for s in self.stains.values()
-                 if not s.kappa and s.id not in self._given_up
+                 if not s.kappa and s.id not in self._given_up and s.id != exclude
                  and clock_s - self._left_at.get(s.id, -math.inf) >= self.recheck_s]
         fewest = min((self._passes[s.id] for s in ready), default=0)
         return [(s.ink if by_ink and s.ink is not None else Stain(s.id, s.centre_m, s.size_m, s.width_m, s.axis_rad))

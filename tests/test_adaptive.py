@@ -184,8 +184,8 @@ class _Book:
     def end_pass(self, stain_id: int, clock_s: float) -> bool:
         return False
 
-    def open_stains(self, clock_s: float, by_ink: bool = False) -> list[Stain]:
-        return [self._stain]
+    def open_stains(self, clock_s: float, by_ink: bool = False, exclude: int | None = None) -> list[Stain]:
+        return [self._stain] if self._stain.id != exclude else []
 
 
 class _View:

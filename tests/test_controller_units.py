@@ -430,6 +430,12 @@ def test_a_stain_passed_without_kappa_waits_until_no_stain_has_fewer_passes():
     done_c = StainState(2, c.centre_m, c.size_m, True)
     book.update([a, StainState(1, b.centre_m, b.size_m, True), done_c], 10.0)
     assert book.open_ids(10.0) == {0}
+    # the stain just left does not count (recheck_s 0: it would be the only one open, and the chain would end)
+    book = StainBook(recheck_s=0.0, max_passes=5)
+    book.update([a, b], 0.0)
+    book.end_pass(1, 1.0), book.end_pass(1, 2.0), book.end_pass(0, 3.0)
+    assert {s.id for s in book.open_stains(3.0)} == {0}
+    assert {s.id for s in book.open_stains(3.0, exclude=0)} == {1}
 
 
 def test_a_pass_ends_after_pass_cycles_of_the_periodic_mp(learned_skill):

@@ -88,7 +88,7 @@ class Book(Protocol):
 
     def end_pass(self, stain_id: int, clock_s: float) -> bool: ...
 
-    def open_stains(self, clock_s: float, by_ink: bool = False) -> list[Stain]: ...
+    def open_stains(self, clock_s: float, by_ink: bool = False, exclude: int | None = None) -> list[Stain]: ...
 
 #: Adaptive wiping re-targets the periodic MP at most this often [s] (perception reports ~10-30 times a second)...
 ADAPT_EVERY_S = 0.5
@@ -330,7 +330,9 @@ class MpChain:
         cycles = self.cycles_wiped
         if self._wipe_t < self.wipe_timeout_s and cycles < self.pass_cycles:
             return False
-        self.counters["wipe_timeouts"] += 1
+        self.counters["wipe_timeouts"] += 1  # a pass ended without kappa (by time or by cycles)
+        if cycles >= self.pass_cycles:
+            self.counters["passes_ended_by_cycles"] += 1
         if book.end_pass(sid, clock_s):
             log.warning("stain %d: no kappa after %d passes, giving up", sid, book.max_passes)
         else:
@@ -341,7 +343,7 @@ class MpChain:
         """Re-plan over the stains open now (in the tick, or handed to :attr:`background`); keep wiping until
         the phase heads for the next one."""
         current = self.wipe.stain.id
-        open_stains = [s for s in book.open_stains(clock_s, by_ink=self.planner.adaptive) if s.id != current]
+        open_stains = book.open_stains(clock_s, by_ink=self.planner.adaptive, exclude=current)
         self._next = None
         if not open_stains:
             return self._leave_towards(runner, None)

@@ -152,8 +152,8 @@ class _PlanBook:
         self._done.add(stain_id)
         return True
 
-    def open_stains(self, clock_s: float, by_ink: bool = False) -> list[Stain]:
-        return [w.stain for w in self._plan.wipes if w.stain.id not in self._done]
+    def open_stains(self, clock_s: float, by_ink: bool = False, exclude: int | None = None) -> list[Stain]:
+        return [w.stain for w in self._plan.wipes if w.stain.id not in self._done and w.stain.id != exclude]
 
 
 class _Recorder:
