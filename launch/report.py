@@ -31,7 +31,10 @@
   (APPROACH holds the survey's flight and look); ``skill_start_s``: the
   robot time of the first TRANSITION or WIPE tick (the start of the skill,
   after waiting for the peers, the survey and the approach; null if never),
-  exact even when the recording began late.
+  exact even when the recording began late; ``job_end_s``: the robot time
+  of the first tick of the DONE the run ended in (the skill's end: the
+  launcher keeps the cell running ``SETTLE_S`` longer to see that it stays
+  DONE; null if the run did not end DONE).
 * ``loop_timing``: the controller's last reported loop statistics.
 * ``max_contact_force_n`` (the sim's truth: the physical contact force,
   whatever the controller measured) and ``max_joint_speed_ratio`` (the
@@ -153,6 +156,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report["motion_peaks"] = _motion_peaks(run.tr, run.col)
     report["phase_time_s"] = phase_times(run.tr, run.col)
     report["skill_start_s"] = skill_start(run.tr, run.col)
+    report["job_end_s"] = job_end(run.tr, run.col)
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
     report.update(_safety_section(run))
@@ -303,6 +307,17 @@ def skill_start(tr: np.ndarray, col: dict[str, int]) -> float | None:
         return None
     hit = np.flatnonzero(np.isin(tr[:, col["phase"]].astype(int), _WIPING))
     return float(tr[hit[0], col["t_s"]]) if hit.size else None
+
+
+def job_end(tr: np.ndarray, col: dict[str, int]) -> float | None:
+    """Robot time [s] of the first tick of the DONE the recording ends in (None if it does not end DONE)."""
+    if not len(tr):
+        return None
+    done = tr[:, col["phase"]].astype(int) == PHASE_CODES[Phase.DONE]
+    if not done[-1]:
+        return None
+    other = np.flatnonzero(~done)
+    return float(tr[other[-1] + 1 if other.size else 0, col["t_s"]])
 
 
 def _final_phase(run: _Run) -> str:

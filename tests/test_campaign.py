@@ -89,11 +89,17 @@ def test_a_row_takes_the_fixed_moves_from_the_skill_start_and_the_retreat():
     assert row["time_over_cell_bound"] == pytest.approx(20.0 / row["cell_bound_s"])
     old = row_of(Cell(0, 1, "wall"), _report(1.0, 20.0), 0.5, "a", stains=stains, felt=felt)
     assert math.isnan(old["cell_bound_s"])  # a report from before the skill start was reported: no bound
+    # the robot time ends at the DONE the run ended in; the cell's time (with the launcher's look) is kept beside
+    done = row_of(Cell(0, 1, "wall"), {**report, "job_end_s": 17.5}, 0.5, "a", stains=stains, felt=felt)
+    assert done["robot_time_s"] == 17.5 and done["cell_time_s"] == 20.0 and done["time_per_stain_s"] == 7.5
+    assert done["time_over_cell_bound"] == pytest.approx(17.5 / done["cell_bound_s"])
+    assert done["cell_time_over_cell_bound"] == pytest.approx(20.0 / done["cell_bound_s"])
+    assert row["robot_time_s"] == 20.0  # not DONE at the end (or an older report): the whole cell
 
 
 def test_phase_times_and_the_skill_start_come_from_the_trace():
     from controller.core import PHASE_CODES
-    from launch.report import phase_times, skill_start
+    from launch.report import job_end, phase_times, skill_start
 
     col = {"t_s": 0, "phase": 1}
     codes = [PHASE_CODES["APPROACH"]] * 3 + [PHASE_CODES["TRANSITION"]] * 2 + [PHASE_CODES["WIPE"]] * 3
@@ -103,6 +109,11 @@ def test_phase_times_and_the_skill_start_come_from_the_trace():
     assert times["APPROACH"] == pytest.approx(0.003) and times["TRANSITION"] == pytest.approx(0.001)
     assert times["WIPE"] == pytest.approx(0.002) and times["all"] == pytest.approx(0.006)
     assert skill_start(tr, col) == 2.003 and skill_start(tr[:3], col) is None
+    # the job ends at the first tick of the DONE the recording ends in (not an earlier DONE left again)
+    done, wipe = PHASE_CODES["DONE"], PHASE_CODES["WIPE"]
+    tr2 = np.column_stack([[1.0, 1.001, 1.002, 1.003, 1.004, 1.005], [wipe, done, wipe, done, done, done]])
+    assert job_end(tr2, col) == 1.003 and job_end(tr2[:3], col) is None and job_end(tr2[:0], col) is None
+    assert job_end(tr2[3:], col) == 1.003
 
 
 def test_rows_and_summary_count_success_faults_and_cells_without_a_report():
