@@ -417,7 +417,9 @@ class SkillExecutor:
         self.current_mp = "retreat"
         self.stain_id = -1
         self.junction_ticks.append(self.ticks)
-        self._brake(self.p.stop_s, self.f.ramp_s)
+        # the end of the skill, not a stop for safety: within the planner's kinematic bounds, taking longer if needed
+        bounds = (self.planner.max_accel_m_s2, self.planner.max_jerk_m_s3)
+        self._stage = Stage.UNPRESS if self.motion.brake(self.p.stop_s, self.f.ramp_s, bounds) else Stage.BRAKE
 
     def _stop(self, phase: Phase, reason: str, fast: bool = False) -> None:
         """Brake the in-plane motion, ramp the force out, lift off, hold (PAUSED, FAULT, ESTOP)."""

@@ -17,8 +17,8 @@ import numpy as np
 from interfaces.transforms import tool_rotation_on_board
 
 from .executor_types import BoardPose, Setpoint, StainState, ToolState, look_point
-from .motion import (OrientationBlend, Quintic, SmoothRamp, brake_above, brake_to_rest, orientation_duration,
-                     rest_to_rest, vertical_move)
+from .motion import (OrientationBlend, Quintic, SmoothRamp, bounded_brake_to_rest, brake_above, brake_to_rest,
+                     orientation_duration, rest_to_rest, vertical_move)
 from .params import ExecutorParams, ForceParams
 
 #: An in-the-air stop takes at most this long [s] (its dip below the start height is <= 0.2 v T).
@@ -123,8 +123,11 @@ class FreeMotion:
         if self._turn is not None:
             self._turn.stop(duration_s)
 
-    def brake(self, duration_s: float, force_ramp_s: float) -> bool:
+    def brake(self, duration_s: float, force_ramp_s: float, bounds: tuple[float, float] | None = None) -> bool:
         """Bring the reference to rest C2-continuously: True in contact (in-plane, force to 0), False in the air.
+
+        ``bounds`` (max acceleration [m/s^2], max jerk [m/s^3]): in contact, take longer than ``duration_s`` if
+        the in-plane stop needs it to stay within them (a retreat; a stop for safety keeps its duration).
 
         In the air, x, y and h stop within :data:`AIR_BRAKE_S`, never below
         the current height (a brake while descending must not carry the pad
@@ -132,7 +135,8 @@ class FreeMotion:
         """
         sp = self.setpoint
         if sp.contact:
-            self._xy_brake = brake_to_rest(sp.xy, sp.v_xy, sp.a_xy, duration_s)
+            self._xy_brake = (brake_to_rest(sp.xy, sp.v_xy, sp.a_xy, duration_s) if bounds is None else
+                              bounded_brake_to_rest(sp.xy, sp.v_xy, sp.a_xy, duration_s, *bounds))
             self._force.restart(sp.force_n, 0.0, force_ramp_s)
             return True
         self._mover = brake_above(sp.xyh(), np.array([*sp.v_xy, sp.v_h]), np.array([*sp.a_xy, sp.a_h]),

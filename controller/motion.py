@@ -54,6 +54,14 @@ class Quintic:
     def finished(self) -> bool:
         return self.time_s >= self.T - 1e-12
 
+    def peaks(self, samples: int = 65) -> tuple[float, float]:
+        """The largest acceleration [m/s^2] and jerk [m/s^3] (vector norms) over [0, T], on ``samples`` points."""
+        t = np.linspace(0.0, self.T, samples)[:, None]
+        c = self._c
+        acc = 2 * c[2] + 6 * c[3] * t + 12 * c[4] * t**2 + 20 * c[5] * t**3
+        jerk = 6 * c[3] + 24 * c[4] * t + 60 * c[5] * t**2
+        return float(np.linalg.norm(acc, axis=1).max()), float(np.linalg.norm(jerk, axis=1).max())
+
     def update(self, dt_s: float) -> None:
         """Advance by ``dt_s`` [s] and refresh position, velocity, acceleration (one compiled call)."""
         self.time_s += dt_s
@@ -92,6 +100,21 @@ def brake_to_rest(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, duration_s: fl
     p0, v0, a0 = (np.asarray(x, float) for x in (p0, v0, a0))
     z = np.zeros_like(p0)
     return Quintic((p0, v0, a0), (p0 + 0.5 * v0 * duration_s, z, z), duration_s)
+
+
+def bounded_brake_to_rest(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, duration_s: float, max_accel_m_s2: float,
+                          max_jerk_m_s3: float, stretch: float = 1.2, tries: int = 20) -> Quintic:
+    """:func:`brake_to_rest` over ``duration_s`` [s], or longer (``stretch`` times per try) until its acceleration
+    and jerk stay within the bounds (the acceleration it starts with excepted); the last try if none does."""
+    start = float(np.linalg.norm(a0))
+    T = float(duration_s)
+    for _ in range(tries):
+        q = brake_to_rest(p0, v0, a0, T)
+        acc, jerk = q.peaks()
+        if jerk <= max_jerk_m_s3 and acc <= max(max_accel_m_s2, start):
+            return q
+        T *= stretch
+    return q
 
 
 def vertical_move(xy_m: np.ndarray, h0_m: float, h1_m: float, duration_s: float, v0_m_s: float = 0.0) -> Quintic:

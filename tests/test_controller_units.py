@@ -15,7 +15,7 @@ from lampskit.core.chain import ChainStep
 from controller.executor import SkillExecutor
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
 from controller.stain_book import StainBook
-from controller.motion import OrientationBlend, Quintic, brake_to_rest
+from controller.motion import OrientationBlend, Quintic, bounded_brake_to_rest, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
 from interfaces.errors import ConfigError
 from lampskit.errors import PlanningError
@@ -452,6 +452,28 @@ def test_a_pass_ends_after_pass_cycles_of_the_periodic_mp(learned_skill):
         assert ended and cycles <= ended[0] < cycles + 0.05, (cycles, ended)
     with pytest.raises(ConfigError, match="pass_cycles"):
         ExecutorParams(pass_cycles=0.0)
+
+
+def test_the_retreat_brake_takes_as_long_as_the_kinematic_bounds_need():
+    """A wiping stroke stopped at 0.3 m/s turning at 3.4 m/s^2: over 0.3 s the quintic stop peaks above 100 m/s^3;
+    the bounded stop stretches until its jerk and acceleration fit, C2 from the stroke's state, to rest."""
+    p0, v0, a0 = np.array([0.3, 0.2]), np.array([0.3, 0.0]), np.array([0.0, 3.4])
+    plain = brake_to_rest(p0, v0, a0, 0.3)
+    assert plain.peaks()[1] > 100.0
+    q = bounded_brake_to_rest(p0, v0, a0, 0.3, 4.0, 100.0)
+    acc, jerk = q.peaks()
+    assert q.T > 0.3 and jerk <= 100.0 and acc <= 4.0
+    dt = 1e-4  # the peaks hold on a fine grid too
+    ts = np.arange(0.0, q.T + dt, dt)
+    a = []
+    for _ in ts:
+        a.append(q.acceleration.copy())
+        q.update(dt)
+    j = np.linalg.norm(np.diff(np.array(a), axis=0), axis=1) / dt
+    assert j.max() <= 100.0 * 1.01 and np.allclose(q.velocity, 0.0) and np.allclose(q.acceleration, 0.0)
+    np.testing.assert_allclose(a[0], a0)
+    easy = bounded_brake_to_rest(p0, 0.1 * v0, 0.0 * a0, 0.3, 4.0, 100.0)  # already within: as asked
+    assert easy.T == 0.3
 
 
 def test_look_point_is_beyond_the_stains_towards_the_robot_base_and_on_the_board():
