@@ -63,6 +63,8 @@ _ACTIVE = (Phase.APPROACH, Phase.WIPE, Phase.TRANSITION)
 _HALTED = (Phase.FAULT, Phase.ESTOP)
 #: The pad counts as off the board this far above it [m] (see :attr:`SkillExecutor.pad_down`).
 LIFTED_M = 0.005
+#: The retreat's in-plane stop is planned to this share of the planner's jerk bound (see :meth:`_begin_retreat`).
+RETREAT_JERK_SHARE = 0.75
 
 
 class Stage(IntEnum):
@@ -417,8 +419,10 @@ class SkillExecutor:
         self.current_mp = "retreat"
         self.stain_id = -1
         self.junction_ticks.append(self.ticks)
-        # the end of the skill, not a stop for safety: within the planner's kinematic bounds, taking longer if needed
-        bounds = (self.planner.max_accel_m_s2, self.planner.max_jerk_m_s3)
+        # the end of the skill, not a stop for safety: within the planner's kinematic bounds, taking longer if needed,
+        # with room for the speed override's time scaling (the executed jerk gains 2 s ds/dt a: at 3.4 m/s^2 and the
+        # scale falling 4/s, 27 m/s^3: a campaign cell stopped at 105 m/s^3 with the whole bound planned)
+        bounds = (self.planner.max_accel_m_s2, RETREAT_JERK_SHARE * self.planner.max_jerk_m_s3)
         self._stage = Stage.UNPRESS if self.motion.brake(self.p.stop_s, self.f.ramp_s, bounds) else Stage.BRAKE
 
     def _stop(self, phase: Phase, reason: str, fast: bool = False) -> None:

@@ -397,7 +397,7 @@ def test_a_stain_without_kappa_gets_another_pass_after_the_others_and_a_recheck(
     ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.5, recheck_s=1.0, max_passes=3, survey_s=0.0))
     arm = IdealArm()
     ex.set_stains(BOARD, stains()[:2])
-    log = run(ex, arm, 25.0)
+    log = run(ex, arm, 30.0)
     visits = [sid for i, (phase, sid, *_rest) in enumerate(log)
               if phase == "WIPE" and (i == 0 or log[i - 1][0] != "WIPE" or log[i - 1][1] != sid)]
     # never two passes in a row on one stain, each stain three passes, then given up
