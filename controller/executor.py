@@ -46,12 +46,15 @@ import logging
 from collections import Counter
 from enum import IntEnum
 
+import numpy as np
+
 from lampskit.errors import PlanningError
 from lampskit.core.planner import Plan, PlannerParams, plan
 from lampskit.core.skill import Skill
 from interfaces.messages import Phase
 
 from lampskit.core.chain import ChainResult, MpChain
+from .control.limits import OVERRIDE_DOWN_RATE_1_S
 from .executor_types import BoardPose, Setpoint, StainState, ToolState
 from .free_motion import FreeMotion
 from .params import ExecutorParams, ForceParams
@@ -63,8 +66,9 @@ _ACTIVE = (Phase.APPROACH, Phase.WIPE, Phase.TRANSITION)
 _HALTED = (Phase.FAULT, Phase.ESTOP)
 #: The pad counts as off the board this far above it [m] (see :attr:`SkillExecutor.pad_down`).
 LIFTED_M = 0.005
-#: The retreat's in-plane stop is planned to this share of the planner's jerk bound (see :meth:`_begin_retreat`).
-RETREAT_JERK_SHARE = 0.75
+#: The retreat's in-plane stop is planned to at least this share of the planner's jerk bound (see
+#: :meth:`_begin_retreat`).
+RETREAT_MIN_JERK_SHARE = 0.25
 
 
 class Stage(IntEnum):
@@ -420,9 +424,11 @@ class SkillExecutor:
         self.stain_id = -1
         self.junction_ticks.append(self.ticks)
         # the end of the skill, not a stop for safety: within the planner's kinematic bounds, taking longer if needed,
-        # with room for the speed override's time scaling (the executed jerk gains 2 s ds/dt a: at 3.4 m/s^2 and the
-        # scale falling 4/s, 27 m/s^3: a campaign cell stopped at 105 m/s^3 with the whole bound planned)
-        bounds = (self.planner.max_accel_m_s2, RETREAT_JERK_SHARE * self.planner.max_jerk_m_s3)
+        # with room for the speed override's time scaling: the executed jerk gains 2 s (ds/dt) a, up to 2 x 8/s x a
+        # at the stroke's acceleration a (campaign cells stopped at 101-105 m/s^3 with 75-100 % of the bound planned)
+        jerk = self.planner.max_jerk_m_s3
+        room = 2.0 * OVERRIDE_DOWN_RATE_1_S * float(np.linalg.norm(self._sp.a_xy))
+        bounds = (self.planner.max_accel_m_s2, max(jerk - room, RETREAT_MIN_JERK_SHARE * jerk))
         self._stage = Stage.UNPRESS if self.motion.brake(self.p.stop_s, self.f.ramp_s, bounds) else Stage.BRAKE
 
     def _stop(self, phase: Phase, reason: str, fast: bool = False) -> None:

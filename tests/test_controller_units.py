@@ -476,6 +476,21 @@ def test_the_retreat_brake_takes_as_long_as_the_kinematic_bounds_need():
     assert easy.T == 0.3
 
 
+def test_the_retreat_leaves_room_in_the_jerk_bound_for_the_speed_override(learned_skill):
+    """The retreat's stop is planned to the jerk bound less ``2 x 8/s x |a|`` (the override's scale may fall at 8/s
+    while the stroke accelerates at ``a``: the executed jerk gains ``2 s (ds/dt) a``)."""
+    ex = SkillExecutor(learned_skill, ExecutorParams(max_passes=1, survey_s=0.0))
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains()[:1])
+    seen = []
+    run(ex, arm, 12.0, on_tick=lambda k, e: seen.append(e.motion.setpoint.a_xy.copy())
+        if e.phase in ("WIPE", "TRANSITION") else None)
+    assert ex.counters["phase_retreat"] == 1
+    a0 = float(np.linalg.norm(seen[-1]))
+    acc, jerk = ex.motion._xy_brake.peaks()
+    assert a0 > 1.0 and jerk <= max(100.0 - 16.0 * a0, 25.0) + 1e-9 and acc <= 4.0
+
+
 def test_look_point_is_beyond_the_stains_towards_the_robot_base_and_on_the_board():
     base_xy = BOARD.to_board(np.zeros(3))[:2]
     c = np.array([0.5, 0.3])

@@ -129,6 +129,10 @@ def joint_speed_brake_torque(dq: np.ndarray, onset_rad_s: np.ndarray, rate_1_s: 
     return out
 
 
+#: How fast the override's scale may fall [1/s] (its default ``down_rate_1_s``).
+OVERRIDE_DOWN_RATE_1_S = 8.0
+
+
 class SpeedOverride:
     """Time scaling of the skill so that no joint is asked to move faster than a share of its speed limit.
 
@@ -162,7 +166,7 @@ class SpeedOverride:
     """
 
     def __init__(self, dq_max_rad_s: np.ndarray, share: float, min_scale: float = 0.05,
-                 down_rate_1_s: float = 8.0, up_rate_1_s: float = 0.5, release_1_s: float = 0.5) -> None:
+                 down_rate_1_s: float = OVERRIDE_DOWN_RATE_1_S, up_rate_1_s: float = 0.5, release_1_s: float = 0.5) -> None:
         self.inv_dq_max = 1.0 / np.asarray(dq_max_rad_s, float)
         self.share = float(share)
         self.min_scale = float(min_scale)
