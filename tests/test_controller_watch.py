@@ -183,10 +183,14 @@ def _brake_then_release(skill, held_flag: bool) -> tuple[float, float, float, Ph
 def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does_not_leap(learned_skill):
     """A CI run: after a 300 ms link stall the reference had run 18 mm ahead of the braked pad; released, the arm
     leapt after it, the pad bounced off the board and the contact-loss watch faulted. A cycle the robot held does
-    not advance the skill: released, the pad lags only by what it takes to get back up to wiping speed (here 3.3 mm
-    wiping, 7.7 mm after the release, 16 mm had the reference run on) and keeps the board."""
+    not advance the skill: released, the pad lags only by what it takes to get back up to speed and keeps the
+    board (3.0 mm wiping, 10.4 mm after the release into a transition at full speed; the reference running on:
+    22.4 mm and the contact lost for 0.2 s. With the override holding the wiping back, as it did before its
+    look-ahead followed the motion: 3.3, 7.7 and 16 mm)."""
     before, lag, lost_s, phase = _brake_then_release(learned_skill, held_flag=True)
-    assert lag < before + 0.006, f"the reference ran {lag * 1000:.1f} mm from the pad (wiping: {before * 1000:.1f})"
-    assert lost_s < 0.05 and phase in (Phase.WIPE, Phase.TRANSITION), (lost_s, phase)
     _, lag_unflagged, _, _ = _brake_then_release(learned_skill, held_flag=False)
+    msg = f"the reference ran {lag * 1000:.1f} mm from the pad (wiping: {before * 1000:.1f}, run on: " \
+          f"{lag_unflagged * 1000:.1f})"
+    assert lag < 0.012 and lag < 0.6 * lag_unflagged, msg
+    assert lost_s < 0.05 and phase in (Phase.WIPE, Phase.TRANSITION), (lost_s, phase)
     assert lag_unflagged > lag + 0.005, "without the flag the reference leaps (the check can fail)"
