@@ -15,17 +15,20 @@ import sys
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
+from interfaces.realtime import keep_fair
+
 #: The interpreter's switch interval while a plan runs [s].
 SWITCH_INTERVAL_S = 2e-4
 
 
 class PlannerThread(ThreadPoolExecutor):
     """One worker thread, started at construction (create it before the loop's thread turns real-time: a
-    thread inherits its creator's scheduling). ``submit`` as for any executor."""
+    thread inherits its creator's scheduling) and kept under the fair scheduler when the loop raises the
+    process's I/O threads (:func:`~interfaces.realtime.keep_fair`). ``submit`` as for any executor."""
 
     def __init__(self) -> None:
         super().__init__(max_workers=1, thread_name_prefix="lamps-planner")
-        super().submit(lambda: None).result()  # the thread exists from now on
+        super().submit(keep_fair).result()  # the thread exists from now on, and stays under the fair scheduler
         self._normal_s = sys.getswitchinterval()
         self._running = 0
         self._lock = threading.Lock()

@@ -420,6 +420,7 @@ def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, lear
         assert "loop_sched_fifo_priority" not in c, c
     elif os.geteuid() == 0:  # real time, allowed: the adapter's loop thread is SCHED_FIFO, its memory locked
         assert c["loop_sched_fifo_priority"] == 10 and c["loop_memory_locked"] == 1, c
+        assert c["io_threads_sched_fifo"] > 0, c  # Zenoh's threads just below: no inversion on the lock
     states = [m for _, m in rec[keys.robot_state]]
     assert all(s["capabilities"]["backend"] == "lbr" and s["capabilities"]["gravity_compensated"] for s in states)
     assert all(s["capabilities"]["state_rate_hz"] == 500.0 for s in states[:100]), states[0]["capabilities"]
