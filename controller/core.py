@@ -131,7 +131,7 @@ class ControllerCore:
         self._speed_onset = params.limits.joint_speed_share * self.model.limits.dq_max
         self.override = SpeedOverride(self.model.limits.dq_max, params.limits.reference_joint_speed_share)
         self._demand = np.zeros(self.model.nq)
-        self._demand_work = np.zeros((2, 6))
+        self._demand_work = np.zeros((4, 7))
         self._board: BoardPose | None = None
         self._board_R = np.eye(3)
         self._board_origin = np.zeros(3)

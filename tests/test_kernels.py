@@ -169,14 +169,57 @@ def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model):
     np.testing.assert_allclose(ac, np.r_[Rb @ np.r_[a, 0.3], dom] * 0.36, atol=1e-14)
     # the joint speeds the unscaled reference asks for
     demand = np.zeros(n)
-    kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, tw, ac, 0.6, 0.1, demand, np.zeros((2, 6)))
-    np.testing.assert_allclose(demand, kin.M_inv @ kin.J.T @ kin.Lambda @ (tw / 0.6 + ac / 0.36 * 0.1), rtol=1e-9)
+    kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, tw, ac, 0.6, 0.1, demand, np.zeros((4, 7)))
+    u, b = tw / 0.6, ac / 0.36
+    v = np.zeros(6)
+    for k in (slice(0, 3), slice(3, 6)):  # each part along u + 0.1 b, as fast as u speeds up along itself
+        w, su = u[k] + 0.1 * b[k], np.linalg.norm(u[k])
+        v[k] = w / np.linalg.norm(w) * abs(su + 0.1 * (u[k] @ b[k]) / su)
+    A = kin.M_inv @ kin.J.T @ kin.Lambda
+    now, ahead = A @ u, A @ v
+    np.testing.assert_allclose(demand, np.where(abs(now) > abs(ahead), now, ahead), rtol=1e-9)
     # the pad in the board frame and the normal force
     xyh, vb = np.zeros(3), np.zeros(3)
     f = kernels.tool_in_board(origin, Rb, kin.p, kin.twist, wrench, xyh, vb)
     np.testing.assert_allclose(xyh, (kin.p - origin) @ Rb, atol=1e-14)
     np.testing.assert_allclose(vb, Rb.T @ kin.twist[:3], atol=1e-14)
     assert f == pytest.approx(wrench[:3] @ Rb[:, 2], abs=1e-14)
+
+
+def test_the_speed_demand_looks_ahead_along_the_motion_not_around_a_curve(model):
+    """The override's look-ahead: a straight acceleration raises the predicted speed by ``lookahead a``; a circle
+    at constant speed (acceleration across the motion) keeps its speed, only turned ahead (a linear extrapolation
+    would over-state it by sqrt(1 + (lookahead Omega)^2), 1.4x at 10 rad/s); from rest it is ``lookahead a``; a
+    braking motion asks for its speed now, one braking through zero for its speed back; never less than now."""
+    kin = Kinematics(model)
+    kin.update(np.array([0.3, 0.7, -0.2, -1.5, 0.4, 0.9, 0.1]), np.zeros(model.nq))
+    A = kin.M_inv @ kin.J.T @ kin.Lambda
+
+    def demand(twist, accel):
+        out = np.zeros(model.nq)
+        kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, np.asarray(twist, float), np.asarray(accel, float),
+                                  1.0, 0.1, out, np.zeros((4, 7)))
+        return out
+
+    def larger(*vs):  # per joint, the demand of the largest magnitude
+        d = np.array([A @ np.asarray(v, float) for v in vs])
+        return d[np.argmax(abs(d), axis=0), np.arange(d.shape[1])]
+
+    np.testing.assert_allclose(demand([0.3, 0, 0, 0, 0, 0], [2.0, 0, 0, 0, 0, 0]), A @ [0.5, 0, 0, 0, 0, 0],
+                               rtol=1e-9)
+    turned = np.r_[0.3, 0.3 * 0.1 * 10, 0, 0, 0, 0] / np.sqrt(2)  # r = 3 cm at 10 rad/s: speed kept, turned ahead
+    turning = demand([0.3, 0, 0, 0, 0, 0], [0, 3.0, 0, 0, 0, 0])
+    np.testing.assert_allclose(turning, larger([0.3, 0, 0, 0, 0, 0], turned), rtol=1e-9)
+    assert np.abs(turning).max() < np.abs(A @ [0.3, 0.3, 0, 0, 0, 0]).max()  # below the linear extrapolation
+    np.testing.assert_allclose(demand(np.zeros(6), [0, 0, 0, 0, 0, 4.0]), A @ [0, 0, 0, 0, 0, 0.4], rtol=1e-9)
+    # braking: the speed now; braking through zero: back the other way, as fast as it will be then
+    np.testing.assert_allclose(demand([0, 0.3, 0, 0, 0, 0], [0, -2.0, 0, 0, 0, 0]), A @ [0, 0.3, 0, 0, 0, 0],
+                               rtol=1e-9)
+    np.testing.assert_allclose(demand([0, 0.05, 0, 0, 0, 0], [0, -1.5, 0, 0, 0, 0]),
+                               larger([0, 0.05, 0, 0, 0, 0], [0, -0.1, 0, 0, 0, 0]), rtol=1e-9)
+    # never less than what the reference asks for now, whatever the prediction's direction
+    u, b = np.r_[0.05, 0, 0, 0, 0, 0], np.r_[-0.5, 0.05, 0, 0, 0, 0]
+    assert np.all(np.abs(demand(u, b)) >= np.abs(A @ u) - 1e-12)
 
 
 def test_no_kernel_compiles_inside_a_tick():
