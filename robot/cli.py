@@ -75,7 +75,8 @@ def load(a: argparse.Namespace):
     republish = robot.get("republish_s", 0.05)
     check_range("robot", "republish_s", republish, 0.001, 10.0)
     server = ServerParams(mode=mode, rate_hz=float(rate), stale_limit_s=lbr_params.stale_limit_s,
-                          republish_s=float(republish), status_rate_hz=float(status))
+                          republish_s=float(republish), status_rate_hz=float(status),
+                          speed_brake_share=lbr_params.speed_brake_share)
     return zenoh_with_options(cfg.zenoh, a), lbr_params, server
 
 

@@ -99,6 +99,11 @@ class RobotPort(ABC):
         """Hold for one cycle because the e-stop is engaged: at once, no grace (default: :meth:`hold`)."""
         self.hold()
 
+    def speed_hold(self) -> None:
+        """Hold for one cycle because a joint is too fast: at once, no repeat of the last command (which is
+        what sped it up). Default: :meth:`hold`."""
+        self.hold()
+
     def after_cycle(self, lockstep: bool) -> None:
         """Called after each written cycle (a simulator publishes its extras here). Default: nothing."""
 

@@ -187,7 +187,7 @@ class RobotServer:
             if not self._speed_braking:
                 self.counters["joint_speed_brakes"] += 1
                 self._speed_braking = True
-            self.port.hold()
+            self.port.speed_hold()
             self.braked = True
         else:
             self.port.write(command)

@@ -396,6 +396,28 @@ def test_guard_joint_speed_over_the_limit_disarms():
         _tripped(cell, s, f"joint A1 velocity {s.dq_rad_s[0]:+.3f} rad/s over the limit {limit:.3f} rad/s")
 
 
+def test_a_joint_near_the_guard_speed_is_braked_with_damping_before_the_guard_disarms():
+    """The server's speed brake on the adapter's declared speeds (the guard's): above ``speed_brake_share``
+    of them the cycle is damping at once, not the controller's torque (nor its repeat), and nothing disarms."""
+    limit = LIMITS.dq_max[0] * LbrParams().max_joint_speed_scale
+    v = np.zeros(7)
+    v[0] = 0.98 * limit  # over the brake (0.95 of the guard), under the guard
+    tau = np.full(7, 0.5)
+    with Cell() as cell:
+        np.testing.assert_allclose(cell.port.velocity_limits_rad_s, LIMITS.dq_max * LbrParams().max_joint_speed_scale)
+        cell.armed()
+        states, k = _ramp_to(cell, Q0, v, 40, tau)
+        assert k is None, "no guard tripped"
+        braked = [(s, c) for s, c in zip(states, cell.stack.commands[-len(states):])
+                  if s.dq_rad_s[0] > LbrParams().speed_brake_share * limit]
+        assert braked, "the estimate passed the brake"
+        for s, (_, jp, sent) in braked[1:]:  # from the state after the first over it: damping, measured position
+            np.testing.assert_allclose(sent, -HOLD_D * np.array(s.dq_rad_s), atol=0.05)
+        st = cell.wait_status(lambda m: m.counters.get("speed_holds_sent", 0) > 0, "speed holds counted")
+        assert st.counters["joint_speed_brakes"] == 1 and "guard_trips" not in st.counters, st.counters
+        assert "armed=True" in st.detail, st.detail
+
+
 # the guard function alone: one case per guard, the joint and the value named
 
 GUARD = GuardLimits(LIMITS.q_min, LIMITS.q_max, LIMITS.dq_max * 0.5, LIMITS.tau_max, 0.05, 2000.0)

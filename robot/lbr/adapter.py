@@ -24,6 +24,13 @@ must not step the torque), then damping torques ``-D dq`` with the measured
 joint position; after
 ``hold_timeout_s`` of holding the adapter disarms and stops commanding, so
 that the robot's own FRI watchdog ends the session and the robot stops.
+Speed brake: the adapter declares the guard's joint speeds as its velocity
+limits, so the server holds (``joint_speed_brakes``) while a joint moves
+faster than ``speed_brake_share`` of them or is about to by the next cycle,
+below the guard that would disarm: after a stall in our own processes the
+robot has repeated the last torque for tens of milliseconds, and the
+controller's correction can whip a light wrist joint.
+
 Disarming (stop, signal, controller loss, guard trip, session lost, no robot state for ``hold_timeout_s``) sends
 one last hold and says why (log, status).
 """
@@ -73,6 +80,9 @@ class LbrPort(RobotPort):
         self.capabilities = Capabilities(True, lim.tau_max.tolist(), "lbr")
         self.limits = GuardLimits(lim.q_min, lim.q_max, lim.dq_max * params.max_joint_speed_scale, lim.tau_max,
                                   params.limit_margin_rad, params.tau_rate_nm_s)
+        # the server brakes (holds) below the guard's speed, before a wrist whipping after a stall disarms
+        self.velocity_limits_rad_s = self.limits.dq_max_rad_s
+        self._zeros = np.zeros(7)
         self.counts: Counter[str] = Counter()
         self.armed = False
         self.arm_pending = params.arm
@@ -195,6 +205,20 @@ class LbrPort(RobotPort):
             return
         self._send_hold()
         self.counts["holds_sent"] += 1
+
+    def speed_hold(self) -> None:
+        """A joint too fast (the server's speed brake): damping torques at once, no repeat of the last command;
+        past a guard (the joint's speed over the guard's, a position limit ahead), disarm as a command would."""
+        if not self.armed:
+            return
+        r = self._reading
+        reason = guard_trip(r.q_rad, r.dq_rad_s, self._zeros, None, self._state.sample_time_s, self.limits)
+        if reason is not None:
+            self.counts["guard_trips"] += 1
+            self.disarm(f"guard: {reason}")
+            return
+        self._send_hold()
+        self.counts["speed_holds_sent"] += 1
 
     def estop_hold(self) -> None:
         """E-stop: damping torques with the measured position at once (no repeat of the last command)."""

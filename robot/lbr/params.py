@@ -15,6 +15,7 @@
     hold_timeout_s = 0.5                     # holding this long without a controller command: stop commanding
     stale_limit_s = 0.005                    # a controller answer later than this is not sent; hold instead
     max_joint_speed_scale = 0.8              # guard: this share of the description's joint speed limits
+    speed_brake_share = 0.95                 # brake (hold) above this share of the guard's speed, or about to be
     tau_rate_nm_s = 5000.0                   # guard: torque change per second (the controller keeps to ~1000)
     limit_margin_rad = 0.05                  # guard: distance kept from the joint position limits
     arm = false                              # arm at start-up (else: an ArmRequest on robot/arm)
@@ -55,6 +56,7 @@ class LbrParams:
     hold_timeout_s: float = 0.5
     stale_limit_s: float = 0.005
     max_joint_speed_scale: float = 0.8
+    speed_brake_share: float = 0.95
     tau_rate_nm_s: float = 5000.0
     limit_margin_rad: float = 0.05
     arm: bool = False
@@ -83,6 +85,7 @@ class LbrParams:
         _range(s, "hold_timeout_s", self.hold_timeout_s, 0.001, 10.0)
         _range(s, "stale_limit_s", self.stale_limit_s, 0.0005, 1.0)
         _range(s, "max_joint_speed_scale", self.max_joint_speed_scale, 0.01, 1.0)
+        _range(s, "speed_brake_share", self.speed_brake_share, 0.0, 1.0)
         _range(s, "tau_rate_nm_s", self.tau_rate_nm_s, 1.0, 100_000.0)
         _range(s, "limit_margin_rad", self.limit_margin_rad, 0.0, 0.5)
         if not isinstance(self.arm, bool):
