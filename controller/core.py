@@ -47,6 +47,9 @@ from .params import ControllerParams
 TRACE_COLUMNS = ("t_s", "phase", "ref_x", "ref_y", "ref_vx", "ref_vy", "ref_ax", "ref_ay", "x", "y", "h",
                  "ref_p_x", "ref_p_y", "ref_p_z", "p_x", "p_y", "p_z", "force_n", "press_n", "contact",
                  "speed_scale")
+#: The skill's clock advances at most this many robot periods in one tick (a longer gap between states: our own
+#: processes stalled while the robot repeated or held the last command; the reference must not leap ahead).
+SKILL_STEP_CAP_PERIODS = 2.0
 #: Trace code of each phase name: its place in :class:`~interfaces.messages.Phase`.
 PHASE_CODES = {phase.value: i for i, phase in enumerate(Phase)}
 _HALTED = (Phase.FAULT, Phase.ESTOP)
@@ -141,6 +144,7 @@ class ControllerCore:
         self._modes_age = 0
         self._modes_scale = -1.0
         self.robot_rate_hz = 0.0  # unknown until a state says
+        self.skill_steps_capped = 0  # ticks whose skill step was cut to SKILL_STEP_CAP_PERIODS robot periods
         self.mode_cap_rad_s = params.impedance.max_mode_frequency_rad_s
         self.kin = Kinematics(self.model)
         self._terms = new_terms(self.kin)
@@ -242,7 +246,7 @@ class ControllerCore:
             n = board.normal
             tool = self._measure_tool(board, n, kin, wrench, dt_s)
             scale = self.override_used = self.override.scale
-            sp = self.executor.step(0.0 if robot_held else dt_s * scale, tool)
+            sp = self.executor.step(0.0 if robot_held else self._skill_step(dt_s) * scale, tool)
             self._reference_from_setpoint(board, n, sp, tool, scale)
             self._regulate_force(n, sp, dt_s)
             self._update_override(kin, scale, dt_s)
@@ -369,6 +373,19 @@ class ControllerCore:
                            shaper.rate * min(dt_s, self._period_s), kin.g, not gravity_compensated, self._limit_work)
         shaper.count(hit)
         return tau
+
+    def _skill_step(self, dt_s: float) -> float:
+        """The skill's step for a tick ``dt_s`` [s] after the last: at most :data:`SKILL_STEP_CAP_PERIODS` robot
+        periods (the controller's own before a state has said the robot's rate). Over a longer gap our processes
+        stood still while the robot repeated or held an old command; the arm did not follow the reference, so,
+        as over a held cycle, the skill's clock does not run on (in one step it would also leap: the executed
+        reference's acceleration jumped there, 1.4 km/s^3 of jerk after a 36 ms stall)."""
+        period = 1.0 / self.robot_rate_hz if self.robot_rate_hz > 0 else self._period_s
+        cap = SKILL_STEP_CAP_PERIODS * period
+        if dt_s > cap:
+            self.skill_steps_capped += 1
+            return cap
+        return dt_s
 
     def follow_robot_rate(self, rate_hz: float) -> None:
         """The robot sends states at ``rate_hz`` (its declared capability): cap the task modes for that loop

@@ -447,7 +447,8 @@ class ControllerService:
         counters.update(ex.counters)
         counters.update(torque_rate_clipped=core.shaper.clipped_rate, torque_abs_clipped=core.shaper.clipped_abs,
                         robot_estop_engaged=int(self._robot_estop), estop_latched=int(self._estop_ours),
-                        overload_slowed_ticks=core.override.load_limited_ticks)
+                        overload_slowed_ticks=core.override.load_limited_ticks,
+                        skill_steps_capped=core.skill_steps_capped)
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
                              ("estop", self._estops), ("estop_release", self._releases)):
             if reader is None:

@@ -7,11 +7,14 @@ party's torques move the arm, a fault when the board goes away under the pressin
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pybullet as pb
 import pytest
 
 from controller.control.watch import ContactWatch, DisturbanceWatch
+import controller.core
 from controller.core import ControllerCore
 from controller.executor_types import BoardPose, StainState
 from controller.params import ControllerParams
@@ -142,11 +145,11 @@ def test_contact_lost_while_the_robot_braked_is_the_brakes_doing_not_a_fault(lea
     assert core.contact_watch.lost_s == 0.0
 
 
-def _brake_then_release(skill, held_flag: bool) -> tuple[float, float, float, Phase]:
+def _brake_then_release(skill, held_flag: bool) -> tuple[float, float, float, Phase, int]:
     """Mid-wipe, the link stalls: the sim brakes for 64 ms and the controller then sees one state 64 ms on (its
     robot clock says so) flagged ``held_flag``, then normal ticks. Returns (largest reference-to-pad distance
     over the 0.3 s before the stall and over the 0.3 s after the release [m], longest time under 2 N while the
-    skill presses [s], final phase)."""
+    skill presses [s], final phase, ticks whose skill step was capped)."""
     core = ControllerCore(ControllerParams.from_table({}), skill)
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
     gap, lag_before, lag, lost, lost_max, after = 64, [], 0.0, 0.0, 0.0, None
@@ -176,21 +179,29 @@ def _brake_then_release(skill, held_flag: bool) -> tuple[float, float, float, Ph
                     break
     finally:
         sim.close()
-    return max(lag_before), lag, lost_max, core.executor.phase
+    return max(lag_before), lag, lost_max, core.executor.phase, core.skill_steps_capped
 
 
 @pytest.mark.slow
-def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does_not_leap(learned_skill):
+def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does_not_leap(learned_skill,
+                                                                                          monkeypatch):
     """A CI run: after a 300 ms link stall the reference had run 18 mm ahead of the braked pad; released, the arm
     leapt after it, the pad bounced off the board and the contact-loss watch faulted. A cycle the robot held does
     not advance the skill: released, the pad lags only by what it takes to get back up to speed and keeps the
     board (3.0 mm wiping, 10.4 mm after the release into a transition at full speed; the reference running on:
     22.4 mm and the contact lost for 0.2 s. With the override holding the wiping back, as it did before its
-    look-ahead followed the motion: 3.3, 7.7 and 16 mm)."""
-    before, lag, lost_s, phase = _brake_then_release(learned_skill, held_flag=True)
-    _, lag_unflagged, _, _ = _brake_then_release(learned_skill, held_flag=False)
-    msg = f"the reference ran {lag * 1000:.1f} mm from the pad (wiping: {before * 1000:.1f}, run on: " \
-          f"{lag_unflagged * 1000:.1f})"
-    assert lag < 0.012 and lag < 0.6 * lag_unflagged, msg
+    look-ahead followed the motion: 3.3, 7.7 and 16 mm). Unflagged, a gap longer than two periods is our own
+    stall and the skill's step is capped to two periods (core.SKILL_STEP_CAP_PERIODS)."""
+    before, lag, lost_s, phase, _ = _brake_then_release(learned_skill, held_flag=True)
+    # unflagged, a 64 ms gap on the robot's clock is capped to two periods of the skill's (our processes stalled)
+    _, lag_capped, lost_capped, phase_capped, capped = _brake_then_release(learned_skill, held_flag=False)
+    with monkeypatch.context() as m:  # the reference running on over the whole gap, as before either guard
+        m.setattr(controller.core, "SKILL_STEP_CAP_PERIODS", math.inf)
+        _, lag_run_on, _, _, _ = _brake_then_release(learned_skill, held_flag=False)
+    msg = f"the reference ran {lag * 1000:.1f} mm from the pad (wiping: {before * 1000:.1f}, gap capped: " \
+          f"{lag_capped * 1000:.1f}, run on: {lag_run_on * 1000:.1f})"
+    assert lag < 0.012 and lag < 0.6 * lag_run_on, msg
+    assert lag_capped < 0.012 and lag_capped < 0.6 * lag_run_on and capped == 1, (msg, capped)
     assert lost_s < 0.05 and phase in (Phase.WIPE, Phase.TRANSITION), (lost_s, phase)
-    assert lag_unflagged > lag + 0.005, "without the flag the reference leaps (the check can fail)"
+    assert lost_capped < 0.05 and phase_capped in (Phase.WIPE, Phase.TRANSITION), (lost_capped, phase_capped)
+    assert lag_run_on > lag + 0.005, "running on, the reference leaps (the check can fail)"
