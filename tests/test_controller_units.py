@@ -15,7 +15,7 @@ from lampskit.core.chain import ChainStep
 from controller.executor import SkillExecutor
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
 from controller.stain_book import StainBook
-from controller.motion import OrientationBlend, Quintic, bounded_brake_to_rest, brake_to_rest
+from controller.motion import OrientationBlend, Quintic, bounded_brake_to_rest, brake_peaks, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
 from interfaces.errors import ConfigError
 from lampskit.errors import PlanningError
@@ -474,6 +474,23 @@ def test_the_retreat_brake_takes_as_long_as_the_kinematic_bounds_need():
     np.testing.assert_allclose(a[0], a0)
     easy = bounded_brake_to_rest(p0, 0.1 * v0, 0.0 * a0, 0.3, 4.0, 100.0)  # already within: as asked
     assert easy.T == 0.3
+
+
+def test_the_brakes_closed_form_peaks_are_the_quintics_sampled_ones():
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        n = int(rng.integers(2, 4))
+        p0, v0, a0 = rng.normal(size=n), rng.normal(size=n) * 0.3, rng.normal(size=n) * 3.0
+        durations = rng.uniform(0.05, 2.0, size=4)
+        acc, jerk = brake_peaks(v0, a0, durations)
+        for T, a, j in zip(durations, acc, jerk):
+            np.testing.assert_allclose((a, j), brake_to_rest(p0, v0, a0, T).peaks(), rtol=1e-9, atol=1e-9)
+    # the bounded stop is the first stretched try within both bounds, as trying them one by one would find
+    p0, v0, a0 = np.zeros(2), np.array([0.3, 0.0]), np.array([0.0, 3.4])
+    T = 0.3
+    while brake_to_rest(p0, v0, a0, T).peaks()[1] > 60.0:
+        T *= 1.2
+    assert bounded_brake_to_rest(p0, v0, a0, 0.3, 4.0, 60.0).T == pytest.approx(T, rel=1e-12)
 
 
 def test_the_retreat_leaves_room_in_the_jerk_bound_for_the_speed_override(learned_skill):
