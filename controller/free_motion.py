@@ -87,23 +87,27 @@ class FreeMotion:
         sp.contact = False
 
     def descend(self) -> None:
-        """Down to ``creep_height_m`` at the approach speed (air mode: to ``air_height_m``)."""
+        """Down to ``creep_height_m``, arriving at the creep speed (``descend_speed_m_s`` downwards, no
+        acceleration), at the approach speed's mean (air mode: to rest at ``air_height_m``)."""
         sp = self.setpoint
         if self.p.air:
             bottom = self.p.air_height_m
             T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.3)
-        else:
-            bottom = min(self.p.creep_height_m, sp.h)
-            T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.2)
-        self._mover = vertical_move(sp.xy, sp.h, bottom, T)
+            self._mover = vertical_move(sp.xy, sp.h, bottom, T)
+            return
+        bottom = min(self.p.creep_height_m, sp.h)
+        T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.2)
+        self._mover = vertical_move(sp.xy, sp.h, bottom, T, sp.v_h, -self.p.descend_speed_m_s)
 
     def creep(self) -> None:
-        """On at ``descend_speed_m_s`` (peak) towards and past the surface, to ``contact_search_m`` below it."""
+        """On at ``descend_speed_m_s``, constant (the descent hands over at that speed), towards and past the
+        surface, to ``contact_search_m`` below it; the contact is found at that speed wherever the board is
+        within ``creep_height_m`` of where it was expected."""
         sp = self.setpoint
         bottom = -self.p.contact_search_m
-        # a rest-to-rest quintic peaks at 1.875x its mean speed: mean = descend speed / 1.875
-        T = abs(sp.h - bottom) * 1.875 / self.p.descend_speed_m_s
-        self._mover = vertical_move(sp.xy, sp.h, bottom, T)
+        v = self.p.descend_speed_m_s
+        T = max(sp.h - bottom, 1e-3) / v
+        self._mover = vertical_move(sp.xy, sp.h, bottom, T, -v, -v)
 
     def press(self, tool: ToolState) -> None:
         """In contact at the measured height: the force target ramps from the measured force to ``target_n``."""

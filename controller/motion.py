@@ -138,11 +138,13 @@ def bounded_brake_to_rest(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, durati
     return brake_to_rest(p0, v0, a0, float(durations[ok[0]] if ok.size else durations[-1]))
 
 
-def vertical_move(xy_m: np.ndarray, h0_m: float, h1_m: float, duration_s: float, v0_m_s: float = 0.0) -> Quintic:
-    """A quintic in (x, y, h): ``xy_m`` (2,) held, h from ``h0_m`` [m] (moving at ``v0_m_s``) to rest at ``h1_m``."""
+def vertical_move(xy_m: np.ndarray, h0_m: float, h1_m: float, duration_s: float, v0_m_s: float = 0.0,
+                  v1_m_s: float = 0.0) -> Quintic:
+    """A quintic in (x, y, h): ``xy_m`` (2,) held, h from ``h0_m`` [m] moving at ``v0_m_s`` to ``h1_m`` moving at
+    ``v1_m_s`` [m/s] (default: at rest), without acceleration at either end; after it, on at ``v1_m_s``."""
     z = np.zeros(3)
-    return Quintic((np.array([*xy_m, h0_m]), np.array([0.0, 0.0, v0_m_s]), z), (np.array([*xy_m, h1_m]), z, z),
-                   duration_s)
+    return Quintic((np.array([*xy_m, h0_m]), np.array([0.0, 0.0, v0_m_s]), z),
+                   (np.array([*xy_m, h1_m]), np.array([0.0, 0.0, v1_m_s]), z), duration_s)
 
 
 def brake_above(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, duration_s: float) -> Quintic:

@@ -12,7 +12,7 @@ from controller.control.force import NormalForceRegulator
 from controller.control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
                                        speed_excess_force)
 from lampskit.core.chain import ChainStep
-from controller.executor import SkillExecutor
+from controller.executor import SkillExecutor, Stage
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
 from controller.stain_book import StainBook
 from controller.motion import OrientationBlend, Quintic, bounded_brake_to_rest, brake_peaks, brake_to_rest
@@ -361,6 +361,50 @@ def test_a_release_with_stale_stains_waits_paused_instead_of_wiping_blind(learne
     assert "APPROACH" in phases(log)
 
 
+class RaisedBoardArm(IdealArm):
+    """An :class:`IdealArm` whose board surface is ``surface_h`` [m] above where the executor expects it."""
+
+    def __init__(self, surface_h: float):
+        super().__init__()
+        self.surface_h = surface_h
+
+    def follow(self, sp) -> ToolState:
+        t = super().follow(sp)
+        if sp.contact:
+            t.h = self.surface_h - sp.force_n / 2e4
+        t.force_n = max(0.0, (self.surface_h - t.h) * 2e4)
+        return t
+
+
+@pytest.mark.parametrize("surface_h", [0.0, 0.011, -0.004])
+def test_the_pad_touches_down_at_the_creep_speed_wherever_the_board_is_within_the_creep_height(learned_skill,
+                                                                                                surface_h):
+    """The tilted board met the pad up to 11 mm above the expected surface, at the end of the fast descent
+    (0.075-0.09 m/s, 46-50 N). The descent now hands over at the creep speed at ``creep_height_m`` (16 mm),
+    C1 across the hand-over, and the contact comes at that speed (with the surface where expected, 4 mm low or 11
+    mm high)."""
+    p = ExecutorParams()
+    ex = SkillExecutor(learned_skill, p)
+    arm = RaisedBoardArm(surface_h)
+    ex.set_stains(BOARD, stains())
+    v_h, touch, stages = [], None, []
+    for _ in range(30000):
+        sp = ex.step(0.001, arm.tool)
+        if ex.current_mp == "descend":
+            v_h.append(sp.v_h)
+            stages.append(ex._stage)
+        arm.follow(sp)
+        if arm.tool.force_n >= ex.f.contact_threshold_n and touch is None:
+            touch = v_h[-1]
+            break
+    assert touch is not None, "no contact"
+    assert -p.descend_speed_m_s * 1.001 <= touch < 0.0, touch
+    assert Stage.CREEP in stages, "the contact came while creeping"
+    k = stages.index(Stage.CREEP)  # the hand-over: the creep goes on at the speed the descent arrived with
+    assert abs(v_h[k] - v_h[k - 1]) < 1e-4 and abs(v_h[k] + p.descend_speed_m_s) < 1e-4, v_h[k - 2:k + 2]
+    assert max(abs(np.diff(v_h))) < 0.004, "no step in the speed (the fast descent peaks at 3.5 m/s^2)"
+
+
 def test_a_pause_while_descending_fast_never_drives_the_pad_into_the_board(learned_skill):
     ex = SkillExecutor(learned_skill, ExecutorParams())
     arm = IdealArm()
@@ -371,6 +415,8 @@ def test_a_pause_while_descending_fast_never_drives_the_pad_into_the_board(learn
         arm.follow(sp)
         if ex.current_mp == "descend" and sp.v_h < -0.2:
             break
+    else:
+        pytest.fail("the descent never went faster than 0.2 m/s: nothing tested")
     h_at_pause = sp.h
     ex.stains_stale("no stains")
     log = run(ex, arm, 2.0)
