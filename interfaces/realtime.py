@@ -19,7 +19,7 @@ busy process: with the loop's thread alone raised the adapter's loop stood
 still for up to 83 ms, 23 % of the FRI states went unanswered in time, 61
 stale-command brakes, and the robot, repeating the last torque meanwhile as
 the stack does, sped its wrist past the adapter's guard; with the others
-raised, 4-5 % and 1-4 brakes, and the run completes. Threads doing long
+raised, 4-5 % and 1-4 brakes, and 4 of 5 runs complete. Threads doing long
 computations (the controller's planner) register with :func:`keep_fair`
 and stay where they are: as ``SCHED_FIFO`` threads they would hold a core
 against every ordinary process for a whole plan. Threads started later by
