@@ -132,7 +132,8 @@ class ControllerCore:
         self._tau = np.zeros(self.model.nq)
         self._period_s = 1.0 / params.rate_hz
         self._speed_onset = params.limits.joint_speed_share * self.model.limits.dq_max
-        self.override = SpeedOverride(self.model.limits.dq_max, params.limits.reference_joint_speed_share)
+        self.override = SpeedOverride(self.model.limits.dq_max, params.limits.reference_joint_speed_share,
+                                      jerk_bound_m_s3=params.planner.max_jerk_m_s3)
         self._demand = np.zeros(self.model.nq)
         self._demand_work = np.zeros((4, 7))
         self._board: BoardPose | None = None
@@ -249,7 +250,7 @@ class ControllerCore:
             sp = self.executor.step(0.0 if robot_held else self._skill_step(dt_s) * scale, tool)
             self._reference_from_setpoint(board, n, sp, tool, scale)
             self._regulate_force(n, sp, dt_s)
-            self._update_override(kin, scale, dt_s)
+            self._update_override(kin, sp, scale, dt_s)
         self._shape_task(kin, dt_s)
         tau = self._torque(q, dq, kin, gravity_compensated, dt_s)
         if self.trace is not None:
@@ -317,13 +318,14 @@ class ControllerCore:
                        0.0 if c else float(sp.v_h), sp.a_xy, 0.0 if c else float(sp.a_h), sp.R, sp.omega,
                        sp.domega, float(scale), ref.p_m, ref.R, ref.twist, ref.accel)
 
-    def _update_override(self, kin: Kinematics, scale: float, dt_s: float) -> None:
+    def _update_override(self, kin: Kinematics, sp: Setpoint, scale: float, dt_s: float) -> None:
         """The time scale of the next tick from the joint speeds the unscaled reference asks for (the least-inertia
-        ones, ``M^-1 J^T Lambda v``), looking ``OVERRIDE_LOOKAHEAD_S`` ahead along its acceleration."""
+        ones, ``M^-1 J^T Lambda v``), looking ``OVERRIDE_LOOKAHEAD_S`` ahead along its acceleration; its changes
+        within the planner's jerk bound on the executed in-plane reference (the setpoint's unscaled acceleration)."""
         ref = self.ref
         joint_demand_into(kin.M_inv, kin.J, kin.Lambda, ref.twist, ref.accel, float(scale), OVERRIDE_LOOKAHEAD_S,
                           self._demand, self._demand_work)
-        self.override.update(self._demand, dt_s)
+        self.override.update(self._demand, dt_s, sp.a_xy)
 
     def _regulate_force(self, n: np.ndarray, sp: Setpoint, dt_s: float) -> None:
         """In contact, the press force along the normal ``n`` (3,) from the regulator (PI + feed-forward); else none."""

@@ -32,6 +32,8 @@ from interfaces.config import dataclass_from_table
 from interfaces.errors import ConfigError
 
 MODES = ("lockstep", "realtime")
+#: No robot state this long [s, wall] is a lost robot, per mode (``robot_lost_s = 0``).
+ROBOT_LOST_DEFAULT_S = {"lockstep": 2.0, "realtime": 0.5}
 #: 20 min at 1 kHz, 190 MB of trace.
 MAX_TRACE_TICKS = 1_200_000
 #: A rest-to-rest quintic's peak speed over its mean speed.
@@ -252,7 +254,10 @@ class ControllerParams:
     answered (nothing new is sent; counted); 0 = five periods. robot_lost_s : no robot state
     for this long (wall time, both modes; the lock-step sim re-sends its
     state every 0.1 s while it waits) -> FAULT, and a restart from the
-    measured pose when states come back. stains_timeout_s : no stains update this long -> PAUSED.
+    measured pose when states come back; 0 = the mode's default,
+    :data:`ROBOT_LOST_DEFAULT_S` (real time 0.5 s; lock-step 2 s: the sim
+    waits for each answer, so a silence moves nothing and only a dead peer
+    matters, not one starved for half a second on a loaded machine). stains_timeout_s : no stains update this long -> PAUSED.
     status_rate_hz : ControllerStatus rate. max_ticks : stop after this many
     ticks (0 = run until stopped). trace_ticks : keep this many ticks of
     reference/measurement trace in memory (0 = none). publish_trace : publish
@@ -265,7 +270,7 @@ class ControllerParams:
     skill: str = ""
     stains_from: str = "perception"
     state_timeout_s: float = 0.0
-    robot_lost_s: float = 0.5
+    robot_lost_s: float = 0.0
     stains_timeout_s: float = 1.0
     status_rate_hz: float = 20.0
     max_ticks: int = 0
@@ -288,7 +293,8 @@ class ControllerParams:
             raise ConfigError(f"[{s}] stains_from must be one of {STAIN_SOURCES}, got {self.stains_from!r}")
         if self.state_timeout_s != 0.0:
             _range(s, "state_timeout_s", self.state_timeout_s, 1.5 / self.rate_hz, 1.0)
-        _range(s, "robot_lost_s", self.robot_lost_s, 0.15, 60.0)
+        if self.robot_lost_s != 0.0:
+            _range(s, "robot_lost_s", self.robot_lost_s, 0.15, 60.0)
         _range(s, "stains_timeout_s", self.stains_timeout_s, 0.05, 3600.0)
         _range(s, "status_rate_hz", self.status_rate_hz, 0.5, 200.0)
         check_int(s, "max_ticks", self.max_ticks, 0, 10**9)
@@ -304,6 +310,10 @@ class ControllerParams:
     @property
     def state_timeout_or_default_s(self) -> float:
         return self.state_timeout_s or 5.0 / self.rate_hz
+
+    @property
+    def robot_lost_or_default_s(self) -> float:
+        return self.robot_lost_s or ROBOT_LOST_DEFAULT_S[self.mode]
 
     @property
     def dt_s(self) -> float:

@@ -327,7 +327,7 @@ class ControllerService:
         return dt
 
     def _check_lost(self, silence_s: float) -> None:
-        if self._ever_state and not self._lost and silence_s >= self.p.robot_lost_s:
+        if self._ever_state and not self._lost and silence_s >= self.p.robot_lost_or_default_s:
             self._lost = True
             self.counters["robot_lost"] += 1
             self.core.executor.robot_lost(f"no robot state for {silence_s * 1000:.0f} ms")
@@ -448,6 +448,7 @@ class ControllerService:
         counters.update(torque_rate_clipped=core.shaper.clipped_rate, torque_abs_clipped=core.shaper.clipped_abs,
                         robot_estop_engaged=int(self._robot_estop), estop_latched=int(self._estop_ours),
                         overload_slowed_ticks=core.override.load_limited_ticks,
+                        override_jerk_limited_ticks=core.override.jerk_limited_ticks,
                         skill_steps_capped=core.skill_steps_capped)
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
                              ("estop", self._estops), ("estop_release", self._releases)):
@@ -460,7 +461,8 @@ class ControllerService:
         return ControllerStatus(seq=self._status_seq, stamp_ns=time.monotonic_ns(), phase=ex.phase, reason=ex.reason,
                                 current_mp=ex.current_mp, stain_id=ex.stain_id,
                                 normal_force_n=float(core.normal_force_n), timing=self.stats.summary(),
-                                counters=counters, wall_ns=time.time_ns())
+                                counters=counters, wall_ns=time.time_ns(),
+                                robot_time_ns=int(core.time_s * 1e9))
 
     def _publish_status(self, force: bool = False) -> None:
         now = time.monotonic()

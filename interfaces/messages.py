@@ -369,7 +369,8 @@ class ControllerStatus(Message, frozen=True):
     phase : a :class:`Phase` name; reason : why (always set in PAUSED, FAULT,
     ESTOP); current_mp : e.g. ``"periodic 3"``; normal_force_n : measured
     contact force along the board normal [N]; counters : e.g. dropped samples
-    per key.
+    per key; robot_time_ns : the controller's time on the robot's clock (the
+    sum of its ticks' steps since it started) [ns], 0 before the first state.
     """
 
     seq: int
@@ -382,6 +383,7 @@ class ControllerStatus(Message, frozen=True):
     timing: LoopTiming = msgspec.field(default_factory=LoopTiming)
     counters: Counters = msgspec.field(default_factory=dict)
     wall_ns: int = 0
+    robot_time_ns: int = 0
 
     def __post_init__(self) -> None:
         _clip(self, reason=TEXT_MAX, current_mp=TEXT_MAX)

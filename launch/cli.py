@@ -387,7 +387,7 @@ def _watch(cell: _Cell, children, max_duration_s: float, stop_requested) -> tupl
                 first_dirt = tr.total_dirt
             sn = stains.take() or sn
             if st is not None:
-                ended = end.update(st.phase, st.reason, now)
+                ended = end.update(st.phase, st.reason, now, st.robot_time_ns * 1e-9)
                 if ended is not None:
                     return ended
             if now >= next_print:

@@ -86,7 +86,7 @@ def _wait_for_end(node, stop: threading.Event, max_duration_s: float | None) -> 
             return "timeout", f"not finished after --max-duration {max_duration_s:g} s"
         st = status.take() or st
         if st is not None:
-            ended = end.update(st.phase, st.reason, now)
+            ended = end.update(st.phase, st.reason, now, st.robot_time_ns * 1e-9)
             if ended is not None:
                 return ended
     return None

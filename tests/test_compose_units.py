@@ -103,6 +103,19 @@ def test_the_run_ends_after_done_or_a_fault_is_held():
     assert end.update(Phase.ESTOP, "stop pressed", 5.0) == ("fault", f"controller {Phase.ESTOP}: stop pressed")
 
 
+def test_done_is_held_on_the_robot_clock_when_the_controller_reports_it():
+    """A lock-step cell on a loaded machine runs slower than the wall: 2.5 s of wall time in DONE may be 1 s of the
+    executor's time (its recheck may still bring it back); the robot clock is what the executor waits on."""
+    end = RunEnd(settle_s=2.5, fault_hold_s=5.0)
+    assert end.update(Phase.DONE, "", 0.0, robot_s=10.0) is None
+    assert end.update(Phase.DONE, "", 6.0, robot_s=12.0) is None, "6 s of wall, 2 s of robot time"
+    assert end.update(Phase.DONE, "", 7.0, robot_s=12.5) == ("done", "the controller is DONE")
+    # a fault is held on the wall (a lost robot has no clock)
+    assert end.update(Phase.FAULT, "no robot state", 8.0, robot_s=12.5) is None
+    assert end.update(Phase.FAULT, "no robot state", 13.0, robot_s=12.5) == (
+        "fault", f"controller {Phase.FAULT}: no robot state")
+
+
 # ------------------------------------------------------------------------------------------------ the lock
 
 def test_the_image_lock_pins_every_dependency_inside_its_range_with_hashes():

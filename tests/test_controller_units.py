@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from controller.control.force import NormalForceRegulator
-from controller.control.limits import (SpeedOverride, TorqueShaper, joint_margin_torque, joint_speed_brake_torque,
-                                       speed_excess_force)
+from controller.control.limits import (SpeedOverride, TorqueShaper, jerk_limited_scale, joint_margin_torque,
+                                       joint_speed_brake_torque, speed_excess_force)
 from lampskit.core.chain import ChainStep
 from controller.executor import SkillExecutor, Stage
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
@@ -126,10 +126,18 @@ def test_force_regulator_reaches_the_target_on_a_spring_and_respects_the_cap():
     ({"planner": {"order": "random"}}, "order must be"),
     ({"force": {"gain": 1.0}}, r"unknown key\(s\) \['gain'\]"),
     ({"impedance": 3}, r"\[controller.impedance\] must be a table"),
+    ({"robot_lost_s": 0.05}, r"robot_lost_s must be a number in \[0.15, 60.0\]"),
 ])
 def test_bad_controller_config_is_refused_with_the_key_named(table, match):
     with pytest.raises(ConfigError, match=match):
         ControllerParams.from_table(table)
+
+
+def test_the_robot_lost_watch_is_longer_in_lock_step_unless_set():
+    """Lock-step: the sim waits for each answer, so a starved sim moves nothing; only a dead one is lost."""
+    assert ControllerParams.from_table({}).robot_lost_or_default_s == 2.0
+    assert ControllerParams.from_table({"mode": "realtime"}).robot_lost_or_default_s == 0.5
+    assert ControllerParams.from_table({"robot_lost_s": 0.3}).robot_lost_or_default_s == 0.3
 
 
 def test_defaults_are_valid_and_the_example_config_lists_them():
@@ -652,6 +660,57 @@ def test_speed_override_slows_to_the_share_holds_the_peak_and_recovers_slowly():
     for _ in range(2000):  # an absurd demand (a singularity): never slower than min_scale
         s = ov.update(np.array([0.0, 1e6]), 0.001)
     assert s == pytest.approx(0.1)
+
+
+def _override_run(ov: SpeedOverride, j_along_m_s3: float, with_accel: bool, ticks: int = 400, dt: float = 0.001):
+    """A skill accelerating at ``4 exp(-k sigma)`` m/s^2 along x, its planned jerk ``j_along`` at first (against
+    the acceleration: the case where a falling scale adds to it); the joints ask for twice the override's share
+    from tick 2. Returns the scales used and the executed in-plane acceleration ``s^2 a(sigma)`` per tick."""
+    sigma, scales, executed = 0.0, [], []
+    for k in range(ticks):
+        s = ov.scale
+        sigma += s * dt
+        a = np.array([4.0 * np.exp(-j_along_m_s3 / 4.0 * sigma), 0.0])
+        scales.append(s)
+        executed.append(s * s * a)
+        ov.update(np.array([0.0, 1.0 if k >= 2 else 0.2]), dt, a if with_accel else None)
+    return np.array(scales), np.array(executed)
+
+
+def test_the_speed_override_changes_its_scale_within_the_jerk_bound():
+    """The executed acceleration is ``s^2 a``: its jerk is ``s^3 j + 2 s (ds/dt) a``. Falling at its full 8/s the
+    scale would add 64 m/s^3 to a planned 80 m/s^3; with the skill's acceleration the override falls only as fast
+    as keeps the executed jerk within the 100 m/s^3 bound, still well above its 1/s floor."""
+    def run(with_accel, j):
+        ov = SpeedOverride(np.ones(2), share=0.5, min_scale=0.1, jerk_bound_m_s3=100.0)
+        scales, executed = _override_run(ov, j, with_accel)
+        return ov, scales, np.linalg.norm(np.diff(executed, axis=0), axis=1) / 0.001
+
+    ov, scales, jerk = run(False, 80.0)
+    assert jerk.max() > 125.0 and ov.jerk_limited_ticks == 0, "the baseline: the scale's fall adds ~55 m/s^3"
+    ov, scales, jerk = run(True, 80.0)
+    assert jerk.max() <= 100.0 and ov.jerk_limited_ticks > 0
+    rate = -np.diff(scales)[3:13] / 0.001
+    assert np.all(rate >= 1.0 - 1e-9) and rate.max() < 8.0, "slower than 8/s, at least the floor"
+    assert scales[-1] == pytest.approx(0.5, abs=0.01), "the scale still reaches the speed share"
+    # a planned jerk at the bound leaves no room: the floor wins (the joints' speed first), the excess is small
+    ov, scales, jerk = run(True, 99.0)
+    assert -np.diff(scales)[2] / 0.001 == pytest.approx(1.0) and jerk.max() < 99.0 + 2 * 1.0 * 4.0 + 1.0
+
+
+def test_the_jerk_limited_scale_is_the_nearest_to_the_wanted_within_the_step():
+    # no acceleration: the scale does not change the jerk
+    assert jerk_limited_scale(1.0, 0.99, 0.0, 0.0, 0.0, 0.0, 0.1) == 0.99
+    # constant a = 4 along x: |s^2 - 1| 4 <= 0.05 -> s >= sqrt(1 - 0.0125)
+    s = jerk_limited_scale(1.0, 0.9, 4.0, 0.0, 4.0, 0.0, 0.05)
+    assert s == pytest.approx(np.sqrt(1.0 - 0.0125))
+    # the wanted scale within the step: unchanged; rising works alike
+    assert jerk_limited_scale(1.0, 0.999, 4.0, 0.0, 4.0, 0.0, 0.05) == 0.999
+    assert jerk_limited_scale(0.5, 0.6, 4.0, 0.0, 4.0, 0.0, 0.05) == pytest.approx(np.sqrt(0.25 + 0.0125))
+    # a planned acceleration that changes by more than the step: a rising one (4 -> 4.5 next tick) is met by a
+    # lower scale, the one nearest the wanted; against a falling one (4 -> 3.5) no fall helps: the least jerk, stay
+    assert jerk_limited_scale(1.0, 0.9, 4.0, 0.0, 3.5, 0.0, 0.01) == pytest.approx(np.sqrt(3.99 / 4.5))
+    assert jerk_limited_scale(1.0, 0.9, 4.0, 0.0, 4.5, 0.0, 0.01) == 1.0
 
 
 def test_a_loop_that_cannot_keep_up_slows_the_motion_smoothly_before_the_overload_ends_it():

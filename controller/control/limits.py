@@ -131,6 +131,10 @@ def joint_speed_brake_torque(dq: np.ndarray, onset_rad_s: np.ndarray, rate_1_s: 
 
 #: How fast the override's scale may fall [1/s] (its default ``down_rate_1_s``).
 OVERRIDE_DOWN_RATE_1_S = 8.0
+#: How fast the scale may always fall [1/s], whatever the jerk it adds (the override's job is the joints' speed).
+OVERRIDE_JERK_FLOOR_RATE_1_S = 1.0
+#: The share of the jerk bound the override's scale changes aim at (the next acceleration is extrapolated).
+OVERRIDE_JERK_MARGIN = 0.98
 
 
 class SpeedOverride:
@@ -151,9 +155,17 @@ class SpeedOverride:
     dq_max_rad_s : (n,) joint speed limits [rad/s]. share : the share of them the reference may ask for.
     min_scale : the slowest the skill runs. down_rate_1_s, up_rate_1_s : how fast the scale may change [1/s].
     release_1_s : how fast the held peak demand falls [share/s].
+    jerk_bound_m_s3 : the executed in-plane jerk the scale's changes keep to [m/s^3] (inf: no such limit).
+    jerk_floor_rate_1_s : how fast the scale may fall whatever the jerk [1/s].
 
     The caller may also cap the scale with :attr:`load_cap` (a loop that cannot keep up with the robot slows the
     motion: :func:`load_scale`); the cap is reached through the same rate limits.
+
+    Jerk: the executed acceleration is ``s^2 a(sigma)``, so its jerk is ``s^3 j + 2 s (ds/dt) a``: a scale that
+    changes adds to the planned jerk. Given ``jerk_bound_m_s3`` and the skill's unscaled in-plane acceleration
+    each tick (``accel`` of :meth:`update`), the scale changes only as fast as keeps the next tick's executed
+    jerk within the bound (the next acceleration extrapolated from the last two), but it may always fall at
+    ``jerk_floor_rate_1_s`` (the joints' speed comes first; the controller's speed brake is behind it).
 
     Attributes
     ----------
@@ -163,10 +175,14 @@ class SpeedOverride:
         Ticks with ``scale < 1``. load_limited_ticks : int, ticks on which :attr:`load_cap` set the target.
     load_cap : float
         Upper bound on the target scale, in (0, 1] (1: none).
+    jerk_limited_ticks : int
+        Ticks on which the jerk bound held the scale's change back.
     """
 
     def __init__(self, dq_max_rad_s: np.ndarray, share: float, min_scale: float = 0.05,
-                 down_rate_1_s: float = OVERRIDE_DOWN_RATE_1_S, up_rate_1_s: float = 0.5, release_1_s: float = 0.5) -> None:
+                 down_rate_1_s: float = OVERRIDE_DOWN_RATE_1_S, up_rate_1_s: float = 0.5, release_1_s: float = 0.5,
+                 jerk_bound_m_s3: float = math.inf,
+                 jerk_floor_rate_1_s: float = OVERRIDE_JERK_FLOOR_RATE_1_S) -> None:
         self.inv_dq_max = 1.0 / np.asarray(dq_max_rad_s, float)
         self.share = float(share)
         self.min_scale = float(min_scale)
@@ -178,25 +194,71 @@ class SpeedOverride:
         self.slowed_ticks = 0
         self.load_cap = 1.0
         self.load_limited_ticks = 0
+        self.jerk_bound = float(jerk_bound_m_s3) * OVERRIDE_JERK_MARGIN
+        self.jerk_floor = float(jerk_floor_rate_1_s)
+        self.jerk_limited_ticks = 0
+        self._a_prev = (0.0, 0.0)
+        self._has_a_prev = False
 
     def reset(self) -> None:
         self.scale = 1.0
         self.demand_share = 0.0
+        self._has_a_prev = False
 
-    def update(self, demand_rad_s: np.ndarray, dt_s: float) -> float:
-        """The scale for the next tick, given the joint speeds (n,) the unscaled reference needs now."""
+    def update(self, demand_rad_s: np.ndarray, dt_s: float, accel: np.ndarray | None = None) -> float:
+        """The scale for the next tick, given the joint speeds (n,) the unscaled reference needs now and, for the
+        jerk bound, the skill's unscaled in-plane acceleration (2,) [m/s^2] at this tick (None: no jerk limit)."""
         r = max(largest_share(demand_rad_s, self.inv_dq_max), self.demand_share - self.release * dt_s)
         self.demand_share = r
         target = 1.0 if r <= self.share else max(self.share / r, self.min_scale)
         if self.load_cap < target:
             target = max(self.load_cap, self.min_scale)
             self.load_limited_ticks += 1
-        s = self.scale
-        s = max(target, s - self.down * dt_s) if target < s else min(target, s + self.up * dt_s)
+        s0 = self.scale
+        s = max(target, s0 - self.down * dt_s) if target < s0 else min(target, s0 + self.up * dt_s)
+        if accel is not None:
+            ax, ay = float(accel[0]), float(accel[1])
+            if s != s0 and self.jerk_bound < math.inf:
+                limited = jerk_limited_scale(s0, s, ax, ay, *(self._a_prev if self._has_a_prev else (ax, ay)),
+                                             self.jerk_bound * dt_s)
+                if s < s0:
+                    limited = min(limited, max(s, s0 - self.jerk_floor * dt_s))
+                if limited != s:
+                    self.jerk_limited_ticks += 1
+                    s = limited
+            self._a_prev = (ax, ay)
+            self._has_a_prev = True
         self.scale = s
         if s < 1.0:
             self.slowed_ticks += 1
         return s
+
+
+def jerk_limited_scale(s0: float, s_wanted: float, ax: float, ay: float, ax_prev: float, ay_prev: float,
+                       step_m_s2: float) -> float:
+    """The scale between ``s0`` (this tick's) and ``s_wanted`` nearest ``s_wanted`` whose executed acceleration
+    next tick, ``s^2 a_next``, differs from this tick's ``s0^2 a`` by at most ``step_m_s2`` (the jerk bound
+    times the tick) [m/s^2]; ``a_next = 2 a - a_prev`` (in-plane, unscaled). If none does: the one nearest to
+    doing so (the least jerk on the way). Pure arithmetic, no allocation."""
+    nx, ny = 2.0 * ax - ax_prev, 2.0 * ay - ay_prev
+    c2 = s0 * s0
+    cx, cy = c2 * ax, c2 * ay
+    qa = nx * nx + ny * ny
+    if qa < 1e-12:
+        return s_wanted  # the acceleration vanishes: the scale does not change the jerk
+    # |x n - c|^2 <= step^2 in x = s^2: qa x^2 - 2 qb x + qc <= 0
+    qb = nx * cx + ny * cy
+    qc = cx * cx + cy * cy - step_m_s2 * step_m_s2
+    disc = qb * qb - qa * qc
+    if disc < 0.0:
+        x_lo = x_hi = qb / qa  # the least jerk
+    else:
+        root = math.sqrt(disc)
+        x_lo, x_hi = (qb - root) / qa, (qb + root) / qa
+    seg_lo, seg_hi = (s_wanted, s0) if s_wanted < s0 else (s0, s_wanted)
+    x = min(max(s_wanted * s_wanted, max(seg_lo * seg_lo, x_lo)), min(seg_hi * seg_hi, x_hi))
+    x = min(max(x, seg_lo * seg_lo), seg_hi * seg_hi)
+    return math.sqrt(x)
 
 
 def load_scale(unanswered_share: float, onset_share: float, limit_share: float, min_scale: float) -> float:
