@@ -164,7 +164,7 @@ class SpeedOverride:
     Jerk: the executed acceleration is ``s^2 a(sigma)``, so its jerk is ``s^3 j + 2 s (ds/dt) a``: a scale that
     changes adds to the planned jerk. Given ``jerk_bound_m_s3`` and the skill's unscaled in-plane acceleration
     each tick (``accel`` of :meth:`update`), the scale changes only as fast as keeps the next tick's executed
-    jerk within the bound (the next acceleration extrapolated from the last two), but it may always fall at
+    jerk within the bound (the next acceleration extrapolated from the last three), but it may always fall at
     ``jerk_floor_rate_1_s`` (the joints' speed comes first; the controller's speed brake is behind it).
 
     Attributes
@@ -197,13 +197,13 @@ class SpeedOverride:
         self.jerk_bound = float(jerk_bound_m_s3) * OVERRIDE_JERK_MARGIN
         self.jerk_floor = float(jerk_floor_rate_1_s)
         self.jerk_limited_ticks = 0
-        self._a_prev = (0.0, 0.0)
-        self._has_a_prev = False
+        self._a_prev = self._a_prev2 = (0.0, 0.0)
+        self._n_prev = 0  # accelerations seen (up to 2)
 
     def reset(self) -> None:
         self.scale = 1.0
         self.demand_share = 0.0
-        self._has_a_prev = False
+        self._n_prev = 0
 
     def update(self, demand_rad_s: np.ndarray, dt_s: float, accel: np.ndarray | None = None) -> float:
         """The scale for the next tick, given the joint speeds (n,) the unscaled reference needs now and, for the
@@ -219,28 +219,40 @@ class SpeedOverride:
         if accel is not None:
             ax, ay = float(accel[0]), float(accel[1])
             if s != s0 and self.jerk_bound < math.inf:
-                limited = jerk_limited_scale(s0, s, ax, ay, *(self._a_prev if self._has_a_prev else (ax, ay)),
-                                             self.jerk_bound * dt_s)
+                nx, ny = self._next_accel(ax, ay)
+                limited = jerk_limited_scale(s0, s, ax, ay, nx, ny, self.jerk_bound * dt_s)
                 if s < s0:
                     limited = min(limited, max(s, s0 - self.jerk_floor * dt_s))
                 if limited != s:
                     self.jerk_limited_ticks += 1
                     s = limited
+            self._a_prev2 = self._a_prev
             self._a_prev = (ax, ay)
-            self._has_a_prev = True
+            self._n_prev = min(self._n_prev + 1, 2)
         self.scale = s
         if s < 1.0:
             self.slowed_ticks += 1
         return s
 
+    def _next_accel(self, ax: float, ay: float) -> tuple[float, float]:
+        """The skill's unscaled acceleration next tick, extrapolated from the last three (quadratic: a planned
+        jerk that grows is foreseen), from fewer linearly or held."""
+        if self._n_prev >= 2:
+            (px, py), (qx, qy) = self._a_prev, self._a_prev2
+            return 3.0 * (ax - px) + qx, 3.0 * (ay - py) + qy
+        if self._n_prev == 1:
+            px, py = self._a_prev
+            return 2.0 * ax - px, 2.0 * ay - py
+        return ax, ay
 
-def jerk_limited_scale(s0: float, s_wanted: float, ax: float, ay: float, ax_prev: float, ay_prev: float,
+
+def jerk_limited_scale(s0: float, s_wanted: float, ax: float, ay: float, nx: float, ny: float,
                        step_m_s2: float) -> float:
     """The scale between ``s0`` (this tick's) and ``s_wanted`` nearest ``s_wanted`` whose executed acceleration
-    next tick, ``s^2 a_next``, differs from this tick's ``s0^2 a`` by at most ``step_m_s2`` (the jerk bound
-    times the tick) [m/s^2]; ``a_next = 2 a - a_prev`` (in-plane, unscaled). If none does: the one nearest to
-    doing so (the least jerk on the way). Pure arithmetic, no allocation."""
-    nx, ny = 2.0 * ax - ax_prev, 2.0 * ay - ay_prev
+    next tick, ``s^2 (nx, ny)``, differs from this tick's ``s0^2 (ax, ay)`` by at most ``step_m_s2`` (the jerk
+    bound times the tick) [m/s^2]; ``(ax, ay)``, ``(nx, ny)``: the skill's unscaled in-plane acceleration now and
+    (predicted) next tick. If none does: the one nearest to doing so (the least jerk on the way). Pure
+    arithmetic, no allocation."""
     c2 = s0 * s0
     cx, cy = c2 * ax, c2 * ay
     qa = nx * nx + ny * ny
