@@ -37,6 +37,7 @@ from .control.impedance import (Kinematics, Reference, TaskModes, TaskShaping, i
 from .control.kernels import (joint_demand_into, largest_share, limit_torque, reference_into, tool_in_board,
                               trace_row)
 from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
+from .reach import arm_reach
 from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
 from .executor import SkillExecutor
@@ -111,6 +112,7 @@ class ControllerCore:
         self.p = params
         self.model = model or RobotModel()
         self.executor = SkillExecutor(skill, params.executor, params.force, params.planner)
+        self.executor.motion.arm = arm_reach(self.model)  # look points where the elbow has room
         f = params.force
         self.force = NormalForceRegulator(f.kp, f.ki, f.integral_limit_n, f.cap_n, f.filter_s)
         lim = self.model.limits

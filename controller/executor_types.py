@@ -11,7 +11,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from interfaces.transforms import tool_rotation_on_board
 from lampskit.core.planner import Stain
+
+from .reach import ArmReach
+
+#: The elbow's least distance [rad] from its limit at a look point (the controller's joint-limit repulsion acts
+#: within 0.12 rad; the flight there and the pose error need room beyond it; the wall board has 0.24 at its edge).
+LOOK_ELBOW_ROOM_RAD = 0.2
 
 
 @dataclass(frozen=True)
@@ -103,17 +110,43 @@ class Setpoint:
         return np.array([*self.xy, self.h])
 
 
-def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[float], clearance_m: float) -> np.ndarray:
+def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[float], clearance_m: float,
+               arm: ArmReach | None = None, height_m: float = 0.0) -> np.ndarray:
     """(2,) board point [m] from which the arm leaves ``centres_m`` (stains (2,), sizes [m]) in the camera's view.
 
     The arm runs from the pad back towards the robot base, so the pad goes
     ``clearance_m`` beyond the stains' extent in the direction of the base
     (its projection on the board plane; the world origin), clipped into the
     board. With the base right behind the stains: along board -x.
+
+    With ``arm``: no further towards the base than where the pad, ``height_m``
+    above the board and flat on it, leaves the elbow :data:`LOOK_ELBOW_ROOM_RAD`
+    from its limit (on a board near the base the edge is out of reach; the
+    pad goes as far as it can; the stains' centre if even that is too far).
     """
     c = np.mean(np.asarray(centres_m, float), axis=0)
     reach = max(float(np.linalg.norm(np.asarray(x) - c)) + 0.5 * s for x, s in zip(centres_m, sizes_m))
     d = board.to_board(np.zeros(3))[:2] - c
     n = float(np.linalg.norm(d))
     d = d / n if n > 1e-6 else np.array([-1.0, 0.0])
-    return np.clip(c + d * (reach + clearance_m), 0.0, board.size_m)
+
+    def at(t: float) -> np.ndarray:
+        return np.clip(c + d * t, 0.0, board.size_m)
+
+    far = reach + clearance_m
+    if arm is None:
+        return at(far)
+    R_pad = tool_rotation_on_board(board.R)
+
+    def roomy(t: float) -> bool:
+        return arm.elbow_room_rad(board.to_world(np.array([*at(t), height_m])), R_pad) >= LOOK_ELBOW_ROOM_RAD
+
+    if roomy(far):
+        return at(far)
+    if not roomy(0.0):
+        return at(0.0)
+    lo, hi = 0.0, far  # roomy at lo, not at hi: the elbow's room falls towards the base
+    for _ in range(12):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if roomy(mid) else (lo, mid)
+    return at(lo)

@@ -20,6 +20,7 @@ from .executor_types import BoardPose, Setpoint, StainState, ToolState, look_poi
 from .motion import (OrientationBlend, Quintic, SmoothRamp, bounded_brake_to_rest, brake_above, brake_to_rest,
                      orientation_duration, rest_to_rest, vertical_move)
 from .params import ExecutorParams, ForceParams
+from .reach import ArmReach
 
 #: An in-the-air stop takes at most this long [s] (its dip below the start height is <= 0.2 v T).
 AIR_BRAKE_S = 0.1
@@ -37,11 +38,14 @@ class FreeMotion:
     ----------
     setpoint : Setpoint
         Written in place every tick.
+    arm : ArmReach or None
+        The arm's elbow geometry: look points stay where the elbow has room (None: anywhere on the board).
     """
 
     def __init__(self, params: ExecutorParams, force: ForceParams) -> None:
         self.p = params
         self.f = force
+        self.arm: ArmReach | None = None
         self.setpoint = Setpoint()
         self._mover: Quintic | None = None  # x, y, h in the air
         self._turn: OrientationBlend | None = None
@@ -163,7 +167,8 @@ class FreeMotion:
         pad flat: from there the arm hides none of the board from the camera."""
         w, h = (float(x) for x in board.size_m)
         corners = [np.array(c) for c in ((0.0, 0.0), (w, 0.0), (0.0, h), (w, h))]
-        self.fly_to_hover(look_point(board, corners, [0.0] * 4, self.p.look_clearance_m), board)
+        self.fly_to_hover(look_point(board, corners, [0.0] * 4, self.p.look_clearance_m, self.arm, self.p.standoff_m),
+                          board)
 
     def fly_to_look(self, board: BoardPose, pending: list[StainState]) -> bool:
         """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there.
@@ -171,7 +176,8 @@ class FreeMotion:
         The arm reaches back towards the robot base, away from them, so the
         camera sees them; ``look_clearance_m`` beyond their edge.
         """
-        goal = look_point(board, [s.centre_m for s in pending], [s.size_m for s in pending], self.p.look_clearance_m)
+        goal = look_point(board, [s.centre_m for s in pending], [s.size_m for s in pending], self.p.look_clearance_m,
+                          self.arm, self.setpoint.h)
         sp = self.setpoint
         if np.linalg.norm(goal - sp.xy) < 0.005:
             return False
