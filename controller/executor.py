@@ -397,8 +397,16 @@ class SkillExecutor:
         self.current_mp, self._stage = "press", Stage.PRESS
 
     def _begin_chain(self) -> None:
-        """First transition of the chain, from rest at the hover point, into the plan's first wipe."""
+        """First transition of the chain, from rest at the hover point, into the plan's first wipe. The last stroke
+        will head away from the robot base before the retreat's stop (the stop runs on a few cm: towards the base,
+        on a board near it, that is where the elbow folds to its limit; the tilted board's pad dipped into it at
+        33 N)."""
         self.motion.rest_in_plane()
+        board = self.board
+        if board is not None:
+            away = 0.5 * board.size_m - board.to_board(np.zeros(3))[:2]
+            n = float(np.linalg.norm(away))
+            self.chain.finish_heading = away / n if n > 1e-6 else None
         self._on_chain_result[self.chain.start(self._plan, self._sp)]()
 
     def _entered_transition(self) -> None:

@@ -562,6 +562,25 @@ def test_the_retreat_leaves_room_in_the_jerk_bound_for_the_speed_override(learne
     assert a0 > 1.0 and jerk <= max(100.0 - 16.0 * a0, 25.0) + 1e-9 and acc <= 4.0
 
 
+def test_the_last_stroke_heads_away_from_the_robot_base_before_the_retreat(learned_skill):
+    """The retreat's stop runs on a few cm the way the stroke goes: towards the base, on a board near it, the elbow
+    folds to its limit. The chain finishes when the stroke heads away from the base."""
+    ex = SkillExecutor(learned_skill, ExecutorParams(max_passes=1, survey_s=0.0))
+    arm = IdealArm()
+    ex.set_stains(BOARD, stains()[:1])
+    seen = []
+    run(ex, arm, 12.0, on_tick=lambda k, e: seen.append((e.phase, e.motion.setpoint.v_xy.copy(),
+                                                         e.motion.setpoint.xy.copy())))
+    assert ex.counters["phase_retreat"] == 1
+    k = next(i for i, (phase, _, _) in enumerate(seen) if phase == "RETREAT")
+    v = seen[k - 1][1]
+    away = 0.5 * BOARD.size_m - BOARD.to_board(np.zeros(3))[:2]
+    away /= np.linalg.norm(away)
+    assert v @ away > 0.8 * np.linalg.norm(v) > 0.0, "the last stroke heads away from the base"
+    rest = [xy for phase, _, xy in seen[k:] if phase == "RETREAT"][-1]
+    assert (rest - seen[k - 1][2]) @ away > 0.0, "and the stop runs on that way"
+
+
 def test_look_point_is_beyond_the_stains_towards_the_robot_base_and_on_the_board():
     base_xy = BOARD.to_board(np.zeros(3))[:2]
     c = np.array([0.5, 0.3])

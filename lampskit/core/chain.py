@@ -101,6 +101,10 @@ def _bounded_duration_of(skill: Skill, plan_: Plan, wipe: Wipe, start) -> float:
     return plan_transition(skill, plan_, wipe, start).duration_s
 
 
+#: How far [m] along :attr:`MpChain.finish_heading` the last stroke aims (far: a direction, not a point).
+FINISH_LOOKOUT_M = 10.0
+
+
 class ChainResult(IntEnum):
     """Result of :meth:`MpChain.start` and :meth:`MpChain.update` (negative = error)."""
 
@@ -162,6 +166,9 @@ class MpChain:
         self._entry: TransitionSpec | None = None
         self._next: Wipe | None = None
         self._leave_at = 0.0
+        #: (2,) unit direction [board frame] the last stroke heads in when the chain finishes, so the stop that
+        #: follows runs that way (the executor: away from the robot base, where the arm has room); None: at once
+        self.finish_heading: np.ndarray | None = None
         #: where re-plans run (a one-thread executor), or None: in the tick
         self.background: Executor | None = None
         self._pending: Future | None = None
@@ -391,6 +398,8 @@ class MpChain:
             self.counters["replans"] += 1
             self._next = new_plan.wipes[0]
             towards = self._next.anchor_m
+        elif self.finish_heading is not None:
+            towards = runner.anchor_m + FINISH_LOOKOUT_M * self.finish_heading
         delay = 0.0 if towards is None else exit_phase_delay(self.skill, self.wipe, runner.phase_rad, towards)
         self._leave_at = runner.phase_unwrapped_rad + delay
         self.step = ChainStep.LEAVE
