@@ -19,6 +19,8 @@ from .reach import ArmReach
 #: The elbow's least distance [rad] from its limit at a look point (the controller's joint-limit repulsion acts
 #: within 0.12 rad; the flight there and the pose error need room beyond it; the wall board has 0.24 at its edge).
 LOOK_ELBOW_ROOM_RAD = 0.2
+#: Turns [rad] off the line towards the robot base tried for a look point when that line is out of reach.
+LOOK_TURNS_RAD = tuple(np.radians([30.0, -30.0, 60.0, -60.0, 90.0, -90.0]))
 
 
 @dataclass(frozen=True)
@@ -119,10 +121,13 @@ def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[floa
     (its projection on the board plane; the world origin), clipped into the
     board. With the base right behind the stains: along board -x.
 
-    With ``arm``: no further towards the base than where the pad, ``height_m``
-    above the board and flat on it, leaves the elbow :data:`LOOK_ELBOW_ROOM_RAD`
-    from its limit (on a board near the base the edge is out of reach; the
-    pad goes as far as it can; the stains' centre if even that is too far).
+    With ``arm``: only where the pad, ``height_m`` above the board and flat
+    on it, leaves the elbow :data:`LOOK_ELBOW_ROOM_RAD` from its limit (on a
+    board near the base its near edge is out of reach). If the point towards
+    the base is not, the same distance turned off that line
+    (:data:`LOOK_TURNS_RAD`, up to beside the stains) where it is still clear
+    of them; else as far towards the base as the arm reaches (the survey of a
+    whole board: no point is clear of it).
     """
     c = np.mean(np.asarray(centres_m, float), axis=0)
     reach = max(float(np.linalg.norm(np.asarray(x) - c)) + 0.5 * s for x, s in zip(centres_m, sizes_m))
@@ -138,15 +143,22 @@ def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[floa
         return at(far)
     R_pad = tool_rotation_on_board(board.R)
 
-    def roomy(t: float) -> bool:
-        return arm.elbow_room_rad(board.to_world(np.array([*at(t), height_m])), R_pad) >= LOOK_ELBOW_ROOM_RAD
+    def roomy(xy: np.ndarray) -> bool:
+        return arm.elbow_room_rad(board.to_world(np.array([*xy, height_m])), R_pad) >= LOOK_ELBOW_ROOM_RAD
 
-    if roomy(far):
+    if roomy(at(far)):
         return at(far)
-    if not roomy(0.0):
+    # towards the base is out of reach (a board near it): turned off that line, up to beside the stains (never
+    # beyond them, where the arm would reach over them), as long as the point is still clear of them
+    for angle in LOOK_TURNS_RAD:
+        co, si = np.cos(angle), np.sin(angle)
+        xy = np.clip(c + far * np.array([co * d[0] - si * d[1], si * d[0] + co * d[1]]), 0.0, board.size_m)
+        if np.linalg.norm(xy - c) >= reach + 0.5 * clearance_m and roomy(xy):
+            return xy
+    if not roomy(at(0.0)):
         return at(0.0)
     lo, hi = 0.0, far  # roomy at lo, not at hi: the elbow's room falls towards the base
     for _ in range(12):
         mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if roomy(mid) else (lo, mid)
+        lo, hi = (mid, hi) if roomy(at(mid)) else (lo, mid)
     return at(lo)

@@ -57,3 +57,19 @@ def test_the_survey_look_point_is_one_the_arm_can_reach(model, name, params, mov
         assert xy[1] > plain[1] and xy[0] == pytest.approx(plain[0]), "moved in towards the board centre"
     else:
         np.testing.assert_allclose(xy, plain)
+
+
+def test_a_look_point_out_of_reach_towards_the_base_turns_aside_clear_of_the_stain(model):
+    """A stain near the tilted board's near edge: the point beyond it towards the base is out of reach; the one
+    the bisection would give hovers over the stain (the camera never saw it clean: six passes, 2x the run's time in
+    a campaign cell). The look point turns off that line, clear of the stain, where the elbow has room."""
+    board = board_from_params(TILTED)
+    pose = BoardPose(board.R, board.origin_m, np.array(board.size_m, float))
+    arm = arm_reach(model)
+    c, size = np.array([0.238, 0.157]), 0.06
+    xy = look_point(pose, [c], [size], 0.1, arm, 0.04)
+    assert np.linalg.norm(xy - c) >= 0.5 * size + 0.05, "clear of the stain"
+    R = tool_rotation_on_board(board.R)
+    assert arm.elbow_room_rad(pose.to_world(np.array([*xy, 0.04])), R) >= LOOK_ELBOW_ROOM_RAD
+    towards_base = pose.to_board(np.zeros(3))[:2] - c
+    assert (xy - c) @ towards_base >= 0.0, "never beyond the stain, where the arm would reach over it"
