@@ -1,12 +1,16 @@
-"""Cost per cycle of what the real-time loops do besides their work: the robot side's joint speed brake check
-and the loop hygiene's end of period (collection check, deadline), against an empty call in the same run.
+"""Cost per cycle of what the real-time loops do besides their work: the robot side's joint speed brake check,
+the loop hygiene's end of period (collection check, deadline) and the controller's speed override (its jerk limit
+on the scale's changes), against an empty call in the same run.
 
 Usage: .venv/bin/python bench/bench_loop_additions.py [--quick] [--json OUT]
 
 Each call is timed on its own with ``perf_counter_ns`` (about 0.1 us of it is the timer), 20,000 times
 (5,000 with --quick): ``RobotServer._watch_speed`` on a 7-joint state (the sim's limits); the collection
 check of ``LoopHygiene.collect_due`` with nothing due; ``LoopHygiene.next_period`` with a 1 ns period (its
-deadline is due at once: the cost of ending a period, not its wait). Baseline: a Python call that does nothing.
+deadline is due at once: the cost of ending a period, not its wait); ``SpeedOverride.update`` without the
+skill's acceleration (no jerk limit: as before it), with it and a steady scale, and with it while the scale
+changes (the joints' demand switched every 0.2 s: the limit's arithmetic runs). Baseline: a Python call that does
+nothing.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from controller.control.limits import SpeedOverride  # noqa: E402
 from interfaces.loop_hygiene import LoopHygiene  # noqa: E402
 from interfaces.loop_stats import LoopStats  # noqa: E402
 from interfaces.robot_model import RobotModel  # noqa: E402
@@ -63,6 +68,18 @@ def main() -> int:
         k[0] += 1
         srv._watch_speed(dqs[k[0] & 63])
 
+    accel = np.array([3.0, -1.0])
+    demands = (np.full(7, 0.2), np.full(7, 1.0))
+
+    def override(with_accel: bool, switching: bool):
+        ov = SpeedOverride(np.ones(7), 0.5, jerk_bound_m_s3=100.0)
+        j = [0]
+
+        def tick():
+            j[0] += 1
+            ov.update(demands[(j[0] // 200) & 1] if switching else demands[0], 0.001, accel if with_accel else None)
+        return tick
+
     h = LoopHygiene(counts=Counter())
     h.start()
     stats = LoopStats()
@@ -70,7 +87,10 @@ def main() -> int:
         rows = {"empty call (baseline)": _time(lambda: None, n),
                 "RobotServer._watch_speed (7 joints)": _time(watch, n),
                 "LoopHygiene.collect_due, nothing due": _time(lambda: h.collect_due(500_000), n),
-                "LoopHygiene.next_period, no wait": _time(lambda: h.next_period(stats, 0, 1), n)}
+                "LoopHygiene.next_period, no wait": _time(lambda: h.next_period(stats, 0, 1), n),
+                "SpeedOverride.update, scale changing, no jerk limit": _time(override(False, True), n),
+                "SpeedOverride.update, jerk limit, scale steady": _time(override(True, False), n),
+                "SpeedOverride.update, jerk limit, scale changing": _time(override(True, True), n)}
     finally:
         h.stop()
     print("| per cycle | p50 [us] | p99 [us] | max [us] |")
