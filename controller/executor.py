@@ -462,8 +462,10 @@ class SkillExecutor:
     def _begin_look(self) -> bool:
         """Off the stains awaiting kappa, which the arm hid from the camera; False if none wait or no move is needed."""
         pending = self.book.pending()
+        # a stain still waiting after k passes was not seen clean from the k - 1 look points before: another one
+        attempt = max((self.book.passes(s.id) for s in pending), default=1) - 1
         if not pending or self.p.look_clearance_m <= 0.0 or self.board is None \
-                or not self.motion.fly_to_look(self.board, pending):
+                or not self.motion.fly_to_look(self.board, pending, attempt):
             return False
         self.current_mp = "look"
         self.counters["looks"] += 1

@@ -113,7 +113,7 @@ class Setpoint:
 
 
 def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[float], clearance_m: float,
-               arm: ArmReach | None = None, height_m: float = 0.0) -> np.ndarray:
+               arm: ArmReach | None = None, height_m: float = 0.0, attempt: int = 0) -> np.ndarray:
     """(2,) board point [m] from which the arm leaves ``centres_m`` (stains (2,), sizes [m]) in the camera's view.
 
     The arm runs from the pad back towards the robot base, so the pad goes
@@ -128,6 +128,10 @@ def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[floa
     (:data:`LOOK_TURNS_RAD`, up to beside the stains) where it is still clear
     of them; else as far towards the base as the arm reaches (the survey of a
     whole board: no point is clear of it).
+
+    ``attempt`` k > 0 (the stains are still waiting for kappa after k looks: the arm hid them from there
+    too, e.g. a stain at a table's near edge that the links hang over from one side): the next of the points
+    that qualify (towards the base, then turned), in turn, so each look sees them from elsewhere.
     """
     c = np.mean(np.asarray(centres_m, float), axis=0)
     reach = max(float(np.linalg.norm(np.asarray(x) - c)) + 0.5 * s for x, s in zip(centres_m, sizes_m))
@@ -146,15 +150,20 @@ def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[floa
     def roomy(xy: np.ndarray) -> bool:
         return arm.elbow_room_rad(board.to_world(np.array([*xy, height_m])), R_pad) >= LOOK_ELBOW_ROOM_RAD
 
-    if roomy(at(far)):
+    if attempt <= 0 and roomy(at(far)):
         return at(far)
-    # towards the base is out of reach (a board near it): turned off that line, up to beside the stains (never
-    # beyond them, where the arm would reach over them), as long as the point is still clear of them
+    # towards the base is out of reach (a board near it), or was looked from already: turned off that line, up
+    # to beside the stains (never beyond them, where the arm would reach over them), while still clear of them
+    qualified = [at(far)] if roomy(at(far)) else []
     for angle in LOOK_TURNS_RAD:
         co, si = np.cos(angle), np.sin(angle)
         xy = np.clip(c + far * np.array([co * d[0] - si * d[1], si * d[0] + co * d[1]]), 0.0, board.size_m)
         if np.linalg.norm(xy - c) >= reach + 0.5 * clearance_m and roomy(xy):
-            return xy
+            if attempt <= 0:
+                return xy
+            qualified.append(xy)
+    if qualified:
+        return qualified[attempt % len(qualified)]
     if not roomy(at(0.0)):
         return at(0.0)
     lo, hi = 0.0, far  # roomy at lo, not at hi: the elbow's room falls towards the base

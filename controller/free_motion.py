@@ -170,14 +170,15 @@ class FreeMotion:
         self.fly_to_hover(look_point(board, corners, [0.0] * 4, self.p.look_clearance_m, self.arm, self.p.standoff_m),
                           board)
 
-    def fly_to_look(self, board: BoardPose, pending: list[StainState]) -> bool:
+    def fly_to_look(self, board: BoardPose, pending: list[StainState], attempt: int = 0) -> bool:
         """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there.
 
         The arm reaches back towards the robot base, away from them, so the
-        camera sees them; ``look_clearance_m`` beyond their edge.
+        camera sees them; ``look_clearance_m`` beyond their edge. ``attempt``: looks made at them before
+        (each from another point).
         """
         goal = look_point(board, [s.centre_m for s in pending], [s.size_m for s in pending], self.p.look_clearance_m,
-                          self.arm, self.setpoint.h)
+                          self.arm, self.setpoint.h, attempt)
         sp = self.setpoint
         if np.linalg.norm(goal - sp.xy) < 0.005:
             return False

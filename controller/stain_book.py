@@ -66,6 +66,10 @@ class StainBook:
             return True
         return False
 
+    def passes(self, stain_id: int) -> int:
+        """Passes over the stain that ended without kappa."""
+        return self._passes[stain_id]
+
     def open_stains(self, clock_s: float, by_ink: bool = False, exclude: int | None = None) -> list[Stain]:
         """The stains to wipe at ``clock_s`` [s]: without kappa, not given up, not waiting for a recheck, not
         ``exclude`` (the stain just left), and of those the ones passed over least often (a stain is wiped again
