@@ -15,8 +15,9 @@ between shade and ink when the ink is neutral, e.g. black)::
 
 A pixel is *occluded* (the arm, the eraser, a deep shadow, anything that is
 not board) when ``s`` is outside ``illumination_range``, when the colour is
-farther than ``max_residual`` from the model, or when it lies outside the
-camera image; occluded areas are closed over gaps narrower than
+farther than ``max_residual`` from the model, when it lies outside the
+camera image, or when the caller knows it hidden (the robot's own tool,
+whose colour may be the ink's: :mod:`perception.self_filter`); occluded areas are closed over gaps narrower than
 ``occlusion_fill_m`` (highlights on the arm that look like white board)
 and grow by ``occlusion_margin_m`` to catch mixed pixels at their edges. Otherwise it is *stain* when ``d >= stain_level``,
 else *clean*. The threshold is on the ink fraction relative to the local
@@ -138,8 +139,10 @@ class InkClassifier:
         c = int(np.ceil(params.occlusion_fill_m / resolution_m / 2))
         self._fill = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * c + 1, 2 * c + 1)) if c > 0 else None
 
-    def classify(self, rect_rgb: np.ndarray) -> InkMap:
-        """The :class:`InkMap` of ``rect_rgb`` (rows, cols, 3) uint8 RGB."""
+    def classify(self, rect_rgb: np.ndarray, hidden: np.ndarray | None = None) -> InkMap:
+        """The :class:`InkMap` of ``rect_rgb`` (rows, cols, 3) uint8 RGB; ``hidden`` (rows, cols) bool: pixels
+        known to show something else than the board (the robot's tool, :mod:`perception.self_filter`), occluded
+        whatever their colour."""
         p = self.p
         rgb = rect_rgb.astype(np.float32)
         coef = fit_white(rgb, self.looked_at, self.block_px)
@@ -154,6 +157,8 @@ class InkClassifier:
         ok = cv2.inRange(s, lo, hi) & cv2.inRange(d, D_RANGE[0], D_RANGE[1]) \
             & cv2.inRange(residual2, -1.0, p.max_residual ** 2)
         bad = ok == 0
+        if hidden is not None:
+            bad |= hidden
         if self._fill is not None:  # highlights on the arm, gaps between its links: not board to judge
             bad |= ~self.looked_at
             bad = cv2.morphologyEx(bad.view(np.uint8), cv2.MORPH_CLOSE, self._fill).view(bool)

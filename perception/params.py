@@ -6,6 +6,9 @@ Layout (every key optional)::
     camera = "board"            # frames from camera/<camera>/frame
     source = "zenoh"            # or "folder:DIR", "video:FILE", "device:N" (offline checks, a UVC camera)
     publish_rate_hz = 10.0      # perception/stains at least this often
+    tool_mask = true            # the robot's tool (from robot/state) is not board: masked out of the image
+    tool_margin_m = 0.01        # ... its shadow from the camera on the board grown by this [m]
+    tool_max_age_s = 0.1        # ... from the joint state nearest the frame's time, if this near [s]
     [perception.board]   size_m, resolution_m, min_markers, hold_s, max_reprojection_px, ...
     [perception.ink]     ink_rgb, board_rgb, stain_level, illumination_range, max_residual, ...
     [perception.stains]  link_m, min_area_m2, confirm_s, region_margin_m
@@ -226,6 +229,9 @@ class PerceptionParams:
     debug_rate_hz: float = 2.0
     frame_timeout_s: float = 2.0
     source_rate_hz: float = 10.0
+    tool_mask: bool = True
+    tool_margin_m: float = 0.01
+    tool_max_age_s: float = 0.1
     board: BoardParams = field(default_factory=BoardParams)
     ink: InkParams = field(default_factory=InkParams)
     stains: StainParams = field(default_factory=StainParams)
@@ -244,6 +250,10 @@ class PerceptionParams:
         _range(s, "source_rate_hz", self.source_rate_hz, 0.1, 120.0)
         if not isinstance(self.debug_images, bool):
             raise ConfigError(f"[{s}] debug_images must be true or false, got {self.debug_images!r}")
+        if not isinstance(self.tool_mask, bool):
+            raise ConfigError(f"[{s}] tool_mask must be true or false, got {self.tool_mask!r}")
+        _range(s, "tool_margin_m", self.tool_margin_m, 0.0, 0.1)
+        _range(s, "tool_max_age_s", self.tool_max_age_s, 0.001, 5.0)
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any]) -> "PerceptionParams":

@@ -1,7 +1,8 @@
 """One camera frame in, the board and its stains out: the whole of perception without any I/O.
 
 :meth:`Perception.process` runs board finding (:mod:`~perception.board`),
-rectification (:mod:`~perception.rectify`), pixel classification
+rectification (:mod:`~perception.rectify`), the robot's tool masked out
+(:mod:`~perception.self_filter`, when its pose is given), pixel classification
 (:mod:`~perception.classify`) and stain tracking (:mod:`~perception.tracking`)
 and returns a :class:`Result` whose ``stains`` is the message to publish (or
 None while nothing can be said yet) and whose ``reason`` says why a frame
@@ -24,6 +25,7 @@ from .classify import InkClassifier, InkMap
 from .frames import Frame
 from .params import PerceptionParams
 from .rectify import BoardGrid
+from .self_filter import board_shadow, shadow_mask
 from .tracking import StainTracker
 
 #: Marker areas are left out of the stain search with this margin [m].
@@ -72,8 +74,9 @@ class Perception:
         self._first_fix_t = None
         self.resets += 1
 
-    def process(self, frame: Frame) -> Result:
-        """The board and its stains in ``frame``."""
+    def process(self, frame: Frame, tool_world_m: np.ndarray | None = None) -> Result:
+        """The board and its stains in ``frame``; ``tool_world_m`` (n, 3) [m]: the robot's tool box at the
+        frame's time (:mod:`perception.self_filter`), whose shadow from the camera on the board is occluded."""
         timing: dict[str, float] = {}
         t0 = time.perf_counter()
         if self._last_t is not None and frame.t_s < self._last_t - CLOCK_RESTART_S:
@@ -97,7 +100,12 @@ class Perception:
             return Result(self._message(est, frame, lost=True), est, est.reason, timing)
         rect = self.grid.warp(frame.rgb, self.grid.image_from_grid(frame.K, est.T_board_to_camera))
         t2 = time.perf_counter()
-        ink = self.classifier.classify(rect)
+        hidden = None
+        if tool_world_m is not None:
+            camera = frame.T_camera_to_world[:3, 3]
+            hidden = shadow_mask(self.grid, board_shadow(tool_world_m, est.T_board_to_world, camera),
+                                 self.p.tool_margin_m)
+        ink = self.classifier.classify(rect, hidden)
         t3 = time.perf_counter()
         self.tracker.update(ink, frame.t_s)
         t4 = time.perf_counter()

@@ -9,7 +9,9 @@ unknown, never clean. A status (``ServiceStatus`` on ``perception/status``)
 carries the counters (frames processed, dropped, bad by reason, board
 held/lost) and the per-frame processing time; debug images (the rectified
 board with occlusion and stains drawn, JPEG) go to ``perception/debug`` when
-enabled.
+enabled. With ``tool_mask`` the service also follows ``robot/state``: the
+robot's tool at each frame's time is masked out of the image
+(:mod:`~perception.self_filter`), so its colour is never taken for ink.
 """
 
 from __future__ import annotations
@@ -22,12 +24,13 @@ from collections import Counter, deque
 import msgspec
 import numpy as np
 
-from interfaces.messages import CameraFrame, CameraIntrinsics, LoopTiming, ServiceStatus, Stains
+from interfaces.messages import CameraFrame, CameraIntrinsics, LoopTiming, RobotState, ServiceStatus, Stains
 from interfaces.transforms import pose_from_transform
 
 from .debug import debug_jpeg
 from .params import PerceptionParams
 from .pipeline import Perception, Result
+from .self_filter import ToolTrack
 
 log = logging.getLogger(__name__)
 SERVICE = "perception"
@@ -45,6 +48,12 @@ class PerceptionService:
         self.source = source
         self.sink = sink  # optional callable(Stains) for offline runs (JSON lines)
         self.perception = Perception(params)
+        # the robot's joint states, to mask its tool out of the image (perception.self_filter)
+        self.tool: ToolTrack | None = None
+        self._robot_states = None
+        if node is not None and params.tool_mask:
+            self.tool = ToolTrack(params.tool_max_age_s)
+            self._robot_states = node.inbox(self.keys.robot_state, RobotState, maxlen=256)
         self.stop = threading.Event()
         self.counters: Counter[str] = Counter()
         self.last: Stains | None = None
@@ -73,10 +82,18 @@ class PerceptionService:
         self._publish_status(time.monotonic(), force=True)
         return self.counters["frames_processed"]
 
+    def _tool_at(self, frame, now: float) -> np.ndarray | None:
+        """The tool box (8, 3) [m] at the frame's time from the joint states received so far, or None."""
+        if self.tool is None:
+            return None
+        while (state := self._robot_states.get(0.0)) is not None:
+            self.tool.add(state.robot_time_ns, state.q_rad, now)
+        return self.tool.corners_at(frame.robot_time_ns, now)
+
     def _handle(self, frame, now: float) -> None:
         t0 = time.perf_counter()
         try:
-            result = self.perception.process(frame)
+            result = self.perception.process(frame, self._tool_at(frame, now))
         except Exception as exc:  # never the loop's end: count, log, go on with the next frame
             self.counters[f"frames_failed: {type(exc).__name__}"] += 1
             log.exception("processing frame %d failed", frame.seq)
@@ -138,6 +155,11 @@ class PerceptionService:
         counters = dict(self.counters)
         counters.update(self.source.counters)
         counters["board_resets"] = self.perception.resets
+        if self.tool is not None:
+            counters["frames_tool_masked"] = self.tool.used
+            counters["frames_tool_pose_unknown"] = self.tool.unknown
+            for reason, n in self._robot_states.bad.items():
+                counters[f"robot_states_bad: {reason}"] = n
         proc = np.array(self._process_us) if self._process_us else np.zeros(1)
         gap = np.array(self._interval_us) if self._interval_us else np.zeros(1)
         timing = LoopTiming(period_p50_us=float(np.percentile(gap, 50)), period_p99_us=float(np.percentile(gap, 99)),

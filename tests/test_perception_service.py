@@ -119,6 +119,10 @@ def test_closed_loop_wipes_three_seeded_stains_on_perceptions_stains(tmp_path, l
     for k, line in zip(timings, report):
         assert k.truth_at_kappa <= 0.05 and k.kappa_s - k.in_view_s <= 0.5, line
     assert counters.get("surveys", 0) == 1 and counters.get("plans", 0) == 1, counters
+    # the eraser masked out of every frame from the sim's joint states, each at its frame's robot time
+    status = run.perception_status.counters
+    assert status["frames_tool_masked"] >= status["frames_processed"] - 3 > 0, status
+    assert status.get("frames_tool_pose_unknown", 0) <= 3, status
 
 
 def _frame(seq: int, data: bytes, encoding: str = "rgb8", w: int = 64, h: int = 48) -> CameraFrame:

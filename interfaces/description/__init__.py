@@ -21,3 +21,5 @@ ERASER_LINK = "eraser"
 TCP_FRAME = "eraser_tcp"
 #: Felt pad size [m]: along the tool x axis, along the tool y axis.
 PAD_SIZE_M: tuple[float, float] = (0.12, 0.05)
+#: The eraser's depth behind the pad face (holder 0.030 m + felt 0.005 m) [m].
+ERASER_DEPTH_M: float = 0.035

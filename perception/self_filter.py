@@ -1,0 +1,127 @@
+"""The robot's own tool, masked out of the board image (a self-filter): the eraser is not ink.
+
+The camera sees the eraser whenever the arm is over the board, and its
+holder can have any colour, the ink's included (the sim's is blue like
+the marker): classified by colour alone, the eraser hovering at a look point
+or pressing at the board's near edge read as ink that no wiping removes, and
+the controller re-passed a clean stain until it gave it up. The robot's
+joint states say where the tool is: its box (the pad ``PAD_SIZE_M`` by
+``ERASER_DEPTH_M`` behind the pad face, the TCP frame's z out of the pad)
+is projected from the camera's centre onto the board plane and the pixels
+it covers there are occluded, not judged. The rest of the arm is left to
+the colour model (grey and orange links are far from it).
+
+Pure maths here (:func:`tool_corners`, :func:`board_shadow`,
+:func:`shadow_mask`); :class:`ToolTrack` keeps the robot's recent joint
+states and gives the tool at a frame's time, with a forward kinematics of
+the shared description.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+
+import cv2
+import numpy as np
+
+from interfaces.description import ERASER_DEPTH_M, PAD_SIZE_M
+
+from .rectify import BoardGrid
+
+#: The tool box's corners in the TCP frame (8, 3) [m]: the pad face at z = 0, the holder behind it (z < 0).
+TOOL_CORNERS_TCP = np.array([[sx * PAD_SIZE_M[0] / 2, sy * PAD_SIZE_M[1] / 2, z]
+                             for sx in (-1, 1) for sy in (-1, 1) for z in (0.0, -ERASER_DEPTH_M)])
+#: Points closer than this to the camera's plane parallel to the board (or beyond it) are not projected [m].
+MIN_DEPTH_M = 1e-3
+
+
+def tool_corners(p_world_m: np.ndarray, R_world: np.ndarray) -> np.ndarray:
+    """World points (8, 3) [m] of the tool box for a TCP at ``p_world_m`` (3,) with orientation ``R_world`` (3, 3)."""
+    return TOOL_CORNERS_TCP @ np.asarray(R_world, float).T + np.asarray(p_world_m, float)
+
+
+def board_shadow(points_world_m: np.ndarray, T_board_to_world: np.ndarray, camera_world_m: np.ndarray
+                 ) -> np.ndarray:
+    """Board-plane points (k, 2) [m] where the camera's rays through ``points_world_m`` (n, 3) meet the board.
+
+    The camera centre ``camera_world_m`` (3,) must be in front of the board (board z > 0); points on or
+    behind the camera's side of it (z >= the camera's) have no such ray and are left out (k <= n).
+    """
+    R, o = T_board_to_world[:3, :3], T_board_to_world[:3, 3]
+    c = (np.asarray(camera_world_m, float) - o) @ R
+    if c[2] <= MIN_DEPTH_M:
+        return np.zeros((0, 2))
+    p = (np.asarray(points_world_m, float).reshape(-1, 3) - o) @ R
+    p = p[p[:, 2] < c[2] - MIN_DEPTH_M]
+    t = c[2] / (c[2] - p[:, 2])  # c + t (p - c) has z = 0
+    return c[:2] + t[:, None] * (p[:, :2] - c[:2])
+
+
+def shadow_mask(grid: BoardGrid, shadow_xy_m: np.ndarray, margin_m: float) -> np.ndarray:
+    """(rows, cols) bool of the rectified board: the convex hull of ``shadow_xy_m`` (k, 2) [m] grown by
+    ``margin_m`` [m]; all False for fewer than three points."""
+    rows, cols = grid.shape
+    mask = np.zeros((rows, cols), np.uint8)
+    if len(shadow_xy_m) < 3:
+        return mask.view(bool)
+    r = grid.resolution_m
+    px = np.column_stack([shadow_xy_m[:, 0] / r - 0.5, rows - shadow_xy_m[:, 1] / r - 0.5])
+    # far outside the grid (a grazing ray): clip so the polygon stays drawable; the board part is unchanged
+    px = np.clip(px, -4.0 * max(rows, cols), 5.0 * max(rows, cols))
+    hull = cv2.convexHull(np.round(px * 16).astype(np.int32))  # 4 fractional bits
+    cv2.fillConvexPoly(mask, hull, 1, lineType=cv2.LINE_8, shift=4)
+    k = int(np.ceil(margin_m / r))
+    if k > 0:
+        mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1)))
+    return mask.view(bool)
+
+
+class ToolTrack:
+    """The robot's recent joint states and the tool's pose at a frame's time.
+
+    :meth:`add` is called from the subscriber's thread with each state
+    (robot clock [ns], joint positions (7,) [rad], arrival monotonic time [s]); :meth:`corners_at` from the
+    perception loop. A frame stamped with the robot's clock gets the state
+    nearest that time; a frame without it (a real camera: 0) the newest
+    state. Either is used only if it is within ``max_age_s`` of the frame (robot clock) or of now (arrival).
+
+    Attributes
+    ----------
+    used, unknown : int
+        Frames given a tool pose, and frames without one (no state near enough).
+    """
+
+    def __init__(self, max_age_s: float, history: int = 512) -> None:
+        from interfaces.robot_model import RobotModel
+
+        self.max_age_s = float(max_age_s)
+        self._states: deque[tuple[int, float, np.ndarray]] = deque(maxlen=history)
+        self._lock = threading.Lock()
+        self._model = RobotModel()
+        self.used = 0
+        self.unknown = 0
+
+    def add(self, robot_time_ns: int, q_rad, arrived_s: float) -> None:
+        q = np.asarray(q_rad, float)
+        if q.shape != (self._model.nq,) or not np.all(np.isfinite(q)):
+            return  # the decoder checked the message; a wrong arm is not ours to mask
+        with self._lock:
+            self._states.append((int(robot_time_ns), float(arrived_s), q))
+
+    def corners_at(self, frame_robot_time_ns: int, now_s: float) -> np.ndarray | None:
+        """World points (8, 3) [m] of the tool box at the frame's time, or None (no state near enough)."""
+        with self._lock:
+            states = list(self._states) if frame_robot_time_ns > 0 else [self._states[-1]] if self._states else []
+        q = None
+        if states and frame_robot_time_ns > 0:
+            t, _, q_near = min(states, key=lambda s: abs(s[0] - frame_robot_time_ns))
+            if abs(t - frame_robot_time_ns) * 1e-9 <= self.max_age_s:
+                q = q_near
+        elif states and now_s - states[-1][1] <= self.max_age_s:
+            q = states[-1][2]
+        if q is None:
+            self.unknown += 1
+            return None
+        self.used += 1
+        return tool_corners(*self._model.tcp_pose(q))
