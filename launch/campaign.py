@@ -164,7 +164,7 @@ def felt_path_m(area_m2: float, pad_area_m2: float, rate_per_n_m: float, force_o
 
 def cell_bound_s(fixed_moves_s: float, areas_m2: list[float], centres_m: np.ndarray, felt: dict[str, float],
                  speed_m_s: float) -> float:
-    """The cell bound [s]: the run's fixed moves (before the skill's start + RETREAT, as executed) + each stain's
+    """The cell bound [s]: the run's fixed moves (before the skill's start + the final RETREAT, as executed) + each stain's
     :func:`felt_path_m` + the stains' minimum spanning tree, both at ``speed_m_s``. ``felt``: ``pad_area_m2``,
     ``rate_per_n_m``, ``force_over_threshold_n``, ``level``."""
     wipe = sum(felt_path_m(a, **felt) for a in areas_m2)
@@ -207,7 +207,11 @@ def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: s
         return {**row, "outcome": "no report", "success": False, "why": why}
     phases = report.get("phase_time_s") or {}
     start = report.get("skill_start_s")
-    fixed = float(start) + float(phases.get("RETREAT", 0.0)) if start is not None and phases else float("nan")
+    # the retreat into the final DONE (a re-pass's retreat and look before it are not fixed moves); reports
+    # from before that field: the RETREAT phase's whole time
+    retreat = report.get("final_retreat_s")
+    retreat = float(phases.get("RETREAT", 0.0)) if retreat is None else float(retreat)
+    fixed = float(start) + retreat if start is not None and phases else float("nan")
     cell_b = cell_bound_s(fixed, *stains, felt, speed_m_s) if stains is not None and felt and fixed == fixed \
         else float("nan")
     faults = [f for f in report.get("faults", []) if f.get("phase") in FAULT_PHASES]

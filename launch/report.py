@@ -34,7 +34,9 @@
   exact even when the recording began late; ``job_end_s``: the robot time
   of the first tick of the DONE the run ended in (the skill's end: the
   launcher keeps the cell running ``SETTLE_S`` longer to see that it stays
-  DONE; null if the run did not end DONE).
+  DONE; null if the run did not end DONE); ``final_retreat_s``: the RETREAT
+  that led into that DONE, its first tick to the DONE (a re-pass's retreat
+  and look before it are not counted; null without one).
 * ``loop_timing``: the controller's last reported loop statistics.
 * ``max_contact_force_n`` (the sim's truth: the physical contact force,
   whatever the controller measured) and ``max_joint_speed_ratio`` (the
@@ -157,6 +159,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report["phase_time_s"] = phase_times(run.tr, run.col)
     report["skill_start_s"] = skill_start(run.tr, run.col)
     report["job_end_s"] = job_end(run.tr, run.col)
+    report["final_retreat_s"] = final_retreat(run.tr, run.col)
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
     report.update(_safety_section(run))
@@ -318,6 +321,20 @@ def job_end(tr: np.ndarray, col: dict[str, int]) -> float | None:
         return None
     other = np.flatnonzero(~done)
     return float(tr[other[-1] + 1 if other.size else 0, col["t_s"]])
+
+
+def final_retreat(tr: np.ndarray, col: dict[str, int]) -> float | None:
+    """Robot time [s] of the RETREAT that ends in the DONE the recording ends in (from its first tick to that
+    DONE; None if it does not end DONE after a RETREAT). Retreats before it (a look, then a re-pass) are not it."""
+    end = job_end(tr, col)
+    if end is None:
+        return None
+    t, phase = tr[:, col["t_s"]], tr[:, col["phase"]].astype(int)
+    before = np.flatnonzero(t < end)
+    if not before.size or phase[before[-1]] != PHASE_CODES[Phase.RETREAT]:
+        return None
+    other = np.flatnonzero(phase[: before[-1] + 1] != PHASE_CODES[Phase.RETREAT])
+    return float(end - t[other[-1] + 1 if other.size else 0])
 
 
 def _final_phase(run: _Run) -> str:

@@ -95,6 +95,9 @@ def test_a_row_takes_the_fixed_moves_from_the_skill_start_and_the_retreat():
     assert done["time_over_cell_bound"] == pytest.approx(17.5 / done["cell_bound_s"])
     assert done["cell_time_over_cell_bound"] == pytest.approx(20.0 / done["cell_bound_s"])
     assert row["robot_time_s"] == 20.0  # not DONE at the end (or an older report): the whole cell
+    # a run that re-passed a stain: its first retreat and look are no fixed move, only the final retreat is
+    repass = row_of(Cell(0, 1, "wall"), {**report, "final_retreat_s": 2.0}, 0.5, "a", stains=stains, felt=felt)
+    assert repass["fixed_moves_s"] == 9.0
 
 
 def test_phase_times_and_the_skill_start_come_from_the_trace():
@@ -114,6 +117,14 @@ def test_phase_times_and_the_skill_start_come_from_the_trace():
     tr2 = np.column_stack([[1.0, 1.001, 1.002, 1.003, 1.004, 1.005], [wipe, done, wipe, done, done, done]])
     assert job_end(tr2, col) == 1.003 and job_end(tr2[:3], col) is None and job_end(tr2[:0], col) is None
     assert job_end(tr2[3:], col) == 1.003
+    # the final retreat: only the RETREAT that leads into that DONE (a look and a re-pass before it are not it)
+    from launch.report import final_retreat
+
+    retreat = PHASE_CODES["RETREAT"]
+    phases = [wipe, retreat, retreat, done, wipe, wipe, retreat, retreat, retreat, done, done]
+    tr3 = np.column_stack([1.0 + 0.001 * np.arange(len(phases)), phases])
+    assert final_retreat(tr3, col) == pytest.approx(0.003)
+    assert final_retreat(tr3[:9], col) is None and final_retreat(tr2, col) is None  # not DONE / no RETREAT
 
 
 def test_rows_and_summary_count_success_faults_and_cells_without_a_report():
