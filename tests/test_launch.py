@@ -125,6 +125,8 @@ def test_localize_maps_service_names_to_loopback_and_listen_ports_to_local_ones(
                                                     ("perception", 7449): 20003})}
     assert local["sim"].environment["LAMPS_ZENOH_LISTEN"] == "tcp/127.0.0.1:20001"
     assert local["controller"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:20001"
+    # the sim is both `robot` and `camera`: one endpoint, once
+    assert local["perception"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:20001,tcp/127.0.0.1:20002"
     assert local["recorder"].environment["LAMPS_ZENOH_CONNECT"] == \
         "tcp/127.0.0.1:20001,tcp/127.0.0.1:20002,tcp/127.0.0.1:20003"
     assert local["sim"].argv[:3] == (sys.executable, "-m", "interfaces.cli") and local["sim"].argv[3] == "sim"
@@ -137,7 +139,9 @@ def test_localize_maps_service_names_to_loopback_and_listen_ports_to_local_ones(
                                         ("controller", 7448): 21003, ("perception", 7449): 21004})}
     assert lbr["robot-lbr-sim"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21001"
     assert lbr["controller"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21002"
-    assert lbr["perception"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21001,tcp/127.0.0.1:21003"
+    # perception: the robot (its joint states, for the eraser's mask), the camera, the controller
+    assert lbr["perception"].environment["LAMPS_ZENOH_CONNECT"] == \
+        "tcp/127.0.0.1:21002,tcp/127.0.0.1:21001,tcp/127.0.0.1:21003"
     assert lbr["recorder"].environment["LAMPS_ZENOH_CONNECT"] == \
         "tcp/127.0.0.1:21002,tcp/127.0.0.1:21001,tcp/127.0.0.1:21003,tcp/127.0.0.1:21004"
     # the fixed-rate loops (granted SYS_NICE) stop in order; the others are asked first, waited for last
