@@ -3,7 +3,8 @@
 1. Frames rendered by ``lamps sim`` (lock-step, wall board, 4 seeded stains,
    the arm parked and the arm over the board) are processed by
    :class:`perception.pipeline.Perception` with OpenCV on one thread; per
-   stage and total. Baseline in the same run: the same stain pixels clustered
+   stage and total; the arm-over-board frames again with the eraser masked
+   out (the self-filter, from the joint states of the same run). Baseline in the same run: the same stain pixels clustered
    with scikit-learn's DBSCAN (``min_samples = 1``, same link distance), the
    paper's pixel clustering done directly.
 2. The closed loop over real Zenoh (``lamps sim`` with its camera, the
@@ -38,15 +39,25 @@ from perception.evaluate import kappa_timings  # noqa: E402
 from perception.frames import frame_from_message  # noqa: E402
 from perception.params import PerceptionParams  # noqa: E402
 from perception.pipeline import Perception  # noqa: E402
+from perception.self_filter import tool_corners  # noqa: E402
 from tests.zenoh_helpers import SimProcess, run_lockstep, wait_for  # noqa: E402  (the real sim, started as in tests)
 
 PARKED_Q = [2.6, 0.3, 0.0, -1.2, 0.0, 0.8, 0.0]
+MODEL = RobotModel()
 
 
-def render(tmp: Path, model: RobotModel, cfg: dict, steps: int) -> list[CameraFrame]:
+def render(tmp: Path, model: RobotModel, cfg: dict, steps: int, states: list | None = None) -> list[CameraFrame]:
+    """The sim's frames over ``steps`` lock-step ticks (the arm held by gravity compensation); ``states``: also
+    collect its joint states ``(robot_time_ns, q)`` there."""
     with SimProcess(tmp, {"mode": "lockstep", "camera": {"rate_hz": 10.0}, **cfg}) as sim:
         inbox = sim.node.inbox(sim.keys.camera_frame("board"), CameraFrame, maxlen=10_000)
-        run_lockstep(sim, steps, lambda s: model.gravity(np.array(s.q_rad)) - 5.0 * np.array(s.dq_rad_s))
+
+        def law(s):
+            if states is not None:
+                states.append((s.robot_time_ns, np.array(s.q_rad)))
+            return model.gravity(np.array(s.q_rad)) - 5.0 * np.array(s.dq_rad_s)
+
+        run_lockstep(sim, steps, law)
         wait_for(lambda: inbox.received >= steps // 100 - 1, 30.0, "frames")
         out = []
         while (f := inbox.get(0.0)) is not None:
@@ -54,7 +65,16 @@ def render(tmp: Path, model: RobotModel, cfg: dict, steps: int) -> list[CameraFr
     return out
 
 
-def bench_frames(frames: list[CameraFrame], repeat: int = 3) -> dict:
+def tool_at(states: list, robot_time_ns: int) -> np.ndarray:
+    """The eraser's box (8, 3) [m] at the joint state nearest ``robot_time_ns`` (as the service's ToolTrack)."""
+    t = np.array([s[0] for s in states])
+    q = states[int(np.argmin(np.abs(t - robot_time_ns)))][1]
+    return tool_corners(*MODEL.tcp_pose(q))
+
+
+def bench_frames(frames: list[CameraFrame], repeat: int = 3, states: list | None = None) -> dict:
+    """Per-frame processing time; ``states`` (joint states of the run): with the eraser masked out of each frame
+    (the self-filter; the pose lookup and forward kinematics counted in the mask stage)."""
     cv2.setNumThreads(1)
     stages: dict[str, list[float]] = {}
     totals, dbscan_ms, ours_ms, found = [], [], [], []
@@ -63,7 +83,11 @@ def bench_frames(frames: list[CameraFrame], repeat: int = 3) -> dict:
         for msg in frames:
             f = frame_from_message(msg)
             t0 = time.perf_counter()
-            r = p.process(f)
+            tool = tool_at(states, f.robot_time_ns) if states is not None else None
+            t_tool = time.perf_counter()
+            r = p.process(f, tool)
+            if states is not None:
+                r.timing_ms["mask"] = r.timing_ms.get("mask", 0.0) + (t_tool - t0) * 1e3
             totals.append((time.perf_counter() - t0) * 1e3)
             for k, v in r.timing_ms.items():
                 stages.setdefault(k, []).append(v)
@@ -121,11 +145,13 @@ def markdown(result: dict) -> str:
     out = ["| per 640x480 frame, one core | p50 [ms] | p99 [ms] | frames/s (p50) | stages p50 [ms]: board / rectify / "
            "classify / track |", "|---|---:|---:|---:|---|"]
     for key, label in (("frames_arm_parked", "arm parked away from the board"),
-                       ("frames_arm_over_board", "arm over the board")):
+                       ("frames_arm_over_board", "arm over the board"),
+                       ("frames_arm_over_board_masked", "arm over the board, the eraser masked (self-filter)")):
         r = result[key]
         st = r["stages_p50_ms"]
+        mask = f" (+ mask {st['mask']:.2f})" if "mask" in st else ""
         out.append(f"| {label} | {r['p50_ms']:.1f} | {r['p99_ms']:.1f} | {r['fps_one_core_p50']:.1f} | "
-                   f"{st['board']:.1f} / {st['rectify']:.1f} / {st['classify']:.1f} / {st['track']:.1f} |")
+                   f"{st['board']:.1f} / {st['rectify']:.1f}{mask} / {st['classify']:.1f} / {st['track']:.1f} |")
     out += ["", "| scale: per frame, arm parked, stains on a grid | stains found (median) | p50 [ms] | p99 [ms] | "
             "classify / track p50 [ms] |", "|---|---:|---:|---:|---|"]
     for key, label in (("frames_3_stains", "3 stains"), ("frames_20_stains", "20 stains")):
@@ -159,10 +185,12 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         parked = render(tmp, model, {"seed": 0, "start_q_rad": PARKED_Q, "dirt": {"stains": 4}}, 3000)
-        arm = render(tmp, model, {"seed": 0, "dirt": {"stains": 4}}, 3000)
+        states: list = []
+        arm = render(tmp, model, {"seed": 0, "dirt": {"stains": 4}}, 3000, states)
         three = render(tmp, model, {"seed": 0, "start_q_rad": PARKED_Q, "dirt": {"stain": grid_stains(3, 1)}}, 2000)
         twenty = render(tmp, model, {"seed": 0, "start_q_rad": PARKED_Q, "dirt": {"stain": grid_stains(5, 4)}}, 2000)
         result = {"frames_arm_parked": bench_frames(parked), "frames_arm_over_board": bench_frames(arm),
+                  "frames_arm_over_board_masked": bench_frames(arm, states=states),
                   "frames_3_stains": bench_frames(three), "frames_20_stains": bench_frames(twenty),
                   "closed_loop": bench_closed_loop(tmp)}
     print(markdown(result))
