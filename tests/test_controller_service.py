@@ -92,7 +92,8 @@ def _circle_skill(skill, radius_m: float = 0.05, freq_hz: float = 1.0):
 
 def test_free_space_tracking_of_a_1hz_5cm_circle_is_within_2mm_rms(tmp_path, learned_skill):
     skill = _circle_skill(learned_skill)
-    table = {"executor": {"air": True, "wipe_timeout_s": 4.0},
+    # a pass of up to 4 s (4 cycles): 3 s of steady tracking after the first period
+    table = {"executor": {"air": True, "wipe_timeout_s": 4.0, "pass_cycles": 4.0},
              "planner": {"min_amplitude_m": 0.05, "max_amplitude_m": 0.05}}
     with SimProcess(tmp_path, {"mode": "lockstep", "camera": NO_CAMERA}) as sim, \
             ControllerThread(sim, skill, table) as ctl:
