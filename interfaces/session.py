@@ -122,7 +122,8 @@ def _read_secret(path: str, what: str) -> str:
 
 
 class Latest(Generic[M]):
-    """Newest decoded sample of one key; :meth:`take` returns it once, or None.
+    """Newest decoded sample of one key; :meth:`take` returns it once, or None. With ``depth`` > 1 the newest
+    ``depth`` samples are held: :meth:`take` gives the oldest of them, :meth:`take_all` all, oldest first.
 
     Attributes
     ----------
@@ -132,10 +133,12 @@ class Latest(Generic[M]):
         Dropped payloads by reason (the decode error's first words).
     """
 
-    def __init__(self, session: zenoh.Session, key: str, msg_type: type[M]) -> None:
+    def __init__(self, session: zenoh.Session, key: str, msg_type: type[M], depth: int = 1) -> None:
         self.key = key
         self._decode = Decoder(msg_type)
-        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
+        # Zenoh keeps the newest ``depth`` samples itself: no Python runs per sample (a 1 kHz stream read at
+        # 10 Hz costs a decode per sample only when taken)
+        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(depth))
         self.received = 0
         self._bad = _BadSamples(key)
         self.bad = self._bad.bad
@@ -152,6 +155,20 @@ class Latest(Generic[M]):
         except MessageDecodeError as exc:
             self._bad.count(str(exc))
             return None
+
+    def take_all(self) -> list[M]:
+        """Every valid sample held (at most ``depth``, the newest), oldest first; never blocks."""
+        out = []
+        while True:
+            sample = self._sub.try_recv()
+            if sample is None:
+                return out
+            self.received += 1
+            try:
+                self._decode.check_size(len(sample.payload))
+                out.append(self._decode(sample.payload.to_bytes()))
+            except MessageDecodeError as exc:
+                self._bad.count(str(exc))
 
     def close(self) -> None:
         if self._sub is not None:
@@ -284,9 +301,10 @@ class ServiceNode:
             pub = self._publishers[key] = self.session.declare_publisher(key, **publisher_qos(self.keys, key))
         pub.put(encode(msg))
 
-    def latest(self, key: str, msg_type: type[M]) -> Latest[M]:
-        """A newest-sample reader of ``key`` decoding ``msg_type``."""
-        reader = Latest(self.session, key, msg_type)
+    def latest(self, key: str, msg_type: type[M], depth: int = 1) -> Latest[M]:
+        """A newest-sample reader of ``key`` decoding ``msg_type`` (``depth``: the newest samples kept, for
+        :meth:`Latest.take_all`)."""
+        reader = Latest(self.session, key, msg_type, depth)
         self._readers.append(reader)
         return reader
 

@@ -53,7 +53,8 @@ class PerceptionService:
         self._robot_states = None
         if node is not None and params.tool_mask:
             self.tool = ToolTrack(params.tool_max_age_s)
-            self._robot_states = node.inbox(self.keys.robot_state, RobotState, maxlen=256)
+            # the newest 512 states (0.5 s at 1 kHz) held by Zenoh, decoded only at each frame: no Python per state
+            self._robot_states = node.latest(self.keys.robot_state, RobotState, depth=512)
         self.stop = threading.Event()
         self.counters: Counter[str] = Counter()
         self.last: Stains | None = None
@@ -86,7 +87,7 @@ class PerceptionService:
         """The tool box (8, 3) [m] at the frame's time from the joint states received so far, or None."""
         if self.tool is None:
             return None
-        while (state := self._robot_states.get(0.0)) is not None:
+        for state in self._robot_states.take_all():
             self.tool.add(state.robot_time_ns, state.q_rad, now)
         return self.tool.corners_at(frame.robot_time_ns, now)
 

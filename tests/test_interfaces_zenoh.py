@@ -64,6 +64,27 @@ def test_the_reader_keeps_only_the_newest_sample(peers):
     assert states.take() is None
 
 
+def test_a_deeper_reader_holds_the_newest_samples_in_order_and_counts_the_bad_ones(peers):
+    """``depth`` N: Zenoh holds the newest N (no Python per sample); ``take_all`` gives them oldest first. Here N
+    is more than is sent: every sample is there, in order, the bad one counted."""
+    sim, ctrl = peers
+    states = ctrl.latest(ctrl.keys.robot_state, RobotState, depth=64)
+    wait_subscribed(sim.session, sim.keys.robot_state)
+    for seq in range(1, 41):
+        sim.publish(sim.keys.robot_state, state(seq))
+    sim.session.put(sim.keys.robot_state, b"garbage")
+    sim.publish(sim.keys.robot_state, state(41))
+    got: list[int] = []
+
+    def all_in() -> bool:
+        got.extend(m.seq for m in states.take_all())
+        return bool(got) and got[-1] == 41
+
+    wait_for(all_in)
+    assert got == list(range(1, 42)), got  # in order, each once
+    assert sum(states.bad.values()) == 1 and states.take_all() == []
+
+
 def test_bad_samples_are_counted_and_dropped_and_the_reader_goes_on(peers):
     sim, ctrl = peers
     states = ctrl.latest(ctrl.keys.robot_state, RobotState)
