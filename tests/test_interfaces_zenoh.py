@@ -65,24 +65,35 @@ def test_the_reader_keeps_only_the_newest_sample(peers):
 
 
 def test_a_deeper_reader_holds_the_newest_samples_in_order_and_counts_the_bad_ones(peers):
-    """``depth`` N: Zenoh holds the newest N (no Python per sample); ``take_all`` gives them oldest first. Here N
-    is more than is sent: every sample is there, in order, the bad one counted."""
+    """``depth`` N: Zenoh holds the newest N (no Python per sample); ``take_all`` gives them oldest first, each
+    once, and counts a bad one. The states' publisher drops under congestion (the control path's QoS), so the
+    test sends on until what it waits for has come, and asks for order, not for every sample."""
     sim, ctrl = peers
     states = ctrl.latest(ctrl.keys.robot_state, RobotState, depth=64)
     wait_subscribed(sim.session, sim.keys.robot_state)
-    for seq in range(1, 41):
-        sim.publish(sim.keys.robot_state, state(seq))
-    sim.session.put(sim.keys.robot_state, b"garbage")
-    sim.publish(sim.keys.robot_state, state(41))
     got: list[int] = []
+    sent = [0]
 
-    def all_in() -> bool:
+    def send(garbage: bool = False) -> None:
+        if garbage:
+            sim.session.put(sim.keys.robot_state, b"garbage")
+        sent[0] += 1
+        sim.publish(sim.keys.robot_state, state(sent[0]))
+
+    for _ in range(40):
+        send()
+
+    def caught_up(garbage: bool = False) -> bool:
         got.extend(m.seq for m in states.take_all())
-        return bool(got) and got[-1] == 41
+        if got and got[-1] == sent[0] and (not garbage or sum(states.bad.values()) >= 1):
+            return True
+        send(garbage)  # the last one may have been dropped: another
+        return False
 
-    wait_for(all_in)
-    assert got == list(range(1, 42)), got  # in order, each once
-    assert sum(states.bad.values()) == 1 and states.take_all() == []
+    wait_for(lambda: caught_up(), 10.0, "the newest state", period_s=0.02)
+    assert len(got) >= 20 and got == sorted(set(got)), got  # in order, each once
+    wait_for(lambda: caught_up(garbage=True), 10.0, "a bad sample counted", period_s=0.02)
+    assert got == sorted(set(got)) and states.take_all() == []
 
 
 def test_bad_samples_are_counted_and_dropped_and_the_reader_goes_on(peers):
