@@ -146,8 +146,18 @@ class Latest(Generic[M]):
     def take(self) -> M | None:
         """The newest valid message not yet taken, or None; never blocks, never raises on bad data."""
         sample = self._sub.try_recv()
-        if sample is None:
-            return None
+        return None if sample is None else self._decoded(sample)
+
+    def take_all(self) -> list[M]:
+        """Every valid sample held (at most ``depth``, the newest), oldest first; never blocks."""
+        out = []
+        while (sample := self._sub.try_recv()) is not None:
+            if (msg := self._decoded(sample)) is not None:
+                out.append(msg)
+        return out
+
+    def _decoded(self, sample) -> M | None:
+        """The sample's message, or None (counted in :attr:`bad`)."""
         self.received += 1
         try:
             self._decode.check_size(len(sample.payload))  # before copying it out: a huge one is never parsed
@@ -155,20 +165,6 @@ class Latest(Generic[M]):
         except MessageDecodeError as exc:
             self._bad.count(str(exc))
             return None
-
-    def take_all(self) -> list[M]:
-        """Every valid sample held (at most ``depth``, the newest), oldest first; never blocks."""
-        out = []
-        while True:
-            sample = self._sub.try_recv()
-            if sample is None:
-                return out
-            self.received += 1
-            try:
-                self._decode.check_size(len(sample.payload))
-                out.append(self._decode(sample.payload.to_bytes()))
-            except MessageDecodeError as exc:
-                self._bad.count(str(exc))
 
     def close(self) -> None:
         if self._sub is not None:

@@ -19,7 +19,6 @@ the shared description.
 
 from __future__ import annotations
 
-import threading
 from collections import deque
 
 import cv2
@@ -80,11 +79,13 @@ def shadow_mask(grid: BoardGrid, shadow_xy_m: np.ndarray, margin_m: float) -> np
 class ToolTrack:
     """The robot's recent joint states and the tool's pose at a frame's time.
 
-    :meth:`add` is called from the subscriber's thread with each state
-    (robot clock [ns], joint positions (7,) [rad], arrival monotonic time [s]); :meth:`corners_at` from the
-    perception loop. A frame stamped with the robot's clock gets the state
-    nearest that time; a frame without it (a real camera: 0) the newest
-    state. Either is used only if it is within ``max_age_s`` of the frame (robot clock) or of now (arrival).
+    The perception loop, at each frame, :meth:`add` s the states received
+    since the last one (robot clock [ns], joint positions (7,) [rad], the
+    monotonic time [s] they were taken) and asks :meth:`corners_at`. A frame
+    stamped with the robot's clock gets the state nearest that time; a frame
+    without it (a real camera: 0) the newest state. Either is used only if it
+    is within ``max_age_s`` of the frame (robot clock) or of now (taken): a
+    robot side that went silent leaves the frames unmasked, counted.
 
     Attributes
     ----------
@@ -97,7 +98,6 @@ class ToolTrack:
 
         self.max_age_s = float(max_age_s)
         self._states: deque[tuple[int, float, np.ndarray]] = deque(maxlen=history)
-        self._lock = threading.Lock()
         self._model = RobotModel()
         self.used = 0
         self.unknown = 0
@@ -106,13 +106,11 @@ class ToolTrack:
         q = np.asarray(q_rad, float)
         if q.shape != (self._model.nq,) or not np.all(np.isfinite(q)):
             return  # the decoder checked the message; a wrong arm is not ours to mask
-        with self._lock:
-            self._states.append((int(robot_time_ns), float(arrived_s), q))
+        self._states.append((int(robot_time_ns), float(arrived_s), q))
 
     def corners_at(self, frame_robot_time_ns: int, now_s: float) -> np.ndarray | None:
         """World points (8, 3) [m] of the tool box at the frame's time, or None (no state near enough)."""
-        with self._lock:
-            states = list(self._states) if frame_robot_time_ns > 0 else [self._states[-1]] if self._states else []
+        states = self._states
         q = None
         if states and frame_robot_time_ns > 0:
             t, _, q_near = min(states, key=lambda s: abs(s[0] - frame_robot_time_ns))
