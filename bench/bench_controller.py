@@ -205,12 +205,17 @@ class Proc:
         return self.proc.returncode
 
 
+#: The simulated stack set up as docs/real-robot.md has a user set the real one up for torque commands.
+LBR_TORQUE_SETUP = {"LAMPS__LBR_PEER__CLIENT_COMMAND_MODE": "torque", "LAMPS__LBR_PEER__OPEN_LOOP": "false",
+                    "LAMPS__LBR_PEER__UPDATE_RATE_HZ": "1000", "LAMPS__LBR__OPEN_LOOP": "false"}
+
+
 def _robot_side(robot: str, mode: str, p1: int, rid: str, bridge: int) -> list[tuple[str, list[str], str]]:
     """(name, argv, liveliness name) of the robot side's processes: the sim, or the lbr peer and the adapter."""
     if robot == "sim":
         return [("sim", [sys.executable, "-m", "sim.cli", "--mode", mode, "--no-camera",
                          "--listen", f"tcp/127.0.0.1:{p1}", "--robot-id", rid], "sim")]
-    return [("lbr-peer", [sys.executable, "-m", "robot.lbr.peer_cli", "--mode", mode,
+    return [("lbr-peer", [sys.executable, "-m", "sim.lbr_stack.cli", "--mode", mode,
                           "--listen", f"tcp/127.0.0.1:{bridge}", "--robot-id", rid], "lbr-peer"),
             ("robot", [sys.executable, "-m", "robot.cli", "--backend", "lbr", "--mode", mode, "--arm",
                        "--connect", f"tcp/127.0.0.1:{bridge}", "--listen", f"tcp/127.0.0.1:{p1}",
@@ -235,8 +240,9 @@ def sim_and_controller(mode: str, robot: str = "sim", env: dict[str, str] | None
         procs = []
         stack.callback(lambda: [p.stop() for p in reversed(procs)])
         side = _robot_side(robot, mode, p1, rid, bridge)
+        side_env = dict(env or {}, **(LBR_TORQUE_SETUP if robot != "sim" else {}))
         for name, cmd, _ in side:
-            procs.append(Proc(name, cmd, Path(tmp), env))
+            procs.append(Proc(name, cmd, Path(tmp), side_env))
             time.sleep(0.5)  # let each listener come up before the next one dials it
         n_side = len(procs)
         procs.append(Proc("controller", ctl_cmd, Path(tmp), env))

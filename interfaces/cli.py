@@ -22,7 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "learn": ("lampskit.cli:learn_main", "segment and learn a demonstration into a skill file"),
     "plan": ("lampskit.cli:plan_main", "plan and roll out a skill over given stains"),
     "sim": ("sim.cli:main", "the simulated robot, board and camera as a Zenoh service"),
-    "lbr-peer": ("robot.lbr.peer_cli:main", "a simulated iiwa behind lbr_fri_ros2_stack's keys, to test the adapter"),
+    "lbr-peer": ("sim.lbr_stack.cli:main", "a simulated iiwa behind lbr_fri_ros2_stack's keys, to test the adapter"),
     "robot": ("robot.cli:main", "a robot side over Zenoh: the real iiwa through lbr_fri_ros2_stack, or a mock arm"),
     "controller": ("controller.cli:main", "run a skill on the robot: impedance control and the skill executor"),
     "perception": ("perception.cli:main", "stains and kappa from camera images (board markers, ink clustering)"),

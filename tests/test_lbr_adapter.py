@@ -26,6 +26,7 @@ from interfaces.messages import ArmRequest, RobotState, ServiceStatus, TorqueCom
 from interfaces.robot_model import RobotModel
 from interfaces.session import zenoh_config
 from robot.lbr.adapter import LbrPort
+from robot.lbr.compensation import filter_alpha
 from robot.lbr.guards import GuardLimits, VelocityFilter, guard_trip
 from robot.lbr.msgs import (
     CLIENT_COMMAND_MODE_TORQUE,
@@ -51,8 +52,6 @@ ACTIVE, READY = SessionState.COMMANDING_ACTIVE, SessionState.MONITORING_READY
 LIMITS = RobotModel().limits
 #: A posture well inside the joint limits, away from singularities.
 Q0 = np.array([0.2, 0.5, -0.3, -1.2, 0.4, 0.8, 0.1])
-#: The safe hold's damping [Nm s/rad], (7,) (a scalar or one per joint in the parameters).
-HOLD_D = np.broadcast_to(np.asarray(LbrParams().hold_damping_nm_s_rad, float), (7,))
 
 
 @pytest.fixture(scope="module")
@@ -83,23 +82,27 @@ class Stack:
 
 
 def lbr_state(q, stamp_ns: int, *, session=ACTIVE, safety=SafetyState.NORMAL_OPERATION, drive=DriveState.ACTIVE,
-              tau_measured=None, tau_external=None, sample_time_s: float = 0.001) -> LbrState:
+              tau_measured=None, tau_external=None, sample_time_s: float = 0.001, q_commanded=None,
+              command_mode=CLIENT_COMMAND_MODE_TORQUE, control_mode=CONTROL_MODE_JOINT_IMPEDANCE) -> LbrState:
+    """An FRI 1 state; the stack's joint position command ``q_commanded`` defaults to ``q`` (spring relaxed)."""
     zeros = np.zeros(7)
     return LbrState(sample_time_s, int(session), int(safety), int(OperationMode.AUTOMATIC_MODE), int(drive),
-                    CLIENT_COMMAND_MODE_TORQUE, CONTROL_MODE_JOINT_IMPEDANCE, stamp_ns, np.asarray(q, float),
+                    int(command_mode), int(control_mode), stamp_ns, np.asarray(q, float),
                     zeros if tau_measured is None else np.asarray(tau_measured, float),
-                    zeros if tau_external is None else np.asarray(tau_external, float))
+                    zeros if tau_external is None else np.asarray(tau_external, float),
+                    np.asarray(q if q_commanded is None else q_commanded, float))
 
 
 class Cell:
     """The robot server with an LbrPort on a thread, the stack and the controller connected to it.
 
-    ``lbr`` : [lbr] keys; ``server`` : ServerParams overrides (default: real time, a 1 s stale
-    limit, so that a test stepping the stack by hand is never "late").
+    ``lbr`` : [lbr] keys over the stack as docs/real-robot.md sets it up (``open_loop = false``); ``server`` :
+    ServerParams overrides (default: real time, a 1 s stale limit, so that a test stepping the stack by hand is
+    never "late").
     """
 
     def __init__(self, lbr: dict | None = None, server: dict | None = None) -> None:
-        self.params = LbrParams(**(lbr or {}))
+        self.params = LbrParams(**{"open_loop": False, **(lbr or {})})
         sp = {"mode": "realtime", "stale_limit_s": 1.0, "status_rate_hz": 100.0, **(server or {})}
         self.srv = ServerThread(lambda node: LbrPort(self.params, node), ServerParams(**sp))
         self.t_ns = 1_700_000_000_999_000_000  # the robot's clock: seconds and nanoseconds both non-zero
@@ -156,7 +159,8 @@ class Cell:
     # -- the controller ----------------------------------------------------------------------------
     def answer(self, state: RobotState, tau, sent: bool = True):
         """Answer ``state`` with ``tau``; ``sent``: wait for the LBRTorqueCommand it causes and return it,
-        else wait until the adapter has refused it (disarmed) and check that nothing reached the stack."""
+        else wait until the adapter has refused it (disarmed) and check that nothing but a hold (zero overlay)
+        reached the stack."""
         n, refused = len(self.stack.commands), self.port.counts["commands_while_disarmed"]
         self.ctl.publish(self.keys.robot_command, TorqueCommand(seq=state.seq, stamp_ns=time.monotonic_ns(),
                                                                 tau_nm=[float(v) for v in tau]))
@@ -165,7 +169,8 @@ class Cell:
             return self.stack.commands[n]
         wait_for(lambda: self.port.counts["commands_while_disarmed"] > refused, 5.0,
                  f"the adapter refusing the answer to state {state.seq}", 0.0005)
-        assert len(self.stack.commands) == n, "a command reached the stack while disarmed"
+        time.sleep(0.01)
+        assert all(not np.any(tau) for _, _, tau in self.stack.commands[n:]), "a torque reached the stack disarmed"
         return None
 
     def request(self, armed: bool, counter: str) -> ServiceStatus:
@@ -192,20 +197,27 @@ class Cell:
 
 
 def test_states_arrive_as_robot_states_in_joint_order_with_estimated_velocity_and_wrench(model):
+    """The stack low-passes measured and external torque (10 Hz, state.cpp:18,26): the states carry the filtered
+    torques and the adapter gives the controller the raw ones back."""
     v = np.array([0.1, -0.2, 0.3, -0.1, 0.2, -0.3, 0.15])  # rad/s, a different one per joint
     F = np.array([5.0, -3.0, 10.0, 0.5, -0.2, 0.1])  # N, Nm on the pad, world axes
     tau_measured = np.array([11.0, 12.0, 13.0, 14.0, 15.0, 16.0, 17.0])
+    a = filter_alpha(10.0, 0.001)
+    y_measured, y_external = np.zeros(7), np.zeros(7)
     with Cell() as cell:
         states, sent = [], []
         for k in range(40):
             q = Q0 + v * k * 0.001
             tau_ext = model.tcp_jacobian(q).T @ F
-            states.append(cell.step(q, tau_measured=tau_measured + k, tau_external=tau_ext))
+            y_measured = a * (tau_measured + k) + (1 - a) * y_measured
+            y_external = a * tau_ext + (1 - a) * y_external
+            states.append(cell.step(q, tau_measured=y_measured, tau_external=y_external))
             sent.append(q)
     first, last = states[0], states[-1]
     assert [s.seq for s in states] == list(range(first.seq, first.seq + 40)), "one RobotState per LBRState"
     assert last.q_rad == sent[-1].tolist(), "A1..A7 in the stack's order, radians"
-    assert last.tau_nm == (tau_measured + 39).tolist()
+    np.testing.assert_allclose(last.tau_nm, tau_measured + 39, atol=1e-9)  # the filtered value: 0.91 of it
+    assert abs(y_measured[0] - (tau_measured[0] + 39)) > 5
     assert last.robot_time_ns == 1_700_000_001_039_000_000, "the LBRState's stamp, seconds and nanoseconds"
     caps = last.capabilities
     assert caps.gravity_compensated and caps.backend == "lbr" and caps.torque_limits_nm == LIMITS.tau_max.tolist()
@@ -320,12 +332,15 @@ def _ramp_to(cell: Cell, q_start, v, n: int, tau=None):
 
 
 def _tripped(cell: Cell, state: RobotState, why: str) -> ServiceStatus:
-    """After a trip: one last hold with the measured position, then nothing; the status says why."""
+    """After a trip: the hold (the measured position frozen, zero overlay), sent again for every later state; the
+    status says why."""
     _, jp, tau = cell.stack.commands[-1]
-    assert jp.tolist() == state.q_rad
-    np.testing.assert_allclose(tau, np.clip(-HOLD_D * np.array(state.dq_rad_s), -LIMITS.tau_max, LIMITS.tau_max))
-    refused = cell.port.counts["commands_while_disarmed"]
-    cell.answer(cell.step(np.array(state.q_rad)), np.zeros(7), sent=False)
+    assert jp.tolist() == state.q_rad and not np.any(tau)
+    refused, n = cell.port.counts["commands_while_disarmed"], len(cell.stack.commands)
+    cell.answer(cell.step(np.array(state.q_rad) + 1e-5), np.ones(7), sent=False)
+    wait_for(lambda: len(cell.stack.commands) > n, 5.0, "the hold answering the next state")
+    _, jp2, tau2 = cell.stack.commands[n]
+    assert jp2.tolist() == state.q_rad and not np.any(tau2)  # frozen where the hold began
     st = cell.wait_status(lambda m: m.counters.get("commands_while_disarmed", 0) > refused, "a status after the trip")
     assert "armed=False" in st.detail and f"why='guard: {why}" in st.detail, st.detail
     assert st.counters["guard_trips"] == 1 and st.counters["disarms"] == 1, st.counters
@@ -342,7 +357,7 @@ def test_guard_torque_step_over_the_rate_limit_disarms():
                                                                 tau_nm=[1.0, 7.0, 1.0, 1.0, 1.0, 1.0, 1.0]))
         wait_for(lambda: len(cell.stack.commands) > n, 5.0, "the trip's last hold")
         _tripped(cell, s, "joint A2 torque step 6.0 Nm in 1.0 ms over the rate limit 5000 Nm/s")
-    assert [tau[1] for _, _, tau in cell.stack.commands] == [1.0, 0.0], "the 7 Nm never went out"
+    assert [tau[1] for _, _, tau in cell.stack.commands] == [1.0, 0.0, 0.0], "the 7 Nm never went out: holds"
 
 
 def test_guard_torque_over_the_limit_disarms_and_the_gate_clips_before_it():
@@ -380,7 +395,7 @@ def test_guard_joint_position_with_its_velocity_times_dt_margin_disarms():
         assert s.q_rad[3] < edge < s.q_rad[3] + s.dq_rad_s[3] * 0.001, "tripped by the velocity term"
         _tripped(cell, s, f"joint A4 at {s.q_rad[3]:+.3f} rad moving {s.dq_rad_s[3]:+.3f} rad/s comes within "
                           f"{margin:g} rad of its limit {LIMITS.q_max[3]:+.3f} rad")
-    assert len(cell.stack.commands) == k_trip + 1, "every answer before the trip went out, then one hold"
+    assert len(cell.stack.commands) == k_trip + 2, "every answer before the trip went out, then the hold (twice)"
 
 
 def test_guard_joint_speed_over_the_limit_disarms():
@@ -411,8 +426,10 @@ def test_a_joint_near_the_guard_speed_is_braked_with_damping_before_the_guard_di
         braked = [(s, c) for s, c in zip(states, cell.stack.commands[-len(states):])
                   if s.dq_rad_s[0] > LbrParams().speed_brake_share * limit]
         assert braked, "the estimate passed the brake"
-        for s, (_, jp, sent) in braked[1:]:  # from the state after the first over it: damping, measured position
-            np.testing.assert_allclose(sent, -HOLD_D * np.array(s.dq_rad_s), atol=0.05)
+        holds = [(s, c) for s, c in braked[1:]]  # from the state after the first over it: the hold
+        assert holds
+        for s, (_, jp, sent) in holds:  # zero overlay, the position frozen where the brake began
+            assert not np.any(sent) and jp.tolist() == holds[0][1][1].tolist()
         st = cell.wait_status(lambda m: m.counters.get("speed_holds_sent", 0) > 0, "speed holds counted")
         assert st.counters["joint_speed_brakes"] == 1 and "guard_trips" not in st.counters, st.counters
         assert "armed=True" in st.detail, st.detail
@@ -527,9 +544,12 @@ class ControllerThread:
 
 
 @pytest.mark.slow
-def test_realtime_holds_a_silent_controller_then_disarms_after_the_hold_timeout():
+def test_realtime_holds_a_silent_controller_then_disarms_and_keeps_sending_the_hold():
+    """The stack re-applies its last message forever (lbr_torque_command_controller.cpp:42-55): a silent controller
+    gets the hold (the measured pose frozen, zero overlay) after the stale limit, a disarm after the hold
+    timeout, and the same hold in answer to every state from then on, not silence."""
     hold_timeout_s = 0.3
-    v = np.full(7, 0.05)  # rad/s: the hold's damping torque is -D v; the controller's is 1 Nm
+    v = np.full(7, 0.05)  # rad/s: the arm drifts on; the hold must not follow it
     with Cell({"arm": True, "hold_timeout_s": hold_timeout_s},
               {"stale_limit_s": LbrParams().stale_limit_s}) as cell, StackThread(cell, v) as stack, \
             ControllerThread(cell, np.ones(7)) as ctl:
@@ -543,20 +563,21 @@ def test_realtime_holds_a_silent_controller_then_disarms_after_the_hold_timeout(
         later = len(cell.stack.commands)
         stack.stop.set()
         final = cell.wait_status(lambda m: m.stamp_ns > st.stamp_ns, "a later status")
-    assert "no controller command for" in st.detail and "stopped commanding" in st.detail, st.detail
-    assert later <= n + 1, f"{later - n} commands after the disarm"
+    assert "no controller command for" in st.detail and "holding the measured pose" in st.detail, st.detail
+    assert later - n >= 150, f"only {later - n} holds for 200 states after the disarm"
     commands = cell.stack.commands
     last_torque = max(i for i, c in enumerate(commands) if c[2][0] == 1.0)  # the last answer (or its repeat)
     holds = commands[last_torque + 1:]
-    assert len(holds) >= 50, len(holds)
-    span_s = (holds[-1][0] - holds[0][0]) * 1e-9
+    assert all(not np.any(tau) for _, _, tau in holds), "zero overlay in every hold"
+    before_disarm = [c for c in holds if c[0] <= commands[n - 1][0]]
+    span_s = (before_disarm[-1][0] - before_disarm[0][0]) * 1e-9
     assert 0.8 * hold_timeout_s <= span_s <= hold_timeout_s + 0.3, span_s
-    torques = np.array([tau for _, _, tau in holds])
-    np.testing.assert_allclose(np.median(torques, axis=0), -HOLD_D * v, rtol=0.01)
-    assert all(np.array_equal(jp, stack.sent.get(float(jp[0]))) for _, jp, _ in holds), "the measured positions"
+    frozen = {tuple(jp) for _, jp, _ in holds}
+    assert len(frozen) <= 2, "one frozen pose while holding, one from the disarm on"
+    assert all(tuple(stack.sent.get(float(jp[0]))) == tuple(jp) for jp in map(np.array, frozen)), "measured poses"
+    assert frozen != {tuple(stack.sent[max(stack.sent)])}, "not the newest pose: frozen, while the arm drifted"
     c = final.counters
-    assert c["holds_sent"] >= len(holds) - 1 and c["disarms"] == 1, c
-    assert c["commands_late"] + c.get("stale_command_brakes", 0) >= len(holds) - 1, c
+    assert c["holds_sent"] >= 150 and c["disarms"] == 1 and c["stop_holds_sent"] >= 150, c
 
 
 # --------------------------------------------------------------------------
@@ -652,5 +673,79 @@ def test_states_stopping_while_armed_disarms():
         cell.armed()
         cell.answer(cell.step(Q0), np.ones(7))
         st = cell.wait_status(lambda m: "armed=False" in m.detail, "a status saying disarmed", timeout_s=5.0)
-    assert "why='no robot state for" in st.detail and "stack or bridge gone" in st.detail, st.detail
+    assert "why='no robot state for" in st.detail and "the bridge is gone" in st.detail, st.detail
     assert st.counters["disarms"] == 1
+
+
+# --------------------------------------------------------------------------
+# 8. what the real stack needs before the adapter may command
+
+
+@pytest.mark.parametrize("lbr, state, why", [
+    ({}, {"command_mode": 1}, "client command mode POSITION: choose TORQUE in the LBRServer app"),
+    ({}, {"control_mode": 0}, "control mode POSITION_CONTROL_MODE: choose JOINT_IMPEDANCE_CONTROL"),
+    ({}, {"session": SessionState.COMMANDING_WAIT}, "session state COMMANDING_WAIT"),
+    ({"open_loop": True}, {}, "[lbr] open_loop = true: with the stack's open_loop: true"),
+    ({"external_torque_cutoff_hz": 1000.0}, {}, "external_torque_cutoff_frequency 1000 Hz at a 1 ms sample time "
+                                                "gives its filter alpha 0"),
+])
+def test_arming_is_refused_with_the_reason_for_each_wrong_setting(lbr, state, why):
+    with Cell(lbr) as cell:
+        cell.answer(cell.step(Q0, **state), np.zeros(7), sent=False)
+        st = cell.request(True, "arm_refused")
+        assert "armed=False" in st.detail and why in st.detail, st.detail
+        assert not cell.stack.commands
+
+
+def test_an_fri2_state_to_an_fri1_adapter_is_named_and_refused_then_fri2_arms():
+    with Cell() as cell:
+        st2 = lbr_state(Q0, cell.t_ns + 1_000_000, q_commanded=None)
+        st2.q_commanded_rad = None
+        cell.stack.state_pub.put(encode_state(st2, fri_major=2))
+        wait_for(lambda: any(k.startswith("states_dropped") for k in cell.port.counters()), 5.0, "the state dropped")
+        st = cell.request(True, "arm_refused")
+        assert "an FRI 2 LBRState (316 bytes), but the adapter expects FRI 1" in st.detail, st.detail
+        assert st.counters.get("states_received", 0) == 0
+    with Cell({"fri_major": 2}) as cell:
+        t = cell.t_ns
+        for k in range(3):
+            t += 1_000_000
+            s2 = lbr_state(Q0, t)
+            s2.q_commanded_rad = None
+            cell.stack.state_pub.put(encode_state(s2, fri_major=2))
+        s = cell.state_for(t)
+        cell.t_ns = t
+        assert cell.request(True, "arms").counters["arms"] == 1
+        _, jp, tau = cell.answer(s, np.full(7, 0.5))
+        np.testing.assert_allclose(jp, Q0) and np.testing.assert_allclose(tau, 0.5)  # the PID mirror starts at q
+
+
+def test_the_joint_spring_is_steered_onto_the_arm_and_its_rest_taken_off_the_overlay():
+    """FRI 1 reports the stack's joint position command c: the message's target moves c by steer_share of its
+    distance to q (the stack's PID gain p = 0.1), and the overlay is the controller's torque minus the spring
+    K (c_next - q) the robot will add."""
+    p = LbrParams()
+    lag = np.array([0.01, -0.02, 0.0, 0.005, 0.0, 0.0, -0.01])  # q - c [rad]
+    tau = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 0.5])
+    with Cell() as cell:
+        cell.armed()
+        _, jp, overlay = cell.answer(cell.step(Q0, q_commanded=Q0 - lag), tau)
+    np.testing.assert_allclose(jp, Q0 + p.steer_share / p.pid_p * lag, atol=1e-12)
+    c_next = Q0 - lag + p.steer_share * lag
+    np.testing.assert_allclose(overlay, tau - np.array(p.joint_stiffness_nm_rad) * (c_next - Q0), atol=1e-9)
+
+
+def test_a_frozen_position_stream_disarms_as_open_loop():
+    """The stack's open_loop publishes its own command as measured: positions bitwise unchanged while the overlay
+    changes are not the arm's (async_client.cpp:82-85)."""
+    with Cell({"frozen_after_s": 0.02}) as cell:
+        cell.armed()
+        for k in range(40):
+            s = cell.step(Q0)
+            if cell.port.armed:
+                cell.answer(s, np.full(7, 0.1 * k))
+            else:
+                break
+        st = cell.wait_status(lambda m: "armed=False" in m.detail, "disarmed by the freeze watch")
+    assert "measured joint positions frozen for" in st.detail and "set open_loop: false" in st.detail, st.detail
+    assert st.counters["frozen_positions"] == 1

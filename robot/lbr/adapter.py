@@ -1,38 +1,57 @@
 """The KUKA LBR iiwa through lbr_fri_ros2_stack, as a clocked :class:`~robot.port.RobotPort`.
 
-States: the stack's ``LBRState`` (through zenoh-bridge-ros2dds, CDR) gives
-the measured joint positions, measured and external torques, the FRI
-sample time and the session, safety and drive states. Joint velocity is
-estimated (:class:`~robot.lbr.guards.VelocityFilter`; the state says so);
-the tool wrench comes from the external torques through our model
-(``F = (J J^T + l^2 I)^-1 J tau_ext`` at the pad, world axes) or, with
-``wrench_source = "stack"``, from the bridge's ``WrenchStamped``.
-Capabilities: the robot compensates gravity itself; torque limits from the
-description; the state rate from the FRI sample time in the states.
+Built against the stack as its code behaves (lbr_fri_ros2_stack ``rolling``
+218d723 and ``humble`` cca24ae; docs/real-robot.md has the table):
 
-Commands: ``LBRTorqueCommand`` with the measured joint position and the
-controller's torques as overlay. Nothing is sent until the adapter is
-**armed**: with ``--arm`` (``[lbr] arm = true``) at the first controller
-command the session allows, or by an :class:`~interfaces.messages.ArmRequest`
-on ``robot/arm``; arming is refused unless the session says commanding is possible (COMMANDING_WAIT or
-COMMANDING_ACTIVE), safety is normal and the drives are active. Every
-command passes :func:`~robot.lbr.guards.guard_trip` first; a trip disarms.
+States: the stack's ``LBRState`` (zenoh-bridge-ros2dds, CDR), in the FRI 1
+or FRI 2 layout (``[lbr] fri_major``; the other layout is named at its
+first state and arming refused). Joint velocity is estimated from the
+positions (:class:`~robot.lbr.guards.VelocityFilter`). The stack
+low-passes measured and external torque (10 Hz by default); the adapter
+recovers the raw torques from consecutive states
+(:class:`~robot.lbr.compensation.TorqueUnfilter`). The tool wrench comes
+from the external torques through our model (``F = (J J^T + l^2 I)^-1 J
+tau_ext`` at the pad, world axes) or, with ``wrench_source = "stack"``, from
+the stack's estimate (tip frame, soft deadband, brought to the pad:
+:func:`~robot.lbr.tip.stack_wrench_to_tcp`).
 
-Safe hold (a late or missing controller answer, or ``hold``): the last
-command again while it is younger than ``stale_limit_s`` (one late answer
-must not step the torque), then damping torques ``-D dq`` with the measured
-joint position; after
-``hold_timeout_s`` of holding the adapter disarms and stops commanding, so
-that the robot's own FRI watchdog ends the session and the robot stops.
-Speed brake: the adapter declares the guard's joint speeds as its velocity
-limits, so the server holds (``joint_speed_brakes``) while a joint moves
-faster than ``speed_brake_share`` of them or is about to by the next cycle,
-below the guard that would disarm: after a stall in our own processes the
-robot has repeated the last torque for tens of milliseconds, and the
-controller's correction can whip a light wrist joint.
+Commands: the robot runs joint impedance at the app's stiffness (200
+Nm/rad) towards the joint position the stack's PID makes of the message's
+``joint_position``; the torque overlay is added. The adapter steers that
+position onto the arm and takes the spring's rest off the overlay
+(:class:`~robot.lbr.compensation.JointSpring`), so the joints get the
+controller's torque. Nothing is sent before the adapter is **armed**: with
+``--arm`` (``[lbr] arm = true``) at the first controller command the robot
+allows, or by an :class:`~interfaces.messages.ArmRequest` on
+``robot/arm``. Arming is refused, the reason named, unless: a state has
+come in the configured layout, the session is COMMANDING_ACTIVE, safety is
+normal, the drives are active, the client command mode is TORQUE, the
+control mode is joint impedance, the stack runs with ``open_loop: false``
+(``[lbr] open_loop``), the torque filter can be undone and the joint names
+are the configured ones. Every command passes
+:func:`~robot.lbr.guards.guard_trip` first; a trip disarms.
 
-Disarming (stop, signal, controller loss, guard trip, session lost, no robot state for ``hold_timeout_s``) sends
-one last hold and says why (log, status).
+**A stop that stops.** The stack re-applies the last message for as long
+as it runs and answers every FRI cycle itself, so the robot's FRI watchdog
+never fires when commands stop (lbr_torque_command_controller.cpp:42-55,
+async_client.cpp:74-93). Holding and disarming therefore send a *hold*:
+``joint_position`` frozen at the measured pose where the hold began and a
+zero overlay, which the robot's own joint impedance holds (and the stack
+keeps re-applying if the adapter dies). A disarmed adapter sends that hold
+in answer to every state for as long as it runs.
+
+Hold (a late or missing controller answer, ``hold``): the last command
+again while it is younger than ``stale_limit_s`` (one late answer must not
+step the torque), then the hold; after ``hold_timeout_s`` of holding the
+adapter disarms (the hold stays). Speed brake: the adapter declares the
+guard's joint speeds as its velocity limits; the server holds while a joint
+moves faster than ``speed_brake_share`` of them.
+
+Disarming (stop, signal, controller loss, guard trip, a frozen position
+stream, session lost, no robot state for ``hold_timeout_s``) says why (log,
+status). When the robot leaves COMMANDING_ACTIVE the stack exits
+(system_interface.cpp:307-318): states stop, the adapter disarms, and the
+stack must be launched again before the adapter can arm.
 """
 
 from __future__ import annotations
@@ -49,16 +68,20 @@ from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.port import Reading, RobotPort
 
+from .compensation import FreezeWatch, JointSpring, TorqueUnfilter
 from .guards import GuardLimits, VelocityFilter, guard_trip
-from .msgs import (DriveState, LbrState, LbrWireError, SafetyState, SessionState, decode_joint_names, decode_state,
-                   decode_wrench, encode_torque_command)
+from .msgs import (ClientCommandMode, ControlMode, DriveState, LbrState, LbrWireError, SafetyState, SessionState,
+                   decode_joint_names, decode_state, decode_wrench, encode_torque_command)
 from .params import LbrParams
+from .tip import stack_wrench_to_tcp
 
 log = logging.getLogger(__name__)
 
-COMMANDING = (SessionState.COMMANDING_WAIT, SessionState.COMMANDING_ACTIVE)
 #: Damping of the pseudo-inverse that turns external joint torques into a tool wrench.
 WRENCH_DAMPING = 0.01
+#: Joint speed [rad/s] under which the arm counts as at rest for arming on an FRI 2 state (no commanded
+#: position in it: the stack's command is taken to be where the arm rests).
+REST_SPEED_RAD_S = 0.05
 
 
 class LbrPort(RobotPort):
@@ -80,7 +103,7 @@ class LbrPort(RobotPort):
         self.capabilities = Capabilities(True, lim.tau_max.tolist(), "lbr")
         self.limits = GuardLimits(lim.q_min, lim.q_max, lim.dq_max * params.max_joint_speed_scale, lim.tau_max,
                                   params.limit_margin_rad, params.tau_rate_nm_s)
-        # the server brakes (holds) below the guard's speed, before a wrist whipping after a stall disarms
+        # the server brakes (holds) below the guard's speed, before a joint whipping after a stall disarms
         self.velocity_limits_rad_s = self.limits.dq_max_rad_s
         self._zeros = np.zeros(7)
         self.counts: Counter[str] = Counter()
@@ -88,16 +111,23 @@ class LbrPort(RobotPort):
         self.arm_pending = params.arm
         self.disarm_reason = "not armed yet"
         self._velocity = VelocityFilter(7, params.velocity_cutoff_hz)
-        self._hold_damping = np.array(params.hold_damping_nm_s_rad)
+        self._tau_measured = TorqueUnfilter(params.measured_torque_cutoff_hz)
+        self._tau_external = TorqueUnfilter(params.external_torque_cutoff_hz)
+        self.spring = JointSpring(np.array(params.joint_stiffness_nm_rad), params.pid_p, params.steer_share)
+        self._freeze = FreezeWatch(params.frozen_after_s)
         self._cond = threading.Condition()
         self._wake: threading.Event | None = None
         self._inbox: LbrState | None = None
         self._state: LbrState | None = None
+        self._layout_error = ""
         self._reading = Reading(np.zeros(7), np.zeros(7), np.zeros(7), np.zeros(6), 0, dq_estimated=True)
         self._stack_wrench: np.ndarray | None = None
         self._names_ok: bool | None = None
-        self._tau_prev: np.ndarray | None = None
+        self._tau_prev: np.ndarray | None = None  # the controller's last torque sent
         self._tau_prev_ns = 0
+        self._overlay = np.zeros(7)  # the overlay last sent
+        self._hold_q: np.ndarray | None = None  # the frozen joint position of the hold being sent
+        self._has_sent = False
         self._holding_since_ns: int | None = None
         self._last_state_ns: int | None = None
         topics = params.topics
@@ -112,9 +142,14 @@ class LbrPort(RobotPort):
     # -- network callbacks (Zenoh's thread: decode, count, hand over) ------------------------------
     def _on_state(self, sample) -> None:
         try:
-            st = decode_state(sample.payload.to_bytes())
+            st = decode_state(sample.payload.to_bytes(), self.p.fri_major)
         except LbrWireError as exc:
-            self.counts[f"states_dropped: {str(exc)[:60]}"] += 1
+            text = str(exc)
+            if "set [lbr] fri_major" in text:
+                if not self._layout_error:
+                    log.error("lbr: %s", text)
+                self._layout_error = text
+            self.counts[f"states_dropped: {text[:60]}"] += 1
             return
         with self._cond:
             self.counts["states_received"] += 1
@@ -144,7 +179,7 @@ class LbrPort(RobotPort):
 
     # -- the port ----------------------------------------------------------------------------------
     def wait_reading(self, timeout_s: float) -> bool:
-        """Wait for the next LBRState with a new time stamp; update velocity, wrench and the arming state."""
+        """Wait for the next LBRState with a new time stamp; update velocity, torques, wrench, arming state."""
         with self._cond:
             if self._inbox is None and not self._cond.wait_for(lambda: self._inbox is not None, timeout_s):
                 self._poll_arm_requests()
@@ -158,6 +193,11 @@ class LbrPort(RobotPort):
         self._take(st)
         self._poll_arm_requests()
         self._check_session()
+        if self.armed:
+            why = self._freeze.update(st.q_rad, st.stamp_ns, self._overlay)
+            if why is not None:
+                self.counts["frozen_positions"] += 1
+                self.disarm(why)
         return True
 
     def set_wake(self, wake: threading.Event) -> None:
@@ -170,6 +210,7 @@ class LbrPort(RobotPort):
         if not self.armed and not (self.arm_pending and self._cannot_arm() is None
                                    and self.arm("--arm at start-up, and the controller answers")):
             self.counts["commands_while_disarmed"] += 1
+            self._send_hold_if_stopped()
             return
         r = self._reading
         # the rate guard compares with the last sent command over the robot time since (late cycles in between)
@@ -180,36 +221,41 @@ class LbrPort(RobotPort):
             self.counts["guard_trips"] += 1
             self.disarm(f"guard: {reason}")
             return
-        self._send(tau_nm)
+        target, overlay = self.spring.command(r.q_rad, np.asarray(tau_nm, float))
+        self._send(target, overlay)
         self._tau_prev = np.array(tau_nm, float)
         self._tau_prev_ns = r.robot_time_ns
         self._holding_since_ns = None
+        self._hold_q = None
         self.counts["commands_sent"] += 1
 
     def hold(self) -> None:
         """Hold this cycle: the last command again while it is younger than ``stale_limit_s`` (a late answer must
-        not step the torque), then damping torques with the measured position; disarm after ``hold_timeout_s``."""
+        not step the torque), then the hold (frozen position, zero overlay); disarm after ``hold_timeout_s``."""
         if not self.armed:
+            self._send_hold_if_stopped()
             return
         if self._tau_prev is not None and \
                 (self._reading.robot_time_ns - self._tau_prev_ns) * 1e-9 <= self.p.stale_limit_s:
-            self._send(self._tau_prev)
+            target, overlay = self.spring.command(self._reading.q_rad, self._tau_prev)
+            self._send(target, overlay)
             self.counts["commands_repeated"] += 1
             return
         now = time.monotonic_ns()
         if self._holding_since_ns is None:
             self._holding_since_ns = now
         elif (now - self._holding_since_ns) * 1e-9 > self.p.hold_timeout_s:
-            self.disarm(f"no controller command for {(now - self._holding_since_ns) / 1e6:.0f} ms: stopped "
-                        "commanding (the robot's FRI watchdog stops it)")
+            self.disarm(f"no controller command for {(now - self._holding_since_ns) / 1e6:.0f} ms: holding the "
+                        "measured pose on the robot's joint impedance")
             return
         self._send_hold()
         self.counts["holds_sent"] += 1
 
     def speed_hold(self) -> None:
-        """A joint too fast (the server's speed brake): damping torques at once, no repeat of the last command;
-        past a guard (the joint's speed over the guard's, a position limit ahead), disarm as a command would."""
+        """A joint too fast (the server's speed brake): the hold at once, no repeat of the last command; past a
+        guard (the joint's speed over the guard's, a position limit ahead), disarm as a command would."""
         if not self.armed:
+            self._send_hold_if_stopped()
             return
         r = self._reading
         reason = guard_trip(r.q_rad, r.dq_rad_s, self._zeros, None, self._state.sample_time_s, self.limits)
@@ -221,10 +267,12 @@ class LbrPort(RobotPort):
         self.counts["speed_holds_sent"] += 1
 
     def estop_hold(self) -> None:
-        """E-stop: damping torques with the measured position at once (no repeat of the last command)."""
+        """E-stop: the hold at once (no repeat of the last command)."""
         if self.armed:
             self._send_hold()
             self.counts["estop_holds_sent"] += 1
+        else:
+            self._send_hold_if_stopped()
 
     def activate(self) -> None:
         log.info("lbr: monitoring %s (commands only once armed)", self.p.topics.key(self.p.state_topic))
@@ -234,7 +282,7 @@ class LbrPort(RobotPort):
 
     # -- arming ------------------------------------------------------------------------------------
     def arm(self, reason: str = "") -> bool:
-        """Start commanding if the robot's session allows it; False (and why, logged) otherwise."""
+        """Start commanding if the robot allows it; False (and why, logged and in the status) otherwise."""
         if self.armed:
             return True
         why = self._cannot_arm()
@@ -243,18 +291,22 @@ class LbrPort(RobotPort):
             log.warning("lbr: refusing to arm: %s", why)
             self.disarm_reason = f"arming refused: {why}"
             return False
+        st = self._state
+        self.spring.reset(st.q_commanded_rad if st.q_commanded_rad is not None else st.q_rad, st.stamp_ns)
+        self._freeze.reset()
         self.armed, self.arm_pending = True, False
         self.disarm_reason = ""  # the status's why= is for not commanding; an old refusal must not show
-        self._tau_prev, self._holding_since_ns = None, None
+        self._tau_prev, self._holding_since_ns, self._hold_q = None, None, None
         self.counts["arms"] += 1
         log.warning("lbr: ARMED (%s): commanding torques", reason or "request")
         return True
 
     def disarm(self, reason: str) -> None:
-        """Stop commanding now, after one last hold; the robot holds by itself once commands stop."""
+        """Stop commanding torques now: the hold (frozen pose, zero overlay) from here on, as long as this runs."""
         if self.armed:
-            self._send_hold()
             self.armed = False
+            self._hold_q = None
+            self._send_hold()
             self.counts["disarms"] += 1
             log.warning("lbr: disarmed: %s", reason)
         self.arm_pending = False
@@ -262,17 +314,36 @@ class LbrPort(RobotPort):
 
     def _cannot_arm(self) -> str | None:
         st = self._state
+        if self._layout_error:
+            return self._layout_error
         if st is None:
-            return "no robot state received yet"
-        if st.session_state not in COMMANDING:
+            return "no robot state received yet (the stack publishes from COMMANDING_WAIT on)"
+        if st.session_state != SessionState.COMMANDING_ACTIVE:
             return (f"session state {_name(SessionState, st.session_state)}: start the LBRServer application "
-                    "in torque command mode on the smartPAD first")
+                    "(JOINT_IMPEDANCE_CONTROL, TORQUE) on the smartPAD first")
         if st.safety_state != SafetyState.NORMAL_OPERATION:
             return f"safety state {_name(SafetyState, st.safety_state)}"
         if st.drive_state != DriveState.ACTIVE:
             return f"drives {_name(DriveState, st.drive_state)}"
+        if st.client_command_mode != ClientCommandMode.TORQUE:
+            return (f"client command mode {_name(ClientCommandMode, st.client_command_mode)}: choose TORQUE in the "
+                    "LBRServer app and client_command_mode: torque in the stack's config")
+        if st.control_mode != ControlMode.JOINT_IMP_CONTROL_MODE:
+            return (f"control mode {_name(ControlMode, st.control_mode)}: choose JOINT_IMPEDANCE_CONTROL in the "
+                    "LBRServer app (torque overlay needs it)")
+        if self.p.open_loop:
+            return ("[lbr] open_loop = true: with the stack's open_loop: true (its default) the published measured "
+                    "position is the stack's own command, not the encoders; set open_loop: false in the stack's "
+                    "config and [lbr] open_loop = false")
+        for name, unfilter in (("measured", self._tau_measured), ("external", self._tau_external)):
+            if unfilter.alpha(st.sample_time_s) <= 1e-9:
+                return (f"the stack's {name}_torque_cutoff_frequency {unfilter.cutoff_hz:g} Hz at a "
+                        f"{st.sample_time_s * 1e3:g} ms sample time gives its filter alpha 0: that torque never "
+                        "changes; choose a cutoff below the sample rate")
         if self._names_ok is False:
             return f"joint names on {self.p.joint_states_topic} are not {list(self.p.joint_names)}"
+        if st.q_commanded_rad is None and float(np.max(np.abs(self._reading.dq_rad_s))) > REST_SPEED_RAD_S:
+            return "the arm is moving: an FRI 2 state has no commanded position, so arming waits for the arm at rest"
         return None
 
     def _poll_arm_requests(self) -> None:
@@ -289,11 +360,13 @@ class LbrPort(RobotPort):
         if self.armed and self._last_state_ns is not None:
             silent_s = (time.monotonic_ns() - self._last_state_ns) * 1e-9
             if silent_s > self.p.hold_timeout_s:
-                self.disarm(f"no robot state for {silent_s * 1e3:.0f} ms (stack or bridge gone)")
+                self.disarm(f"no robot state for {silent_s * 1e3:.0f} ms (the stack exits when the robot leaves "
+                            "COMMANDING_ACTIVE: launch it again; or the bridge is gone)")
 
     def _check_session(self) -> None:
         st = self._state
-        if self.armed and (st.session_state not in COMMANDING or st.safety_state != SafetyState.NORMAL_OPERATION
+        if self.armed and (st.session_state != SessionState.COMMANDING_ACTIVE
+                           or st.safety_state != SafetyState.NORMAL_OPERATION
                            or st.drive_state != DriveState.ACTIVE):
             self.disarm(f"robot left commanding (session {_name(SessionState, st.session_state)}, safety "
                         f"{_name(SafetyState, st.safety_state)}, drives {_name(DriveState, st.drive_state)})")
@@ -308,31 +381,48 @@ class LbrPort(RobotPort):
         r = self._reading
         r.q_rad = st.q_rad
         r.dq_rad_s = self._velocity.update(st.q_rad, st.stamp_ns).copy()
-        r.tau_nm = st.tau_measured_nm
+        r.tau_nm = self._tau_measured.update(st.tau_measured_nm, st.stamp_ns, st.sample_time_s).copy()
+        tau_ext = self._tau_external.update(st.tau_external_nm, st.stamp_ns, st.sample_time_s)
         r.robot_time_ns = st.stamp_ns
+        self.spring.observe(st.q_rad, st.stamp_ns, st.sample_time_s, st.q_commanded_rad)
         if self.p.wrench_source == "stack":
-            r.wrench_world = self._stack_wrench if self._stack_wrench is not None else np.zeros(6)
+            w = self._stack_wrench
+            r.wrench_world = np.zeros(6) if w is None else stack_wrench_to_tcp(
+                self.model, st.q_rad, w, self.p.wrench_force_threshold_n, self.p.wrench_torque_threshold_nm)
         else:
             J = self.model.tcp_jacobian(st.q_rad)
-            r.wrench_world = np.linalg.solve(J @ J.T + WRENCH_DAMPING**2 * np.eye(6), J @ st.tau_external_nm)
+            r.wrench_world = np.linalg.solve(J @ J.T + WRENCH_DAMPING**2 * np.eye(6), J @ tau_ext)
 
-    def _send(self, tau: np.ndarray) -> None:
-        self._command_pub.put(encode_torque_command(self._state.q_rad, tau))
+    def _send(self, joint_position: np.ndarray, overlay: np.ndarray) -> None:
+        self._command_pub.put(encode_torque_command(joint_position, overlay))
+        self._overlay = np.asarray(overlay, float)
+        self._has_sent = True
 
     def _send_hold(self) -> None:
+        """The hold: joint_position frozen where this hold began, zero overlay (the robot's impedance holds)."""
         if self._state is None:
             return
-        tau = np.clip(-self._hold_damping * self._reading.dq_rad_s, -self.limits.tau_max_nm,
-                      self.limits.tau_max_nm)
-        self._send(tau)
+        if self._hold_q is None:
+            self._hold_q = np.array(self._state.q_rad, float)
+        self._send(self._hold_q, self._zeros)
+        self.spring.hold(self._hold_q)
+
+    def _send_hold_if_stopped(self) -> None:
+        """A disarmed adapter that has commanded keeps sending its hold in answer to every state."""
+        if self._has_sent and self._state is not None:
+            self._send_hold()
+            self.counts["stop_holds_sent"] += 1
 
     def counters(self) -> dict[str, int]:
-        return dict(self.counts)
+        counts = dict(self.counts)
+        counts["torques_passed_filtered"] = self._tau_external.passed_filtered
+        return counts
 
     def detail(self) -> str:
         st = self._state
         session = _name(SessionState, st.session_state) if st is not None else "none"
-        return f"armed={self.armed} session={session} why={self.disarm_reason[:120]!r}"
+        return (f"armed={self.armed} session={session} fri={self.p.fri_major} "
+                f"why={self.disarm_reason[:160]!r}")
 
     def close(self) -> None:
         for sub in self._subs:

@@ -8,8 +8,12 @@ tool wrench as ``geometry_msgs/msg/WrenchStamped`` on
 on ``/<namespace>/command/torque`` (namespace ``lbr`` by default).
 zenoh-bridge-ros2dds maps the ROS topic ``/a/b`` to the Zenoh key ``a/b``
 and forwards the DDS payload as it is: CDR with its 4-byte encapsulation
-header. The message definitions below are the stack's (lbr_fri_idl 1.5),
-registered from their ``.msg`` text; encoding and decoding are rosbags'.
+header. The message definitions below are the stack's (lbr-stack/lbr_fri_idl,
+``msg/LBRState.msg`` on its ``fri-1`` branch, e422bff, and its ``fri-2``
+branch, a54bc11, which drops ``commanded_joint_position``: the stack builds
+against the FRI client SDK of the robot, 1.x or 2.x), registered from
+their ``.msg`` text; encoding and decoding are rosbags'. Both layouts are
+fixed-size, so the number of bytes tells them apart (:func:`state_layout`).
 
 FRI enumerations carried as ``int8`` in ``LBRState`` (KUKA::FRI, friClientIf.h):
 :class:`SessionState`, :class:`SafetyState`, :class:`OperationMode`, :class:`DriveState`.
@@ -27,6 +31,8 @@ from lampskit.errors import LampsError
 
 N_JOINTS = 7
 STATE_TYPE = "lbr_fri_idl/msg/LBRState"
+#: The FRI 2 layout of the same message, registered under its own name (one typestore holds both).
+STATE_TYPE_FRI2 = "lbr_fri_idl_fri2/msg/LBRState"
 TORQUE_COMMAND_TYPE = "lbr_fri_idl/msg/LBRTorqueCommand"
 WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
@@ -52,6 +58,10 @@ float64[7] external_torque
 float64[7] ipo_joint_position
 float64 tracking_performance
 """
+
+#: lbr_fri_idl/msg/LBRState.msg on the ``fri-2`` branch (FRI 2.x): no ``commanded_joint_position``.
+LBR_STATE_MSG_FRI2 = "\n".join(line for line in LBR_STATE_MSG.splitlines()
+                               if not line.startswith("float64[7] commanded_joint_position"))
 
 #: lbr_fri_idl/msg/LBRTorqueCommand.msg: joint position and torque overlay.
 LBR_TORQUE_COMMAND_MSG = """
@@ -95,9 +105,38 @@ class DriveState(IntEnum):
     ACTIVE = 2
 
 
+class ClientCommandMode(IntEnum):
+    """KUKA::FRI::EClientCommandMode (FRI 2 names POSITION ``JOINT_POSITION`` and adds CARTESIAN_POSE = 4)."""
+
+    NO_COMMAND_MODE = 0
+    POSITION = 1
+    WRENCH = 2
+    TORQUE = 3
+    CARTESIAN_POSE = 4
+
+
+class ControlMode(IntEnum):
+    """KUKA::FRI::EControlMode: the robot-side controller the LBRServer app runs."""
+
+    POSITION_CONTROL_MODE = 0
+    CART_IMP_CONTROL_MODE = 1
+    JOINT_IMP_CONTROL_MODE = 2
+    NO_CONTROL = 3
+
+
 #: KUKA::FRI::EClientCommandMode's value for torque overlay; EControlMode's for joint impedance.
-CLIENT_COMMAND_MODE_TORQUE = 3
-CONTROL_MODE_JOINT_IMPEDANCE = 2
+CLIENT_COMMAND_MODE_TORQUE = int(ClientCommandMode.TORQUE)
+CONTROL_MODE_JOINT_IMPEDANCE = int(ControlMode.JOINT_IMP_CONTROL_MODE)
+#: The FRI client SDK major versions the stack builds against (lbr_fri_idl branches ``fri-1`` and ``fri-2``).
+FRI_MAJORS = (1, 2)
+
+
+def stack_joint_names(branch: str, robot_name: str = "lbr") -> tuple[str, ...]:
+    """The stack's joint names in A1..A7 order: ``<robot_name>_A1`` .. on ``rolling`` / ``jazzy``, ``A1`` ..
+    on ``humble`` (the branch's ros2_control xacro and its torque command controller name them so)."""
+    if branch == "humble":
+        return tuple(f"A{i}" for i in range(1, N_JOINTS + 1))
+    return tuple(f"{robot_name}_A{i}" for i in range(1, N_JOINTS + 1))
 
 
 class LbrWireError(LampsError, ValueError):
@@ -138,7 +177,8 @@ class LbrState:
     q_rad: np.ndarray
     tau_measured_nm: np.ndarray
     tau_external_nm: np.ndarray
-    q_commanded_rad: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    q_commanded_rad: np.ndarray | None = field(default_factory=lambda: np.zeros(N_JOINTS))
+    """The robot's commanded joint position (FRI 1 only; None in an FRI 2 state)."""
 
 
 def _typestore():
@@ -146,12 +186,15 @@ def _typestore():
     types = {}
     types.update(get_types_from_msg(LBR_STATE_MSG, STATE_TYPE))
     types.update(get_types_from_msg(LBR_TORQUE_COMMAND_MSG, TORQUE_COMMAND_TYPE))
+    types.update(get_types_from_msg(LBR_STATE_MSG_FRI2, STATE_TYPE_FRI2))
     store.register(types)
     return store
 
 
 TYPESTORE = _typestore()
 _State = TYPESTORE.types[STATE_TYPE]
+_State2 = TYPESTORE.types[STATE_TYPE_FRI2]
+_STATE_TYPES = {1: STATE_TYPE, 2: STATE_TYPE_FRI2}
 _Torque = TYPESTORE.types[TORQUE_COMMAND_TYPE]
 
 
@@ -171,9 +214,30 @@ def _vector(name: str, values, n: int = N_JOINTS) -> np.ndarray:
     return v
 
 
-def decode_state(raw: bytes) -> LbrState:
-    """An ``LBRState`` from its CDR bytes; LbrWireError for bad bytes, wrong lengths or non-finite values."""
-    m = _decode(raw, STATE_TYPE)
+def state_size(fri_major: int) -> int:
+    """Bytes of a CDR ``LBRState`` of the FRI ``fri_major`` layout (header included; both are fixed-size)."""
+    return _STATE_SIZES[fri_major]
+
+
+def state_layout(raw: bytes) -> int | None:
+    """The FRI major version whose ``LBRState`` is ``len(raw)`` bytes, or None when neither is."""
+    for major, size in _STATE_SIZES.items():
+        if len(raw) == size:
+            return major
+    return None
+
+
+def decode_state(raw: bytes, fri_major: int = 1) -> LbrState:
+    """An ``LBRState`` of the FRI ``fri_major`` layout from its CDR bytes.
+
+    LbrWireError for bad bytes, the other layout (named), wrong lengths or non-finite values.
+    """
+    if len(raw) != _STATE_SIZES[fri_major]:
+        other = state_layout(raw)
+        if other is not None:
+            raise LbrWireError(f"an FRI {other} LBRState ({len(raw)} bytes), but the adapter expects FRI "
+                               f"{fri_major} ({_STATE_SIZES[fri_major]} bytes): set [lbr] fri_major = {other}")
+    m = _decode(raw, _STATE_TYPES[fri_major])
     if not np.isfinite(m.sample_time) or m.sample_time <= 0:
         raise LbrWireError(f"sample_time must be finite and > 0 s, got {m.sample_time!r}")
     return LbrState(
@@ -184,14 +248,16 @@ def decode_state(raw: bytes) -> LbrState:
         q_rad=_vector("measured_joint_position", m.measured_joint_position),
         tau_measured_nm=_vector("measured_torque", m.measured_torque),
         tau_external_nm=_vector("external_torque", m.external_torque),
-        q_commanded_rad=_vector("commanded_joint_position", m.commanded_joint_position))
+        q_commanded_rad=(_vector("commanded_joint_position", m.commanded_joint_position) if fri_major == 1
+                         else None))
 
 
 def encode_state(s: LbrState, *, connection_quality: int = 3, overlay_type: int = 1,
-                 commanded_torque_nm: np.ndarray | None = None, tracking_performance: float = 1.0) -> bytes:
-    """The CDR bytes of an ``LBRState`` (what the stack publishes; the lbr peer uses it)."""
+                 commanded_torque_nm: np.ndarray | None = None, tracking_performance: float = 1.0,
+                 fri_major: int = 1, ipo_joint_position_rad: np.ndarray | None = None) -> bytes:
+    """The CDR bytes of an ``LBRState`` of the FRI ``fri_major`` layout (what the stack publishes)."""
     zeros = np.zeros(N_JOINTS)
-    msg = _State(
+    fields = dict(
         sample_time=float(s.sample_time_s), session_state=int(s.session_state),
         connection_quality=int(connection_quality), safety_state=int(s.safety_state),
         operation_mode=int(s.operation_mode), drive_state=int(s.drive_state),
@@ -199,12 +265,20 @@ def encode_state(s: LbrState, *, connection_quality: int = 3, overlay_type: int 
         control_mode=int(s.control_mode), time_stamp_sec=int(s.stamp_ns // 1_000_000_000),
         time_stamp_nano_sec=int(s.stamp_ns % 1_000_000_000),
         measured_joint_position=np.asarray(s.q_rad, float),
-        commanded_joint_position=np.asarray(s.q_commanded_rad, float),
         measured_torque=np.asarray(s.tau_measured_nm, float),
         commanded_torque=np.asarray(zeros if commanded_torque_nm is None else commanded_torque_nm, float),
-        external_torque=np.asarray(s.tau_external_nm, float), ipo_joint_position=np.asarray(s.q_rad, float),
+        external_torque=np.asarray(s.tau_external_nm, float),
+        ipo_joint_position=np.asarray(s.q_rad if ipo_joint_position_rad is None else ipo_joint_position_rad, float),
         tracking_performance=float(tracking_performance))
-    return bytes(TYPESTORE.serialize_cdr(msg, STATE_TYPE))
+    if fri_major == 1:
+        q_cmd = s.q_commanded_rad if s.q_commanded_rad is not None else s.q_rad
+        return bytes(TYPESTORE.serialize_cdr(_State(**fields, commanded_joint_position=np.asarray(q_cmd, float)),
+                                             STATE_TYPE))
+    return bytes(TYPESTORE.serialize_cdr(_State2(**fields), STATE_TYPE_FRI2))
+
+
+_STATE_SIZES = {major: len(encode_state(LbrState(0.001, 0, 0, 0, 0, 0, 0, 0, np.zeros(N_JOINTS), np.zeros(N_JOINTS),
+                                                   np.zeros(N_JOINTS)), fri_major=major)) for major in FRI_MAJORS}
 
 
 def encode_torque_command(joint_position_rad: np.ndarray, torque_nm: np.ndarray) -> bytes:

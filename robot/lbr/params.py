@@ -8,11 +8,21 @@
     torque_command_topic = "command/torque"
     wrench_topic = "force_torque_broadcaster/wrench"
     joint_states_topic = "joint_states"
-    joint_names = ["lbr_A1", ..., "lbr_A7"]  # the stack's names, in our joint order
-    wrench_source = "external_torque"        # or "stack": the bridge's WrenchStamped (world-aligned at the pad)
+    branch = "rolling"                       # the stack's branch: "rolling" / "jazzy" (lbr_A1 ..) or "humble" (A1 ..)
+    joint_names = []                         # [] : the branch's names; else 7 names in A1..A7 order
+    fri_major = 1                            # the FRI client SDK the stack was built with: 1 or 2 (LBRState layout)
+    open_loop = true                         # the stack's open_loop setting (its default: true; arming needs false)
+    joint_stiffness_nm_rad = [200.0, ...]    # the LBRServer app's joint impedance stiffness, A1..A7
+    pid_p = 0.1                              # the stack's pid_p (its joint_position PID; i and d must be 0)
+    steer_share = 0.3                        # share of (q - stack command) one message closes
+    measured_torque_cutoff_hz = 10.0         # the stack's low-pass cutoffs (undone from consecutive states)
+    external_torque_cutoff_hz = 10.0
+    frozen_after_s = 0.05                    # measured positions unchanged this long under a changing overlay: disarm
+    wrench_source = "external_torque"        # or "stack": the stack's WrenchStamped (tip frame, soft deadband)
+    wrench_force_threshold_n = 2.0           # the stack's estimated_ft_sensor thresholds (force_*_th, torque_*_th)
+    wrench_torque_threshold_nm = 0.5
     velocity_cutoff_hz = 80.0                # low-pass of the position difference
-    hold_damping_nm_s_rad = [4.0, 4.0, 2.0, 2.0, 0.5, 0.3, 0.1]   # safe hold per joint: tau = -D dq
-    hold_timeout_s = 0.5                     # holding this long without a controller command: stop commanding
+    hold_timeout_s = 0.5                     # holding this long without a controller command: disarm (the hold stays)
     stale_limit_s = 0.005                    # a controller answer later than this is not sent; hold instead
     max_joint_speed_scale = 0.8              # guard: this share of the description's joint speed limits
     speed_brake_share = 0.95                 # brake (hold) above this share of the guard's speed, or about to be
@@ -29,15 +39,14 @@ from interfaces.config import check_range as _range
 from interfaces.config import dataclass_from_table
 from interfaces.errors import ConfigError
 
-from .msgs import N_JOINTS, LbrTopics
+from .msgs import FRI_MAJORS, N_JOINTS, LbrTopics, stack_joint_names
 
 WRENCH_SOURCES = ("external_torque", "stack")
-DEFAULT_JOINT_NAMES = tuple(f"lbr_A{i}" for i in range(1, N_JOINTS + 1))
-#: Safe-hold damping per joint [Nm s/rad]. An explicit -D dq at the FRI period is stable only for
-#: D < 2 I / dt with I the joint's inertia: the wrist (A7 with an eraser, about 1e-3 kg m^2 in the
-#: simulator, which has no rotor inertia) allows about 2, so the wrist gets a tenth of that; the real
-#: robot's reflected motor inertia is far larger.
-DEFAULT_HOLD_DAMPING = (4.0, 4.0, 2.0, 2.0, 0.5, 0.3, 0.1)
+BRANCHES = ("rolling", "jazzy", "humble")
+DEFAULT_JOINT_NAMES = stack_joint_names("rolling")
+#: LBRServer.java's JointImpedanceControlMode(200, 200, 200, 200, 200, 200, 200) (lbr-stack/fri ros2-fri-1.15:82,
+#: fri-2.7:92) [Nm/rad].
+APP_STIFFNESS = (200.0,) * N_JOINTS
 
 
 @dataclass(frozen=True)
@@ -49,10 +58,20 @@ class LbrParams:
     torque_command_topic: str = "command/torque"
     wrench_topic: str = "force_torque_broadcaster/wrench"
     joint_states_topic: str = "joint_states"
-    joint_names: tuple[str, ...] = field(default=DEFAULT_JOINT_NAMES)
+    branch: str = "rolling"
+    joint_names: tuple[str, ...] = ()
+    fri_major: int = 1
+    open_loop: bool = True
+    joint_stiffness_nm_rad: tuple[float, ...] = field(default=APP_STIFFNESS)
+    pid_p: float = 0.1
+    steer_share: float = 0.3
+    measured_torque_cutoff_hz: float = 10.0
+    external_torque_cutoff_hz: float = 10.0
+    frozen_after_s: float = 0.05
     wrench_source: str = "external_torque"
+    wrench_force_threshold_n: float = 2.0
+    wrench_torque_threshold_nm: float = 0.5
     velocity_cutoff_hz: float = 80.0
-    hold_damping_nm_s_rad: tuple[float, ...] = DEFAULT_HOLD_DAMPING
     hold_timeout_s: float = 0.5
     stale_limit_s: float = 0.005
     max_joint_speed_scale: float = 0.8
@@ -67,29 +86,43 @@ class LbrParams:
             v = getattr(self, name)
             if not isinstance(v, str) or (name != "namespace" and not v.strip("/")):
                 raise ConfigError(f"[{s}] {name} must be a topic name (string), got {v!r}")
+        if self.branch not in BRANCHES:
+            raise ConfigError(f"[{s}] branch must be one of {BRANCHES}, got {self.branch!r}")
         names = tuple(self.joint_names) if isinstance(self.joint_names, (list, tuple)) else None
+        if names == ():
+            names = stack_joint_names(self.branch, self.namespace.strip("/").split("/")[-1] or "lbr")
         if names is None or len(names) != N_JOINTS or len(set(names)) != N_JOINTS or \
                 not all(isinstance(n, str) and n for n in names):
-            raise ConfigError(f"[{s}] joint_names must be {N_JOINTS} distinct names (A1..A7 order), "
-                              f"got {self.joint_names!r}")
+            raise ConfigError(f"[{s}] joint_names must be {N_JOINTS} distinct names (A1..A7 order) or [] for the "
+                              f"branch's, got {self.joint_names!r}")
         object.__setattr__(self, "joint_names", names)
+        if self.fri_major not in FRI_MAJORS or isinstance(self.fri_major, bool):
+            raise ConfigError(f"[{s}] fri_major must be one of {FRI_MAJORS}, got {self.fri_major!r}")
+        for name in ("open_loop", "arm"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"[{s}] {name} must be true or false, got {getattr(self, name)!r}")
         if self.wrench_source not in WRENCH_SOURCES:
             raise ConfigError(f"[{s}] wrench_source must be one of {WRENCH_SOURCES}, got {self.wrench_source!r}")
+        k = self.joint_stiffness_nm_rad
+        if not isinstance(k, (list, tuple)) or len(k) != N_JOINTS:
+            raise ConfigError(f"[{s}] joint_stiffness_nm_rad must be {N_JOINTS} numbers (A1..A7), got {k!r}")
+        for v in k:
+            _range(s, "joint_stiffness_nm_rad", v, 0.0, 5000.0)
+        object.__setattr__(self, "joint_stiffness_nm_rad", tuple(float(v) for v in k))
+        _range(s, "pid_p", self.pid_p, 1e-3, 1.0)
+        _range(s, "steer_share", self.steer_share, 0.01, 1.0)
+        _range(s, "measured_torque_cutoff_hz", self.measured_torque_cutoff_hz, 0.0, 10_000.0)
+        _range(s, "external_torque_cutoff_hz", self.external_torque_cutoff_hz, 0.0, 10_000.0)
+        _range(s, "frozen_after_s", self.frozen_after_s, 0.005, 10.0)
+        _range(s, "wrench_force_threshold_n", self.wrench_force_threshold_n, 0.0, 1000.0)
+        _range(s, "wrench_torque_threshold_nm", self.wrench_torque_threshold_nm, 0.0, 100.0)
         _range(s, "velocity_cutoff_hz", self.velocity_cutoff_hz, 1.0, 500.0)
-        d = self.hold_damping_nm_s_rad
-        if not isinstance(d, (list, tuple)) or len(d) != N_JOINTS:
-            raise ConfigError(f"[{s}] hold_damping_nm_s_rad must be {N_JOINTS} numbers (A1..A7), got {d!r}")
-        for v in d:
-            _range(s, "hold_damping_nm_s_rad", v, 0.0, 100.0)
-        object.__setattr__(self, "hold_damping_nm_s_rad", tuple(float(v) for v in d))
         _range(s, "hold_timeout_s", self.hold_timeout_s, 0.001, 10.0)
         _range(s, "stale_limit_s", self.stale_limit_s, 0.0005, 1.0)
         _range(s, "max_joint_speed_scale", self.max_joint_speed_scale, 0.01, 1.0)
         _range(s, "speed_brake_share", self.speed_brake_share, 0.0, 1.0)
         _range(s, "tau_rate_nm_s", self.tau_rate_nm_s, 1.0, 100_000.0)
         _range(s, "limit_margin_rad", self.limit_margin_rad, 0.0, 0.5)
-        if not isinstance(self.arm, bool):
-            raise ConfigError(f"[{s}] arm must be true or false, got {self.arm!r}")
 
     @classmethod
     def from_table(cls, table) -> "LbrParams":

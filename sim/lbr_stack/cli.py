@@ -2,7 +2,7 @@
 
 Configuration comes from ``--config FILE`` (TOML: ``[zenoh]``, ``[lbr_peer]``
 and ``[sim]`` for the arm, board, dirt and camera; see
-:mod:`robot.lbr.peer`), then ``LAMPS_*`` environment variables
+:mod:`sim.lbr_stack.params` and :mod:`sim.lbr_stack.peer`), then ``LAMPS_*`` environment variables
 (:mod:`interfaces.config`), then the options below (highest priority).
 A broken config file or an impossible board pose is a one-line error and
 exit code 1 before anything starts; Ctrl-C or SIGTERM stops it cleanly.
@@ -26,10 +26,11 @@ PROG = "lamps lbr-peer"
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=PROG,
-        description="A robot to test the real-robot adapter against: publishes and takes lbr_fri_ros2_stack's CDR "
-                    "messages on the bridge keys (<namespace>/state, <namespace>/command/torque, ...) at the FRI "
-                    "rate, backed by the PyBullet iiwa. Options override the config file, which overrides the "
-                    "defaults.")
+        description="A robot to test the real-robot adapter against: the PyBullet iiwa behind lbr_fri_ros2_stack's "
+                    "CDR messages on the bridge keys (<namespace>/state, <namespace>/command/torque, ...), behaving "
+                    "as the stack's code does (the last command re-applied, the app's joint spring, the PID, "
+                    "open_loop, filtered torques, FRI 1 or 2). Options override the config file, which overrides "
+                    "the defaults.")
     p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh], [lbr_peer] and [sim] tables")
     p.add_argument("--mode", choices=("lockstep", "realtime"),
                    help="lockstep: step once per received torque command (deterministic); "
@@ -43,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def load(a: argparse.Namespace):
     """(ZenohSettings, LbrPeerParams, SimParams) from file, environment and options."""
-    from .peer import LbrPeerParams, sim_params_for_peer
+    from .params import LbrPeerParams
+    from .peer import sim_params_for_peer
 
     cfg = load_config(a.config)
     table = dict(cfg.table("lbr_peer"))
@@ -71,7 +73,10 @@ def main(argv: list[str] | None = None) -> int:
     if a.check:
         t = params.topics
         print(f"ok: keys {t.key(t.state)}, {t.key(t.torque_command)}, {t.key(t.wrench)}, {t.key(t.joint_states)}; "
-              f"mode {params.mode}, sample time {params.sample_time_s * 1e3:g} ms, {sim_params.board.preset} board, "
+              f"mode {params.mode}, sample time {params.sample_time_s * 1e3:g} ms, update rate "
+              f"{params.update_rate_hz:g} Hz, FRI {params.fri_major}, {params.branch} joint names, client command "
+              f"mode {params.client_command_mode}, open_loop {str(params.open_loop).lower()}, "
+              f"{sim_params.board.preset} board, "
               f"{len(core.dirt.stains)} stains, sim keys under {zenoh_settings.keys.prefix}")
         core.close()
         return 0
@@ -90,7 +95,7 @@ def _serve(zenoh_settings, params, sim_params, core) -> int:
         core.close()
         print(f"{PROG}: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
         return 1
-    log = logging.getLogger("robot.lbr.peer")
+    log = logging.getLogger("sim.lbr_stack.peer")
     try:
         peer = LbrPeer(params, sim_params, node, core)
     except Exception:
@@ -109,7 +114,7 @@ def _serve(zenoh_settings, params, sim_params, core) -> int:
         return 1
     finally:
         node.close()
-    log.info("stopped after %d steps, %d watchdog trips", steps, peer.session.watchdog_trips)
+    log.info("stopped after %d steps%s", steps, f"; the stack had exited: {peer.stack_exit}" if peer.stack_exit else "")
     return 0
 
 

@@ -1,0 +1,151 @@
+"""What the adapter undoes of the stack: its torque filter, its PID and the robot's joint spring, a frozen stream.
+
+Pure state on numpy arrays (joints A1..A7, SI units), the stack's code
+cited by file and line (lbr_fri_ros2_stack ``rolling`` 218d723):
+
+* :func:`filter_alpha` and :class:`TorqueUnfilter`: the stack low-passes
+  measured and external torque (state.cpp:18,26, filters.cpp:23-28,
+  ``y = a x + (1 - a) y_prev`` each FRI cycle); from two consecutive
+  states the raw torque is ``x = (y - (1 - a)^n y_prev) / (1 - (1 - a)^n)``
+  for a torque that held over the n cycles between them (n = 1 exactly).
+* :class:`JointSpring`: the robot holds joint impedance at stiffness K
+  (LBRServer.java: 200 Nm/rad) towards the position the stack's PID makes
+  of the message's ``joint_position`` (``c += p (target - q)`` per FRI
+  cycle, filters.cpp:56-62, torque_command.cpp:33-37). The adapter steers
+  that position onto the arm (``target = q + (share / p) (q - c)``: each
+  application moves ``c`` by ``share`` of its distance to ``q``) and takes
+  the rest of the spring, ``K (c_next - q)``, off the overlay, so the
+  controller's torque is what reaches the joints. ``c`` is the state's
+  ``commanded_joint_position`` (FRI 1) or, where the state lacks it (FRI 2),
+  the same PID run on the states the adapter sees.
+* :class:`FreezeWatch`: measured positions that do not change at all while
+  the overlay does are not a robot's (the stack's ``open_loop`` publishes
+  its own command as measured, async_client.cpp:82-85).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def filter_alpha(cutoff_hz: float, sample_time_s: float) -> float:
+    """The stack's smoothing factor (filters.cpp:23-28) for a cutoff [Hz] at a sample time [s]."""
+    c = math.cos(2.0 * math.pi * sample_time_s * cutoff_hz)
+    return c - 1.0 + math.sqrt(max(c * c - 4.0 * c + 3.0, 0.0))
+
+
+class TorqueUnfilter:
+    """The raw torque (n,) [Nm] behind the stack's filtered one, from consecutive states.
+
+    cutoff_hz : the stack's cutoff for this torque; max_cycles : a longer gap between states (FRI cycles)
+    restarts the estimate (the filtered value is passed on until two states are close enough).
+    """
+
+    def __init__(self, cutoff_hz: float, n: int = 7, max_cycles: int = 20) -> None:
+        self.cutoff_hz = cutoff_hz
+        self.max_cycles = max_cycles
+        self.passed_filtered = 0  # states whose torque went on filtered (first, gap)
+        self._y = np.zeros(n)
+        self._t_ns: int | None = None
+        self.x = np.zeros(n)
+
+    def alpha(self, sample_time_s: float) -> float:
+        return filter_alpha(self.cutoff_hz, sample_time_s)
+
+    def update(self, y: np.ndarray, t_ns: int, sample_time_s: float) -> np.ndarray:
+        """The raw torque at robot time ``t_ns`` from the filtered ``y``; :attr:`x` (reused)."""
+        a = self.alpha(sample_time_s)
+        cycles = round((t_ns - self._t_ns) * 1e-9 / sample_time_s) if self._t_ns is not None else 0
+        if a >= 1.0:
+            self.x[:] = y
+        elif 1 <= cycles <= self.max_cycles and a > 1e-9:
+            keep = (1.0 - a) ** cycles
+            np.subtract(y, keep * self._y, out=self.x)
+            self.x /= 1.0 - keep
+        else:
+            self.x[:] = y
+            self.passed_filtered += 1
+        self._y[:] = y
+        self._t_ns = t_ns
+        return self.x
+
+
+class JointSpring:
+    """The robot's joint spring and the stack's PID, as the adapter knows them (module docstring).
+
+    stiffness : (7,) [Nm/rad] the app's joint stiffness; pid_p : the stack's ``pid_p``; share : how much of
+    ``q - c`` one message closes (0 < share <= 1).
+    """
+
+    def __init__(self, stiffness: np.ndarray, pid_p: float, share: float) -> None:
+        self.K = np.asarray(stiffness, float)
+        self.p = pid_p
+        self.share = share
+        self.c: np.ndarray | None = None  # the stack's joint position command, as last known or mirrored
+        self._target: np.ndarray | None = None
+        self._t_ns: int | None = None
+
+    def reset(self, c: np.ndarray, t_ns: int) -> None:
+        """Start from a known stack command ``c`` (7,) [rad] (arming)."""
+        self.c = np.array(c, float)
+        self._target = None
+        self._t_ns = t_ns
+
+    def observe(self, q: np.ndarray, t_ns: int, sample_time_s: float, c_reported: np.ndarray | None) -> None:
+        """A new state: the reported command (FRI 1), or the PID run over the FRI cycles since the last state."""
+        if c_reported is not None:
+            self.c = np.array(c_reported, float)
+        elif self.c is None:
+            self.c = np.array(q, float)
+        elif self._target is not None and self._t_ns is not None:
+            cycles = max(round((t_ns - self._t_ns) * 1e-9 / sample_time_s), 0)
+            for _ in range(min(cycles, 50)):
+                self.c += self.p * (self._target - q)
+        self._t_ns = t_ns
+
+    def command(self, q: np.ndarray, tau_nm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(joint_position target (7,), overlay (7,)) that make the joints see ``tau_nm`` at ``q``."""
+        c = self.c if self.c is not None else q
+        target = q + (self.share / self.p) * (q - c) if self.p > 0 else np.array(q, float)
+        c_next = c + self.share * (q - c)
+        self._target = target
+        return target, tau_nm - self.K * (c_next - q)
+
+    def hold(self, target: np.ndarray) -> None:
+        """A hold (frozen ``target``, zero overlay) went out: the mirror follows it."""
+        self._target = np.array(target, float)
+
+
+class FreezeWatch:
+    """Measured positions bitwise unchanged for ``window_s`` of robot time while the sent overlay changed by more
+    than ``torque_change_nm`` on some joint: a stream that is not the arm's."""
+
+    def __init__(self, window_s: float, torque_change_nm: float = 1.0) -> None:
+        self.window_ns = round(window_s * 1e9)
+        self.torque_change_nm = torque_change_nm
+        self._q: np.ndarray | None = None
+        self._since_ns = 0
+        self._tau_lo: np.ndarray | None = None
+        self._tau_hi: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self._q = None
+
+    def update(self, q: np.ndarray, t_ns: int, tau_sent: np.ndarray) -> str | None:
+        """The reason the stream looks frozen, or None."""
+        if self._q is None or not np.array_equal(q, self._q):
+            self._q = np.array(q, float)
+            self._since_ns = t_ns
+            self._tau_lo = np.array(tau_sent, float)
+            self._tau_hi = np.array(tau_sent, float)
+            return None
+        np.minimum(self._tau_lo, tau_sent, out=self._tau_lo)
+        np.maximum(self._tau_hi, tau_sent, out=self._tau_hi)
+        frozen_ns = t_ns - self._since_ns
+        change = float(np.max(self._tau_hi - self._tau_lo))
+        if frozen_ns >= self.window_ns and change > self.torque_change_nm:
+            return (f"measured joint positions frozen for {frozen_ns / 1e6:.0f} ms under a {change:.1f} Nm overlay "
+                    "change: not encoders (the stack's open_loop: true? set open_loop: false)")
+        return None

@@ -1,0 +1,153 @@
+"""The ``[lbr_peer]`` table: the simulated stack's configuration, with the stack's own defaults.
+
+Each key mirrors a setting of lbr_fri_ros2_stack, of the robot-side
+LBRServer application or of the session; the defaults are the stack's
+(``rolling`` 218d723, ``humble`` cca24ae, lbr-stack/fri ``ros2-fri-1.15``
+0a5e17a and ``fri-2.7`` 8298a4b). A cell that commands torques must change
+some of them, as a user of the real stack must (docs/real-robot.md):
+``client_command_mode = "torque"``, ``open_loop = false``, ``update_rate_hz``
+at the FRI rate. docker-compose.yml's ``lbr-sim`` profile does.
+
+namespace : the stack's robot name (topics ``/<namespace>/...``).
+branch : ``rolling`` | ``jazzy`` | ``humble``: joint names ``<robot>_A1`` .. or ``A1`` ..
+fri_major : 1 | 2: the FRI client SDK the stack was built with (lbr_fri_idl ``fri-1`` | ``fri-2`` LBRState).
+mode : ``lockstep`` | ``realtime``. sample_time_s : the FRI send period the app runs with [s].
+update_rate_hz : the controller manager's rate (lbr_controllers.yaml: 100) [Hz].
+client_command_mode : ``position`` | ``torque`` | ``wrench``: the stack's and the app's (they must agree).
+control_mode : ``joint_impedance`` | ``position`` | ``cartesian_impedance``: the app's robot-side controller.
+open_loop : the stack publishes its own joint position command as measured (lbr_system_config.yaml: true).
+pid_p, pid_i, pid_d, pid_i_max, pid_i_min : the stack's PID on the commanded joint position.
+measured_torque_cutoff_hz, external_torque_cutoff_hz : the stack's low-pass on those torques [Hz].
+joint_stiffness_nm_rad : the app's joint impedance (LBRServer.java: 200 on every joint) [Nm/rad].
+joint_damping_ratio : its damping (not set by the app: the robot's default, 0.7).
+ft_update_rate_hz, ft_damping, ft_force_threshold_n, ft_torque_threshold_nm : the stack's wrench estimate.
+commanding_after_s : robot time at which the operator has started the app (COMMANDING_WAIT) [s].
+commanding_wait_s : how long COMMANDING_WAIT lasts before the overlay is active [s].
+stop_app_after_s : robot time at which the operator stops the app (0: never) [s].
+operation_mode : ``T1`` | ``T2`` | ``AUT`` (reported). joint_states_rate_hz : JointState rate [Hz].
+lockstep_wait_s : lock-step: wall time the robot waits for an answer before it runs on, re-applying the
+last command as the stack does [s]. republish_s : lock-step re-send of an unanswered state [s].
+status_rate_hz : the peer's ServiceStatus rate [Hz].
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from interfaces.config import check_range, dataclass_from_table
+from interfaces.errors import ConfigError
+from robot.lbr.msgs import (FRI_MAJORS, N_JOINTS, ClientCommandMode, ControlMode, LbrTopics, OperationMode,
+                            stack_joint_names)
+
+MODES = ("lockstep", "realtime")
+BRANCHES = ("rolling", "jazzy", "humble")
+OPERATION_MODES = {"T1": OperationMode.TEST_MODE_1, "T2": OperationMode.TEST_MODE_2,
+                   "AUT": OperationMode.AUTOMATIC_MODE}
+COMMAND_MODES = {"position": ClientCommandMode.POSITION, "torque": ClientCommandMode.TORQUE,
+                 "wrench": ClientCommandMode.WRENCH}
+CONTROL_MODES = {"joint_impedance": ControlMode.JOINT_IMP_CONTROL_MODE,
+                 "position": ControlMode.POSITION_CONTROL_MODE,
+                 "cartesian_impedance": ControlMode.CART_IMP_CONTROL_MODE}
+_NAMESPACE = re.compile(r"[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*")
+
+
+@dataclass(frozen=True)
+class LbrPeerParams:
+    """The ``[lbr_peer]`` table (module docstring); the arm, board and camera come from ``[sim]``."""
+
+    namespace: str = "lbr"
+    branch: str = "rolling"
+    fri_major: int = 1
+    mode: str = "lockstep"
+    sample_time_s: float = 0.001
+    update_rate_hz: float = 100.0
+    client_command_mode: str = "position"
+    control_mode: str = "joint_impedance"
+    open_loop: bool = True
+    pid_p: float = 0.1
+    pid_i: float = 0.0
+    pid_d: float = 0.0
+    pid_i_max: float = 0.0
+    pid_i_min: float = 0.0
+    measured_torque_cutoff_hz: float = 10.0
+    external_torque_cutoff_hz: float = 10.0
+    joint_stiffness_nm_rad: float = 200.0
+    joint_damping_ratio: float = 0.7
+    ft_update_rate_hz: float = 100.0
+    ft_damping: float = 0.2
+    ft_force_threshold_n: float = 2.0
+    ft_torque_threshold_nm: float = 0.5
+    commanding_after_s: float = 0.0
+    commanding_wait_s: float = 0.05
+    stop_app_after_s: float = 0.0
+    operation_mode: str = "T1"
+    joint_states_rate_hz: float = 100.0
+    lockstep_wait_s: float = 0.5
+    republish_s: float = 0.05
+    status_rate_hz: float = 2.0
+
+    def __post_init__(self) -> None:
+        s = "lbr_peer"
+        if not isinstance(self.namespace, str) or not _NAMESPACE.fullmatch(self.namespace.strip("/")):
+            raise ConfigError(f"[{s}] namespace must be a ROS name like 'lbr' (letters, digits, '_', "
+                              f"'/'-separated), got {self.namespace!r}")
+        object.__setattr__(self, "namespace", self.namespace.strip("/"))
+        for name, allowed in (("mode", MODES), ("branch", BRANCHES), ("operation_mode", tuple(OPERATION_MODES)),
+                              ("client_command_mode", tuple(COMMAND_MODES)),
+                              ("control_mode", tuple(CONTROL_MODES))):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(f"[{s}] {name} must be one of {allowed}, got {getattr(self, name)!r}")
+        if self.fri_major not in FRI_MAJORS or isinstance(self.fri_major, bool):
+            raise ConfigError(f"[{s}] fri_major must be one of {FRI_MAJORS}, got {self.fri_major!r}")
+        if not isinstance(self.open_loop, bool):
+            raise ConfigError(f"[{s}] open_loop must be true or false, got {self.open_loop!r}")
+        check_range(s, "sample_time_s", self.sample_time_s, 0.001, 0.01)
+        rate = 1.0 / self.sample_time_s
+        check_range(s, "update_rate_hz", self.update_rate_hz, 1.0, 10_000.0)
+        for name in ("pid_p", "pid_i", "pid_d"):
+            check_range(s, name, getattr(self, name), 0.0, 10.0)
+        check_range(s, "pid_i_max", self.pid_i_max, -10.0, 10.0)
+        check_range(s, "pid_i_min", self.pid_i_min, -10.0, self.pid_i_max)
+        for name in ("measured_torque_cutoff_hz", "external_torque_cutoff_hz"):
+            check_range(s, name, getattr(self, name), 0.0, 10_000.0)
+        check_range(s, "joint_stiffness_nm_rad", self.joint_stiffness_nm_rad, 0.0, 5000.0)
+        check_range(s, "joint_damping_ratio", self.joint_damping_ratio, 0.0, 1.0)
+        check_range(s, "ft_update_rate_hz", self.ft_update_rate_hz, 0.1, rate)
+        check_range(s, "ft_damping", self.ft_damping, 0.0, 10.0)
+        check_range(s, "ft_force_threshold_n", self.ft_force_threshold_n, 0.0, 1000.0)
+        check_range(s, "ft_torque_threshold_nm", self.ft_torque_threshold_nm, 0.0, 100.0)
+        check_range(s, "commanding_after_s", self.commanding_after_s, 0.0, 3600.0)
+        check_range(s, "commanding_wait_s", self.commanding_wait_s, 0.0, 60.0)
+        check_range(s, "stop_app_after_s", self.stop_app_after_s, 0.0, 1e6)
+        check_range(s, "joint_states_rate_hz", self.joint_states_rate_hz, 0.1, rate)
+        check_range(s, "lockstep_wait_s", self.lockstep_wait_s, 0.001, 10.0)
+        check_range(s, "republish_s", self.republish_s, 0.001, 10.0)
+        check_range(s, "status_rate_hz", self.status_rate_hz, 0.1, 100.0)
+
+    @property
+    def topics(self) -> LbrTopics:
+        return LbrTopics(self.namespace)
+
+    @property
+    def robot_name(self) -> str:
+        """The prefix of the stack's joint and link names (the last chunk of the namespace)."""
+        return self.namespace.split("/")[-1]
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return stack_joint_names(self.branch, self.robot_name)
+
+    @property
+    def cm_every(self) -> int:
+        """FRI cycles per controller-manager cycle (at least 1: a faster manager re-reads the same state)."""
+        return max(int(round(1.0 / (self.update_rate_hz * self.sample_time_s))), 1)
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> LbrPeerParams:
+        return dataclass_from_table(cls, "lbr_peer", table)
+
+
+assert len(LbrPeerParams().joint_names) == N_JOINTS
