@@ -332,15 +332,15 @@ def _ramp_to(cell: Cell, q_start, v, n: int, tau=None):
 
 
 def _tripped(cell: Cell, state: RobotState, why: str) -> ServiceStatus:
-    """After a trip: the hold (the measured position frozen, zero overlay), sent again for every later state; the
-    status says why."""
+    """After a trip: the hold (the measured position, zero overlay), sent again for every later state; the status
+    says why."""
     _, jp, tau = cell.stack.commands[-1]
     assert jp.tolist() == state.q_rad and not np.any(tau)
     refused, n = cell.port.counts["commands_while_disarmed"], len(cell.stack.commands)
     cell.answer(cell.step(np.array(state.q_rad) + 1e-5), np.ones(7), sent=False)
     wait_for(lambda: len(cell.stack.commands) > n, 5.0, "the hold answering the next state")
     _, jp2, tau2 = cell.stack.commands[n]
-    assert jp2.tolist() == state.q_rad and not np.any(tau2)  # frozen where the hold began
+    assert jp2.tolist() == (np.array(state.q_rad) + 1e-5).tolist() and not np.any(tau2)  # the new state's pose
     st = cell.wait_status(lambda m: m.counters.get("commands_while_disarmed", 0) > refused, "a status after the trip")
     assert "armed=False" in st.detail and f"why='guard: {why}" in st.detail, st.detail
     assert st.counters["guard_trips"] == 1 and st.counters["disarms"] == 1, st.counters
@@ -428,8 +428,8 @@ def test_a_joint_near_the_guard_speed_is_braked_with_damping_before_the_guard_di
         assert braked, "the estimate passed the brake"
         holds = [(s, c) for s, c in braked[1:]]  # from the state after the first over it: the hold
         assert holds
-        for s, (_, jp, sent) in holds:  # zero overlay, the position frozen where the brake began
-            assert not np.any(sent) and jp.tolist() == holds[0][1][1].tolist()
+        for s, (_, jp, sent) in holds:  # zero overlay, the measured position
+            assert not np.any(sent) and jp.tolist() == s.q_rad
         st = cell.wait_status(lambda m: m.counters.get("speed_holds_sent", 0) > 0, "speed holds counted")
         assert st.counters["joint_speed_brakes"] == 1 and "guard_trips" not in st.counters, st.counters
         assert "armed=True" in st.detail, st.detail
@@ -546,10 +546,10 @@ class ControllerThread:
 @pytest.mark.slow
 def test_realtime_holds_a_silent_controller_then_disarms_and_keeps_sending_the_hold():
     """The stack re-applies its last message forever (lbr_torque_command_controller.cpp:42-55): a silent controller
-    gets the hold (the measured pose frozen, zero overlay) after the stale limit, a disarm after the hold
-    timeout, and the same hold in answer to every state from then on, not silence."""
+    gets the hold (the measured pose, zero overlay) after the stale limit, a disarm after the hold timeout, and
+    the hold in answer to every state from then on, not silence."""
     hold_timeout_s = 0.3
-    v = np.full(7, 0.05)  # rad/s: the arm drifts on; the hold must not follow it
+    v = np.full(7, 0.05)  # rad/s: the arm drifts on; each hold is the pose measured
     with Cell({"arm": True, "hold_timeout_s": hold_timeout_s},
               {"stale_limit_s": LbrParams().stale_limit_s}) as cell, StackThread(cell, v) as stack, \
             ControllerThread(cell, np.ones(7)) as ctl:
@@ -564,7 +564,7 @@ def test_realtime_holds_a_silent_controller_then_disarms_and_keeps_sending_the_h
         stack.stop.set()
         final = cell.wait_status(lambda m: m.stamp_ns > st.stamp_ns, "a later status")
     assert "no controller command for" in st.detail and "holding the measured pose" in st.detail, st.detail
-    assert later - n >= 150, f"only {later - n} holds for 200 states after the disarm"
+    assert later - n >= 100, f"only {later - n} holds for 200 states after the disarm"
     commands = cell.stack.commands
     last_torque = max(i for i, c in enumerate(commands) if c[2][0] == 1.0)  # the last answer (or its repeat)
     holds = commands[last_torque + 1:]
@@ -572,12 +572,9 @@ def test_realtime_holds_a_silent_controller_then_disarms_and_keeps_sending_the_h
     before_disarm = [c for c in holds if c[0] <= commands[n - 1][0]]
     span_s = (before_disarm[-1][0] - before_disarm[0][0]) * 1e-9
     assert 0.8 * hold_timeout_s <= span_s <= hold_timeout_s + 0.3, span_s
-    frozen = {tuple(jp) for _, jp, _ in holds}
-    assert len(frozen) <= 2, "one frozen pose while holding, one from the disarm on"
-    assert all(tuple(stack.sent.get(float(jp[0]))) == tuple(jp) for jp in map(np.array, frozen)), "measured poses"
-    assert frozen != {tuple(stack.sent[max(stack.sent)])}, "not the newest pose: frozen, while the arm drifted"
+    assert all(tuple(stack.sent.get(float(jp[0]))) == tuple(jp) for _, jp, _ in holds), "measured poses"
     c = final.counters
-    assert c["holds_sent"] >= 150 and c["disarms"] == 1 and c["stop_holds_sent"] >= 150, c
+    assert c["holds_sent"] >= 150 and c["disarms"] == 1 and c["stop_holds_sent"] >= 100, c
 
 
 # --------------------------------------------------------------------------

@@ -35,10 +35,14 @@ are the configured ones. Every command passes
 as it runs and answers every FRI cycle itself, so the robot's FRI watchdog
 never fires when commands stop (lbr_torque_command_controller.cpp:42-55,
 async_client.cpp:74-93). Holding and disarming therefore send a *hold*:
-``joint_position`` frozen at the measured pose where the hold began and a
-zero overlay, which the robot's own joint impedance holds (and the stack
-keeps re-applying if the adapter dies). A disarmed adapter sends that hold
-in answer to every state for as long as it runs.
+``joint_position`` the measured pose and a zero overlay. The stack's PID
+(``c += p (target - measured)``) then leaves its joint position command
+where it is, and the robot's joint spring-damper (200 Nm/rad) brings the
+arm to rest there. A frozen target would not do: the PID integrates
+towards it, which holds a pad pressed on the board at its force and hunts
+against joint friction. A disarmed adapter sends the hold in answer to
+every state for as long as it runs; if it dies, the stack re-applies the
+last one (the pose where the arm came to rest).
 
 Hold (a late or missing controller answer, ``hold``): the last command
 again while it is younger than ``stale_limit_s`` (one late answer must not
@@ -126,7 +130,6 @@ class LbrPort(RobotPort):
         self._tau_prev: np.ndarray | None = None  # the controller's last torque sent
         self._tau_prev_ns = 0
         self._overlay = np.zeros(7)  # the overlay last sent
-        self._hold_q: np.ndarray | None = None  # the frozen joint position of the hold being sent
         self._has_sent = False
         self._holding_since_ns: int | None = None
         self._last_state_ns: int | None = None
@@ -226,7 +229,6 @@ class LbrPort(RobotPort):
         self._tau_prev = np.array(tau_nm, float)
         self._tau_prev_ns = r.robot_time_ns
         self._holding_since_ns = None
-        self._hold_q = None
         self.counts["commands_sent"] += 1
 
     def hold(self) -> None:
@@ -296,16 +298,16 @@ class LbrPort(RobotPort):
         self._freeze.reset()
         self.armed, self.arm_pending = True, False
         self.disarm_reason = ""  # the status's why= is for not commanding; an old refusal must not show
-        self._tau_prev, self._holding_since_ns, self._hold_q = None, None, None
+        self._tau_prev, self._holding_since_ns = None, None
         self.counts["arms"] += 1
         log.warning("lbr: ARMED (%s): commanding torques", reason or "request")
         return True
 
     def disarm(self, reason: str) -> None:
-        """Stop commanding torques now: the hold (frozen pose, zero overlay) from here on, as long as this runs."""
+        """Stop commanding torques now: the hold (the measured pose, zero overlay) from here on, as long as this
+        runs."""
         if self.armed:
             self.armed = False
-            self._hold_q = None
             self._send_hold()
             self.counts["disarms"] += 1
             log.warning("lbr: disarmed: %s", reason)
@@ -399,13 +401,14 @@ class LbrPort(RobotPort):
         self._has_sent = True
 
     def _send_hold(self) -> None:
-        """The hold: joint_position frozen where this hold began, zero overlay (the robot's impedance holds)."""
+        """The hold: joint_position the measured pose, zero overlay. The stack's PID then leaves its command where
+        it is (its input, target - measured, stays near zero), and the robot's joint spring-damper brings the arm
+        to rest there; a pad pressed on a surface backs off until the spring balances it (no integrator pushes)."""
         if self._state is None:
             return
-        if self._hold_q is None:
-            self._hold_q = np.array(self._state.q_rad, float)
-        self._send(self._hold_q, self._zeros)
-        self.spring.hold(self._hold_q)
+        q = np.array(self._state.q_rad, float)
+        self._send(q, self._zeros)
+        self.spring.hold(q)
 
     def _send_hold_if_stopped(self) -> None:
         """A disarmed adapter that has commanded keeps sending its hold in answer to every state."""

@@ -114,7 +114,7 @@ class JointSpring:
         return target, tau_nm - self.K * (c_next - q)
 
     def hold(self, target: np.ndarray) -> None:
-        """A hold (frozen ``target``, zero overlay) went out: the mirror follows it."""
+        """A hold (``target``, zero overlay) went out: the mirror follows it."""
         self._target = np.array(target, float)
 
 
