@@ -1,7 +1,8 @@
 """``lamps controller``: the LAMPS skill executor and Cartesian impedance controller as a Zenoh service.
 
 Configuration comes from ``--config FILE`` (TOML, ``[zenoh]`` and
-``[controller]`` tables, see :mod:`controller.params`), then ``LAMPS_*``
+``[controller]`` tables, see :mod:`controller.params`; ``[joints]``, the
+arm's rotor inertia and friction, :mod:`interfaces.joint_dynamics`), then ``LAMPS_*``
 environment variables, then the options below (highest priority). A bad
 config, a skill file that does not load, or a rate this machine cannot
 hold is a one-line error and exit code 1 before anything starts; Ctrl-C or
@@ -137,10 +138,11 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_settings, params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
+        from interfaces.joint_dynamics import joint_dynamics_from_config
         from interfaces.robot_model import RobotModel
 
         skill = load_runnable_skill(params.skill)
-        model = RobotModel()
+        model = RobotModel(joints=joint_dynamics_from_config(a.config))  # the [joints] table the sim reads too
         timing = check_rate(params, skill, model)
     except (LampsError, OSError) as exc:
         print(f"lamps controller: error: {exc}", file=sys.stderr)

@@ -1,8 +1,12 @@
 """Kinematics and dynamics of the described arm with Pinocchio (same URDF as the sim).
 
 Used by the controller, by test clients (gravity compensation) and by the sim
-to place the arm at a start pose facing the board. Joint vectors are (7,)
-[rad]; poses are in the world (robot base) frame.
+to place the arm at a start pose facing the board and to drive its joints.
+Joint vectors are (7,) [rad]; poses are in the world (robot base) frame.
+The model carries the joints' rotor inertia in ``model.armature`` (so
+``crba`` and ``computeMinverse`` give M + diag(Ia)) and their friction in
+``model.damping`` (viscous) and ``model.friction`` (Coulomb), from
+:mod:`.joint_dynamics`.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ import pinocchio as pin
 
 from .description import TCP_FRAME, URDF_PATH
 from .errors import InterfaceError
+from .joint_dynamics import JointDynamics
 
 
 class IkError(InterfaceError):
@@ -31,10 +36,18 @@ class JointLimits:
 
 
 class RobotModel:
-    """Pinocchio model and data of the arm; one instance per thread (the data is scratch space)."""
+    """Pinocchio model and data of the arm; one instance per thread (the data is scratch space).
 
-    def __init__(self, urdf_path=URDF_PATH) -> None:
+    joints : rotor inertia and friction per joint (default: the cited iiwa figures of
+    :mod:`.joint_dynamics`); kept as :attr:`joints` for a simulator that should match.
+    """
+
+    def __init__(self, urdf_path=URDF_PATH, joints: JointDynamics | None = None) -> None:
         self.model = pin.buildModelFromUrdf(str(urdf_path))
+        self.joints = joints or JointDynamics()
+        self.model.armature[:] = self.joints.armature_kg_m2
+        self.model.damping[:] = self.joints.viscous_nm_s_rad
+        self.model.friction[:] = self.joints.coulomb_nm
         self.data = self.model.createData()
         self.tcp_id = self.model.getFrameId(TCP_FRAME)
         self.nq = self.model.nq

@@ -1,7 +1,8 @@
 """``lamps sim``: the simulated robot side of the cell as a Zenoh service.
 
 Configuration comes from ``--config FILE`` (TOML, ``[zenoh]`` and ``[sim]``
-tables, see :mod:`sim.params`), then ``LAMPS_*`` environment variables
+tables, see :mod:`sim.params`; ``[joints]``, the drives' rotor inertia and
+friction, :mod:`interfaces.joint_dynamics`), then ``LAMPS_*`` environment variables
 (:mod:`interfaces.config`), then the options below (highest priority).
 A broken config file or an impossible board pose is a one-line error and
 exit code 1 before anything starts; Ctrl-C or SIGTERM stops it cleanly.
@@ -28,7 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="lamps sim",
         description="PyBullet iiwa 14 with an eraser, a whiteboard with dirt and a camera, served over Zenoh. "
                     "Options override the config file, which overrides the defaults.")
-    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh] and [sim] tables")
+    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh], [sim] and [joints] tables")
     p.add_argument("--mode", choices=("lockstep", "realtime"),
                    help="lockstep: step after each answering command (deterministic); realtime: 1 kHz wall clock")
     p.add_argument("--seed", type=int, help="seed of the stains (count, places, shapes)")
@@ -91,6 +92,13 @@ def load(a: argparse.Namespace):
     return zenoh_with_options(cfg.zenoh, a), SimParams.from_table(table)
 
 
+def load_joints(a: argparse.Namespace):
+    """The drives' rotor inertia and friction: the ``[joints]`` table of the file, with environment overrides."""
+    from interfaces.joint_dynamics import joint_dynamics_from_config
+
+    return joint_dynamics_from_config(a.config)
+
+
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
@@ -99,9 +107,11 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_settings, params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
+        from interfaces.robot_model import RobotModel
+
         from .core import SimCore
 
-        core = SimCore(params)
+        core = SimCore(params, RobotModel(joints=load_joints(a)))
     except LampsError as exc:
         print(f"lamps sim: error: {exc}", file=sys.stderr)
         return 1

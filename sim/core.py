@@ -37,6 +37,10 @@ def make_stains(params: SimParams, board: Board):
 class SimCore:
     """Physics, dirt and robot of one cell. Raises :class:`ConfigError` for an impossible set-up.
 
+    ``model`` (default ``RobotModel()``) gives the limits, the start pose and, in
+    ``model.joints``, the rotor inertia and friction the simulated drives get: a controller
+    built on the same model has the simulated arm's inertia.
+
     Attributes
     ----------
     board : Board
@@ -49,6 +53,7 @@ class SimCore:
     def __init__(self, params: SimParams, model: RobotModel | None = None) -> None:
         self.params = params
         model = model or RobotModel()
+        self.joints = model.joints
         self.tau_max = model.limits.tau_max.copy()
         self.dq_max = model.limits.dq_max.copy()
         self.board = board_from_params(params.board)
@@ -71,13 +76,13 @@ class SimCore:
                 raise ConfigError(f"[sim.camera] {exc}") from None
         self.client = pb.connect(pb.DIRECT)
         try:
-            self.world = build_world(self.client, self.board, params.contact, self.q_start, params.dt_s,
-                                     params.joint_damping_nm_s_rad)
+            self.world = build_world(self.client, self.board, params.contact, self.q_start, params.dt_s)
             self._check_start_clear()
         except Exception:
             pb.disconnect(self.client)
             raise
-        self.robot = SimRobot(self.world, self.tau_max, self.board.normal_world, params.gravity_compensated)
+        self.robot = SimRobot(self.world, self.tau_max, self.board.normal_world, params.gravity_compensated,
+                              model.joints, params.dt_s)
         self.steps = 0
         self._cos_tilt = math.cos(math.radians(params.dirt.max_tilt_deg))
         self._half_pad = (PAD_SIZE_M[0] / 2, PAD_SIZE_M[1] / 2)

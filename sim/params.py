@@ -212,11 +212,12 @@ class SimParams:
     speed_brake_share : the robot side brakes while a joint moves faster than
     this share of its speed limit, as a robot's safety controller does (0: off).
     gravity_compensated : add gravity torques like the real iiwa's own
-    controller does (declared in RobotState.capabilities).
-    joint_damping_nm_s_rad : viscous joint friction. start_q_rad : start
-    joint positions, or None for an automatic pose facing the board centre
-    ``start_standoff_m`` off its surface. max_steps : stop after this many
-    steps (0 = run until stopped).
+    controller does (declared in RobotState.capabilities). start_q_rad :
+    start joint positions, or None for an automatic pose facing the board
+    centre ``start_standoff_m`` off its surface. max_steps : stop after
+    this many steps (0 = run until stopped). The joints' rotor inertia and
+    friction are not here: the ``[joints]`` table sets them for the sim and
+    the controller alike (:mod:`interfaces.joint_dynamics`).
     """
 
     mode: str = "lockstep"
@@ -225,7 +226,6 @@ class SimParams:
     stale_limit_s: float = 0.02
     speed_brake_share: float = 0.95
     gravity_compensated: bool = False
-    joint_damping_nm_s_rad: float = 0.2
     start_q_rad: tuple[float, ...] | None = None
     start_standoff_m: float = 0.08
     truth_rate_hz: float = 10.0
@@ -249,7 +249,6 @@ class SimParams:
         for name in ("gravity_compensated", "lockstep_camera_sync"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"[{s}] {name} must be true or false, got {getattr(self, name)!r}")
-        _range(s, "joint_damping_nm_s_rad", self.joint_damping_nm_s_rad, 0.0, 50.0)
         if self.start_q_rad is not None:
             object.__setattr__(self, "start_q_rad", _vector(s, "start_q_rad", self.start_q_rad, 7))
         _range(s, "start_standoff_m", self.start_standoff_m, 0.01, 0.5)
@@ -266,6 +265,9 @@ class SimParams:
     def from_table(cls, table: Mapping[str, Any]) -> "SimParams":
         """The ``[sim]`` table (with its sub-tables) as parameters."""
         table = dict(table)
+        if "joint_damping_nm_s_rad" in table:
+            raise ConfigError("[sim] joint_damping_nm_s_rad: joint friction is set per joint in the [joints] table "
+                              "(viscous_nm_s_rad, coulomb_nm), which the controller's model reads too")
         subs = {"board": BoardParams, "contact": ContactParams, "dirt": DirtParams, "camera": CameraParams}
         parts = {name: _from_table(kind, f"sim.{name}", table.pop(name, {})) for name, kind in subs.items()}
         return _from_table(cls, "sim", table, **parts)

@@ -2,7 +2,9 @@
 
 :class:`SimRobot` is the sim's hardware: ``write`` torques (or ``brake``),
 ``step`` the physics, ``read`` joint state, applied torques and the
-eraser's contact with the board. Readouts land in one preallocated
+eraser's contact with the board. The written torques drive joints with
+rotor inertia and friction (:mod:`.drive`, figures in
+:mod:`interfaces.joint_dynamics`). Readouts land in one preallocated
 :class:`Readout`, so a step allocates little.
 """
 
@@ -13,6 +15,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet as pb
 
+from interfaces.joint_dynamics import JointDynamics
+
+from .drive import drive_torque_into
 from .world import World
 
 
@@ -47,21 +52,38 @@ class SimRobot:
     tau_max : (7,) joint torque limits [Nm]; the brakes hold up to these.
     board_normal : (3,) outward normal of the board (pressing force is along -normal).
     gravity_compensated : add gravity torques to every command, like the real iiwa.
+    joints : rotor inertia and friction of the drives (default: the cited iiwa figures); the
+        controller's :class:`~interfaces.robot_model.RobotModel` should carry the same.
+    dt_s : physics step [s] (default: the client's).
     """
 
     def __init__(self, world: World, tau_max: np.ndarray, board_normal: np.ndarray,
-                 gravity_compensated: bool = False) -> None:
+                 gravity_compensated: bool = False, joints: JointDynamics | None = None,
+                 dt_s: float | None = None) -> None:
         self.w = world
         self.c = world.client
         self.tau_max = np.asarray(tau_max, float)
         self.normal = np.asarray(board_normal, float)
         self.gravity_compensated = gravity_compensated
+        self.joints = joints or JointDynamics()
+        self._rigid = self.joints.is_rigid
+        self.dt_s = float(dt_s if dt_s is not None
+                          else pb.getPhysicsEngineParameters(physicsClientId=self.c)["fixedTimeStep"])
         self.braked = False
         self.out = Readout()
         self._joints = list(world.joints)
-        self._zeros = [0.0] * len(self._joints)
-        self._tau_cmd = np.zeros(len(self._joints))
+        n = len(self._joints)
+        self._zeros = [0.0] * n
+        self._tau_cmd = np.zeros(n)
+        self._tau_pb = np.zeros(n)
+        self._armature = np.array(self.joints.armature_kg_m2)
+        self._fv = np.array(self.joints.viscous_nm_s_rad)
+        self._fc = np.array(self.joints.coulomb_nm)
+        self._L = np.zeros((n, n))
+        self._a = np.zeros(n)
         self.read()
+        if not self._rigid:
+            self._drive_torque()  # compiles (or loads) the kernel now, not in the first step
 
     def write(self, tau_nm: np.ndarray) -> None:
         """Torques [Nm] (7,) for the next step (already validated and clipped); releases the brakes."""
@@ -73,8 +95,24 @@ class SimRobot:
         if self.gravity_compensated:
             tau = tau + self.gravity()
         np.clip(tau, -self.tau_max, self.tau_max, out=self._tau_cmd)
-        pb.setJointMotorControlArray(self.w.robot, self._joints, pb.TORQUE_CONTROL, forces=self._tau_cmd.tolist(),
+        applied = self._tau_cmd if self._rigid else self._drive_torque()
+        pb.setJointMotorControlArray(self.w.robot, self._joints, pb.TORQUE_CONTROL, forces=applied.tolist(),
                                      physicsClientId=self.c)
+
+    def _drive_torque(self) -> np.ndarray:
+        """The torques PyBullet must apply so the arm moves as one with armature and friction (:mod:`.drive`)."""
+        o, robot, c = self.out, self.w.robot, self.c
+        q, dq = o.q.tolist(), o.dq.tolist()
+        M = np.array(pb.calculateMassMatrix(robot, q, physicsClientId=c))
+        h_hat = np.array(pb.calculateInverseDynamics(robot, q, dq, self._zeros, physicsClientId=c))
+        if o.wrench.any():  # the contact of the last step stands for this one's: h_hat = C dq + g - J^T f
+            # the TCP link's inertial frame is its link frame, about which the wrench is taken
+            lin, ang = pb.calculateJacobian(robot, self.w.tcp_link, [0.0, 0.0, 0.0], q, self._zeros, self._zeros,
+                                            physicsClientId=c)
+            h_hat -= np.array(lin + ang).T @ o.wrench
+        ok = drive_torque_into(self._tau_cmd, o.dq, self._fv, self._fc, self.joints.coulomb_velocity_rad_s, M, h_hat,
+                               self._armature, self.dt_s, self._tau_pb, self._L, self._a)
+        return self._tau_pb if ok else self._tau_cmd  # (M + Ia is positive definite for any arm PyBullet loads)
 
     def brake(self) -> None:
         """Engage the brakes: every joint held at zero speed with up to its torque limit."""

@@ -60,8 +60,12 @@ def _board_face_mesh(board: Board) -> dict:
 
 
 def build_world(client: int, board: Board, contact: ContactParams, q_start: np.ndarray,
-                dt_s: float = 1e-3, joint_damping: float = 0.2, visual: bool = False) -> World:
-    """Load robot and board into ``client``; joints at ``q_start`` (7,) [rad], motors off (torque control)."""
+                dt_s: float = 1e-3, visual: bool = False) -> World:
+    """Load robot and board into ``client``; joints at ``q_start`` (7,) [rad], motors off (torque control).
+
+    The joints get no damping of PyBullet's own: rotor inertia and friction act in the torque path
+    (:mod:`.drive`), where they share one model with the controller.
+    """
     pb.resetSimulation(physicsClientId=client)
     pb.setGravity(0, 0, -GRAVITY_M_S2, physicsClientId=client)
     pb.setTimeStep(dt_s, physicsClientId=client)
@@ -72,7 +76,7 @@ def build_world(client: int, board: Board, contact: ContactParams, q_start: np.n
     eraser, tcp = _link_index(client, robot, ERASER_LINK), _link_index(client, robot, TCP_FRAME)
     for j, q in zip(joints, q_start):
         pb.resetJointState(robot, j, float(q), 0.0, physicsClientId=client)
-        pb.changeDynamics(robot, j, linearDamping=0.0, angularDamping=0.0, jointDamping=joint_damping,
+        pb.changeDynamics(robot, j, linearDamping=0.0, angularDamping=0.0, jointDamping=0.0,
                           physicsClientId=client)
     # Disable the default velocity motors: joints are torque controlled.
     pb.setJointMotorControlArray(robot, joints, pb.VELOCITY_CONTROL, forces=[0.0] * len(joints),

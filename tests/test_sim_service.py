@@ -124,7 +124,10 @@ def test_pressing_and_sliding_wipes_the_stain_under_the_pad_and_leaves_the_next_
         states = run_lockstep(sim, 4000, client)
         final = wait_for(truth.take, 5.0, "sim truth")
     forces = np.array([np.array(s.wrench_world[:3]) @ board.normal_world for s in states])
-    sliding = forces[1500:]
+    # the client only damps its approach (and no friction compensation): the pad lands after 2-3 s
+    touched = int(np.argmax(forces > 1.0))
+    assert 0 < touched < 3200, f"the pad touched the board at step {touched}"
+    sliding = forces[touched + 300:]
     assert 6.0 < sliding.mean() < 14.0, f"mean normal force {sliding.mean():.1f} N (10 N pressed)"
     assert final.seq == 4000 and final.stain_ids == [0, 1]
     assert final.remaining[0] < 0.2, final.remaining

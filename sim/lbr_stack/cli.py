@@ -31,7 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "as the stack's code does (the last command re-applied, the app's joint spring, the PID, "
                     "open_loop, filtered torques, FRI 1 or 2). Options override the config file, which overrides "
                     "the defaults.")
-    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh], [lbr_peer] and [sim] tables")
+    p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh], [lbr_peer], [sim] and [joints] tables")
     p.add_argument("--mode", choices=("lockstep", "realtime"),
                    help="lockstep: step once per received torque command (deterministic); "
                         "realtime: the FRI period on the wall clock, newest command held")
@@ -64,9 +64,11 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_settings, params, sim_params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
+        from interfaces.joint_dynamics import joint_dynamics_from_config
+        from interfaces.robot_model import RobotModel
         from sim.core import SimCore
 
-        core = SimCore(sim_params)
+        core = SimCore(sim_params, RobotModel(joints=joint_dynamics_from_config(a.config)))
     except LampsError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 1

@@ -243,7 +243,7 @@ class LbrPeer:
         self.node = node
         self.core = core or SimCore(sim_params)
         self.port = SimPort(sim_params, node, self.core, substeps_for_peer(sim_params, params))
-        self.model = RobotModel()
+        self.model = RobotModel(joints=self.core.joints)  # the simulated drives' rotor inertia in M
         lim = self.model.limits
         self.stack = StackClient(params, lim.q_min, lim.q_max, lim.dq_max)
         self.session = RobotSession(params)
