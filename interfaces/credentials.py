@@ -38,6 +38,17 @@ DICTIONARY = "credentials.txt"
 BRIDGE_CONFIG = "zenoh-bridge.json5"
 #: Where the bridge's container finds the dictionary (compose mounts ./secrets there).
 BRIDGE_DICTIONARY = "/secrets/credentials.txt"
+#: zenoh-plugin-ros2dds settings (its DEFAULT_CONFIG.json5, 09d68c0): only the lbr stack's topics the adapter
+#: uses cross the bridge; the 1 kHz state goes first and unbatched (``pub_priorities`` ``1:express``, which the
+#: plugin applies to the ROS -> Zenoh direction only: the adapter's own publisher sets the command's), and
+#: a congested route drops a state rather than blocking the stack's writer (``reliable_routes_blocking``).
+BRIDGE_ROS2DDS = {
+    "allow": {"publishers": ["/lbr/state", "/lbr/joint_states", "/lbr/force_torque_broadcaster/wrench"],
+              "subscribers": ["/lbr/command/torque"], "service_servers": [], "service_clients": [],
+              "action_servers": [], "action_clients": []},
+    "pub_priorities": ["/lbr/state=1:express"],
+    "reliable_routes_blocking": False,
+}
 
 
 def password_file(directory: Path, role: str) -> Path:
@@ -69,7 +80,8 @@ def _write_bridge_config(directory: Path, if_missing: bool = False) -> None:
         return
     word = password_file(directory, "robot").read_text(encoding="utf-8").strip()
     config = {"transport": {"auth": {"usrpwd": {"user": "robot", "password": word,
-                                               "dictionary_file": BRIDGE_DICTIONARY}}}}
+                                               "dictionary_file": BRIDGE_DICTIONARY}}},
+              "plugins": {"ros2dds": BRIDGE_ROS2DDS}}
     write_text_atomic(path, json.dumps(config, indent=2) + "\n", mode=0o600)
 
 

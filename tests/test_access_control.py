@@ -183,6 +183,9 @@ def test_the_bridge_config_lets_the_authenticated_adapter_connect_and_an_unauthe
     ep = f"tcp/127.0.0.1:{free_port()}"
     cfg = json.loads((creds / BRIDGE_CONFIG).read_text())
     assert cfg["transport"]["auth"]["usrpwd"]["user"] == "robot"
+    ros2dds = cfg["plugins"]["ros2dds"]  # only the stack's topics cross; the state express and first
+    assert ros2dds["pub_priorities"] == ["/lbr/state=1:express"] and ros2dds["reliable_routes_blocking"] is False
+    assert ros2dds["allow"]["subscribers"] == ["/lbr/command/torque"] and "/lbr/state" in ros2dds["allow"]["publishers"]
     cfg["transport"]["auth"]["usrpwd"]["dictionary_file"] = str(creds / DICTIONARY)
     local = creds / "bridge-local.json5"
     local.write_text(json.dumps(cfg))
