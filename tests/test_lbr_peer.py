@@ -52,6 +52,8 @@ def test_the_example_config_shows_the_defaults():
         ("position", True, 100.0, 0.1, 1, "rolling")
     assert (p.measured_torque_cutoff_hz, p.external_torque_cutoff_hz, p.ft_force_threshold_n) == (10.0, 10.0, 2.0)
     assert p.cm_every == 10 and LbrPeerParams(update_rate_hz=500.0, sample_time_s=0.002).cm_every == 1
+    humble = LbrPeerParams(branch="humble")  # humble's lbr_controllers.yaml: 200 Hz; its wrench every cycle
+    assert (humble.update_rate_hz, humble.ft_update_rate_hz, p.ft_update_rate_hz) == (200.0, 200.0, 100.0)
 
 
 @pytest.mark.parametrize("table, match", [
@@ -174,7 +176,7 @@ def test_check_names_the_keys_and_a_bad_config_is_one_line(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "arm1/state" in out and "arm1/command/torque" in out and "mode realtime" in out
     bad = tmp_path / "bad.toml"
-    bad.write_text("[lbr_peer]\nupdate_rate_hz = 0.0\n")
+    bad.write_text("[lbr_peer]\nupdate_rate_hz = -1.0\n")
     assert peer_cli.main(["--config", str(bad), "--check"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "[lbr_peer] update_rate_hz" in err

@@ -12,7 +12,8 @@ namespace : the stack's robot name (topics ``/<namespace>/...``).
 branch : ``rolling`` | ``jazzy`` | ``humble``: joint names ``<robot>_A1`` .. or ``A1`` ..
 fri_major : 1 | 2: the FRI client SDK the stack was built with (lbr_fri_idl ``fri-1`` | ``fri-2`` LBRState).
 mode : ``lockstep`` | ``realtime``. sample_time_s : the FRI send period the app runs with [s].
-update_rate_hz : the controller manager's rate (lbr_controllers.yaml: 100) [Hz].
+update_rate_hz : the controller manager's rate; 0: the branch's default (lbr_controllers.yaml:5: 100 on rolling,
+200 on humble) [Hz].
 client_command_mode : ``position`` | ``torque`` | ``wrench``: the stack's and the app's (they must agree).
 control_mode : ``joint_impedance`` | ``position`` | ``cartesian_impedance``: the app's robot-side controller.
 open_loop : the stack publishes its own joint position command as measured (lbr_system_config.yaml: true).
@@ -20,7 +21,8 @@ pid_p, pid_i, pid_d, pid_i_max, pid_i_min : the stack's PID on the commanded joi
 measured_torque_cutoff_hz, external_torque_cutoff_hz : the stack's low-pass on those torques [Hz].
 joint_stiffness_nm_rad : the app's joint impedance (LBRServer.java: 200 on every joint) [Nm/rad].
 joint_damping_ratio : its damping (not set by the app: the robot's default, 0.7).
-ft_update_rate_hz, ft_damping, ft_force_threshold_n, ft_torque_threshold_nm : the stack's wrench estimate.
+ft_update_rate_hz, ft_damping, ft_force_threshold_n, ft_torque_threshold_nm : the stack's wrench estimate
+(rate 0: the branch's, a 100 Hz thread on rolling, every controller-manager cycle on humble).
 commanding_after_s : robot time at which the operator has started the app (COMMANDING_WAIT) [s].
 commanding_wait_s : how long COMMANDING_WAIT lasts before the overlay is active [s].
 stop_app_after_s : robot time at which the operator stops the app (0: never) [s].
@@ -51,6 +53,8 @@ COMMAND_MODES = {"position": ClientCommandMode.POSITION, "torque": ClientCommand
 CONTROL_MODES = {"joint_impedance": ControlMode.JOINT_IMP_CONTROL_MODE,
                  "position": ControlMode.POSITION_CONTROL_MODE,
                  "cartesian_impedance": ControlMode.CART_IMP_CONTROL_MODE}
+#: lbr_ros2_control/config/lbr_controllers.yaml:5 of each branch [Hz].
+BRANCH_UPDATE_RATE_HZ = {"rolling": 100.0, "jazzy": 100.0, "humble": 200.0}
 _NAMESPACE = re.compile(r"[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*")
 
 
@@ -63,7 +67,7 @@ class LbrPeerParams:
     fri_major: int = 1
     mode: str = "lockstep"
     sample_time_s: float = 0.001
-    update_rate_hz: float = 100.0
+    update_rate_hz: float = 0.0
     client_command_mode: str = "position"
     control_mode: str = "joint_impedance"
     open_loop: bool = True
@@ -76,7 +80,7 @@ class LbrPeerParams:
     external_torque_cutoff_hz: float = 10.0
     joint_stiffness_nm_rad: float = 200.0
     joint_damping_ratio: float = 0.7
-    ft_update_rate_hz: float = 100.0
+    ft_update_rate_hz: float = 0.0
     ft_damping: float = 0.2
     ft_force_threshold_n: float = 2.0
     ft_torque_threshold_nm: float = 0.5
@@ -106,7 +110,15 @@ class LbrPeerParams:
             raise ConfigError(f"[{s}] open_loop must be true or false, got {self.open_loop!r}")
         check_range(s, "sample_time_s", self.sample_time_s, 0.001, 0.01)
         rate = 1.0 / self.sample_time_s
-        check_range(s, "update_rate_hz", self.update_rate_hz, 1.0, 10_000.0)
+        check_range(s, "update_rate_hz", self.update_rate_hz, 0.0, 10_000.0)
+        if self.update_rate_hz == 0:
+            object.__setattr__(self, "update_rate_hz", BRANCH_UPDATE_RATE_HZ[self.branch])
+        elif self.update_rate_hz < 1.0:
+            raise ConfigError(f"[{s}] update_rate_hz must be 0 (the branch's) or at least 1 Hz, got "
+                              f"{self.update_rate_hz!r}")
+        if self.ft_update_rate_hz == 0:
+            object.__setattr__(self, "ft_update_rate_hz",
+                               min(self.update_rate_hz if self.branch == "humble" else 100.0, rate))
         for name in ("pid_p", "pid_i", "pid_d"):
             check_range(s, name, getattr(self, name), 0.0, 10.0)
         check_range(s, "pid_i_max", self.pid_i_max, -10.0, 10.0)
