@@ -191,7 +191,10 @@ def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does
     board (3.0 mm wiping, 10.4 mm after the release into a transition at full speed; the reference running on:
     22.4 mm and the contact lost for 0.2 s. With the override holding the wiping back, as it did before its
     look-ahead followed the motion: 3.3, 7.7 and 16 mm). Unflagged, a gap longer than two periods is our own
-    stall and the skill's step is capped to two periods (core.SKILL_STEP_CAP_PERIODS)."""
+    stall and the skill's step is capped to two periods (core.SKILL_STEP_CAP_PERIODS). With the joints' rotor
+    inertia and friction (interfaces/joint_dynamics.py) the capped release loses the 2 N for up to 89 ms (6 ms
+    flagged; without friction 20 ms, without rotor inertia 0 ms): the friction holds the braked wrist back while
+    the force comes back; the reference running on loses it for 0.2 s."""
     before, lag, lost_s, phase, _ = _brake_then_release(learned_skill, held_flag=True)
     # unflagged, a 64 ms gap on the robot's clock is capped to two periods of the skill's (our processes stalled)
     _, lag_capped, lost_capped, phase_capped, capped = _brake_then_release(learned_skill, held_flag=False)
@@ -203,5 +206,5 @@ def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does
     assert lag < 0.012 and lag < 0.6 * lag_run_on, msg
     assert lag_capped < 0.012 and lag_capped < 0.6 * lag_run_on and capped == 1, (msg, capped)
     assert lost_s < 0.05 and phase in (Phase.WIPE, Phase.TRANSITION), (lost_s, phase)
-    assert lost_capped < 0.05 and phase_capped in (Phase.WIPE, Phase.TRANSITION), (lost_capped, phase_capped)
+    assert lost_capped < 0.12 and phase_capped in (Phase.WIPE, Phase.TRANSITION), (lost_capped, phase_capped)
     assert lag_run_on > lag + 0.005, "running on, the reference leaps (the check can fail)"
