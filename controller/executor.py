@@ -66,6 +66,10 @@ _ACTIVE = (Phase.APPROACH, Phase.WIPE, Phase.TRANSITION)
 _HALTED = (Phase.FAULT, Phase.ESTOP)
 #: The pad counts as off the board this far above it [m] (see :attr:`SkillExecutor.pad_down`).
 LIFTED_M = 0.005
+#: Below this measured contact force [N] the pad counts as released (:attr:`SkillExecutor.pad_down`).
+RELEASED_N = 0.5
+#: Lifts from the measured height in a row before the executor only holds (a wrong normal would press on).
+MAX_FORCED_LIFTS = 3
 #: The retreat's in-plane stop is planned to at least this share of the planner's jerk bound (see
 #: :meth:`_begin_retreat`).
 RETREAT_MIN_JERK_SHARE = 0.25
@@ -133,11 +137,17 @@ class SkillExecutor:
         self._plan: Plan | None = None
         self._resume_after_lift = False
         self._last_h = float("inf")  # the pad above the board at the last step [m]
+        self._last_force_n = 0.0  # the measured push of the board on the pad at the last step [N]
+        self._last_tool: ToolState | None = None
+        self._forced_lifts = 0  # lifts from the measured height in a row (a pad pressing while held in the air)
         self._initialised = False
         self._estop: str | None = None
         self._restart_pending = False
         self._surveyed = False
         self._survey_until_s = float("inf")
+        self._jump: BoardPose | None = None  # a board pose that jumped from the adopted one, not adopted (yet)
+        self._jump_since_s = 0.0
+        self.board_note = ""  # why a board report was not taken (status)
         self._on_stage = {Stage.FLY: self._on_fly, Stage.DESCEND: self._on_descend, Stage.CREEP: self._on_creep,
                           Stage.PRESS: self._on_press, Stage.CHAIN: self._on_chain, Stage.UNPRESS: self._on_unpress,
                           Stage.BRAKE: self._on_brake, Stage.LIFT: self._on_lift, Stage.HOLD: self._on_hold,
@@ -148,11 +158,26 @@ class SkillExecutor:
 
     # ------------------------------------------------------------------ inputs
     def set_stains(self, board: BoardPose, stains: list[StainState]) -> None:
-        """A fresh view of the board and its stains (kappa per stain)."""
+        """A fresh view of the board and its stains (kappa per stain).
+
+        A board out of the arm's reach is refused; one that jumps from the adopted pose (beyond
+        ``board_jump_m`` / ``board_jump_rad``) is not adopted and its stains are not taken (:meth:`_board_jumped`).
+        """
+        why = self._out_of_reach(board)
+        if why is not None:
+            self.counters["boards_out_of_reach"] += 1
+            self.board_note = why
+            return
         if self.board is None:
             self.board = board
+        elif self._jump_of(board) is not None:
+            self._board_jumped(board)
+            return
         elif not board.close_to(self.board):
             self._board_moved(board)
+        if self._jump is not None:
+            self.counters["board_jumps_back"] += 1  # the adopted pose is reported again: the jump is over
+            self._jump, self.board_note = None, ""
         self.stains_fresh = True
         if self.book.update(stains, self.clock_s) and self.phase in _ACTIVE:
             self.counters["stain_set_changes"] += 1
@@ -161,6 +186,51 @@ class SkillExecutor:
             self.counters["anchor_moves"] += 1
             if moved == ChainResult.ERROR:
                 self._chain_failed()
+
+    def _out_of_reach(self, board: BoardPose) -> str | None:
+        centre = board.to_world(np.array([0.5 * board.size_m[0], 0.5 * board.size_m[1], 0.0]))
+        d = float(np.linalg.norm(centre))
+        if d > self.p.board_reach_m:
+            return f"a board centred {d:.2f} m from the robot base is beyond its reach ({self.p.board_reach_m} m)"
+        return None
+
+    def _jump_of(self, board: BoardPose) -> tuple[float, float] | None:
+        """(distance [m], turn [rad]) of ``board`` from the adopted one when beyond the jump limits, else None."""
+        d = float(np.linalg.norm(board.origin_m - self.board.origin_m))
+        c = float(np.clip((np.trace(board.R @ self.board.R.T) - 1.0) / 2.0, -1.0, 1.0))
+        a = float(np.arccos(c))
+        return (d, a) if d > self.p.board_jump_m or a > self.p.board_jump_rad else None
+
+    def _board_jumped(self, board: BoardPose) -> None:
+        """A board pose far from the adopted one: never adopted at once. Pressing or on the way, lift off first
+        (PAUSED); then hold until the adopted pose is reported again, or the new one has held still for
+        ``board_confirm_s`` with the pad in the air: adopted then, and surveyed before any approach."""
+        d, a = self._jump_of(board)
+        if self._jump is None or not board.close_to(self._jump, 0.01, 0.02):
+            self.counters["board_jumps"] += 1
+            self._jump, self._jump_since_s = board, self.clock_s
+            self.board_note = (f"the board pose jumped {d:.2f} m / {np.degrees(a):.1f} deg: not adopted without a "
+                               "new survey")
+            log.warning("%s", self.board_note)
+        if self.phase in _ACTIVE:
+            self._stop(Phase.PAUSED, self.board_note + "; lifting off")
+
+    def _confirm_jump(self) -> bool:
+        """In the air, holding: adopt a jumped board that has held still long enough; True while one is pending."""
+        if self._jump is None:
+            return False
+        if self.clock_s - self._jump_since_s < self.p.board_confirm_s or self._sp.contact:
+            if self.phase not in _HALTED and self.phase != Phase.PAUSED:
+                self._set_phase(Phase.PAUSED, self.board_note)
+            return True
+        self.motion.adopt_board(self.board, self._jump)
+        self.board, self._jump, self.board_note = self._jump, None, ""
+        self.counters["board_jumps_adopted"] += 1
+        self._surveyed = False  # the new pose is surveyed before any approach
+        log.warning("the board's new pose held still for %.1f s: adopted; surveying it", self.p.board_confirm_s)
+        if self.phase == Phase.PAUSED and self.stains_fresh and self._estop is None:
+            self._survey_or_start()
+        return self._jump is not None
 
     def _board_moved(self, board: BoardPose) -> None:
         """Adopt a moved board while holding in the air (the held pose stays where it is in the world)."""
@@ -213,8 +283,10 @@ class SkillExecutor:
 
     @property
     def pad_down(self) -> bool:
-        """The pad presses, or moves less than ``LIFTED_M`` above the board: stopping now would leave it there."""
-        return self._initialised and (self._sp.contact or (self._stage != Stage.HOLD and self._last_h < LIFTED_M))
+        """The pad presses (by the setpoint, or by the measured force: ``RELEASED_N`` or more, whatever the board
+        model says), or moves less than ``LIFTED_M`` above the board: stopping now would leave it there."""
+        return self._initialised and (self._sp.contact or self._last_force_n >= RELEASED_N
+                                      or (self._stage != Stage.HOLD and self._last_h < LIFTED_M))
 
     def restart(self) -> None:
         """The robot came back after a loss: start over from WAIT_PEERS at the measured pose on the next step (and
@@ -241,6 +313,8 @@ class SkillExecutor:
         self.ticks += 1
         self.clock_s += dt_s
         self._last_h = tool.h
+        self._last_force_n = tool.force_n
+        self._last_tool = tool
         if not self._initialised or self._restart_pending:
             self._start_over(tool)
         if self.phase == Phase.WAIT_PEERS:
@@ -334,6 +408,13 @@ class SkillExecutor:
 
     def _on_hold(self, dt: float, tool: ToolState) -> None:
         self.motion.rest_in_plane()
+        if tool.force_n >= RELEASED_N and not self._sp.contact and self.phase not in _ACTIVE:
+            self._lift_from_measured(tool)  # a stop must end with the pad off the board
+            return
+        if tool.force_n < RELEASED_N:
+            self._forced_lifts = 0
+        if self._confirm_jump():
+            return
         if self.phase == Phase.PAUSED and self.stains_fresh:
             self._resume()
         elif self.phase == Phase.DONE and self.stains_fresh and self.book.open_stains(self.clock_s):
@@ -445,6 +526,8 @@ class SkillExecutor:
         self._resume_after_lift = False
         self.current_mp = "lift"
         if self._stage == Stage.HOLD and not self._sp.contact:
+            if self._last_force_n >= RELEASED_N and self._last_tool is not None:
+                self._lift_from_measured(self._last_tool)
             return
         self.motion.stop_turn(self.p.estop_ramp_s if fast else self.p.stop_s)
         self._brake(self.p.estop_ramp_s if fast else self.p.stop_s,
@@ -452,6 +535,18 @@ class SkillExecutor:
 
     def _brake(self, duration_s: float, force_ramp_s: float) -> None:
         self._stage = Stage.UNPRESS if self.motion.brake(duration_s, force_ramp_s) else Stage.BRAKE
+
+    def _lift_from_measured(self, tool: ToolState) -> None:
+        """Held in the air by the board model but pressing in fact (the model is off): lift ``standoff_m`` above the
+        measured height, at most ``MAX_FORCED_LIFTS`` times in a row."""
+        if self._forced_lifts >= MAX_FORCED_LIFTS:
+            return
+        self._forced_lifts += 1
+        self.counters["lifts_from_a_pressing_hold"] += 1
+        log.warning("the pad presses %.1f N while held in the air: lifting %.0f mm from where it is", tool.force_n,
+                    1e3 * self.p.standoff_m)
+        self.motion.lift(tool, from_measured=True)
+        self._stage = Stage.LIFT
 
     def _begin_lift(self, tool: ToolState) -> None:
         self.motion.lift(tool)

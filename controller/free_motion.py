@@ -151,13 +151,15 @@ class FreeMotion:
                                   min(duration_s, AIR_BRAKE_S))
         return False
 
-    def lift(self, tool: ToolState) -> None:
-        """Out of contact (from the measured height) or on from the air, up to ``standoff_m``."""
+    def lift(self, tool: ToolState, from_measured: bool = False) -> None:
+        """Out of contact (from the measured height) or on from the air, up to ``standoff_m``; ``from_measured``:
+        ``standoff_m`` above the measured height (a pad found pressing while the board model says it is in the
+        air: the model is off, so the lift goes by what is measured)."""
         sp = self.setpoint
-        h0 = tool.h if sp.contact else sp.h
-        v0 = 0.0 if sp.contact else sp.v_h
+        h0 = tool.h if sp.contact or from_measured else sp.h
+        v0 = 0.0 if sp.contact or from_measured else sp.v_h
         sp.contact, sp.force_n = False, 0.0
-        goal_h = max(self.p.standoff_m, h0)
+        goal_h = h0 + self.p.standoff_m if from_measured else max(self.p.standoff_m, h0)
         T = max(abs(goal_h - h0) / self.p.descend_speed_m_s, 0.3)
         self._mover = vertical_move(sp.xy, h0, goal_h, T, v0)
         sp.h, sp.v_h, sp.a_h = h0, v0, 0.0

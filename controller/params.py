@@ -198,7 +198,13 @@ class ExecutorParams:
     (``look_clearance_m`` beyond its edge on the robot base's side, where the
     arm hides none of it from the camera) and waits this long for perception
     to report every stain before the skill is planned [s] (0: plan over the
-    stains reported at the start, wherever the arm is).
+    stains reported at the start, wherever the arm is); board_jump_m,
+    board_jump_rad : a reported board pose this far from the adopted one [m]
+    or turned this much [rad] is a jump: never adopted at once (lift off
+    first when pressing), only after it has held still for
+    ``board_confirm_s`` [s] with the pad in the air, and then surveyed
+    before any approach; board_reach_m : a board whose centre is farther
+    from the robot base is refused [m].
     """
 
     standoff_m: float = 0.04
@@ -218,6 +224,10 @@ class ExecutorParams:
     estop_ramp_s: float = 0.1
     contact_search_m: float = 0.03
     survey_s: float = 1.0
+    board_jump_m: float = 0.05
+    board_jump_rad: float = 0.1
+    board_confirm_s: float = 2.0
+    board_reach_m: float = 1.3
 
     def __post_init__(self) -> None:
         s = "controller.executor"
@@ -239,6 +249,10 @@ class ExecutorParams:
         _range(s, "contact_search_m", self.contact_search_m, 0.005, 0.2)
         _range(s, "creep_height_m", self.creep_height_m, 0.001, self.standoff_m)
         _range(s, "survey_s", self.survey_s, 0.0, 60.0)
+        _range(s, "board_jump_m", self.board_jump_m, 0.005, 10.0)
+        _range(s, "board_jump_rad", self.board_jump_rad, 0.02, 3.2)
+        _range(s, "board_confirm_s", self.board_confirm_s, 0.0, 600.0)
+        _range(s, "board_reach_m", self.board_reach_m, 0.3, 10.0)
 
 
 @dataclass(frozen=True)
