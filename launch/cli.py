@@ -321,8 +321,19 @@ def _stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_star
 
 
 def _show_report(out: Path, why: str) -> int:
-    """Print the summary of the report the recorder wrote (or build it from the recording); 0 if cleaned."""
-    if not (out / "report.json").is_file() and not (out / "recording.mcap").is_file():
+    """Print the summary of the report the recorder wrote, or build it from the recording, recovering a recording
+    the recorder left unfinished (it died: ``recording.mcap.partial``); 0 if cleaned."""
+    from .record import RECORDING, recover_recording
+
+    final, partial = out / RECORDING, out / (RECORDING + ".partial")
+    if not (out / "report.json").is_file() and not final.is_file() and partial.is_file():
+        try:
+            n = recover_recording(partial, final)
+        except OSError as exc:
+            print(f"lamps up: the recorder did not finish and {partial} cannot be recovered: {exc}", file=sys.stderr)
+            return 1
+        _print(f"the recorder did not finish: recovered {n} messages from {partial.name}")
+    if not (out / "report.json").is_file() and not final.is_file():
         print(f"lamps up: no recording in {out}: {why}", file=sys.stderr)
         return 1
     from .report import summary_lines, write_report

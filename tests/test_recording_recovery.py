@@ -112,3 +112,19 @@ def test_a_recorder_started_again_continues_the_recording_and_loses_nothing(tmp_
     (_, marker), = got[RESUMED_TOPIC]
     assert marker["carried_messages"] == expected and marker["earlier_finished"] is finished
     assert marker["last_earlier_ns"] == 1_000_000 + expected - 1
+
+
+def test_lamps_up_recovers_the_recording_of_a_dead_recorder_and_writes_the_report(tmp_path, capsys):
+    """The recorder killed: lamps up still leaves report.json, from the recording recovered up to the crash."""
+    from launch.cli import _show_report
+
+    out = tmp_path / "run"
+    out.mkdir()
+    sink = McapSink(out / "recording.mcap.partial")
+    for i in range(3000):  # past one chunk: a whole chunk reaches the disk
+        sink.write("lamps/x/perception/status", _status(i), 1_000_000 + i)
+    sink.flush()  # what reached the disk before the crash; no footer
+    assert not (out / "recording.mcap").exists()
+    rc = _show_report(out, "the recorder died")
+    assert (out / "report.json").is_file() and (out / "recording.mcap").is_file()
+    assert "recovered" in capsys.readouterr().out and rc == 1  # nothing was cleaned in this recording
