@@ -120,6 +120,10 @@ class SimPort(RobotPort):
         if self.camera is not None:
             self.camera.close()
             self.camera = None
+        try:  # the last truth, where the arm was left: what a stopped cell pressed when it stopped
+            self._publish_truth()
+        except Exception as exc:  # the session may already be closing; the truth is a courtesy here
+            log.debug("no final truth: %s", exc)
         self.core.close()
 
     # -- ground truth ------------------------------------------------------------------------------
