@@ -129,9 +129,6 @@ def _jpeg_of(frame: CameraFrame) -> bytes | None:
 TRACE_PLOT_EVERY = 10
 TRACE_PLOT_SCHEMA_NAME = "lamps.ControllerTraceRow"
 
-_RAW_SCHEMA = {"type": "object", "title": "lamps.Raw", "required": ["error", "data"],
-               "properties": {"error": {"type": "string"}, "data": {"type": "string", "contentEncoding": "base64"}}}
-
 
 def _camera_info_schema() -> dict:
     schema = json_schema_of(CameraFrame, drop=("data",))
@@ -279,6 +276,10 @@ class McapSink:
         for topic, name, schema, data, t in json_records(key, msg, t_ns):
             self.write_json(topic, name, data, t, None if name in self._schemas else schema())
 
+    def bytes_written(self) -> int:
+        """Bytes in the file so far (whole chunks; the open chunk is not counted until it is written out)."""
+        return self._f.tell()
+
     def flush(self, every_s: float = 0.0) -> None:
         """Push the complete chunks written so far to the disk (at most every ``every_s``)."""
         now = time.monotonic()
@@ -295,14 +296,47 @@ class McapSink:
             self._f.close()
 
 
+#: At most this many rejected samples per key are described on ``<key>/rejected`` (their size and the error,
+#: never their bytes); the rest are only counted.
+REJECTED_NOTES_PER_KEY = 100
+#: The recording's disk budget [bytes] by default (``LAMPS_RECORD_MAX_MB`` sets it in MiB).
+DEFAULT_BUDGET_BYTES = 4 * 1024**3
+_REJECTED_SCHEMA = {"type": "object", "title": "lamps.Rejected",
+                    "properties": {"error": {"type": "string"}, "bytes": {"type": "integer"},
+                                   "rejected_so_far": {"type": "integer"}}}
+_BUDGET_SCHEMA = {"type": "object", "title": "lamps.RecorderBudget",
+                  "properties": {"budget_bytes": {"type": "integer"}, "message": {"type": "string"}}}
+
+
+def budget_from_env() -> int:
+    """The disk budget [bytes] from ``LAMPS_RECORD_MAX_MB`` (MiB, > 0), or :data:`DEFAULT_BUDGET_BYTES`."""
+    raw = os.environ.get("LAMPS_RECORD_MAX_MB", "").strip()
+    if not raw:
+        return DEFAULT_BUDGET_BYTES
+    try:
+        mb = float(raw)
+    except ValueError:
+        mb = -1.0
+    if not mb > 0:
+        raise ValueError(f"LAMPS_RECORD_MAX_MB must be a positive number of MiB, got {raw!r}")
+    return int(mb * 1024**2)
+
+
 class Recorder:
     """Subscribes ``<prefix>/**`` on ``session`` and writes ``out_dir/recording.mcap`` until :meth:`close`.
 
-    counters : samples recorded per key suffix, plus ``undecodable`` and
-    ``unknown_key`` (recorded as raw base64 on their own channel).
+    It records what the cell's receivers accept: a sample that does not decode as its key's message (bad
+    bytes, over the key's size bound, an unknown key) is counted (``undecodable``, ``unknown_key``) and only
+    described, its size and the error, on ``<key>/rejected``, for its first :data:`REJECTED_NOTES_PER_KEY`
+    samples. ``budget_bytes`` bounds the file: past it nothing more is recorded (counted as
+    ``dropped_over_budget``), one ``recorder/budget`` message and an error in the log say so, and the file is
+    finished as usual.
     """
 
-    def __init__(self, session, keys: Keys, out_dir: Path, max_queue: int = 200_000) -> None:
+    def __init__(self, session, keys: Keys, out_dir: Path, max_queue: int = 200_000,
+                 budget_bytes: int = DEFAULT_BUDGET_BYTES) -> None:
+        self.budget_bytes = budget_bytes
+        self.over_budget = False
         self.keys = keys
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
@@ -313,6 +347,7 @@ class Recorder:
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._decoders: dict[str, Decoder | None] = {}
+        self._rejected: Counter[str] = Counter()
         from .scene import SceneBuilder
 
         self.scene = SceneBuilder(keys)
@@ -359,6 +394,9 @@ class Recorder:
     def _drain(self) -> None:
         while self._queue:
             key, data, t_ns = self._queue.popleft()
+            if self.over_budget or self._check_budget(t_ns):
+                self.counters["dropped_over_budget"] += 1
+                continue
             dec = self._decoder(key)
             short = key[len(self.keys.prefix) + 1:]
             try:
@@ -371,9 +409,23 @@ class Recorder:
                     self.sink.write_typed(topic, scene_msg, t_ns)
             except MessageDecodeError as exc:
                 self.counters["undecodable" if dec is not None else "unknown_key"] += 1
-                self.sink.write_json(key + "/raw", "lamps.Raw", {"error": str(exc),
-                                                                 "data": base64.b64encode(data).decode("ascii")}, t_ns,
-                                     _RAW_SCHEMA)
+                self._rejected[key] += 1
+                if self._rejected[key] <= REJECTED_NOTES_PER_KEY:
+                    self.sink.write_json(key + "/rejected", "lamps.Rejected",
+                                         {"error": str(exc)[:200], "bytes": len(data),
+                                          "rejected_so_far": self._rejected[key]}, t_ns, _REJECTED_SCHEMA)
+
+    def _check_budget(self, t_ns: int) -> bool:
+        """True (and said once) when the file has reached its disk budget."""
+        if self.sink.bytes_written() < self.budget_bytes:
+            return False
+        self.over_budget = True
+        message = (f"the recording reached its disk budget of {self.budget_bytes / 1024**2:.0f} MiB "
+                   "(LAMPS_RECORD_MAX_MB): nothing more is recorded in this run")
+        log.error("%s", message)
+        self.sink.write_json("recorder/budget", "lamps.RecorderBudget",
+                             {"budget_bytes": self.budget_bytes, "message": message}, t_ns, _BUDGET_SCHEMA)
+        return True
 
     def _run(self) -> None:
         while not self._stop.is_set():

@@ -42,15 +42,20 @@ def record_main(argv: list[str] | None = None) -> int:
     if a.max_duration is not None and not (a.max_duration > 0 and a.max_duration < float("inf")):
         p.error(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
     from .background_node import open_background_node
-    from .record import Recorder
+    from .record import Recorder, budget_from_env
 
+    try:
+        budget = budget_from_env()
+    except ValueError as exc:
+        print(f"lamps record: error: {exc}", file=sys.stderr)
+        return 1
     opened = open_background_node("lamps record", "recorder", a)
     if opened is None:
         return 1
     node, settings, stop = opened
     out = Path(a.out)
     try:
-        rec = Recorder(node.session, settings.keys, out)
+        rec = Recorder(node.session, settings.keys, out, budget_bytes=budget)
         ended = _wait_for_end(node, stop, a.max_duration) if a.until == "done" else (stop.wait(), None)[1]
         path = rec.close()
     finally:
