@@ -92,8 +92,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"lamps robot: error: {exc}", file=sys.stderr)
         return 1
     if a.check:
-        where = f"topics under /{lbr_params.namespace}" if a.backend == "lbr" else "a mock arm"
+        where = (f"topics under /{lbr_params.namespace}, {lbr_params.branch} joint names, FRI "
+                 f"{lbr_params.fri_major} states" if a.backend == "lbr" else "a mock arm")
         print(f"ok: backend {a.backend} ({where}), mode {server_params.mode}, keys under {zenoh_settings.keys.prefix}")
+        if a.backend == "lbr" and lbr_params.open_loop:
+            print("note: [lbr] open_loop = true (the stack's default): arming will be refused until the stack runs "
+                  "with open_loop: false and [lbr] open_loop = false (docs/real-robot.md)")
         return 0
     from interfaces.session import ServiceNode
 

@@ -80,3 +80,17 @@ def test_the_torque_command_text_is_the_one_we_encode():
     fields = [line.strip() for line in text.splitlines() if line.strip() and not line.startswith("#")]
     ours = [line.strip() for line in msgs.LBR_TORQUE_COMMAND_MSG.splitlines() if line.strip()]
     assert fields == ours
+
+
+def test_robot_check_names_the_layout_and_warns_of_open_loop(capsys, monkeypatch):
+    from robot import cli
+
+    assert cli.main(["--check", "--backend", "lbr"]) == 0
+    out = capsys.readouterr().out
+    assert "rolling joint names, FRI 1 states" in out and "arming will be refused" in out
+    monkeypatch.setenv("LAMPS__LBR__OPEN_LOOP", "false")
+    monkeypatch.setenv("LAMPS__LBR__FRI_MAJOR", "2")
+    monkeypatch.setenv("LAMPS__LBR__BRANCH", "humble")
+    assert cli.main(["--check", "--backend", "lbr"]) == 0
+    out = capsys.readouterr().out
+    assert "humble joint names, FRI 2 states" in out and "arming will be refused" not in out
