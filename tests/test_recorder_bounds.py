@@ -32,18 +32,23 @@ def test_rejected_samples_are_counted_and_described_never_stored(tmp_path):
         rec = Recorder(rec_node.session, rec_node.keys, tmp_path)
         key = rec_node.keys.perception_stains
         wait_subscribed(pub.session, key)
-        big = b"\x00" * 3_000_000  # over the Stains size bound: no receiver parses it
-        n = REJECTED_NOTES_PER_KEY + 50
-        for _ in range(n):
-            pub.session.put(key, big)
+        big = b"\x00" * 300_000  # over the Stains size bound (256 KiB): no receiver parses it
+        want = REJECTED_NOTES_PER_KEY + 50
+        end = time.monotonic() + 60.0
+        while rec.counters["undecodable"] < want and time.monotonic() < end:  # a congested put may be dropped
+            for _ in range(20):
+                pub.session.put(key, big)
+            time.sleep(0.05)
         pub.publish(pub.keys.perception_status, ServiceStatus(service="p", seq=1, stamp_ns=1))
-        wait_for(lambda: rec.counters["undecodable"] >= n and rec.counters.get("perception/status", 0) >= 1, 30.0,
-                 "the flood counted")
+        wait_for(lambda: rec.counters["undecodable"] >= want and rec.counters.get("perception/status", 0) >= 1,
+                 30.0, "the flood counted")
+        received = rec.counters["undecodable"]
         path = rec.close()
     finally:
         pub.close()
         rec_node.close()
-    assert path.stat().st_size < 1_000_000, path.stat().st_size  # 450 MB arrived; none of it is stored
+    assert path.stat().st_size < 200_000, path.stat().st_size  # 45 MB and more arrived; none of it is stored
+    assert received >= REJECTED_NOTES_PER_KEY + 50
     msgs = read_recording(path)
     notes = msgs[key + "/rejected"]
     assert len(notes) == REJECTED_NOTES_PER_KEY and notes[0][1]["bytes"] == len(big)
