@@ -122,6 +122,8 @@ def test_disarming_mid_wipe_stops_the_arm_and_it_stays_stopped(tmp_path, learned
             wait_for(lambda: states[-1].stamp_ns > t_disarm + 6500 * MS, 120.0, "6.5 s of robot time after it",
                      0.05)
             force = wait_sample(truth, timeout_s=5.0, what="sim/truth").contact_force_n
+            later = wait_sample(robot, lambda m: m.counters.get("stop_holds_sent", 0) > 0, 10.0,
+                                "the hold sent for the states after the disarm")
             sub.undeclare()
         with lock:
             after = [s for s in states if s.stamp_ns >= t_disarm]
@@ -136,7 +138,7 @@ def test_disarming_mid_wipe_stops_the_arm_and_it_stays_stopped(tmp_path, learned
         assert drift.max() < 2e-3, f"drift over 5 s: {drift}"
         assert np.abs(q[-1] - q_disarm).max() < 0.05, q[-1] - q_disarm
         assert force < 2.0, force
-        assert st.counters.get("stop_holds_sent", 0) > 0, st.counters
+        assert "disarm request" in st.detail and later.counters["stop_holds_sent"] > 0, later.counters
     finally:
         procs.stop()
 
