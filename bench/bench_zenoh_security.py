@@ -11,11 +11,11 @@ warm-up, for each way a cell can join:
 
 - baseline ``plain TCP``: no authentication (how the benchmarks of the
   real-time cell run);
-- ``user-password``: Zenoh's authentication only (the link's handshake);
-- ``user-password + ACL``: the cell's access-control list checked on every
-  received sample (the default under compose and ``lamps up``);
-- ``mutual TLS``, ``mutual TLS + user-password + ACL``: cells that span
-  machines.
+- ``mutual TLS``: each side's role identity from ``lamps credentials``
+  (the links encrypted and both ends checked);
+- ``mutual TLS + access list``: the cell's default-deny list checked on
+  every sample sent and received (the default under compose and
+  ``lamps up``).
 
 The table gives p50, p99 and mean [us] and each p50 and mean over the baseline's,
 measured in the same run, the cases interleaved in rounds (the machine's
@@ -36,32 +36,26 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from interfaces.certificates import CA_CERT, cert_paths, make_certificates  # noqa: E402
 from interfaces.config import ZenohSettings  # noqa: E402
-from interfaces.credentials import DICTIONARY, make_credentials, password_file  # noqa: E402
+from interfaces.credentials import identity_folder, make_credentials  # noqa: E402
 from interfaces.messages import Capabilities, RobotState, TorqueCommand  # noqa: E402
 from interfaces.session import ServiceNode  # noqa: E402
 from launch.compose import free_port  # noqa: E402
 
 
-def _settings(role: str, rid: str, port: int, listen: bool, secrets: Path, auth: bool, acl: bool,
-              tls: bool) -> ZenohSettings:
+def _settings(role: str, rid: str, port: int, listen: bool, secrets: Path, acl: bool, tls: bool) -> ZenohSettings:
     ep = f"{'tls' if tls else 'tcp'}/127.0.0.1:{port}"
     kw: dict = {"listen": (ep,)} if listen else {"connect": (ep,)}
-    if auth:
-        kw.update(user=role, password_file=str(password_file(secrets, role)),
-                  credentials_file=str(secrets / DICTIONARY), access_control=acl)
     if tls:
-        cert, key = cert_paths(secrets, role)
-        kw.update(tls_ca=str(secrets / CA_CERT), tls_certificate=str(cert), tls_private_key=str(key))
+        kw.update(identity=str(identity_folder(secrets, role)), access_control=acl)
     return ZenohSettings(robot_id=rid, **kw)
 
 
-def _round_trips(n: int, warmup: int, secrets: Path, auth: bool, acl: bool, tls: bool) -> np.ndarray:
+def _round_trips(n: int, warmup: int, secrets: Path, acl: bool, tls: bool) -> np.ndarray:
     port = free_port()
     rid = f"b{port}"
-    robot = ServiceNode("robot", _settings("robot", rid, port, True, secrets, auth, acl, tls)).__enter__()
-    ctl = ServiceNode("controller", _settings("controller", rid, port, False, secrets, auth, acl, tls)).__enter__()
+    robot = ServiceNode("robot", _settings("robot", rid, port, True, secrets, acl, tls)).__enter__()
+    ctl = ServiceNode("controller", _settings("controller", rid, port, False, secrets, acl, tls)).__enter__()
     try:
         keys = robot.keys
         answers = robot.inbox(keys.robot_command, TorqueCommand, maxlen=16)
@@ -93,9 +87,8 @@ def _round_trips(n: int, warmup: int, secrets: Path, auth: bool, acl: bool, tls:
 
 #: Rounds over all cases; each measures N / ROUNDS exchanges per case with a fresh pair of sessions.
 ROUNDS = 5
-CASES = (("plain TCP (baseline)", False, False, False), ("user-password", True, False, False),
-         ("user-password + ACL", True, True, False), ("mutual TLS", False, False, True),
-         ("mutual TLS + user-password + ACL", True, True, True))
+CASES = (("plain TCP (baseline)", False, False), ("mutual TLS", False, True),
+         ("mutual TLS + access list (the default)", True, True))
 
 
 def main() -> None:
@@ -107,13 +100,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         secrets = Path(tmp)
         make_credentials(secrets)
-        make_certificates(secrets, names=("robot", "controller"))
         samples: dict[str, list[np.ndarray]] = {c[0]: [] for c in CASES}
         rng = np.random.default_rng(0)
         for _ in range(ROUNDS):  # the cases interleaved, in a new order each round: drift hits them alike
             for k in rng.permutation(len(CASES)):
-                name, auth, acl, tls = CASES[k]
-                samples[name].append(_round_trips(n // ROUNDS, warmup, secrets, auth, acl, tls))
+                name, acl, tls = CASES[k]
+                samples[name].append(_round_trips(n // ROUNDS, warmup, secrets, acl, tls))
         rows = []
         for name, parts in samples.items():
             rt = np.concatenate(parts)

@@ -1,29 +1,42 @@
-"""Who may write what in a cell: the roles, and Zenoh's access control built from them.
+"""Who may write what in a cell: the roles, and Zenoh's access control built from them (default deny).
 
-Every service authenticates as one role (Zenoh user-password
-authentication: its user name is the role) and every service applies the
-same access-control list on what it receives (ingress: the subject is
-the sending peer), so a message from a peer that may not write a key is
-dropped at the first hop, wherever that peer connects. (Egress rules would
-be checked against the *receiving* peer: a deny on robot/state for
-everyone but the robot would stop the robot sending its states.) Keys not listed below are open
-to any authenticated peer; unauthenticated peers cannot join at all.
+Every service joins as one role. By default the role is the common name of
+its own TLS certificate (mutual TLS, :mod:`interfaces.credentials`: each
+service holds only its own private key, and both ends of every link prove
+who they are, whichever side opened it); a cell that still uses Zenoh's
+user-password authentication is named by user name instead, which identifies
+only the side that *connected* (the listener's user is unknown on a link a
+service opened itself, so such a link is denied everything).
 
-======================  =========================================
-key (under the prefix)  who may put it
-======================  =========================================
-robot/command           controller
-robot/state, robot/     robot (the sim, a robot adapter, the lbr
-status, sim/**,         peer's simulated side)
-camera/**
-robot/arm               operator
-perception/**           perception
-controller/status,      controller
+Every service applies the same list on what it receives (ingress: the
+subject is the sending peer) and on what it sends (egress: the subject is
+the receiving peer). **Default deny**: a peer that is not one of the roles
+(no certificate, another CA's, an unknown common name, a link whose remote
+is unauthenticated) may do nothing; a role may put only on the keys below
+and may declare subscribers, liveliness tokens and queries under the cell's
+prefix (and the ROS bridge's namespace), so every role can read the whole
+cell. Zenoh drops a refused message at the first hop, before the
+application, and logs it (``RUST_LOG=zenoh::net::routing::interceptor=debug``).
+
+================================  =====================================
+key (under the prefix)            who may put it
+================================  =====================================
+robot/command                     controller
+robot/state, robot/status,        robot (the sim, a robot adapter, the
+sim/**, camera/**                 lbr peer's simulated side)
+<ros namespace>/** (not under     robot, bridge (zenoh-bridge-ros2dds
+the prefix, default ``lbr``)      next to lbr_fri_ros2_stack)
+robot/arm                         operator
+perception/**                     perception
+controller/status,                controller
 controller/trace
-controller/estop        every role (engaging is never refused)
-controller/estop/       operator
-release
-======================  =========================================
+controller/estop                  every role but the bridge (engaging
+                                  is never refused)
+controller/estop/release          operator
+================================  =====================================
+
+The recorder writes nothing the cell acts on (its identity can engage the
+e-stop and read); the bridge only the ROS topics it carries.
 """
 
 from __future__ import annotations
@@ -32,11 +45,18 @@ from typing import Any
 
 from .keys import Keys
 
-#: The identities of a cell. ``operator``: a person's tools (``lamps up``, e-stop release, arming).
-ROLES = ("controller", "robot", "perception", "recorder", "operator")
+#: The identities of a cell. ``operator``: a person's tools (``lamps up``, e-stop release, arming); ``bridge``:
+#: zenoh-bridge-ros2dds on the robot's PC.
+ROLES = ("controller", "robot", "perception", "recorder", "operator", "bridge")
+#: The ROS namespace the bridge publishes under (lbr_fri_ros2_stack's default robot_name).
+DEFAULT_ROS_NAMESPACE = "lbr"
+#: Zenoh message kinds a role may send to and receive from another role (besides the puts of its row).
+_DECLARATIONS = ["declare_subscriber", "declare_queryable", "query", "reply", "liveliness_token",
+                 "declare_liveliness_subscriber", "liveliness_query"]
+_DATA = ["put", "delete"]
 
 
-def writers(keys: Keys) -> dict[str, tuple[str, ...]]:
+def writers(keys: Keys, ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> dict[str, tuple[str, ...]]:
     """Key expression -> the roles that may put on it (the table of the module docstring)."""
     p = keys.prefix
     return {
@@ -45,23 +65,45 @@ def writers(keys: Keys) -> dict[str, tuple[str, ...]]:
         keys.robot_status: ("robot",),
         f"{p}/sim/**": ("robot",),
         f"{p}/camera/**": ("robot",),
+        f"{ros_namespace.strip('/')}/**": ("robot", "bridge"),
         keys.robot_arm: ("operator",),
         f"{p}/perception/**": ("perception",),
         keys.controller_status: ("controller",),
         keys.controller_trace: ("controller",),
+        keys.controller_estop: tuple(r for r in ROLES if r != "bridge"),
         keys.controller_estop_release: ("operator",),
     }
 
 
-def cell_acl(keys: Keys) -> dict[str, Any]:
-    """Zenoh's ``access_control`` section for a cell under ``keys``: default allow, puts denied to all but writers."""
-    rules, policies = [], []
-    subjects = [{"id": role, "usernames": [role]} for role in ROLES]
-    for i, (key, allowed) in enumerate(writers(keys).items()):
-        others = [r for r in ROLES if r not in allowed]
-        rule = f"put-{i}"
-        rules.append({"id": rule, "permission": "deny", "flows": ["ingress"], "messages": ["put", "delete"],
-                      "key_exprs": [key]})
-        policies.append({"id": f"only-{'-'.join(allowed)}-{i}", "rules": [rule], "subjects": others})
-    return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects,
+def may_put(keys: Keys, role: str, key: str, ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> bool:
+    """Whether ``role`` may put on the concrete key ``key`` (what the access list lets through)."""
+    import zenoh
+
+    k = zenoh.KeyExpr(key)
+    return any(role in allowed and zenoh.KeyExpr(expr).intersects(k)
+               for expr, allowed in writers(keys, ros_namespace).items())
+
+
+def cell_acl(keys: Keys, subject: str = "cert_common_names",
+             ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> dict[str, Any]:
+    """Zenoh's ``access_control`` section for a cell under ``keys`` (default deny, see the module docstring).
+
+    subject : how a peer's role is told: ``cert_common_names`` (mutual TLS, the default) or ``usernames``.
+    """
+    if subject not in ("cert_common_names", "usernames"):
+        raise ValueError(f"subject must be cert_common_names or usernames, got {subject!r}")
+    scope = [f"{keys.prefix}/**", f"{ros_namespace.strip('/')}/**"]
+    rules: list[dict[str, Any]] = [
+        {"id": "talk", "permission": "allow", "flows": ["egress", "ingress"], "messages": _DECLARATIONS,
+         "key_exprs": scope},
+        {"id": "deliver", "permission": "allow", "flows": ["egress"], "messages": _DATA, "key_exprs": scope},
+    ]
+    policies = []
+    for role in ROLES:
+        exprs = [k for k, allowed in writers(keys, ros_namespace).items() if role in allowed]
+        rules.append({"id": f"put-{role}", "permission": "allow", "flows": ["ingress"], "messages": _DATA,
+                      "key_exprs": exprs})
+        policies.append({"id": f"as-{role}", "rules": ["talk", "deliver", f"put-{role}"], "subjects": [role]})
+    subjects = [{"id": role, subject: [role]} for role in ROLES]
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}

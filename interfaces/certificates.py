@@ -60,7 +60,7 @@ def cert_paths(directory: Path, name: str) -> tuple[Path, Path]:
     return directory / f"{name}.pem", directory / f"{name}.key"
 
 
-def _write_key_and_cert(cert_path: Path, key_path: Path, key, cert) -> None:
+def write_key_and_cert(cert_path: Path, key_path: Path, key, cert) -> None:
     _, _, serialization, *_ = _crypto()
     key_pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
                                 serialization.NoEncryption())
@@ -81,6 +81,13 @@ def _san(hosts: tuple[str, ...]):
 
 
 def _make_ca(directory: Path, days: int):
+    key, cert = new_ca(days)
+    write_key_and_cert(directory / CA_CERT, directory / CA_KEY, key, cert)
+    return key, cert
+
+
+def new_ca(days: int = DEFAULT_DAYS):
+    """A new self-signed CA: (private key, certificate) objects of ``cryptography``."""
     x509, hashes, _, ec, _, NameOID = _crypto()
     key = ec.generate_private_key(ec.SECP256R1())
     name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "LAMPS cell CA")])
@@ -95,7 +102,6 @@ def _make_ca(directory: Path, days: int):
                            critical=True)
             .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
             .sign(key, hashes.SHA256()))
-    _write_key_and_cert(directory / CA_CERT, directory / CA_KEY, key, cert)
     return key, cert
 
 
@@ -112,6 +118,15 @@ def _load_ca(directory: Path):
 
 
 def _sign(directory: Path, name: str, hosts: tuple[str, ...], days: int, ca_key, ca_cert) -> Path:
+    key, cert = issue(name, hosts, days, ca_key, ca_cert)
+    cert_path, key_path = cert_paths(directory, name)
+    write_key_and_cert(cert_path, key_path, key, cert)
+    return cert_path
+
+
+def issue(name: str, hosts: tuple[str, ...], days: int, ca_key, ca_cert):
+    """A new key and a certificate for it signed by the CA: common name ``name`` (the role access control
+    reads), subject alternative names ``hosts``, server and client use; (private key, certificate)."""
     x509, hashes, _, ec, EKU, NameOID = _crypto()
     key = ec.generate_private_key(ec.SECP256R1())
     now = dt.datetime.now(dt.timezone.utc)
@@ -129,9 +144,7 @@ def _sign(directory: Path, name: str, hosts: tuple[str, ...], days: int, ca_key,
             .add_extension(_san(hosts), critical=False)
             .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
             .sign(ca_key, hashes.SHA256()))
-    cert_path, key_path = cert_paths(directory, name)
-    _write_key_and_cert(cert_path, key_path, key, cert)
-    return cert_path
+    return key, cert
 
 
 def _check_name(name: str) -> None:

@@ -19,17 +19,19 @@ and ``connect`` (lists of endpoints such as ``tcp/127.0.0.1:7447``),
 ``gossip`` (default true: peers learn each other's endpoints from the
 ones they connect to and link directly; false: only the configured links,
 e.g. when a link must pass a particular network path),
-``robot_id``, ``key_prefix`` (default ``lamps/<robot_id>``); authentication and
-access control (:mod:`interfaces.access`): ``user`` (the service's role),
-``password_file`` (its password, one line), ``credentials_file`` (every role's
-``user:password``, to check the peers that connect), ``access_control``
-(true: apply the cell's access-control list; needs a user). Shorthands
+``robot_id``, ``key_prefix`` (default ``lamps/<robot_id>``); identity and
+access control (:mod:`interfaces.access`, :mod:`interfaces.credentials`):
+``identity`` (the service's folder from ``lamps credentials DIR``: its
+role's certificate and key and the cell's CA; mutual TLS, every endpoint
+then ``tls/...``), or ``tls_ca``, ``tls_certificate`` and ``tls_private_key``
+given one by one (all three or none); ``access_control`` (true: apply the
+cell's default-deny access list, subjects the certificates' common names);
+``ros_namespace`` (default ``lbr``: the keys the ROS bridge may put).
+Zenoh's user-password authentication is still there for a router-held
+dictionary: ``user`` (the role), ``password_file``, ``credentials_file``.
+Shorthands ``LAMPS_ZENOH_IDENTITY``, ``LAMPS_ZENOH_ACCESS_CONTROL``,
 ``LAMPS_ZENOH_USER``, ``LAMPS_ZENOH_PASSWORD_FILE``,
-``LAMPS_ZENOH_CREDENTIALS_FILE``, ``LAMPS_ZENOH_ACCESS_CONTROL``; mutual TLS
-(:mod:`interfaces.certificates`): ``tls_ca`` (the cell's CA certificate),
-``tls_certificate`` and ``tls_private_key`` (the service's), all three or
-none; with them every endpoint must be ``tls/...``. Shorthands
-``LAMPS_ZENOH_TLS_CA``, ``LAMPS_ZENOH_TLS_CERTIFICATE``,
+``LAMPS_ZENOH_CREDENTIALS_FILE``, ``LAMPS_ZENOH_TLS_CA``, ``LAMPS_ZENOH_TLS_CERTIFICATE``,
 ``LAMPS_ZENOH_TLS_PRIVATE_KEY``. ``config_file`` (shorthand
 ``LAMPS_ZENOH_CONFIG_FILE``): a Zenoh configuration file (JSON5, Zenoh's own
 format) to start from, for what these settings do not cover (QoS, buffers,
@@ -47,7 +49,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from .access import ROLES
+from .access import DEFAULT_ROS_NAMESPACE, ROLES
 from .errors import ConfigError
 from .keys import DEFAULT_ROBOT_ID, Keys
 
@@ -64,11 +66,18 @@ _SHORTHANDS = {
     "LAMPS_ZENOH_PASSWORD_FILE": ("zenoh", "password_file"),
     "LAMPS_ZENOH_CREDENTIALS_FILE": ("zenoh", "credentials_file"),
     "LAMPS_ZENOH_ACCESS_CONTROL": ("zenoh", "access_control"),
+    "LAMPS_ZENOH_IDENTITY": ("zenoh", "identity"),
     "LAMPS_ZENOH_TLS_CA": ("zenoh", "tls_ca"),
     "LAMPS_ZENOH_TLS_CERTIFICATE": ("zenoh", "tls_certificate"),
     "LAMPS_ZENOH_TLS_PRIVATE_KEY": ("zenoh", "tls_private_key"),
     "LAMPS_ZENOH_CONFIG_FILE": ("zenoh", "config_file"),
 }
+
+
+def _check_ros_namespace(ns: str) -> None:
+    chunks = ns.strip("/").split("/")
+    if not all(c and all(ch.isalnum() or ch == "_" for ch in c) for c in chunks):
+        raise ConfigError(f"[zenoh] ros_namespace must be a ROS namespace like 'lbr' or 'cell1/lbr', got {ns!r}")
 
 
 @dataclass(frozen=True)
@@ -86,17 +95,19 @@ class ZenohSettings:
     password_file: str = ""
     credentials_file: str = ""
     access_control: bool = False
+    identity: str = ""
     tls_ca: str = ""
     tls_certificate: str = ""
     tls_private_key: str = ""
     config_file: str = ""
+    ros_namespace: str = DEFAULT_ROS_NAMESPACE
 
     def __post_init__(self) -> None:
         for name in ("mode", "robot_id", "key_prefix"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
-        for name in ("user", "password_file", "credentials_file", "tls_ca", "tls_certificate", "tls_private_key",
-                     "config_file"):
+        for name in ("user", "password_file", "credentials_file", "identity", "tls_ca", "tls_certificate",
+                     "tls_private_key", "config_file", "ros_namespace"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
         if not isinstance(self.access_control, bool):
@@ -106,8 +117,26 @@ class ZenohSettings:
         if self.user and not (self.password_file and self.credentials_file):
             raise ConfigError("[zenoh] user needs password_file and credentials_file (make them with "
                               "'lamps credentials DIR')")
-        if self.access_control and not self.user:
-            raise ConfigError("[zenoh] access_control needs a user (the service's role) and its credentials")
+        if self.identity:
+            from .credentials import identity_files
+
+            files = [str(p) for p in identity_files(Path(self.identity))]
+            given = (self.tls_ca, self.tls_certificate, self.tls_private_key)
+            if any(given) and list(given) != files:  # a copy of settings made from an identity carries its files
+                raise ConfigError("[zenoh] identity (a folder from 'lamps credentials') or tls_ca, tls_certificate "
+                                  "and tls_private_key, not both")
+            for name, path in zip(("tls_ca", "tls_certificate", "tls_private_key"), files):
+                object.__setattr__(self, name, path)
+        if self.access_control and not (self.user or self.tls_ca):
+            raise ConfigError("[zenoh] access_control needs an identity (LAMPS_ZENOH_IDENTITY: the service's folder "
+                              "from 'lamps credentials DIR') or a user and its password")
+        if self.access_control and self.user and not self.tls_ca and self.mode != "router":
+            raise ConfigError("[zenoh] access_control with a user-password identity works on a router only: Zenoh's "
+                              "user-password authentication names the side that connects, so a peer cannot tell who "
+                              "it connected to (and would deny it everything); give the service an identity folder "
+                              "(mutual TLS: 'lamps credentials DIR')")
+        if self.ros_namespace:
+            _check_ros_namespace(self.ros_namespace)
         if self.mode not in ZENOH_MODES:
             raise ConfigError(f"[zenoh] mode must be one of {ZENOH_MODES}, got {self.mode!r}")
         for name in ("listen", "connect"):

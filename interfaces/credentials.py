@@ -1,43 +1,61 @@
-"""``lamps credentials DIR``: one password per role of the cell and the dictionary that checks them.
+"""``lamps credentials DIR``: one identity per role of the cell, each in a folder of its own (mutual TLS).
 
-Writes ``DIR/<role>.password`` (a random 256-bit secret, one line) for
-every role of :data:`interfaces.access.ROLES` and ``DIR/credentials.txt``
-(``role:password`` per line: what each service checks connecting peers
-against), each atomically with mode 0600, and ``DIR/zenoh-bridge.json5``:
-a Zenoh configuration for zenoh-bridge-ros2dds (``-c``) that authenticates
-it as the robot side (an authenticated adapter cannot open a link to an
-unauthenticated bridge), its dictionary at the containers' ``/secrets``. Existing files are never
-overwritten: a cell keeps its credentials until they are deleted on
-purpose (``--if-missing``: a complete set already there is kept, exit 0;
-compose's one-shot ``credentials`` service runs it so).
- A service then runs with ``LAMPS_ZENOH_USER=<role>``,
-``LAMPS_ZENOH_PASSWORD_FILE=DIR/<role>.password``,
-``LAMPS_ZENOH_CREDENTIALS_FILE=DIR/credentials.txt`` and
-``LAMPS_ZENOH_ACCESS_CONTROL=true``.
+Writes, each file atomically (private keys mode 0600):
 
-Zenoh's user-password authentication is a challenge-response: a service
-that checks others needs their passwords, so this keeps a cell on one
-trusted host (or one compose project) honest, not a hostile network; cells
-that leave one machine need mutual TLS with per-service certificates.
+* ``DIR/ca/ca.pem`` and ``DIR/ca/ca.key``: the cell's certificate
+  authority. No service is given the CA's key (compose mounts no service
+  ``DIR/ca``): it is needed only to add a host or remake an identity.
+* ``DIR/<role>/`` for every role of :data:`interfaces.access.ROLES`:
+  ``ca.pem`` (the CA's certificate, to check peers), ``cert.pem`` (the
+  role's certificate: common name = the role, which is what access control
+  reads) and ``key.pem`` (its private key). A service is given its own
+  folder only (compose mounts ``DIR/<role>`` at ``/secrets``), so it can
+  prove who it is but never be anyone else.
+* ``DIR/bridge/zenoh-bridge.json5``: a Zenoh configuration for
+  zenoh-bridge-ros2dds (``-c``) that joins as the ``bridge`` role over mutual
+  TLS with the cell's access list, only the lbr stack's topics crossing.
+
+Each certificate names the hosts its role is reached at (the compose service
+names and aliases of that role, ``localhost`` and ``127.0.0.1``, plus every
+``--host``): Zenoh checks the listener's name on every TLS link a service
+opens. Elliptic-curve keys (P-256) and SHA-256 signatures, as
+:mod:`interfaces.certificates` makes them.
+
+Existing files are never overwritten: a cell keeps its identities until they
+are deleted on purpose (``--if-missing``: a complete set already there is
+kept, exit 0; compose's one-shot ``credentials`` service runs it so). A
+service then runs with ``LAMPS_ZENOH_IDENTITY=DIR/<role>`` (inside compose:
+``/secrets``), ``tls/`` endpoints and ``LAMPS_ZENOH_ACCESS_CONTROL=true``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
-import secrets
 import sys
 from pathlib import Path
 
-from lampskit.atomic import write_text_atomic
+from lampskit.atomic import write_atomic, write_text_atomic
 
-from .access import ROLES
+from .access import DEFAULT_ROS_NAMESPACE, ROLES, cell_acl
+from .certificates import DEFAULT_DAYS, DEFAULT_HOSTS, issue, new_ca, write_key_and_cert
+from .keys import Keys
 
-DICTIONARY = "credentials.txt"
+CA_FOLDER = "ca"
+#: The files of an identity folder: the CA's certificate, the role's certificate, its private key.
+CA_FILE, CERT_FILE, KEY_FILE = "ca.pem", "cert.pem", "key.pem"
 BRIDGE_CONFIG = "zenoh-bridge.json5"
-#: Where the bridge's container finds the dictionary (compose mounts ./secrets there).
-BRIDGE_DICTIONARY = "/secrets/credentials.txt"
+#: Where the bridge's container finds its identity (compose mounts ./secrets/bridge there).
+BRIDGE_SECRETS = "/secrets"
+#: The host names each role is reached at in docker-compose.yml (service names and network aliases).
+ROLE_HOSTS = {
+    "robot": ("robot", "camera", "sim", "lbr-peer", "robot-lbr-sim", "robot-lbr", "bridge"),
+    "bridge": ("bridge",),
+    "controller": ("controller",),
+    "perception": ("perception",),
+    "recorder": ("recorder", "foxglove"),
+    "operator": ("operator",),
+}
 #: zenoh-plugin-ros2dds settings (its DEFAULT_CONFIG.json5, 09d68c0): only the lbr stack's topics the adapter
 #: uses cross the bridge; the 1 kHz state goes first and unbatched (``pub_priorities`` ``1:express``, which the
 #: plugin applies to the ROS -> Zenoh direction only: the adapter's own publisher sets the command's), and
@@ -51,54 +69,82 @@ BRIDGE_ROS2DDS = {
 }
 
 
-def password_file(directory: Path, role: str) -> Path:
-    return directory / f"{role}.password"
+def identity_folder(directory: Path, role: str) -> Path:
+    """The folder of ``role``'s identity in a credentials folder ``directory``."""
+    return directory / role
 
 
-def make_credentials(directory: Path, if_missing: bool = False) -> dict[str, Path]:
-    """Create the files (see the module docstring); role -> its password file. FileExistsError if any exists
+def identity_files(folder: Path) -> tuple[Path, Path, Path]:
+    """(CA certificate, certificate, private key) of an identity folder."""
+    return folder / CA_FILE, folder / CERT_FILE, folder / KEY_FILE
+
+
+def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str, ...] = (),
+                     days: int = DEFAULT_DAYS) -> dict[str, Path]:
+    """Create the files (see the module docstring); role -> its identity folder. FileExistsError if any exists
     (with ``if_missing``: only if some but not all exist; a complete set is kept as it is)."""
-    directory.mkdir(parents=True, exist_ok=True)
-    targets = [password_file(directory, r) for r in ROLES] + [directory / DICTIONARY]
+    targets = [directory / CA_FOLDER / n for n in (CA_FILE, "ca.key")]
+    targets += [p for r in ROLES for p in identity_files(identity_folder(directory, r))]
+    targets.append(identity_folder(directory, "bridge") / BRIDGE_CONFIG)
     present = [str(p) for p in targets if p.exists()]
+    folders = {role: identity_folder(directory, role) for role in ROLES}
     if if_missing and len(present) == len(targets):
-        _write_bridge_config(directory, if_missing=True)
-        return {role: password_file(directory, role) for role in ROLES}
+        return folders
     if present:
-        raise FileExistsError(f"credentials already exist, not overwritten: {', '.join(present)}")
-    words = {role: secrets.token_hex(32) for role in ROLES}
-    for role, word in words.items():
-        write_text_atomic(password_file(directory, role), word + "\n", mode=0o600)
-    write_text_atomic(directory / DICTIONARY, "".join(f"{r}:{w}\n" for r, w in words.items()), mode=0o600)
-    _write_bridge_config(directory)
-    return {role: password_file(directory, role) for role in ROLES}
+        raise FileExistsError(f"credentials already exist, not overwritten: {', '.join(present[:4])}"
+                              f"{' ...' if len(present) > 4 else ''}")
+    ca_key, ca_cert = new_ca(days)
+    (directory / CA_FOLDER).mkdir(parents=True, exist_ok=True)
+    write_key_and_cert(directory / CA_FOLDER / CA_FILE, directory / CA_FOLDER / "ca.key", ca_key, ca_cert)
+    ca_pem = (directory / CA_FOLDER / CA_FILE).read_bytes()
+    for role, folder in folders.items():
+        folder.mkdir(parents=True, exist_ok=True)
+        key, cert = issue(role, (*ROLE_HOSTS[role], *DEFAULT_HOSTS, *hosts), days, ca_key, ca_cert)
+        ca_path, cert_path, key_path = identity_files(folder)
+        write_key_and_cert(cert_path, key_path, key, cert)
+        write_atomic(ca_path, lambda f: f.write(ca_pem), mode=0o644)
+    write_bridge_config(folders["bridge"])
+    return folders
 
 
-def _write_bridge_config(directory: Path, if_missing: bool = False) -> None:
-    path = directory / BRIDGE_CONFIG
-    if if_missing and path.exists():
-        return
-    word = password_file(directory, "robot").read_text(encoding="utf-8").strip()
-    config = {"transport": {"auth": {"usrpwd": {"user": "robot", "password": word,
-                                               "dictionary_file": BRIDGE_DICTIONARY}}},
-              "plugins": {"ros2dds": BRIDGE_ROS2DDS}}
-    write_text_atomic(path, json.dumps(config, indent=2) + "\n", mode=0o600)
+def bridge_config(secrets: str = BRIDGE_SECRETS, keys: Keys | None = None,
+                  ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> dict:
+    """zenoh-bridge-ros2dds's configuration: the bridge identity at ``secrets``, the cell's access list."""
+    ca, cert, key = (f"{secrets}/{n}" for n in (CA_FILE, CERT_FILE, KEY_FILE))
+    return {"transport": {"link": {"tls": {"root_ca_certificate": ca, "enable_mtls": True,
+                                           "listen_certificate": cert, "listen_private_key": key,
+                                           "connect_certificate": cert, "connect_private_key": key}}},
+            "access_control": cell_acl(keys or Keys(), "cert_common_names", ros_namespace),
+            "plugins": {"ros2dds": BRIDGE_ROS2DDS}}
+
+
+def write_bridge_config(folder: Path) -> Path:
+    path = folder / BRIDGE_CONFIG
+    write_text_atomic(path, json.dumps(bridge_config(), indent=2) + "\n", mode=0o644)
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="lamps credentials", description=__doc__.split("\n\n")[0])
-    ap.add_argument("directory", type=Path, help="where the password files and credentials.txt go")
+    ap.add_argument("directory", type=Path, help="where ca/ and one folder per role go")
+    ap.add_argument("--host", action="append", default=[],
+                    help="one more host name or address every role may be reached at (repeatable; a cell on "
+                         "several machines)")
+    ap.add_argument("--days", type=int, default=DEFAULT_DAYS, help=f"validity [days] (default {DEFAULT_DAYS})")
     ap.add_argument("--if-missing", action="store_true",
                     help="keep a complete set that is already there (exit 0); a partial one is still an error")
     args = ap.parse_args(argv)
+    if not 1 <= args.days <= 3650:
+        print(f"lamps credentials: --days must be in [1, 3650], got {args.days}", file=sys.stderr)
+        return 2
     try:
-        files = make_credentials(args.directory, args.if_missing)
-    except (FileExistsError, OSError) as exc:
+        folders = make_credentials(args.directory, args.if_missing, tuple(args.host), args.days)
+    except (FileExistsError, OSError, ValueError) as exc:
         print(f"lamps credentials: {exc}", file=sys.stderr)
         return 1
     d = args.directory
-    print(f"wrote {len(files)} password files and {d / DICTIONARY} (mode 0600); a service runs as a role with")
-    print(f"  LAMPS_ZENOH_USER=<role> LAMPS_ZENOH_PASSWORD_FILE={d}{os.sep}<role>.password "
-          f"LAMPS_ZENOH_CREDENTIALS_FILE={d / DICTIONARY} LAMPS_ZENOH_ACCESS_CONTROL=true")
-    print(f"roles: {', '.join(ROLES)}")
+    print(f"identities of {', '.join(folders)} in {d}{'/'}<role>/ (the CA's key in {d / CA_FOLDER}: give it to "
+          "no service)")
+    print("a service runs as a role with  LAMPS_ZENOH_IDENTITY=<that role's folder>  tls/ endpoints and "
+          "LAMPS_ZENOH_ACCESS_CONTROL=true")
     return 0

@@ -184,7 +184,7 @@ class _Cell:
     robot_id: str
     skill: Path
     out: Path
-    credentials: Path  # the run's per-role passwords (the containers' /secrets)
+    credentials: Path  # the run's per-role identities (each container's /secrets is one role's folder)
     access_control: bool
 
 
@@ -204,7 +204,7 @@ def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, o
                       f"{len(sides)} robot sides ({', '.join(sides) or 'none'}); choose one with --robot "
                       f"{'|'.join(ROBOTS)} or COMPOSE_PROFILES")
     credentials = out / "credentials"
-    make_credentials(credentials, if_missing=True)  # a new run folder: new passwords for this run
+    make_credentials(credentials, if_missing=True)  # a new run folder: new identities (and CA) for this run
     local = localize(services, _port_map(services, a.port_base), secrets=credentials)
     robot_id = next((s.environment.get("LAMPS_ROBOT_ID") for s in local if s.environment.get("LAMPS_ROBOT_ID")),
                     "iiwa")
@@ -362,17 +362,15 @@ def _port_busy(port: int) -> bool:
 def _watch(cell: _Cell, children, max_duration_s: float, stop_requested) -> tuple[str, str]:
     """Progress on the terminal until the run ends; returns (outcome for run.json, why)."""
     from interfaces.config import ZenohSettings
-    from interfaces.credentials import DICTIONARY, password_file
+    from interfaces.credentials import identity_folder
     from interfaces.messages import ControllerStatus, Phase, SimTruth, Stains
     from interfaces.session import ServiceNode
 
     local, robot_id = cell.services, cell.robot_id
-    endpoints = [f"tcp/127.0.0.1:{p}" for s in local for p in s.listen_ports]
-    auth = {}
-    if cell.access_control:  # the launcher watches as the operator
-        auth = dict(user="operator", password_file=str(password_file(cell.credentials, "operator")),
-                    credentials_file=str(cell.credentials / DICTIONARY), access_control=True)
-    settings = ZenohSettings(connect=tuple(endpoints), robot_id=robot_id, **auth)
+    endpoints = [e for s in local for e in s.listen_endpoints]
+    # the launcher watches as the operator (its identity is in the run's credentials whether or not the list is on)
+    settings = ZenohSettings(connect=tuple(endpoints), robot_id=robot_id, access_control=cell.access_control,
+                             identity=str(identity_folder(cell.credentials, "operator")))
     t0 = time.monotonic()
     with ServiceNode("launcher", settings) as node:
         keys = node.keys

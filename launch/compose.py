@@ -44,7 +44,7 @@ DEFAULT_COMPOSE = Path(__file__).resolve().parent.parent / "docker-compose.yml"
 READERS = ("auto", "docker", "builtin")
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-_ENDPOINT = re.compile(r"^(tcp|udp)/([^:/,]+):(\d+)$")
+_ENDPOINT = re.compile(r"^(tcp|udp|tls)/([^:/,]+):(\d+)$")
 
 
 @dataclass(frozen=True)
@@ -84,6 +84,11 @@ class LocalService:
     environment: dict[str, str]
     listen_ports: tuple[int, ...] = field(default=())
     loop: bool = False  # a fixed-rate loop (granted SYS_NICE): it runs, and stops, ahead of the others
+
+    @property
+    def listen_endpoints(self) -> tuple[str, ...]:
+        """Where it listens, as endpoints another local process connects to (``tls/127.0.0.1:<port>``...)."""
+        return tuple(e.strip() for e in self.environment.get("LAMPS_ZENOH_LISTEN", "").split(",") if e.strip())
 
 
 # ------------------------------------------------------------------------------------------------ interpolation
@@ -448,8 +453,9 @@ def compose_model(path: str | os.PathLike = DEFAULT_COMPOSE, environment: Mappin
     return ComposeModel(load_compose(p, variables), profiles, "builtin")
 
 
-#: Where the containers find the cell's credentials (``lamps credentials``); ``lamps up`` maps it to a local folder.
-SECRETS_MOUNT = "/secrets/"
+#: Where a container finds its role's identity (a folder of ``lamps credentials``); ``lamps up`` maps it to that
+#: role's local folder.
+SECRETS_MOUNT = "/secrets"
 #: A service labelled ``lamps.up: skip`` is compose's alone: ``lamps up`` does its job itself (learning the skill).
 SKIP_LABEL = "lamps.up"
 
@@ -498,6 +504,16 @@ def listen_ports(s: ComposeService) -> list[int]:
     return ports
 
 
+def secrets_role(s: ComposeService) -> str | None:
+    """The folder of ``./secrets`` a service mounts at ``/secrets`` (its role), or None."""
+    for v in s.volumes:
+        parts = v.split(":")
+        if len(parts) >= 2 and parts[1].rstrip("/") == SECRETS_MOUNT and "/secrets/" in parts[0] + "/":
+            name = Path(parts[0]).name
+            return None if name == "secrets" else name
+    return None
+
+
 def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], int] | None = None,
              lamps_argv0: tuple[str, ...] | None = None, secrets: Path | None = None) -> list[LocalService]:
     """The services as local processes (see the module docstring).
@@ -505,8 +521,9 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
     port_of : (service, container port) -> local port; missing ones get
     :func:`free_port`. lamps_argv0 : what replaces ``lamps`` in commands
     (default: this interpreter running the console script's module).
-    secrets : the local folder that stands for the containers' ``/secrets``
-    (the cell's credentials) in environment values.
+    secrets : the local credentials folder (``lamps credentials``): a
+    service's ``/secrets`` in environment values becomes the folder of the
+    role its compose volume mounts there (``./secrets/<role>:/secrets``).
     """
     lamps = lamps_argv0 or (sys.executable, "-m", "interfaces.cli")
     host_of: dict[str, str] = {}
@@ -535,9 +552,10 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
     out = []
     for s in services:
         env = dict(s.environment)
-        if secrets is not None:
-            env = {k: (str(secrets / v[len(SECRETS_MOUNT):]) if v.startswith(SECRETS_MOUNT) else v)
-                   for k, v in env.items()}
+        if secrets is not None and (role := secrets_role(s)) is not None:
+            local = secrets / role
+            env = {k: (str(local / v[len(SECRETS_MOUNT):].lstrip("/"))
+                       if v == SECRETS_MOUNT or v.startswith(SECRETS_MOUNT + "/") else v) for k, v in env.items()}
         for key in ("LAMPS_ZENOH_LISTEN", "LAMPS_ZENOH_CONNECT"):
             if env.get(key):
                 # two names of one service (robot, camera) become one endpoint, once

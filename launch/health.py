@@ -20,7 +20,7 @@ import re
 import socket
 import sys
 
-_ENDPOINT = re.compile(r"^tcp/(\[[0-9a-fA-F:]+\]|[^:/,\[\]]+):(\d+)$")
+_ENDPOINT = re.compile(r"^(?:tcp|tls)/(\[[0-9a-fA-F:]+\]|[^:/,\[\]]+):(\d+)$")
 
 
 def probe_targets(endpoints: str) -> list[tuple[str, int]]:
@@ -34,7 +34,7 @@ def probe_targets(endpoints: str) -> list[tuple[str, int]]:
             continue
         m = _ENDPOINT.match(ep.split("#", 1)[0])
         if not m:
-            raise ValueError(f"cannot probe endpoint {ep!r}: only tcp/<host>:<port> is probed")
+            raise ValueError(f"cannot probe endpoint {ep!r}: only tcp/ and tls/<host>:<port> are probed (a TCP connect)")
         host = m.group(1).strip("[]")
         host = {"0.0.0.0": "127.0.0.1", "::": "::1", "": "127.0.0.1"}.get(host, host)
         out.append((host, int(m.group(2))))

@@ -23,7 +23,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from interfaces.config import ZenohSettings
-from interfaces.credentials import DICTIONARY, password_file
+from interfaces.credentials import identity_folder
 from interfaces.keys import Keys
 from interfaces.messages import ControllerStatus
 from interfaces.session import ServiceNode
@@ -177,14 +177,12 @@ class Cell:
     def __exit__(self, *exc) -> None:
         self._stop_all()
 
-    def operator_settings(self, role: str = "operator", with_credentials: bool = True) -> ZenohSettings:
-        endpoints = tuple(f"tcp/127.0.0.1:{p}" for s in self.services.values() for p in s.listen_ports)
-        auth = {}
-        if with_credentials:
-            creds = self.cell.credentials
-            auth = dict(user=role, password_file=str(password_file(creds, role)),
-                        credentials_file=str(creds / DICTIONARY), access_control=True)
-        return ZenohSettings(connect=endpoints, robot_id=self.cell.robot_id, **auth)
+    def operator_settings(self, role: str = "operator", **over) -> ZenohSettings:
+        """Settings of a peer joining the cell with ``role``'s identity (connected to every service)."""
+        endpoints = tuple(e for s in self.services.values() for e in s.listen_endpoints)
+        kw = dict(connect=endpoints, robot_id=self.cell.robot_id, access_control=True,
+                  identity=str(identity_folder(self.cell.credentials, role)))
+        return ZenohSettings(**{**kw, **over})
 
     def start(self, name: str) -> None:
         """Start (or start again) service ``name``; returns once it listens."""

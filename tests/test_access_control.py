@@ -1,27 +1,30 @@
-"""Authentication and access control over real Zenoh on loopback: only the controller moves the arm.
+"""Identities and access control over real Zenoh on loopback: each role writes only its own keys, whoever opened
+the link.
 
-Each node authenticates as a role of the cell (user-password, credentials
-from ``lamps credentials``) and applies the cell's access-control list. A
-forbidden put is proven dropped with a barrier: the same session then puts
-an allowed message on the same link, and once that arrives every earlier
-sample from that session would have arrived too.
+Each node joins with a role's identity from ``lamps credentials`` (mutual TLS: a certificate whose common name is
+the role) and applies the cell's default-deny access list. A forbidden put is proven dropped with a barrier: the
+same session then puts an allowed message on the same link at the same priority, and once that arrives every
+earlier sample from that session would have arrived too.
 """
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import pytest
+import zenoh
 
-from interfaces.access import ROLES, cell_acl, writers
+from interfaces.access import ROLES, cell_acl, may_put, writers
+from interfaces.certificates import issue, new_ca, write_key_and_cert
 from interfaces.config import ZenohSettings
-from interfaces.credentials import DICTIONARY, main as credentials_main, make_credentials, password_file
+from interfaces.credentials import (BRIDGE_CONFIG, CA_FOLDER, identity_files, identity_folder,
+                                    main as credentials_main, make_credentials)
 from interfaces.errors import ConfigError
 from interfaces.keys import Keys
-from interfaces.messages import Estop, TorqueCommand
 from interfaces.session import ServiceNode, zenoh_config
 
-from .zenoh_helpers import free_port, wait_alive, wait_for, wait_sample, wait_subscribed
+from .zenoh_helpers import free_port, wait_for, wait_subscribed
 
 
 @pytest.fixture(scope="module")
@@ -31,178 +34,237 @@ def creds(tmp_path_factory):
     return d
 
 
-def _settings(creds, role: str, rid: str, listen=(), connect=(), password: str | None = None) -> ZenohSettings:
-    pw = password_file(creds, role)
-    if password is not None:
-        pw = creds / f"wrong-{role}.password"
-        pw.write_text(password + "\n")
-    return ZenohSettings(listen=tuple(listen), connect=tuple(connect), robot_id=rid, user=role,
-                         password_file=str(pw), credentials_file=str(creds / DICTIONARY), access_control=True)
+def _settings(folder: Path, rid: str, listen=(), connect=(), acl: bool = True) -> ZenohSettings:
+    """A peer with the identity in ``folder``; ``acl=False``: one that does not apply the cell's list (an attacker)."""
+    return ZenohSettings(listen=tuple(listen), connect=tuple(connect), robot_id=rid, identity=str(folder),
+                         access_control=acl, gossip=False)
 
 
-def _robot_readers(robot: ServiceNode, *senders: ServiceNode):
-    """(commands, e-stop engages, releases) inboxes on ``robot``, once every sender knows they are subscribed."""
-    keys = robot.keys
-    readers = (robot.inbox(keys.robot_command, TorqueCommand), robot.inbox(keys.controller_estop, Estop),
-               robot.inbox(keys.controller_estop_release, Estop))
-    for node in senders:
-        for key in (keys.robot_command, keys.controller_estop, keys.controller_estop_release):
-            wait_subscribed(node.session, key)
-    return readers
+def _tls() -> str:
+    return f"tls/127.0.0.1:{free_port()}"
 
 
-def _cmd(seq: int) -> TorqueCommand:
-    return TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=[0.0] * 7)
+def _attempts(keys: Keys) -> list[str]:
+    """A concrete key under every row of the table, plus keys nobody may put."""
+    p = keys.prefix
+    return [keys.robot_command, keys.robot_state, keys.robot_status, keys.sim_truth, keys.camera_frame("scene"),
+            "lbr/state", "lbr/command/torque", keys.robot_arm, keys.perception_stains, keys.controller_status,
+            keys.controller_trace, keys.controller_estop, keys.controller_estop_release, f"{p}/other/thing"]
 
 
-def _estop(engaged: bool, source: str) -> Estop:
-    return Estop(stamp_ns=time.monotonic_ns(), engaged=engaged, reason="test", source=source)
+def _barrier_key(keys: Keys, role: str) -> str:
+    return "lbr/state" if role == "bridge" else keys.controller_estop
 
 
-def test_the_acl_gives_each_protected_key_to_its_writers_only():
-    keys = Keys.for_robot("acl")
-    acl = cell_acl(keys)
-    assert acl["enabled"] and acl["default_permission"] == "allow"
-    rules = {r["id"]: r for r in acl["rules"]}
-    denied: dict[str, set[str]] = {}
-    for policy in acl["policies"]:
-        for rule in policy["rules"]:
-            for key in rules[rule]["key_exprs"]:
-                denied.setdefault(key, set()).update(policy["subjects"])
-    for key, allowed in writers(keys).items():
-        assert denied[key] == set(ROLES) - set(allowed), key
-    assert keys.controller_estop not in denied, "engaging the e-stop is never refused"
-    assert denied[keys.robot_command] == set(ROLES) - {"controller"}
-    assert denied[keys.controller_estop_release] == set(ROLES) - {"operator"}
+def _until_heard(sender: ServiceNode, role: str, keys: Keys, got: dict[str, list], timeout_s: float = 10.0) -> None:
+    """``sender`` puts a hello on every key its role may put until every receiver has one on each: from then on
+    it knows every receiver's subscriptions (a put it sends is decided by the receiver's access list)."""
+    allowed = [k for k in _attempts(keys) if may_put(keys, role, k)]
+    tag = f"{role}-hello"
+    deadline = time.monotonic() + timeout_s
+    while True:
+        for k in allowed:
+            sender.session.put(k, tag.encode())
+        time.sleep(0.05)
+        if all({k for s, k in g if s == tag} >= set(allowed) for g in got.values()):
+            return
+        assert time.monotonic() < deadline, f"{role}'s hellos did not reach every receiver"
+
+
+# ------------------------------------------------------------------------------------------------- identities
+
+def test_lamps_credentials_gives_each_role_a_folder_of_its_own_and_never_overwrites(tmp_path, capsys):
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    d = tmp_path / "c"
+    assert credentials_main([str(d), "--host", "cell-a.example"]) == 0
+    keys = {}
+    for role in ROLES:
+        ca, cert, key = identity_files(identity_folder(d, role))
+        assert ca.read_bytes() == (d / CA_FOLDER / "ca.pem").read_bytes()
+        assert oct(key.stat().st_mode & 0o777) == "0o600", role
+        c = x509.load_pem_x509_certificate(cert.read_bytes())
+        assert c.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == role
+        names = c.extensions.get_extension_for_class(x509.SubjectAlternativeName).value.get_values_for_type(
+            x509.DNSName)
+        assert "localhost" in names and "cell-a.example" in names, names
+        keys[role] = key.read_bytes()
+        assert sorted(p.name for p in identity_folder(d, role).iterdir()) == sorted(
+            ["ca.pem", "cert.pem", "key.pem"] + ([BRIDGE_CONFIG] if role == "bridge" else []))
+    assert len(set(keys.values())) == len(ROLES)
+    assert credentials_main([str(d)]) == 1
+    assert "not overwritten" in capsys.readouterr().err
+    assert credentials_main([str(d), "--if-missing"]) == 0
+    assert {r: identity_files(identity_folder(d, r))[2].read_bytes() for r in ROLES} == keys
 
 
 def test_a_bad_security_setting_is_refused_with_its_name(creds, tmp_path):
     with pytest.raises(ConfigError, match="user must be one of the cell's roles"):
         ZenohSettings(user="intruder", password_file="x", credentials_file="y")
-    with pytest.raises(ConfigError, match="needs password_file and credentials_file"):
-        ZenohSettings(user="controller")
-    with pytest.raises(ConfigError, match="access_control needs a user"):
+    with pytest.raises(ConfigError, match="access_control needs an identity"):
         ZenohSettings(access_control=True)
-    missing = ZenohSettings(user="controller", password_file=str(tmp_path / "nope"),
-                            credentials_file=str(creds / DICTIONARY))
-    with pytest.raises(ConfigError, match="password_file .*nope"):
-        zenoh_config(missing)
+    with pytest.raises(ConfigError, match="works on a router only"):
+        ZenohSettings(user="controller", password_file="x", credentials_file="y", access_control=True)
+    with pytest.raises(ConfigError, match="every endpoint must be tls"):
+        ZenohSettings(identity=str(identity_folder(creds, "robot")), listen=("tcp/127.0.0.1:7447",))
+    with pytest.raises(ConfigError, match="not both"):
+        ZenohSettings(identity=str(identity_folder(creds, "robot")), tls_ca="x", tls_certificate="y",
+                      tls_private_key="z")
+    with pytest.raises(ConfigError, match="tls_ca .*nope.ca.pem.*No such file"):
+        zenoh_config(ZenohSettings(identity=str(tmp_path / "nope")))
+    with pytest.raises(ConfigError, match="ros_namespace"):
+        ZenohSettings(ros_namespace="lbr/**")
 
 
-def test_lamps_credentials_never_overwrites(tmp_path, capsys):
-    assert credentials_main([str(tmp_path / "c")]) == 0
-    words = {r: password_file(tmp_path / "c", r).read_text() for r in ROLES}
-    assert len(set(words.values())) == len(ROLES) and all(len(w.strip()) == 64 for w in words.values())
-    assert oct(password_file(tmp_path / "c", "controller").stat().st_mode & 0o777) == "0o600"
-    assert credentials_main([str(tmp_path / "c")]) == 1
-    assert "not overwritten" in capsys.readouterr().err
-    assert {r: password_file(tmp_path / "c", r).read_text() for r in ROLES} == words
+def test_the_access_list_denies_by_default_and_lets_each_role_put_its_own_keys_only():
+    keys = Keys.for_robot("acl")
+    acl = cell_acl(keys)
+    assert acl["enabled"] and acl["default_permission"] == "deny"
+    assert [s["cert_common_names"] for s in acl["subjects"]] == [[r] for r in ROLES]
+    rules = {r["id"]: r for r in acl["rules"]}
+    for policy in acl["policies"]:
+        (role,) = policy["subjects"]
+        puts = [k for rule in policy["rules"] for k in rules[rule]["key_exprs"]
+                if "put" in rules[rule]["messages"] and "ingress" in rules[rule]["flows"]]
+        assert set(puts) == {k for k, allowed in writers(keys).items() if role in allowed}, role
+    assert may_put(keys, "operator", keys.controller_estop_release)
+    assert not any(may_put(keys, r, keys.controller_estop_release) for r in ROLES if r != "operator")
+    assert [r for r in ROLES if may_put(keys, r, keys.robot_command)] == ["controller"]
+    assert all(may_put(keys, r, keys.controller_estop) for r in ROLES if r != "bridge"), "engaging is never refused"
 
 
-def test_only_the_controller_moves_the_arm_and_only_the_operator_releases_the_estop(creds):
+# --------------------------------------------------------------------------------------- the matrix, over Zenoh
+
+@pytest.mark.attack("2", "every role's identity used by a peer that listens (the receivers open the links, as "
+                         "gossip makes them) puts on every key of the cell and outside it")
+def test_every_identity_puts_only_its_own_keys_on_links_the_receiver_opened(creds):
+    _matrix(creds, receivers_connect=True)
+
+
+@pytest.mark.attack("2", "every role's identity used by a peer that connects to each service puts on every key")
+def test_every_identity_puts_only_its_own_keys_on_links_the_sender_opened(creds):
+    _matrix(creds, receivers_connect=False)
+
+
+def _matrix(creds: Path, receivers_connect: bool) -> None:
+    """One sender per role and one receiver per role; every sender puts on every key; each receiver gets exactly
+    the puts the table allows that sender."""
     rid = f"acl{free_port()}"
-    port = free_port()
-    ep = f"tcp/127.0.0.1:{port}"
-    with ServiceNode("robot", _settings(creds, "robot", rid, listen=[ep])) as robot, \
-            ServiceNode("controller", _settings(creds, "controller", rid, connect=[ep])) as ctl, \
-            ServiceNode("perception", _settings(creds, "perception", rid, connect=[ep])) as rogue, \
-            ServiceNode("operator", _settings(creds, "operator", rid, connect=[ep])) as op:
-        keys = robot.keys
-        commands, engages, releases = _robot_readers(robot, ctl, rogue, op)
-        # a perception peer commands torques and releases the e-stop: both dropped at the robot's ingress
-        for seq in range(100, 120):
-            rogue.publish(keys.robot_command, _cmd(seq))
-        rogue.publish(keys.controller_estop_release, _estop(False, "rogue"))
-        rogue.publish(keys.controller_estop, _estop(True, "rogue barrier"))  # allowed: the barrier
-        assert wait_sample(engages, lambda e: e.source == "rogue barrier", what="the rogue's allowed e-stop")
-        assert commands.get(0.0) is None and releases.get(0.0) is None
-        assert commands.received == 0 and releases.received == 0
-        # the controller's commands and the operator's release arrive
-        ctl.publish(keys.robot_command, _cmd(1))
-        assert wait_sample(commands, lambda c: c.seq == 1, what="the controller's command").seq == 1
-        op.publish(keys.controller_estop_release, _estop(False, "operator"))
-        assert wait_sample(releases, what="the operator's release").source == "operator"
-        assert commands.received == 1 and releases.received == 1
+    keys = Keys.for_robot(rid)
+    sender_eps = {r: _tls() for r in ROLES}
+    receiver_eps = {r: _tls() for r in ROLES}
+    got: dict[str, list[tuple[str, str]]] = {r: [] for r in ROLES}
+    senders, receivers = {}, {}
+    try:
+        for r in ROLES:
+            senders[r] = ServiceNode(f"sender-{r}", _settings(identity_folder(creds, r), rid, listen=[sender_eps[r]],
+                                                              acl=False))
+            senders[r].__enter__()
+        for r in ROLES:
+            connect = list(sender_eps.values()) if receivers_connect else []
+            receivers[r] = ServiceNode(f"receiver-{r}", _settings(identity_folder(creds, r), rid,
+                                                                  listen=[receiver_eps[r]], connect=connect))
+            receivers[r].__enter__()
+            for scope in (f"{keys.prefix}/**", "lbr/**"):
+                receivers[r].session.declare_subscriber(
+                    scope, lambda s, r=r: got[r].append((s.payload.to_bytes().decode(), str(s.key_expr))))
+        if not receivers_connect:  # the senders open the links this time
+            for r in ROLES:
+                senders[r].close()
+                senders[r] = ServiceNode(f"sender-{r}", _settings(identity_folder(creds, r), rid,
+                                                                  connect=list(receiver_eps.values()), acl=False))
+                senders[r].__enter__()
+        for r in ROLES:
+            wait_for(lambda r=r: len(list(senders[r].session.info.peers_zid())) == len(ROLES), 10.0,
+                     f"{r}'s links to every receiver")
+            _until_heard(senders[r], r, keys, got)
+        for r in ROLES:
+            for key in _attempts(keys):
+                senders[r].session.put(key, r.encode())
+            senders[r].session.put(_barrier_key(keys, r), f"{r}-barrier".encode())
+        for q in ROLES:
+            wait_for(lambda q=q: {s for s, _ in got[q] if s.endswith("-barrier")} == {f"{r}-barrier" for r in ROLES},
+                     10.0, f"every sender's barrier at {q}")
+        for q in ROLES:
+            arrived = {(s, k) for s, k in got[q] if s in ROLES}
+            allowed = {(r, k) for r in ROLES for k in _attempts(keys) if may_put(keys, r, k)}
+            assert arrived == allowed, (q, sorted(arrived ^ allowed))
+    finally:
+        for node in (*senders.values(), *receivers.values()):
+            node.close()
 
 
-def test_a_peer_without_valid_credentials_cannot_join(creds):
+@pytest.mark.attack("2", "a peer with a certificate of the cell's CA for a name that is no role, and one with "
+                         "another CA's certificate, put on the e-stop release and the torque command")
+def test_a_peer_that_is_no_role_may_do_nothing(creds, tmp_path):
     rid = f"acl{free_port()}"
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    anonymous = ZenohSettings(connect=(ep,), robot_id=rid)
-    with ServiceNode("robot", _settings(creds, "robot", rid, listen=[ep])) as robot, \
-            ServiceNode("impostor", _settings(creds, "controller", rid, connect=[ep], password="guessed")) as bad, \
-            ServiceNode("anonymous", anonymous) as anon, \
-            ServiceNode("controller", _settings(creds, "controller", rid, connect=[ep])) as ctl:
-        wait_alive(robot, "controller")
-        commands = robot.inbox(robot.keys.robot_command, TorqueCommand)
-        wait_subscribed(ctl.session, robot.keys.robot_command)
-        for node, seq in ((bad, 7), (anon, 8)):
-            node.publish(robot.keys.robot_command, _cmd(seq))
-        ctl.publish(robot.keys.robot_command, _cmd(1))
-        assert wait_sample(commands, what="the controller's command").seq == 1
-        time.sleep(0.3)  # the refused peers have no link at all: nothing of theirs can be in flight
-        assert commands.get(0.0) is None
-        assert not bad.session.info.peers_zid() and not anon.session.info.peers_zid(), "no transport was opened"
-        alive = robot.alive_services(0.5)
-        assert "impostor" not in alive and "anonymous" not in alive and "controller" in alive
-        assert wait_for(lambda: len(list(robot.session.info.peers_zid())) == 1, 2.0, "one peer: the controller")
+    keys = Keys.for_robot(rid)
+    # a certificate signed by the cell's own CA (whoever holds ca/ca.key) for a name that is not a role
+    from cryptography.hazmat.primitives import serialization
+    from cryptography import x509
+
+    ca_key = serialization.load_pem_private_key((creds / CA_FOLDER / "ca.key").read_bytes(), password=None)
+    ca_cert = x509.load_pem_x509_certificate((creds / CA_FOLDER / "ca.pem").read_bytes())
+    stranger = tmp_path / "stranger"
+    stranger.mkdir()
+    key, cert = issue("intruder", ("localhost", "127.0.0.1"), 1, ca_key, ca_cert)
+    ca_path, cert_path, key_path = identity_files(stranger)
+    write_key_and_cert(cert_path, key_path, key, cert)
+    ca_path.write_bytes((creds / CA_FOLDER / "ca.pem").read_bytes())
+    # and a whole other cell's identity
+    foreign = tmp_path / "foreign"
+    make_credentials(foreign)
+    ep = _tls()
+    robot_settings = _settings(identity_folder(creds, "robot"), rid, listen=[ep])
+    got = []
+    with ServiceNode("robot", robot_settings) as robot, \
+            ServiceNode("stranger", _settings(stranger, rid, connect=[ep], acl=False)) as intruder, \
+            ServiceNode("foreign", _settings(identity_folder(foreign, "controller"), rid, connect=[ep],
+                                             acl=False)) as other, \
+            ServiceNode("controller", _settings(identity_folder(creds, "controller"), rid, connect=[ep])) as ctl:
+        robot.session.declare_subscriber(f"{keys.prefix}/**", lambda s: got.append(s.payload.to_bytes()))
+        wait_subscribed(ctl.session, keys.robot_command)
+        for node in (intruder, other):
+            for key in (keys.robot_command, keys.controller_estop_release, keys.controller_estop):
+                node.session.put(key, node.service.encode())
+        ctl.session.put(keys.robot_command, b"controller")
+        wait_for(lambda: b"controller" in got, 5.0, "the controller's command")
+        time.sleep(0.3)
+        assert got == [b"controller"]
+        assert not list(other.session.info.peers_zid()), "another CA's certificate opens no link"
+        assert "stranger" not in robot.alive_services(0.5), "a non-role cannot even declare its presence"
 
 
-def test_the_rules_hold_for_peers_that_connect_through_another_service(creds):
-    """The robot listens, the controller connects to it and listens too, perception and the operator connect only to
-    the controller's endpoint (as in compose). Zenoh's gossip links them to the robot directly, so the robot sees
-    each origin's own identity: the rogue's command is dropped, the operator's release arrives."""
-    rid = f"acl{free_port()}"
-    ep1, ep2 = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
-    with ServiceNode("robot", _settings(creds, "robot", rid, listen=[ep1])) as robot, \
-            ServiceNode("controller", _settings(creds, "controller", rid, listen=[ep2], connect=[ep1])) as ctl, \
-            ServiceNode("perception", _settings(creds, "perception", rid, connect=[ep2])) as rogue, \
-            ServiceNode("operator", _settings(creds, "operator", rid, connect=[ep2])) as op:
-        keys = robot.keys
-        commands, engages, releases = _robot_readers(robot, ctl, rogue, op)
-        rogue.publish(keys.robot_command, _cmd(100))
-        rogue.publish(keys.controller_estop, _estop(True, "rogue barrier"))
-        wait_sample(engages, lambda e: e.source == "rogue barrier", what="the rogue's allowed e-stop")
-        op.publish(keys.controller_estop_release, _estop(False, "operator"))
-        release = wait_sample(releases, what="the operator's release, through the controller's endpoint")
-        assert release.source == "operator"
-        assert commands.received == 0
-
-
-def test_the_bridge_config_lets_the_authenticated_adapter_connect_and_an_unauthenticated_bridge_does_not(creds):
-    """zenoh-bridge-ros2dds is not ours: compose starts it with ``-c /secrets/zenoh-bridge.json5`` so that the
-    adapter (authenticated as the robot side) can open a link to it. Here a Zenoh session opened from that very
-    file (its dictionary path pointed at this test's folder) stands for the bridge."""
+def test_the_bridge_config_joins_as_the_bridge_over_mutual_tls_with_the_cells_access_list(creds):
+    """zenoh-bridge-ros2dds is not ours: compose starts it with ``-c /secrets/zenoh-bridge.json5`` and its own
+    identity folder at /secrets. A Zenoh session opened from that very file (its paths pointed at this test's
+    folder) stands for the bridge: the adapter's command reaches it, a perception identity's does not."""
     import json
 
-    import zenoh
-
-    from interfaces.credentials import BRIDGE_CONFIG
-
     rid = f"acl{free_port()}"
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    cfg = json.loads((creds / BRIDGE_CONFIG).read_text())
-    assert cfg["transport"]["auth"]["usrpwd"]["user"] == "robot"
+    ep = _tls()
+    folder = identity_folder(creds, "bridge")
+    text = (folder / BRIDGE_CONFIG).read_text().replace('"/secrets/', f'"{folder}/')
+    cfg = json.loads(text)
     ros2dds = cfg["plugins"]["ros2dds"]  # only the stack's topics cross; the state express and first
     assert ros2dds["pub_priorities"] == ["/lbr/state=1:express"] and ros2dds["reliable_routes_blocking"] is False
     assert ros2dds["allow"]["subscribers"] == ["/lbr/command/torque"] and "/lbr/state" in ros2dds["allow"]["publishers"]
-    cfg["transport"]["auth"]["usrpwd"]["dictionary_file"] = str(creds / DICTIONARY)
-    local = creds / "bridge-local.json5"
-    local.write_text(json.dumps(cfg))
-    conf = zenoh.Config.from_file(str(local))
+    assert cfg["access_control"]["default_permission"] == "deny"
+    conf = zenoh.Config.from_json5(text)
     conf.insert_json5("listen/endpoints", json.dumps([ep]))
     conf.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(conf) as bridge, ServiceNode("robot", _settings(creds, "robot", rid, connect=[ep])) as adapter:
-        wait_for(lambda: list(adapter.session.info.peers_zid()), 5.0, "the adapter's link to the bridge")
+    with zenoh.open(conf) as bridge, \
+            ServiceNode("robot", _settings(identity_folder(creds, "robot"), rid, connect=[ep])) as adapter, \
+            ServiceNode("perception", _settings(identity_folder(creds, "perception"), rid, connect=[ep],
+                                                acl=False)) as rogue:
         got = []
-        sub = bridge.declare_subscriber("lbr/command/torque", lambda s: got.append(s))
+        sub = bridge.declare_subscriber("lbr/command/torque", lambda s: got.append(s.payload.to_bytes()))
         wait_subscribed(adapter.session, "lbr/command/torque")
+        wait_subscribed(rogue.session, "lbr/command/torque")
+        rogue.session.put("lbr/command/torque", b"rogue")
         adapter.session.put("lbr/command/torque", b"cdr")
-        wait_for(lambda: got, 5.0, "the adapter's command at the bridge")
+        wait_for(lambda: b"cdr" in got, 5.0, "the adapter's command at the bridge")
+        time.sleep(0.2)
+        assert got == [b"cdr"]
         sub.undeclare()
-    plain = ZenohSettings(listen=(f"tcp/127.0.0.1:{free_port()}",), robot_id=rid)
-    with ServiceNode("bridge", plain) as b2, \
-            ServiceNode("robot", _settings(creds, "robot", rid, connect=list(plain.listen))) as a2:
-        time.sleep(1.0)
-        assert not list(a2.session.info.peers_zid()), "without credentials on the bridge there is no link"
-        assert not list(b2.session.info.peers_zid())

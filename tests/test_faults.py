@@ -93,10 +93,10 @@ def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recor
     with Cell(tmp_path / "run", learned_skill_file, "lockstep") as cell:
         cell.wait_phase(("WIPE",), 120.0)
         keys = cell.node.keys
-        # rogue peers: one without credentials cannot join; one authenticated as perception may not command
+        # rogue peers: one without a certificate cannot join; one with perception's identity may not command
         intruder_cfg = zenoh.Config()
         intruder_cfg.insert_json5("scouting/multicast/enabled", "false")
-        intruder_cfg.insert_json5("connect/endpoints", f'["tcp/127.0.0.1:{cell.services["sim"].listen_ports[0]}"]')
+        intruder_cfg.insert_json5("connect/endpoints", f'["{cell.services["sim"].listen_endpoints[0]}"]')
         intruder = zenoh.open(intruder_cfg)
         with ServiceNode("perception", cell.operator_settings("perception")) as insider:
             for i in range(200):

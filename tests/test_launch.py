@@ -60,7 +60,7 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
             assert not ep or ep.split("/")[1].split(":")[0] in hosts, ep
     # nobody connects to a robot side by its service name: it is `robot` (robot/*) and `camera` (frames, truth)
     robot_sides = ("sim", "lbr-peer", "robot-lbr-sim", "robot-lbr")
-    assert all(f"tcp/{r}:" not in s.environment.get("LAMPS_ZENOH_CONNECT", "")
+    assert all(f"/{r}:" not in s.environment.get("LAMPS_ZENOH_CONNECT", "")
                for s in services.values() for r in robot_sides)
     # each profile has exactly one `robot` and one `camera`... (real: the camera is the user's, see README)
     for profile, robot in (("sim", "sim"), ("lbr-sim", "robot-lbr-sim"), ("real", "robot-lbr")):
@@ -88,23 +88,63 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
                                                                                    "folders")]
 
 
-def test_every_zenoh_service_of_every_profile_joins_as_its_role_with_access_control_on(tmp_path):
+ROLE_OF = {"sim": "robot", "lbr-peer": "robot", "robot-lbr-sim": "robot", "robot-lbr": "robot",
+           "controller": "controller", "perception": "perception", "recorder": "recorder", "foxglove": "recorder",
+           "bridge": "bridge"}
+
+
+def test_every_zenoh_service_of_every_profile_joins_with_its_roles_identity_and_access_control_on(tmp_path):
     from interfaces.access import ROLES
 
     services = load_compose(COMPOSE, {})
-    roles = {"sim": "robot", "lbr-peer": "robot", "robot-lbr-sim": "robot", "robot-lbr": "robot",
-             "controller": "controller", "perception": "perception", "recorder": "recorder"}
-    for name, role in roles.items():
+    for name, role in ROLE_OF.items():
+        assert role in ROLES and f"./secrets/{role}:/secrets:ro" in services[name].volumes, name
+        if name == "bridge":
+            assert services[name].command[:2] == ("-c", "/secrets/zenoh-bridge.json5"), services[name].command
+            assert "tls/0.0.0.0:7447" in services[name].command
+            continue
         env = services[name].environment
-        assert env["LAMPS_ZENOH_USER"] == role and role in ROLES, name
-        assert env["LAMPS_ZENOH_PASSWORD_FILE"] == f"/secrets/{role}.password", name
-        assert env["LAMPS_ZENOH_ACCESS_CONTROL"] == "true", name
-        assert "./secrets:/secrets:ro" in services[name].volumes, name
+        assert env["LAMPS_ZENOH_IDENTITY"] == "/secrets" and env["LAMPS_ZENOH_ACCESS_CONTROL"] == "true", name
+        assert not {"LAMPS_ZENOH_USER", "LAMPS_ZENOH_PASSWORD_FILE", "LAMPS_ZENOH_CREDENTIALS_FILE"} & set(env), name
+        endpoints = [e for k in ("LAMPS_ZENOH_LISTEN", "LAMPS_ZENOH_CONNECT") for e in env.get(k, "").split(",") if e]
+        assert endpoints and all(e.startswith("tls/") for e in endpoints), (name, endpoints)
     assert services["credentials"].command[1:] == ("credentials", "/secrets", "--if-missing")
     local = {s.name: s for s in localize(run_locally(active(services, ("sim",))), secrets=tmp_path / "c")}
-    assert local["controller"].environment["LAMPS_ZENOH_PASSWORD_FILE"] == str(tmp_path / "c" / "controller.password")
+    assert local["controller"].environment["LAMPS_ZENOH_IDENTITY"] == str(tmp_path / "c" / "controller")
+    assert local["perception"].environment["LAMPS_ZENOH_IDENTITY"] == str(tmp_path / "c" / "perception")
     off = load_compose(COMPOSE, {"LAMPS_ACCESS_CONTROL": "false"})
     assert off["controller"].environment["LAMPS_ZENOH_ACCESS_CONTROL"] == "false"
+
+
+@pytest.mark.attack("1", "read every file each compose service can reach (its volumes, made by compose's "
+                         "folders and credentials services) for another role's private key or the CA's")
+def test_a_service_reaches_its_own_roles_secret_and_no_other(tmp_path):
+    from interfaces.credentials import CA_FOLDER, identity_files, identity_folder, make_credentials
+
+    host = tmp_path / "host"
+    make_credentials(host / "secrets")
+    (host / "skills").mkdir()
+    (host / "runs").mkdir()
+    secret = {role: identity_files(identity_folder(host / "secrets", role))[2].read_bytes()
+              for role in set(ROLE_OF.values())}
+    ca_key = (host / "secrets" / CA_FOLDER / "ca.key").read_bytes()
+    services = load_compose(COMPOSE, {"LAMPS_HOST_DIR": str(host)})
+    checked = 0
+    for name, svc in services.items():
+        if name in ("folders", "credentials"):  # the one-shots that make the folders and the identities
+            continue
+        reach = []
+        for v in svc.volumes:
+            source = Path(v.split(":")[0])
+            reach += [p for p in source.rglob("*") if p.is_file()] if source.is_dir() else []
+        texts = [p.read_bytes() for p in reach] + [v.encode() for v in svc.environment.values()]
+        own = ROLE_OF.get(name)
+        for role, key in secret.items():
+            found = any(key in t for t in texts)
+            assert found == (role == own), f"{name} {'reaches' if found else 'misses'} the {role} key"
+        assert not any(ca_key in t for t in texts), f"{name} reaches the CA's key"
+        checked += 1
+    assert checked >= 10, checked
 
 
 def test_every_compose_service_config_is_accepted_by_its_own_check(tmp_path, learned_skill_file):
@@ -123,12 +163,12 @@ def test_localize_maps_service_names_to_loopback_and_listen_ports_to_local_ones(
     services = active(load_compose(COMPOSE, {}), ("sim",))
     local = {s.name: s for s in localize(services, {("sim", 7447): 20001, ("controller", 7448): 20002,
                                                     ("perception", 7449): 20003})}
-    assert local["sim"].environment["LAMPS_ZENOH_LISTEN"] == "tcp/127.0.0.1:20001"
-    assert local["controller"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:20001"
+    assert local["sim"].environment["LAMPS_ZENOH_LISTEN"] == "tls/127.0.0.1:20001"
+    assert local["controller"].environment["LAMPS_ZENOH_CONNECT"] == "tls/127.0.0.1:20001"
     # the sim is both `robot` and `camera`: one endpoint, once
-    assert local["perception"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:20001,tcp/127.0.0.1:20002"
+    assert local["perception"].environment["LAMPS_ZENOH_CONNECT"] == "tls/127.0.0.1:20001,tls/127.0.0.1:20002"
     assert local["recorder"].environment["LAMPS_ZENOH_CONNECT"] == \
-        "tcp/127.0.0.1:20001,tcp/127.0.0.1:20002,tcp/127.0.0.1:20003"
+        "tls/127.0.0.1:20001,tls/127.0.0.1:20002,tls/127.0.0.1:20003"
     assert local["sim"].argv[:3] == (sys.executable, "-m", "interfaces.cli") and local["sim"].argv[3] == "sim"
     # free ports by default, all different
     ports = [p for s in localize(services) for p in s.listen_ports]
@@ -137,13 +177,13 @@ def test_localize_maps_service_names_to_loopback_and_listen_ports_to_local_ones(
     lbr = {s.name: s for s in localize(run_locally(active(load_compose(COMPOSE, {}), ("lbr-sim",))),
                                        {("lbr-peer", 7447): 21001, ("robot-lbr-sim", 7447): 21002,
                                         ("controller", 7448): 21003, ("perception", 7449): 21004})}
-    assert lbr["robot-lbr-sim"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21001"
-    assert lbr["controller"].environment["LAMPS_ZENOH_CONNECT"] == "tcp/127.0.0.1:21002"
+    assert lbr["robot-lbr-sim"].environment["LAMPS_ZENOH_CONNECT"] == "tls/127.0.0.1:21001"
+    assert lbr["controller"].environment["LAMPS_ZENOH_CONNECT"] == "tls/127.0.0.1:21002"
     # perception: the robot (its joint states, for the eraser's mask), the camera, the controller
     assert lbr["perception"].environment["LAMPS_ZENOH_CONNECT"] == \
-        "tcp/127.0.0.1:21002,tcp/127.0.0.1:21001,tcp/127.0.0.1:21003"
+        "tls/127.0.0.1:21002,tls/127.0.0.1:21001,tls/127.0.0.1:21003"
     assert lbr["recorder"].environment["LAMPS_ZENOH_CONNECT"] == \
-        "tcp/127.0.0.1:21002,tcp/127.0.0.1:21001,tcp/127.0.0.1:21003,tcp/127.0.0.1:21004"
+        "tls/127.0.0.1:21002,tls/127.0.0.1:21001,tls/127.0.0.1:21003,tls/127.0.0.1:21004"
     # the fixed-rate loops (granted SYS_NICE) stop in order; the others are asked first, waited for last
     assert {n for n, s in local.items() if s.loop} == {"sim", "controller"}
     assert {n for n, s in lbr.items() if s.loop} == {"lbr-peer", "robot-lbr-sim", "controller"}
@@ -165,7 +205,7 @@ def test_a_broken_compose_file_is_refused_with_the_reason(tmp_path, text, match)
 def test_a_connect_to_a_service_that_is_not_there_is_named():
     # the real profile's bridge is compose's alone (its own image): as local processes the adapter has nobody
     services = run_locally(active(load_compose(COMPOSE, {}), ("real",)))
-    with pytest.raises(ConfigError, match="'robot-lbr' connects to 'tcp/bridge:7447', but no active service"):
+    with pytest.raises(ConfigError, match="'robot-lbr' connects to 'tls/bridge:7447', but no active service"):
         localize(services)
 
 
