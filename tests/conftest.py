@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import os
 from pathlib import Path
 
 import matplotlib
@@ -27,3 +29,30 @@ def learned_skill_file(learned_skill, tmp_path_factory) -> Path:
     from lampskit.core.skill import save_skill
 
     return save_skill(tmp_path_factory.mktemp("skill") / "skill.json", learned_skill)
+
+
+# -------------------------------------------------------------------------------- attacks and faults tried
+#: ``LAMPS_ATTACK_RESULTS=FILE``: each test marked ``@pytest.mark.attack(case, tried, expected)`` adds its outcome
+#: (scripts/attack_table.py runs them and writes docs/security.md's table from the file).
+_ATTACK_RESULTS: list[dict] = []
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    rep = outcome.get_result()
+    mark = item.get_closest_marker("attack")
+    if mark is None or not os.environ.get("LAMPS_ATTACK_RESULTS"):
+        return
+    if rep.when == "call" or (rep.when == "setup" and not rep.passed):
+        case, tried, expected = (str(x) for x in mark.args)
+        _ATTACK_RESULTS.append({"nodeid": item.nodeid, "case": case, "tried": tried, "expected": expected,
+                                "outcome": rep.outcome, "seconds": round(rep.duration, 1)})
+
+
+def pytest_sessionfinish(session, exitstatus):
+    path = os.environ.get("LAMPS_ATTACK_RESULTS")
+    if path and _ATTACK_RESULTS:
+        from lampskit.atomic import write_text_atomic
+
+        write_text_atomic(Path(path), json.dumps(_ATTACK_RESULTS, indent=1) + "\n")

@@ -137,12 +137,14 @@ def test_the_access_list_denies_by_default_and_lets_each_role_put_its_own_keys_o
 # --------------------------------------------------------------------------------------- the matrix, over Zenoh
 
 @pytest.mark.attack("2", "every role's identity used by a peer that listens (the receivers open the links, as "
-                         "gossip makes them) puts on every key of the cell and outside it")
+                         "gossip makes them) puts on every key of the cell",
+                   "each receiver gets exactly the puts the table gives the sender's role")
 def test_every_identity_puts_only_its_own_keys_on_links_the_receiver_opened(creds):
     _matrix(creds, receivers_connect=True)
 
 
-@pytest.mark.attack("2", "every role's identity used by a peer that connects to each service puts on every key")
+@pytest.mark.attack("2", "every role's identity used by a peer that connects to each service puts on every key",
+                   "each receiver gets exactly the puts the table gives the sender's role")
 def test_every_identity_puts_only_its_own_keys_on_links_the_sender_opened(creds):
     _matrix(creds, receivers_connect=False)
 
@@ -196,7 +198,8 @@ def _matrix(creds: Path, receivers_connect: bool) -> None:
 
 
 @pytest.mark.attack("2", "a peer with a certificate of the cell's CA for a name that is no role, and one with "
-                         "another CA's certificate, put on the e-stop release and the torque command")
+                         "another CA's certificate, put on the e-stop release and the torque command",
+                   'nothing arrives, no presence; another CA opens no link')
 def test_a_peer_that_is_no_role_may_do_nothing(creds, tmp_path):
     rid = f"acl{free_port()}"
     keys = Keys.for_robot(rid)

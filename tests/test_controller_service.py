@@ -289,6 +289,8 @@ def test_estop_holds_the_arm_on_both_sides_and_bad_samples_are_counted_not_fatal
         wait_sample(sim_status, lambda s: "estop=" not in s.detail, 5.0, "the sim released")
 
 
+@pytest.mark.attack('estop', 'an e-stop that reaches only the robot side',
+                    "the controller follows the robot's state into ESTOP and out")
 def test_the_controller_follows_an_estop_that_reached_only_the_robot_side(tmp_path, learned_skill):
     """An operator linked to the sim alone (peers do not route for each other): the controller never hears the
     e-stop, yet its state and the robot's agree through the robot's states; the robot's release resumes it."""
@@ -395,6 +397,8 @@ def test_check_reports_the_skill_and_the_tick_cost(learned_skill_file):
     assert "ok: skill with 3 periodic" in r.stdout and "control tick p50" in r.stdout
 
 
+@pytest.mark.attack('faults', 'the controller stopped (SIGTERM) mid-wipe',
+                    'lifts, then exits with the pad clear')
 def test_a_controller_stopped_mid_wipe_lifts_the_pad_off_before_it_exits(tmp_path, learned_skill):
     """The review: perception killed, the cell stopped, the pad left pressing on the board. A stop request with the
     pad down is an e-stop (the fast lift) the loop sees through before exiting; with the pad up it exits at once."""
@@ -417,6 +421,8 @@ def test_a_controller_stopped_mid_wipe_lifts_the_pad_off_before_it_exits(tmp_pat
         assert took < LIFT_ON_STOP_S, took
 
 
+@pytest.mark.attack('faults', 'a sustained overload of the controller in real time',
+                    'FAULT, the pad lifted off, the reason named')
 @pytest.mark.slow
 def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp_path, learned_skill):
     """Graceful degradation: the real-time controller, its tick slowed to miss two robot states in three while it

@@ -98,6 +98,8 @@ def _run(skill, table: dict, until, disturb, ticks: int = 30_000):
     return core, core.disturbance.peak_ratio, fault_after
 
 
+@pytest.mark.attack('torques', '8 Nm of foreign torque on A7 mid-wipe',
+                    'FAULT naming A7 within 0.1 s; a clean run never alarms')
 @pytest.mark.slow
 def test_a_clean_run_never_alarms_and_foreign_torques_on_a7_fault_within_a_tenth_of_a_second(learned_skill):
     """The review's rogue peer swung A7 4.5 rad in 0.25 s with the controller none the wiser. Here 8 Nm on A7
@@ -119,6 +121,8 @@ def test_a_clean_run_never_alarms_and_foreign_torques_on_a7_fault_within_a_tenth
     assert baseline.executor.phase in (Phase.WIPE, Phase.TRANSITION), "the skill goes on regardless"
 
 
+@pytest.mark.attack('board', 'the board taken away under the pressing pad',
+                    'FAULT contact lost within 0.4 s')
 @pytest.mark.slow
 def test_a_board_taken_away_under_the_pressing_pad_is_a_contact_loss_fault(learned_skill):
     def remove_board(sim, tau):

@@ -10,6 +10,8 @@ force, so a controller that exits waits for it.
 
 from __future__ import annotations
 
+import pytest
+
 import numpy as np
 
 from controller.executor import RELEASED_N, SkillExecutor
@@ -23,6 +25,8 @@ def _shifted(dx_m: float) -> BoardPose:
     return BoardPose(WALL, BOARD.origin_m + np.array([0.0, dx_m, 0.0]), BOARD.size_m)
 
 
+@pytest.mark.attack('3', "a board placed out of the arm's reach",
+                    'refused, nothing starts')
 def test_a_board_out_of_reach_is_refused_and_nothing_starts(learned_skill):
     ex = SkillExecutor(learned_skill, ExecutorParams())
     far = BoardPose(WALL, np.array([10.0, 0.4, 0.25]), BOARD.size_m)
@@ -32,6 +36,8 @@ def test_a_board_out_of_reach_is_refused_and_nothing_starts(learned_skill):
     assert ex.phase == "WAIT_PEERS"
 
 
+@pytest.mark.attack('3', 'a board pose that jumps 0.30 m while wiping',
+                    'lifted off first; adopted only after it held still 2 s, then surveyed')
 def test_a_jump_while_wiping_lifts_off_and_is_not_adopted_until_it_held_still(learned_skill):
     p = ExecutorParams(board_confirm_s=4.0)
     ex = SkillExecutor(learned_skill, p)
@@ -63,6 +69,8 @@ def test_a_jump_that_goes_away_is_never_adopted_and_the_job_goes_on(learned_skil
     assert "WIPE" in phases(log) or "APPROACH" in phases(log), phases(log)
 
 
+@pytest.mark.attack('3', 'a board pose that jumps while DONE (executor over real skills)',
+                    'held, not approached')
 def test_a_jump_while_done_is_held_not_approached(learned_skill):
     """The case that pressed the real board: a jump while DONE never leads to an approach of the new pose before
     it has held still and been surveyed."""
@@ -78,6 +86,8 @@ def test_a_jump_while_done_is_held_not_approached(learned_skill):
     assert ex.board is BOARD
 
 
+@pytest.mark.attack('3', 'a pad that presses while the board model says it is held in the air',
+                    'lifted by what is measured, force below 0.5 N')
 def test_a_pad_pressing_while_held_in_the_air_is_lifted_and_counts_as_down(learned_skill):
     """The board model off: held in the air by the model, the pad presses in fact (10 N). pad_down says True by the
     measured force (a controller that exits waits for it), and the hold lifts the pad by what is measured."""

@@ -57,6 +57,8 @@ def _sim_status(cell: Cell, accept, what: str) -> ServiceStatus:
     return wait_sample(reader, accept, 10.0, what)
 
 
+@pytest.mark.attack('faults', 'perception and sim frozen (SIGSTOP) and killed and restarted, lock-step',
+                    'paused or FAULT off the board, resumed; force and speeds within limits')
 def test_lockstep_survives_perception_and_sim_freezes_kills_and_restarts(tmp_path, learned_skill_file):
     with Cell(tmp_path / "run", learned_skill_file, "lockstep") as cell:
         cell.wait_phase(("WIPE",), 120.0)
@@ -89,6 +91,8 @@ def test_lockstep_survives_perception_and_sim_freezes_kills_and_restarts(tmp_pat
     assert any("no robot state" in r for r in _reasons(report, "FAULT")), report["faults"]
 
 
+@pytest.mark.attack('faults', "controller frozen 2 s, killed and restarted; a peer without a certificate and one with perception's identity command 30 Nm; recorder frozen and restarted",
+                    'nothing of the rogues reaches the sim; wiping again; recording whole')
 def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recorder(tmp_path, learned_skill_file):
     with Cell(tmp_path / "run", learned_skill_file, "lockstep") as cell:
         cell.wait_phase(("WIPE",), 120.0)
@@ -136,6 +140,8 @@ def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recor
     assert sim.get("controller_changes", 0) >= 1, sim
 
 
+@pytest.mark.attack('faults', 'real time: the controller-robot link stalled 300 ms and cut, sim frozen 3 s, controller and recorder killed',
+                    'the robot side brakes; wiping on; force and speeds within limits')
 def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_controller_and_recorder(
         tmp_path, learned_skill_file):
     with Cell(tmp_path / "run", learned_skill_file, "realtime", proxy=True) as cell:
@@ -169,6 +175,8 @@ def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_contro
     assert not any("silent for the last" in r for r in service), "the recorder's death is not the controller's"
 
 
+@pytest.mark.attack('faults', 'real time: states thinned to 500/s, commands to 333/s, stains to 2/s',
+                    'the board cleaned, no FAULT')
 def test_realtime_cleans_the_board_with_samples_dropped_on_the_state_command_and_stains_keys(
         tmp_path, learned_skill_file):
     # Zenoh's own downsampling on each sender's egress: about every other state, two of three commands and

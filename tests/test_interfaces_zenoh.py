@@ -96,6 +96,8 @@ def test_a_deeper_reader_holds_the_newest_samples_in_order_and_counts_the_bad_on
     assert got == sorted(set(got)) and states.take_all() == []
 
 
+@pytest.mark.attack('payloads', 'garbage, NaN and wrong-length samples on a key',
+                    'counted and dropped, the reader goes on')
 def test_bad_samples_are_counted_and_dropped_and_the_reader_goes_on(peers):
     sim, ctrl = peers
     states = ctrl.latest(ctrl.keys.robot_state, RobotState)
@@ -121,6 +123,8 @@ def test_bad_samples_are_counted_and_dropped_and_the_reader_goes_on(peers):
     raw.undeclare()
 
 
+@pytest.mark.attack('payloads', "samples far over their type's size bound",
+                    'dropped before decoding, counted')
 def test_an_oversized_sample_is_dropped_before_it_is_parsed(peers):
     """A well-formed RobotState 10x larger than any robot's is counted and dropped; the next good one decodes."""
     sim, ctrl = peers

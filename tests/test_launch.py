@@ -117,7 +117,8 @@ def test_every_zenoh_service_of_every_profile_joins_with_its_roles_identity_and_
 
 
 @pytest.mark.attack("1", "read every file each compose service can reach (its volumes, made by compose's "
-                         "folders and credentials services) for another role's private key or the CA's")
+                         "folders and credentials services) for another role's private key or the CA's",
+                   "only the service's own role key, never another's nor the CA's")
 def test_a_service_reaches_its_own_roles_secret_and_no_other(tmp_path):
     from interfaces.credentials import CA_FOLDER, identity_files, identity_folder, make_credentials
 

@@ -84,6 +84,8 @@ def _raw_config(connect: str, tls: dict | None) -> zenoh.Config:
     return cfg
 
 
+@pytest.mark.attack('identity', "a peer with another CA's certificate, without one, or plain TCP to a TLS port",
+                    'no link, no token, no sample')
 @pytest.mark.slow
 def test_only_peers_with_a_certificate_from_the_cell_ca_join(pki):
     cell, other = pki

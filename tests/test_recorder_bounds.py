@@ -26,6 +26,8 @@ def _pair(rid: str):
     return a, b
 
 
+@pytest.mark.attack('7', 'a flood of oversized Stains at the recorder',
+                    'counted and described, never stored')
 def test_rejected_samples_are_counted_and_described_never_stored(tmp_path):
     rec_node, pub = _pair(f"rb{free_port()}")
     try:
@@ -56,6 +58,8 @@ def test_rejected_samples_are_counted_and_described_never_stored(tmp_path):
     assert not any(topic.endswith("/raw") for topic in msgs)
 
 
+@pytest.mark.attack('7', 'a recording past its disk budget',
+                    'nothing more recorded; recorder/budget says so')
 def test_past_its_budget_the_recorder_records_nothing_more_and_says_so(tmp_path):
     rec_node, pub = _pair(f"rb{free_port()}")
     try:

@@ -114,6 +114,8 @@ def test_a_recorder_started_again_continues_the_recording_and_loses_nothing(tmp_
     assert marker["last_earlier_ns"] == 1_000_000 + expected - 1
 
 
+@pytest.mark.attack('6', 'the recorder killed under lamps up',
+                    'report.json written from the recovered recording')
 def test_lamps_up_recovers_the_recording_of_a_dead_recorder_and_writes_the_report(tmp_path, capsys):
     """The recorder killed: lamps up still leaves report.json, from the recording recovered up to the crash."""
     from launch.cli import _show_report

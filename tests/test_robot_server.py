@@ -218,6 +218,8 @@ def test_max_steps_ends_the_run_and_deactivating_leaves_the_arm_holding():
     assert arm.dq.tolist() == [0.0] * 7 and final.counters["commands_applied"] == 2
 
 
+@pytest.mark.attack('estop', '40 Nm commands during an e-stop',
+                    'the robot side holds, the arm unmoved')
 def test_the_robot_side_holds_while_the_estop_is_engaged_whatever_is_commanded():
     """Lock-step: every answer still steps the arm, but as a hold while e-stopped (a rogue or a broken controller
     cannot move it); a release on the engage key changes nothing; the release key does."""
@@ -249,6 +251,8 @@ def test_the_robot_side_holds_while_the_estop_is_engaged_whatever_is_commanded()
         assert np.all(arm.q > 0.0) and st.counters["estop_engaged"] == 0 and "estop" not in st.detail.split()[-1]
 
 
+@pytest.mark.attack('torques', 'a second controller session commands the robot',
+                    'dropped and counted; a restarted one served after 0.5 s of silence')
 def test_commands_are_bound_to_the_controller_session_served_and_each_state_says_which_it_applied():
     """A second controller (another session, even answering the right state) is dropped and counted while the one
     served keeps commanding; once that one has been silent for ``rebind_after_s`` the newcomer (a restarted
@@ -321,6 +325,8 @@ def test_after_its_own_loop_froze_the_robot_side_brakes_until_the_controller_ans
     assert st.counters["loop_freezes"] == 1, st.counters
 
 
+@pytest.mark.attack('torques', 'commands that drive a joint over 0.95 of its speed limit',
+                    'braked')
 def test_a_joint_over_its_speed_brake_is_braked_whatever_is_commanded():
     """A starved controller answering late once spun the sim's A6 to 7.7x its limit (CI load). The robot side
     brakes every joint while one is (or by the next cycle will be) faster than 0.95 of its limit, counts each episode

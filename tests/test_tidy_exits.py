@@ -21,6 +21,8 @@ from .cell_harness import Cell
 pytestmark = pytest.mark.slow
 
 
+@pytest.mark.attack('5', 'perception killed (SIGKILL) under lamps up mid-wipe',
+                    'the controller exits only with contact below 0.5 N')
 def test_perception_killed_mid_wipe_the_controller_lifts_the_pad_before_it_exits(tmp_path, learned_skill_file):
     out = tmp_path / "run"
     with Cell(out, learned_skill_file, "lockstep") as cell:
