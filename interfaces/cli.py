@@ -37,9 +37,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "health": ("launch.health:main", "is this service ready (its Zenoh endpoints accept connections)? compose's probe"),
     "folders": ("launch.folders:main", "make the cell's host folders and give them to the service user (compose)"),
     "credentials": ("interfaces.credentials:main",
-                    "make a cell's per-role passwords for Zenoh authentication and access control"),
+                    "make a cell's CA and one mutual-TLS identity per role (the access list's subjects)"),
     "certificates": ("interfaces.certificates:main",
-                     "make a cell's CA and per-service certificates for mutual TLS between machines"),
+                     "make a CA and certificates for other names (flat layout; --add signs one more)"),
     "bench": ("launch.bench:main", "run every benchmark into bench.json and a markdown page (a source checkout)"),
 }
 
