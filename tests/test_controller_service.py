@@ -128,8 +128,8 @@ def test_full_wipe_of_three_seeded_stains_with_regulated_force_and_c2_junctions(
             truth.take()  # one from before DONE, perhaps: the final truth is the next one
             final = wait_sample(truth, timeout_s=5.0, what="a sim truth after DONE")
             junctions = list(ctl.core.executor.junction_ticks)
-        # a controller restarted while the arm holds DONE (the review saw that hold oscillate at ~20 Hz and fault at
-        # 43 N): a new session, served once the old one is silent, holds still
+        # a controller restarted while the arm holds DONE (a hold that oscillates or presses would fault): a new
+        # session, served once the old one is silent, holds still
         with ControllerThread(sim, learned_skill) as again:
             wait_for(lambda: again.core.time_s > 3.0, 60.0, "3 s of robot time under the restarted controller")
             assert again.phase == "DONE", (again.phase, again.core.executor.reason)
@@ -400,7 +400,7 @@ def test_check_reports_the_skill_and_the_tick_cost(learned_skill_file):
 @pytest.mark.attack('faults', 'the controller stopped (SIGTERM) mid-wipe',
                     'lifts, then exits with the pad clear')
 def test_a_controller_stopped_mid_wipe_lifts_the_pad_off_before_it_exits(tmp_path, learned_skill):
-    """The review: perception killed, the cell stopped, the pad left pressing on the board. A stop request with the
+    """Perception killed and the cell stopped must not leave the pad pressing on the board. A stop request with the
     pad down is an e-stop (the fast lift) the loop sees through before exiting; with the pad up it exits at once."""
     from controller.service import LIFT_ON_STOP_S
 

@@ -102,7 +102,7 @@ def _run(skill, table: dict, until, disturb, ticks: int = 30_000):
                     'FAULT naming A7 within 0.1 s; a clean run never alarms')
 @pytest.mark.slow
 def test_a_clean_run_never_alarms_and_foreign_torques_on_a7_fault_within_a_tenth_of_a_second(learned_skill):
-    """The review's rogue peer swung A7 4.5 rad in 0.25 s with the controller none the wiser. Here 8 Nm on A7
+    """A foreign torque (a rogue peer's) must not move a joint unnoticed. Here 8 Nm on A7
     (a fifth of its limit) from mid-wipe on: the watch faults naming A7, the baseline without it wipes on."""
     core, peak, fault = _run(learned_skill, {}, lambda c: False, lambda sim, tau: None)
     assert core.executor.phase == Phase.DONE and fault is None

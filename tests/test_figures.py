@@ -21,8 +21,8 @@ def test_a_transition_between_two_stains_is_shown_between_them(learned_skill):
 
 @pytest.mark.skipif(not REAL.is_file(), reason="the real wiping demos are not beside the repo")
 def test_a_real_single_wipe_shows_its_demonstrated_approach_at_its_own_duration(tmp_path):
-    """A single-wipe recording has no transition between stains: the approach used to be squeezed between two
-    phases of the one stroke, 8x faster than shown; now it is the approach as demonstrated."""
+    """A single-wipe recording has no transition between stains: the approach is the one demonstrated, at its own
+    duration, not squeezed between two phases of the one stroke."""
     demo = read_demo(f"{REAL}#0")
     skill, seg = learn_skill(demo)
     shown = _shown(skill)

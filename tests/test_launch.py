@@ -601,6 +601,6 @@ def test_a_service_dying_mid_run_stops_the_others_and_is_named(tmp_path, learned
     assert (out / "recording.mcap").is_file() and report["outcome"] == "failed"
     cell = [f for f in report["faults"] if f["phase"] == "CELL"]  # the death is a fault with a time and a reason
     assert len(cell) == 1 and "perception exited with code -9" in cell[0]["reason"] and cell[0]["wall_ns"] > 0
-    # the controller, stopped first, lifted the pad off the board before it exited (the review: left pressing)
+    # the controller, stopped first, lifted the pad off the board before it exited (never left pressing)
     assert any(f["phase"] == "ESTOP" and f["reason"].startswith("cell stopping with the pad on the board")
                for f in report["faults"]), report["faults"]

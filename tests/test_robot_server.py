@@ -302,7 +302,7 @@ class FreezingArm(MockArm):
 
 @pytest.mark.slow
 def test_after_its_own_loop_froze_the_robot_side_brakes_until_the_controller_answers_a_fresh_state():
-    """The review: after a sim freeze the sim applied a pre-freeze command for 3 ms. Now the held command and an
+    """After the robot side's own loop froze, no pre-freeze command may be applied: the held command and an
     answer to a state from before the freeze are both dropped; the arm holds until an answer to a new state."""
     arm = FreezingArm(q0_rad=np.zeros(7))
     params = ServerParams(mode="realtime", rate_hz=500.0, stale_limit_s=0.05, status_rate_hz=100.0)
