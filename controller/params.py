@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any
 
 from controller.control.params import ControlConfigError, ImpedanceParams
 from lampskit.errors import PlanningError
@@ -29,6 +29,7 @@ from lampskit.core.planner import PlannerParams
 from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import dataclass_from_table
+from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
 MODES = ("lockstep", "realtime")
@@ -56,31 +57,23 @@ class ForceParams:
     lost) [s].
     """
 
-    target_n: float = 10.0
-    cap_n: float = 40.0
-    kp: float = 0.3
-    ki: float = 8.0
-    integral_limit_n: float = 8.0
+    target_n: Annotated[float, In(0.5, 150.0)] = 10.0
+    cap_n: Annotated[float, In(1.0, 150.0)] = 40.0
+    kp: Annotated[float, In(0.0, 5.0)] = 0.3
+    ki: Annotated[float, In(0.0, 100.0)] = 8.0
+    integral_limit_n: Annotated[float, In(0.0, 100.0)] = 8.0
     contact_threshold_n: float = 2.0
-    normal_damping_1_s: float = 40.0
-    ramp_s: float = 0.3
-    filter_s: float = 0.005
-    contact_loss_s: float = 0.3
+    normal_damping_1_s: Annotated[float, In(0.0, 500.0)] = 40.0
+    ramp_s: Annotated[float, In(0.01, 5.0)] = 0.3
+    filter_s: Annotated[float, In(0.0, 0.1)] = 0.005
+    contact_loss_s: Annotated[float, In(0.01, 10.0)] = 0.3
 
     def __post_init__(self) -> None:
         s = "controller.force"
-        _range(s, "contact_loss_s", self.contact_loss_s, 0.01, 10.0)
-        _range(s, "cap_n", self.cap_n, 1.0, 150.0)
-        _range(s, "target_n", self.target_n, 0.5, 150.0)
+        check_declared(self, s)
         if self.target_n >= self.cap_n:
             raise ConfigError(f"[{s}] target_n ({self.target_n} N) must be below cap_n ({self.cap_n} N)")
-        _range(s, "kp", self.kp, 0.0, 5.0)
-        _range(s, "ki", self.ki, 0.0, 100.0)
-        _range(s, "integral_limit_n", self.integral_limit_n, 0.0, 100.0)
         _range(s, "contact_threshold_n", self.contact_threshold_n, 0.1, self.target_n)
-        _range(s, "normal_damping_1_s", self.normal_damping_1_s, 0.0, 500.0)
-        _range(s, "ramp_s", self.ramp_s, 0.01, 5.0)
-        _range(s, "filter_s", self.filter_s, 0.0, 0.1)
 
 
 @dataclass(frozen=True)
@@ -113,52 +106,33 @@ class LimitParams:
     overload_share (:func:`controller.control.limits.load_scale`).
     """
 
-    torque_rate_nm_per_ms: float = 1.0
-    joint_margin_rad: float = 0.12
-    joint_margin_stiffness_nm_rad: float = 300.0
-    joint_margin_damping_nm_s_rad: float = 10.0
-    max_speed_m_s: float = 0.6
-    speed_brake_gain_n_s_m: float = 200.0
-    reference_joint_speed_share: float = 0.6
-    joint_speed_share: float = 0.65
-    joint_speed_brake_1_s: float = 150.0
-    max_position_error_m: float = 0.05
-    max_rotation_error_rad: float = 0.3
-    gain_ramp_s: float = 0.5
-    disturbance_share: float = 0.1
-    disturbance_filter_s: float = 0.02
-    disturbance_persist_s: float = 0.05
-    overload_share: float = 0.3
-    overload_filter_s: float = 0.5
-    overload_persist_s: float = 1.0
-    overload_slow_share: float = 0.05
-    overload_min_scale: float = 0.4
+    torque_rate_nm_per_ms: Annotated[float, In(0.01, 50.0)] = 1.0
+    joint_margin_rad: Annotated[float, In(0.01, 0.5)] = 0.12
+    joint_margin_stiffness_nm_rad: Annotated[float, In(0.0, 5000.0)] = 300.0
+    joint_margin_damping_nm_s_rad: Annotated[float, In(0.0, 500.0)] = 10.0
+    max_speed_m_s: Annotated[float, In(0.05, 2.0)] = 0.6
+    speed_brake_gain_n_s_m: Annotated[float, In(0.0, 5000.0)] = 200.0
+    reference_joint_speed_share: Annotated[float, In(0.05, 10.0)] = 0.6
+    joint_speed_share: Annotated[float, In(0.1, 1.0)] = 0.65
+    joint_speed_brake_1_s: Annotated[float, In(0.0, 400.0)] = 150.0
+    max_position_error_m: Annotated[float, In(0.005, 0.5)] = 0.05
+    max_rotation_error_rad: Annotated[float, In(0.05, 3.2)] = 0.3
+    gain_ramp_s: Annotated[float, In(0.0, 10.0)] = 0.5
+    disturbance_share: Annotated[float, In(0.02, 10.0)] = 0.1
+    disturbance_filter_s: Annotated[float, In(0.001, 1.0)] = 0.02
+    disturbance_persist_s: Annotated[float, In(0.0, 5.0)] = 0.05
+    overload_share: Annotated[float, In(0.01, 1.0)] = 0.3
+    overload_filter_s: Annotated[float, In(0.01, 10.0)] = 0.5
+    overload_persist_s: Annotated[float, In(0.0, 60.0)] = 1.0
+    overload_slow_share: Annotated[float, In(0.0, 1.0)] = 0.05
+    overload_min_scale: Annotated[float, In(0.05, 1.0)] = 0.4
 
     def __post_init__(self) -> None:
         s = "controller.limits"
-        _range(s, "disturbance_share", self.disturbance_share, 0.02, 10.0)
-        _range(s, "disturbance_filter_s", self.disturbance_filter_s, 0.001, 1.0)
-        _range(s, "disturbance_persist_s", self.disturbance_persist_s, 0.0, 5.0)
-        _range(s, "overload_share", self.overload_share, 0.01, 1.0)
-        _range(s, "overload_filter_s", self.overload_filter_s, 0.01, 10.0)
-        _range(s, "overload_persist_s", self.overload_persist_s, 0.0, 60.0)
-        _range(s, "overload_slow_share", self.overload_slow_share, 0.0, 1.0)
-        _range(s, "overload_min_scale", self.overload_min_scale, 0.05, 1.0)
+        check_declared(self, s)
         if self.overload_slow_share >= self.overload_share:
             raise ControlConfigError(f"{s}.overload_slow_share must be below overload_share ({self.overload_share:g}), "
                               f"got {self.overload_slow_share:g}: the motion slows before the overload ends the run")
-        _range(s, "torque_rate_nm_per_ms", self.torque_rate_nm_per_ms, 0.01, 50.0)
-        _range(s, "joint_margin_rad", self.joint_margin_rad, 0.01, 0.5)
-        _range(s, "joint_margin_stiffness_nm_rad", self.joint_margin_stiffness_nm_rad, 0.0, 5000.0)
-        _range(s, "joint_margin_damping_nm_s_rad", self.joint_margin_damping_nm_s_rad, 0.0, 500.0)
-        _range(s, "max_speed_m_s", self.max_speed_m_s, 0.05, 2.0)
-        _range(s, "speed_brake_gain_n_s_m", self.speed_brake_gain_n_s_m, 0.0, 5000.0)
-        _range(s, "reference_joint_speed_share", self.reference_joint_speed_share, 0.05, 10.0)
-        _range(s, "joint_speed_share", self.joint_speed_share, 0.1, 1.0)
-        _range(s, "joint_speed_brake_1_s", self.joint_speed_brake_1_s, 0.0, 400.0)
-        _range(s, "max_position_error_m", self.max_position_error_m, 0.005, 0.5)
-        _range(s, "max_rotation_error_rad", self.max_rotation_error_rad, 0.05, 3.2)
-        _range(s, "gain_ramp_s", self.gain_ramp_s, 0.0, 10.0)
 
 
 @dataclass(frozen=True)
@@ -207,52 +181,34 @@ class ExecutorParams:
     from the robot base is refused [m].
     """
 
-    standoff_m: float = 0.04
-    approach_speed_m_s: float = 0.15
-    descend_speed_m_s: float = 0.02
+    standoff_m: Annotated[float, In(0.005, 0.3)] = 0.04
+    approach_speed_m_s: Annotated[float, In(0.01, 1.0)] = 0.15
+    descend_speed_m_s: Annotated[float, In(0.005, 0.3)] = 0.02
     creep_height_m: float = 0.016
-    turn_rate_rad_s: float = 0.6
-    wipe_timeout_s: float = 2.5
-    pass_cycles: float = 2.0
-    recheck_s: float = 1.0
-    max_passes: int = 6
-    look_clearance_m: float = 0.1
-    kappa_remaining: float = 0.03
+    turn_rate_rad_s: Annotated[float, In(0.05, 3.0)] = 0.6
+    wipe_timeout_s: Annotated[float, In(0.5, 3600.0)] = 2.5
+    pass_cycles: Annotated[float, In(0.5, 1e6)] = 2.0
+    recheck_s: Annotated[float, In(0.0, 60.0)] = 1.0
+    max_passes: Annotated[int, In(1, 100)] = 6
+    look_clearance_m: Annotated[float, In(0.0, 1.0)] = 0.1
+    kappa_remaining: Annotated[float, In(0.0, 1.0)] = 0.03
     air: bool = False
-    air_height_m: float = 0.03
-    stop_s: float = 0.3
-    estop_ramp_s: float = 0.1
-    contact_search_m: float = 0.03
-    survey_s: float = 1.0
-    board_jump_m: float = 0.05
-    board_jump_rad: float = 0.1
-    board_confirm_s: float = 2.0
-    board_reach_m: float = 1.3
+    air_height_m: Annotated[float, In(0.005, 0.3)] = 0.03
+    stop_s: Annotated[float, In(0.05, 3.0)] = 0.3
+    estop_ramp_s: Annotated[float, In(0.01, 1.0)] = 0.1
+    contact_search_m: Annotated[float, In(0.005, 0.2)] = 0.03
+    survey_s: Annotated[float, In(0.0, 60.0)] = 1.0
+    board_jump_m: Annotated[float, In(0.005, 10.0)] = 0.05
+    board_jump_rad: Annotated[float, In(0.02, 3.2)] = 0.1
+    board_confirm_s: Annotated[float, In(0.0, 600.0)] = 2.0
+    board_reach_m: Annotated[float, In(0.3, 10.0)] = 1.3
 
     def __post_init__(self) -> None:
         s = "controller.executor"
-        _range(s, "standoff_m", self.standoff_m, 0.005, 0.3)
-        _range(s, "approach_speed_m_s", self.approach_speed_m_s, 0.01, 1.0)
-        _range(s, "descend_speed_m_s", self.descend_speed_m_s, 0.005, 0.3)
-        _range(s, "turn_rate_rad_s", self.turn_rate_rad_s, 0.05, 3.0)
-        _range(s, "wipe_timeout_s", self.wipe_timeout_s, 0.5, 3600.0)
-        _range(s, "pass_cycles", self.pass_cycles, 0.5, 1e6)
-        _range(s, "recheck_s", self.recheck_s, 0.0, 60.0)
-        check_int(s, "max_passes", self.max_passes, 1, 100)
-        _range(s, "look_clearance_m", self.look_clearance_m, 0.0, 1.0)
-        _range(s, "kappa_remaining", self.kappa_remaining, 0.0, 1.0)
+        check_declared(self, s)
         if not isinstance(self.air, bool):
             raise ConfigError(f"[{s}] air must be true or false, got {self.air!r}")
-        _range(s, "air_height_m", self.air_height_m, 0.005, 0.3)
-        _range(s, "stop_s", self.stop_s, 0.05, 3.0)
-        _range(s, "estop_ramp_s", self.estop_ramp_s, 0.01, 1.0)
-        _range(s, "contact_search_m", self.contact_search_m, 0.005, 0.2)
         _range(s, "creep_height_m", self.creep_height_m, 0.001, self.standoff_m)
-        _range(s, "survey_s", self.survey_s, 0.0, 60.0)
-        _range(s, "board_jump_m", self.board_jump_m, 0.005, 10.0)
-        _range(s, "board_jump_rad", self.board_jump_rad, 0.02, 3.2)
-        _range(s, "board_confirm_s", self.board_confirm_s, 0.0, 600.0)
-        _range(s, "board_reach_m", self.board_reach_m, 0.3, 10.0)
 
 
 @dataclass(frozen=True)
@@ -282,15 +238,15 @@ class ControllerParams:
     """
 
     mode: str = "lockstep"
-    rate_hz: float = 1000.0
+    rate_hz: Annotated[float, In(100.0, 10000.0)] = 1000.0
     skill: str = ""
     stains_from: str = "perception"
     state_timeout_s: float = 0.0
     robot_lost_s: float = 0.0
-    stains_timeout_s: float = 1.0
-    status_rate_hz: float = 20.0
-    max_ticks: int = 0
-    trace_ticks: int = 0
+    stains_timeout_s: Annotated[float, In(0.05, 3600.0)] = 1.0
+    status_rate_hz: Annotated[float, In(0.5, 200.0)] = 20.0
+    max_ticks: Annotated[int, In(0, 10**9)] = 0
+    trace_ticks: Annotated[int, In(0, MAX_TRACE_TICKS)] = 0
     publish_trace: bool = True
     impedance: ImpedanceParams = field(default_factory=ImpedanceParams)
     force: ForceParams = field(default_factory=ForceParams)
@@ -300,9 +256,9 @@ class ControllerParams:
 
     def __post_init__(self) -> None:
         s = "controller"
+        check_declared(self, s)
         if self.mode not in MODES:
             raise ConfigError(f"[{s}] mode must be one of {MODES}, got {self.mode!r}")
-        _range(s, "rate_hz", self.rate_hz, 100.0, 10000.0)
         if not isinstance(self.skill, str):
             raise ConfigError(f"[{s}] skill must be a file path (string), got {self.skill!r}")
         if self.stains_from not in STAIN_SOURCES:
@@ -311,10 +267,6 @@ class ControllerParams:
             _range(s, "state_timeout_s", self.state_timeout_s, 1.5 / self.rate_hz, 1.0)
         if self.robot_lost_s != 0.0:
             _range(s, "robot_lost_s", self.robot_lost_s, 0.15, 60.0)
-        _range(s, "stains_timeout_s", self.stains_timeout_s, 0.05, 3600.0)
-        _range(s, "status_rate_hz", self.status_rate_hz, 0.5, 200.0)
-        check_int(s, "max_ticks", self.max_ticks, 0, 10**9)
-        check_int(s, "trace_ticks", self.trace_ticks, 0, MAX_TRACE_TICKS)
         if not isinstance(self.publish_trace, bool):
             raise ConfigError(f"[{s}] publish_trace must be true or false, got {self.publish_trace!r}")
         peak = QUINTIC_PEAK_SPEED * self.executor.approach_speed_m_s

@@ -44,10 +44,13 @@ from __future__ import annotations
 import math
 import os
 import tomllib
+import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
+
+import msgspec
 
 from .access import DEFAULT_ROS_NAMESPACE, ROLES
 from .errors import ConfigError
@@ -249,6 +252,42 @@ def load_config(path: str | os.PathLike | None = None, env: Mapping[str, str] | 
 
 # --------------------------------------------------------------------------
 # checks every service's parameter dataclasses share
+
+
+def In(lo: float, hi: float) -> msgspec.Meta:
+    """A setting's allowed closed range, declared on its field: ``x: Annotated[float, In(0.0, 1.0)] = 0.5``
+    (an ``int`` field takes whole numbers only). :func:`check_declared` checks it."""
+    return msgspec.Meta(ge=lo, le=hi)
+
+
+_DECLARED: dict[type, list[tuple[str, type, float, float]]] = {}
+
+
+def declared_bounds(cls: type) -> list[tuple[str, type, float, float]]:
+    """(field, int or float, lo, hi) of every field of dataclass ``cls`` declared with :func:`In`."""
+    if cls not in _DECLARED:
+        hints = typing.get_type_hints(cls, include_extras=True)
+        out = []
+        for f in fields(cls):
+            hint = hints.get(f.name)
+            if typing.get_origin(hint) is not Annotated:
+                continue
+            base, *extras = typing.get_args(hint)
+            for meta in extras:
+                if isinstance(meta, msgspec.Meta) and meta.ge is not None and meta.le is not None:
+                    out.append((f.name, int if base is int else float, meta.ge, meta.le))
+        _DECLARED[cls] = out
+    return _DECLARED[cls]
+
+
+def check_declared(obj: Any, section: str) -> None:
+    """Check every field of dataclass ``obj`` against its declared range (:func:`In`); ConfigError naming the
+    section, the key, the value and the range. Cross-field rules stay in the dataclass's ``__post_init__``."""
+    for name, kind, lo, hi in declared_bounds(type(obj)):
+        if kind is int:
+            check_int(section, name, getattr(obj, name), int(lo), int(hi))
+        else:
+            check_range(section, name, getattr(obj, name), lo, hi)
 
 
 def check_range(section: str, name: str, value: Any, lo: float, hi: float) -> None:

@@ -24,11 +24,12 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any
 
 from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import check_vector, dataclass_from_table
+from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
 
@@ -48,27 +49,21 @@ class BoardParams:
     """
 
     size_m: tuple[float, float] = (0.0, 0.0)
-    resolution_m: float = 0.002
-    min_markers: int = 2
-    hold_s: float = 2.0
-    max_reprojection_px: float = 2.0
-    moved_m: float = 0.03
-    moved_deg: float = 3.0
-    edge_margin_m: float = 0.01
+    resolution_m: Annotated[float, In(0.0005, 0.01)] = 0.002
+    min_markers: Annotated[int, In(1, 4)] = 2
+    hold_s: Annotated[float, In(0.0, 600.0)] = 2.0
+    max_reprojection_px: Annotated[float, In(0.1, 20.0)] = 2.0
+    moved_m: Annotated[float, In(0.001, 1.0)] = 0.03
+    moved_deg: Annotated[float, In(0.1, 90.0)] = 3.0
+    edge_margin_m: Annotated[float, In(0.0, 0.1)] = 0.01
 
     def __post_init__(self) -> None:
         s = "perception.board"
+        check_declared(self, s)
         size = check_vector(s, "size_m", self.size_m, 2)
         object.__setattr__(self, "size_m", size)
         if size != (0.0, 0.0) and not all(0.2 <= v <= 5.0 for v in size):
             raise ConfigError(f"[{s}] size_m must be [0, 0] (measure) or two lengths in [0.2, 5.0] m, got {list(size)}")
-        _range(s, "resolution_m", self.resolution_m, 0.0005, 0.01)
-        check_int(s, "min_markers", self.min_markers, 1, 4)
-        _range(s, "hold_s", self.hold_s, 0.0, 600.0)
-        _range(s, "max_reprojection_px", self.max_reprojection_px, 0.1, 20.0)
-        _range(s, "moved_m", self.moved_m, 0.001, 1.0)
-        _range(s, "moved_deg", self.moved_deg, 0.1, 90.0)
-        _range(s, "edge_margin_m", self.edge_margin_m, 0.0, 0.1)
 
 
 @dataclass(frozen=True)
@@ -90,15 +85,16 @@ class InkParams:
 
     ink_rgb: tuple[float, float, float] = (28.0, 38.0, 96.0)
     board_rgb: tuple[float, float, float] = (242.0, 243.0, 238.0)
-    stain_level: float = 0.3
+    stain_level: Annotated[float, In(0.05, 0.95)] = 0.3
     illumination_range: tuple[float, float] = (0.82, 1.3)
-    max_residual: float = 0.06
-    prior_weight: float = 0.002
-    occlusion_fill_m: float = 0.04
-    occlusion_margin_m: float = 0.004
+    max_residual: Annotated[float, In(0.005, 1.0)] = 0.06
+    prior_weight: Annotated[float, In(0.0, 10.0)] = 0.002
+    occlusion_fill_m: Annotated[float, In(0.0, 0.2)] = 0.04
+    occlusion_margin_m: Annotated[float, In(0.0, 0.05)] = 0.004
 
     def __post_init__(self) -> None:
         s = "perception.ink"
+        check_declared(self, s)
         ink = check_vector(s, "ink_rgb", self.ink_rgb, 3)
         board = check_vector(s, "board_rgb", self.board_rgb, 3)
         if not all(0 <= v <= 255 for v in ink + board):
@@ -108,16 +104,11 @@ class InkParams:
                               "by at least 20 % in some channel")
         object.__setattr__(self, "ink_rgb", ink)
         object.__setattr__(self, "board_rgb", board)
-        _range(s, "stain_level", self.stain_level, 0.05, 0.95)
         lo, hi = check_vector(s, "illumination_range", self.illumination_range, 2)
         if not 0.05 <= lo < 1.0 < hi <= 5.0:
             raise ConfigError(f"[{s}] illumination_range must be [lo, hi] with 0.05 <= lo < 1 < hi <= 5, "
                               f"got {[lo, hi]}")
         object.__setattr__(self, "illumination_range", (lo, hi))
-        _range(s, "max_residual", self.max_residual, 0.005, 1.0)
-        _range(s, "prior_weight", self.prior_weight, 0.0, 10.0)
-        _range(s, "occlusion_fill_m", self.occlusion_fill_m, 0.0, 0.2)
-        _range(s, "occlusion_margin_m", self.occlusion_margin_m, 0.0, 0.05)
 
 
 @dataclass(frozen=True)
@@ -133,17 +124,14 @@ class StainParams:
     its ink, so its edges count in the remaining fraction [m].
     """
 
-    link_m: float = 0.015
-    min_area_m2: float = 1.5e-4
-    confirm_s: float = 0.3
-    region_margin_m: float = 0.006
+    link_m: Annotated[float, In(0.001, 0.2)] = 0.015
+    min_area_m2: Annotated[float, In(1e-6, 0.1)] = 1.5e-4
+    confirm_s: Annotated[float, In(0.0, 10.0)] = 0.3
+    region_margin_m: Annotated[float, In(0.0, 0.05)] = 0.006
 
     def __post_init__(self) -> None:
         s = "perception.stains"
-        _range(s, "link_m", self.link_m, 0.001, 0.2)
-        _range(s, "min_area_m2", self.min_area_m2, 1e-6, 0.1)
-        _range(s, "confirm_s", self.confirm_s, 0.0, 10.0)
-        _range(s, "region_margin_m", self.region_margin_m, 0.0, 0.05)
+        check_declared(self, s)
 
 
 @dataclass(frozen=True)
@@ -158,19 +146,15 @@ class KappaParams:
     for ``debounce_s`` (new ink on the stain).
     """
 
-    level: float = 0.03
-    debounce_s: float = 0.2
-    min_seen: float = 0.9
-    memory_s: float = 1.5
-    reappear_margin: float = 0.1
+    level: Annotated[float, In(0.0, 0.9)] = 0.03
+    debounce_s: Annotated[float, In(0.0, 10.0)] = 0.2
+    min_seen: Annotated[float, In(0.1, 1.0)] = 0.9
+    memory_s: Annotated[float, In(0.05, 60.0)] = 1.5
+    reappear_margin: Annotated[float, In(0.01, 1.0)] = 0.1
 
     def __post_init__(self) -> None:
         s = "perception.kappa"
-        _range(s, "level", self.level, 0.0, 0.9)
-        _range(s, "debounce_s", self.debounce_s, 0.0, 10.0)
-        _range(s, "min_seen", self.min_seen, 0.1, 1.0)
-        _range(s, "memory_s", self.memory_s, 0.05, 60.0)
-        _range(s, "reappear_margin", self.reappear_margin, 0.01, 1.0)
+        check_declared(self, s)
 
 
 @dataclass(frozen=True)
@@ -183,18 +167,17 @@ class CameraModelParams:
     frame; the board pose is then reported in that frame.
     """
 
-    fx: float = 0.0
-    fy: float = 0.0
-    cx: float = 0.0
-    cy: float = 0.0
+    fx: Annotated[float, In(0.0, 20000.0)] = 0.0
+    fy: Annotated[float, In(0.0, 20000.0)] = 0.0
+    cx: Annotated[float, In(0.0, 20000.0)] = 0.0
+    cy: Annotated[float, In(0.0, 20000.0)] = 0.0
     position_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
     look_at_m: tuple[float, float, float] = (1.0, 0.0, 1.0)
     up_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
     def __post_init__(self) -> None:
         s = "perception.camera"
-        for name in ("fx", "fy", "cx", "cy"):
-            _range(s, name, getattr(self, name), 0.0, 20000.0)
+        check_declared(self, s)
         for name in ("position_m", "look_at_m", "up_m"):
             object.__setattr__(self, name, check_vector(s, name, getattr(self, name), 3))
 
@@ -223,15 +206,15 @@ class PerceptionParams:
 
     camera: str = "board"
     source: str = "zenoh"
-    publish_rate_hz: float = 10.0
-    status_rate_hz: float = 2.0
+    publish_rate_hz: Annotated[float, In(1.0, 200.0)] = 10.0
+    status_rate_hz: Annotated[float, In(0.1, 50.0)] = 2.0
     debug_images: bool = False
-    debug_rate_hz: float = 2.0
-    frame_timeout_s: float = 2.0
-    source_rate_hz: float = 10.0
+    debug_rate_hz: Annotated[float, In(0.1, 30.0)] = 2.0
+    frame_timeout_s: Annotated[float, In(0.1, 60.0)] = 2.0
+    source_rate_hz: Annotated[float, In(0.1, 120.0)] = 10.0
     tool_mask: bool = True
-    tool_margin_m: float = 0.01
-    tool_max_age_s: float = 0.1
+    tool_margin_m: Annotated[float, In(0.0, 0.1)] = 0.01
+    tool_max_age_s: Annotated[float, In(0.001, 5.0)] = 0.1
     board: BoardParams = field(default_factory=BoardParams)
     ink: InkParams = field(default_factory=InkParams)
     stains: StainParams = field(default_factory=StainParams)
@@ -240,20 +223,14 @@ class PerceptionParams:
 
     def __post_init__(self) -> None:
         s = "perception"
+        check_declared(self, s)
         if not isinstance(self.camera, str) or not re.fullmatch(r"[A-Za-z0-9_\-.]+", self.camera):
             raise ConfigError(f"[{s}] camera must be letters, digits, '_', '-' or '.', got {self.camera!r}")
         parse_source(self.source)
-        _range(s, "publish_rate_hz", self.publish_rate_hz, 1.0, 200.0)
-        _range(s, "status_rate_hz", self.status_rate_hz, 0.1, 50.0)
-        _range(s, "debug_rate_hz", self.debug_rate_hz, 0.1, 30.0)
-        _range(s, "frame_timeout_s", self.frame_timeout_s, 0.1, 60.0)
-        _range(s, "source_rate_hz", self.source_rate_hz, 0.1, 120.0)
         if not isinstance(self.debug_images, bool):
             raise ConfigError(f"[{s}] debug_images must be true or false, got {self.debug_images!r}")
         if not isinstance(self.tool_mask, bool):
             raise ConfigError(f"[{s}] tool_mask must be true or false, got {self.tool_mask!r}")
-        _range(s, "tool_margin_m", self.tool_margin_m, 0.0, 0.1)
-        _range(s, "tool_max_age_s", self.tool_max_age_s, 0.001, 5.0)
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any]) -> "PerceptionParams":

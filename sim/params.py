@@ -23,12 +23,13 @@ import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any
 
 from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import check_vector as _vector
 from interfaces.config import dataclass_from_table as _from_table
+from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
 MODES = ("lockstep", "realtime")
@@ -51,10 +52,11 @@ class BoardParams:
     size_m: tuple[float, float] | None = None
     origin_m: tuple[float, float, float] | None = None
     quat_wxyz: tuple[float, float, float, float] | None = None
-    thickness_m: float = 0.02
+    thickness_m: Annotated[float, In(0.005, 0.1)] = 0.02
 
     def __post_init__(self) -> None:
         s = "sim.board"
+        check_declared(self, s)
         if self.preset not in BOARD_PRESETS:
             raise ConfigError(f"[{s}] preset must be one of {BOARD_PRESETS}, got {self.preset!r}")
         if self.preset == "custom" and (self.origin_m is None or self.quat_wxyz is None or self.size_m is None):
@@ -73,7 +75,6 @@ class BoardParams:
             if abs(norm - 1.0) > 1e-3:
                 raise ConfigError(f"[{s}] quat_wxyz must be a unit quaternion, got norm {norm:.4f}")
             object.__setattr__(self, "quat_wxyz", tuple(v / norm for v in q))
-        _range(s, "thickness_m", self.thickness_m, 0.005, 0.1)
 
 
 @dataclass(frozen=True)
@@ -87,14 +88,12 @@ class ContactParams:
     N/m in all, so 10 N presses about 0.13 mm).
     """
 
-    friction: float = 0.35
-    stiffness_n_m: float = 2.0e4
-    damping_n_s_m: float = 300.0
+    friction: Annotated[float, In(0.0, 2.0)] = 0.35
+    stiffness_n_m: Annotated[float, In(1e3, 1e7)] = 2.0e4
+    damping_n_s_m: Annotated[float, In(0.0, 1e5)] = 300.0
 
     def __post_init__(self) -> None:
-        _range("sim.contact", "friction", self.friction, 0.0, 2.0)
-        _range("sim.contact", "stiffness_n_m", self.stiffness_n_m, 1e3, 1e7)
-        _range("sim.contact", "damping_n_s_m", self.damping_n_s_m, 0.0, 1e5)
+        check_declared(self, "sim.contact")
 
 
 @dataclass(frozen=True)
@@ -113,32 +112,27 @@ class DirtParams:
     a cell, so the removal pattern is unchanged at a quarter of the cost).
     """
 
-    cell_m: float = 0.002
+    cell_m: Annotated[float, In(0.0005, 0.002)] = 0.002
     stains: int = 3
     stain_size_m: tuple[float, float] = (0.04, 0.08)
-    margin_m: float = 0.12
+    margin_m: Annotated[float, In(0.0, 0.5)] = 0.12
     stain: tuple[Mapping[str, Any], ...] = ()
-    threshold_force_n: float = 2.0
-    rate_per_n_m: float = 2.0
-    max_tilt_deg: float = 10.0
-    wipe_every_steps: int = 4
+    threshold_force_n: Annotated[float, In(0.0, 100.0)] = 2.0
+    rate_per_n_m: Annotated[float, In(0.0, 1e3)] = 2.0
+    max_tilt_deg: Annotated[float, In(0.0, 45.0)] = 10.0
+    wipe_every_steps: Annotated[int, In(1, 20)] = 4
 
     def __post_init__(self) -> None:
         s = "sim.dirt"
-        check_int(s, "wipe_every_steps", self.wipe_every_steps, 1, 20)
-        _range(s, "cell_m", self.cell_m, 0.0005, 0.002)
+        check_declared(self, s)
         check_int(s, "stains", self.stains, 0, 12, what="an integer count")
         lo, hi = _vector(s, "stain_size_m", self.stain_size_m, 2)
         if not 0.01 <= lo <= hi <= 0.3:
             raise ConfigError(f"[{s}] stain_size_m must be (min, max) with 0.01 <= min <= max <= 0.3, got {self.stain_size_m!r}")
         object.__setattr__(self, "stain_size_m", (lo, hi))
-        _range(s, "margin_m", self.margin_m, 0.0, 0.5)
         if not isinstance(self.stain, (list, tuple)) or not all(isinstance(t, Mapping) for t in self.stain):
             raise ConfigError(f"[{s}] stain must be a list of tables, got {self.stain!r}")
         object.__setattr__(self, "stain", tuple(self.stain))
-        _range(s, "threshold_force_n", self.threshold_force_n, 0.0, 100.0)
-        _range(s, "rate_per_n_m", self.rate_per_n_m, 0.0, 1e3)
-        _range(s, "max_tilt_deg", self.max_tilt_deg, 0.0, 45.0)
 
 
 @dataclass(frozen=True)
@@ -157,28 +151,26 @@ class CameraParams:
 
     enabled: bool = True
     name: str = "board"
-    width: int = 640
-    height: int = 480
-    rate_hz: float = 10.0
+    width: Annotated[int, In(64, 1920)] = 640
+    height: Annotated[int, In(48, 1080)] = 480
+    rate_hz: Annotated[float, In(0.5, 60.0)] = 10.0
     fx: float | None = None
     fy: float | None = None
     cx: float | None = None
     cy: float | None = None
     position_m: tuple[float, float, float] | None = None
     look_at_m: tuple[float, float, float] | None = None
-    elevation_deg: float = 30.0
-    azimuth_deg: float = 20.0
-    margin: float = 0.15
+    elevation_deg: Annotated[float, In(0.0, 70.0)] = 30.0
+    azimuth_deg: Annotated[float, In(-70.0, 70.0)] = 20.0
+    margin: Annotated[float, In(0.0, 1.0)] = 0.15
     shadow: bool = True
     light_direction: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         s = "sim.camera"
+        check_declared(self, s)
         if not isinstance(self.enabled, bool) or not isinstance(self.shadow, bool):
             raise ConfigError(f"[{s}] enabled and shadow must be true or false")
-        for name, lo, hi in (("width", 64, 1920), ("height", 48, 1080)):
-            check_int(s, name, getattr(self, name), lo, hi)
-        _range(s, "rate_hz", self.rate_hz, 0.5, 60.0)
         if not isinstance(self.name, str) or not re.fullmatch(r"[A-Za-z0-9_\-.]+", self.name):
             raise ConfigError(f"[{s}] name must be letters, digits, '_', '-' or '.', got {self.name!r}")
         scale = self.width / 640.0
@@ -194,9 +186,6 @@ class CameraParams:
             object.__setattr__(self, "look_at_m", _vector(s, "look_at_m", self.look_at_m, 3))
             if math.dist(self.position_m, self.look_at_m) < 0.1:
                 raise ConfigError(f"[{s}] position_m and look_at_m must be at least 0.1 m apart")
-        _range(s, "elevation_deg", self.elevation_deg, 0.0, 70.0)
-        _range(s, "azimuth_deg", self.azimuth_deg, -70.0, 70.0)
-        _range(s, "margin", self.margin, 0.0, 1.0)
         if self.light_direction is not None:
             object.__setattr__(self, "light_direction", _vector(s, "light_direction", self.light_direction, 3))
 
@@ -222,15 +211,15 @@ class SimParams:
 
     mode: str = "lockstep"
     seed: int = 0
-    rate_hz: float = 1000.0
+    rate_hz: Annotated[float, In(100.0, 5000.0)] = 1000.0
     stale_limit_s: float = 0.02
-    speed_brake_share: float = 0.95
+    speed_brake_share: Annotated[float, In(0.0, 1.0)] = 0.95
     gravity_compensated: bool = False
     start_q_rad: tuple[float, ...] | None = None
-    start_standoff_m: float = 0.08
+    start_standoff_m: Annotated[float, In(0.01, 0.5)] = 0.08
     truth_rate_hz: float = 10.0
-    status_rate_hz: float = 2.0
-    lockstep_republish_s: float = 0.1
+    status_rate_hz: Annotated[float, In(0.1, 100.0)] = 2.0
+    lockstep_republish_s: Annotated[float, In(0.001, 10.0)] = 0.1
     lockstep_camera_sync: bool = True
     max_steps: int = 0
     board: BoardParams = field(default_factory=BoardParams)
@@ -240,21 +229,17 @@ class SimParams:
 
     def __post_init__(self) -> None:
         s = "sim"
+        check_declared(self, s)
         if self.mode not in MODES:
             raise ConfigError(f"[{s}] mode must be one of {MODES}, got {self.mode!r}")
         check_int(s, "seed", self.seed, 0)
-        _range(s, "rate_hz", self.rate_hz, 100.0, 5000.0)
         _range(s, "stale_limit_s", self.stale_limit_s, 2.0 / self.rate_hz, 1.0)
-        _range(s, "speed_brake_share", self.speed_brake_share, 0.0, 1.0)
         for name in ("gravity_compensated", "lockstep_camera_sync"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"[{s}] {name} must be true or false, got {getattr(self, name)!r}")
         if self.start_q_rad is not None:
             object.__setattr__(self, "start_q_rad", _vector(s, "start_q_rad", self.start_q_rad, 7))
-        _range(s, "start_standoff_m", self.start_standoff_m, 0.01, 0.5)
         _range(s, "truth_rate_hz", self.truth_rate_hz, 0.1, self.rate_hz)
-        _range(s, "status_rate_hz", self.status_rate_hz, 0.1, 100.0)
-        _range(s, "lockstep_republish_s", self.lockstep_republish_s, 0.001, 10.0)
         check_int(s, "max_steps", self.max_steps, 0)
 
     @property

@@ -33,10 +33,12 @@
 
 from __future__ import annotations
 
+from typing import Annotated
 from dataclasses import dataclass, field
 
 from interfaces.config import check_range as _range
 from interfaces.config import dataclass_from_table
+from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
 from .msgs import FRI_MAJORS, N_JOINTS, LbrTopics, stack_joint_names
@@ -63,25 +65,26 @@ class LbrParams:
     fri_major: int = 1
     open_loop: bool = True
     joint_stiffness_nm_rad: tuple[float, ...] = field(default=APP_STIFFNESS)
-    pid_p: float = 0.1
-    steer_share: float = 0.3
-    measured_torque_cutoff_hz: float = 10.0
-    external_torque_cutoff_hz: float = 10.0
-    frozen_after_s: float = 0.05
+    pid_p: Annotated[float, In(1e-3, 1.0)] = 0.1
+    steer_share: Annotated[float, In(0.01, 1.0)] = 0.3
+    measured_torque_cutoff_hz: Annotated[float, In(0.0, 10_000.0)] = 10.0
+    external_torque_cutoff_hz: Annotated[float, In(0.0, 10_000.0)] = 10.0
+    frozen_after_s: Annotated[float, In(0.005, 10.0)] = 0.05
     wrench_source: str = "external_torque"
-    wrench_force_threshold_n: float = 2.0
-    wrench_torque_threshold_nm: float = 0.5
-    velocity_cutoff_hz: float = 80.0
-    hold_timeout_s: float = 0.5
-    stale_limit_s: float = 0.005
-    max_joint_speed_scale: float = 0.8
-    speed_brake_share: float = 0.95
-    tau_rate_nm_s: float = 5000.0
-    limit_margin_rad: float = 0.05
+    wrench_force_threshold_n: Annotated[float, In(0.0, 1000.0)] = 2.0
+    wrench_torque_threshold_nm: Annotated[float, In(0.0, 100.0)] = 0.5
+    velocity_cutoff_hz: Annotated[float, In(1.0, 500.0)] = 80.0
+    hold_timeout_s: Annotated[float, In(0.001, 10.0)] = 0.5
+    stale_limit_s: Annotated[float, In(0.0005, 1.0)] = 0.005
+    max_joint_speed_scale: Annotated[float, In(0.01, 1.0)] = 0.8
+    speed_brake_share: Annotated[float, In(0.0, 1.0)] = 0.95
+    tau_rate_nm_s: Annotated[float, In(1.0, 100_000.0)] = 5000.0
+    limit_margin_rad: Annotated[float, In(0.0, 0.5)] = 0.05
     arm: bool = False
 
     def __post_init__(self) -> None:
         s = "lbr"
+        check_declared(self, s)
         for name in ("namespace", "state_topic", "torque_command_topic", "wrench_topic", "joint_states_topic"):
             v = getattr(self, name)
             if not isinstance(v, str) or (name != "namespace" and not v.strip("/")):
@@ -109,20 +112,6 @@ class LbrParams:
         for v in k:
             _range(s, "joint_stiffness_nm_rad", v, 0.0, 5000.0)
         object.__setattr__(self, "joint_stiffness_nm_rad", tuple(float(v) for v in k))
-        _range(s, "pid_p", self.pid_p, 1e-3, 1.0)
-        _range(s, "steer_share", self.steer_share, 0.01, 1.0)
-        _range(s, "measured_torque_cutoff_hz", self.measured_torque_cutoff_hz, 0.0, 10_000.0)
-        _range(s, "external_torque_cutoff_hz", self.external_torque_cutoff_hz, 0.0, 10_000.0)
-        _range(s, "frozen_after_s", self.frozen_after_s, 0.005, 10.0)
-        _range(s, "wrench_force_threshold_n", self.wrench_force_threshold_n, 0.0, 1000.0)
-        _range(s, "wrench_torque_threshold_nm", self.wrench_torque_threshold_nm, 0.0, 100.0)
-        _range(s, "velocity_cutoff_hz", self.velocity_cutoff_hz, 1.0, 500.0)
-        _range(s, "hold_timeout_s", self.hold_timeout_s, 0.001, 10.0)
-        _range(s, "stale_limit_s", self.stale_limit_s, 0.0005, 1.0)
-        _range(s, "max_joint_speed_scale", self.max_joint_speed_scale, 0.01, 1.0)
-        _range(s, "speed_brake_share", self.speed_brake_share, 0.0, 1.0)
-        _range(s, "tau_rate_nm_s", self.tau_rate_nm_s, 1.0, 100_000.0)
-        _range(s, "limit_margin_rad", self.limit_margin_rad, 0.0, 0.5)
 
     @classmethod
     def from_table(cls, table) -> "LbrParams":

@@ -37,9 +37,10 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 from interfaces.config import check_range, dataclass_from_table
+from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 from robot.lbr.msgs import (FRI_MAJORS, N_JOINTS, ClientCommandMode, ControlMode, LbrTopics, OperationMode,
                             stack_joint_names)
@@ -66,35 +67,36 @@ class LbrPeerParams:
     branch: str = "rolling"
     fri_major: int = 1
     mode: str = "lockstep"
-    sample_time_s: float = 0.001
-    update_rate_hz: float = 0.0
+    sample_time_s: Annotated[float, In(0.001, 0.01)] = 0.001
+    update_rate_hz: Annotated[float, In(0.0, 10_000.0)] = 0.0
     client_command_mode: str = "position"
     control_mode: str = "joint_impedance"
     open_loop: bool = True
-    pid_p: float = 0.1
-    pid_i: float = 0.0
-    pid_d: float = 0.0
-    pid_i_max: float = 0.0
+    pid_p: Annotated[float, In(0.0, 10.0)] = 0.1
+    pid_i: Annotated[float, In(0.0, 10.0)] = 0.0
+    pid_d: Annotated[float, In(0.0, 10.0)] = 0.0
+    pid_i_max: Annotated[float, In(-10.0, 10.0)] = 0.0
     pid_i_min: float = 0.0
-    measured_torque_cutoff_hz: float = 10.0
-    external_torque_cutoff_hz: float = 10.0
-    joint_stiffness_nm_rad: float = 200.0
-    joint_damping_ratio: float = 0.7
+    measured_torque_cutoff_hz: Annotated[float, In(0.0, 10_000.0)] = 10.0
+    external_torque_cutoff_hz: Annotated[float, In(0.0, 10_000.0)] = 10.0
+    joint_stiffness_nm_rad: Annotated[float, In(0.0, 5000.0)] = 200.0
+    joint_damping_ratio: Annotated[float, In(0.0, 1.0)] = 0.7
     ft_update_rate_hz: float = 0.0
-    ft_damping: float = 0.2
-    ft_force_threshold_n: float = 2.0
-    ft_torque_threshold_nm: float = 0.5
-    commanding_after_s: float = 0.0
-    commanding_wait_s: float = 0.05
-    stop_app_after_s: float = 0.0
+    ft_damping: Annotated[float, In(0.0, 10.0)] = 0.2
+    ft_force_threshold_n: Annotated[float, In(0.0, 1000.0)] = 2.0
+    ft_torque_threshold_nm: Annotated[float, In(0.0, 100.0)] = 0.5
+    commanding_after_s: Annotated[float, In(0.0, 3600.0)] = 0.0
+    commanding_wait_s: Annotated[float, In(0.0, 60.0)] = 0.05
+    stop_app_after_s: Annotated[float, In(0.0, 1e6)] = 0.0
     operation_mode: str = "T1"
     joint_states_rate_hz: float = 100.0
-    lockstep_wait_s: float = 0.5
-    republish_s: float = 0.05
-    status_rate_hz: float = 2.0
+    lockstep_wait_s: Annotated[float, In(0.001, 10.0)] = 0.5
+    republish_s: Annotated[float, In(0.001, 10.0)] = 0.05
+    status_rate_hz: Annotated[float, In(0.1, 100.0)] = 2.0
 
     def __post_init__(self) -> None:
         s = "lbr_peer"
+        check_declared(self, s)
         if not isinstance(self.namespace, str) or not _NAMESPACE.fullmatch(self.namespace.strip("/")):
             raise ConfigError(f"[{s}] namespace must be a ROS name like 'lbr' (letters, digits, '_', "
                               f"'/'-separated), got {self.namespace!r}")
@@ -108,9 +110,7 @@ class LbrPeerParams:
             raise ConfigError(f"[{s}] fri_major must be one of {FRI_MAJORS}, got {self.fri_major!r}")
         if not isinstance(self.open_loop, bool):
             raise ConfigError(f"[{s}] open_loop must be true or false, got {self.open_loop!r}")
-        check_range(s, "sample_time_s", self.sample_time_s, 0.001, 0.01)
         rate = 1.0 / self.sample_time_s
-        check_range(s, "update_rate_hz", self.update_rate_hz, 0.0, 10_000.0)
         if self.update_rate_hz == 0:
             object.__setattr__(self, "update_rate_hz", BRANCH_UPDATE_RATE_HZ[self.branch])
         elif self.update_rate_hz < 1.0:
@@ -119,25 +119,9 @@ class LbrPeerParams:
         if self.ft_update_rate_hz == 0:
             object.__setattr__(self, "ft_update_rate_hz",
                                min(self.update_rate_hz if self.branch == "humble" else 100.0, rate))
-        for name in ("pid_p", "pid_i", "pid_d"):
-            check_range(s, name, getattr(self, name), 0.0, 10.0)
-        check_range(s, "pid_i_max", self.pid_i_max, -10.0, 10.0)
-        check_range(s, "pid_i_min", self.pid_i_min, -10.0, self.pid_i_max)
-        for name in ("measured_torque_cutoff_hz", "external_torque_cutoff_hz"):
-            check_range(s, name, getattr(self, name), 0.0, 10_000.0)
-        check_range(s, "joint_stiffness_nm_rad", self.joint_stiffness_nm_rad, 0.0, 5000.0)
-        check_range(s, "joint_damping_ratio", self.joint_damping_ratio, 0.0, 1.0)
         check_range(s, "ft_update_rate_hz", self.ft_update_rate_hz, 0.1, rate)
-        check_range(s, "ft_damping", self.ft_damping, 0.0, 10.0)
-        check_range(s, "ft_force_threshold_n", self.ft_force_threshold_n, 0.0, 1000.0)
-        check_range(s, "ft_torque_threshold_nm", self.ft_torque_threshold_nm, 0.0, 100.0)
-        check_range(s, "commanding_after_s", self.commanding_after_s, 0.0, 3600.0)
-        check_range(s, "commanding_wait_s", self.commanding_wait_s, 0.0, 60.0)
-        check_range(s, "stop_app_after_s", self.stop_app_after_s, 0.0, 1e6)
         check_range(s, "joint_states_rate_hz", self.joint_states_rate_hz, 0.1, rate)
-        check_range(s, "lockstep_wait_s", self.lockstep_wait_s, 0.001, 10.0)
-        check_range(s, "republish_s", self.republish_s, 0.001, 10.0)
-        check_range(s, "status_rate_hz", self.status_rate_hz, 0.1, 100.0)
+        check_range(s, "pid_i_min", self.pid_i_min, -10.0, self.pid_i_max)
 
     @property
     def topics(self) -> LbrTopics:
