@@ -21,7 +21,7 @@ from lampskit.errors import PlanningError
 from lampskit.core.periodic import periodic_state
 from lampskit.core.periodic_runner import rollout as periodic_rollout
 from lampskit.core.planner import PlannerParams, transition_duration
-from lampskit.figures.demo import plt, save_figure
+from lampskit.figures.canvas import plt, save_figure
 from lampskit.learn.segmentation import Segmentation
 from lampskit.core.skill import PeriodicEntry, Skill, TransitionalEntry
 from lampskit.core.transitional import TrajectorySamples
