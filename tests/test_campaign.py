@@ -102,7 +102,7 @@ def test_a_row_takes_the_fixed_moves_from_the_skill_start_and_the_retreat():
 
 def test_phase_times_and_the_skill_start_come_from_the_trace():
     from controller.core import PHASE_CODES
-    from launch.report import job_end, phase_times, skill_start
+    from launch.report_maths import job_end, phase_times, skill_start
 
     col = {"t_s": 0, "phase": 1}
     codes = [PHASE_CODES["APPROACH"]] * 3 + [PHASE_CODES["TRANSITION"]] * 2 + [PHASE_CODES["WIPE"]] * 3
@@ -118,7 +118,7 @@ def test_phase_times_and_the_skill_start_come_from_the_trace():
     assert job_end(tr2, col) == 1.003 and job_end(tr2[:3], col) is None and job_end(tr2[:0], col) is None
     assert job_end(tr2[3:], col) == 1.003
     # the final retreat: only the RETREAT that leads into that DONE (a look and a re-pass before it are not it)
-    from launch.report import final_retreat
+    from launch.report_maths import final_retreat
 
     retreat = PHASE_CODES["RETREAT"]
     phases = [wipe, retreat, retreat, done, wipe, wipe, retreat, retreat, retreat, done, done]
