@@ -49,7 +49,8 @@ from enum import IntEnum
 import numpy as np
 
 from lampskit.errors import PlanningError
-from lampskit.core.planner import Plan, PlannerParams, plan
+from lampskit.core.planner import plan
+from lampskit.core.planner_types import Plan, PlannerParams
 from lampskit.core.skill import Skill
 from interfaces.messages import Phase
 

@@ -393,7 +393,7 @@ def _bounds(cells: list[Cell]) -> tuple[dict[Cell, tuple], dict[Cell, float], di
     pad's width."""
     from controller.params import ControllerParams
     from interfaces.description import PAD_SIZE_M
-    from lampskit.core.planner import PlannerParams
+    from lampskit.core.planner_types import PlannerParams
 
     tables = {b: _board_table(b) for b in dict.fromkeys(c.board for c in cells)}
     speed, pad = ControllerParams.from_table({}).limits.max_speed_m_s, max(PAD_SIZE_M)
