@@ -12,8 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from launch.campaign import (CampaignError, Cell, cell_bound_s, cell_stains, cells_of, felt_model, felt_path_m,
-                             lower_bound_s, mst_length_m, parse_range, row_of, summarize)
+from launch.campaign import cell_stains, felt_model
+from launch.campaign_bounds import cell_bound_s, felt_path_m, lower_bound_s, mst_length_m
+from launch.campaign_cells import CampaignError, Cell, cells_of, parse_range
+from launch.campaign_table import row_of, summarize
 
 REPO = Path(__file__).resolve().parent.parent
 TILTED = REPO / "config" / "boards" / "tilted.toml"
