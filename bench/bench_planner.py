@@ -26,8 +26,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from controller.planner_thread import SWITCH_INTERVAL_S, PlannerThread  # noqa: E402
-from lampskit.core.planner import (EXACT_ORDER_MAX, Plan, PlannerParams, Stain, adapted_wipe,  # noqa: E402
-                                   order_stains, plan, plan_transition)
+from lampskit.core.planner import adapted_wipe, plan, plan_transition  # noqa: E402
+from lampskit.core.planner_types import Plan, PlannerParams, Stain  # noqa: E402
+from lampskit.core.stain_order import EXACT_ORDER_MAX, order_stains  # noqa: E402
 from lampskit.learn.learn import bundled_skill  # noqa: E402
 
 SIZES = (5, 7, 10, 30, 100)

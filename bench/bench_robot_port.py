@@ -36,7 +36,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from bench_controller import BenchError, bench_lockstep, bench_realtime, free_port  # noqa: E402
+from bench_controller import bench_lockstep, bench_realtime  # noqa: E402
+from service_procs import BenchError, free_port  # noqa: E402
 from interfaces.config import ZenohSettings  # noqa: E402
 from interfaces.messages import RobotState, TorqueCommand  # noqa: E402
 from interfaces.session import ServiceNode, zenoh_config  # noqa: E402

@@ -34,8 +34,9 @@ from interfaces.robot_model import RobotModel
 from .control.force import NormalForceRegulator
 from .control.impedance import (Kinematics, Reference, TaskModes, TaskShaping, impedance_torque, new_terms,
                                 task_modes, task_stiffness)
-from .control.kernels import (joint_demand_into, largest_share, limit_torque, reference_into, tool_in_board,
-                              trace_row)
+from .control.demand_kernels import joint_demand_into, largest_share
+from .control.kernels import reference_into, tool_in_board, trace_row
+from .control.limit_kernels import limit_torque
 from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
 from .reach import arm_reach
 from .control.params import mode_frequency_cap

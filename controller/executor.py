@@ -44,17 +44,19 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from enum import IntEnum
 
 import numpy as np
 
 from lampskit.errors import PlanningError
-from lampskit.core.planner import Plan, PlannerParams, plan
+from lampskit.core.planner import plan
+from lampskit.core.planner_types import Plan, PlannerParams
 from lampskit.core.skill import Skill
 from interfaces.messages import Phase
 
 from lampskit.core.chain import ChainResult, MpChain
-from .control.limits import OVERRIDE_DOWN_RATE_1_S
+from .board_watch import BoardWatch
+from .executor_stage import _ACTIVE, _HALTED, LIFTED_M, RELEASED_N, Stage
+from .executor_stops import ExecutorStops
 from .executor_types import BoardPose, Setpoint, StainState, ToolState
 from .free_motion import FreeMotion
 from .params import ExecutorParams, ForceParams
@@ -62,36 +64,8 @@ from .stain_book import StainBook
 
 log = logging.getLogger(__name__)
 
-_ACTIVE = (Phase.APPROACH, Phase.WIPE, Phase.TRANSITION)
-_HALTED = (Phase.FAULT, Phase.ESTOP)
-#: The pad counts as off the board this far above it [m] (see :attr:`SkillExecutor.pad_down`).
-LIFTED_M = 0.005
-#: Below this measured contact force [N] the pad counts as released (:attr:`SkillExecutor.pad_down`).
-RELEASED_N = 0.5
-#: Lifts from the measured height in a row before the executor only holds (a wrong normal would press on).
-MAX_FORCED_LIFTS = 3
-#: The retreat's in-plane stop is planned to at least this share of the planner's jerk bound (see
-#: :meth:`_begin_retreat`).
-RETREAT_MIN_JERK_SHARE = 0.25
 
-
-class Stage(IntEnum):
-    """The motion running inside a phase; :meth:`SkillExecutor.step` calls one handler per stage."""
-
-    FLY = 0  #: to the hover point (quintic in x, y, h) while the pad turns flat
-    DESCEND = 1  #: down to the creep height (air mode: to the air height)
-    CREEP = 2  #: slowly on towards and past the surface until contact
-    PRESS = 3  #: force ramp up to its target, at rest
-    CHAIN = 4  #: the learned MPs over the stains (:class:`~lampskit.core.chain.MpChain`)
-    UNPRESS = 5  #: in contact: in-plane motion to rest while the force ramps out
-    BRAKE = 6  #: in the air: x, y and h to rest together
-    LIFT = 7  #: up to the standoff height
-    HOLD = 8  #: at rest
-    LOOK = 9  #: at the standoff height off the stains awaiting kappa
-    SURVEY = 10  #: before the first approach: to the look point of the whole board, then wait for the stains
-
-
-class SkillExecutor:
+class SkillExecutor(BoardWatch, ExecutorStops):
     """Runs one skill over the stains it is told about. See the module docstring for the phases.
 
     Parameters
@@ -186,60 +160,6 @@ class SkillExecutor:
             self.counters["anchor_moves"] += 1
             if moved == ChainResult.ERROR:
                 self._chain_failed()
-
-    def _out_of_reach(self, board: BoardPose) -> str | None:
-        centre = board.to_world(np.array([0.5 * board.size_m[0], 0.5 * board.size_m[1], 0.0]))
-        d = float(np.linalg.norm(centre))
-        if d > self.p.board_reach_m:
-            return f"a board centred {d:.2f} m from the robot base is beyond its reach ({self.p.board_reach_m} m)"
-        return None
-
-    def _jump_of(self, board: BoardPose) -> tuple[float, float] | None:
-        """(distance [m], turn [rad]) of ``board`` from the adopted one when beyond the jump limits, else None."""
-        d = float(np.linalg.norm(board.origin_m - self.board.origin_m))
-        c = float(np.clip((np.trace(board.R @ self.board.R.T) - 1.0) / 2.0, -1.0, 1.0))
-        a = float(np.arccos(c))
-        return (d, a) if d > self.p.board_jump_m or a > self.p.board_jump_rad else None
-
-    def _board_jumped(self, board: BoardPose) -> None:
-        """A board pose far from the adopted one: never adopted at once. Pressing or on the way, lift off first
-        (PAUSED); then hold until the adopted pose is reported again, or the new one has held still for
-        ``board_confirm_s`` with the pad in the air: adopted then, and surveyed before any approach."""
-        d, a = self._jump_of(board)
-        if self._jump is None or not board.close_to(self._jump, 0.01, 0.02):
-            self.counters["board_jumps"] += 1
-            self._jump, self._jump_since_s = board, self.clock_s
-            self.board_note = (f"the board pose jumped {d:.2f} m / {np.degrees(a):.1f} deg: not adopted without a "
-                               "new survey")
-            log.warning("%s", self.board_note)
-        if self.phase in _ACTIVE:
-            self._stop(Phase.PAUSED, self.board_note + "; lifting off")
-
-    def _confirm_jump(self) -> bool:
-        """In the air, holding: adopt a jumped board that has held still long enough; True while one is pending."""
-        if self._jump is None:
-            return False
-        if self.clock_s - self._jump_since_s < self.p.board_confirm_s or self._sp.contact:
-            if self.phase not in _HALTED and self.phase != Phase.PAUSED:
-                self._set_phase(Phase.PAUSED, self.board_note)
-            return True
-        self.motion.adopt_board(self.board, self._jump)
-        self.board, self._jump, self.board_note = self._jump, None, ""
-        self.counters["board_jumps_adopted"] += 1
-        self._surveyed = False  # the new pose is surveyed before any approach
-        log.warning("the board's new pose held still for %.1f s: adopted; surveying it", self.p.board_confirm_s)
-        if self.phase == Phase.PAUSED and self.stains_fresh and self._estop is None:
-            self._survey_or_start()
-        return self._jump is not None
-
-    def _board_moved(self, board: BoardPose) -> None:
-        """Adopt a moved board while holding in the air (the held pose stays where it is in the world)."""
-        if self._stage == Stage.HOLD and not self._sp.contact:
-            self.motion.adopt_board(self.board, board)
-            self.board = board
-            self.counters["board_adopted"] += 1
-        else:
-            self.counters["board_moved"] += 1
 
     def stains_stale(self, reason: str) -> None:
         """No stains update for too long: pause off the board (resumes on the next :meth:`set_stains`)."""
@@ -506,71 +426,7 @@ class SkillExecutor:
     def _chain_failed(self) -> None:
         self.fault(self.chain.error)
 
-    # ------------------------------------------------------------------ stopping
-    def _begin_retreat(self) -> None:
-        self._set_phase(Phase.RETREAT, "")
-        self.current_mp = "retreat"
-        self.stain_id = -1
-        self.junction_ticks.append(self.ticks)
-        # the end of the skill, not a stop for safety: within the planner's kinematic bounds, taking longer if needed,
-        # with room for the speed override's time scaling: the executed jerk gains 2 s (ds/dt) a, up to 2 x 8/s x a
-        # at the stroke's acceleration a (campaign cells stopped at 101-105 m/s^3 with 75-100 % of the bound planned)
-        jerk = self.planner.max_jerk_m_s3
-        room = 2.0 * OVERRIDE_DOWN_RATE_1_S * float(np.linalg.norm(self._sp.a_xy))
-        bounds = (self.planner.max_accel_m_s2, max(jerk - room, RETREAT_MIN_JERK_SHARE * jerk))
-        self._stage = Stage.UNPRESS if self.motion.brake(self.p.stop_s, self.f.ramp_s, bounds) else Stage.BRAKE
-
-    def _stop(self, phase: Phase, reason: str, fast: bool = False) -> None:
-        """Brake the in-plane motion, ramp the force out, lift off, hold (PAUSED, FAULT, ESTOP)."""
-        self._set_phase(phase, reason)
-        self._resume_after_lift = False
-        self.current_mp = "lift"
-        if self._stage == Stage.HOLD and not self._sp.contact:
-            if self._last_force_n >= RELEASED_N and self._last_tool is not None:
-                self._lift_from_measured(self._last_tool)
-            return
-        self.motion.stop_turn(self.p.estop_ramp_s if fast else self.p.stop_s)
-        self._brake(self.p.estop_ramp_s if fast else self.p.stop_s,
-                    self.p.estop_ramp_s if fast else self.f.ramp_s)
-
-    def _brake(self, duration_s: float, force_ramp_s: float) -> None:
-        self._stage = Stage.UNPRESS if self.motion.brake(duration_s, force_ramp_s) else Stage.BRAKE
-
-    def _lift_from_measured(self, tool: ToolState) -> None:
-        """Held in the air by the board model but pressing in fact (the model is off): lift ``standoff_m`` above the
-        measured height, at most ``MAX_FORCED_LIFTS`` times in a row."""
-        if self._forced_lifts >= MAX_FORCED_LIFTS:
-            return
-        self._forced_lifts += 1
-        self.counters["lifts_from_a_pressing_hold"] += 1
-        log.warning("the pad presses %.1f N while held in the air: lifting %.0f mm from where it is", tool.force_n,
-                    1e3 * self.p.standoff_m)
-        self.motion.lift(tool, from_measured=True)
-        self._stage = Stage.LIFT
-
-    def _begin_lift(self, tool: ToolState) -> None:
-        self.motion.lift(tool)
-        if self.phase == Phase.RETREAT:
-            self.current_mp = "retreat"
-        self._stage = Stage.LIFT
-
-    def _begin_look(self) -> bool:
-        """Off the stains awaiting kappa, which the arm hid from the camera; False if none wait or no move is needed."""
-        pending = self.book.pending()
-        # a stain still waiting after k passes was not seen clean from the k - 1 look points before: another one
-        attempt = max((self.book.passes(s.id) for s in pending), default=1) - 1
-        if not pending or self.p.look_clearance_m <= 0.0 or self.board is None \
-                or not self.motion.fly_to_look(self.board, pending, attempt):
-            return False
-        self.current_mp = "look"
-        self.counters["looks"] += 1
-        self._stage = Stage.LOOK
-        return True
-
-    def _done(self) -> None:
-        self._set_phase(Phase.DONE, "")
-        self._stage, self.current_mp = Stage.HOLD, "hold"
-
+    # ------------------------------------------------------------------ the phase
     def _set_phase(self, phase: Phase, reason: str) -> None:
         if phase != self.phase or reason != self.reason:
             log.info("phase %s -> %s%s", self.phase, phase, f" ({reason})" if reason else "")

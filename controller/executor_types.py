@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from interfaces.transforms import tool_rotation_on_board
-from lampskit.core.planner import Stain
+from lampskit.core.planner_types import Stain
 
 from .reach import ArmReach
 

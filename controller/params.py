@@ -25,7 +25,7 @@ from typing import Annotated, Any
 
 from controller.control.params import ControlConfigError, ImpedanceParams
 from lampskit.errors import PlanningError
-from lampskit.core.planner import PlannerParams
+from lampskit.core.planner_types import PlannerParams
 from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import dataclass_from_table

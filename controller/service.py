@@ -38,7 +38,7 @@ from interfaces.loop_stats import LoopStats
 from interfaces.session import ServiceNode
 from interfaces.transforms import transform_from_pose
 
-from lampskit.core.planner import Stain
+from lampskit.core.planner_types import Stain
 from lampskit.errors import PlanningError
 
 from .control.limits import load_scale

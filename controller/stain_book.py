@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from lampskit.core.planner import Stain
+from lampskit.core.planner_types import Stain
 
 from .executor_types import StainState
 

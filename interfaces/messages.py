@@ -6,6 +6,8 @@ so a payload of the wrong type or version is rejected on decode
 msgpack arrays (``array_like``): compact, and floats are IEEE doubles, so
 float vectors round-trip bit-exactly. ``__post_init__`` checks what the
 types cannot: vector lengths, finiteness, ranges. It runs on decode too.
+The string and counter bounds and the shared checks are in
+:mod:`interfaces.message_checks`.
 
 Units are SI; stamps are ``time.monotonic_ns()`` of the sender
 (``stamp_ns``) plus ``time.time_ns()`` (``wall_ns``) where logs need it.
@@ -16,48 +18,14 @@ scalar first (PyBullet's scalar-last order is converted at the sim's edge).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from enum import StrEnum
 from typing import Annotated
 
 import msgspec
 from msgspec.structs import force_setattr
 
-#: Longest strings a message may carry (a longer one fails to decode: dropped and counted). Producers' statuses
-#: are clipped to them on construction, so no input can make a status grow.
-NAME_MAX = 64
-TEXT_MAX = 512
-DETAIL_MAX = 1024
-COUNTER_KEY_MAX = 160
-COUNTERS_MAX = 256
-Name = Annotated[str, msgspec.Meta(max_length=NAME_MAX)]
-Text = Annotated[str, msgspec.Meta(max_length=TEXT_MAX)]
-Detail = Annotated[str, msgspec.Meta(max_length=DETAIL_MAX)]
-Counters = Annotated[dict[Annotated[str, msgspec.Meta(max_length=COUNTER_KEY_MAX)], int],
-                     msgspec.Meta(max_length=COUNTERS_MAX)]
-
-
-def bounded_counters(counters: dict[str, int]) -> dict[str, int]:
-    """``counters`` with keys clipped to :data:`COUNTER_KEY_MAX` and at most :data:`COUNTERS_MAX` entries (the rest
-    summed into ``"other counters"``)."""
-    if len(counters) <= COUNTERS_MAX and all(len(k) <= COUNTER_KEY_MAX for k in counters):
-        return counters
-    out: dict[str, int] = {}
-    for k, v in counters.items():
-        k = k[:COUNTER_KEY_MAX]
-        if k in out or len(out) < COUNTERS_MAX - 1:
-            out[k] = out.get(k, 0) + v
-        else:
-            out["other counters"] = out.get("other counters", 0) + v
-    return out
-
-
-def _clip(msg, **limits: int) -> None:
-    """Clip the named string fields of a just-built (frozen) message to their limits."""
-    for name, limit in limits.items():
-        value = getattr(msg, name)
-        if len(value) > limit:
-            force_setattr(msg, name, value[:limit])
+from interfaces.message_checks import (DETAIL_MAX, NAME_MAX, TEXT_MAX, Counters, Detail, Name, Text, _clip, _finite,
+                                       _same_length, bounded_counters)
 
 #: Bump when a change could make an old reader misread a new message.
 SCHEMA_VERSION = 1
@@ -95,21 +63,6 @@ class Phase(StrEnum):
 
 #: The phases' names, as :class:`ControllerStatus` carries them.
 PHASES = tuple(p.value for p in Phase)
-
-
-def _finite(name: str, values: Sequence[float], length: int | None = None) -> None:
-    if length is not None and len(values) != length:
-        raise ValueError(f"{name} must hold {length} numbers, got {len(values)}")
-    for v in values:
-        if not math.isfinite(v):
-            raise ValueError(f"{name} must be finite, got {v!r}")
-
-
-def _same_length(names: Sequence[str], vectors: Sequence[Sequence[float]]) -> None:
-    n = len(vectors[0])
-    for name, v in zip(names, vectors):
-        if len(v) != n:
-            raise ValueError(f"{name} has {len(v)} entries but {names[0]} has {n}")
 
 
 class Message(msgspec.Struct, frozen=True, kw_only=True, array_like=True, tag=True):

@@ -264,7 +264,7 @@ def _skill_summary(skill) -> str:
 
 
 def _parse_stains(text: str):
-    from lampskit.core.planner import Stain
+    from lampskit.core.planner_types import Stain
 
     stains = []
     for i, item in enumerate(filter(None, (s.strip() for s in text.split(";")))):
@@ -372,7 +372,8 @@ def demo_main(argv: list[str]) -> int:
 
 def _generalise_to_new_board(skill, seed: int):
     """Plan and roll out ``skill`` over 3 random stains (seeded) of a board it has never seen: (plan, rollout)."""
-    from lampskit.core.planner import Stain, plan
+    from lampskit.core.planner import plan
+    from lampskit.core.planner_types import Stain
     from lampskit.core.rollout import rollout
 
     rng = np.random.default_rng(seed + 1000)

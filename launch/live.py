@@ -1,7 +1,7 @@
 """``lamps foxglove``: the running cell served live to the Foxglove app over its WebSocket protocol.
 
 It subscribes every key of the cell as the recorder does and publishes what
-the recording would hold (:func:`launch.record.json_records`: the cell's
+the recording would hold (:func:`launch.record_json.json_records`: the cell's
 messages as JSON with full schemas, camera frames as
 ``foxglove.CompressedImage``, the controller trace as plottable rows) and the
 3D scene and image overlays of :mod:`launch.scene` (Foxglove's typed messages
@@ -92,7 +92,7 @@ class LiveView:
         from interfaces.codec import Decoder
         from interfaces.errors import MessageDecodeError
 
-        from .record import json_records, message_type_of
+        from .record_json import json_records, message_type_of
 
         if key not in self._decoders:
             t = message_type_of(self.keys, key)

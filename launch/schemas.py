@@ -4,7 +4,7 @@ The open-source Foxglove / Lichtblick JSON decoders drop a channel whose
 ``jsonschema`` has no ``properties``. :func:`json_schema_of` derives a full
 schema from a message type's declaration (``msgspec.inspect``): every field
 with its JSON type, nested messages as objects (the recorder writes array-like
-structs with field names, :func:`launch.record.to_builtins`), lists with their
+structs with field names, :func:`launch.record_json.to_builtins`), lists with their
 item schema, bytes as base64 strings, optional fields as ``anyOf`` with
 ``null``, and ``required`` for the fields without a default. String length
 bounds are kept; numeric bounds are not (a schema for viewers, not a second

@@ -16,8 +16,9 @@ from interfaces.stain_shape import shape_of
 from lampskit.core.chain import ChainResult, ChainStep, MpChain
 from lampskit.core.periodic import check_stroke, cycle_shape, periodic_state, stroke_matrix
 from lampskit.core.periodic_runner import PeriodicRunner, PeriodicStatus
-from lampskit.core.planner import (MAX_ADAPT_STEP, PlannerParams, Stain, adapted_wipe, cycle_peaks, plan,
-                                   wipe_shape)
+from lampskit.core.kinematic_bounds import cycle_peaks
+from lampskit.core.planner import MAX_ADAPT_STEP, adapted_wipe, plan, wipe_shape
+from lampskit.core.planner_types import PlannerParams, Stain
 from lampskit.core.skill import PeriodicEntry, Skill
 from lampskit.errors import PlanningError
 from lampskit.learn.learn import learn_skill

@@ -12,8 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from launch.campaign import (CampaignError, Cell, cell_bound_s, cell_stains, cells_of, felt_model, felt_path_m,
-                             lower_bound_s, mst_length_m, parse_range, row_of, summarize)
+from launch.campaign import cell_stains, felt_model
+from launch.campaign_bounds import cell_bound_s, felt_path_m, lower_bound_s, mst_length_m
+from launch.campaign_cells import CampaignError, Cell, cells_of, parse_range
+from launch.campaign_table import row_of, summarize
 
 REPO = Path(__file__).resolve().parent.parent
 TILTED = REPO / "config" / "boards" / "tilted.toml"
@@ -102,7 +104,7 @@ def test_a_row_takes_the_fixed_moves_from_the_skill_start_and_the_retreat():
 
 def test_phase_times_and_the_skill_start_come_from_the_trace():
     from controller.core import PHASE_CODES
-    from launch.report import job_end, phase_times, skill_start
+    from launch.report_maths import job_end, phase_times, skill_start
 
     col = {"t_s": 0, "phase": 1}
     codes = [PHASE_CODES["APPROACH"]] * 3 + [PHASE_CODES["TRANSITION"]] * 2 + [PHASE_CODES["WIPE"]] * 3
@@ -118,7 +120,7 @@ def test_phase_times_and_the_skill_start_come_from_the_trace():
     assert job_end(tr2, col) == 1.003 and job_end(tr2[:3], col) is None and job_end(tr2[:0], col) is None
     assert job_end(tr2[3:], col) == 1.003
     # the final retreat: only the RETREAT that leads into that DONE (a look and a re-pass before it are not it)
-    from launch.report import final_retreat
+    from launch.report_maths import final_retreat
 
     retreat = PHASE_CODES["RETREAT"]
     phases = [wipe, retreat, retreat, done, wipe, wipe, retreat, retreat, retreat, done, done]

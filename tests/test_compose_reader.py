@@ -14,8 +14,8 @@ import subprocess
 import pytest
 
 from interfaces.errors import ConfigError
-from launch.compose import (active_profiles, compose_model, interpolate, load_compose, load_with_docker,
-                            read_dotenv)
+from launch.compose import compose_model, load_compose, load_with_docker
+from launch.compose_interp import active_profiles, interpolate, read_dotenv
 
 from .conftest import REPO
 from .docker_helpers import ensure_docker
@@ -105,7 +105,7 @@ def test_profiles_come_from_the_environment_then_env_file(tmp_path):
 
 def _both(path, env):
     """(built-in, docker compose) services of ``path`` with environment ``env``; a refusal as ('error', text)."""
-    from launch.compose import compose_variables
+    from launch.compose_interp import compose_variables
 
     out = []
     for read in (lambda: load_compose(path, compose_variables(path, env)), lambda: load_with_docker(path, env)):

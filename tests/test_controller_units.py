@@ -12,7 +12,8 @@ from controller.control.force import NormalForceRegulator
 from controller.control.limits import (SpeedOverride, TorqueShaper, jerk_limited_scale, joint_margin_torque,
                                        joint_speed_brake_torque, speed_excess_force)
 from lampskit.core.chain import ChainStep
-from controller.executor import SkillExecutor, Stage
+from controller.executor import SkillExecutor
+from controller.executor_stage import Stage
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
 from controller.stain_book import StainBook
 from controller.motion import OrientationBlend, Quintic, bounded_brake_to_rest, brake_peaks, brake_to_rest

@@ -14,7 +14,8 @@ import pytest
 
 import numpy as np
 
-from controller.executor import RELEASED_N, SkillExecutor
+from controller.executor import SkillExecutor
+from controller.executor_stage import RELEASED_N
 from controller.executor_types import BoardPose
 from controller.params import ExecutorParams
 

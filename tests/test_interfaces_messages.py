@@ -256,7 +256,8 @@ def _wire_with(msg, index: int, value) -> bytes:
 
 
 def test_strings_are_bounded_on_the_wire_and_clipped_when_built():
-    from interfaces.messages import COUNTERS_MAX, DETAIL_MAX, NAME_MAX, TEXT_MAX, ArmRequest, ServiceStatus
+    from interfaces.message_checks import COUNTERS_MAX, DETAIL_MAX, NAME_MAX, TEXT_MAX
+    from interfaces.messages import ArmRequest, ServiceStatus
 
     e = Estop(stamp_ns=1, engaged=True, reason="r" * 10**6, source="s" * 1000)
     assert len(e.reason) == TEXT_MAX and len(e.source) == NAME_MAX, "a producer's long text is clipped"

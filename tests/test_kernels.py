@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from controller.control import kernels
+from controller.control import demand_kernels, kernels, limit_kernels
 from controller.control.impedance import (Kinematics, Reference, TaskShaping, impedance_torque, task_modes,
                                           task_stiffness)
 from controller.control.limits import TorqueShaper
@@ -137,8 +137,9 @@ def test_limits_equal_the_numpy_formulation(model):
         want = np.clip(want - off, prev - 1.0, prev + 1.0) + off
         want = np.clip(want, -lim.tau_max, lim.tau_max)
         got = tau.copy()
-        hit = kernels.limit_torque(got, q, dq, lim.q_min, lim.q_max, 0.1, 300.0, 10.0, onset, 50.0, np.diag(M_diag),
-                                   shaper.prev, shaper.tau_max, 1.0, g, gravity, np.zeros((2, n)))
+        hit = limit_kernels.limit_torque(got, q, dq, lim.q_min, lim.q_max, 0.1, 300.0, 10.0, onset, 50.0,
+                                         np.diag(M_diag), shaper.prev, shaper.tau_max, 1.0, g, gravity,
+                                         np.zeros((2, n)))
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
         np.testing.assert_allclose(shaper.prev, want - off, atol=1e-9)
         assert hit & 1  # 60 Nm from a random previous command is always more than 1 Nm away
@@ -169,7 +170,7 @@ def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model):
     np.testing.assert_allclose(ac, np.r_[Rb @ np.r_[a, 0.3], dom] * 0.36, atol=1e-14)
     # the joint speeds the unscaled reference asks for
     demand = np.zeros(n)
-    kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, tw, ac, 0.6, 0.1, demand, np.zeros((4, 7)))
+    demand_kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, tw, ac, 0.6, 0.1, demand, np.zeros((4, 7)))
     u, b = tw / 0.6, ac / 0.36
     v = np.zeros(6)
     for k in (slice(0, 3), slice(3, 6)):  # each part along u + 0.1 b, as fast as u speeds up along itself
@@ -197,8 +198,8 @@ def test_the_speed_demand_looks_ahead_along_the_motion_not_around_a_curve(model)
 
     def demand(twist, accel):
         out = np.zeros(model.nq)
-        kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, np.asarray(twist, float), np.asarray(accel, float),
-                                  1.0, 0.1, out, np.zeros((4, 7)))
+        demand_kernels.joint_demand_into(kin.M_inv, kin.J, kin.Lambda, np.asarray(twist, float),
+                                         np.asarray(accel, float), 1.0, 0.1, out, np.zeros((4, 7)))
         return out
 
     def larger(*vs):  # per joint, the demand of the largest magnitude
@@ -229,6 +230,7 @@ def test_no_kernel_compiles_inside_a_tick():
         import numpy as np
         from numba.core.registry import CPUDispatcher
         import controller.control.kernels as K, controller.motion as motion
+        import controller.control.demand_kernels as DK, controller.control.limit_kernels as LK
         from controller.core import ControllerCore
         from controller.executor_types import BoardPose, StainState
         from controller.params import ControllerParams
@@ -238,7 +240,7 @@ def test_no_kernel_compiles_inside_a_tick():
 
         def signatures():
             found = {}
-            for mod in (K, motion):
+            for mod in (K, DK, LK, motion):
                 for name, obj in vars(mod).items():
                     if isinstance(obj, CPUDispatcher):
                         found[f"{mod.__name__}.{name}"] = len(obj.signatures)

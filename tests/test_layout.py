@@ -1,4 +1,6 @@
-"""The package layout holds: the runtime imports only the runtime, the LAMPS core only numpy.
+"""The package layout holds: the runtime imports only the runtime, the LAMPS core only numpy, the robot side
+nothing of the simulator; no source file is over :data:`MAX_LINES` lines and no modules import each other in a
+cycle (:func:`import_graph` says which imports count).
 
 Checked in a fresh interpreter (what a process really loads) and statically
 (an import inside a function would escape the first check until it runs).
@@ -70,7 +72,9 @@ def _imports(path: Path) -> list[tuple[int, str]]:
     ("lampskit/learn", ("lampskit.figures", "lampskit.cli", "interfaces", "controller", "sim", "perception", "launch")),
     ("controller", ("lampskit.learn", "lampskit.figures", "lampskit.cli", "matplotlib", "sklearn", "sim",
                     "perception", "launch", "robot")),
-    ("robot", ("lampskit.learn", "lampskit.figures", "controller", "perception", "launch", "matplotlib", "sklearn")),
+    # the robot side drives the real arm: the simulated lbr stack (sim.lbr_stack) is a simulator backend, not its own
+    ("robot", ("lampskit.learn", "lampskit.figures", "controller", "perception", "launch", "sim", "matplotlib",
+               "sklearn")),
 ])
 def test_no_module_imports_across_the_layout(folder, forbidden):
     """Static: a lazy import inside a function counts too."""
@@ -93,3 +97,170 @@ def test_every_error_the_project_raises_on_purpose_shares_one_root():
                 SegmentationError, LearningError, SkillFileError, PlanningError, UpError, FrameError):
         assert issubclass(cls, LampsError), cls
     assert issubclass(ControlConfigError, ConfigError)  # a bad gain is a configuration error
+
+
+# ------------------------------------------------------------------------------------------ the code's rooms
+#: The longest a source file outside tests/ may be [lines]: past it, a module holds more than one purpose.
+MAX_LINES = 500
+#: The project's folders of source (a checkout without git: these are walked).
+SOURCE_FOLDERS = ("controller", "sim", "perception", "interfaces", "robot", "launch", "lampskit", "bench", "scripts")
+
+
+def _source_files() -> list[Path]:
+    """Every Python file of the project outside tests/: the ones git tracks, else those of :data:`SOURCE_FOLDERS`."""
+    try:
+        r = subprocess.run(["git", "ls-files", "*.py"], cwd=REPO, capture_output=True, text=True, timeout=60)
+        tracked = r.stdout.split() if r.returncode == 0 else []
+    except OSError:
+        tracked = []
+    if tracked:
+        files = [REPO / f for f in tracked if not f.startswith("tests/")]
+    else:
+        files = [p for d in SOURCE_FOLDERS for p in (REPO / d).rglob("*.py")]
+    files = sorted(p for p in files if p.is_file())
+    assert len(files) > 100, f"found only {len(files)} source files under {REPO}"
+    return files
+
+
+def test_no_source_file_is_over_the_line_limit():
+    """One purpose per module: a file over the limit is split by moving a cohesive group into a module beside it."""
+    over = {str(p.relative_to(REPO)): n for p in _source_files()
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    assert not over, f"over {MAX_LINES} lines: " + ", ".join(f"{f} ({n})" for f, n in sorted(over.items()))
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _type_checking_only(node: ast.AST) -> bool:
+    return isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+
+
+def _import_nodes(tree: ast.AST):
+    """Every import statement of a module, at any depth, except those under ``if TYPE_CHECKING:``."""
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            yield node
+        stack.extend(c for c in ast.iter_child_nodes(node) if not _type_checking_only(c))
+
+
+def import_graph(files: list[Path]) -> dict[str, set[str]]:
+    """Module -> the project's modules it imports, read from the source (ast), never by importing it.
+
+    Imports anywhere in a module count, inside functions too (an import deferred to a call is a cycle deferred,
+    not removed); only those under ``if TYPE_CHECKING:`` do not (they never run). ``import a.b`` and
+    ``from a.b import c`` are edges to ``a.b.c`` when that is a module, else to ``a.b`` (not to the packages
+    above it: the project's ``__init__`` files import nothing of it). Relative imports are resolved; in a folder
+    without ``__init__.py`` (``bench/``, ``scripts/``: scripts run from their folder) a bare name may be a
+    sibling file.
+    """
+    modules = {_module_name(p): p for p in files}
+
+    def known(name: str, folder: str) -> str | None:
+        if folder and f"{folder}.{name}" in modules and not (REPO / folder.replace(".", "/") / "__init__.py").exists():
+            return f"{folder}.{name}"  # a script's sibling
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, set[str]] = {}
+    for me, path in modules.items():
+        package = me if path.name == "__init__.py" else me.rpartition(".")[0]
+        edges: set[str] = set()
+        for node in _import_nodes(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                base = node.module or ""
+                if node.level:
+                    up = package.split(".") if package else []
+                    up = up[: len(up) - (node.level - 1)]
+                    base = ".".join(up + ([node.module] if node.module else []))
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+            edges.update(t for name in targets if name and (t := known(name, package)) is not None)
+        edges.discard(me)
+        graph[me] = edges
+    return graph
+
+
+def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of ``graph`` (Tarjan's algorithm, iterative), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    out: list[list[str]] = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        work = [(root, iter(sorted(graph[root])))]
+        while work:
+            v, children = work[-1]
+            w = next(children, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph.get(w, ())))))
+                elif w in on_stack:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                component = []
+                while True:
+                    w = stack.pop()
+                    on_stack.discard(w)
+                    component.append(w)
+                    if w == v:
+                        break
+                out.append(sorted(component))
+    return out
+
+
+def _a_cycle(graph: dict[str, set[str]], component: list[str]) -> list[str]:
+    """The shortest import cycle through the component's first module: ``[a, b, ..., a]``."""
+    inside, start = set(component), component[0]
+    paths, seen = [[start]], {start}
+    while paths:
+        path = paths.pop(0)
+        for w in sorted(graph[path[-1]] & inside):
+            if w == start:
+                return path + [start]
+            if w not in seen:
+                seen.add(w)
+                paths.append(path + [w])
+    return component
+
+
+def test_the_cycle_finder_finds_cycles():
+    g = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a", "e"}, "e": {"d"}, "f": set()}
+    assert sorted(strongly_connected(g)) == [["a", "b", "c"], ["d", "e"], ["f"]]
+    assert _a_cycle(g, ["a", "b", "c"]) == ["a", "b", "c", "a"]
+
+
+def test_the_import_graph_reads_relative_lazy_and_script_imports():
+    graph = import_graph(_source_files())
+    assert "launch.record" in graph["launch.report_run"]  # from .record import ...
+    assert "controller.control.kernels" in graph["controller.core"]  # from .control.kernels import ...
+    assert "lampskit.core.planner" in graph["lampskit.cli"]  # an import inside a function
+    assert "bench.bench_controller" in graph["bench.bench_robot_port"]  # a script's sibling
+
+
+def test_no_modules_import_each_other_in_a_cycle():
+    """A module needs the ones it imports, never the other way round: two modules that need each other are one
+    purpose in two files, or share a piece that belongs in a module of its own."""
+    graph = import_graph(_source_files())
+    cycles = [" -> ".join(_a_cycle(graph, c)) + (f" (all of: {', '.join(c)})" if len(c) > 2 else "")
+              for c in strongly_connected(graph) if len(c) > 1]
+    assert not cycles, "import cycles: " + "; ".join(cycles)

@@ -10,7 +10,9 @@ import pytest
 from lampskit.errors import PlanningError
 from lampskit.learn.learn import learn_skill
 from lampskit.core.periodic import periodic_state
-from lampskit.core.planner import Plan, PlannerParams, Stain, entry_phase, exit_phase_delay, order_stains, plan
+from lampskit.core.planner import entry_phase, exit_phase_delay, plan
+from lampskit.core.planner_types import Plan, PlannerParams, Stain
+from lampskit.core.stain_order import order_stains
 from lampskit.core.rollout import junction_step_ratios, rollout
 from lampskit.learn.synth import synthesize_demo
 
@@ -187,7 +189,8 @@ def _length_of(order, start) -> float:
 def test_up_to_seven_stains_the_order_is_the_shortest_of_all(n):
     import itertools
 
-    from lampskit.core.planner import Stain, order_stains
+    from lampskit.core.planner_types import Stain
+    from lampskit.core.stain_order import order_stains
 
     rng = np.random.default_rng(n)
     for _ in range(5):
@@ -199,7 +202,8 @@ def test_up_to_seven_stains_the_order_is_the_shortest_of_all(n):
 
 @pytest.mark.parametrize("n", [8, 30, 100])
 def test_more_stains_get_a_two_opt_local_optimum_no_longer_than_nearest_neighbour(n):
-    from lampskit.core.planner import Stain, order_stains
+    from lampskit.core.planner_types import Stain
+    from lampskit.core.stain_order import order_stains
 
     rng = np.random.default_rng(n)
     stains = [Stain(i, rng.uniform(0, 1, 2), 0.05) for i in range(n)]
@@ -232,7 +236,7 @@ def _peaks(ro, mask) -> tuple[float, float, float]:
 def test_every_planned_mp_stays_inside_the_kinematic_bounds(skill, seed):
     """1-6 stains of 3-22 cm anywhere on the board: the executed 1 kHz reference of every wipe and transition
     stays inside the planner's speed, acceleration and jerk bounds (measured on the rollout, not the plan)."""
-    from lampskit.core.planner import BOUND_SHARE
+    from lampskit.core.kinematic_bounds import BOUND_SHARE
 
     rng = np.random.default_rng(100 + seed)
     stains = [Stain(i, rng.uniform([0.05, 0.05], [0.65, 0.4]), float(rng.uniform(0.03, 0.22)))
@@ -252,7 +256,8 @@ def test_every_planned_mp_stays_inside_the_kinematic_bounds(skill, seed):
 def test_without_the_bounds_a_big_stain_is_wiped_too_fast_and_the_bounds_cap_omega(skill):
     """A 20 cm stain: at the learned Omega the wipe runs at over 0.9 m/s; the bounds cap Omega exactly where the
     binding peak meets its bound, and lengthen the transition rather than sharpen it."""
-    from lampskit.core.planner import bounded_omega, cycle_peaks, plan_transition
+    from lampskit.core.kinematic_bounds import bounded_omega, cycle_peaks
+    from lampskit.core.planner import plan_transition
 
     stains = [Stain(0, np.array([0.3, 0.25]), 0.2), Stain(1, np.array([0.6, 0.1]), 0.05)]
     loose = PlannerParams(max_speed_m_s=2.0, max_accel_m_s2=50.0, max_jerk_m_s3=5000.0)

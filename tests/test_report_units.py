@@ -6,7 +6,7 @@ import numpy as np
 
 from controller.control.force import NormalForceRegulator
 from controller.params import ForceParams
-from launch.report import cap_watch_force
+from launch.report_maths import cap_watch_force
 
 CAP_N = ForceParams().cap_n
 FILTER_S = ForceParams().filter_s

@@ -10,7 +10,8 @@ import pytest
 
 from interfaces.messages import (ArmRequest, Capabilities, ControllerStatus, ControllerTrace, Estop, RobotState,
                                  ServiceStatus, SimTruth, Stains, TorqueCommand)
-from launch.record import McapSink, read_recording, to_builtins
+from launch.record import McapSink, read_recording
+from launch.record_json import to_builtins
 from launch.schemas import json_schema_of
 
 TYPES = (RobotState, TorqueCommand, Stains, ServiceStatus, ControllerStatus, ControllerTrace, Estop, SimTruth,
@@ -69,7 +70,7 @@ def test_the_recording_holds_the_schemas_with_properties(tmp_path):
 def test_the_controller_trace_is_also_written_as_plottable_rows(tmp_path):
     from mcap.reader import make_reader
 
-    from launch.record import TRACE_PLOT_EVERY
+    from launch.record_json import TRACE_PLOT_EVERY
 
     cols = ["t_s", "phase", "force_n"]
     n = 45

@@ -11,7 +11,8 @@ import pytest
 
 from lampskit.learn.segmentation import segment
 from lampskit.learn.segmentation_scores import frame_accuracy, segment_counts, true_segment_count
-from lampskit.learn.synth import LIFT_HEIGHT_M, PAUSE_S, _HumanPlan, synthesize_demo
+from lampskit.learn.synth import synthesize_demo
+from lampskit.learn.synth_human import LIFT_HEIGHT_M, PAUSE_S, _HumanPlan
 
 
 def _board(s) -> np.ndarray:

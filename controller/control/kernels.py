@@ -12,12 +12,17 @@ compiled function that writes into arrays the caller preallocated:
 * :func:`impedance_into`: the impedance law of :mod:`.impedance`
   (pose error with the rotation logarithm, force axis, modal stiffness and
   damping, feed-forward, consistent nullspace posture, gravity);
-* :func:`limit_torque`: joint-limit repulsion, joint-speed brake, then the
+* :func:`~.limit_kernels.limit_torque`: joint-limit repulsion, joint-speed brake, then the
   torque rate and absolute limits of :class:`~.limits.TorqueShaper`;
-* the pieces they use (:func:`log3_into`, :func:`margin_torque_into`,
-  :func:`speed_brake_into`, :func:`shape_into`) are compiled functions
+* the pieces they use (:func:`log3_into`, :func:`~.limit_kernels.margin_torque_into`,
+  :func:`~.limit_kernels.speed_brake_into`, :func:`~.limit_kernels.shape_into`) are compiled functions
   too, and the numpy-facing API of :mod:`.limits` calls them, so there is
-  one implementation of each formula.
+  one implementation of each formula;
+* :func:`~.demand_kernels.joint_demand_into` and :func:`~.demand_kernels.largest_share`: the joint
+  speeds the reference asks for, for the speed override.
+
+The torque limits are in :mod:`.limit_kernels`, the override's demand in
+:mod:`.demand_kernels`, compiled the same way (this docstring holds for them).
 
 ``fastmath`` stays off: results equal the numpy formulation to rounding
 (tests compare them). ``cache=True`` keeps the machine code beside this file
@@ -304,82 +309,6 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
 
 
 @_jit
-def margin_torque_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, margin_rad: float,
-                       stiffness_nm_rad: float, damping_nm_s_rad: float, out: np.ndarray) -> None:
-    """``out`` (n,) = the joint-limit repulsion of :func:`~.limits.joint_margin_torque`."""
-    for i in range(q.shape[0]):
-        lo = max(q_min[i] + margin_rad - q[i], 0.0)
-        hi = max(q[i] - (q_max[i] - margin_rad), 0.0)
-        t = stiffness_nm_rad * (lo - hi)
-        t -= damping_nm_s_rad * (min(lo / margin_rad, 1.0) * min(dq[i], 0.0) +
-                                 min(hi / margin_rad, 1.0) * max(dq[i], 0.0))
-        out[i] = t
-
-
-@_jit
-def speed_brake_into(dq: np.ndarray, onset_rad_s: np.ndarray, rate_1_s: float, inertia_kg_m2: np.ndarray,
-                     out: np.ndarray) -> None:
-    """``out`` (n,) = the joint-speed brake of :func:`~.limits.joint_speed_brake_torque`."""
-    for i in range(dq.shape[0]):
-        x = max(abs(dq[i]) - onset_rad_s[i], 0.0)
-        sign = 1.0 if dq[i] > 0.0 else (-1.0 if dq[i] < 0.0 else 0.0)
-        out[i] = -rate_1_s * (x * sign * inertia_kg_m2[i])
-
-
-@_jit
-def shape_into(tau: np.ndarray, prev: np.ndarray, tau_max: np.ndarray, step: float, offset: np.ndarray,
-               use_offset: bool) -> int:
-    """Rate then absolute limits of :class:`~.limits.TorqueShaper` on ``tau`` (n,) in place; ``prev`` updated.
-
-    Returns a bit set: 1 when the rate limit clipped a joint, 2 when the absolute limit did.
-    """
-    n = tau.shape[0]
-    hit = 0
-    for i in range(n):
-        t = tau[i] - offset[i] if use_offset else tau[i]
-        lo = prev[i] - step
-        hi = prev[i] + step
-        if t < lo or t > hi:
-            hit |= 1
-        tau[i] = t
-    for i in range(n):
-        if hit & 1:
-            tau[i] = min(max(tau[i], prev[i] - step), prev[i] + step)
-    for i in range(n):
-        prev[i] = tau[i]
-        if use_offset:
-            tau[i] += offset[i]
-        if abs(tau[i]) > tau_max[i]:
-            hit |= 2
-    if hit & 2:
-        for i in range(n):
-            tau[i] = min(max(tau[i], -tau_max[i]), tau_max[i])
-            prev[i] = tau[i] - offset[i] if use_offset else tau[i]
-    return hit
-
-
-@_jit
-def limit_torque(tau: np.ndarray, q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray,
-                 margin_rad: float, margin_stiffness: float, margin_damping: float, onset_rad_s: np.ndarray,
-                 brake_1_s: float, M: np.ndarray, prev: np.ndarray, tau_max: np.ndarray, step: float,
-                 gravity: np.ndarray, use_gravity: bool, work: np.ndarray) -> int:
-    """``tau`` (n,) [Nm] plus the joint-limit repulsion and the joint-speed brake (on M's diagonal), then shaped
-    (:func:`shape_into`, ``gravity`` outside the rate limit when ``use_gravity``). work : (2, n) scratch.
-    Returns :func:`shape_into`'s bit set."""
-    n = tau.shape[0]
-    margin = work[0]
-    brake = work[1]
-    margin_torque_into(q, dq, q_min, q_max, margin_rad, margin_stiffness, margin_damping, margin)
-    for i in range(n):
-        brake[i] = M[i, i]
-    speed_brake_into(dq, onset_rad_s, brake_1_s, brake, brake)
-    for i in range(n):
-        tau[i] += margin[i]
-        tau[i] += brake[i]
-    return shape_into(tau, prev, tau_max, step, gravity, use_gravity)
-
-
-@_jit
 def disturbance_into(M: np.ndarray, nle: np.ndarray, J: np.ndarray, dq: np.ndarray, dq_prev: np.ndarray,
                      tau_applied: np.ndarray, wrench: np.ndarray, dt_s: float, gain: float, tau_d: np.ndarray,
                      limit: np.ndarray, raw: np.ndarray) -> float:
@@ -445,85 +374,6 @@ def reference_into(origin: np.ndarray, R_board: np.ndarray, xy: np.ndarray, h: f
 
 
 @_jit
-def _predicted_rate_into(u: np.ndarray, b: np.ndarray, k: int, lookahead_s: float, out: np.ndarray) -> None:
-    """``out[k:k+3]``: the rate 3-vector ``u[k:k+3]`` predicted ``lookahead_s`` [s] ahead given its derivative
-    ``b[k:k+3]``, see :func:`joint_demand_into`."""
-    su, sw, ub = 0.0, 0.0, 0.0
-    for i in range(k, k + 3):
-        w = u[i] + lookahead_s * b[i]
-        su += u[i] * u[i]
-        sw += w * w
-        ub += u[i] * b[i]
-    su, sw = math.sqrt(su), math.sqrt(sw)
-    # the magnitude changes with the acceleration along the motion only (through zero: back the other way)
-    speed = abs(su + lookahead_s * ub / su) if su > 1e-9 else sw
-    f = speed / sw if sw > 1e-12 else 1.0
-    for i in range(k, k + 3):
-        out[i] = (u[i] + lookahead_s * b[i]) * f if sw > 1e-12 else u[i]
-
-
-@_jit
-def _demand_of(M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray, v: np.ndarray, w: np.ndarray,
-               demand: np.ndarray) -> None:
-    """``demand = M^-1 J^T Lam v`` (n,); w (6,) scratch."""
-    n = demand.shape[0]
-    for r in range(6):
-        s = 0.0
-        for c in range(6):
-            s += Lam[r, c] * v[c]
-        w[r] = s
-    for i in range(n):
-        s = 0.0
-        for j in range(n):
-            jt = 0.0
-            for r in range(6):
-                jt += J[r, j] * w[r]
-            s += M_inv[i, j] * jt
-        demand[i] = s
-
-
-@_jit
-def joint_demand_into(M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray, twist_ref: np.ndarray,
-                      accel_ref: np.ndarray, scale: float, lookahead_s: float, demand: np.ndarray,
-                      work: np.ndarray) -> None:
-    """Joint speeds (n,) [rad/s] the *unscaled* reference asks for, looking ``lookahead_s`` ahead along its
-    acceleration: per joint the larger of ``M^-1 J^T Lam u`` (now) and ``M^-1 J^T Lam v`` (ahead).
-
-    ``u = twist_ref / scale`` is the unscaled twist, ``b = accel_ref / scale^2`` its derivative (the reference
-    is stored time-scaled); ``v``'s linear and angular parts each point along ``u + lookahead b`` with the
-    magnitude ``|(|u| + lookahead (u . b) / |u|)|``: the speed changes only by the acceleration along the
-    motion (through zero it grows back the other way; from rest ``v = lookahead b``). ``|u + lookahead b|``
-    itself would count the turning of a curved path as speeding up: on a circle at Omega it over-states the
-    speed by ``sqrt(1 + (lookahead Omega)^2)``, 1.4-1.8x at wiping rates, and the override would slow the
-    wiping by that much for nothing. work : (4, 7) scratch (n <= 7)."""
-    n = demand.shape[0]
-    u = work[0]
-    v = work[1]
-    w = work[2]
-    now = work[3]
-    inv = 1.0 / scale
-    for r in range(6):
-        u[r] = twist_ref[r] * inv
-        w[r] = accel_ref[r] * inv * inv
-    _predicted_rate_into(u, w, 0, lookahead_s, v)
-    _predicted_rate_into(u, w, 3, lookahead_s, v)
-    _demand_of(M_inv, J, Lam, u, w, now)
-    _demand_of(M_inv, J, Lam, v, w, demand)
-    for i in range(n):
-        if abs(now[i]) > abs(demand[i]):
-            demand[i] = now[i]
-
-
-@_jit
-def largest_share(x: np.ndarray, inv_limit: np.ndarray) -> float:
-    """``max_i |x_i| * inv_limit_i`` over (n,) arrays."""
-    r = 0.0
-    for i in range(x.shape[0]):
-        r = max(r, abs(x[i]) * inv_limit[i])
-    return r
-
-
-@_jit
 def tool_in_board(origin: np.ndarray, R_board: np.ndarray, p: np.ndarray, twist: np.ndarray, wrench: np.ndarray,
                   xyh: np.ndarray, v_board: np.ndarray) -> float:
     """The pad at world ``p`` (3,) [m] moving with ``twist`` (6,) in the board frame (origin (3,), axes R_board
@@ -565,4 +415,3 @@ def trace_row(r: np.ndarray, t_s: float, phase: float, has_setpoint: bool, xy: n
     r[17] = force_n
     r[18] = press_n
     r[20] = scale
-

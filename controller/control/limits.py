@@ -25,7 +25,8 @@ import math
 
 import numpy as np
 
-from .kernels import largest_share, margin_torque_into, shape_into, speed_brake_into
+from .demand_kernels import largest_share
+from .limit_kernels import margin_torque_into, shape_into, speed_brake_into
 
 
 class TorqueShaper:

@@ -29,7 +29,7 @@ a stand-in for kappa, so what is plotted is what the robot runs.
   MP goes on wiping j; the tick that finds it done hands it over and goes
   on as LEAVE. Without it (lock-step: deterministic) the re-plan runs in
   the tick. So does the search for the next transition's duration within
-  the kinematic bounds (:func:`~lampskit.core.planner.bounded_duration`,
+  the kinematic bounds (:func:`~lampskit.core.kinematic_bounds.bounded_duration`,
   a few ms): in real time it runs on the planner thread during LEAVE, for
   the state the periodic MP will have at its exit phase, and the exit tick
   plans the transition from the real state with that duration (in the
@@ -52,8 +52,8 @@ import numpy as np
 
 from lampskit.core.periodic import periodic_state
 from lampskit.core.periodic_runner import PeriodicRunner
-from lampskit.core.planner import (Plan, PlannerParams, Stain, TransitionSpec, Wipe, adapted_wipe, exit_phase_delay,
-                                   plan, plan_transition)
+from lampskit.core.planner import adapted_wipe, exit_phase_delay, plan, plan_transition
+from lampskit.core.planner_types import Plan, PlannerParams, Stain, TransitionSpec, Wipe
 from lampskit.core.skill import Skill
 from lampskit.core.transitional_runner import TransitionalRunner
 from lampskit.errors import PlanningError

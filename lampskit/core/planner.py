@@ -4,7 +4,7 @@ Given a skill, the stains a perception reports (centre and size in the
 board plane) and the tool's current state, the planner
 
 1. orders the stains to shorten the travel (exact for up to
-   :data:`EXACT_ORDER_MAX` stains, nearest neighbour + 2-opt above),
+   :data:`~lampskit.core.stain_order.EXACT_ORDER_MAX` stains, nearest neighbour + 2-opt above),
 2. picks for each stain the learned periodic MP whose amplitude is closest
    to the one the stain needs, re-anchored at the stain centre (``y_m``) and
    scaled to its size (``r = amplitude_fraction * size``, clamped),
@@ -19,8 +19,8 @@ board plane) and the tool's current state, the planner
    ``max_accel_m_s2``, ``max_jerk_m_s3`` of the in-plane reference): a
    periodic MP's Omega is capped so its limit cycle's peak speed,
    acceleration and jerk at its amplitude stay within them
-   (:func:`bounded_omega`), and a transition is lengthened until its
-   closed-form trajectory does (:func:`bounded_duration`). Position,
+   (:func:`~lampskit.core.kinematic_bounds.bounded_omega`), and a transition is lengthened until its
+   closed-form trajectory does (:func:`~lampskit.core.kinematic_bounds.bounded_duration`). Position,
    velocity and acceleration stay continuous at every junction: only
    durations and frequencies change, never the boundary states.
 5. with ``adaptive`` on, shapes each wipe to its stain (:func:`wipe_shape`):
@@ -39,192 +39,20 @@ executor calls the same :func:`plan_transition` with perception's kappa.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from lampskit.errors import PlanningError
+from lampskit.core.kinematic_bounds import PERIODIC_MARGIN, bounded_duration, bounded_omega
 from lampskit.core.periodic import cycle_shape, periodic_state, stroke_matrix
+from lampskit.core.planner_types import Plan, PlannerParams, Stain, TransitionSpec, Wipe
 from lampskit.core.skill import Skill
-from lampskit.core.transitional_plan import evaluate as evaluate_transition
-from lampskit.core.transitional_plan import plan_transition as plan_transition_mp
+from lampskit.core.stain_order import order_stains
 from lampskit.core.transitional_plan import similarity_transform
 
-#: Up to this many stains the visiting order is found by exhaustive search.
-EXACT_ORDER_MAX = 7
 #: Demonstrated transitions shorter than this [m] carry no usable direction.
 MIN_DEMO_DISPLACEMENT_M = 0.02
-
-
-@dataclass(frozen=True)
-class Stain:
-    """A stain on the board, as perception reports it.
-
-    Attributes
-    ----------
-    id : int
-        Stable stain id.
-    centre_m : array, shape (2,)
-        Centre in the board plane [m].
-    size_m : float
-        Extent of the stain [m] along its main axis (its larger side).
-    width_m : float
-        Extent across the main axis [m]; 0 = not known (taken as round).
-    axis_rad : float
-        Direction of the main axis in the board plane [rad] (from board x).
-    """
-
-    id: int
-    centre_m: np.ndarray
-    size_m: float
-    width_m: float = 0.0
-    axis_rad: float = 0.0
-
-    def __post_init__(self) -> None:
-        c = np.asarray(self.centre_m, dtype=float).reshape(-1)
-        if c.shape != (2,) or not np.all(np.isfinite(c)):
-            raise PlanningError(f"stain {self.id}: centre_m must be 2 finite numbers, got {self.centre_m!r}")
-        if not (np.isfinite(self.size_m) and self.size_m > 0):
-            raise PlanningError(f"stain {self.id}: size_m must be a positive number, got {self.size_m!r}")
-        if not (np.isfinite(self.width_m) and self.width_m >= 0 and np.isfinite(self.axis_rad)):
-            raise PlanningError(f"stain {self.id}: width_m must be >= 0 and axis_rad finite, got "
-                                f"{self.width_m!r}, {self.axis_rad!r}")
-        object.__setattr__(self, "centre_m", c)
-
-    @property
-    def aspect(self) -> float:
-        """Width over size in (0, 1]; 1 when the width is not known."""
-        return 1.0 if self.width_m <= 0 else float(np.clip(self.width_m / self.size_m, 1e-3, 1.0))
-
-
-@dataclass(frozen=True)
-class PlannerParams:
-    """Tunables of the planner (SI units).
-
-    Attributes
-    ----------
-    amplitude_fraction : float
-        Periodic amplitude r as a fraction of the stain size.
-    min_amplitude_m, max_amplitude_m : float
-        Clamp of r [m].
-    transition_speed_m_s : float or None
-        Mean speed of a transition [m/s]; None = as demonstrated.
-    min_transition_s : float
-        Shortest transition [s].
-    max_transition_speed_m_s : float
-        Cap on a transition's mean speed [m/s]: far stains get longer
-        transitions rather than faster ones.
-    order : str
-        ``"shortest"`` (reorder to shorten travel) or ``"given"``.
-    max_speed_m_s, max_accel_m_s2, max_jerk_m_s3 : float
-        Kinematic bounds of the planned in-plane reference [m/s, m/s^2,
-        m/s^3]: below the controller's 0.6 m/s brake, and what an iiwa
-        pressing an eraser takes smoothly (a demonstrated wipe peaks near
-        2.5 m/s^2 and 40 m/s^3).
-    max_transition_stretch : float
-        A transition is lengthened at most this many times its planned
-        duration to meet the bounds (boundary states that violate them
-        cannot be met by any duration: the best one is kept and counted).
-    adaptive : bool
-        Shape each wipe to its stain and adapt it while wiping (see the
-        module docstring, point 5); False (the default until adaptive wiping
-        has run on the real-time real-robot path without a guard trip): the
-        learned cycle scaled to the stain's size, set once per stain
-        ("fixed" wiping).
-    round_aspect : float
-        With ``adaptive``, a stain (or ink) whose width over size is at
-        least this is wiped with the learned, unstretched cycle.
-    min_stroke_aspect : float
-        The narrowest stroke: the cycle is squeezed across the main axis to
-        no less than this share of its length.
-    """
-
-    amplitude_fraction: float = 0.5
-    min_amplitude_m: float = 0.01
-    max_amplitude_m: float = 0.15
-    transition_speed_m_s: float | None = None
-    min_transition_s: float = 0.6
-    max_transition_speed_m_s: float = 0.8
-    order: str = "shortest"
-    max_speed_m_s: float = 0.5
-    max_accel_m_s2: float = 4.0
-    max_jerk_m_s3: float = 100.0
-    max_transition_stretch: float = 4.0
-    adaptive: bool = False
-    round_aspect: float = 0.8
-    min_stroke_aspect: float = 0.35
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.adaptive, bool):
-            raise PlanningError(f"adaptive must be true or false, got {self.adaptive!r}")
-        if not 0.05 <= self.min_stroke_aspect <= self.round_aspect <= 1.0:
-            raise PlanningError(f"need 0.05 <= min_stroke_aspect <= round_aspect <= 1, got "
-                                f"{self.min_stroke_aspect!r}, {self.round_aspect!r}")
-        for name, lo, hi in (("max_speed_m_s", 0.01, 2.0), ("max_accel_m_s2", 0.05, 50.0),
-                             ("max_jerk_m_s3", 0.5, 5000.0), ("max_transition_stretch", 1.0, 20.0)):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and lo <= v <= hi):
-                raise PlanningError(f"{name} must be in [{lo}, {hi}], got {v!r}")
-        if not 0 < self.amplitude_fraction <= 2:
-            raise PlanningError(f"amplitude_fraction must be in (0, 2], got {self.amplitude_fraction}")
-        if not 0 < self.min_amplitude_m <= self.max_amplitude_m:
-            raise PlanningError(
-                f"need 0 < min_amplitude_m <= max_amplitude_m, got {self.min_amplitude_m}, {self.max_amplitude_m}"
-            )
-        if self.transition_speed_m_s is not None and not 0.01 <= self.transition_speed_m_s <= 2.0:
-            raise PlanningError(f"transition_speed_m_s must be in [0.01, 2] m/s, got {self.transition_speed_m_s}")
-        if not 0.05 <= self.min_transition_s <= 10:
-            raise PlanningError(f"min_transition_s must be in [0.05, 10] s, got {self.min_transition_s}")
-        if not 0.01 <= self.max_transition_speed_m_s <= 2.0:
-            raise PlanningError(f"max_transition_speed_m_s must be in [0.01, 2] m/s, got {self.max_transition_speed_m_s}")
-        if self.order not in ("shortest", "given"):
-            raise PlanningError(f"order must be 'shortest' or 'given', got {self.order!r}")
-
-
-@dataclass(frozen=True)
-class Wipe:
-    """One periodic MP of the plan: which learned MP, where (anchor (2,) [m]), how big (r [m]), how fast (Omega
-    [rad/s]) and, with adaptive wiping, its stroke (2, 2) (None: the learned cycle as it is)."""
-
-    stain: Stain
-    periodic_index: int
-    anchor_m: np.ndarray
-    amplitude_m: float
-    omega_rad_s: float
-    stroke: np.ndarray | None = None
-
-    @property
-    def stroke_gain(self) -> float:
-        """How much the stroke stretches the cycle at most (its spectral norm; 1 without one)."""
-        return 1.0 if self.stroke is None else float(np.linalg.norm(self.stroke, 2))
-
-
-@dataclass(frozen=True)
-class Plan:
-    """The stains in visiting order with their periodic MPs."""
-
-    wipes: tuple[Wipe, ...]
-    params: PlannerParams = field(default_factory=PlannerParams)
-
-    @property
-    def order(self) -> tuple[int, ...]:
-        return tuple(w.stain.id for w in self.wipes)
-
-
-@dataclass(frozen=True)
-class TransitionSpec:
-    """Everything needed to start one transitional MP (all arrays shape (2,))."""
-
-    transitional_index: int
-    start: tuple[np.ndarray, np.ndarray, np.ndarray]
-    goal: tuple[np.ndarray, np.ndarray, np.ndarray]
-    duration_s: float
-    entry_phase_rad: float
-    forcing_transform: np.ndarray
-    peaks: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: planned peak speed, accel., jerk [m/s, m/s^2, m/s^3]
-    within_limits: bool = True  #: False: no duration up to the stretch limit met the bounds (the best was kept)
 
 
 def plan(
@@ -329,143 +157,6 @@ def adapted_wipe(skill: Skill, planned: Wipe, running: Wipe, ink: Stain, params:
     return Wipe(wipe.stain, wipe.periodic_index, ink.centre_m.copy(), r_new, omega, stroke)
 
 
-#: A periodic MP is kept this far inside the bounds: a transition ends in its state, and needs some room.
-PERIODIC_MARGIN = 0.85
-#: Phases sampled on a limit cycle to find its peaks.
-_CYCLE_SAMPLES = 720
-#: A transition is planned to this share of the bounds: its sampled peaks miss a little between samples.
-BOUND_SHARE = 0.97
-#: Time step [s] at which a transition's closed form is sampled to find its peaks.
-PEAK_DT_S = 0.004
-
-
-def cycle_peaks(mp, amplitude_m: float, omega_rad_s: float) -> tuple[float, float, float]:
-    """Peak speed, acceleration and jerk [m/s, m/s^2, m/s^3] on ``mp``'s limit cycle at that amplitude and
-    frequency (closed form; jerk by a central difference of the acceleration in phase)."""
-    phases = np.linspace(0.0, 2 * np.pi, _CYCLE_SAMPLES, endpoint=False)
-    _, vel, acc = periodic_state(mp, phases, None, amplitude_m, omega_rad_s)
-    dphi = phases[1] - phases[0]
-    jerk = (np.roll(acc, -1, axis=0) - np.roll(acc, 1, axis=0)) / (2 * dphi) * omega_rad_s
-    return (float(np.linalg.norm(vel, axis=1).max()), float(np.linalg.norm(acc, axis=1).max()),
-            float(np.linalg.norm(jerk, axis=1).max()))
-
-
-_UNIT_PEAKS: dict[int, tuple] = {}  # id(mp) -> (mp, its peaks at r = 1 m, Omega = 1 rad/s)
-
-
-def unit_cycle_peaks(mp) -> tuple[float, float, float]:
-    """:func:`cycle_peaks` at amplitude 1 m and Omega 1 rad/s, computed once per MP (the limit cycle scales
-    linearly with r: peaks at r are r times these)."""
-    hit = _UNIT_PEAKS.get(id(mp))
-    if hit is None or hit[0] is not mp:  # the MP itself is kept, so its id is not reused meanwhile
-        if len(_UNIT_PEAKS) > 256:
-            _UNIT_PEAKS.clear()
-        hit = _UNIT_PEAKS[id(mp)] = (mp, cycle_peaks(mp, 1.0, 1.0))
-    return hit[1]
-
-
-def bounded_omega(mp, amplitude_m: float, params: PlannerParams, share: float = 1.0) -> float:
-    """The largest Omega [rad/s] at which ``mp``'s limit cycle of amplitude ``amplitude_m`` stays within
-    ``share`` of the planner's bounds: speed scales with Omega, acceleration with its square, jerk with its
-    cube, each linearly with the amplitude."""
-    v1, a1, j1 = (amplitude_m * x for x in unit_cycle_peaks(mp))
-    return float(min(share * params.max_speed_m_s / max(v1, 1e-12),
-                     np.sqrt(share * params.max_accel_m_s2 / max(a1, 1e-12)),
-                     np.cbrt(share * params.max_jerk_m_s3 / max(j1, 1e-12))))
-
-
-def trajectory_peaks(tp) -> tuple[float, float, float]:
-    """Peak speed, acceleration and jerk of a planned transition (``transitional_plan.TransitionPlan``), its
-    closed form sampled every :data:`PEAK_DT_S` from start to end (jerk: differences of the acceleration)."""
-    n = max(int(np.ceil(tp.duration_s / PEAK_DT_S)), 4)
-    smp = evaluate_transition(tp, np.linspace(0.0, tp.duration_s, n + 1))
-    jerk = np.diff(smp.acceleration_m_s2, axis=0) / (tp.duration_s / n)
-    return (float(np.linalg.norm(smp.velocity_m_s, axis=1).max()),
-            float(np.linalg.norm(smp.acceleration_m_s2, axis=1).max()), float(np.linalg.norm(jerk, axis=1).max()))
-
-
-def bounded_duration(mp, start, goal, duration_s: float, transform: np.ndarray, params: PlannerParams
-                     ) -> tuple[float, tuple[float, float, float], bool]:
-    """(duration [s], its peaks, whether within the bounds) of a transition lengthened from ``duration_s`` until
-    its peaks are within the planner's bounds, at most ``max_transition_stretch`` times.
-
-    Stretching time by k divides the learned part's speed by k, acceleration by k^2, jerk by k^3; the
-    boundary states do not scale, so each step re-evaluates (a few closed-form samplings, ~1 ms each).
-    """
-    T, longest = duration_s, duration_s * params.max_transition_stretch
-    best = None
-    for _ in range(12):
-        peaks = trajectory_peaks(plan_transition_mp(mp, start, goal, T, transform))
-        excess = max(peaks[0] / params.max_speed_m_s, np.sqrt(peaks[1] / params.max_accel_m_s2),
-                     np.cbrt(peaks[2] / params.max_jerk_m_s3))
-        if best is None or excess < best[2]:
-            best = (T, peaks, excess)
-        if excess <= BOUND_SHARE or T >= longest - 1e-9:
-            break
-        T = min(longest, T * float(np.clip(excess / BOUND_SHARE, 1.05, 2.0)))
-    T, peaks, excess = best
-    return T, peaks, bool(excess <= 1.0)
-
-
-def order_stains(stains: Sequence[Stain], start_m: np.ndarray) -> list[Stain]:
-    """Visiting order that shortens the path start -> s1 -> s2 -> ... (open path).
-
-    Up to :data:`EXACT_ORDER_MAX` stains the shortest order of all (every permutation's length at once from the
-    distance matrix: 5,040 orders of 7 stains in about 1 ms); more: nearest neighbour, then 2-opt (the segment
-    reversal that shortens the path most, from a matrix of every reversal's gain) until none does.
-    """
-    pts = np.array([s.centre_m for s in stains], dtype=float).reshape(-1, 2)
-    n = len(pts)
-    if n <= 2:
-        d = np.linalg.norm(pts - start_m, axis=1)
-        return [stains[i] for i in np.argsort(d, kind="stable")]
-    nodes = np.vstack([start_m, pts])  # node 0 is the start
-    D = np.linalg.norm(nodes[:, None, :] - nodes[None, :, :], axis=2)
-    if n <= EXACT_ORDER_MAX:
-        perms = _permutations(n) + 1
-        lengths = D[0, perms[:, 0]] + D[perms[:, :-1], perms[:, 1:]].sum(axis=1)
-        return [stains[i - 1] for i in perms[int(np.argmin(lengths))]]
-    # nearest neighbour from the start (ties to the lower index)
-    order, here = [], 0
-    left = np.ones(n + 1, dtype=bool)
-    left[0] = False
-    for _ in range(n):
-        nxt = int(np.argmin(np.where(left, D[here], np.inf)))
-        order.append(nxt)
-        left[nxt] = False
-        here = nxt
-    return [stains[i - 1] for i in _two_opt(np.array(order), D)]
-
-
-def _two_opt(order: np.ndarray, D: np.ndarray) -> np.ndarray:
-    """2-opt on the open path 0 -> order[0] -> ... (node indices into ``D`` (n+1, n+1)): reverse order[i..j]
-    while a reversal shortens it, the best one each time."""
-    n = len(order)
-    i_idx, j_idx = np.triu_indices(n, 1)
-    while True:
-        a = np.concatenate([[0], order])  # a[k + 1] is order[k]
-        before, first, last = a[i_idx], a[i_idx + 1], a[j_idx + 1]
-        gain = D[before, first] - D[before, last]  # edge into the reversed run
-        inner = j_idx + 2 < n + 1
-        after = a[np.minimum(j_idx + 2, n)]
-        gain += np.where(inner, D[last, after] - D[first, after], 0.0)  # edge out of it (none at the path's end)
-        k = int(np.argmax(gain))
-        if gain[k] <= 1e-12:
-            return order
-        i, j = i_idx[k], j_idx[k]
-        order = np.concatenate([order[:i], order[i:j + 1][::-1], order[j + 1:]])
-
-
-_PERMS: dict[int, np.ndarray] = {}
-
-
-def _permutations(n: int) -> np.ndarray:
-    """Every permutation of range(n) (n!, n), lexicographic (itertools' order), cached."""
-    if n not in _PERMS:
-        _PERMS[n] = np.array(list(itertools.permutations(range(n))), dtype=np.intp)
-    return _PERMS[n]
-
-
 def entry_phase(skill: Skill, wipe: Wipe, from_m: np.ndarray, n_candidates: int = 72) -> float:
     """Phase [rad] at which a transition coming from ``from_m`` enters the wipe's periodic MP.
 
@@ -524,7 +215,7 @@ def plan_transition(
     start : (position, velocity, acceleration), arrays of shape (2,)
         The tool's reference state now [m, m/s, m/s^2].
     duration_s : float, optional
-        Use this duration [s] (found earlier by :func:`bounded_duration`
+        Use this duration [s] (found earlier by :func:`~lampskit.core.kinematic_bounds.bounded_duration`
         for a state this one is close to, e.g. on a planner thread) instead
         of searching it now: the search costs a few milliseconds, the rest
         well under one.

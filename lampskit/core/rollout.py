@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lampskit.core.chain import ChainResult, ChainStep, MpChain
-from lampskit.core.planner import Plan, Stain, TransitionSpec, Wipe
+from lampskit.core.planner_types import Plan, Stain, TransitionSpec, Wipe
 from lampskit.core.skill import Skill
 from lampskit.errors import PlanningError
 

@@ -6,32 +6,20 @@ returns the path it wrote; files are written atomically.
 
 from __future__ import annotations
 
-import io
 import logging
 from collections.abc import Callable
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from lampskit.atomic import write_atomic  # noqa: E402
-
-from lampskit.learn.demo import Demonstration  # noqa: E402
+from lampskit.figures.canvas import plt, save_figure
+from lampskit.figures.primitives import figure_transition_comparison, figure_transition_phases
+from lampskit.learn.demo import Demonstration
 from lampskit.learn.segmentation import Segmentation, segment
-from lampskit.core.skill import Skill  # noqa: E402
+from lampskit.core.skill import Skill
 
 TRANSITIONAL_COLOUR = "0.6"
 log = logging.getLogger(__name__)
-
-
-def save_figure(fig, path: Path) -> Path:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return write_atomic(path, lambda f: f.write(buf.getvalue()))
 
 
 def _cluster_colours(labels: np.ndarray) -> list:
@@ -119,8 +107,6 @@ def write_figures(
     Figs. 6 and 7 need a learned transitional MP; without one they are
     skipped (logged), the others are still written.
     """
-    from lampskit.figures.primitives import figure_transition_comparison, figure_transition_phases
-
     folder = Path(folder)
     jobs = [
         lambda: figure_reachability(seg, folder / "fig4_reachability.png"),

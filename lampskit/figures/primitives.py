@@ -20,8 +20,9 @@ from lampskit.learn.demo import Demonstration
 from lampskit.errors import PlanningError
 from lampskit.core.periodic import periodic_state
 from lampskit.core.periodic_runner import rollout as periodic_rollout
-from lampskit.core.planner import PlannerParams, transition_duration
-from lampskit.figures.demo import plt, save_figure
+from lampskit.core.planner import transition_duration
+from lampskit.core.planner_types import PlannerParams
+from lampskit.figures.canvas import plt, save_figure
 from lampskit.learn.segmentation import Segmentation
 from lampskit.core.skill import PeriodicEntry, Skill, TransitionalEntry
 from lampskit.core.transitional import TrajectorySamples

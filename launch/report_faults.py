@@ -1,0 +1,155 @@
+"""The report's fault lines: the controller's PAUSED / FAULT / ESTOP entries, services gone silent or restarted,
+the robot side's safety actions, the recorder's stalls and restarts, and the launcher's ending of the cell."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from interfaces.messages import Phase
+
+from .record import RECORDING, RESUMED_TOPIC
+from .report_run import _Run
+
+#: A service whose status is not heard for this long [s], or four of its status periods if that is longer,
+#: went silent: a fault.
+SERVICE_SILENCE_S = 1.0
+
+
+def _recorder_stalls(run: _Run) -> list[tuple[int, int]]:
+    """(start, end) [wall ns] of every stretch longer than ``SERVICE_SILENCE_S`` in which nothing was recorded."""
+    times = np.sort(np.fromiter((t for msgs in run.rec.values() for t, _ in msgs), dtype=np.int64))
+    if len(times) < 2:
+        return []
+    gaps = np.diff(times)
+    return [(int(times[i]), int(times[i + 1])) for i in np.flatnonzero(gaps * 1e-9 > SERVICE_SILENCE_S)]
+
+
+def _unheard_s(t0: int, t1: int, stalls: list[tuple[int, int]]) -> float:
+    """How much of (t0, t1) [wall ns] the recorder was listening [s] (a stalled recorder hears no one)."""
+    deaf = sum(max(0, min(t1, b) - max(t0, a)) for a, b in stalls)
+    return (t1 - t0 - deaf) * 1e-9
+
+
+#: Robot-side counters whose every increase is a safety action worth a line in the faults: name -> what it means.
+ROBOT_EVENTS = {
+    "stale_command_brakes": "braked: no fresh command within its stale limit",
+    "loop_freezes": "its own loop froze: braked until a fresh answer",
+    "commands_from_another_controller": "dropped commands from a controller session it does not serve",
+    "controller_changes": "now serves another controller session (the one it served fell silent)",
+    "commands_held_for_estop": "held commands while e-stopped",
+    "joint_speed_brakes": "braked: a joint moved faster than its speed brake allows",
+    "disarms": "the real-robot adapter disarmed: no more commands to the robot",
+}
+
+
+#: Increases of one robot-side counter less than this apart [s] are one line of the faults (a burst).
+ROBOT_BURST_S = 5.0
+
+
+def _robot_events(run: _Run) -> list[dict[str, Any]]:
+    """Each burst of increases of a :data:`ROBOT_EVENTS` counter in the robot side's statuses (phase ``ROBOT``),
+    until the launcher began stopping the cell: increases less than ``ROBOT_BURST_S`` apart make one line, with
+    how many and over how long."""
+    out: list[dict[str, Any]] = []
+    stopping = int(run.launcher.get("stopping_wall_ns", 0)) or None  # stopping the cell brakes and disarms it
+    for name, topic in (("sim", run.keys.sim_status), ("robot", run.keys.robot_status)):
+        prev: dict = {}
+        bursts: dict[str, list] = {}  # key -> [first wall ns, last wall ns, increase, detail] of the open burst
+        for t, m in run.rec.get(topic, []):
+            if stopping is not None and t >= stopping:
+                break
+            counters = m.get("counters", {})
+            if m.get("seq", 0) < prev.get("_seq", 0):
+                prev = {}  # a restarted robot side counts from 0 again
+            for key in ROBOT_EVENTS:
+                n = int(counters.get(key, 0))
+                if n <= prev.get(key, 0):
+                    continue
+                b = bursts.get(key)
+                if b is not None and (t - b[1]) * 1e-9 < ROBOT_BURST_S:
+                    b[1], b[2] = t, b[2] + n - prev.get(key, 0)
+                else:
+                    if b is not None:
+                        out.append(_robot_line(name, key, b))
+                    bursts[key] = [t, t, n - prev.get(key, 0), m.get("detail", "")]
+            prev = {**{k: int(counters.get(k, 0)) for k in ROBOT_EVENTS}, "_seq": m.get("seq", 0)}
+        out += [_robot_line(name, key, b) for key, b in bursts.items()]
+    return out
+
+
+def _robot_line(name: str, key: str, burst: list) -> dict[str, Any]:
+    first, last, n, detail = burst
+    span = f" over {(last - first) * 1e-9:.1f} s" if last > first else ""
+    why = f"; {detail[detail.index('why='):][:160]}" if key == "disarms" and "why=" in detail else ""
+    return {"wall_ns": first, "phase": "ROBOT", "reason": f"{name}: {ROBOT_EVENTS[key]} ({key} +{n}{span}){why}"}
+
+
+def _service_faults(run: _Run, stalls: list[tuple[int, int]]) -> list[dict[str, Any]]:
+    """Each silence of a service's status longer than ``SERVICE_SILENCE_S`` (not counting the recorder's own stalls)
+    and each restart (its status seq going back), until the launcher began stopping the cell (services then stop
+    one by one) or the recording ends."""
+    k = run.keys
+    last_ns = max((msgs[-1][0] for msgs in run.rec.values() if msgs), default=0)
+    end_ns = min(int(run.launcher.get("stopping_wall_ns", 0)) or last_ns, last_ns) or None
+    out: list[dict[str, Any]] = []
+    for name, topic in (("sim", k.sim_status), ("robot", k.robot_status), ("controller", k.controller_status),
+                        ("perception", k.perception_status)):
+        msgs = run.rec.get(topic, [])
+        if len(msgs) < 2:
+            continue
+        # a service's own status period sets what counts as silent (the sim and perception report at 2 Hz)
+        silence_s = max(SERVICE_SILENCE_S, 4.0 * float(np.median(np.diff([t for t, _ in msgs]))) * 1e-9)
+        for (t0, m0), (t1, m1) in zip(msgs, msgs[1:]):
+            if end_ns is not None and t0 >= end_ns:
+                break
+            gap = (t1 - t0) * 1e-9
+            if gap > silence_s and _unheard_s(t0, t1, stalls) > silence_s:
+                out.append({"wall_ns": t0, "phase": "SERVICE",
+                            "reason": f"{name}: no status for {gap:.1f} s (frozen, stopped or dead)"})
+            if m1.get("seq", 0) < m0.get("seq", 0):
+                out.append({"wall_ns": t1, "phase": "SERVICE",
+                            "reason": f"{name}: restarted (status count {m0.get('seq')} -> {m1.get('seq')})"})
+        if end_ns is not None and _unheard_s(msgs[-1][0], end_ns, stalls) > silence_s:
+            out.append({"wall_ns": msgs[-1][0], "phase": "SERVICE", "reason": f"{name}: silent for the last "
+                        f"{(end_ns - msgs[-1][0]) * 1e-9:.1f} s before the cell stopped (dead or frozen)"})
+    return out
+
+
+def _recorder_faults(run: _Run, run_dir: Path) -> list[dict[str, Any]]:
+    """The recorder stalled (nothing recorded on any key for ``SERVICE_SILENCE_S``) or died (recovered recording)."""
+    out: list[dict[str, Any]] = [{"wall_ns": a, "phase": "RECORDER",
+                                  "reason": f"nothing recorded for {(b - a) * 1e-9:.1f} s (the recorder stalled)"}
+                                 for a, b in _recorder_stalls(run)]
+    for t_ns, m in run.rec.get(RESUMED_TOPIC, []):
+        how = "had finished" if m.get("earlier_finished") else "had died"
+        out.append({"wall_ns": t_ns, "phase": "RECORDER",
+                    "reason": f"the recorder restarted {(t_ns - m.get('last_earlier_ns', t_ns)) * 1e-9:.1f} s after "
+                              f"the last earlier message (its predecessor {how}); {m.get('carried_messages', 0)} "
+                              f"earlier messages carried over from {m.get('earlier_file', '?')}"[:500]})
+    if (run_dir / (RECORDING + ".partial")).is_file():
+        last_ns = max((msgs[-1][0] for msgs in run.rec.values() if msgs), default=0)
+        out.append({"wall_ns": last_ns, "phase": "RECORDER",
+                    "reason": "the recorder did not finish: the recording was recovered from its .partial file "
+                              "and ends here"})
+    return out
+
+
+def _cell_faults(launcher: dict) -> list[dict[str, Any]]:
+    """The launcher's ending as a fault when it was one (a service died or failed, the run timed out)."""
+    if launcher.get("outcome") not in ("failed", "timeout"):
+        return []
+    return [{"wall_ns": int(launcher.get("ended_wall_ns", 0)), "phase": "CELL",
+             "reason": str(launcher.get("why", launcher["outcome"]))[:500]}]
+
+
+def _faults_section(status: list[dict]) -> list[dict[str, Any]]:
+    """Every entry into PAUSED, FAULT or ESTOP in the controller's status."""
+    faults, prev = [], None
+    for s in status:
+        if s["phase"] != prev and s["phase"] in (Phase.PAUSED, Phase.FAULT, Phase.ESTOP):
+            faults.append({"wall_ns": s.get("wall_ns", 0), "phase": s["phase"], "reason": s["reason"]})
+        prev = s["phase"]
+    return faults
