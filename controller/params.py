@@ -97,13 +97,16 @@ class LimitParams:
     over disturbance_filter_s [s], above this share of the joint's torque
     limit for disturbance_persist_s [s] is a fault (the arm is not doing
     what it was told); 10 turns the watch off.
-        overload_share : in real time, a share of the robot's states left
+    overload_share : in real time, a share of the robot's states left
     unanswered (filtered over overload_filter_s [s] of robot time) above this
     for overload_persist_s [s] is a fault: the loop cannot keep up, so the
     pad lifts off under control instead of wiping on with stale torques
     (1 = off). Before that the motion slows: above overload_slow_share the
     skill's time scale falls linearly to overload_min_scale at
-    overload_share (:func:`controller.control.limits.load_scale`).
+    overload_share (:func:`controller.control.limits.load_scale`). After an
+    overload FAULT (the pad lifted), a share below overload_slow_share for
+    overload_recover_s [s] of robot time starts again from the measured pose
+    (0: the FAULT holds until the controller is restarted).
     """
 
     torque_rate_nm_per_ms: Annotated[float, In(0.01, 50.0)] = 1.0
@@ -126,6 +129,7 @@ class LimitParams:
     overload_persist_s: Annotated[float, In(0.0, 60.0)] = 1.0
     overload_slow_share: Annotated[float, In(0.0, 1.0)] = 0.05
     overload_min_scale: Annotated[float, In(0.05, 1.0)] = 0.4
+    overload_recover_s: Annotated[float, In(0.0, 600.0)] = 3.0
 
     def __post_init__(self) -> None:
         s = "controller.limits"

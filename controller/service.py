@@ -84,7 +84,8 @@ class ControllerService:
         self._session_id = str(node.session.zid())
         self._stop_since: float | None = None  # the robot side serves one controller session
         lim = params.limits
-        self._overload = OverloadWatch(lim.overload_share, lim.overload_filter_s, lim.overload_persist_s)
+        self._overload = OverloadWatch(lim.overload_share, lim.overload_filter_s, lim.overload_persist_s,
+                                       lim.overload_slow_share, lim.overload_recover_s)
         self._stains_clock = None
         self._lost = False
         self._ever_state = False
@@ -200,6 +201,8 @@ class ControllerService:
                     ours, replaced_seen = states.replaced - replaced_seen, states.replaced
                     if self._overload.update(ours, dt):
                         self._overloaded()
+                    elif self._overload.calm_again(dt):
+                        self._calm()
                     lim = self.p.limits
                     self.core.override.load_cap = load_scale(self._overload.share, lim.overload_slow_share,
                                                              lim.overload_share, lim.overload_min_scale)
@@ -335,12 +338,17 @@ class ControllerService:
 
     def _overloaded(self) -> None:
         """Too many robot states came while an older one waited, for too long: FAULT, which lifts the pad off
-        (the loop still runs, slower); the watch starts over, so an overload that persists after a clear trips
-        again."""
+        (the loop runs on, slower); the watch starts over, and once the load has passed :meth:`_calm` restarts."""
         self.counters["overload_trips"] += 1
         log.error("%s", self._overload.reason())
         self.core.executor.fault(self._overload.reason())
         self._overload.reset()
+        self._overload.faulted()
+
+    def _calm(self) -> None:
+        log.warning("the load passed after an overload fault: starting again from the measured pose")
+        self.counters["overload_recoveries"] += 1
+        self.core.restart()
 
     def _robot_back(self, state: RobotState) -> None:
         log.warning("robot states back (seq %d after %d): restarting from the measured pose", state.seq,

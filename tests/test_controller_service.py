@@ -426,7 +426,8 @@ def test_a_controller_stopped_mid_wipe_lifts_the_pad_off_before_it_exits(tmp_pat
 @pytest.mark.slow
 def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp_path, learned_skill):
     """Graceful degradation: the real-time controller, its tick slowed to miss two robot states in three while it
-    wipes, faults on the overload watch (not on the force cap) and lifts the pad off at the reduced rate."""
+    wipes, faults on the overload watch (not on the force cap) and lifts the pad off at the reduced rate; once the
+    load has passed it starts again."""
     with SimProcess(tmp_path, {"mode": "realtime", "camera": NO_CAMERA}) as sim:
         with ControllerThread(sim, learned_skill, {"mode": "realtime"}) as ctl:
             truth = ctl.operator.latest(ctl.operator.keys.sim_truth, SimTruth)
@@ -456,3 +457,9 @@ def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp
             before = ctl.core.override.load_limited_ticks
             reported = ctl.service.status().counters["overload_slowed_ticks"]
             assert before <= reported <= ctl.core.override.load_limited_ticks
+            # the load passes: after overload_recover_s (3 s) of calm the controller starts again from the measured
+            # pose, re-approaches and wipes on
+            ctl.core.tick = tick
+            t1 = time.monotonic()
+            ctl.wait_phase(("APPROACH", "WIPE", "TRANSITION"), 30.0)
+            assert time.monotonic() - t1 >= 2.5 and ctl.service.counters["overload_recoveries"] == 1

@@ -928,3 +928,30 @@ def test_the_overload_watch_trips_on_a_sustained_share_of_unanswered_states_only
     off = OverloadWatch(max_share=1.0, filter_s=0.5, persist_s=0.0)
     assert not any(off.update(10, 0.011) for _ in range(1000))  # 1 = off
 
+
+def test_after_an_overload_fault_the_watch_says_when_the_load_has_passed():
+    from controller.control.watch import OverloadWatch
+
+    w = OverloadWatch(max_share=0.3, filter_s=0.5, persist_s=1.0, calm_share=0.05, calm_s=3.0)
+    assert not w.calm_again(10.0), "nothing to recover from before a fault"
+    while not w.update(1, 0.002):
+        pass
+    w.reset()
+    w.faulted()
+    t = 0.0
+    for _ in range(1000):  # still loaded: every other state unanswered for 2 s
+        w.update(1, 0.002)
+        assert not w.calm_again(0.002)
+    w.share = 0.5
+    while True:  # the load passes: the share decays below 5 %, then 3 s of calm
+        w.update(0, 0.001)
+        t += 0.001
+        if w.calm_again(0.001):
+            break
+        assert t < 10.0
+    assert 3.0 <= t <= 5.5, t
+    assert not w.calm_again(10.0), "once"
+    never = OverloadWatch(0.3, 0.5, 1.0, 0.05, calm_s=0.0)
+    never.faulted()
+    assert not never.calm_again(100.0)
+

@@ -360,7 +360,7 @@ def test_lamps_up_default_cleans_a_wall_board_and_reports_it(tmp_path):
     assert set(json.loads((out / "run.json").read_text())["services"]) == {"sim", "controller", "perception"}
     assert "learn/fig4_reachability.png" in report["plots"] and (out / "learn" / "skill.json").is_file()
     assert "outcome cleaned" in r.stdout
-    secret = out / "credentials" / "controller.password"  # the cell ran authenticated, access control on
+    secret = out / "credentials" / "controller" / "key.pem"  # the cell ran with its roles' identities, list on
     assert secret.is_file() and secret.stat().st_mode & 0o077 == 0
     print(f"lamps up (wall): {time.monotonic() - t0:.0f} s wall, {report['sim_time_s']:.1f} s robot time, "
           f"removed {report['dirt_removed_fraction']:.2%}")
@@ -569,7 +569,7 @@ def test_a_board_pose_file_becomes_the_sims_board_table(tmp_path):
 
 def _pid_listening_on(port: int) -> int | None:
     """The process whose environment sets LAMPS_ZENOH_LISTEN to our local port (a service lamps up started)."""
-    want = f"LAMPS_ZENOH_LISTEN=tcp/127.0.0.1:{port}".encode()
+    want = f"LAMPS_ZENOH_LISTEN=tls/127.0.0.1:{port}".encode()
     for d in Path("/proc").iterdir():
         if d.name.isdigit():
             try:

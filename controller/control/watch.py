@@ -125,16 +125,38 @@ class OverloadWatch:
     ----------
     max_share : limit on the filtered share (0-1; 1 never trips). filter_s : time constant of the first-order
     low-pass [s]. persist_s : above the limit this long (robot time) before :attr:`tripped` [s].
+    calm_share, calm_s : after a trip that faulted (:meth:`faulted`), the share below calm_share for calm_s
+    [s] of robot time means the load has passed (:meth:`calm_again`); calm_s 0: never.
     """
 
-    def __init__(self, max_share: float, filter_s: float, persist_s: float) -> None:
+    def __init__(self, max_share: float, filter_s: float, persist_s: float, calm_share: float = 0.0,
+                 calm_s: float = 0.0) -> None:
         self.max_share = float(max_share)
         self.filter_s = float(filter_s)
         self.persist_s = float(persist_s)
+        self.calm_share = float(calm_share)
+        self.calm_s = float(calm_s)
         self.share = 0.0
         self.over_s = 0.0
         self.peak_share = 0.0
         self.tripped = False
+        self._after_fault = False
+        self._calm_for_s = 0.0
+
+    def faulted(self) -> None:
+        """The trip ended in a FAULT: from now on :meth:`calm_again` watches for the load to pass."""
+        self._after_fault = self.calm_s > 0.0
+        self._calm_for_s = 0.0
+
+    def calm_again(self, dt_s: float) -> bool:
+        """After a fault, True once (then forgotten) when the share has stayed below calm_share for calm_s."""
+        if not self._after_fault:
+            return False
+        self._calm_for_s = self._calm_for_s + dt_s if self.share < self.calm_share else 0.0
+        if self._calm_for_s >= self.calm_s:
+            self._after_fault = False
+            return True
+        return False
 
     def reset(self) -> None:
         """Forget the history (a restart of the robot, a new loop)."""
