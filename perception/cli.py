@@ -43,6 +43,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-zenoh", action="store_true", help="offline sources only: do not open a Zenoh session")
     add_zenoh_options(p)
     p.add_argument("--check", action="store_true", help="validate config and source, then exit")
+    p.add_argument("--check-board", metavar="IMAGE",
+                   help="report which corner markers IMAGE shows, the board's size and pose, and draw them; exit 1 "
+                        "if the board is not found")
+    p.add_argument("--board-image", metavar="FILE", help="where --check-board draws (default IMAGE.board.png)")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     return p
 
@@ -91,6 +95,12 @@ def main(argv: list[str] | None = None) -> int:
     except (LampsError, OSError) as exc:
         print(f"lamps perception: error: {exc}", file=sys.stderr)
         return 1
+    if a.check_board:
+        from .check_board import main_check_board
+
+        if source is not None:
+            source.close()
+        return main_check_board(a.check_board, params, a.board_image)
     if a.check:
         print(f"ok: source {params.source}, camera {params.camera}, keys under {zenoh_settings.keys.prefix}")
         if source is not None:

@@ -29,6 +29,7 @@ from typing import Annotated, Any
 from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import check_vector, dataclass_from_table
+from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
 from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
@@ -46,6 +47,12 @@ class BoardParams:
     refused. moved_m / moved_deg : a jump this large means another board (or
     a moved one): the stains are detected afresh. edge_margin_m : border of
     the board not looked at (rectification bleeds over its edge) [m].
+    dictionary, marker_ids, marker_side_m, marker_inset_m : the corner
+    markers (:class:`~interfaces.board_markers.MarkerLayout`): an OpenCV
+    ArUco dictionary or AprilTag family by name, the ids at the bottom-left,
+    bottom-right, top-right and top-left corners, the side of a marker
+    (black border included) [m] and its outer corner's inset from both
+    board edges [m]; the defaults are the cell's board.
     """
 
     size_m: tuple[float, float] = (0.0, 0.0)
@@ -56,6 +63,10 @@ class BoardParams:
     moved_m: Annotated[float, In(0.001, 1.0)] = 0.03
     moved_deg: Annotated[float, In(0.1, 90.0)] = 3.0
     edge_margin_m: Annotated[float, In(0.0, 0.1)] = 0.01
+    dictionary: str = DEFAULT_LAYOUT.dictionary
+    marker_ids: tuple[int, int, int, int] = DEFAULT_LAYOUT.ids
+    marker_side_m: Annotated[float, In(0.005, 1.0)] = DEFAULT_LAYOUT.side_m
+    marker_inset_m: Annotated[float, In(0.0, 0.5)] = DEFAULT_LAYOUT.inset_m
 
     def __post_init__(self) -> None:
         s = "perception.board"
@@ -64,6 +75,17 @@ class BoardParams:
         object.__setattr__(self, "size_m", size)
         if size != (0.0, 0.0) and not all(0.2 <= v <= 5.0 for v in size):
             raise ConfigError(f"[{s}] size_m must be [0, 0] (measure) or two lengths in [0.2, 5.0] m, got {list(size)}")
+        ids = tuple(self.marker_ids) if isinstance(self.marker_ids, (list, tuple)) else self.marker_ids
+        try:
+            layout = MarkerLayout(self.dictionary, ids, float(self.marker_side_m), float(self.marker_inset_m))
+        except (ValueError, TypeError) as exc:
+            raise ConfigError(f"[{s}] {exc}") from None
+        object.__setattr__(self, "marker_ids", layout.ids)
+
+    @property
+    def layout(self) -> MarkerLayout:
+        """The corner markers this board carries."""
+        return MarkerLayout(self.dictionary, self.marker_ids, self.marker_side_m, self.marker_inset_m)
 
 
 @dataclass(frozen=True)
