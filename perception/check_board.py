@@ -22,7 +22,7 @@ from interfaces.board_markers import CORNERS
 
 from .board import detect_markers, make_detector, measure_board, solve_pose
 from .params import PerceptionParams
-from .sources import camera_model
+from .sources import camera_model, undistorter
 
 
 @dataclass
@@ -49,7 +49,9 @@ def check_board(bgr: np.ndarray, params: PerceptionParams) -> BoardCheck:
     h, w = bgr.shape[:2]
     K, _ = camera_model(params.model, w, h)
     cam = params.model
-    out = BoardCheck((h, w), K, guessed_intrinsics=not (cam.fx and cam.fy))
+    if cam.calibration:
+        bgr = undistorter(cam.calibration, w, h)(bgr)
+    out = BoardCheck((h, w), K, guessed_intrinsics=not (cam.fx and cam.fy or cam.calibration))
     layout = params.board.layout
     grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
     out.markers = detect_markers(make_detector(layout), grey, layout.ids)
@@ -129,7 +131,11 @@ def main_check_board(image: str, params: PerceptionParams, out: str | None) -> i
     if bgr is None:
         print(f"lamps perception: error: --check-board {image}: not an image OpenCV can read", file=sys.stderr)
         return 1
-    check = check_board(bgr, params)
+    try:
+        check = check_board(bgr, params)
+    except ValueError as exc:  # a calibration that does not fit the image
+        print(f"lamps perception: error: {exc}", file=sys.stderr)
+        return 1
     for line in report_lines(check, params):
         print(line)
     target = Path(out) if out else Path(image).with_suffix(".board.png")

@@ -47,6 +47,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="report which corner markers IMAGE shows, the board's size and pose, and draw them; exit 1 "
                         "if the board is not found")
     p.add_argument("--board-image", metavar="FILE", help="where --check-board draws (default IMAGE.board.png)")
+    p.add_argument("--calibrate", metavar="DIR",
+                   help="calibrate the camera from the images of a chessboard in DIR (OpenCV's calibration), write "
+                        "a ROS camera_info YAML (--calibration-out) and exit")
+    p.add_argument("--pattern", metavar="SPEC", default="chessboard:9x6:0.025",
+                   help="the target of --calibrate: chessboard:COLSxROWS:SQUARE_M, inner corners (default %(default)s)")
+    p.add_argument("--calibration-out", metavar="FILE", default="camera_info.yaml",
+                   help="where --calibrate writes (default %(default)s); use it as [perception.camera_model] "
+                        "calibration")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     return p
 
@@ -81,8 +89,39 @@ def open_source(params: PerceptionParams, node):
     return OpenCVSource(params.source, params)
 
 
+def calibrate_main(a: argparse.Namespace) -> int:
+    """``--calibrate DIR``: OpenCV's calibration from chessboard images, written as a ROS camera_info YAML."""
+    from pathlib import Path
+
+    from .calibration import CalibrationError, calibrate, write_camera_info
+    from .sources import IMAGE_SUFFIXES
+
+    folder = Path(a.calibrate)
+    images = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
+    if not images:
+        print(f"lamps perception: error: --calibrate {folder}: no {'/'.join(IMAGE_SUFFIXES)} images there",
+              file=sys.stderr)
+        return 1
+    try:
+        result = calibrate(images, a.pattern)
+        write_camera_info(a.calibration_out, result.calibration)
+    except (CalibrationError, OSError) as exc:
+        print(f"lamps perception: error: {exc}", file=sys.stderr)
+        return 1
+    K, d = result.calibration.K, result.calibration.dist
+    print(f"calibrated from {len(result.used)} of {len(images)} images ({result.calibration.width} x "
+          f"{result.calibration.height} px): fx {K[0, 0]:.1f} fy {K[1, 1]:.1f} cx {K[0, 2]:.1f} cy {K[1, 2]:.1f} px, "
+          f"distortion {' '.join(f'{v:.4f}' for v in d)}; corners reproject to {result.rms_px:.3f} px RMS")
+    for why in result.skipped:
+        print(f"  skipped {why}")
+    print(f"wrote {a.calibration_out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    if a.calibrate:
+        return calibrate_main(a)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="%(asctime)s perception %(levelname)s %(name)s: %(message)s")
     try:

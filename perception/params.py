@@ -184,7 +184,10 @@ class CameraModelParams:
     """The camera model for sources whose frames carry none (image folder, video file, capture device).
 
     fx, fy, cx, cy [px] at the frames' resolution (0 = a D435i-like 615 px
-    focal length scaled to the width, principal point at the centre);
+    focal length scaled to the width, principal point at the centre), or
+    calibration: a ROS ``camera_info`` YAML or an OpenCV calibration file
+    (:mod:`perception.calibration`: intrinsics and lens distortion, scaled to
+    the frames; each frame is undistorted before anything looks at it);
     position_m, look_at_m, up_m: the camera pose in the world (robot base)
     frame; the board pose is then reported in that frame.
     """
@@ -196,10 +199,15 @@ class CameraModelParams:
     position_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
     look_at_m: tuple[float, float, float] = (1.0, 0.0, 1.0)
     up_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    calibration: str = ""
 
     def __post_init__(self) -> None:
-        s = "perception.camera"
+        s = "perception.camera_model"
         check_declared(self, s)
+        if not isinstance(self.calibration, str):
+            raise ConfigError(f"[{s}] calibration must be a file name, got {self.calibration!r}")
+        if self.calibration and any((self.fx, self.fy, self.cx, self.cy)):
+            raise ConfigError(f"[{s}] give calibration or fx, fy, cx, cy, not both")
         for name in ("position_m", "look_at_m", "up_m"):
             object.__setattr__(self, name, check_vector(s, name, getattr(self, name), 3))
 
