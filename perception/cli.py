@@ -39,6 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--source", metavar="SPEC", help="zenoh (default), folder:DIR, video:FILE or device:N")
     p.add_argument("--debug-images", action="store_true", default=None,
                    help="publish the rectified board with stains drawn on perception/debug")
+    p.add_argument("--debug-dir", metavar="DIR",
+                   help="with --debug-images: also write every frame's debug image there (frame-<seq>.jpg); offline "
+                        "runs default to ./perception-debug")
     p.add_argument("--jsonl", metavar="FILE", help="also write every stains message as a JSON line (offline checks)")
     p.add_argument("--no-zenoh", action="store_true", help="offline sources only: do not open a Zenoh session")
     add_zenoh_options(p)
@@ -162,7 +165,10 @@ def main(argv: list[str] | None = None) -> int:
     partial = f"{a.jsonl}.partial" if a.jsonl else None
     out = open(partial, "w") if partial else None  # renamed into place when complete
     sink = (lambda msg: out.write(json.dumps(as_dict(msg)) + "\n")) if out else None
-    service = PerceptionService(params, node, source, sink)
+    debug_dir = a.debug_dir or ("perception-debug" if params.debug_images and kind != "zenoh" else None)
+    if debug_dir and params.debug_images:
+        os.makedirs(debug_dir, exist_ok=True)
+    service = PerceptionService(params, node, source, sink, debug_dir if params.debug_images else None)
     signal.signal(signal.SIGTERM, lambda *_: service.stop.set())
     signal.signal(signal.SIGINT, lambda *_: service.stop.set())
     try:
@@ -178,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("perception").info("stopped after %d frames: %s", frames, status.detail)
     if kind != "zenoh":
         print(f"{frames} frames: {status.detail}; counters {dict(sorted(status.counters.items()))}")
+        if service.debug_dir:
+            print(f"debug images: {service.debug_dir}/")
     return 0
 
 

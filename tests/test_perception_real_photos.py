@@ -85,3 +85,14 @@ def test_the_drawing_outlines_the_board(checks):
     c = checks["straight"]
     img = draw(cv2.imread(str(PHOTOS / "straight.jpg")), c)
     assert (img != cv2.imread(str(PHOTOS / "straight.jpg"))).any()
+
+
+def test_offline_debug_images_are_written_where_asked(tmp_path, capsys):
+    out = tmp_path / "debug"
+    rc = perception_main(["--config", str(PHOTOS / "board.toml"), "--no-zenoh", "--source", f"folder:{PHOTOS}",
+                          "--debug-images", "--debug-dir", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    written = sorted(out.glob("frame-*.jpg"))
+    assert len(written) == 3 and all(cv2.imread(str(p)) is not None for p in written), (written, text)
+    assert f"debug images: {out}/" in text
