@@ -36,7 +36,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "publishes perception/stains over Zenoh. Options override the config file.")
     p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh] and [perception] tables")
     p.add_argument("--camera", metavar="NAME", help="camera name: frames from camera/<NAME>/frame (default board)")
-    p.add_argument("--source", metavar="SPEC", help="zenoh (default), folder:DIR, video:FILE or device:N")
+    p.add_argument("--source", metavar="SPEC",
+                   help="zenoh (default), folder:DIR, video:FILE, device:N or ros:TOPIC (a ROS 2 image topic through "
+                        "zenoh-bridge-ros2dds)")
     p.add_argument("--debug-images", action="store_true", default=None,
                    help="publish the rectified board with stains drawn on perception/debug")
     p.add_argument("--debug-dir", metavar="DIR",
@@ -82,11 +84,15 @@ def as_dict(value):
 
 
 def open_source(params: PerceptionParams, node):
-    kind, _ = parse_source(params.source)
+    kind, arg = parse_source(params.source)
     if kind == "zenoh":
         from .sources import ZenohSource
 
         return ZenohSource(node, params.camera)
+    if kind == "ros":
+        from .ros_images import RosImageSource
+
+        return RosImageSource(node, arg, params)
     from .sources import OpenCVSource
 
     return OpenCVSource(params.source, params)
@@ -131,9 +137,9 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_settings, params = load(a)
         wanted_nice(BACKGROUND)  # a bad LAMPS_NICE is refused with the rest of the configuration
         kind, _ = parse_source(params.source)
-        if a.no_zenoh and kind == "zenoh":
+        if a.no_zenoh and kind in ("zenoh", "ros"):
             raise InterfaceError("--no-zenoh needs an offline source (--source folder:DIR, video:FILE or device:N)")
-        source = None if kind == "zenoh" else open_source(params, None)
+        source = None if kind in ("zenoh", "ros") else open_source(params, None)
     except (LampsError, OSError) as exc:
         print(f"lamps perception: error: {exc}", file=sys.stderr)
         return 1
@@ -165,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     partial = f"{a.jsonl}.partial" if a.jsonl else None
     out = open(partial, "w") if partial else None  # renamed into place when complete
     sink = (lambda msg: out.write(json.dumps(as_dict(msg)) + "\n")) if out else None
-    debug_dir = a.debug_dir or ("perception-debug" if params.debug_images and kind != "zenoh" else None)
+    debug_dir = a.debug_dir or ("perception-debug" if params.debug_images and kind not in ("zenoh", "ros") else None)
     if debug_dir and params.debug_images:
         os.makedirs(debug_dir, exist_ok=True)
     service = PerceptionService(params, node, source, sink, debug_dir if params.debug_images else None)
@@ -182,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
             os.replace(partial, a.jsonl)
     status = service.status()
     logging.getLogger("perception").info("stopped after %d frames: %s", frames, status.detail)
-    if kind != "zenoh":
+    if kind not in ("zenoh", "ros"):
         print(f"{frames} frames: {status.detail}; counters {dict(sorted(status.counters.items()))}")
         if service.debug_dir:
             print(f"debug images: {service.debug_dir}/")

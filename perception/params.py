@@ -227,7 +227,10 @@ def parse_source(spec: str) -> tuple[str, str]:
         return kind, arg
     if kind == "device" and re.fullmatch(r"\d{1,3}", arg):
         return kind, arg
-    raise ConfigError(f"[perception] source must be 'zenoh', 'folder:DIR', 'video:FILE' or 'device:N', got {spec!r}")
+    if kind == "ros" and re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", arg):
+        return kind, arg
+    raise ConfigError(f"[perception] source must be 'zenoh', 'folder:DIR', 'video:FILE', 'device:N' or 'ros:TOPIC' "
+                      f"(a ROS 2 image topic through zenoh-bridge-ros2dds), got {spec!r}")
 
 
 @dataclass(frozen=True)
