@@ -25,7 +25,8 @@ robot/command                     controller
 robot/state, robot/status,        robot (the sim, a robot adapter, the
 sim/**, camera/**                 lbr peer's simulated side)
 <ros namespace>/** (not under     robot, bridge (zenoh-bridge-ros2dds
-the prefix, default ``lbr``)      next to lbr_fri_ros2_stack)
+the prefix: ``lbr`` and           next to lbr_fri_ros2_stack and the
+``camera`` by default)            camera's ROS driver)
 robot/arm                         operator
 perception/**                     perception
 controller/status,                controller
@@ -48,15 +49,15 @@ from .keys import Keys
 #: The identities of a cell. ``operator``: a person's tools (``lamps up``, e-stop release, arming); ``bridge``:
 #: zenoh-bridge-ros2dds on the robot's PC.
 ROLES = ("controller", "robot", "perception", "recorder", "operator", "bridge")
-#: The ROS namespace the bridge publishes under (lbr_fri_ros2_stack's default robot_name).
-DEFAULT_ROS_NAMESPACE = "lbr"
+#: The ROS namespaces the bridge carries: lbr_fri_ros2_stack's default robot_name and a camera driver's default.
+DEFAULT_ROS_NAMESPACES = ("lbr", "camera")
 #: Zenoh message kinds a role may send to and receive from another role (besides the puts of its row).
 _DECLARATIONS = ["declare_subscriber", "declare_queryable", "query", "reply", "liveliness_token",
                  "declare_liveliness_subscriber", "liveliness_query"]
 _DATA = ["put", "delete"]
 
 
-def writers(keys: Keys, ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> dict[str, tuple[str, ...]]:
+def writers(keys: Keys, ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES) -> dict[str, tuple[str, ...]]:
     """Key expression -> the roles that may put on it (the table of the module docstring)."""
     p = keys.prefix
     return {
@@ -65,7 +66,7 @@ def writers(keys: Keys, ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> dict[str,
         keys.robot_status: ("robot",),
         f"{p}/sim/**": ("robot",),
         f"{p}/camera/**": ("robot",),
-        f"{ros_namespace.strip('/')}/**": ("robot", "bridge"),
+        **{f"{ns.strip('/')}/**": ("robot", "bridge") for ns in ros_namespaces},
         keys.robot_arm: ("operator",),
         f"{p}/perception/**": ("perception",),
         keys.controller_status: ("controller",),
@@ -75,24 +76,24 @@ def writers(keys: Keys, ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> dict[str,
     }
 
 
-def may_put(keys: Keys, role: str, key: str, ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> bool:
+def may_put(keys: Keys, role: str, key: str, ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES) -> bool:
     """Whether ``role`` may put on the concrete key ``key`` (what the access list lets through)."""
     import zenoh
 
     k = zenoh.KeyExpr(key)
     return any(role in allowed and zenoh.KeyExpr(expr).intersects(k)
-               for expr, allowed in writers(keys, ros_namespace).items())
+               for expr, allowed in writers(keys, ros_namespaces).items())
 
 
 def cell_acl(keys: Keys, subject: str = "cert_common_names",
-             ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> dict[str, Any]:
+             ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for a cell under ``keys`` (default deny, see the module docstring).
 
     subject : how a peer's role is told: ``cert_common_names`` (mutual TLS, the default) or ``usernames``.
     """
     if subject not in ("cert_common_names", "usernames"):
         raise ValueError(f"subject must be cert_common_names or usernames, got {subject!r}")
-    scope = [f"{keys.prefix}/**", f"{ros_namespace.strip('/')}/**"]
+    scope = [f"{keys.prefix}/**", *(f"{ns.strip('/')}/**" for ns in ros_namespaces)]
     rules: list[dict[str, Any]] = [
         {"id": "talk", "permission": "allow", "flows": ["egress", "ingress"], "messages": _DECLARATIONS,
          "key_exprs": scope},
@@ -100,7 +101,7 @@ def cell_acl(keys: Keys, subject: str = "cert_common_names",
     ]
     policies = []
     for role in ROLES:
-        exprs = [k for k, allowed in writers(keys, ros_namespace).items() if role in allowed]
+        exprs = [k for k, allowed in writers(keys, ros_namespaces).items() if role in allowed]
         rules.append({"id": f"put-{role}", "permission": "allow", "flows": ["ingress"], "messages": _DATA,
                       "key_exprs": exprs})
         policies.append({"id": f"as-{role}", "rules": ["talk", "deliver", f"put-{role}"], "subjects": [role]})

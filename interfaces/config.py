@@ -26,7 +26,8 @@ role's certificate and key and the cell's CA; mutual TLS, every endpoint
 then ``tls/...``), or ``tls_ca``, ``tls_certificate`` and ``tls_private_key``
 given one by one (all three or none); ``access_control`` (true: apply the
 cell's default-deny access list, subjects the certificates' common names);
-``ros_namespace`` (default ``lbr``: the keys the ROS bridge may put).
+``ros_namespaces`` (default ``["lbr", "camera"]``: the ROS topic namespaces
+zenoh-bridge-ros2dds carries, the keys the robot side and the bridge may put).
 Zenoh's user-password authentication is still there for a router-held
 dictionary: ``user`` (the role), ``password_file``, ``credentials_file``.
 Shorthands ``LAMPS_ZENOH_IDENTITY``, ``LAMPS_ZENOH_ACCESS_CONTROL``,
@@ -52,7 +53,7 @@ from typing import Annotated, Any
 
 import msgspec
 
-from .access import DEFAULT_ROS_NAMESPACE, ROLES
+from .access import DEFAULT_ROS_NAMESPACES, ROLES
 from .errors import ConfigError
 from .keys import DEFAULT_ROBOT_ID, Keys
 
@@ -80,7 +81,7 @@ _SHORTHANDS = {
 def _check_ros_namespace(ns: str) -> None:
     chunks = ns.strip("/").split("/")
     if not all(c and all(ch.isalnum() or ch == "_" for ch in c) for c in chunks):
-        raise ConfigError(f"[zenoh] ros_namespace must be a ROS namespace like 'lbr' or 'cell1/lbr', got {ns!r}")
+        raise ConfigError(f"[zenoh] ros_namespaces must be ROS namespaces like 'lbr' or 'cell1/lbr', got {ns!r}")
 
 
 @dataclass(frozen=True)
@@ -103,14 +104,14 @@ class ZenohSettings:
     tls_certificate: str = ""
     tls_private_key: str = ""
     config_file: str = ""
-    ros_namespace: str = DEFAULT_ROS_NAMESPACE
+    ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES
 
     def __post_init__(self) -> None:
         for name in ("mode", "robot_id", "key_prefix"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
         for name in ("user", "password_file", "credentials_file", "identity", "tls_ca", "tls_certificate",
-                     "tls_private_key", "config_file", "ros_namespace"):
+                     "tls_private_key", "config_file"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
         if not isinstance(self.access_control, bool):
@@ -138,8 +139,11 @@ class ZenohSettings:
                               "user-password authentication names the side that connects, so a peer cannot tell who "
                               "it connected to (and would deny it everything); give the service an identity folder "
                               "(mutual TLS: 'lamps credentials DIR')")
-        if self.ros_namespace:
-            _check_ros_namespace(self.ros_namespace)
+        if not isinstance(self.ros_namespaces, (list, tuple)) or not all(isinstance(n, str) for n in self.ros_namespaces):
+            raise ConfigError(f"[zenoh] ros_namespaces must be a list of ROS namespaces, got {self.ros_namespaces!r}")
+        for ns in self.ros_namespaces:
+            _check_ros_namespace(ns)
+        object.__setattr__(self, "ros_namespaces", tuple(self.ros_namespaces))
         if self.mode not in ZENOH_MODES:
             raise ConfigError(f"[zenoh] mode must be one of {ZENOH_MODES}, got {self.mode!r}")
         for name in ("listen", "connect"):

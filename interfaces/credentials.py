@@ -37,7 +37,7 @@ from pathlib import Path
 
 from lampskit.atomic import write_atomic, write_text_atomic
 
-from .access import DEFAULT_ROS_NAMESPACE, ROLES, cell_acl
+from .access import DEFAULT_ROS_NAMESPACES, ROLES, cell_acl
 from .certificates import DEFAULT_DAYS, DEFAULT_HOSTS, issue, new_ca, write_key_and_cert
 from .keys import Keys
 
@@ -61,7 +61,8 @@ ROLE_HOSTS = {
 #: plugin applies to the ROS -> Zenoh direction only: the adapter's own publisher sets the command's), and
 #: a congested route drops a state rather than blocking the stack's writer (``reliable_routes_blocking``).
 BRIDGE_ROS2DDS = {
-    "allow": {"publishers": ["/lbr/state", "/lbr/joint_states", "/lbr/force_torque_broadcaster/wrench"],
+    "allow": {"publishers": ["/lbr/state", "/lbr/joint_states", "/lbr/force_torque_broadcaster/wrench",
+                             "/camera/.*/image_raw", "/camera/.*/image_raw/compressed", "/camera/.*/camera_info"],
               "subscribers": ["/lbr/command/torque"], "service_servers": [], "service_clients": [],
               "action_servers": [], "action_clients": []},
     "pub_priorities": ["/lbr/state=1:express"],
@@ -108,13 +109,13 @@ def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str
 
 
 def bridge_config(secrets: str = BRIDGE_SECRETS, keys: Keys | None = None,
-                  ros_namespace: str = DEFAULT_ROS_NAMESPACE) -> dict:
+                  ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES) -> dict:
     """zenoh-bridge-ros2dds's configuration: the bridge identity at ``secrets``, the cell's access list."""
     ca, cert, key = (f"{secrets}/{n}" for n in (CA_FILE, CERT_FILE, KEY_FILE))
     return {"transport": {"link": {"tls": {"root_ca_certificate": ca, "enable_mtls": True,
                                            "listen_certificate": cert, "listen_private_key": key,
                                            "connect_certificate": cert, "connect_private_key": key}}},
-            "access_control": cell_acl(keys or Keys(), "cert_common_names", ros_namespace),
+            "access_control": cell_acl(keys or Keys(), "cert_common_names", ros_namespaces),
             "plugins": {"ros2dds": BRIDGE_ROS2DDS}}
 
 

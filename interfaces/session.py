@@ -98,7 +98,7 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
             {"user": settings.user, "password": password, "dictionary_file": settings.credentials_file}))
     if settings.access_control:
         subject = "cert_common_names" if settings.tls_ca else "usernames"
-        cfg.insert_json5("access_control", json.dumps(cell_acl(settings.keys, subject, settings.ros_namespace)))
+        cfg.insert_json5("access_control", json.dumps(cell_acl(settings.keys, subject, settings.ros_namespaces)))
     if settings.tls_ca:
         for path, what in ((settings.tls_ca, "tls_ca"), (settings.tls_certificate, "tls_certificate"),
                            (settings.tls_private_key, "tls_private_key")):

@@ -1,7 +1,8 @@
 """The board from its corner markers: detection, size, pose, and the rectifying homography.
 
-The markers follow :mod:`interfaces.board_markers` (ids 0-3 of
-``DICT_4X4_50`` at the corners). Each frame: detect the markers, solve the
+The markers follow a :class:`~interfaces.board_markers.MarkerLayout` (the
+cell's default: ids 0-3 of ``DICT_4X4_50`` at the corners; ``[perception.board]``
+names another). Each frame: detect the markers, solve the
 board pose from every visible marker corner (a planar PnP, board frame z = 0),
 refuse it if the corners reproject badly. The board size, unless configured,
 is measured once from the markers (:func:`measure_board`: each marker's own
@@ -21,30 +22,27 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from interfaces.board_markers import (ARUCO_DICTIONARY, MARKER_IDS, MARKER_INSET_M, MARKER_SIDE_M,
-                                      marker_corners_board)
+from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
 
 from .params import BoardParams
 
-#: Marker centre in the board frame is (a + s/2) from its two nearest edges.
-_CENTRE_INSET_M = MARKER_INSET_M + MARKER_SIDE_M / 2
 
-
-def make_detector() -> cv2.aruco.ArucoDetector:
-    """An ArUco detector for the board's dictionary with sub-pixel corner refinement."""
+def make_detector(layout: MarkerLayout = DEFAULT_LAYOUT) -> cv2.aruco.ArucoDetector:
+    """An ArUco detector for the layout's dictionary with sub-pixel corner refinement."""
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-    return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ARUCO_DICTIONARY)), params)
+    return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, layout.dictionary)), params)
 
 
-def detect_markers(detector: cv2.aruco.ArucoDetector, grey: np.ndarray) -> dict[int, np.ndarray]:
+def detect_markers(detector: cv2.aruco.ArucoDetector, grey: np.ndarray,
+                   ids_wanted: tuple[int, ...] = DEFAULT_LAYOUT.ids) -> dict[int, np.ndarray]:
     """Corners (4, 2) [px] of each board marker seen in ``grey`` (H, W) uint8, by id (other ids ignored)."""
     corners, ids, _ = detector.detectMarkers(grey)
     if ids is None:
         return {}
     out: dict[int, np.ndarray] = {}
     for c, i in zip(corners, ids.ravel()):
-        if int(i) in MARKER_IDS and int(i) not in out:
+        if int(i) in ids_wanted and int(i) not in out:
             out[int(i)] = c.reshape(4, 2).astype(np.float64)
     return out
 
@@ -56,9 +54,10 @@ def _transform(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
     return T
 
 
-def _board_points(markers: dict[int, np.ndarray], size_m: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+def _board_points(markers: dict[int, np.ndarray], size_m: tuple[float, float],
+                  layout: MarkerLayout = DEFAULT_LAYOUT) -> tuple[np.ndarray, np.ndarray]:
     """Object points (n, 3) in the board frame and image points (n, 2) of the visible marker corners."""
-    board = marker_corners_board(size_m)
+    board = layout.corners(size_m)
     ids = sorted(markers)
     obj = np.concatenate([np.column_stack([board[i], np.zeros(4)]) for i in ids])
     img = np.concatenate([markers[i] for i in ids])
@@ -73,9 +72,9 @@ def reprojection_rms(obj: np.ndarray, img: np.ndarray, K: np.ndarray, T_board_to
 
 
 def solve_pose(markers: dict[int, np.ndarray], size_m: tuple[float, float], K: np.ndarray,
-               guess: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+               guess: np.ndarray | None = None, layout: MarkerLayout = DEFAULT_LAYOUT) -> tuple[np.ndarray, float]:
     """``(T_board_to_camera (4, 4), rms_px)`` from the visible markers' corners (a planar PnP)."""
-    obj, img = _board_points(markers, size_m)
+    obj, img = _board_points(markers, size_m, layout)
     if guess is not None:
         rvec = cv2.Rodrigues(guess[:3, :3])[0]
         ok, rvec, tvec = cv2.solvePnP(obj, img, K, None, rvec, guess[:3, 3].copy(), useExtrinsicGuess=True,
@@ -88,7 +87,8 @@ def solve_pose(markers: dict[int, np.ndarray], size_m: tuple[float, float], K: n
     return T, reprojection_rms(obj, img, K, T)
 
 
-def measure_board(markers: dict[int, np.ndarray], K: np.ndarray) -> tuple[tuple[float, float], np.ndarray, float]:
+def measure_board(markers: dict[int, np.ndarray], K: np.ndarray,
+                  layout: MarkerLayout = DEFAULT_LAYOUT) -> tuple[tuple[float, float], np.ndarray, float]:
     """``(size_m (w, h), T_board_to_camera, rms_px)`` from at least three markers, or ValueError.
 
     Each marker's pose (PnP on its own square) gives its centre and axes;
@@ -97,7 +97,7 @@ def measure_board(markers: dict[int, np.ndarray], K: np.ndarray) -> tuple[tuple[
     """
     if len(markers) < 3:
         raise ValueError(f"measuring the board needs 3 markers, saw {sorted(markers)}")
-    s = MARKER_SIDE_M
+    s = layout.side_m
     square = np.array([[-s / 2, s / 2, 0], [s / 2, s / 2, 0], [s / 2, -s / 2, 0], [-s / 2, -s / 2, 0]])
     centres, axes = {}, []
     for i, c in markers.items():
@@ -108,24 +108,24 @@ def measure_board(markers: dict[int, np.ndarray], K: np.ndarray) -> tuple[tuple[
     # the average marker orientation: board x and y in the camera frame
     u, _, vt = np.linalg.svd(sum(axes))
     R = u @ vt
-    col = {0: 0, 1: 1, 2: 1, 3: 0}
-    row = {0: 0, 1: 0, 2: 1, 3: 1}
+    col = {i: (0, 1, 1, 0)[layout.corner_index(i)] for i in markers}
+    row = {i: (0, 0, 1, 1)[layout.corner_index(i)] for i in markers}
     widths, heights = [], []
     ids = sorted(centres)
     for a_i, i in enumerate(ids):
         for j in ids[a_i + 1:]:
             d = centres[j] - centres[i]
             if col[i] != col[j]:
-                widths.append(abs(d @ R[:, 0]) + 2 * _CENTRE_INSET_M)
+                widths.append(abs(d @ R[:, 0]) + 2 * layout.centre_inset_m)
             if row[i] != row[j]:
-                heights.append(abs(d @ R[:, 1]) + 2 * _CENTRE_INSET_M)
+                heights.append(abs(d @ R[:, 1]) + 2 * layout.centre_inset_m)
     if not widths or not heights:
         raise ValueError(f"markers {ids} do not span both board axes")
     size0 = (float(np.mean(widths)), float(np.mean(heights)))
-    T0, _ = solve_pose(markers, size0, K)
+    T0, _ = solve_pose(markers, size0, K, layout=layout)
 
     def residual(x: np.ndarray) -> np.ndarray:
-        obj, img = _board_points(markers, (x[6], x[7]))
+        obj, img = _board_points(markers, (x[6], x[7]), layout)
         proj, _ = cv2.projectPoints(obj, x[:3], x[3:6], K, None)
         return (proj.reshape(-1, 2) - img).ravel()
 
@@ -133,7 +133,7 @@ def measure_board(markers: dict[int, np.ndarray], K: np.ndarray) -> tuple[tuple[
     x = least_squares(residual, x0, method="lm").x
     size = (float(x[6]), float(x[7]))
     T = _transform(x[:3], x[3:6])
-    obj, img = _board_points(markers, size)
+    obj, img = _board_points(markers, size, layout)
     return size, T, reprojection_rms(obj, img, K, T)
 
 
@@ -171,25 +171,26 @@ class BoardTracker:
 
     def __init__(self, params: BoardParams) -> None:
         self.p = params
-        self.detector = make_detector()
+        self.layout = params.layout
+        self.detector = make_detector(self.layout)
         self.size_m: tuple[float, float] | None = None if params.size_m == (0.0, 0.0) else params.size_m
         self.last: BoardEstimate | None = None
         self.why = ""  # why the last frame gave no fresh pose
 
     def update(self, grey: np.ndarray, K: np.ndarray, T_camera_to_world: np.ndarray, t_s: float) -> BoardEstimate | None:
         """The board in this frame (``grey`` (H, W) uint8); None until it has been found once."""
-        markers = detect_markers(self.detector, grey)
+        markers = detect_markers(self.detector, grey, self.layout.ids)
         reason = self._why_not(markers)
         T_bc, size = None, self.size_m
         if not reason:
             try:
                 if size is None:
-                    size, T_bc, rms = measure_board(markers, K)
+                    size, T_bc, rms = measure_board(markers, K, self.layout)
                 else:
                     guess = self.last.T_board_to_camera if self.last is not None else None
-                    T_bc, rms = solve_pose(markers, size, K, guess)
+                    T_bc, rms = solve_pose(markers, size, K, guess, self.layout)
                     if rms > self.p.max_reprojection_px and self.p.size_m == (0.0, 0.0) and len(markers) >= 3:
-                        size, T_bc, rms = measure_board(markers, K)  # another board, of another size
+                        size, T_bc, rms = measure_board(markers, K, self.layout)  # another board, of another size
                 if rms > self.p.max_reprojection_px:
                     reason = f"markers reproject badly ({rms:.1f} px RMS)"
             except (ValueError, cv2.error) as exc:

@@ -36,13 +36,30 @@ def build_parser() -> argparse.ArgumentParser:
                     "publishes perception/stains over Zenoh. Options override the config file.")
     p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh] and [perception] tables")
     p.add_argument("--camera", metavar="NAME", help="camera name: frames from camera/<NAME>/frame (default board)")
-    p.add_argument("--source", metavar="SPEC", help="zenoh (default), folder:DIR, video:FILE or device:N")
+    p.add_argument("--source", metavar="SPEC",
+                   help="zenoh (default), folder:DIR, video:FILE, device:N or ros:TOPIC (a ROS 2 image topic through "
+                        "zenoh-bridge-ros2dds)")
     p.add_argument("--debug-images", action="store_true", default=None,
                    help="publish the rectified board with stains drawn on perception/debug")
+    p.add_argument("--debug-dir", metavar="DIR",
+                   help="with --debug-images: also write every frame's debug image there (frame-<seq>.jpg); offline "
+                        "runs default to ./perception-debug")
     p.add_argument("--jsonl", metavar="FILE", help="also write every stains message as a JSON line (offline checks)")
     p.add_argument("--no-zenoh", action="store_true", help="offline sources only: do not open a Zenoh session")
     add_zenoh_options(p)
     p.add_argument("--check", action="store_true", help="validate config and source, then exit")
+    p.add_argument("--check-board", metavar="IMAGE",
+                   help="report which corner markers IMAGE shows, the board's size and pose, and draw them; exit 1 "
+                        "if the board is not found")
+    p.add_argument("--board-image", metavar="FILE", help="where --check-board draws (default IMAGE.board.png)")
+    p.add_argument("--calibrate", metavar="DIR",
+                   help="calibrate the camera from the images of a chessboard in DIR (OpenCV's calibration), write "
+                        "a ROS camera_info YAML (--calibration-out) and exit")
+    p.add_argument("--pattern", metavar="SPEC", default="chessboard:9x6:0.025",
+                   help="the target of --calibrate: chessboard:COLSxROWS:SQUARE_M, inner corners (default %(default)s)")
+    p.add_argument("--calibration-out", metavar="FILE", default="camera_info.yaml",
+                   help="where --calibrate writes (default %(default)s); use it as [perception.camera_model] "
+                        "calibration")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     return p
 
@@ -67,30 +84,71 @@ def as_dict(value):
 
 
 def open_source(params: PerceptionParams, node):
-    kind, _ = parse_source(params.source)
+    kind, arg = parse_source(params.source)
     if kind == "zenoh":
         from .sources import ZenohSource
 
         return ZenohSource(node, params.camera)
+    if kind == "ros":
+        from .ros_images import RosImageSource
+
+        return RosImageSource(node, arg, params)
     from .sources import OpenCVSource
 
     return OpenCVSource(params.source, params)
 
 
+def calibrate_main(a: argparse.Namespace) -> int:
+    """``--calibrate DIR``: OpenCV's calibration from chessboard images, written as a ROS camera_info YAML."""
+    from pathlib import Path
+
+    from .calibration import CalibrationError, calibrate, write_camera_info
+    from .sources import IMAGE_SUFFIXES
+
+    folder = Path(a.calibrate)
+    images = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
+    if not images:
+        print(f"lamps perception: error: --calibrate {folder}: no {'/'.join(IMAGE_SUFFIXES)} images there",
+              file=sys.stderr)
+        return 1
+    try:
+        result = calibrate(images, a.pattern)
+        write_camera_info(a.calibration_out, result.calibration)
+    except (CalibrationError, OSError) as exc:
+        print(f"lamps perception: error: {exc}", file=sys.stderr)
+        return 1
+    K, d = result.calibration.K, result.calibration.dist
+    print(f"calibrated from {len(result.used)} of {len(images)} images ({result.calibration.width} x "
+          f"{result.calibration.height} px): fx {K[0, 0]:.1f} fy {K[1, 1]:.1f} cx {K[0, 2]:.1f} cy {K[1, 2]:.1f} px, "
+          f"distortion {' '.join(f'{v:.4f}' for v in d)}; corners reproject to {result.rms_px:.3f} px RMS")
+    for why in result.skipped:
+        print(f"  skipped {why}")
+    print(f"wrote {a.calibration_out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    if a.calibrate:
+        return calibrate_main(a)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="%(asctime)s perception %(levelname)s %(name)s: %(message)s")
     try:
         zenoh_settings, params = load(a)
         wanted_nice(BACKGROUND)  # a bad LAMPS_NICE is refused with the rest of the configuration
         kind, _ = parse_source(params.source)
-        if a.no_zenoh and kind == "zenoh":
+        if a.no_zenoh and kind in ("zenoh", "ros"):
             raise InterfaceError("--no-zenoh needs an offline source (--source folder:DIR, video:FILE or device:N)")
-        source = None if kind == "zenoh" else open_source(params, None)
+        source = None if kind in ("zenoh", "ros") else open_source(params, None)
     except (LampsError, OSError) as exc:
         print(f"lamps perception: error: {exc}", file=sys.stderr)
         return 1
+    if a.check_board:
+        from .check_board import main_check_board
+
+        if source is not None:
+            source.close()
+        return main_check_board(a.check_board, params, a.board_image)
     if a.check:
         print(f"ok: source {params.source}, camera {params.camera}, keys under {zenoh_settings.keys.prefix}")
         if source is not None:
@@ -113,7 +171,10 @@ def main(argv: list[str] | None = None) -> int:
     partial = f"{a.jsonl}.partial" if a.jsonl else None
     out = open(partial, "w") if partial else None  # renamed into place when complete
     sink = (lambda msg: out.write(json.dumps(as_dict(msg)) + "\n")) if out else None
-    service = PerceptionService(params, node, source, sink)
+    debug_dir = a.debug_dir or ("perception-debug" if params.debug_images and kind not in ("zenoh", "ros") else None)
+    if debug_dir and params.debug_images:
+        os.makedirs(debug_dir, exist_ok=True)
+    service = PerceptionService(params, node, source, sink, debug_dir if params.debug_images else None)
     signal.signal(signal.SIGTERM, lambda *_: service.stop.set())
     signal.signal(signal.SIGINT, lambda *_: service.stop.set())
     try:
@@ -127,8 +188,10 @@ def main(argv: list[str] | None = None) -> int:
             os.replace(partial, a.jsonl)
     status = service.status()
     logging.getLogger("perception").info("stopped after %d frames: %s", frames, status.detail)
-    if kind != "zenoh":
+    if kind not in ("zenoh", "ros"):
         print(f"{frames} frames: {status.detail}; counters {dict(sorted(status.counters.items()))}")
+        if service.debug_dir:
+            print(f"debug images: {service.debug_dir}/")
     return 0
 
 

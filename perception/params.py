@@ -29,6 +29,7 @@ from typing import Annotated, Any
 from interfaces.config import check_int
 from interfaces.config import check_range as _range
 from interfaces.config import check_vector, dataclass_from_table
+from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
 from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
@@ -46,6 +47,12 @@ class BoardParams:
     refused. moved_m / moved_deg : a jump this large means another board (or
     a moved one): the stains are detected afresh. edge_margin_m : border of
     the board not looked at (rectification bleeds over its edge) [m].
+    dictionary, marker_ids, marker_side_m, marker_inset_m : the corner
+    markers (:class:`~interfaces.board_markers.MarkerLayout`): an OpenCV
+    ArUco dictionary or AprilTag family by name, the ids at the bottom-left,
+    bottom-right, top-right and top-left corners, the side of a marker
+    (black border included) [m] and its outer corner's inset from both
+    board edges [m]; the defaults are the cell's board.
     """
 
     size_m: tuple[float, float] = (0.0, 0.0)
@@ -56,6 +63,10 @@ class BoardParams:
     moved_m: Annotated[float, In(0.001, 1.0)] = 0.03
     moved_deg: Annotated[float, In(0.1, 90.0)] = 3.0
     edge_margin_m: Annotated[float, In(0.0, 0.1)] = 0.01
+    dictionary: str = DEFAULT_LAYOUT.dictionary
+    marker_ids: tuple[int, int, int, int] = DEFAULT_LAYOUT.ids
+    marker_side_m: Annotated[float, In(0.005, 1.0)] = DEFAULT_LAYOUT.side_m
+    marker_inset_m: Annotated[float, In(0.0, 0.5)] = DEFAULT_LAYOUT.inset_m
 
     def __post_init__(self) -> None:
         s = "perception.board"
@@ -64,6 +75,17 @@ class BoardParams:
         object.__setattr__(self, "size_m", size)
         if size != (0.0, 0.0) and not all(0.2 <= v <= 5.0 for v in size):
             raise ConfigError(f"[{s}] size_m must be [0, 0] (measure) or two lengths in [0.2, 5.0] m, got {list(size)}")
+        ids = tuple(self.marker_ids) if isinstance(self.marker_ids, (list, tuple)) else self.marker_ids
+        try:
+            layout = MarkerLayout(self.dictionary, ids, float(self.marker_side_m), float(self.marker_inset_m))
+        except (ValueError, TypeError) as exc:
+            raise ConfigError(f"[{s}] {exc}") from None
+        object.__setattr__(self, "marker_ids", layout.ids)
+
+    @property
+    def layout(self) -> MarkerLayout:
+        """The corner markers this board carries."""
+        return MarkerLayout(self.dictionary, self.marker_ids, self.marker_side_m, self.marker_inset_m)
 
 
 @dataclass(frozen=True)
@@ -162,7 +184,10 @@ class CameraModelParams:
     """The camera model for sources whose frames carry none (image folder, video file, capture device).
 
     fx, fy, cx, cy [px] at the frames' resolution (0 = a D435i-like 615 px
-    focal length scaled to the width, principal point at the centre);
+    focal length scaled to the width, principal point at the centre), or
+    calibration: a ROS ``camera_info`` YAML or an OpenCV calibration file
+    (:mod:`perception.calibration`: intrinsics and lens distortion, scaled to
+    the frames; each frame is undistorted before anything looks at it);
     position_m, look_at_m, up_m: the camera pose in the world (robot base)
     frame; the board pose is then reported in that frame.
     """
@@ -174,10 +199,15 @@ class CameraModelParams:
     position_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
     look_at_m: tuple[float, float, float] = (1.0, 0.0, 1.0)
     up_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    calibration: str = ""
 
     def __post_init__(self) -> None:
-        s = "perception.camera"
+        s = "perception.camera_model"
         check_declared(self, s)
+        if not isinstance(self.calibration, str):
+            raise ConfigError(f"[{s}] calibration must be a file name, got {self.calibration!r}")
+        if self.calibration and any((self.fx, self.fy, self.cx, self.cy)):
+            raise ConfigError(f"[{s}] give calibration or fx, fy, cx, cy, not both")
         for name in ("position_m", "look_at_m", "up_m"):
             object.__setattr__(self, name, check_vector(s, name, getattr(self, name), 3))
 
@@ -197,7 +227,10 @@ def parse_source(spec: str) -> tuple[str, str]:
         return kind, arg
     if kind == "device" and re.fullmatch(r"\d{1,3}", arg):
         return kind, arg
-    raise ConfigError(f"[perception] source must be 'zenoh', 'folder:DIR', 'video:FILE' or 'device:N', got {spec!r}")
+    if kind == "ros" and re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", arg):
+        return kind, arg
+    raise ConfigError(f"[perception] source must be 'zenoh', 'folder:DIR', 'video:FILE', 'device:N' or 'ros:TOPIC' "
+                      f"(a ROS 2 image topic through zenoh-bridge-ros2dds), got {spec!r}")
 
 
 @dataclass(frozen=True)

@@ -121,7 +121,7 @@ class Perception:
 
     def _setup(self, est: BoardEstimate) -> None:
         self.grid = BoardGrid(est.size_m, self.p.board.resolution_m)
-        looked_at = self.grid.looked_at(self.p.board.edge_margin_m, MARKER_MARGIN_M)
+        looked_at = self.grid.looked_at(self.p.board.edge_margin_m, MARKER_MARGIN_M, self.p.board.layout)
         self.classifier = InkClassifier(self.p.ink, looked_at, self.p.board.resolution_m)
         self.tracker = StainTracker(self.grid, self.p.stains, self.p.kappa, self.p.ink.stain_level)
 

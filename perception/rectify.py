@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from interfaces.board_markers import MARKER_SIDE_M, marker_origins_board
+from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
 
 
 @dataclass(frozen=True)
@@ -51,17 +51,19 @@ class BoardGrid:
                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT,
                                    borderValue=(0, 0, 0))
 
-    def looked_at(self, edge_margin_m: float, marker_margin_m: float) -> np.ndarray:
+    def looked_at(self, edge_margin_m: float, marker_margin_m: float,
+                  layout: MarkerLayout = DEFAULT_LAYOUT) -> np.ndarray:
         """(rows, cols) bool: board pixels perception judges (not the edge band, not the markers)."""
         rows, cols = self.shape
         mask = np.zeros((rows, cols), bool)
         e = int(np.ceil(edge_margin_m / self.resolution_m))
         mask[e:rows - e, e:cols - e] = True
         r = self.resolution_m
-        for x0, y0 in marker_origins_board(self.size_m).values():
+        side = layout.side_m
+        for x0, y0 in layout.origins(self.size_m).values():
             c0 = int(np.floor((x0 - marker_margin_m) / r))
-            c1 = int(np.ceil((x0 + MARKER_SIDE_M + marker_margin_m) / r))
-            r0 = int(np.floor((self.shape[0] * r - (y0 + MARKER_SIDE_M + marker_margin_m)) / r))
+            c1 = int(np.ceil((x0 + side + marker_margin_m) / r))
+            r0 = int(np.floor((self.shape[0] * r - (y0 + side + marker_margin_m)) / r))
             r1 = int(np.ceil((self.shape[0] * r - (y0 - marker_margin_m)) / r))
             mask[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = False
         return mask

@@ -20,6 +20,7 @@ import logging
 import threading
 import time
 from collections import Counter, deque
+from pathlib import Path
 
 import msgspec
 import numpy as np
@@ -41,12 +42,14 @@ IDLE_S = 0.002
 class PerceptionService:
     """The loop around one :class:`Perception`; ``source`` has ``read() -> Frame | None``, ``ended``, ``counters``."""
 
-    def __init__(self, params: PerceptionParams, node, source, sink=None) -> None:
+    def __init__(self, params: PerceptionParams, node, source, sink=None, debug_dir=None) -> None:
         self.p = params
         self.node = node
         self.keys = node.keys if node is not None else None
         self.source = source
         self.sink = sink  # optional callable(Stains) for offline runs (JSON lines)
+        #: with debug_images: every frame's debug image is also written here as frame-<seq>.jpg (offline checks)
+        self.debug_dir = debug_dir
         self.perception = Perception(params)
         # the robot's joint states, to mask its tool out of the image (perception.self_filter)
         self.tool: ToolTrack | None = None
@@ -109,6 +112,8 @@ class PerceptionService:
         self.detail = self._describe(result)
         if result.stains is not None:
             self._publish(result.stains, now)
+        if self.p.debug_images and result.rect is not None and self.debug_dir is not None:
+            self._write_debug(result, frame)
         if self.p.debug_images and result.rect is not None and now >= self._next_debug and self.node is not None:
             self._next_debug = now + 1.0 / self.p.debug_rate_hz
             self._publish_debug(result, frame)
@@ -142,6 +147,14 @@ class PerceptionService:
             self.detail = f"no camera frame for {now - self._last_frame_wall:.1f} s: stains unknown"
             self.counters["camera_silent"] += 1
         self._publish(msgspec.structs.replace(msg, stamp_ns=time.monotonic_ns()), now)
+
+    def _write_debug(self, result: Result, frame) -> None:
+        """The frame's debug image (the rectified board, stains drawn) as ``<debug_dir>/frame-<seq>.jpg``."""
+        from lampskit.atomic import write_atomic
+
+        data, _ = debug_jpeg(result, self.perception)
+        write_atomic(Path(self.debug_dir) / f"frame-{frame.seq:06d}.jpg", lambda f: f.write(data))
+        self.counters["debug_images_written"] += 1
 
     def _publish_debug(self, result: Result, frame) -> None:
         data, (h, w) = debug_jpeg(result, self.perception)

@@ -10,6 +10,7 @@ Sources without a camera model of their own (files, devices) take it from
 
 from __future__ import annotations
 
+import functools
 import time
 from collections import Counter
 from pathlib import Path
@@ -19,6 +20,7 @@ import numpy as np
 
 from interfaces.messages import CameraFrame
 
+from .calibration import Calibration, CalibrationError, Undistorter, read_calibration
 from .frames import Frame, FrameError, frame_from_message
 from .params import CameraModelParams, PerceptionParams, parse_source
 
@@ -28,10 +30,14 @@ DEFAULT_FX_AT_640 = 615.0
 
 
 def camera_model(params: CameraModelParams, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(K (3, 3), T_camera_to_world (4, 4))`` of a configured camera for frames of ``width`` x ``height``."""
-    f = DEFAULT_FX_AT_640 * width / 640.0
-    K = np.array([[params.fx or f, 0.0, params.cx or (width - 1) / 2.0],
-                  [0.0, params.fy or f, params.cy or (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+    """``(K (3, 3), T_camera_to_world (4, 4))`` of a configured camera for frames of ``width`` x ``height``
+    (with a calibration file: its K scaled to the frames; the frames must be undistorted, :func:`undistorter`)."""
+    if params.calibration:
+        K = _calibration(params.calibration).at(width, height).K
+    else:
+        f = DEFAULT_FX_AT_640 * width / 640.0
+        K = np.array([[params.fx or f, 0.0, params.cx or (width - 1) / 2.0],
+                      [0.0, params.fy or f, params.cy or (height - 1) / 2.0], [0.0, 0.0, 1.0]])
     position, target, up = (np.array(v, float) for v in (params.position_m, params.look_at_m, params.up_m))
     z = target - position
     z /= np.linalg.norm(z)
@@ -43,6 +49,17 @@ def camera_model(params: CameraModelParams, width: int, height: int) -> tuple[np
     T[:3, :3] = np.column_stack([np.cross(y, z), y, z])
     T[:3, 3] = position
     return K, T
+
+
+@functools.lru_cache(maxsize=8)
+def _calibration(path: str) -> Calibration:
+    return read_calibration(path)
+
+
+@functools.lru_cache(maxsize=8)
+def undistorter(path: str, width: int, height: int) -> Undistorter:
+    """The undistortion of the calibration in ``path`` for frames of ``width`` x ``height`` (made once)."""
+    return Undistorter(_calibration(path).at(width, height))
 
 
 class ZenohSource:
@@ -85,6 +102,8 @@ class OpenCVSource:
     def __init__(self, spec: str, params: PerceptionParams) -> None:
         self.kind, arg = parse_source(spec)
         self.model = params.model
+        if self.model.calibration:
+            _calibration(self.model.calibration)  # an unusable file is refused now, naming it
         self.rate_hz = params.source_rate_hz
         self.counters: Counter[str] = Counter()
         self.ended = False
@@ -132,7 +151,9 @@ class OpenCVSource:
         h, w = bgr.shape[:2]
         try:
             K, T = camera_model(self.model, w, h)
-        except FrameError as exc:
+            if self.model.calibration:
+                bgr = undistorter(self.model.calibration, w, h)(bgr)
+        except (FrameError, CalibrationError) as exc:
             self.counters[f"frames_bad: {str(exc).split(':')[0]}"] += 1
             return None
         return Frame(np.ascontiguousarray(bgr[..., ::-1]), K, T, float(t), self._seq - 1, time.monotonic_ns())

@@ -113,8 +113,8 @@ def test_a_bad_security_setting_is_refused_with_its_name(creds, tmp_path):
                       tls_private_key="z")
     with pytest.raises(ConfigError, match="tls_ca .*nope.ca.pem.*No such file"):
         zenoh_config(ZenohSettings(identity=str(tmp_path / "nope")))
-    with pytest.raises(ConfigError, match="ros_namespace"):
-        ZenohSettings(ros_namespace="lbr/**")
+    with pytest.raises(ConfigError, match="ros_namespaces"):
+        ZenohSettings(ros_namespaces=("lbr/**",))
 
 
 def test_the_access_list_denies_by_default_and_lets_each_role_put_its_own_keys_only():
