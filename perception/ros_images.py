@@ -33,6 +33,8 @@ from .frames import Frame, FrameError
 _TYPES = {"image": "sensor_msgs/msg/Image", "compressed": "sensor_msgs/msg/CompressedImage",
           "info": "sensor_msgs/msg/CameraInfo"}
 _CHANNELS = {"rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "mono8": 1}
+#: A larger payload is dropped before it is decoded (counted): 8K RGBA is 133 MB, a 4K RGB frame 25 MB.
+MAX_IMAGE_BYTES = 64 * 1024 * 1024
 
 
 def _typestore():
@@ -143,7 +145,7 @@ class RosImageSource:
 
     def _take_info(self) -> None:
         sample = self._infos.try_recv()
-        if sample is None:
+        if sample is None or len(sample.payload) > 65536:  # a CameraInfo is a few hundred bytes
             return
         try:
             cal = decode_camera_info(sample.payload.to_bytes())
@@ -160,6 +162,9 @@ class RosImageSource:
         self._take_info()
         sample = self._images.try_recv()
         if sample is None:
+            return None
+        if len(sample.payload) > MAX_IMAGE_BYTES:
+            self.counters["frames_bad: image over the size bound"] += 1
             return None
         try:
             rgb, stamp = (decode_compressed if self.compressed else decode_image)(sample.payload.to_bytes())

@@ -128,6 +128,16 @@ def test_a_ros_image_topic_through_the_bridge_is_a_frame_with_the_cameras_own_in
                 frame = wait_for(source.read, 1.0, "a frame") if source.calibration is not None else source.read()
             assert frame is not None and np.array_equal(frame.rgb, photo)
             assert np.allclose(frame.K, K) and abs(frame.t_s - 1.5) < 1e-9
+            # a payload over the size bound is dropped before decoding, counted
+            import perception.ros_images as ri
+
+            bound, ri.MAX_IMAGE_BYTES = ri.MAX_IMAGE_BYTES, len(image) - 1
+            try:
+                bridge.session.put("camera/color/image_raw", image)
+                wait_for(lambda: source.read() is None and source.counters["frames_bad: image over the size bound"],
+                         5.0, "the oversized image counted")
+            finally:
+                ri.MAX_IMAGE_BYTES = bound
             # a perception identity may not put on the camera's keys: the bridge and the robot side only
             rogue = []
             sub = bridge.session.declare_subscriber("camera/**", lambda s: rogue.append(s))
