@@ -234,7 +234,9 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
     the main axis from board x [rad]; the ink that remains of the stain
     (what wiping has not lifted yet, hidden parts as last seen):
     ink_centre_board_m (2,) (empty: none left or not known), ink_size_m,
-    ink_width_m [m], ink_axis_board_rad [rad].
+    ink_width_m [m], ink_axis_board_rad [rad]; colour: the name of the
+    stain's ink in perception's palette (``[perception.ink] inks``; empty:
+    not known).
     """
 
     id: int
@@ -251,9 +253,12 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
     ink_size_m: float = 0.0
     ink_width_m: float = 0.0
     ink_axis_board_rad: float = 0.0
+    colour: str = ""
 
     def __post_init__(self) -> None:
         _finite("centre_board_m", self.centre_board_m, 2)
+        if not isinstance(self.colour, str) or len(self.colour) > 16:
+            raise ValueError(f"colour must be an ink name of at most 16 characters, got {self.colour!r}")
         _finite("centre_world_m", self.centre_world_m, 3)
         _finite("extent_board_m", self.extent_board_m, 2)
         _finite("size_m", (self.size_m,))

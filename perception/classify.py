@@ -1,32 +1,51 @@
-"""Board pixels as clean board, stain, or occluded, in a colour model of marker ink on a white board.
+"""Board pixels as clean board, stain of one of several inks, or occluded, in a colour model of ink on a white board.
 
 A board pixel's colour ``I`` (3,), divided by the local white ``W`` (3,)
-(the clean board under this frame's light), is modelled as::
+(the clean board under this frame's light), is modelled, for each ink
+``k`` of the palette (``[perception.ink] inks``), as::
 
-    x = I / W = s (1 - d a),        a = 1 - ink_rgb / board_rgb
+    x = I / W = s (1 - d a_k),        a_k = 1 - ink_k / board_rgb
 
 with ``s`` the illumination relative to ``W`` (shading, a soft shadow) and
 ``d`` the ink fraction (0 clean, 1 full ink). With ``t = s d`` the model is
-linear, ``x = s 1 - t a``; ``(s, t)`` come per pixel from a least-squares
+linear, ``x = s 1 - t a_k``; ``(s, t)`` come per pixel from a least-squares
 fit with a weak prior ``s ~ 1`` (weight ``prior_weight``, which decides
 between shade and ink when the ink is neutral, e.g. black)::
 
-    [s, t] = (A^T A + lambda e1 e1^T)^-1 (A^T x + lambda e1),   A = [1 | -a]  (3, 2)
+    [s, t] = (A^T A + lambda e1 e1^T)^-1 (A^T x + lambda e1),   A = [1 | -a_k]  (3, 2)
+
+and the pixel takes the ink whose model leaves the smallest residual (the
+ink each stain reports). ``d = t / s`` does not change when ``W`` is off
+by a factor, so a light gradient only moves ``s``.
 
 A pixel is *occluded* (the arm, the eraser, a deep shadow, anything that is
 not board) when ``s`` is outside ``illumination_range``, when the colour is
-farther than ``max_residual`` from the model, when it lies outside the
-camera image, or when the caller knows it hidden (the robot's own tool,
-whose colour may be the ink's: :mod:`perception.self_filter`); occluded areas are closed over gaps narrower than
-``occlusion_fill_m`` (highlights on the arm that look like white board)
-and grow by ``occlusion_margin_m`` to catch mixed pixels at their edges. Otherwise it is *stain* when ``d >= stain_level``,
-else *clean*. The threshold is on the ink fraction relative to the local
-white, so it adapts to the light; no grey level is fixed.
+farther than ``max_residual + chroma_tolerance d`` from every ink's model,
+when it lies outside the camera image, or when the caller knows it hidden
+(the robot's own tool, whose colour may be the ink's:
+:mod:`perception.self_filter`). Such pixels in specks narrower than
+``occlusion_min_m`` are not occluded (a stroke's colour fringe, a JPEG
+block: too small to hide anything); occluded areas are closed over gaps
+narrower than ``occlusion_fill_m`` (highlights on the arm that look like
+white board) and grow by ``occlusion_margin_m`` to catch mixed pixels at
+their edges. Otherwise it is *stain* when ``d >= stain_level``, else
+*clean* (at or below ``clean_level``: clean; between: faint ink, the
+ghost an eraser leaves, which counts in a stain's remaining ink but never
+starts a stain). The thresholds are on the ink fraction relative to the
+local white, so they adapt to the light; no grey level is fixed.
 
-``W`` is an affine function of the board coordinates per channel (a light
-gradient across the board), fitted each frame to the brightest blocks of
-the rectified image and refitted without the blocks far below the first fit
-(the arm, big shadows).
+``W`` has two parts. The board-wide white ``W_g`` is an affine function of
+the board coordinates per channel (a light gradient), fitted each frame to
+the typical (upper-quartile) brightness of blocks of the rectified image, refitted
+without the blocks far off the first fit (the arm, big shadows, solid
+stains, glare). With ``white_fill_m > 0`` the local white follows the light
+closer (a real room: glare from a window, a lamp's hot spot, shadows):
+the image averaged over cells of a quarter of ``white_fill_m`` and
+closed (a grey-level closing: the dark filled, a step kept) over
+``white_fill_m`` (strokes and letters filled, a glare's edge kept), kept
+within ``white_follow`` times ``W_g`` (a solid stain wider than the fill is
+not taken for a shadow). Glare is then white board, never ink; ink under
+glare keeps what contrast it has left.
 """
 
 from __future__ import annotations
@@ -38,8 +57,10 @@ import numpy as np
 
 from .params import InkParams
 
-#: Side of the blocks the white is measured on [m].
+#: Side of the blocks the board-wide white is measured on [m].
 WHITE_BLOCK_M = 0.05
+#: A channel this bright is clipped by the sensor (glare): no colour is measured there.
+SATURATED = 250
 #: Ink fractions outside this are not ink on a board.
 D_RANGE = (-0.3, 1.6)
 
@@ -48,24 +69,29 @@ D_RANGE = (-0.3, 1.6)
 class InkMap:
     """One frame's classification of the rectified board image, all (rows, cols).
 
-    d : float32 ink fraction (0 where not judged). occluded : bool, not
-    board or not seen. stain : bool, board with ``d >= stain_level``.
-    looked_at : bool, pixels judged at all (board minus edges and markers).
+    d : float32 ink fraction (0 where not judged). ink : uint8 index into
+    ``names`` of the ink that explains each pixel best (meaningful where
+    ``d > 0``). occluded : bool, not board or not seen. stain : bool, board
+    with ``d >= stain_level``. looked_at : bool, pixels judged at all (board
+    minus edges and markers). names : the palette's ink names.
     """
 
     d: np.ndarray
     occluded: np.ndarray
     stain: np.ndarray
     looked_at: np.ndarray
+    ink: np.ndarray | None = None
+    names: tuple[str, ...] = ("ink",)
 
     @property
     def visible(self) -> np.ndarray:
         return self.looked_at & ~self.occluded
 
 
-def ink_absorption(params: InkParams) -> np.ndarray:
-    """(3,) absorption ``a = 1 - ink / board`` per RGB channel."""
-    return 1.0 - np.array(params.ink_rgb) / np.array(params.board_rgb)
+def ink_absorptions(params: InkParams) -> np.ndarray:
+    """(k, 3) absorption ``a_k = 1 - ink_k / board`` per ink and RGB channel, in palette order."""
+    board = np.array(params.board_rgb)
+    return np.array([1.0 - np.array(rgb) / board for rgb in params.inks.values()])
 
 
 def unmixing_matrix(a: np.ndarray, prior_weight: float) -> tuple[np.ndarray, np.ndarray]:
@@ -77,41 +103,48 @@ def unmixing_matrix(a: np.ndarray, prior_weight: float) -> tuple[np.ndarray, np.
 
 
 def fit_white(rgb: np.ndarray, looked_at: np.ndarray, block_px: int) -> np.ndarray:
-    """(3, 3) coefficients ``W_c(col, row) = c0 + c1 col + c2 row`` of the local white per channel.
+    """(3, 3) coefficients ``W_c(col, row) = c0 + c1 col + c2 row`` of the board-wide white per channel.
 
-    rgb : (rows, cols, 3) float32. The white of a block is its brightest
-    quarter-block average; blocks below 80 % of the brightest tenth are
-    ignored, then those more than 8 % below the first fit.
+    rgb : (rows, cols, 3) float32. A block's white is the upper quartile of
+    its 16 quarter-block averages (typical board, not its brightest patch:
+    clean board then reads as no ink; ink over most of a block does not
+    lower it); blocks outside 75-130 % of the typical block
+    are ignored, then those more than 15 %, then 8 %, off the previous fit
+    (the arm, shadows, solid stains, glare).
     """
     rows, cols = looked_at.shape
     q = max(block_px // 4, 1)
     small = cv2.resize(rgb, (max(cols // q, 1), max(rows // q, 1)), interpolation=cv2.INTER_AREA)
     ok = cv2.resize(looked_at.astype(np.float32), (small.shape[1], small.shape[0]), interpolation=cv2.INTER_AREA) > 0.99
-    lum = np.where(ok, small.mean(axis=2), 0.0)
     br, bc = small.shape[0] // 4, small.shape[1] // 4
     if br == 0 or bc == 0:
         return np.array([[float(np.max(small[..., c])), 0.0, 0.0] for c in range(3)])
-    blocks = lum[:br * 4, :bc * 4].reshape(br, 4, bc, 4).transpose(0, 2, 1, 3).reshape(br, bc, 16)
-    best = blocks.argmax(axis=2)
-    bi, bj = np.divmod(best, 4)
-    ii = np.arange(br)[:, None] * 4 + bi
-    jj = np.arange(bc)[None, :] * 4 + bj
-    values = small[ii, jj]  # (br, bc, 3): each block's brightest quarter-block
-    lum_b = values.mean(axis=2)
-    # centres of those quarter-blocks in grid pixels
-    ci = (ii + 0.5) * rows / small.shape[0]
-    cj = (jj + 0.5) * cols / small.shape[1]
-    keep = lum_b >= 0.8 * np.percentile(lum_b, 90)
+    cells = small[:br * 4, :bc * 4].reshape(br, 4, bc, 4, 3).transpose(0, 2, 1, 3, 4).reshape(br, bc, 16, 3)
+    good = ok[:br * 4, :bc * 4].reshape(br, 4, bc, 4).transpose(0, 2, 1, 3).reshape(br, bc, 16)
+    lum = np.where(good, cells.mean(axis=3), -np.inf)
+    n_good = good.sum(axis=2)  # (br, bc)
+    order = np.argsort(lum, axis=2)  # judged cells last, brightest at the end
+    rank = 16 - n_good + (3 * n_good) // 4  # the upper quartile of the judged cells
+    pick = np.take_along_axis(order, np.minimum(rank, 15)[..., None], axis=2)[..., 0]
+    found = n_good > 0
+    values = np.take_along_axis(cells, pick[..., None, None], axis=2)[:, :, 0]  # (br, bc, 3): that cell
+    lum_b = np.where(found, values.mean(axis=2), 0.0)
+    ci = ((np.arange(br)[:, None] * 4 + pick // 4) + 0.5) * rows / small.shape[0]
+    cj = ((np.arange(bc)[None, :] * 4 + pick % 4) + 0.5) * cols / small.shape[1]
+    if not found.any():
+        return np.array([[float(np.max(small[..., c])), 0.0, 0.0] for c in range(3)])
+    typical = float(np.median(lum_b[found]))
+    keep = found & (lum_b >= 0.75 * typical) & (lum_b <= 1.3 * typical)
     G = np.column_stack([np.ones(lum_b.size), cj.ravel(), ci.ravel()])
     Y = values.reshape(-1, 3)
     coef = np.zeros((3, 3))
-    for _ in range(2):
+    for tol in (0.15, 0.08):  # refit without the blocks far from the fit: the arm, shadows, solid stains, glare
         sel = keep.ravel()
         if sel.sum() < 3:
             return np.array([[float(np.percentile(Y[:, c], 90)), 0.0, 0.0] for c in range(3)])
         coef = np.linalg.lstsq(G[sel], Y[sel], rcond=None)[0].T  # (3 channels, 3 coefficients)
         fit = (G @ coef.T).mean(axis=1).reshape(lum_b.shape)
-        keep = keep & (lum_b >= 0.92 * fit)
+        keep = found & (np.abs(lum_b - fit) <= tol * fit)
     return coef
 
 
@@ -121,23 +154,52 @@ class InkClassifier:
     def __init__(self, params: InkParams, looked_at: np.ndarray, resolution_m: float) -> None:
         self.p = params
         self.looked_at = looked_at
-        self.M, self.m = unmixing_matrix(ink_absorption(params), params.prior_weight)
+        self.names = params.ink_names
         rows, cols = looked_at.shape
         self.block_px = max(int(round(WHITE_BLOCK_M / resolution_m)), 4)
-        # per pixel [1, col, row]: the local white is cv2.transform of it with the (3, 3) fitted coefficients
+        # per pixel [1, col, row]: the board-wide white is cv2.transform of it with the (3, 3) fitted coefficients
         self._affine_basis = np.dstack([np.ones((rows, cols), np.float32),
                                         np.broadcast_to(np.arange(cols, dtype=np.float32)[None, :], (rows, cols)),
                                         np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None], (rows, cols))])
-        # [s, t] = M x + m and the model's residual e = x - A [s, t] = (I - A M) x - A m: both affine in x,
-        # so each is one cv2.transform with a (k, 4) matrix (fused, float32, no temporaries per channel)
-        A = np.column_stack([np.ones(3), -ink_absorption(params)])
-        self._to_st = np.hstack([self.M, self.m[:, None]]).astype(np.float32)
-        self._to_residual = np.hstack([np.eye(3) - A @ self.M, -(A @ self.m)[:, None]]).astype(np.float32)
+        # per ink, [s, t] = M x + m and the model's residual e = x - A [s, t] = (I - A M) x - A m: both affine in
+        # x, so each is one cv2.transform with a (k, 4) matrix (fused, float32, no temporaries per channel)
+        self._to_st, self._to_residual = [], []
+        for a in ink_absorptions(params):
+            M, m = unmixing_matrix(a, params.prior_weight)
+            A = np.column_stack([np.ones(3), -a])
+            self._to_st.append(np.hstack([M, m[:, None]]).astype(np.float32))
+            self._to_residual.append(np.hstack([np.eye(3) - A @ M, -(A @ m)[:, None]]).astype(np.float32))
         self._sum3 = np.ones((1, 3), np.float32)
         r = int(np.ceil(params.occlusion_margin_m / resolution_m))
         self._grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)) if r > 0 else None
+        o = int(np.ceil(params.occlusion_min_m / resolution_m / 2))
+        self._speck = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * o + 1, 2 * o + 1)) if o > 0 else None
         c = int(np.ceil(params.occlusion_fill_m / resolution_m / 2))
         self._fill = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * c + 1, 2 * c + 1)) if c > 0 else None
+        # the local white: cells of a quarter of white_fill_m, closed over white_fill_m (4 cells + 1)
+        self._cell = max(int(round(params.white_fill_m / 4 / resolution_m)), 1) if params.white_fill_m > 0 else 0
+        if self._cell:
+            self._close_kernel = np.ones((5, 5), np.uint8)
+            self._edge_kernel = np.ones((5, 5), np.uint8)
+
+    def local_white(self, rgb: np.ndarray, white_g: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """``(W, edges)``: the white under this frame's light near each pixel, (rows, cols, 3) float32 (module
+        docstring), and (rows, cols) bool where the light changes too fast to judge ink (a glare's or a shadow's
+        edge), or None without a local white."""
+        if not self._cell:
+            return white_g, None
+        rows, cols = self.looked_at.shape
+        k = self._cell
+        small = cv2.resize(rgb, (max(cols // k, 1), max(rows // k, 1)), interpolation=cv2.INTER_AREA)
+        small = cv2.morphologyEx(small, cv2.MORPH_CLOSE, self._close_kernel)
+        lum = small.mean(axis=2)
+        spread = cv2.morphologyEx(lum, cv2.MORPH_GRADIENT, self._edge_kernel)
+        edges = (spread > self.p.light_step * cv2.dilate(lum, self._edge_kernel)).view(np.uint8)
+        edges = cv2.resize(edges, (cols, rows), interpolation=cv2.INTER_NEAREST).view(bool)
+        small = cv2.blur(small, (3, 3))
+        local = cv2.resize(small, (cols, rows), interpolation=cv2.INTER_LINEAR)
+        lo, hi = self.p.white_follow
+        return np.minimum(np.maximum(local, white_g * lo), white_g * hi), edges
 
     def classify(self, rect_rgb: np.ndarray, hidden: np.ndarray | None = None) -> InkMap:
         """The :class:`InkMap` of ``rect_rgb`` (rows, cols, 3) uint8 RGB; ``hidden`` (rows, cols) bool: pixels
@@ -148,15 +210,35 @@ class InkClassifier:
         coef = fit_white(rgb, self.looked_at, self.block_px)
         white = cv2.transform(self._affine_basis, coef.astype(np.float32))  # (rows, cols, 3)
         np.maximum(white, 1.0, out=white)
-        x = cv2.divide(rgb, white)
-        s, t = cv2.split(cv2.transform(x, self._to_st))
-        e = cv2.transform(x, self._to_residual)
-        residual2 = cv2.transform(cv2.multiply(e, e), self._sum3)
-        d = cv2.divide(t, s)  # s ~ 0 (black: outside the camera image) is out of the illumination range below
+        local, edges = self.local_white(rgb, white)
+        if edges is None:
+            x = cv2.divide(rgb, white)
+        else:  # light above the board's own white is added (glare): ink takes away a share of the board's white
+            x = 1.0 - cv2.divide(local - rgb, np.minimum(local, white))
         lo, hi = p.illumination_range
-        ok = cv2.inRange(s, lo, hi) & cv2.inRange(d, D_RANGE[0], D_RANGE[1]) \
-            & cv2.inRange(residual2, -1.0, p.max_residual ** 2)
+        best = None
+        for k, (to_st, to_residual) in enumerate(zip(self._to_st, self._to_residual)):
+            s, t = cv2.split(cv2.transform(x, to_st))
+            e = cv2.transform(x, to_residual)
+            residual2 = cv2.transform(cv2.multiply(e, e), self._sum3)
+            d_k = cv2.divide(t, s)  # s ~ 0 (black: outside the camera image) is out of the illumination range below
+            if best is None:
+                best, d, ink, s_best = residual2, d_k, np.zeros(d_k.shape, np.uint8), s
+                continue
+            better = residual2 < best
+            np.copyto(best, residual2, where=better)
+            np.copyto(d, d_k, where=better)
+            np.copyto(s_best, s, where=better)
+            ink[better] = k
+        tol = p.max_residual + p.chroma_tolerance * np.clip(d, 0.0, 1.0) if p.chroma_tolerance else \
+            np.float32(p.max_residual)
+        ok = cv2.inRange(s_best, lo, hi) & cv2.inRange(d, D_RANGE[0], D_RANGE[1]) \
+            & (best <= tol * tol).view(np.uint8) * 255
         bad = ok == 0
+        if edges is not None:  # and the sensor's clipped pixels (glare): nothing is measured there
+            bad |= edges | (cv2.inRange(rect_rgb, (0, 0, 0), (SATURATED - 1,) * 3) == 0)
+        if self._speck is not None:  # colour fringes at strokes, JPEG blocks: too small to be the arm
+            bad = cv2.morphologyEx(bad.view(np.uint8), cv2.MORPH_OPEN, self._speck).view(bool)
         if hidden is not None:
             bad |= hidden
         if self._fill is not None:  # highlights on the arm, gaps between its links: not board to judge
@@ -168,4 +250,4 @@ class InkClassifier:
         occluded = bad & self.looked_at
         visible = self.looked_at & ~occluded
         d = np.where(visible, np.clip(d, 0.0, 1.0), 0.0).astype(np.float32)
-        return InkMap(d, occluded, visible & (d >= p.stain_level), self.looked_at)
+        return InkMap(d, occluded, visible & (d >= p.stain_level), self.looked_at, ink, self.names)

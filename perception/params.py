@@ -10,7 +10,7 @@ Layout (every key optional)::
     tool_margin_m = 0.01        # ... its shadow from the camera on the board grown by this [m]
     tool_max_age_s = 0.1        # ... from the joint state nearest the frame's time, if this near [s]
     [perception.board]   size_m, resolution_m, min_markers, hold_s, max_reprojection_px, ...
-    [perception.ink]     ink_rgb, board_rgb, stain_level, illumination_range, max_residual, ...
+    [perception.ink]     inks, board_rgb, stain_level, clean_level, illumination_range, white_fill_m, ...
     [perception.stains]  link_m, min_area_m2, confirm_s, region_margin_m
     [perception.kappa]   level, debounce_s, min_seen, memory_s, reappear_margin
     [perception.camera_model]  fx, fy, cx, cy, position_m, look_at_m, up_m (sources without one)
@@ -52,7 +52,9 @@ class BoardParams:
     ArUco dictionary or AprilTag family by name, the ids at the bottom-left,
     bottom-right, top-right and top-left corners, the side of a marker
     (black border included) [m] and its outer corner's inset from both
-    board edges [m]; the defaults are the cell's board.
+    board edges [m]; the defaults are the cell's board. marker_margin_m :
+    the band around each marker left out of the stain search (printed
+    markers sit on paper whose edge casts a line) [m].
     """
 
     size_m: tuple[float, float] = (0.0, 0.0)
@@ -67,6 +69,7 @@ class BoardParams:
     marker_ids: tuple[int, int, int, int] = DEFAULT_LAYOUT.ids
     marker_side_m: Annotated[float, In(0.005, 1.0)] = DEFAULT_LAYOUT.side_m
     marker_inset_m: Annotated[float, In(0.0, 0.5)] = DEFAULT_LAYOUT.inset_m
+    marker_margin_m: Annotated[float, In(0.0, 0.2)] = 0.005
 
     def __post_init__(self) -> None:
         s = "perception.board"
@@ -90,47 +93,86 @@ class BoardParams:
 
 @dataclass(frozen=True)
 class InkParams:
-    """Telling ink from clean board and from anything that is not board.
+    """Telling ink (of several colours) from clean board and from anything that is not board.
 
-    Each board pixel is explained as ``x = s (1 - d a)`` (per channel,
-    relative to the local white): illumination ``s`` (shading, shadows) and
-    ink fraction ``d`` with the ink's absorption ``a = 1 - ink_rgb /
-    board_rgb``. ink_rgb / board_rgb : the ink and the clean board as one
-    camera sees them in the same light (RGB, 0-255). stain_level : ink
-    fraction from which a pixel is stain. illumination_range : ``s`` outside
-    it is not board (the arm, deep shadow, a glare). max_residual : colour
-    distance from the board-and-ink model above which a pixel is not board
-    (the eraser, the arm's orange ring). prior_weight : pull of ``s``
-    towards 1 (needed for neutral, e.g. black, ink). occlusion_margin_m :
-    occluded areas grow by this [m] (mixed pixels at their edges).
+    Each board pixel is explained, relative to the local white (the clean
+    board under this frame's light, :mod:`perception.classify`), as ``x = s
+    (1 - d a_k)`` per channel: illumination ``s`` (shading, shadows) and
+    ink fraction ``d`` of the ink ``k`` that explains it best, with that
+    ink's absorption ``a_k = 1 - inks[k] / board_rgb``. inks : name -> the
+    ink's colour on the clean board ``board_rgb`` in the same light (RGB,
+    0-255); the default is the simulator's blue marker, a real board lists
+    its markers (see tests/fixtures/whiteboards/board.toml). stain_level :
+    ink fraction from which a pixel is stain. clean_level : ink fraction at
+    or below which a pixel counts as clean, the ghost an eraser leaves (a
+    stain's remaining ink is what lies above it). illumination_range :
+    ``s`` outside it is not board (the arm, deep shadow). max_residual :
+    colour distance from the board-and-ink model above which a pixel is not
+    board (the eraser, the arm's orange ring); it grows by ``chroma_tolerance``
+    times the ink's strength (real inks are not one colour). prior_weight :
+    pull of ``s`` towards 1 (needed for neutral, e.g. black, ink).
+    white_fill_m : dark features narrower than this (strokes) are filled
+    when the local white is measured, wider ones (a shadow, glare's edge)
+    are followed [m]. white_follow : the local white stays within this
+    factor range of the board-wide fit (a solid stain wider than
+    white_fill_m is not taken for a shadow). occlusion_fill_m /
+    occlusion_margin_m : occluded areas are closed over gaps narrower than
+    the first and grow by the second [m].
     """
 
-    ink_rgb: tuple[float, float, float] = (28.0, 38.0, 96.0)
+    inks: Mapping[str, tuple[float, float, float]] = field(default_factory=lambda: {"blue": (28.0, 38.0, 96.0)})
     board_rgb: tuple[float, float, float] = (242.0, 243.0, 238.0)
     stain_level: Annotated[float, In(0.05, 0.95)] = 0.3
+    clean_level: Annotated[float, In(0.0, 0.5)] = 0.05
     illumination_range: tuple[float, float] = (0.82, 1.3)
     max_residual: Annotated[float, In(0.005, 1.0)] = 0.06
+    chroma_tolerance: Annotated[float, In(0.0, 1.0)] = 0.0
     prior_weight: Annotated[float, In(0.0, 10.0)] = 0.002
+    white_fill_m: Annotated[float, In(0.0, 0.2)] = 0.0
+    white_follow: tuple[float, float] = (0.9, 1.1)
+    light_step: Annotated[float, In(0.01, 1.0)] = 0.15
+    occlusion_min_m: Annotated[float, In(0.0, 0.1)] = 0.0
     occlusion_fill_m: Annotated[float, In(0.0, 0.2)] = 0.04
     occlusion_margin_m: Annotated[float, In(0.0, 0.05)] = 0.004
 
     def __post_init__(self) -> None:
         s = "perception.ink"
         check_declared(self, s)
-        ink = check_vector(s, "ink_rgb", self.ink_rgb, 3)
         board = check_vector(s, "board_rgb", self.board_rgb, 3)
-        if not all(0 <= v <= 255 for v in ink + board):
-            raise ConfigError(f"[{s}] ink_rgb and board_rgb must be colours in [0, 255]")
-        if not all(b > 0 for b in board) or max(1 - i / b for i, b in zip(ink, board)) < 0.2:
-            raise ConfigError(f"[{s}] ink_rgb {list(ink)} must be darker than board_rgb {list(board)} "
-                              "by at least 20 % in some channel")
-        object.__setattr__(self, "ink_rgb", ink)
+        if not all(0 < b <= 255 for b in board):
+            raise ConfigError(f"[{s}] board_rgb must be a colour in (0, 255], got {list(board)}")
         object.__setattr__(self, "board_rgb", board)
+        if not isinstance(self.inks, Mapping) or not 1 <= len(self.inks) <= 8:
+            raise ConfigError(f"[{s}] inks must be a table of 1 to 8 named colours, e.g. "
+                              "{ blue = [28, 38, 96] }, got " + repr(self.inks))
+        inks = {}
+        for name, rgb in self.inks.items():
+            if not re.fullmatch(r"[a-z][a-z0-9_]{0,15}", str(name)):
+                raise ConfigError(f"[{s}] ink name {name!r} must be lower-case letters, digits or '_' "
+                                  "(16 at most), starting with a letter")
+            ink = check_vector(s, f"inks.{name}", rgb, 3)
+            if not all(0 <= v <= 255 for v in ink):
+                raise ConfigError(f"[{s}] inks.{name} must be a colour in [0, 255], got {list(ink)}")
+            if max(1 - i / b for i, b in zip(ink, board)) < 0.2:
+                raise ConfigError(f"[{s}] inks.{name} {list(ink)} must be darker than board_rgb {list(board)} "
+                                  "by at least 20 % in some channel")
+            inks[str(name)] = ink
+        object.__setattr__(self, "inks", inks)
+        if self.clean_level >= self.stain_level:
+            raise ConfigError(f"[{s}] clean_level {self.clean_level} must be below stain_level {self.stain_level}")
         lo, hi = check_vector(s, "illumination_range", self.illumination_range, 2)
         if not 0.05 <= lo < 1.0 < hi <= 5.0:
             raise ConfigError(f"[{s}] illumination_range must be [lo, hi] with 0.05 <= lo < 1 < hi <= 5, "
                               f"got {[lo, hi]}")
         object.__setattr__(self, "illumination_range", (lo, hi))
+        lo, hi = check_vector(s, "white_follow", self.white_follow, 2)
+        if not 0.2 <= lo <= 1.0 <= hi <= 5.0:
+            raise ConfigError(f"[{s}] white_follow must be [lo, hi] with 0.2 <= lo <= 1 <= hi <= 5, got {[lo, hi]}")
+        object.__setattr__(self, "white_follow", (lo, hi))
+
+    @property
+    def ink_names(self) -> tuple[str, ...]:
+        return tuple(self.inks)
 
 
 @dataclass(frozen=True)

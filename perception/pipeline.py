@@ -28,8 +28,6 @@ from .rectify import BoardGrid
 from .self_filter import board_shadow, shadow_mask
 from .tracking import StainTracker
 
-#: Marker areas are left out of the stain search with this margin [m].
-MARKER_MARGIN_M = 0.005
 #: The frame clock going back by more than this means a restarted source [s].
 CLOCK_RESTART_S = 1.0
 
@@ -121,9 +119,10 @@ class Perception:
 
     def _setup(self, est: BoardEstimate) -> None:
         self.grid = BoardGrid(est.size_m, self.p.board.resolution_m)
-        looked_at = self.grid.looked_at(self.p.board.edge_margin_m, MARKER_MARGIN_M, self.p.board.layout)
+        looked_at = self.grid.looked_at(self.p.board.edge_margin_m, self.p.board.marker_margin_m, self.p.board.layout)
         self.classifier = InkClassifier(self.p.ink, looked_at, self.p.board.resolution_m)
-        self.tracker = StainTracker(self.grid, self.p.stains, self.p.kappa, self.p.ink.stain_level)
+        self.tracker = StainTracker(self.grid, self.p.stains, self.p.kappa, self.p.ink.stain_level,
+                                    self.p.ink.clean_level)
 
     def _message(self, est: BoardEstimate, frame: Frame, lost: bool) -> Stains:
         T = est.T_board_to_world
@@ -143,7 +142,8 @@ class Perception:
                 ink_centre_board_m=[] if ink is None else [float(ink.centre_m[0]), float(ink.centre_m[1])],
                 ink_size_m=0.0 if ink is None else float(ink.size_m),
                 ink_width_m=0.0 if ink is None else float(ink.width_m),
-                ink_axis_board_rad=0.0 if ink is None else float(ink.axis_rad)))
+                ink_axis_board_rad=0.0 if ink is None else float(ink.axis_rad),
+                colour=self.p.ink.ink_names[tr.colour]))
         self._seq += 1
         return Stains(seq=self._seq, stamp_ns=time.monotonic_ns(), T_board_to_world=pose_from_transform(T),
                       board_size_m=[float(v) for v in est.size_m], stains=out, board=est.state,

@@ -13,12 +13,16 @@ candidates. Per region pixel the tracker keeps
 
 Fractions of a stain::
 
-    remaining = sum(d_last) / sum(d_ref)      over its region
+    remaining = sum(d_last - c)+ / sum(d_ref - c)+   over its region, c = clean_level
     visible   = visible pixels / region pixels  (this frame)
     seen      = pixels observed within memory_s / region pixels
 
 so a pixel the arm or the eraser hides keeps its last observation and never
-turns clean by being hidden. The *ink* of a stain is its region's pixels
+turns clean by being hidden, and the faint ghost an eraser leaves (ink
+fraction at or below ``clean_level``) is no ink left. With several inks
+(``[perception.ink] inks``) each stroke takes one ink
+(:func:`~perception.ink_areas.drawing_inks`), each ink is clustered on its
+own and a stain grows only by its own ink: every stain has one colour. The *ink* of a stain is its region's pixels
 whose last observation still holds ink (``d_last >= ink_level``): its
 shape (centre, size, width, axis) is what adaptive wiping follows,
 refreshed every :data:`INK_EVERY_S` (the controller re-targets at most
@@ -36,6 +40,7 @@ import numpy as np
 from interfaces.stain_shape import Shape, shape_of
 
 from .classify import InkMap
+from .ink_areas import drawing_inks
 from .cluster import cluster_pixels, disc
 from .kappa import KappaLatch
 from .params import KappaParams, StainParams
@@ -52,6 +57,7 @@ class _Candidate:
     last_t: float
     frames: int
     mask: np.ndarray
+    colour: int = 0
 
 
 @dataclass
@@ -73,6 +79,7 @@ class Track:
     visible: float = 0.0
     seen: float = 0.0
     born_t: float = 0.0
+    colour: int = 0
 
     @property
     def kappa(self) -> bool:
@@ -89,9 +96,11 @@ def _box_of(mask: np.ndarray, pad: int) -> tuple[int, int, int, int]:
 class StainTracker:
     """All stains of one board; :meth:`update` once per classified frame."""
 
-    def __init__(self, grid: BoardGrid, stains: StainParams, kappa: KappaParams, ink_level: float = 0.3) -> None:
+    def __init__(self, grid: BoardGrid, stains: StainParams, kappa: KappaParams, ink_level: float = 0.3,
+                 clean_level: float = 0.0) -> None:
         self.grid = grid
         self.ink_level = ink_level  # darkness from which a pixel's last observation counts as ink left
+        self.clean_level = clean_level  # ink fraction at or below which a pixel counts as clean (a ghost)
         self.p = stains
         self.kp = kappa
         res = grid.resolution_m
@@ -103,30 +112,69 @@ class StainTracker:
         self.tracks: list[Track] = []
         self._candidates: list[_Candidate] = []
         self._next_id = 0
+        self.merges = 0
 
     # -- per frame -------------------------------------------------------------------------------------
 
     def update(self, ink: InkMap, t_s: float) -> None:
         """Follow the stains into the frame of ``ink`` taken at ``t_s`` [s]."""
         visible = ink.visible
+        strokes = None if ink.ink is None or len(ink.names) == 1 else drawing_inks(ink, self.link_px)
         owned = np.zeros(visible.shape, bool)
         for tr in self.tracks:
-            self._grow(tr, ink, owned)
+            self._grow(tr, ink, owned, strokes)
             owned |= tr.region
+        self._merge_touching()
         for tr in self.tracks:
             self._observe(tr, ink, visible, t_s)
         near = cv2.dilate(owned.view(np.uint8), self._link).view(bool) if self.tracks else owned
-        self._detect(ink.stain & ~near, ink, visible, t_s)
+        free = ink.stain & ~near
+        if strokes is None:
+            self._detect(free, ink, visible, t_s, 0)
+        else:
+            for k in range(len(ink.names)):
+                self._detect(free & (strokes == k), ink, visible, t_s, k)
 
-    def _grow(self, tr: Track, ink: InkMap, owned: np.ndarray) -> None:
-        """Stain pixels within ``link_m`` of the core (and nobody's) join the stain."""
+    def _grow(self, tr: Track, ink: InkMap, owned: np.ndarray, strokes: np.ndarray | None) -> None:
+        """Stain pixels of the stain's ink within ``link_m`` of the core (and nobody's) join the stain."""
         r0, r1, c0, c1 = tr.box
         reach = cv2.dilate(tr.core[r0:r1, c0:c1].view(np.uint8), self._link).view(bool)
         new = reach & ink.stain[r0:r1, c0:c1] & ~tr.core[r0:r1, c0:c1] & ~owned[r0:r1, c0:c1]
+        if strokes is not None:
+            new &= strokes[r0:r1, c0:c1] == tr.colour
         if not new.any():
             return
         tr.core[r0:r1, c0:c1] |= new
         self._set_region(tr)
+
+    def _merge_touching(self) -> None:
+        """Stains of one ink whose cores have come within ``link_m`` of each other are one stain (the clustering's
+        rule, kept over time: a faint drawing seen piece by piece, the arm having split it at first), the older
+        id kept; kappa only if both had it."""
+        i = 0
+        while i < len(self.tracks):
+            a = self.tracks[i]
+            r0, r1, c0, c1 = a.box
+            reach = None
+            for b in list(self.tracks[i + 1:]):
+                q0, q1, p0, p1 = b.box
+                if b.colour != a.colour or q0 >= r1 or r0 >= q1 or p0 >= c1 or c0 >= p1:
+                    continue
+                if reach is None:
+                    reach = cv2.dilate(a.core[r0:r1, c0:c1].view(np.uint8), self._link).view(bool)
+                if not (reach & b.core[r0:r1, c0:c1]).any():
+                    continue
+                a.core |= b.core
+                np.maximum(a.d_ref, b.d_ref, out=a.d_ref)
+                np.copyto(a.d_last, b.d_last, where=b.t_seen > a.t_seen)
+                np.maximum(a.t_seen, b.t_seen, out=a.t_seen)
+                a.latch.kappa = a.latch.kappa and b.latch.kappa
+                self.tracks.remove(b)
+                self._set_region(a)
+                r0, r1, c0, c1 = a.box
+                reach = None
+                self.merges += 1
+            i += 1
 
     def _set_region(self, tr: Track) -> None:
         tr.box = _box_of(tr.core, self._pad)
@@ -137,14 +185,16 @@ class StainTracker:
         r0, r1, c0, c1 = tr.box
         reg = tr.region[r0:r1, c0:c1]
         vis = visible[r0:r1, c0:c1] & reg
-        d = ink.d[r0:r1, c0:c1]
+        d = cv2.blur(ink.d[r0:r1, c0:c1], (3, 3))  # 3x3 mean: the reference, a maximum over time, not raised by noise
         d_last, d_ref, t_seen = tr.d_last[r0:r1, c0:c1], tr.d_ref[r0:r1, c0:c1], tr.t_seen[r0:r1, c0:c1]
         d_last[vis] = d[vis]
         t_seen[vis] = t_s
         np.maximum(d_ref, np.where(vis, d, 0.0), out=d_ref)
         n = int(reg.sum())
-        ref = float(d_ref[reg].sum())
-        tr.remaining = float(np.clip(d_last[reg].sum() / ref, 0.0, 1.0)) if ref > 0 else 1.0
+        c = self.clean_level
+        ref = float(np.maximum(d_ref[reg] - c, 0.0).sum())
+        left = float(np.maximum(d_last[reg] - c, 0.0).sum())
+        tr.remaining = float(np.clip(left / ref, 0.0, 1.0)) if ref > 0 else 1.0
         tr.visible = int(vis.sum()) / max(n, 1)
         tr.seen = int(np.count_nonzero(t_s - t_seen[reg] <= self.kp.memory_s)) / max(n, 1)
         tr.latch.update(t_s, tr.remaining, tr.seen)
@@ -157,8 +207,8 @@ class StainTracker:
             rows, cols = np.nonzero(reg & (d_last >= self.ink_level))
             tr.ink = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m) if rows.size else None
 
-    def _detect(self, free: np.ndarray, ink: InkMap, visible: np.ndarray, t_s: float) -> None:
-        """New clusters: candidates until seen for ``confirm_s``, then stains."""
+    def _detect(self, free: np.ndarray, ink: InkMap, visible: np.ndarray, t_s: float, colour: int) -> None:
+        """New clusters of ink ``colour`` (palette index): candidates until seen for ``confirm_s``, then stains."""
         n, labels = cluster_pixels(free, self.link_px)
         seen_now: list[tuple[np.ndarray, np.ndarray]] = []
         if n:
@@ -169,16 +219,17 @@ class StainTracker:
                 mask = labels == k
                 rows, cols = np.nonzero(mask)
                 seen_now.append((np.array([rows.mean(), cols.mean()]), mask))
+        mine = [c for c in self._candidates if c.colour == colour]
         kept: list[_Candidate] = []
         for centre, mask in seen_now:
-            match = min(self._candidates, key=lambda c: np.linalg.norm(c.centre_px - centre), default=None)
+            match = min(mine, key=lambda c: np.linalg.norm(c.centre_px - centre), default=None)
             if match is not None and np.linalg.norm(match.centre_px - centre) <= 2 * self.link_px \
                     and not any(match is k for k in kept):
                 match.centre_px, match.last_t, match.frames, match.mask = centre, t_s, match.frames + 1, mask
                 kept.append(match)
             else:
-                kept.append(_Candidate(centre, t_s, t_s, 1, mask))
-        self._candidates = []
+                kept.append(_Candidate(centre, t_s, t_s, 1, mask, colour))
+        self._candidates = [c for c in self._candidates if c.colour != colour]
         for c in kept:
             if t_s - c.first_t >= self.p.confirm_s - 1e-9 and (c.frames >= 2 or self.p.confirm_s == 0):
                 self._promote(c, ink, visible, t_s)
@@ -189,7 +240,7 @@ class StainTracker:
         shape = c.mask.shape
         tr = Track(self._next_id, c.mask.copy(), np.zeros(shape, bool), np.zeros(shape, np.float32),
                    np.zeros(shape, np.float32), np.full(shape, -np.inf), KappaLatch(self.kp), (0, 0, 0, 0),
-                   born_t=t_s)
+                   born_t=t_s, colour=c.colour)
         self._next_id += 1
         self._set_region(tr)
         self._observe(tr, ink, visible, t_s)

@@ -51,8 +51,8 @@ def test_ink_fraction_is_recovered_under_any_light_and_shade():
     clf = InkClassifier(params, np.ones((60, 80), bool), 0.002)
     for gain, shade in [(1.0, 1.0), (0.55, 1.0), (1.15, 0.9), (0.8, 0.85)]:
         white = np.array([205.0, 205.0, 201.0]) * gain
-        # the ink in the same light as this white: params.ink_rgb is the ink where the board is params.board_rgb
-        ink_colour = np.array(params.ink_rgb) * white / np.array(params.board_rgb)
+        # the ink in the same light as this white: params.inks["blue"] is the ink where the board is params.board_rgb
+        ink_colour = np.array(params.inks["blue"]) * white / np.array(params.board_rgb)
         d_true = np.zeros((60, 80))
         d_true[20:40, 30:50] = np.linspace(0.0, 1.0, 20)[None, :]  # a ramp of ink
         # a pixel with a fraction d of ink averages the ink and the board (mixing by area, not the classifier's
@@ -158,7 +158,7 @@ def test_frames_decode_every_encoding_and_name_what_is_wrong():
 @pytest.mark.parametrize("table,text", [
     ({"publish_rate_hz": 0.5}, r"publish_rate_hz must be a number in \[1.0, 200.0\]"),
     ({"source": "camera:0"}, "source must be 'zenoh'"),
-    ({"ink": {"ink_rgb": [250, 250, 250]}}, "must be darker than board_rgb"),
+    ({"ink": {"inks": {"white": [250, 250, 250]}}}, "inks.white .* must be darker than board_rgb"),
     ({"ink": {"illumination_range": [1.2, 1.5]}}, "illumination_range must be"),
     ({"board": {"size_m": [0.1, 0.1]}}, "size_m must be"),
     ({"board": {"min_markers": 0}}, "min_markers must be an integer"),

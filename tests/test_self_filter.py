@@ -68,7 +68,7 @@ def test_shadow_mask_fills_the_hull_grown_by_the_margin():
 def test_hidden_pixels_are_occluded_whatever_their_colour():
     params = InkParams()
     img = np.tile(np.array((205, 205, 201), np.uint8), (60, 80, 1))
-    ink_colour = np.array(params.ink_rgb) * np.array([205.0, 205.0, 201.0]) / np.array(params.board_rgb)
+    ink_colour = np.array(params.inks["blue"]) * np.array([205.0, 205.0, 201.0]) / np.array(params.board_rgb)
     img[20:40, 20:50] = np.round(ink_colour).astype(np.uint8)  # ink, or a tool the colour of ink
     clf = InkClassifier(params, np.ones((60, 80), bool), 0.002)
     assert clf.classify(img).stain[22:38, 22:48].all()

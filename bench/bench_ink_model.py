@@ -1,0 +1,247 @@
+"""The colour model against a named baseline revision, same frames, same run: cost per frame and stain figures.
+
+Frames:
+
+- ``sim``: the simulator's camera at 640x480 (wall board, the seeded stains
+  of seeds 1..N, the arm parked), rendered in this process with PyBullet's
+  TinyRenderer and the sim's dirt compositing (what ``lamps sim`` sends);
+  the truth is the dirt grid (stain where dirt >= stain_level).
+- ``photo``: the three real photographs (tests/fixtures/whiteboards) at
+  640x480 and at their 1160x870, with their board.toml (six inks, the
+  local white); the truth is stains.toml's hand-made masks.
+
+Each code tree (this checkout, and ``--baseline REV`` checked out into a
+temporary git worktree) processes every frame set in its own Python
+process with :class:`perception.pipeline.Perception` on one OpenCV thread,
+``--repeat`` times, trees alternating (A B A B ...) so a busy machine
+slows both alike; per frame set the p50 of each tree and their ratio are
+printed. The stain figures (IoU of the stain areas against the truth, the
+false stain area over the clean board) are computed here, from each
+tree's stain pixels, with :mod:`perception.ink_areas`.
+
+Run: ``.venv/bin/python bench/bench_ink_model.py --baseline REV [--seeds 6] [--repeat 3]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pickle
+import subprocess
+import sys
+import tempfile
+import tomllib
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from perception.ink_areas import compare, ink_areas  # noqa: E402
+from perception.photo_score import OUTLINE_TOLERANCE_M, truth_masks  # noqa: E402
+from perception.params import PerceptionParams  # noqa: E402
+from perception.rectify import BoardGrid  # noqa: E402
+
+PHOTOS = REPO / "tests" / "fixtures" / "whiteboards"
+
+# What each tree runs: frames in, per frame (ms, stain mask, ink labels, names, looked_at, visible, board size).
+WORKER = r"""
+import pickle, sys, time, tomllib
+import cv2, numpy as np
+cv2.setNumThreads(1)
+sys.path.insert(0, sys.argv[1])
+from perception.frames import Frame
+from perception.params import PerceptionParams
+from perception.pipeline import Perception
+sets = pickle.load(open(sys.argv[2], "rb"))
+out = {}
+for name, s in sets.items():
+    params = PerceptionParams.from_table(s["config"])
+    times, last = [], []
+    for rep in range(int(sys.argv[4])):
+        for rgb, K, T in s["frames"]:
+            p = Perception(params)
+            for i in range(3):  # the board found and fixed, then timed
+                t0 = time.perf_counter()
+                r = p.process(Frame(rgb, K, T, 0.1 * i, i))
+                dt = time.perf_counter() - t0
+            times.append(dt * 1e3)
+            if rep == 0:
+                ink = r.ink
+                labels = getattr(ink, "ink", None)
+                last.append(dict(stain=ink.stain, ink=labels, names=getattr(ink, "names", ("ink",)),
+                                 d=ink.d, looked_at=ink.looked_at, visible=ink.visible, size_m=r.board.size_m))
+    out[name] = dict(ms=times, frames=last)
+pickle.dump(out, open(sys.argv[3], "wb"))
+"""
+
+
+def sim_frames(seeds: int) -> tuple[list, list, dict]:
+    """``(frames [(rgb, K, T_camera_to_world)], truths [(dirt (ny, nx), cell_m, size_m)], config)`` of seeds
+    1..``seeds`` at 640x480, the arm parked."""
+    import pybullet as pb
+
+    from perception.frames import camera_matrix
+    from sim.camera import (board_cell_index, board_texture, camera_pose, composite_dirt, intrinsics_of,
+                            light_towards, marker_layer, projection_matrix, view_matrix)
+    from sim.core import SimCore
+    from sim.params import SimParams
+    from sim.world import build_world
+
+    frames, truths = [], []
+    for seed in range(1, seeds + 1):
+        params = SimParams.from_table({"seed": seed, "camera": {"width": 640, "height": 480}})
+        core = SimCore(params)
+        client = pb.connect(pb.DIRECT)
+        try:
+            world = build_world(client, core.board, params.contact, np.array([2.6, 0.3, 0.0, -1.2, 0.0, 0.8, 0.0]),
+                                visual=True)
+            tex = board_texture(core.dirt.dirt, params.dirt.cell_m, marker_layer(core.board.size_m),
+                                core.board.size_m)
+            with tempfile.TemporaryDirectory() as tmp:
+                path = str(Path(tmp) / "board.png")
+                cv2.imwrite(path, tex[..., ::-1])
+                tex_id = pb.loadTexture(path, physicsClientId=client)
+            pb.changeVisualShape(world.board, -1, textureUniqueId=tex_id, physicsClientId=client)
+            k = intrinsics_of(params.camera)
+            T_cam = camera_pose(params.camera, core.board)
+            out = pb.getCameraImage(k.width, k.height, view_matrix(T_cam), projection_matrix(k),
+                                    renderer=pb.ER_TINY_RENDERER, shadow=1,
+                                    lightDirection=light_towards(params.camera, core.board), physicsClientId=client)
+            rgb = np.asarray(out[2], np.uint8).reshape(k.height, k.width, 4)[..., :3].copy()
+            cells = board_cell_index(k, T_cam, core.board, params.dirt.cell_m, core.dirt.dirt.shape)
+            composite_dirt(rgb, np.asarray(out[4]).reshape(-1) == world.board, cells, core.dirt.dirt)
+            frames.append((rgb, camera_matrix(k), T_cam))
+            truths.append((core.dirt.dirt.copy(), params.dirt.cell_m, tuple(core.board.size_m)))
+        finally:
+            pb.disconnect(client)
+            core.close()
+    return frames, truths, {}
+
+
+def photo_frames(width: int) -> tuple[list, list, dict]:
+    """The three photographs at ``width`` (aspect kept), their hand-made masks and board.toml's config."""
+    from perception.sources import camera_model
+
+    config = tomllib.loads((PHOTOS / "board.toml").read_text())["perception"]
+    labels = tomllib.loads((PHOTOS / "stains.toml").read_text())
+    params = PerceptionParams.from_table(config)
+    frames, truths = [], []
+    for name in ("straight", "sideangle", "highangle"):
+        bgr = cv2.imread(str(PHOTOS / f"{name}.jpg"))
+        h = int(round(bgr.shape[0] * width / bgr.shape[1]))
+        bgr = cv2.resize(bgr, (width, h), interpolation=cv2.INTER_AREA)
+        K, T = camera_model(params.model, width, h)
+        frames.append((cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), K, T))
+        truths.append(labels[name]["stains"])
+    return frames, truths, config
+
+
+def sim_truth(dirt: np.ndarray, cell_m: float, grid: BoardGrid, level: float) -> np.ndarray:
+    """(rows, cols) bool: grid pixels whose dirt cell holds at least ``level``."""
+    rows, cols = grid.shape
+    xy = grid.xy_of(np.repeat(np.arange(rows), cols), np.tile(np.arange(cols), rows))
+    ix = np.clip((xy[:, 0] / cell_m).astype(int), 0, dirt.shape[1] - 1)
+    iy = np.clip((xy[:, 1] / cell_m).astype(int), 0, dirt.shape[0] - 1)
+    return (dirt[iy, ix] >= level).reshape(rows, cols)
+
+
+def figures(kind: str, result: dict, truths: list, config: dict) -> dict:
+    """Mean IoU per ink, worst IoU, and the largest false area over the frames of one set."""
+    params = PerceptionParams.from_table(config)
+    ious: dict[str, list[float]] = {}
+    false = []
+    for f, truth in zip(result["frames"], truths):
+        grid = BoardGrid(tuple(f["size_m"]), params.board.resolution_m)
+
+        class _Ink:  # what ink_areas reads, from the worker's arrays (either tree)
+            stain, d, names = f["stain"], f["d"], tuple(f["names"])
+            ink = f["ink"]
+
+        if kind == "sim":
+            want = {f["names"][0]: sim_truth(truth[0], truth[1], grid, params.ink.stain_level)}
+        else:
+            want = truth_masks(grid, truth)
+        areas = ink_areas(_Ink, params.board.resolution_m, params.stains.link_m, params.stains.min_area_m2)
+        tol = int(round(OUTLINE_TOLERANCE_M / params.board.resolution_m)) if kind == "photo" else 0
+        scores, fa = compare(areas, want, f["stain"], f["visible"], f["looked_at"], tol)
+        for s in scores:
+            ious.setdefault(s.ink, []).append(s.iou)
+        false.append(fa)
+    return {"iou": {k: float(np.mean(v)) for k, v in ious.items()},
+            "worst_iou": float(min(min(v) for v in ious.values())), "false_max": float(max(false))}
+
+
+def run_tree(tree: Path, sets_file: Path, out: Path, repeat: int) -> dict:
+    subprocess.run([sys.executable, "-c", WORKER, str(tree), str(sets_file), str(out), str(repeat)], check=True,
+                   cwd=tree)
+    with open(out, "rb") as f:
+        return pickle.load(f)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--baseline", required=True, help="git revision of the baseline (e.g. the commit before)")
+    ap.add_argument("--seeds", type=int, default=6)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args()
+    sim, sim_truths, sim_config = sim_frames(args.seeds)
+    sets = {"sim 640x480": dict(frames=sim, config=sim_config)}
+    truths = {"sim 640x480": ("sim", sim_truths, sim_config)}
+    for w in (640, 1160):
+        frames, photo_truths, config = photo_frames(w)
+        sets[f"photos {w}x{round(870 * w / 1160)}"] = dict(frames=frames, config=config)
+        truths[f"photos {w}x{round(870 * w / 1160)}"] = ("photo", photo_truths, config)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        base = tmp / "baseline"
+        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(base), args.baseline],
+                       check=True, capture_output=True)
+        try:
+            # the baseline cannot read the photos' new keys: it gets the sim sets only
+            base_sets = {k: v for k, v in sets.items() if k.startswith("sim")}
+            (tmp / "all.pkl").write_bytes(pickle.dumps(sets))
+            (tmp / "base.pkl").write_bytes(pickle.dumps(base_sets))
+            new_ms: dict[str, list] = {k: [] for k in sets}
+            base_ms: dict[str, list] = {k: [] for k in base_sets}
+            new_res = base_res = None
+            for _ in range(2):
+                base_res = run_tree(base, tmp / "base.pkl", tmp / "b.out", args.repeat)
+                new_res = run_tree(REPO, tmp / "all.pkl", tmp / "n.out", args.repeat)
+                for k in base_ms:
+                    base_ms[k] += base_res[k]["ms"]
+                for k in new_ms:
+                    new_ms[k] += new_res[k]["ms"]
+        finally:
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(base)], check=False)
+    rev = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
+                         text=True).stdout.strip()
+    rows = []
+    print(f"| frames | baseline {args.baseline} p50 [ms] | {rev} p50 [ms] | ratio | baseline IoU / false area | "
+          f"{rev} IoU per ink (worst) / largest false area |")
+    print("|---|---:|---:|---:|---|---|")
+    for k in sets:
+        kind, t, config = truths[k]
+        new_fig = figures(kind, new_res[k], t, config)
+        p50 = float(np.median(new_ms[k]))
+        if k in base_ms:
+            b50 = float(np.median(base_ms[k]))
+            base_fig = figures(kind, base_res[k], t, config)
+            base_txt = f"{base_fig['worst_iou']:.2f} / {100 * base_fig['false_max']:.2f} %"
+            ratio = f"{p50 / b50:.2f}x"
+        else:
+            b50, base_fig, base_txt, ratio = float("nan"), None, "(keys unknown to it)", "-"
+        inks = ", ".join(f"{n} {v:.2f}" for n, v in new_fig["iou"].items())
+        print(f"| {k} | {b50:.1f} | {p50:.1f} | {ratio} | {base_txt} | {inks} ({new_fig['worst_iou']:.2f}) / "
+              f"{100 * new_fig['false_max']:.2f} % |")
+        rows.append(dict(frames=k, baseline_ms=b50, ms=p50, new=new_fig, baseline=base_fig))
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
