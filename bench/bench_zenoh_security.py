@@ -15,7 +15,10 @@ warm-up, for each way a cell can join:
   (the links encrypted and both ends checked);
 - ``mutual TLS + access list``: the cell's default-deny list checked on
   every sample sent and received (the default under compose and
-  ``lamps up``).
+  ``lamps up``);
+- ``through lamps router``: both sides clients of ``lamps router`` (a
+  process of its own, the router identity, the access list checked at the
+  router and at each client): one hop more.
 
 The table gives p50, p99 and mean [us] and each p50 and mean over the baseline's,
 measured in the same run, the cases interleaved in rounds (the machine's
@@ -30,6 +33,7 @@ import platform
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -51,11 +55,41 @@ def _settings(role: str, rid: str, port: int, listen: bool, secrets: Path, acl: 
     return ZenohSettings(robot_id=rid, **kw)
 
 
-def _round_trips(n: int, warmup: int, secrets: Path, acl: bool, tls: bool) -> np.ndarray:
+def _router(rid: str, port: int, secrets: Path):
+    """``lamps router`` as a process on ``port`` with the router identity and access list; once it listens."""
+    import os
+    import socket
+    import subprocess
+
+    env = {**os.environ, "LAMPS_ROBOT_ID": rid, "LAMPS_ZENOH_ACCESS_CONTROL": "true",
+           "LAMPS_ZENOH_IDENTITY": str(identity_folder(secrets, "router"))}
+    proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "router", "--listen", f"tls/127.0.0.1:{port}",
+                             "--status-s", "0"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return proc
+        time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError("lamps router did not come up")
+
+
+def _round_trips(n: int, warmup: int, secrets: Path, acl: bool, tls: bool, router: bool = False) -> np.ndarray:
     port = free_port()
     rid = f"b{port}"
-    robot = ServiceNode("robot", _settings("robot", rid, port, True, secrets, acl, tls)).__enter__()
-    ctl = ServiceNode("controller", _settings("controller", rid, port, False, secrets, acl, tls)).__enter__()
+    proc = None
+    if router:
+        proc = _router(rid, port, secrets)
+        client = dict(mode="client", connect=(f"tls/127.0.0.1:{port}",), listen=())
+        robot = ServiceNode("robot", replace(_settings("robot", rid, port, False, secrets, acl, tls), **client))
+        ctl = ServiceNode("controller", replace(_settings("controller", rid, port, False, secrets, acl, tls),
+                                                **client))
+        robot.__enter__()
+        ctl.__enter__()
+    else:
+        robot = ServiceNode("robot", _settings("robot", rid, port, True, secrets, acl, tls)).__enter__()
+        ctl = ServiceNode("controller", _settings("controller", rid, port, False, secrets, acl, tls)).__enter__()
     try:
         keys = robot.keys
         answers = robot.inbox(keys.robot_command, TorqueCommand, maxlen=16)
@@ -83,12 +117,16 @@ def _round_trips(n: int, warmup: int, secrets: Path, acl: bool, tls: bool) -> np
     finally:
         ctl.close()
         robot.close()
+        if proc is not None:
+            proc.terminate()
+            proc.wait(10)
 
 
 #: Rounds over all cases; each measures N / ROUNDS exchanges per case with a fresh pair of sessions.
 ROUNDS = 5
-CASES = (("plain TCP (baseline)", False, False), ("mutual TLS", False, True),
-         ("mutual TLS + access list (the default)", True, True))
+CASES = (("plain TCP (baseline)", False, False, False), ("mutual TLS", False, True, False),
+         ("mutual TLS + access list (the default)", True, True, False),
+         ("through lamps router (mutual TLS + access lists, both sides its clients)", True, True, True))
 
 
 def main() -> None:
@@ -104,8 +142,8 @@ def main() -> None:
         rng = np.random.default_rng(0)
         for _ in range(ROUNDS):  # the cases interleaved, in a new order each round: drift hits them alike
             for k in rng.permutation(len(CASES)):
-                name, acl, tls = CASES[k]
-                samples[name].append(_round_trips(n // ROUNDS, warmup, secrets, acl, tls))
+                name, acl, tls, router = CASES[k]
+                samples[name].append(_round_trips(n // ROUNDS, warmup, secrets, acl, tls, router))
         rows = []
         for name, parts in samples.items():
             rt = np.concatenate(parts)

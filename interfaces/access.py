@@ -38,6 +38,14 @@ controller/estop/release          operator
 
 The recorder writes nothing the cell acts on (its identity can engage the
 e-stop and read); the bridge only the ROS topics it carries.
+
+**A router** (``lamps router``, identity ``router``, :data:`RELAY`) is not a
+role: it writes nothing of its own but forwards what its clients put. On the
+router the same list decides what each client may put (ingress, by the
+client's certificate) and what it is sent; on a service the router's puts
+are let in on every key of the cell (the router already filtered them by
+their sender). Whoever holds the router's key can therefore write anything:
+it belongs on the infrastructure host, like the CA.
 """
 
 from __future__ import annotations
@@ -51,6 +59,10 @@ from .keys import Keys
 ROLES = ("controller", "robot", "perception", "recorder", "operator", "bridge")
 #: The ROS namespaces the bridge carries: lbr_fri_ros2_stack's default robot_name and a camera driver's default.
 DEFAULT_ROS_NAMESPACES = ("lbr", "camera")
+#: The identity of a Zenoh router (``lamps router``): relays the roles' puts, checked at the router.
+RELAY = "router"
+#: Every identity ``lamps credentials`` makes: the roles and the router.
+IDENTITIES = (*ROLES, RELAY)
 #: Zenoh message kinds a role may send to and receive from another role (besides the puts of its row).
 _DECLARATIONS = ["declare_subscriber", "declare_queryable", "query", "reply", "liveliness_token",
                  "declare_liveliness_subscriber", "liveliness_query"]
@@ -105,6 +117,8 @@ def cell_acl(keys: Keys, subject: str = "cert_common_names",
         rules.append({"id": f"put-{role}", "permission": "allow", "flows": ["ingress"], "messages": _DATA,
                       "key_exprs": exprs})
         policies.append({"id": f"as-{role}", "rules": ["talk", "deliver", f"put-{role}"], "subjects": [role]})
-    subjects = [{"id": role, subject: [role]} for role in ROLES]
+    rules.append({"id": "relay", "permission": "allow", "flows": ["ingress"], "messages": _DATA, "key_exprs": scope})
+    policies.append({"id": f"as-{RELAY}", "rules": ["talk", "deliver", "relay"], "subjects": [RELAY]})
+    subjects = [{"id": role, subject: [role]} for role in IDENTITIES]
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}

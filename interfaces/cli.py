@@ -34,6 +34,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "foxglove": ("launch.live:main", "serve the running cell to the Foxglove app over its WebSocket protocol"),
     "report": ("launch.record_cli:report_main", "rebuild a run's report.json and plots from its recording"),
     "campaign": ("launch.campaign:main", "many seeded cells, several at once: success, time against a lower bound, peaks"),
+    "router": ("launch.router:main", "a Zenoh router with the cell's identities and access list (several hosts)"),
     "health": ("launch.health:main", "is this service ready (its Zenoh endpoints accept connections)? compose's probe"),
     "folders": ("launch.folders:main", "make the cell's host folders and give them to the service user (compose)"),
     "credentials": ("interfaces.credentials:main",

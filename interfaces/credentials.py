@@ -5,7 +5,8 @@ Writes, each file atomically (private keys mode 0600):
 * ``DIR/ca/ca.pem`` and ``DIR/ca/ca.key``: the cell's certificate
   authority. No service is given the CA's key (compose mounts no service
   ``DIR/ca``): it is needed only to add a host or remake an identity.
-* ``DIR/<role>/`` for every role of :data:`interfaces.access.ROLES`:
+* ``DIR/<role>/`` for every role of :data:`interfaces.access.ROLES` and the
+  router (:data:`interfaces.access.RELAY`, ``lamps router``):
   ``ca.pem`` (the CA's certificate, to check peers), ``cert.pem`` (the
   role's certificate: common name = the role, which is what access control
   reads) and ``key.pem`` (its private key). A service is given its own
@@ -23,7 +24,8 @@ opens. Elliptic-curve keys (P-256) and SHA-256 signatures, as
 
 Existing files are never overwritten: a cell keeps its identities until they
 are deleted on purpose (``--if-missing``: a complete set already there is
-kept, exit 0; compose's one-shot ``credentials`` service runs it so). A
+kept, exit 0; a set made before the router's identity existed gets it from
+the same CA; compose's one-shot ``credentials`` service runs it so). A
 service then runs with ``LAMPS_ZENOH_IDENTITY=DIR/<role>`` (inside compose:
 ``/secrets``), ``tls/`` endpoints and ``LAMPS_ZENOH_ACCESS_CONTROL=true``.
 """
@@ -37,7 +39,7 @@ from pathlib import Path
 
 from lampskit.atomic import write_atomic, write_text_atomic
 
-from .access import DEFAULT_ROS_NAMESPACES, ROLES, cell_acl
+from .access import DEFAULT_ROS_NAMESPACES, IDENTITIES, cell_acl
 from .certificates import DEFAULT_DAYS, DEFAULT_HOSTS, issue, new_ca, write_key_and_cert
 from .keys import Keys
 
@@ -55,6 +57,7 @@ ROLE_HOSTS = {
     "perception": ("perception",),
     "recorder": ("recorder", "foxglove"),
     "operator": ("operator",),
+    "router": ("router",),
 }
 #: zenoh-plugin-ros2dds settings (its DEFAULT_CONFIG.json5, 09d68c0): only the lbr stack's topics the adapter
 #: uses cross the bridge; the 1 kHz state goes first and unbatched (``pub_priorities`` ``1:express``, which the
@@ -85,11 +88,18 @@ def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str
     """Create the files (see the module docstring); role -> its identity folder. FileExistsError if any exists
     (with ``if_missing``: only if some but not all exist; a complete set is kept as it is)."""
     targets = [directory / CA_FOLDER / n for n in (CA_FILE, "ca.key")]
-    targets += [p for r in ROLES for p in identity_files(identity_folder(directory, r))]
+    targets += [p for r in IDENTITIES for p in identity_files(identity_folder(directory, r))]
     targets.append(identity_folder(directory, "bridge") / BRIDGE_CONFIG)
     present = [str(p) for p in targets if p.exists()]
-    folders = {role: identity_folder(directory, role) for role in ROLES}
+    folders = {role: identity_folder(directory, role) for role in IDENTITIES}
     if if_missing and len(present) == len(targets):
+        return folders
+    missing = {r: f for r, f in folders.items() if not any(p.exists() for p in identity_files(f))}
+    ca_there = all((directory / CA_FOLDER / n).exists() for n in (CA_FILE, "ca.key"))
+    if if_missing and ca_there and missing and len(present) == len(targets) - 3 * len(missing):
+        # a set made before an identity was added (the router): issue the missing ones with the same CA
+        ca_key, ca_cert = _load_ca(directory / CA_FOLDER)
+        _issue_all(directory, missing, ca_key, ca_cert, hosts, days)
         return folders
     if present:
         raise FileExistsError(f"credentials already exist, not overwritten: {', '.join(present[:4])}"
@@ -97,6 +107,23 @@ def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str
     ca_key, ca_cert = new_ca(days)
     (directory / CA_FOLDER).mkdir(parents=True, exist_ok=True)
     write_key_and_cert(directory / CA_FOLDER / CA_FILE, directory / CA_FOLDER / "ca.key", ca_key, ca_cert)
+    _issue_all(directory, folders, ca_key, ca_cert, hosts, days)
+    write_bridge_config(folders["bridge"])
+    return folders
+
+
+def _load_ca(folder: Path):
+    """(key, certificate) of the CA in ``folder``."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import serialization
+
+    cert = x509.load_pem_x509_certificate((folder / CA_FILE).read_bytes())
+    key = serialization.load_pem_private_key((folder / "ca.key").read_bytes(), password=None)
+    return key, cert
+
+
+def _issue_all(directory: Path, folders: dict[str, Path], ca_key, ca_cert, hosts: tuple[str, ...],
+               days: int) -> None:
     ca_pem = (directory / CA_FOLDER / CA_FILE).read_bytes()
     for role, folder in folders.items():
         folder.mkdir(parents=True, exist_ok=True)
@@ -104,8 +131,6 @@ def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str
         ca_path, cert_path, key_path = identity_files(folder)
         write_key_and_cert(cert_path, key_path, key, cert)
         write_atomic(ca_path, lambda f: f.write(ca_pem), mode=0o644)
-    write_bridge_config(folders["bridge"])
-    return folders
 
 
 def bridge_config(secrets: str = BRIDGE_SECRETS, keys: Keys | None = None,

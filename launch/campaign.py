@@ -31,7 +31,11 @@ dirt and nothing faulted.
 
 Writes ``campaign.json`` (every cell, the summary), ``campaign.md`` (the table
 per board and wiping mode, and over all) and ``campaign.png`` (robot time
-against the lower bound, dirt removed per cell), each atomically. Exit 0 when
+against the lower bound, dirt removed per cell), each atomically, again
+after every cell: the table grows as cells finish, and each finished cell
+prints the progress (cells done, failed, time taken and left). A campaign
+stopped half-way keeps what it finished; ``--resume`` with the same
+``--out`` (and options) runs only the cells without a report. Exit 0 when
 every cell left a report (whatever it shows), 1 with the reason otherwise.
 ``--summarize DIR [DIR ...]`` runs nothing: it reads the cells of earlier
 campaigns (their ``campaign.json`` and each cell's ``report.json`` as it is
@@ -47,6 +51,7 @@ import logging
 import math
 import os
 import random
+import shutil
 import subprocess
 import sys
 import time
@@ -171,27 +176,53 @@ def _write_outputs(out: Path, rows: list[dict[str, Any]], command: str, extra: d
 
 
 def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, max_duration_s: float,
-                 command: str, echo=print) -> dict[str, Any]:
-    """Run every cell (``jobs`` at once), write campaign.json, .md and .png into ``out``; returns the json."""
+                 command: str, echo=print, resume: bool = False) -> dict[str, Any]:
+    """Run every cell (``jobs`` at once), write campaign.json, .md and .png into ``out`` after each cell (the table
+    grows as cells finish); returns the json. ``resume``: the cells whose run folder holds a report are taken as
+    they are, a cell folder without one (a campaign killed while it ran) is run again, the rest run."""
     out.mkdir(parents=True, exist_ok=True)
     stains, bounds, felt, v_plan, pad = _bounds(cells)
-    skill = skill or _learn_skill(out)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
+    todo = []
+    for k, c in enumerate(cells):
+        run_dir = out / "cells" / c.name
+        if resume and (run_dir / "report.json").is_file():
+            report = json.loads((run_dir / "report.json").read_text())
+            rows[k] = row_of(c, report, bounds[c], str(run_dir), "", stains[c], felt, v_plan)
+            continue
+        if run_dir.exists():
+            if not resume:
+                raise CampaignError(f"{run_dir} exists: a campaign folder is never overwritten (--resume runs only "
+                                    "the cells that left no report)")
+            shutil.rmtree(run_dir)  # a cell killed half-way: run again from the start
+        todo.append(k)
+    learned = out / "learn" / "skill.json"
+    skill = skill or (learned if resume and learned.is_file() else _learn_skill(out))
+    extra = {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan}
+    if resume:
+        echo(f"resuming: {len(cells) - len(todo)} of {len(cells)} cells already have a report, {len(todo)} to run")
     t0 = time.monotonic()
+    finished = failed = 0
     with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
         port_base = random.choice(PORT_BASES)
-        futures = {pool.submit(_run_cell, k, c, skill, out, max_duration_s, port_base): k for k, c in enumerate(cells)}
+        futures = {pool.submit(_run_cell, k, cells[k], skill, out, max_duration_s, port_base): k for k in todo}
         for fut in concurrent.futures.as_completed(futures):
             k = futures[fut]
             report, run_dir, why = fut.result()
             rows[k] = row_of(cells[k], report, bounds[cells[k]], run_dir, why, stains[cells[k]], felt, v_plan)
             r = rows[k]
-            echo(f"[{sum(x is not None for x in rows)}/{len(cells)} {time.monotonic() - t0:.0f} s] {cells[k].name}: "
+            finished += 1
+            failed += not r["success"]
+            _write_outputs(out, [x for x in rows if x is not None], command, extra)
+            elapsed = time.monotonic() - t0
+            left = (len(todo) - finished) * elapsed / finished
+            echo(f"[{sum(x is not None for x in rows)}/{len(cells)} done, {failed} failed, {elapsed:.0f} s, "
+                 f"~{left:.0f} s left] {cells[k].name}: "
                  + (f"no report ({why})" if report is None else
                     f"{r['outcome']}, {r['dirt_removed']:.1%} removed in {r['robot_time_s']:.1f} s "
                     f"({r['time_over_cell_bound']:.2f}x the cell bound)"))
     done = [r for r in rows if r is not None]
-    return _write_outputs(out, done, command, {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan})
+    return _write_outputs(out, done, command, extra)
 
 
 def summarize_campaigns(dirs: list[Path], out: Path, command: str) -> dict[str, Any]:
@@ -236,6 +267,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--skill", default=None, help="skill file (default: learn the bundled demo once)")
     ap.add_argument("--max-duration", type=float, default=600.0, help="give a cell up after S s wall (default 600)")
     ap.add_argument("--out", default=None, help="campaign folder (default runs/campaign-<time>)")
+    ap.add_argument("--resume", action="store_true",
+                    help="--out is a campaign that was stopped: keep the cells that left a report, run the rest")
     ap.add_argument("--summarize", nargs="+", metavar="DIR", default=None,
                     help="run nothing: one table of these campaign folders' cells, into --out")
     ap.add_argument("-v", "--verbose", action="store_true", help="log what the campaign does")
@@ -276,7 +309,9 @@ def main(argv: list[str] | None = None) -> int:
         wipings = tuple(w.strip() for w in a.wiping.split(",") if w.strip())
         cells = cells_of(seeds, stains, boards, wipings)
         command = "lamps campaign " + " ".join(argv if argv is not None else sys.argv[1:])
-        result = run_campaign(cells, out, a.jobs, skill, a.max_duration, command)
+        if a.resume and not (a.out and Path(a.out).is_dir()):
+            raise CampaignError("--resume needs --out, the folder of the campaign to go on with")
+        result = run_campaign(cells, out, a.jobs, skill, a.max_duration, command, resume=a.resume)
     except LampsError as exc:
         print(f"lamps campaign: error: {exc}", file=sys.stderr)
         return 1

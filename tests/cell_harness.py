@@ -17,6 +17,7 @@ import os
 import selectors
 import signal
 import socket
+import sys
 import threading
 import time
 from pathlib import Path
@@ -121,14 +122,15 @@ class Cell:
     """The sim profile of the compose file as local processes (see the module docstring).
 
     mode : ``lockstep`` or ``realtime``; proxy : route the controller's link to the sim through a
-    :class:`TcpProxy` (:attr:`proxy`); thin : service name -> {key suffix (``robot/state``): samples per
+    :class:`TcpProxy` (:attr:`proxy`); router : run ``lamps router`` (the router identity, the cell's access
+    list) and every service as its client (no listen endpoint, no link between services); thin : service name -> {key suffix (``robot/state``): samples per
     second}: Zenoh's own downsampling on that service's egress drops the samples of that key that come
     sooner than 1 / rate after the last one let through (given to the service as a Zenoh configuration
     file, ``LAMPS_ZENOH_CONFIG_FILE``).
     """
 
     def __init__(self, out: Path, skill: Path, mode: str = "lockstep", proxy: bool = False,
-                 thin: dict[str, dict[str, float]] | None = None) -> None:
+                 thin: dict[str, dict[str, float]] | None = None, router: bool = False) -> None:
         from launch.cli import _plan_cell
 
         self.out = out
@@ -145,6 +147,11 @@ class Cell:
             ctl = self.services["controller"]
             ctl.environment["LAMPS_ZENOH_CONNECT"] = ctl.environment["LAMPS_ZENOH_CONNECT"].replace(
                 f":{sim_port}", f":{self.proxy.port}")
+        self.router_endpoint = f"tls/127.0.0.1:{free_port()}" if router else None
+        if router:
+            for svc in self.services.values():
+                svc.environment.update(LAMPS_ZENOH_MODE="client", LAMPS_ZENOH_CONNECT=self.router_endpoint,
+                                       LAMPS_ZENOH_LISTEN="")
         for name, rates in (thin or {}).items():
             self.services[name].environment["LAMPS_ZENOH_CONFIG_FILE"] = str(self._thinning_file(name, rates))
         self.phases: list[tuple[float, str, str]] = []  # (monotonic time, phase, reason) at each change
@@ -163,9 +170,13 @@ class Cell:
     # -- life ------------------------------------------------------------------------------------------
     def __enter__(self) -> "Cell":
         try:
+            if self.router_endpoint:
+                self._start_router()
+                self.node = ServiceNode("operator", self.operator_settings()).__enter__()
             for name in self.services:
                 self.start(name)
-            self.node = ServiceNode("operator", self.operator_settings()).__enter__()
+            if not self.router_endpoint:
+                self.node = ServiceNode("operator", self.operator_settings()).__enter__()
             self._watching.set()
             self._watcher = threading.Thread(target=self._watch, daemon=True)
             self._watcher.start()
@@ -177,11 +188,26 @@ class Cell:
     def __exit__(self, *exc) -> None:
         self._stop_all()
 
+    def _start_router(self) -> None:
+        from launch.procs import Child, wait_port
+
+        env = {**self.cell.env, "LAMPS_ROBOT_ID": self.cell.robot_id, "LAMPS_ZENOH_ACCESS_CONTROL": "true",
+               "LAMPS_ZENOH_IDENTITY": str(identity_folder(self.cell.credentials, "router"))}
+        child = Child("router", (sys.executable, "-m", "interfaces.cli", "router", "--listen", self.router_endpoint,
+                                 "--status-s", "0"), env,
+                      self.out / "logs")
+        self.children["router"] = child
+        if not wait_port(int(self.router_endpoint.rsplit(":", 1)[1]), child, 60.0):
+            raise AssertionError(f"the router did not come up: {child.last_words()}")
+
     def operator_settings(self, role: str = "operator", **over) -> ZenohSettings:
-        """Settings of a peer joining the cell with ``role``'s identity (connected to every service)."""
+        """Settings of a peer joining the cell with ``role``'s identity (connected to every service; through the
+        router, its client)."""
         endpoints = tuple(e for s in self.services.values() for e in s.listen_endpoints)
         kw = dict(connect=endpoints, robot_id=self.cell.robot_id, access_control=True,
                   identity=str(identity_folder(self.cell.credentials, role)))
+        if self.router_endpoint:
+            kw.update(mode="client", connect=(self.router_endpoint,))
         return ZenohSettings(**{**kw, **over})
 
     def start(self, name: str) -> None:
@@ -192,6 +218,13 @@ class Cell:
         child = Child(name, svc.argv, {**svc.environment, **self.cell.env, "MPLBACKEND": "Agg"},
                       self.out / "logs")
         self.children[name] = child
+        if self.router_endpoint:  # no port of its own: up once its liveliness token shows through the router
+            deadline = time.monotonic() + 120.0
+            while name not in self.node.alive_services(0.5):
+                if child.proc.poll() is not None or time.monotonic() > deadline:
+                    raise AssertionError(f"{name} did not come up through the router: {child.last_words()}")
+                time.sleep(0.2)
+            return
         for port in svc.listen_ports:
             if not wait_port(port, child, 120.0):
                 raise AssertionError(f"{name} did not come up: {child.last_words()}")

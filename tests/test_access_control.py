@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from interfaces.access import ROLES, cell_acl, may_put, writers
+from interfaces.access import IDENTITIES, ROLES, cell_acl, may_put, writers
 from interfaces.certificates import issue, new_ca, write_key_and_cert
 from interfaces.config import ZenohSettings
 from interfaces.credentials import (BRIDGE_CONFIG, CA_FOLDER, identity_files, identity_folder,
@@ -121,7 +121,7 @@ def test_the_access_list_denies_by_default_and_lets_each_role_put_its_own_keys_o
     keys = Keys.for_robot("acl")
     acl = cell_acl(keys)
     assert acl["enabled"] and acl["default_permission"] == "deny"
-    assert [s["cert_common_names"] for s in acl["subjects"]] == [[r] for r in ROLES]
+    assert [s["cert_common_names"] for s in acl["subjects"]] == [[r] for r in IDENTITIES]
     rules = {r["id"]: r for r in acl["rules"]}
     for policy in acl["policies"]:
         (role,) = policy["subjects"]

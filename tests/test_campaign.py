@@ -5,8 +5,10 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -170,12 +172,35 @@ def test_bad_options_are_one_line_errors_before_anything_runs(tmp_path, args, ma
 
 
 @pytest.mark.slow
-def test_a_small_campaign_runs_its_cells_at_once_and_writes_the_table(tmp_path, learned_skill_file):
-    """One seeded one-stain cell on the wall board, fixed and adaptive at once, each a whole cell in lock-step;
+def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the_table(tmp_path, learned_skill_file):
+    """One seeded one-stain cell on the wall board, fixed then adaptive, each a whole cell in lock-step; the
+    campaign is killed while the second runs (the table holds the first), ``--resume`` runs only the second;
     then --summarize tables the campaign again from its folder."""
     out = tmp_path / "campaign"
-    r = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed,adaptive", "--jobs", "2",
-                  "--skill", str(learned_skill_file), "--out", str(out))
+    args = ["--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed,adaptive", "--jobs", "1",
+            "--skill", str(learned_skill_file), "--out", str(out)]
+    proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "campaign", *args], cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+                            env={**os.environ, "MPLBACKEND": "Agg"})
+    try:
+        deadline = time.monotonic() + 600
+        while not (out / "campaign.json").is_file() or not (out / "cells" / "wall-s0-n1-adaptive").is_dir():
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[0][-2000:]
+            time.sleep(0.5)
+        time.sleep(2.0)  # the second cell under way
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        printed = proc.communicate()[0]
+    assert "[1/2 done, 0 failed" in printed and "s left] wall-s0-n1:" in printed, printed[-2000:]
+    half = json.loads((out / "campaign.json").read_text())
+    assert [c["name"] for c in half["cells"]] == ["wall-s0-n1"]  # what it finished, kept
+    assert not (out / "cells" / "wall-s0-n1-adaptive" / "report.json").exists()
+    first = (out / "cells" / "wall-s0-n1" / "report.json").stat().st_mtime_ns
+    again = _campaign(*args)
+    assert again.returncode == 1 and "exists: a campaign folder is never overwritten" in again.stderr, again.stderr
+    r = _campaign(*args, "--resume")
+    assert "resuming: 1 of 2 cells already have a report, 1 to run" in r.stdout, r.stdout[-2000:]
+    assert (out / "cells" / "wall-s0-n1" / "report.json").stat().st_mtime_ns == first  # not run again
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     result = json.loads((out / "campaign.json").read_text())
     assert [c["name"] for c in result["cells"]] == ["wall-s0-n1", "wall-s0-n1-adaptive"]
