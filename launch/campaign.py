@@ -9,7 +9,8 @@ the campaign holds; each seed runs once per ``--wiping`` mode (``fixed``: the
 periodic MP set once per stain; ``adaptive``: shaped to the stain and
 following its ink, ``[controller.planner] adaptive``). Each cell is ``lamps up`` in lock-step (deterministic for
 its seed) with the skill learned once, in its own run folder under
-``OUT/cells/``; up to ``--jobs`` run at once, each on its own ports.
+``OUT/cells/``; up to ``--jobs`` run at once, each on its own ports (or, with
+``--ray [ADDRESS]``, as tasks on a Ray cluster: :mod:`launch.campaign_ray`).
 
 From each cell's ``report.json``: outcome, dirt removed, robot time (to the
 DONE the run ended in, ``job_end_s``; the cell time, ``sim_time_s``, also
@@ -175,11 +176,25 @@ def _write_outputs(out: Path, rows: list[dict[str, Any]], command: str, extra: d
     return result
 
 
+def _local_cells(todo: list[int], cells: list[Cell], skill: Path, out: Path, max_duration_s: float, port_base: int,
+                 jobs: int):
+    """(k, report or None, run folder, why) of each cell of ``todo`` as it finishes, ``jobs`` at once here."""
+    with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
+        futures = {pool.submit(_run_cell, k, cells[k], skill, out, max_duration_s, port_base): k for k in todo}
+        for fut in concurrent.futures.as_completed(futures):
+            yield (futures[fut], *fut.result())
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)  # progress seen as it happens, also through a pipe or into a log
+
+
 def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, max_duration_s: float,
-                 command: str, echo=print, resume: bool = False) -> dict[str, Any]:
+                 command: str, echo=_say, resume: bool = False, ray: str | None = None) -> dict[str, Any]:
     """Run every cell (``jobs`` at once), write campaign.json, .md and .png into ``out`` after each cell (the table
     grows as cells finish); returns the json. ``resume``: the cells whose run folder holds a report are taken as
-    they are, a cell folder without one (a campaign killed while it ran) is run again, the rest run."""
+    they are, a cell folder without one (a campaign killed while it ran) is run again, the rest run. ``ray``:
+    run the cells as tasks on that Ray cluster (``local``: one started here), :mod:`launch.campaign_ray`."""
     out.mkdir(parents=True, exist_ok=True)
     stains, bounds, felt, v_plan, pad = _bounds(cells)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
@@ -203,24 +218,26 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
         echo(f"resuming: {len(cells) - len(todo)} of {len(cells)} cells already have a report, {len(todo)} to run")
     t0 = time.monotonic()
     finished = failed = 0
-    with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-        port_base = random.choice(PORT_BASES)
-        futures = {pool.submit(_run_cell, k, cells[k], skill, out, max_duration_s, port_base): k for k in todo}
-        for fut in concurrent.futures.as_completed(futures):
-            k = futures[fut]
-            report, run_dir, why = fut.result()
-            rows[k] = row_of(cells[k], report, bounds[cells[k]], run_dir, why, stains[cells[k]], felt, v_plan)
-            r = rows[k]
-            finished += 1
-            failed += not r["success"]
-            _write_outputs(out, [x for x in rows if x is not None], command, extra)
-            elapsed = time.monotonic() - t0
-            left = (len(todo) - finished) * elapsed / finished
-            echo(f"[{sum(x is not None for x in rows)}/{len(cells)} done, {failed} failed, {elapsed:.0f} s, "
-                 f"~{left:.0f} s left] {cells[k].name}: "
-                 + (f"no report ({why})" if report is None else
-                    f"{r['outcome']}, {r['dirt_removed']:.1%} removed in {r['robot_time_s']:.1f} s "
-                    f"({r['time_over_cell_bound']:.2f}x the cell bound)"))
+    port_base = random.choice(PORT_BASES)
+    if ray is not None:
+        from .campaign_ray import ray_cells
+
+        results = ray_cells(todo, cells, skill, out, max_duration_s, port_base, ray, jobs)
+    else:
+        results = _local_cells(todo, cells, skill, out, max_duration_s, port_base, jobs)
+    for k, report, run_dir, why in results:
+        rows[k] = row_of(cells[k], report, bounds[cells[k]], run_dir, why, stains[cells[k]], felt, v_plan)
+        r = rows[k]
+        finished += 1
+        failed += not r["success"]
+        _write_outputs(out, [x for x in rows if x is not None], command, extra)
+        elapsed = time.monotonic() - t0
+        left = (len(todo) - finished) * elapsed / finished
+        echo(f"[{sum(x is not None for x in rows)}/{len(cells)} done, {failed} failed, {elapsed:.0f} s, "
+             f"~{left:.0f} s left] {cells[k].name}: "
+             + (f"no report ({why})" if report is None else
+                f"{r['outcome']}, {r['dirt_removed']:.1%} removed in {r['robot_time_s']:.1f} s "
+                f"({r['time_over_cell_bound']:.2f}x the cell bound)"))
     done = [r for r in rows if r is not None]
     return _write_outputs(out, done, command, extra)
 
@@ -267,6 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--skill", default=None, help="skill file (default: learn the bundled demo once)")
     ap.add_argument("--max-duration", type=float, default=600.0, help="give a cell up after S s wall (default 600)")
     ap.add_argument("--out", default=None, help="campaign folder (default runs/campaign-<time>)")
+    ap.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                    help="run the cells as Ray tasks on the cluster at ADDRESS (ray start --head prints it; 'auto': "
+                         "the local one); without ADDRESS a local cluster of --jobs CPUs (needs lamps[ray])")
     ap.add_argument("--resume", action="store_true",
                     help="--out is a campaign that was stopped: keep the cells that left a report, run the rest")
     ap.add_argument("--summarize", nargs="+", metavar="DIR", default=None,
@@ -311,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
         command = "lamps campaign " + " ".join(argv if argv is not None else sys.argv[1:])
         if a.resume and not (a.out and Path(a.out).is_dir()):
             raise CampaignError("--resume needs --out, the folder of the campaign to go on with")
-        result = run_campaign(cells, out, a.jobs, skill, a.max_duration, command, resume=a.resume)
+        result = run_campaign(cells, out, a.jobs, skill, a.max_duration, command, resume=a.resume, ray=a.ray)
     except LampsError as exc:
         print(f"lamps campaign: error: {exc}", file=sys.stderr)
         return 1

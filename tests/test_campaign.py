@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import secrets
 import signal
 import subprocess
 import sys
@@ -18,6 +19,8 @@ from launch.campaign import cell_stains, felt_model
 from launch.campaign_bounds import cell_bound_s, felt_path_m, lower_bound_s, mst_length_m
 from launch.campaign_cells import CampaignError, Cell, cells_of, parse_range
 from launch.campaign_table import row_of, summarize
+
+from .zenoh_helpers import free_port
 
 REPO = Path(__file__).resolve().parent.parent
 TILTED = REPO / "config" / "boards" / "tilted.toml"
@@ -157,9 +160,10 @@ def test_each_seed_runs_once_per_wiping_mode_under_its_own_name():
         cells_of([0], [1], ["wall"], ("sloppy",))
 
 
-def _campaign(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess:
+def _campaign(*args: str, timeout: float = 900.0, env: dict | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "interfaces.cli", "campaign", *args], cwd=REPO,
-                          capture_output=True, text=True, timeout=timeout, env={**os.environ, "MPLBACKEND": "Agg"})
+                          capture_output=True, text=True, timeout=timeout,
+                          env={**(env or os.environ), "MPLBACKEND": "Agg"})
 
 
 @pytest.mark.parametrize("args, match", [(["--seeds", "3-1"], "--seeds '3-1'"), (["--stains", "0-2"], "at least one"),
@@ -221,3 +225,30 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     assert joint["summary"] == result["summary"] and joint["from"] == [str(out)]
     twice = _campaign("--summarize", str(out), str(out), "--out", str(tmp_path / "twice"))
     assert twice.returncode == 1 and "share cells (wall-s0-n1)" in twice.stderr
+
+    # the same cells as tasks on a Ray cluster started with `ray start --head`: the same results per cell
+    port = free_port()
+    ray_bin = str(Path(sys.executable).parent / "ray")
+    # token authentication on, the token given to the cluster and the campaign (Ray's RAY_AUTH_TOKEN)
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token",
+           "RAY_AUTH_TOKEN": secrets.token_hex(16)}
+    start = subprocess.run([ray_bin, "start", "--head", "--num-cpus", "2", "--port", str(port), "--node-ip-address",
+                            "127.0.0.1", "--include-dashboard", "false", "--disable-usage-stats"],
+                           capture_output=True, text=True, env=env, timeout=180)
+    assert start.returncode == 0, start.stderr[-2000:]
+    try:
+        on_ray = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed,adaptive",
+                           "--jobs", "2", "--skill", str(learned_skill_file), "--out", str(tmp_path / "on-ray"),
+                           "--ray", f"127.0.0.1:{port}", env=env)
+    finally:
+        subprocess.run([ray_bin, "stop", "--force"], capture_output=True, env=env, timeout=120)
+    assert on_ray.returncode == 0, on_ray.stdout[-2000:] + on_ray.stderr[-2000:]
+    ray_cells = json.loads((tmp_path / "on-ray" / "campaign.json").read_text())["cells"]
+    local = {c["name"]: c for c in result["cells"]}
+    for c in ray_cells:
+        want = local[c["name"]]
+        assert (c["outcome"], c["faults"]) == (want["outcome"], want["faults"]), (c, want)
+        # lock-step fixes the robot's clock, not when perception's frames land: the robot time spreads a little
+        assert abs(c["dirt_removed"] - want["dirt_removed"]) < 0.005, (c, want)
+        assert abs(c["robot_time_s"] - want["robot_time_s"]) < 0.2 * want["robot_time_s"], (c, want)
+        assert (Path(c["run_dir"]) / "report.json").is_file()
