@@ -55,8 +55,8 @@ def main() -> int:
                 ("Ray, 2 workers", 2, True)]
         rows = []
         base_cells = None
-        for name, jobs, ray in runs:
-            wall, cells = campaign(tmp / name.split(",")[0].replace(" ", "-"), a.seeds, skill, jobs, ray, env)
+        for i, (name, jobs, ray) in enumerate(runs):
+            wall, cells = campaign(tmp / f"campaign-{i}", a.seeds, skill, jobs, ray, env)
             same = None
             if base_cells is None:
                 base_cells = {c["name"]: c for c in cells}
