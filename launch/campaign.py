@@ -66,12 +66,9 @@ from lampskit.errors import LampsError
 
 from .campaign_bounds import lower_bound_s
 from .campaign_cells import CampaignError, Cell, cells_of, parse_range
+from .campaign_run import PORT_BASES, run_cell
 from .campaign_table import CLEAN_SHARE, markdown, plot, row_of, summarize
 
-#: Cell k listens on ports from base + (k mod PORT_SLOTS) * PORT_STRIDE (a cell uses fewer than 10), base one of
-#: PORT_BASES picked per campaign (ports a campaign just closed stay unbindable for a minute); a busy port moves
-#: the cell PORT_SLOTS * PORT_STRIDE up. All below the kernel's ephemeral range (32768).
-PORT_BASES, PORT_SLOTS, PORT_STRIDE = (20000, 23000, 26000), 100, 10
 BOARD_NAMES = ("wall", "table", "vertical", "horizontal")
 log = logging.getLogger(__name__)
 
@@ -127,30 +124,6 @@ def _learn_skill(out: Path) -> Path:
     return learn / "skill.json"
 
 
-def _run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
-              port_base: int) -> tuple[dict | None, str, str]:
-    """``lamps up`` for one cell: (its report or None, its run folder, why there is none)."""
-    run_dir = out / "cells" / cell.name
-    base = port_base + (k % PORT_SLOTS) * PORT_STRIDE
-    why = ""
-    for attempt in range(3):  # a port taken by something else: again on another range
-        argv = [sys.executable, "-m", "interfaces.cli", "up", "--seed", str(cell.seed), "--stains", str(cell.stains),
-                "--board", cell.board, "--skill", str(skill), "--out", str(run_dir), "--mode", "lockstep",
-                "--port-base", str(base + attempt * PORT_SLOTS * PORT_STRIDE), "--max-duration", str(max_duration_s),
-                "-q"]
-        log.info("cell %s: %s", cell.name, " ".join(argv[2:]))
-        env = {**os.environ, "MPLBACKEND": "Agg",
-               "LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true" if cell.wiping == "adaptive" else "false"}
-        r = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=max_duration_s + 120)
-        report = run_dir / "report.json"
-        if report.is_file():
-            return json.loads(report.read_text()), str(run_dir), ""
-        why = (r.stderr.strip().splitlines() or [f"exit {r.returncode}"])[-1]
-        if "already in use" not in why:
-            break
-    return None, str(run_dir), why
-
-
 def _bounds(cells: list[Cell]) -> tuple[dict[Cell, tuple], dict[Cell, float], dict[str, float], float, float]:
     """Per cell its stains (areas, centres) and lower bound; the felt model; the planner's speed bound and the
     pad's width."""
@@ -180,7 +153,7 @@ def _local_cells(todo: list[int], cells: list[Cell], skill: Path, out: Path, max
                  jobs: int):
     """(k, report or None, run folder, why) of each cell of ``todo`` as it finishes, ``jobs`` at once here."""
     with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-        futures = {pool.submit(_run_cell, k, cells[k], skill, out, max_duration_s, port_base): k for k in todo}
+        futures = {pool.submit(run_cell, k, cells[k], skill, out, max_duration_s, port_base): k for k in todo}
         for fut in concurrent.futures.as_completed(futures):
             yield (futures[fut], *fut.result())
 

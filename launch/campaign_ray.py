@@ -1,7 +1,7 @@
 """A campaign's cells as Ray tasks: ``lamps campaign --ray [ADDRESS]``, one whole cell per task, on a Ray cluster.
 
 No scheduler of our own: each cell is a Ray task (one CPU) that runs
-:func:`launch.campaign._run_cell` (``lamps up`` in lock-step on ports of
+:func:`launch.campaign_run.run_cell` (``lamps up`` in lock-step on ports of
 its own) on whichever node Ray picks and returns the cell's report. The
 skill travels with the task (its bytes, written on the worker), the
 report comes back with the result and is written into the campaign
@@ -35,7 +35,7 @@ def _cell_task(k: int, cell: Cell, skill_bytes: bytes, out: str, max_duration_s:
     """On a Ray worker: the skill written locally, the cell run as the local campaign runs it."""
     import shutil
 
-    from launch.campaign import _run_cell
+    from launch.campaign_run import run_cell
 
     run_dir = Path(out) / "cells" / cell.name
     if (run_dir / "report.json").is_file():  # a retry after the worker died once the cell had finished
@@ -45,7 +45,7 @@ def _cell_task(k: int, cell: Cell, skill_bytes: bytes, out: str, max_duration_s:
     with tempfile.TemporaryDirectory(prefix="lamps-skill-") as tmp:
         skill = Path(tmp) / "skill.json"
         skill.write_bytes(skill_bytes)
-        return _run_cell(k, cell, skill, Path(out), max_duration_s, port_base)
+        return run_cell(k, cell, skill, Path(out), max_duration_s, port_base)
 
 
 def ray_cells(todo: list[int], cells: list[Cell], skill: Path, out: Path, max_duration_s: float, port_base: int,

@@ -52,6 +52,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="report which corner markers IMAGE shows, the board's size and pose, and draw them; exit 1 "
                         "if the board is not found")
     p.add_argument("--board-image", metavar="FILE", help="where --check-board draws (default IMAGE.board.png)")
+    p.add_argument("--fit-inks", metavar="IMAGE", nargs="+",
+                   help="fit each ink's colour from photographs of the board whose drawings --masks outlines; print "
+                        "the [perception.ink] inks line and exit")
+    p.add_argument("--masks", metavar="FILE",
+                   help="for --fit-inks: a TOML of [<image stem>] stains = [{ ink, polygon_m }] (the format of "
+                        "tests/fixtures/whiteboards/stains.toml)")
     p.add_argument("--calibrate", metavar="DIR",
                    help="calibrate the camera from the images of a chessboard in DIR (OpenCV's calibration), write "
                         "a ROS camera_info YAML (--calibration-out) and exit")
@@ -143,6 +149,16 @@ def main(argv: list[str] | None = None) -> int:
     except (LampsError, OSError) as exc:
         print(f"lamps perception: error: {exc}", file=sys.stderr)
         return 1
+    if a.fit_inks:
+        from .fit_inks import main_fit_inks
+
+        if source is not None:
+            source.close()
+        if not a.masks:
+            print("lamps perception: error: --fit-inks needs --masks FILE (the drawings' outlines and inks)",
+                  file=sys.stderr)
+            return 1
+        return main_fit_inks(a.fit_inks, a.masks, params)
     if a.check_board:
         from .check_board import main_check_board
 

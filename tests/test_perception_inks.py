@@ -95,6 +95,43 @@ def test_a_palette_is_checked_naming_the_bad_ink():
         InkParams(clean_level=0.4)
 
 
+def test_a_palette_fitted_from_two_photographs_scores_as_well_on_the_third(params):
+    """``--fit-inks``: each ink's colour from the labelled drawings of two photographs; on the third (not used to
+    fit), every ink it sees matches its masks at IoU >= 0.7 and the false area stays under 0.5 %."""
+    from dataclasses import replace
+
+    from perception.fit_inks import fit_palette, stroke_absorptions
+
+    photos = {n: cv2.imread(str(PHOTOS / f"{n}.jpg")) for n in NAMES}
+    samples = {n: stroke_absorptions(photos[n], params, LABELS[n]["stains"]) for n in NAMES}
+    for held_out in NAMES:
+        fitted = fit_palette([samples[n] for n in NAMES if n != held_out], params.ink.board_rgb)
+        assert sorted(fitted) == ["blue", "brown", "green", "purple", "red"]
+        ink = replace(params.ink, inks={**params.ink.inks, **fitted})
+        s = score_photo(photos[held_out], replace(params, ink=ink), LABELS[held_out]["stains"])
+        assert s.false_area < 0.005, (held_out, s.false_area)
+        for score in s.scores:
+            assert score.seen < 0.5 or score.iou >= 0.7, (held_out, score, fitted)
+
+
+def test_fit_inks_on_the_command_line_prints_the_palette_and_refuses_bad_input(tmp_path, capsys):
+    from perception.cli import main as perception_main
+
+    images = [str(PHOTOS / f"{n}.jpg") for n in ("straight", "highangle")]
+    base = ["--config", str(PHOTOS / "board.toml"), "--no-zenoh", "--source", f"folder:{PHOTOS}"]
+    assert perception_main([*base, "--fit-inks", *images, "--masks", str(PHOTOS / "stains.toml")]) == 0
+    out = capsys.readouterr().out
+    line = out.strip().splitlines()[-1]
+    assert line.startswith("inks = { red = [") and "purple = [" in line, out
+    assert InkParams(inks=tomllib.loads(line)["inks"]).ink_names == ("red", "blue", "green", "purple", "brown")
+    assert perception_main([*base, "--fit-inks", *images]) == 1
+    assert "needs --masks" in capsys.readouterr().err
+    bad = tmp_path / "masks.toml"
+    bad.write_text("[other]\nstains = []\n")
+    assert perception_main([*base, "--fit-inks", images[0], "--masks", str(bad)]) == 1
+    assert "has no [straight] stains" in capsys.readouterr().err
+
+
 # -- a wipe made from a real photograph --------------------------------------------------------------------------
 
 def _run(params, scenes, rng) -> list:
