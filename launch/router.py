@@ -13,8 +13,8 @@ their own access list, which lets in the router's relayed puts.
 
 A service that must not pay the extra hop (the controller and the robot
 side at 1 kHz) can stay a peer with a direct link to its partner and a
-link to the router for the rest. Runs until SIGTERM or Ctrl-C; prints the
-sessions it routes for every ``--status-s`` seconds (0: never).
+link to the router for the rest. Runs until SIGTERM or Ctrl-C; with ``-v`` logs
+the sessions it routes every ``--status-s`` seconds (0: never).
 """
 
 from __future__ import annotations
@@ -46,10 +46,12 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(prog="lamps router", description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", help="TOML configuration ([zenoh]: identity, access_control, robot_id, ...)")
-    ap.add_argument("--status-s", type=float, default=10.0, help="print the sessions routed this often (0: never)")
+    ap.add_argument("--status-s", type=float, default=10.0, help="with -v: log the sessions routed this often (0: never)")
+    ap.add_argument("-v", "--verbose", action="store_true", help="log what the router does (its sessions, its settings)")
     add_zenoh_options(ap)
     a = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s router %(levelname)s %(message)s")
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
+                        format="%(asctime)s router %(levelname)s %(message)s")
     try:
         cfg = load_config(a.config)
         settings = router_settings(zenoh_with_options(cfg.zenoh, a), tuple(a.listen or ()))
