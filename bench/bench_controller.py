@@ -28,13 +28,15 @@ Usage: .venv/bin/python bench/bench_controller.py [--quick] [--json OUT]
    Run twice: the loops' threads SCHED_FIFO with locked memory (the default), then the baseline with
    both off (``LAMPS_RT_PRIORITY=off LAMPS_MLOCK=off``). Then the floor: the same sim against
    ``bench/minimal_controller.py`` (the controller's set-up, Zenoh path and loop with a tick that answers
-   zeros at once), the same duration; the ratios say what the controller's tick adds.
+   zeros at once), the same duration; the ratios say what the controller's tick adds. And a third time
+   through ``lamps router`` (a process of its own; sim and controller its clients, no link between them):
+   every state and command takes one hop more, the ratios to the mesh run are printed.
 3. Lock-step real-time factor of the whole closed loop: the same two
    processes in ``--mode lockstep`` (each sim step waits for the command
    answering its state) until the controller reports DONE (at most 120 s).
    Simulated seconds per wall second (from ``sim/truth``'s robot clock),
    ticks per wall second, and the controller's loop period (one round trip)
-   p50 / p99. Baseline: 1.0 is real time.
+   p50 / p99. Baseline: 1.0 is real time. Then the same through ``lamps router``.
 """
 
 from __future__ import annotations
@@ -159,10 +161,13 @@ def bench_law(core: ControllerCore, states: list[tuple[np.ndarray, np.ndarray]])
 #: The baseline of the real-time run: the loops' threads left under the fair scheduler (nice -10 still applies).
 NO_RT = {"LAMPS_RT_PRIORITY": "off", "LAMPS_MLOCK": "off"}
 NO_RT_LABEL = "LAMPS_RT_PRIORITY=off LAMPS_MLOCK=off"
+#: The same two processes as clients of ``lamps router`` (one process more, plain TCP like the mesh runs).
+ROUTER_LABEL = "through lamps router (sim and controller its clients)"
 
 
-def bench_realtime(duration_s: float, robot: str = "sim", env: dict[str, str] | None = None) -> dict:
-    with sim_and_controller("realtime", robot, env) as (node, sim, ctl, refusals):
+def bench_realtime(duration_s: float, robot: str = "sim", env: dict[str, str] | None = None,
+                   router: bool = False) -> dict:
+    with sim_and_controller("realtime", robot, env, router) as (node, sim, ctl, refusals):
         status = node.latest(node.keys.controller_status, ControllerStatus)
         sim_status = node.latest(node.keys.sim_status, ServiceStatus)
         robot_status = node.latest(node.keys.robot_status, ServiceStatus)
@@ -259,8 +264,8 @@ def bench_minimal(duration_s: float) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- 3. lock step
-def bench_lockstep(timeout_s: float, robot: str = "sim") -> dict:
-    with sim_and_controller("lockstep", robot) as (node, sim, ctl, refusals):
+def bench_lockstep(timeout_s: float, robot: str = "sim", router: bool = False) -> dict:
+    with sim_and_controller("lockstep", robot, router=router) as (node, sim, ctl, refusals):
         status = node.latest(node.keys.controller_status, ControllerStatus)
         truth = node.latest(node.keys.sim_truth, SimTruth)
         samples: list[ControllerStatus] = []
@@ -309,6 +314,25 @@ def _fmt(v, spec: str = ".0f") -> str:
     return "n/a" if v is None else format(v, spec)
 
 
+def _ratio(a: dict, b: dict, key: str | None) -> str:
+    """``a[key] / b[key]`` as ``1.23x`` ("-" without a key, "n/a" when b's is 0)."""
+    if key is None:
+        return "-"
+    return f"{a[key] / b[key]:.2f}x" if b[key] else "n/a"
+
+
+def _lockstep_rows(lk: dict) -> list[tuple[str, str]]:
+    return [("ended in phase", lk["phase"] + ("" if lk["reached_done"] else " (120 s cap, not DONE)")
+             + (f" ({lk['reason']})" if lk["reason"] else "")),
+            ("simulated s / wall s (first truth seen to the end)", f"{lk['sim_s']:.1f} / {lk['wall_s']:.1f}"),
+            ("real-time factor", f"{lk['x_realtime']:.2f}"),
+            ("ticks per wall second", f"{lk['ticks_per_s']:.0f}"),
+            ("controller period (round trip) p50, median of windows us", f"{lk['period_p50_us_median']:.0f}"),
+            ("controller period (round trip) p99, max of windows us", f"{lk['period_p99_us_max']:.0f}"),
+            ("controller period p50 / p99 at the end us",
+             f"{lk['period_p50_us_final']:.0f} / {lk['period_p99_us_final']:.0f}")]
+
+
 def print_report(res: dict, cmd: str) -> None:
     print(f"Controller benchmarks ({res['machine']})\n")
     tk = res["tick"]
@@ -334,9 +358,10 @@ def print_report(res: dict, cmd: str) -> None:
           "\n|---|---|---|---|")
     print(f"| whole wipe, {tk['wall_s']:.1f} s wall | {tk['loop_ticks_per_s']:.0f} | {tk['loop_x_realtime']:.2f} | "
           f"{', '.join(f'{r:.1%}' for r in tk['remaining'])} |")
-    rt, base = res["realtime"], res["realtime_no_rt"]
-    print(f"\n| real-time mode over Zenoh, {rt['duration_s']:.0f} s each ({rt['samples']} / {base['samples']} status "
-          f"samples) | loop threads SCHED_FIFO, memory locked (default) | baseline: {NO_RT_LABEL} |\n|---|---|---|")
+    rt, base, via = res["realtime"], res["realtime_no_rt"], res["realtime_router"]
+    print(f"\n| real-time mode over Zenoh, {rt['duration_s']:.0f} s each ({rt['samples']} / {base['samples']} / "
+          f"{via['samples']} status samples) | loop threads SCHED_FIFO, memory locked (default) | baseline: "
+          f"{NO_RT_LABEL} | {ROUTER_LABEL} |\n|---|---|---|---|")
 
     def rows(rt: dict) -> list[tuple[str, str]]:
         c = rt["counters"]
@@ -358,8 +383,14 @@ def print_report(res: dict, cmd: str) -> None:
                 ("sim overruns / steps", f"{_fmt(rt['sim_overruns'], 'd')} / {_fmt(rt['sim_ticks'], 'd')}"),
                 ("sim stale_command_brakes", _fmt(rt["stale_command_brakes"], "d"))]
 
-    for (label, v), (_, b) in zip(rows(rt), rows(base)):
-        print(f"| {label} | {v} | {b} |")
+    for (label, v), (_, b), (_, r) in zip(rows(rt), rows(base), rows(via)):
+        print(f"| {label} | {v} | {b} | {r} |")
+    print("\n| through lamps router / the mesh (first column), same run | real time | lock-step |\n|---|---|---|")
+    for label, rk, lk in (("period (round trip) p50", "period_p50_us_median", "period_p50_us_median"),
+                          ("period p99", "period_p99_us_max", "period_p99_us_max"),
+                          ("states unanswered per 10,000", "overruns_per_10k", None),
+                          ("ticks per wall second", None, "ticks_per_s")):
+        print(f"| {label} | {_ratio(via, rt, rk)} | {_ratio(res['lockstep_router'], res['lockstep'], lk)} |")
     mn = res["minimal"]
     print(f"\n| the floor: the same loop with a minimal tick (bench/minimal_controller.py, zeros answered at once), "
           f"{mn['ticks']} states | value | the controller above / floor |\n|---|---|---|")
@@ -374,20 +405,9 @@ def print_report(res: dict, cmd: str) -> None:
           f"{_fmt(mn['sim_overruns_per_10k'], '.1f')} / {_fmt(mn['stale_command_brakes'], 'd')} | - |")
     print("\nreal-time phases (s since start): " + ", ".join(
         f"{t:.1f} {ph}" + (f" ({why})" if why else "") for t, ph, why in rt["timeline"]))
-    lk = res["lockstep"]
-    print("\n| lock-step closed loop over Zenoh | value |\n|---|---|")
-    rows = [("ended in phase", lk["phase"] + ("" if lk["reached_done"] else " (120 s cap, not DONE)")
-             + (f" ({lk['reason']})" if lk["reason"] else "")),
-            ((f"simulated s / wall s (from robot time {lk['sim_time_total_s'] - lk['sim_s']:.1f} s, first truth "
-              f"seen, to {lk['sim_time_total_s']:.1f} s)"), f"{lk['sim_s']:.1f} / {lk['wall_s']:.1f}"),
-            ("real-time factor", f"{lk['x_realtime']:.2f}"),
-            ("ticks per wall second", f"{lk['ticks_per_s']:.0f}"),
-            ("controller period (round trip) p50, median of windows us", f"{lk['period_p50_us_median']:.0f}"),
-            ("controller period (round trip) p99, max of windows us", f"{lk['period_p99_us_max']:.0f}"),
-            ("controller period p50 / p99 at the end us",
-             f"{lk['period_p50_us_final']:.0f} / {lk['period_p99_us_final']:.0f}")]
-    for label, v in rows:
-        print(f"| {label} | {v} |")
+    print(f"\n| lock-step closed loop over Zenoh | the mesh | {ROUTER_LABEL} |\n|---|---|---|")
+    for (label, v), (_, r) in zip(_lockstep_rows(res["lockstep"]), _lockstep_rows(res["lockstep_router"])):
+        print(f"| {label} | {v} | {r} |")
     print(f"\ncpu count {os.cpu_count()}, Python {platform.python_version()}, {platform.machine()}")
     print(f"reproduce: {cmd}")
 
@@ -404,8 +424,10 @@ def main() -> int:
         res["tick"] = bench_tick(skill)
         res["realtime"] = bench_realtime(10.0 if a.quick else 60.0)
         res["realtime_no_rt"] = bench_realtime(10.0 if a.quick else 60.0, env=NO_RT)
+        res["realtime_router"] = bench_realtime(10.0 if a.quick else 60.0, router=True)
         res["minimal"] = bench_minimal(10.0 if a.quick else 60.0)
         res["lockstep"] = bench_lockstep(120.0)
+        res["lockstep_router"] = bench_lockstep(120.0, router=True)
     except BenchError as exc:
         print(f"bench_controller: {exc}", file=sys.stderr)
         return 1

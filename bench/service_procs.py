@@ -88,13 +88,44 @@ def _robot_side(robot: str, mode: str, p1: int, rid: str, bridge: int) -> list[t
                        "--robot-id", rid], "robot")]
 
 
+def _wait_listening(proc: Proc, port: int, timeout_s: float = 60.0) -> None:
+    """Return once ``proc`` accepts TCP connections on ``port``; BenchError when it exits or times out."""
+    end = time.monotonic() + timeout_s
+    while True:
+        proc.check()
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        if time.monotonic() > end:
+            raise BenchError(f"{proc.name} did not listen on {port} within {timeout_s:.0f} s:\n{proc.output()}")
+        time.sleep(0.1)
+
+
+def _as_clients(side: list[tuple[str, list[str], str]], ctl_cmd: list[str], router: str):
+    """The robot side and the controller as clients of the router at ``router`` (each ``--listen``/``--connect``
+    pair replaced by one ``--connect`` to it): no link between them, every sample goes through it."""
+    def client(cmd: list[str]) -> list[str]:
+        out, i = [], 0
+        while i < len(cmd):
+            if cmd[i] in ("--listen", "--connect"):
+                i += 2
+                continue
+            out.append(cmd[i])
+            i += 1
+        return [*out, "--connect", router]
+
+    return [(n, client(c), a) for n, c, a in side], client(ctl_cmd)
+
+
 @contextlib.contextmanager
-def sim_and_controller(mode: str, robot: str = "sim", env: dict[str, str] | None = None):
+def sim_and_controller(mode: str, robot: str = "sim", env: dict[str, str] | None = None, router: bool = False):
     """(node, robot-side Proc, controller Proc, refusals) once all are alive; all stopped on exit. env : added
     to every process's environment.
 
     robot ``"sim"``: ``lamps sim``; ``"lbr"``: ``lamps lbr-peer`` (the arm behind lbr_fri_ros2_stack's
     CDR keys) and ``lamps robot --backend lbr --arm`` in front of it. The controller sees ``robot/*`` alike.
+    router : ``lamps router`` as a process of its own (plain TCP, as the peers here), the robot side and the
+    controller its clients (``LAMPS_ZENOH_MODE=client``, no listen endpoint): every state and command one hop more.
     """
     p1, p2, bridge = free_port(), free_port(), free_port()
     rid = f"bench{p1}"
@@ -106,14 +137,26 @@ def sim_and_controller(mode: str, robot: str = "sim", env: dict[str, str] | None
         procs = []
         stack.callback(lambda: [p.stop() for p in reversed(procs)])
         side = _robot_side(robot, mode, p1, rid, bridge)
+        if router:
+            if robot != "sim":
+                raise BenchError("through the router: the sim only (the lbr peer's link to its adapter is direct)")
+            ends = (free_port(),)
+            side, ctl_cmd = _as_clients(side, ctl_cmd, f"tcp/127.0.0.1:{ends[0]}")
+            env = dict(env or {}, LAMPS_ZENOH_MODE="client")
+            procs.append(Proc("router", [sys.executable, "-m", "interfaces.cli", "router", "--listen",
+                                         f"tcp/127.0.0.1:{ends[0]}", "--status-s", "0", "--robot-id", rid],
+                              Path(tmp)))
+            _wait_listening(procs[-1], ends[0])
         side_env = dict(env or {}, **(LBR_TORQUE_SETUP if robot != "sim" else {}))
         for name, cmd, _ in side:
             procs.append(Proc(name, cmd, Path(tmp), side_env))
             time.sleep(0.5)  # let each listener come up before the next one dials it
         n_side = len(procs)
         procs.append(Proc("controller", ctl_cmd, Path(tmp), env))
-        ends = (p1, p2) if robot == "sim" else (p1, p2, bridge)  # the peer has the truth and the sim status
-        settings = ZenohSettings(connect=tuple(f"tcp/127.0.0.1:{p}" for p in ends), robot_id=rid)
+        if not router:
+            ends = (p1, p2) if robot == "sim" else (p1, p2, bridge)  # the peer has the truth and the sim status
+        settings = ZenohSettings(connect=tuple(f"tcp/127.0.0.1:{p}" for p in ends), robot_id=rid,
+                                 mode="client" if router else "peer")
         node = stack.enter_context(ServiceNode("bench", settings))
         want = {alive for _, _, alive in side} | {"controller"}
         end = time.monotonic() + 60.0
@@ -127,7 +170,7 @@ def sim_and_controller(mode: str, robot: str = "sim", env: dict[str, str] | None
                 ctl.stop()
                 procs.append(Proc(f"controller{len(refusals)}", ctl_cmd, Path(tmp), env))
                 continue
-            for p in (*procs[:n_side], procs[-1]):
+            for p in (*procs[:n_side], procs[-1]):  # the router too
                 p.check()
             if want <= node.alive_services(0.5):
                 break
