@@ -8,8 +8,17 @@ The endpoints come from ``--endpoint`` or the service's own
 ``LAMPS_ZENOH_LISTEN`` (the probe runs in the service's container, with its
 environment); ``0.0.0.0`` is probed on ``127.0.0.1``.
 
-Exit 0 ready, 1 not ready (naming the endpoint and why), 2 nothing to probe.
-Pure standard library: it runs every few seconds in every container.
+A client of a router (``LAMPS_ZENOH_MODE=client``, no listen endpoint, the
+compose router override ``docker-compose.router.yml``) has no port to probe:
+``--alive NAME`` asks Zenoh instead whether NAME's liveliness token
+(``<prefix>/alive/NAME``, what each service declares once its session is up)
+is visible, with the service's own Zenoh settings (its environment: the
+router as the only endpoint, its identity, its access list) but no listen
+endpoint: the answer comes through the router, as every other sample does.
+
+Exit 0 ready, 1 not ready (naming the endpoint, or the token, and why), 2
+nothing to probe. The port probe is pure standard library (it runs every
+few seconds in every container); ``--alive`` imports Zenoh only when asked.
 """
 
 from __future__ import annotations
@@ -50,13 +59,50 @@ def accepts(host: str, port: int, timeout_s: float) -> str | None:
         return exc.strerror or type(exc).__name__
 
 
+def alive(service: str, timeout_s: float, env: dict[str, str] | None = None) -> str | None:
+    """None when ``service``'s liveliness token is visible to a session with this environment's Zenoh settings
+    (no listen endpoint of its own) within ``timeout_s``, else why not."""
+    from dataclasses import replace
+
+    from interfaces.config import load_config
+    from interfaces.errors import ConfigError
+
+    try:
+        settings = replace(load_config(None, env).zenoh, listen=())
+        import zenoh
+
+        from interfaces.session import zenoh_config
+
+        with zenoh.open(zenoh_config(settings)) as session:
+            key = settings.keys.alive(service)
+            replies = session.liveliness().get(key, timeout=timeout_s)
+            if any(r.ok is not None for r in replies):
+                return None
+            through = ", ".join(settings.connect) or "no endpoint"
+            return f"no liveliness token {key} within {timeout_s:g} s (through {through})"
+    except ConfigError as exc:
+        return f"its Zenoh settings: {exc}"
+    except Exception as exc:  # zenoh could not open a session: no route, a refused certificate
+        return f"no Zenoh session ({' '.join(str(exc).split()).split(' at /')[0][:200]})"
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="lamps health", description=__doc__.split("\n\n")[0])
     p.add_argument("--endpoint", action="append", default=[],
                    help="tcp/<host>:<port> to probe (repeatable; default: $LAMPS_ZENOH_LISTEN)")
-    p.add_argument("--timeout", type=float, default=1.0, help="seconds per endpoint (default 1)")
+    p.add_argument("--alive", metavar="SERVICE",
+                   help="instead: ready when SERVICE's liveliness token is visible over Zenoh (a router's client)")
+    p.add_argument("--timeout", type=float, default=1.0, help="seconds per endpoint, or for the token (default 1)")
     p.add_argument("-v", "--verbose", action="store_true", help="say what was probed when ready too")
     a = p.parse_args(argv)
+    if a.alive:
+        why = alive(a.alive, a.timeout)
+        if why is not None:
+            print(f"lamps health: not ready: {a.alive}: {why}", file=sys.stderr)
+            return 1
+        if a.verbose:
+            print(f"lamps health: ready: {a.alive} is alive")
+        return 0
     spec = ",".join(a.endpoint) or os.environ.get("LAMPS_ZENOH_LISTEN", "")
     try:
         targets = probe_targets(spec)

@@ -190,3 +190,13 @@ def test_lamps_up_reports_which_reader_read_the_file(tmp_path):
     r = subprocess.run([str(REPO / "lamps"), "up", "--compose", str(bad), "--out", str(tmp_path / "run")],
                        capture_output=True, text=True, timeout=120, cwd=REPO)
     assert r.returncode != 0 and "NEED" in r.stderr and "set NEED first" in r.stderr, r.stderr
+
+
+def test_lamps_up_reads_the_cell_file_alone_with_the_router_override_in_compose_file():
+    """docker-compose.router.yml is compose's alone: COMPOSE_FILE naming it changes nothing ``lamps up`` runs."""
+    ensure_docker()
+    over = {"COMPOSE_FILE": "docker-compose.yml:docker-compose.router.yml"}
+    plain = compose_model(COMPOSE, {})
+    for reader in ("docker", "builtin"):
+        m = compose_model(COMPOSE, over, reader=reader)
+        assert "router" not in m.services and m.services == plain.services, reader

@@ -151,3 +151,27 @@ def test_a_lockstep_cell_runs_through_the_router_and_cleans_its_board(tmp_path, 
         router_log = (tmp_path / "run" / "logs" / "router.log").read_text()
     assert report["final_phase"] == "DONE" and report["dirt_removed_fraction"] > 0.95, report["dirt_removed_fraction"]
     assert "listening on" in router_log
+
+
+def test_health_alive_sees_a_clients_token_through_the_router_and_names_a_missing_one(cell):
+    """``lamps health --alive``: compose's probe of a router's client (no port of its own to probe)."""
+    import os
+
+    from launch.health import alive
+
+    router, robot_id, creds = cell
+    env = {"LAMPS_ROBOT_ID": robot_id, "LAMPS_ZENOH_MODE": "client", "LAMPS_ZENOH_CONNECT": router.endpoint,
+           "LAMPS_ZENOH_ACCESS_CONTROL": "true", "LAMPS_ZENOH_IDENTITY": str(identity_folder(creds, "robot"))}
+    from interfaces.session import ServiceNode
+
+    settings = ZenohSettings(mode="client", connect=(router.endpoint,), robot_id=robot_id, access_control=True,
+                             identity=str(identity_folder(creds, "robot")))
+    with ServiceNode("sim", settings):
+        r = subprocess.run([sys.executable, "-m", "interfaces.cli", "health", "--alive", "sim", "--timeout", "3",
+                            "-v"],
+                           env={**os.environ, **env, "PYTHONPATH": str(REPO)}, capture_output=True, text=True,
+                           timeout=60)
+        assert r.returncode == 0 and "sim is alive" in r.stdout, r.stderr
+        why = alive("perception", 1.0, env)
+    assert why is not None and f"lamps/{robot_id}/alive/perception" in why and router.endpoint in why, why
+    assert "no Zenoh session" in alive("sim", 1.0, {**env, "LAMPS_ZENOH_CONNECT": "tls/127.0.0.1:1"})
