@@ -83,7 +83,9 @@ def test_docker_compose_through_the_router_cleans_a_board_and_perception_cannot_
         assert seen.returncode == 0, seen.stderr
         reach = json.loads(seen.stdout.strip().splitlines()[-1])
         assert reach["router"] == "connected", reach
-        assert reach["sim_ip"].startswith("OSError 101"), reach  # ENETUNREACH: no route to the robot PC's network
+        # no answer at all from the robot PC's network (a reachable closed port would refuse at once, errno 111):
+        # dropped (a timeout) or unreachable (101, 113)
+        assert reach["sim_ip"].startswith("TimeoutError") or reach["sim_ip"].split()[-1] in ("101", "113"), reach
         assert reach["sim"].startswith("gaierror"), reach  # and no name for it
 
         waited = _compose(project, env, "wait", "recorder", timeout=900)
