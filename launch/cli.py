@@ -68,6 +68,9 @@ def build_up_parser() -> argparse.ArgumentParser:
     p.add_argument("--port-base", type=int, metavar="N",
                    help="listen on N, N+1, ... (default: free ports); a busy port is refused before anything starts")
     p.add_argument("--robot-id", default=None, help="key prefix lamps/<robot-id> (default iiwa)")
+    p.add_argument("--no-network", action="store_true",
+                   help="lock-step, sim only: the same services in one process on an in-process bus, no Zenoh "
+                        "(launch/local_cell.py; what campaigns run by default)")
     p.add_argument("-q", "--quiet", action="store_true", help="do not echo the services' logs")
     p.add_argument("-v", "--verbose", action="store_true", help="log what the launcher does")
     return p
@@ -149,12 +152,22 @@ def _up(a, stop_requested: threading.Event) -> int:
     t_start = time.monotonic()
     skill = _learn(a, out, echo, stop_requested)
     cell = _plan_cell(a, compose_path, board_vars, skill, out)
-    why = _run_cell(cell, a, echo, stop_requested, t_start)
+    if a.no_network:
+        from .local_cell import run as run_local
+
+        _print(f"lamps up: the cell in one process, no network; run folder {cell.out}")
+        why = run_local(cell.services, cell.env, out, cell.robot_id, skill, dict(vars(a)), a.max_duration,
+                        stop_requested, lambda *p: _print(_progress(*p)) if echo else None)
+    else:
+        why = _run_cell(cell, a, echo, stop_requested, t_start)
     return _show_report(out, why)
 
 
 def _check_options(a) -> None:
     """The numeric options in range (the others are checked where they are used)."""
+    if a.no_network and (a.mode != "lockstep" or a.foxglove is not None or a.robot not in (None, "sim")):
+        raise UpError("--no-network runs the simulated cell in lock-step only (no --mode realtime, --foxglove, "
+                      "--robot lbr-sim: they need the network)")
     if a.stains < 0 or a.stains > 50:
         raise UpError(f"--stains must be in [0, 50], got {a.stains}")
     if not (a.max_duration > 0 and math.isfinite(a.max_duration)):

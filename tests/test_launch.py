@@ -382,10 +382,11 @@ def test_adaptive_wiping_cleans_a_long_slanted_streak_with_a_stroke_along_it(tmp
     out, base = tmp_path / "run", _port_base()
     env = {"LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true",
            "LAMPS__SIM__DIRT__STAIN": "[{centre_m = [0.45, 0.3], size_m = 0.16, aspect = 3.0, angle_deg = 30.0}]"}
-    r = _up(["--out", str(out), "--port-base", str(base), "--skill", str(learned_skill_file), "--max-duration", "240"],
-            env=env)
+    r = _up(["--out", str(out), "--port-base", str(base), "--skill", str(learned_skill_file), "--max-duration", "240",
+             "--no-network"], env=env)  # the skill, not the transport: the network-free cell
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     report = _check_run(out, base, stains=1)
+    assert json.loads((out / "run.json").read_text())["network"] == "none"
     assert report["dirt_removed_fraction"] >= 0.97, report["dirt_removed_fraction"]  # 98.7-99.0 % when last run
     assert report["counters"]["controller"]["adaptations"] >= 1
     planner = PlannerParams()
