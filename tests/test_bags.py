@@ -11,6 +11,8 @@ weights to 1e-5 of the largest weight (they amplify the CSV's rounding: 4e-7 of 
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -210,3 +212,143 @@ def test_the_cells_own_recording_learns_the_same_skill(known, csv_skill, tmp_pat
     demo = bags.read_recording_demo(tmp_path / "recording.mcap", known["arm"])
     np.testing.assert_allclose(demo.position_m, known["demo"].position_m, atol=1e-6)
     assert_same_skill(learn_skill(demo)[0], csv_skill)
+
+
+def test_tf_without_a_base_frame_gives_the_frame_in_its_trees_root(recordings, known):
+    demo = bags.read_recording_demo(recordings["mcap"], known["arm"], bags.BagOptions(frame="lbr_link_ee"))
+    p0, R0 = WORLD_FROM_BASE
+    np.testing.assert_allclose(demo.position_m, known["p_flange"] @ R0.T + p0, atol=1e-6)
+
+
+def test_a_time_window_cuts_the_path(recordings, known):
+    demo = bags.read_recording_demo(recordings["sqlite3"], known["arm"], bags.BagOptions(start_s=2.0, end_s=6.0))
+    inside = (known["demo"].t_s >= 2.0) & (known["demo"].t_s <= 6.0)
+    np.testing.assert_allclose(demo.position_m, known["demo"].position_m[inside], atol=1e-6)
+
+
+# ------------------------------------------------------------------------------------------ refusals
+
+
+@pytest.fixture(scope="module")
+def odd_bags(known, tmp_path_factory):
+    d = tmp_path_factory.mktemp("odd")
+    k = int(np.searchsorted(known["demo"].t_s, 5.0))
+    return {"gap": write_rosbag(d / "gap", known, "mcap", drop=slice(k, k + 30)),
+            "panda": write_rosbag(d / "panda.mcap", known, "file", names=[f"panda_joint{i}" for i in range(1, 8)])}
+
+
+@pytest.mark.parametrize("case, options, match", [
+    ("missing topic", bags.BagOptions(topic="/nope"),
+     r"no topic '/nope' in it; it has /lbr/joint_states \(sensor_msgs/msg/JointState, \d+\), /lbr/state \("),
+    ("tf without a frame", bags.BagOptions(topic="/tf"), "carries transforms: name the frame to learn with --frame"),
+    ("unknown frame", bags.BagOptions(frame="eraser"),
+     r"no transform to the frame 'eraser'; the transforms' child frames are \['lbr_link_0', 'lbr_link_ee'\]"),
+    ("base not above", bags.BagOptions(frame="lbr_link_ee", base_frame="camera"),
+     r"the base frame 'camera' is not above 'lbr_link_ee': its chain is lbr_link_ee <- lbr_link_0 <- world"),
+    ("empty window", bags.BagOptions(start_s=100.0),
+     r"no sample in the time range 100 s..end; the topic spans 0.000..11.\d+ s from its first sample"),
+])
+def test_a_recording_is_refused_naming_what_it_holds(recordings, known, case, options, match):
+    with pytest.raises(DemoError, match=match):
+        bags.read_recording_demo(recordings["sqlite3"], known["arm"], options)
+
+
+def test_a_gap_is_refused_naming_its_time_and_a_window_without_it_is_learned(odd_bags, known):
+    with pytest.raises(DemoError, match=r"/lbr/state: a gap of 0\.\d+ s in the samples at t=4\.9\d+ s "
+                                        r"\(the limit is 0\.050 s"):
+        bags.read_recording_demo(odd_bags["gap"], known["arm"])
+    demo = bags.read_recording_demo(odd_bags["gap"], known["arm"], bags.BagOptions(end_s=4.9))
+    assert demo.t_s[-1] <= 4.9
+    demo = bags.read_recording_demo(odd_bags["gap"], known["arm"], bags.BagOptions(max_gap_s=1.0))
+    assert demo.n_samples == known["demo"].n_samples - 30
+
+
+def test_another_robots_joint_names_are_refused(odd_bags, known):
+    with pytest.raises(DemoError, match=r"/lbr/joint_states: joint names \['panda_joint4', 'panda_joint1', .*"
+                                        r"'gripper_finger'\] are not the arm's 7 joints \(A1..A7, "):
+        bags.read_recording_demo(odd_bags["panda"], known["arm"], bags.BagOptions(topic="/lbr/joint_states"))
+
+
+def test_a_recording_without_a_state_topic_is_refused(tmp_path, known):
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    String = store.types["std_msgs/msg/String"]
+    with Writer(tmp_path / "chat", version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
+        c = w.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
+        w.write(c, 1, store.serialize_cdr(String(data="hi"), "std_msgs/msg/String"))
+    with pytest.raises(DemoError, match=r"no robot state, joint state or pose topic in it \(it has /chatter "
+                                        r"\(std_msgs/msg/String, 1\)\); give --topic"):
+        bags.read_recording_demo(tmp_path / "chat", known["arm"])
+    with pytest.raises(DemoError, match=r"/chatter carries std_msgs/msg/String; readable: lbr_fri_idl/msg/LBRState"):
+        bags.read_recording_demo(tmp_path / "chat", known["arm"], bags.BagOptions(topic="/chatter"))
+    (tmp_path / "bad.mcap").write_bytes(b"not an mcap")
+    with pytest.raises(DemoError, match="not a readable MCAP file"):
+        bags.read_recording_demo(tmp_path / "bad.mcap", known["arm"])
+
+
+# ------------------------------------------------------------------------------------------ the maths
+
+
+def test_joint_names_of_the_stack_and_of_the_description_are_the_iiwas():
+    from lampskit.arm import iiwa_joint_index
+
+    assert [iiwa_joint_index(n) for n in ("A1", "lbr_A7", "my_arm_A3", "iiwa_joint_5")] == [0, 6, 2, 4]
+    assert [iiwa_joint_index(n) for n in ("panda_joint1", "A8", "A", "joint_a1")] == [None] * 4
+
+
+def test_a_frame_chain_composes_static_and_moving_links():
+    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    links = {"base": bag_maths.FrameLink("world", "base", None, np.array([[1.0, 0, 0]]), rz[None]),
+             "arm": bag_maths.FrameLink("base", "arm", np.array([10, 20]), np.array([[0, 0, 1.0], [0, 0, 2.0]]),
+                                        np.tile(np.eye(3), (2, 1, 1))),
+             "tip": bag_maths.FrameLink("arm", "tip", np.array([5, 15, 25]), np.array([[1.0, 0, 0]] * 3),
+                                        np.tile(rz, (3, 1, 1)))}
+    t, p, R = bag_maths.compose_chain(bag_maths.chain_to("tip", links, None))
+    np.testing.assert_array_equal(t, [15, 25])  # the tip's stamp 5 is before the arm was first seen
+    np.testing.assert_allclose(p, [[1.0, 1.0, 1.0], [1.0, 1.0, 2.0]])  # world <- base: 90 deg about z, +1 in x
+    np.testing.assert_allclose(R, np.tile(rz @ rz, (2, 1, 1)))
+
+
+def test_thinning_keeps_every_kth_sample_down_to_the_rate():
+    t = np.arange(1001) / 1000.0
+    assert len(bag_maths.thin(t)) == 251  # 1 kHz -> every 4th: 250 Hz
+    assert len(bag_maths.thin(t[::10])) == 101  # 100 Hz stays
+
+
+# ------------------------------------------------------------------------------------------ lamps learn
+
+
+def test_lamps_learn_reads_a_bag_with_its_options(recordings, csv_skill, tmp_path, capsys):
+    from interfaces.cli import main
+    from lampskit.core.skill import load_skill
+
+    out = tmp_path / "skill.json"
+    assert main(["learn", str(recordings["sqlite3"]), "--topic", "/tf", "--frame", "lbr_link_ee",
+                 "--base-frame", "lbr_link_0", "--tool-offset", "0,0,0.035", "-o", str(out)]) == 0
+    assert_same_skill(load_skill(out), csv_skill)
+    assert "skill: 2 periodic MP(s)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--topic", "/nope"], r"^lamps learn: error: \S+sqlite3_bag: no topic '/nope' in it; it has /lbr/joint_states "),
+    (["--tool-offset", "0,0"], r"^lamps learn: error: argument --tool-offset: '0,0' is not X,Y,Z in metres"),
+])
+def test_lamps_learn_refuses_in_one_line_without_output(recordings, tmp_path, capsys, args, match):
+    """The reason is the last line (argparse prints its usage above a bad option's)."""
+    from interfaces.cli import main
+
+    out = tmp_path / "skill.json"
+    try:
+        code = main(["learn", str(recordings["sqlite3"]), "-o", str(out), *args])
+    except SystemExit as exc:  # argparse's exit on a bad option
+        code = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and not out.exists()
+    assert re.search(match, err[-1]), err
+
+
+def test_recording_options_on_a_csv_are_refused(tmp_path, known, capsys):
+    from interfaces.cli import main
+
+    csv = demo_io.write_demo_csv(tmp_path / "d.csv", known["demo"])
+    assert main(["learn", str(csv), "-o", str(tmp_path / "s.json"), "--frame", "x", "--start", "1"]) == 1
+    assert "--frame, --start: only for robot recordings" in capsys.readouterr().err

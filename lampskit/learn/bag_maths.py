@@ -56,11 +56,12 @@ def in_window(t_s: np.ndarray, start_s: float | None, end_s: float | None) -> np
     """Mask (T,) of the samples with ``start_s <= t <= end_s`` (either bound optional); refused when empty."""
     lo = -np.inf if start_s is None else start_s
     hi = np.inf if end_s is None else end_s
+    shown = f"{'start' if start_s is None else f'{start_s:g} s'}..{'end' if end_s is None else f'{end_s:g} s'}"
     if hi <= lo:
-        raise DemoError(f"the time range {start_s}..{end_s} s is empty: the end must come after the start")
+        raise DemoError(f"the time range {shown} is empty: the end must come after the start")
     mask = (t_s >= lo) & (t_s <= hi)
     if not mask.any():
-        raise DemoError(f"no sample in the time range {start_s}..{end_s} s; the topic spans "
+        raise DemoError(f"no sample in the time range {shown}; the topic spans "
                         f"{t_s[0]:.3f}..{t_s[-1]:.3f} s from its first sample")
     return mask
 

@@ -93,7 +93,10 @@ def read_recording_demo(spec: str | Path, arm: ArmKinematics, options: BagOption
         raise DemoError(f"{path}: no such file or folder")
     source = _Json(path) if path.suffix.lower() == ".mcap" and _is_json_mcap(path) else _Ros(path, arm)
     topics = source.topics()
-    topic = _choose_topic(topics, options)
+    try:
+        topic = _choose_topic(topics, options)
+    except DemoError as exc:
+        raise DemoError(f"{path}: {exc}") from None
     kind = topics[topic][0]
     where = f"{path} {topic}"
     try:
