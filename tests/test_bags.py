@@ -352,3 +352,26 @@ def test_recording_options_on_a_csv_are_refused(tmp_path, known, capsys):
     csv = demo_io.write_demo_csv(tmp_path / "d.csv", known["demo"])
     assert main(["learn", str(csv), "-o", str(tmp_path / "s.json"), "--frame", "x", "--start", "1"]) == 1
     assert "--frame, --start: only for robot recordings" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("fri", [1, 2])
+def test_an_lbr_state_without_its_definition_is_decoded_in_the_stacks_layout(known, tmp_path, fri):
+    """A bag that embeds no definition (sqlite3 before ROS 2 Iron): the FRI 1 layout, else the FRI 2 one."""
+    from robot.lbr.msgs import LBR_STATE_MSG_FRI2
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    store.register(get_types_from_msg(LBR_STATE_MSG if fri == 1 else LBR_STATE_MSG_FRI2, bags.LBR_STATE))
+    State, zeros = store.types[bags.LBR_STATE], np.zeros(7)
+    with Writer(tmp_path / "humble", version=8, storage_plugin=StoragePlugin.SQLITE3) as w:
+        c = w.add_connection("/lbr/state", bags.LBR_STATE, msgdef="", rihs01="RIHS01_unknown")
+        for t, q in zip(known["t_ns"], known["q"]):
+            fields = dict(sample_time=0.001, session_state=4, connection_quality=3, safety_state=0, operation_mode=0,
+                          drive_state=2, client_command_mode=3, overlay_type=0, control_mode=2,
+                          time_stamp_sec=int(t) // 10**9, time_stamp_nano_sec=int(t) % 10**9,
+                          measured_joint_position=q.copy(), measured_torque=zeros, commanded_torque=zeros,
+                          external_torque=zeros, ipo_joint_position=q.copy(), tracking_performance=1.0)
+            if fri == 1:
+                fields["commanded_joint_position"] = q.copy()
+            w.write(c, int(t), store.serialize_cdr(State(**fields), bags.LBR_STATE))
+    demo = bags.read_recording_demo(tmp_path / "humble", known["arm"])
+    np.testing.assert_allclose(demo.position_m, known["demo"].position_m, atol=1e-6)

@@ -318,7 +318,8 @@ def _mcap_summary(path: Path):
     except (McapError, OSError, ValueError, EOFError) as exc:
         raise DemoError(f"{path}: not a readable MCAP file ({type(exc).__name__}: {exc})") from None
     if summary is None:
-        raise DemoError(f"{path}: an MCAP file without a summary (cut short? 'lamps report' recovers a recording)")
+        raise DemoError(f"{path}: an MCAP file without a summary (cut short?); 'lamps report RUN_DIR' recovers "
+                        "the cell's own recording")
     return summary
 
 
