@@ -7,6 +7,8 @@ whatever reaches a client came through the router and its access list.
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 import threading
@@ -304,3 +306,22 @@ def test_site_credentials_name_each_cells_roles_and_a_service_refuses_another_ce
                                    identity=str(identity_folder(creds, "controller", CELLS[1]))))
     with pytest.raises(ConfigError, match="credentials folder"):
         make_credentials(tmp_path / "d", cells=("router",))
+
+
+@pytest.mark.slow
+def test_two_lockstep_cells_clean_their_boards_side_by_side_through_one_router(tmp_path, learned_skill_file):
+    """``lamps up --cells 2``: one router, two cells each a client of it with its own identities, one stain each."""
+    out = tmp_path / "site"
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--cells", "2", "--stains", "1", "--seed", "3",
+                        "--skill", str(learned_skill_file), "--out", str(out), "--max-duration", "400", "-q"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=900,
+                       env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"})
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    for cell in ("iiwa-1", "iiwa-2"):
+        report = json.loads((out / cell / "report.json").read_text())
+        assert report["final_phase"] == "DONE" and report["dirt_removed_fraction"] > 0.95, (cell, report)
+        assert json.loads((out / cell / "run.json").read_text())["key_prefix"] == f"lamps/{cell}"
+        assert any(line.startswith(f"{cell}: cleaned") for line in r.stdout.splitlines()), r.stdout[-2000:]
+    # the site viewer, one session through the router, saw both cells to the end
+    assert "seen through the router: iiwa-1 DONE, iiwa-2 DONE" in r.stdout, r.stdout[-2000:]
+    assert "listening on" in (out / "logs" / "router.log").read_text()
