@@ -16,7 +16,7 @@ is unauthenticated) may do nothing; a role may put only on the keys below
 and may declare subscribers, liveliness tokens and queries under the cell's
 prefix (and the ROS bridge's namespace), so every role can read the whole
 cell. Zenoh drops a refused message at the first hop, before the
-application, and logs it (``RUST_LOG=zenoh::net::routing::interceptor=debug``).
+application, and logs it (``RUST_LOG=zenoh::net::routing::interceptor::access_control=trace``).
 
 ================================  =====================================
 key (under the prefix)            who may put it
