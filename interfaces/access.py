@@ -181,6 +181,8 @@ def site_acl(cells: Sequence[str], subject: str = "cert_common_names") -> dict[s
     only there; :data:`SITE_VIEWER` reads every cell and engages any e-stop; a router relays (module docstring)."""
     _check_subject(subject)
     cells = check_cells(cells)
+    if not cells:
+        raise ConfigError("a site's access list needs the robot id of at least one cell")
     every = [f"{Keys.for_robot(c).prefix}/**" for c in cells]
     rules: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []

@@ -312,7 +312,8 @@ def _run_cell(cell: _Cell, a, echo, stop_requested: threading.Event, t_start: fl
 
 def _start_services(cell: _Cell, echo, children: list, node=None) -> None:
     """Start the services in order, each listening on its ports (through a router: its liveliness token seen by
-    ``node``) before the next one starts.
+    ``node``, counted, as a service names its token itself: ``robot``, not ``robot-lbr-sim``) before the next
+    one starts.
 
     ``children`` gets each child as it starts, so whatever started is stopped when a later one fails.
     """
@@ -323,7 +324,7 @@ def _start_services(cell: _Cell, echo, children: list, node=None) -> None:
                       echo)
         children.append(child)
         deadline = time.monotonic() + 120.0
-        while node is not None and svc.name not in node.alive_services(0.5):
+        while node is not None and len(node.alive_services(0.5) - {"launcher"}) < len(children):
             if child.returncode is not None or time.monotonic() > deadline:
                 raise UpError(f"service {svc.name} did not come up through the router {cell.router}: "
                               f"{child.last_words()}")
