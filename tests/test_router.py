@@ -2,7 +2,9 @@
 
 The router is the real command (the eclipse-zenoh library in router mode) started as a process; every other
 party is a Zenoh client of it with its role's identity from ``lamps credentials``: no link between clients, so
-whatever reaches a client came through the router and its access list.
+whatever reaches a client came through the router and its access list. A site of two cells (``lamps credentials
+--cells``, ``lamps router --cells``): each cell's roles are kept to their own cell, and ``lamps up --cells 2`` runs
+both cells side by side through one router.
 """
 
 from __future__ import annotations
