@@ -487,6 +487,10 @@ def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, lear
     (["--demo", "/nonexistent/demo.csv"], 1, "--demo /nonexistent/demo.csv: no such file"),
     (["--board", "diagonal"], 1, "--board 'diagonal': not one of"),
     (["--max-duration", "-1"], 1, "--max-duration must be a positive"),
+    (["--cells", "0"], 1, "--cells must be in [1, 16]"),
+    (["--cells", "2", "--router", "tls/127.0.0.1:7447"], 1, "not with --router or --credentials"),
+    (["--cells", "2", "--robot", "lbr-sim"], 1, "--cells runs --robot sim only"),
+    (["--router", "tcp/127.0.0.1:7447", "--credentials", "x"], 1, "a tls/HOST:PORT endpoint and --credentials"),
 ])
 def test_bad_options_are_refused_before_anything_starts(tmp_path, args, code, match):
     r = _up(["--out", str(tmp_path / "run"), *args], timeout_s=60)

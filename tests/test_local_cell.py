@@ -63,9 +63,10 @@ def test_each_node_has_its_own_session_id_and_an_estop_reaches_both_sides():
 
 
 @pytest.mark.parametrize("args, match", [
-    (["--mode", "realtime"], "--no-network runs the simulated cell in lock-step only"),
-    (["--robot", "lbr-sim"], "--no-network runs the simulated cell in lock-step only"),
-    (["--foxglove", "8999"], "--no-network runs the simulated cell in lock-step only"),
+    (["--mode", "realtime"], "--no-network runs one simulated cell in lock-step only"),
+    (["--robot", "lbr-sim"], "--no-network runs one simulated cell in lock-step only"),
+    (["--foxglove", "8999"], "--no-network runs one simulated cell in lock-step only"),
+    (["--cells", "2"], "--no-network runs one simulated cell in lock-step only"),
 ])
 def test_what_needs_the_network_is_refused_before_anything_starts(tmp_path, args, match):
     r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--no-network", "--out", str(tmp_path / "r"),
