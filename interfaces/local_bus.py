@@ -182,7 +182,8 @@ class LocalSession:
         return _Liveliness(self.bus)
 
     def with_ring(self, depth: int) -> "LocalSession":
-        """This session, its ring subscribers ``depth`` deep (how :class:`Latest` asks for its depth)."""
+        """A view of the same bus and id whose ring subscribers keep ``depth`` samples (how :class:`Latest` gets
+        its depth)."""
         view = LocalSession.__new__(LocalSession)
         view.bus, view.ring_depth, view._zid = self.bus, depth, self._zid
         return view
