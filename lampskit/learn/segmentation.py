@@ -102,6 +102,7 @@ import numpy as np
 from lampskit.errors import SegmentationError
 from lampskit.learn.cluster_baselines import FIXED_THRESHOLD_M, affinity_labels, kmeans_labels, sklearn_optics_labels
 from lampskit.learn.demo import Demonstration
+from lampskit.learn.lifts import split_at_lifts
 from lampskit.learn.optics import OpticsResult, ProgressCallback, optics
 from lampskit.learn.reachability import (
     dbscan_labels,
@@ -392,7 +393,8 @@ def _segment_impl(
         runs = unite_alternating(runs, t, params.min_duration_s)
         runs = bridge_stays(runs, smooth)
         runs = merge_short_runs(runs, t, params.min_duration_s, transitions=True)
-        runs = _refine_thinned(runs, smooth, demo.rate_hz, len(t))
+        runs = _on_thinned(split_at_lifts, runs, smooth, demo.rate_hz, len(t))
+        runs = _on_thinned(refine_boundaries, runs, smooth, demo.rate_hz, len(t))
         runs = merge_short_runs(runs, t, params.min_duration_s, transitions=True)
         runs, rejected = check_periodic(runs, smooth, params.min_path_ratio)
         if not any(c >= 0 for c, _, _ in runs):
@@ -411,16 +413,17 @@ def _segment_impl(
     return Segmentation(segments, labels, method, eps, ms, step, keep, result, params)
 
 
-def _refine_thinned(runs: list, smooth: np.ndarray, rate_hz: float, n: int) -> list:
-    """Step 6 on every q-th sample of a recording faster than :data:`MAX_POINT_RATE_HZ` (q = ceil(rate / 200)):
-    the recurrence compares each sample with a period of lags, so its cost grows with the rate squared; a
-    hand's strokes hold nothing finer than 200 Hz. Boundaries come back to the full rate (within q samples)."""
+def _on_thinned(step, runs: list, smooth: np.ndarray, rate_hz: float, n: int) -> list:
+    """Steps 5b and 6 (``step(runs, smooth, rate_hz)``) on every q-th sample of a recording faster than
+    :data:`MAX_POINT_RATE_HZ` (q = ceil(rate / 200)): the recurrence compares each sample with a period of lags,
+    so its cost grows with the rate squared; a hand's strokes hold nothing finer than 200 Hz. Boundaries come
+    back to the full rate (within q samples)."""
     q = max(1, int(np.ceil(rate_hz / MAX_POINT_RATE_HZ - 1e-9)))
     if q == 1:
-        return refine_boundaries(runs, smooth, rate_hz)
+        return step(runs, smooth, rate_hz)
     m = (n + q - 1) // q
     thin = [(c, a // q, max(a // q + 1, min(-(-b // q), m))) for c, a, b in runs]
-    refined = refine_boundaries(join_runs(thin), smooth[::q], rate_hz / q)
+    refined = step(join_runs(thin), smooth[::q], rate_hz / q)
     labels = np.full(n, -1)
     for c, a, b in refined:
         labels[a * q:min(b * q, n)] = c
