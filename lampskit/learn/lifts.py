@@ -43,6 +43,9 @@ LIFT_MARGIN_M = 0.005
 PLANE_KEEP = 0.5
 #: A lift lasts at least this [s] (a hop of 1 s with a 2 cm lift stays above 1 cm for about 0.7 s).
 LIFT_MIN_S = 0.3
+#: A lift this long [s] is a hop whatever the strokes around it do (the recordings' flange rises with a
+#: stroke for 0.5 s at most; a 1 s hop of 2 cm stays above 1 cm for 0.7 s).
+LIFT_SURE_S = 0.6
 #: Each side of a cut keeps at least this much contact within the run [s].
 SIDE_MIN_S = 0.5
 #: The strokes around a lift whose recurrence it is compared with: this long on each side [s].
@@ -89,7 +92,7 @@ def split_at_lifts(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> list[
             for l0, l1 in lifted_stretches(heights(smooth[a:b], velocity[a:b], smooth), rate_hz):
                 if l0 < side or l1 > b - a - side:
                     continue
-                if not _recurs(smooth, velocity, rate_hz, a, b, a + l0, a + l1):
+                if l1 - l0 >= LIFT_SURE_S * rate_hz or not _recurs(smooth, velocity, rate_hz, a, b, a + l0, a + l1):
                     cuts.append((a + l0, a + l1))
         start = a
         for l0, l1 in cuts:
