@@ -48,6 +48,9 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
    cluster joins it, a short cluster run becomes transitional (or joins the
    cluster around it); a short transitional run between two different
    clusters stays (a quick move between adjacent stains).
+5b. **Hops** (:mod:`.lifts`): a periodic run is cut where the pad leaves its surface between two wipes
+   (above the run's contact band for 0.3 s or more, inside the run, not repeating the strokes around it):
+   the lifted stretch is transitional.
 6. **Boundaries by recurrence.** Spatial clusters also swallow the ends of
    transitions that spiral into and out of a stroke, so each periodic run's
    ends are moved to where the motion stops repeating itself: with the

@@ -46,7 +46,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from interfaces.description import PAD_SIZE_M
 from lampskit.core.rotations import quat_wxyz_from_matrix
 
 from lampskit.learn.demo import Demonstration
@@ -56,8 +55,9 @@ from lampskit.errors import DemoError
 
 #: Board area in which stains are placed, board frame [m] (x range, y range).
 BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))
-#: The eraser pad's length [m], the unit of a hop's move.
-PAD_LENGTH_M = float(PAD_SIZE_M[0])
+#: The eraser pad's length [m], the unit of a hop's move (``interfaces.description.PAD_SIZE_M[0]``; the
+#: offline learner does not import the cell's description, a test keeps the two equal).
+PAD_LENGTH_M = 0.12
 
 
 @dataclass(frozen=True)
