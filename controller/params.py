@@ -12,6 +12,7 @@ Layout (every key optional)::
     [controller.limits]     torque_rate_nm_per_ms, joint_margin_rad, max_speed_m_s, max_position_error_m, ...
     [controller.executor]   standoff_m, approach_speed_m_s, wipe_timeout_s, kappa_remaining, air, ...
     [controller.planner]    amplitude_fraction, min_amplitude_m, max_amplitude_m, order, ...
+    [controller.teach]      damping_n_s_m, damping_nm_s_rad, joint_damping_nm_s_rad, force_cap_n (lamps teach)
 
 Every value is checked when built; an unknown key or a value out of range
 raises :class:`~interfaces.errors.ConfigError` naming the key and its range.
@@ -216,6 +217,31 @@ class ExecutorParams:
 
 
 @dataclass(frozen=True)
+class TeachParams:
+    """Hand-guiding (``lamps teach``, :mod:`controller.teach`): no stiffness, light damping, the guards on.
+
+    damping_n_s_m : translational damping at the pad [N s/m]; damping_nm_s_rad :
+    rotational [Nm s/rad]; joint_damping_nm_s_rad : on every joint [Nm s/rad]
+    (the elbow's nullspace motion, which no Cartesian term sees). A person
+    guiding a 4 kg effective pad mass feels 25 N s/m as a drag of 5 N at
+    0.2 m/s (a wiping stroke) that brings the pad to rest within about a
+    second when let go. force_cap_n : a contact force (the measured wrench's
+    force, world axes) above this, filtered over ``controller.force.filter_s``,
+    is a FAULT: the arm holds where it is (joint-space spring, natural
+    frequency hold_1_s [rad/s], critically damped) until the teach run ends.
+    """
+
+    damping_n_s_m: Annotated[float, In(0.0, 500.0)] = 25.0
+    damping_nm_s_rad: Annotated[float, In(0.0, 50.0)] = 1.0
+    joint_damping_nm_s_rad: Annotated[float, In(0.0, 50.0)] = 0.5
+    force_cap_n: Annotated[float, In(1.0, 150.0)] = 40.0
+    hold_1_s: Annotated[float, In(1.0, 50.0)] = 10.0
+
+    def __post_init__(self) -> None:
+        check_declared(self, "controller.teach")
+
+
+@dataclass(frozen=True)
 class ControllerParams:
     """The whole controller.
 
@@ -257,6 +283,7 @@ class ControllerParams:
     limits: LimitParams = field(default_factory=LimitParams)
     executor: ExecutorParams = field(default_factory=ExecutorParams)
     planner: PlannerParams = field(default_factory=PlannerParams)
+    teach: TeachParams = field(default_factory=TeachParams)
 
     def __post_init__(self) -> None:
         s = "controller"
@@ -298,7 +325,7 @@ class ControllerParams:
             raise ConfigError(f"[controller] must be a table, got {type(table).__name__}")
         table = dict(table)
         subs = {"impedance": ImpedanceParams, "force": ForceParams, "limits": LimitParams,
-                "executor": ExecutorParams, "planner": PlannerParams}
+                "executor": ExecutorParams, "planner": PlannerParams, "teach": TeachParams}
         parts = {}
         for name, kind in subs.items():
             try:

@@ -31,22 +31,20 @@ from collections import Counter
 
 import numpy as np
 
-from interfaces.messages import (HOLD, ControllerStatus, ControllerTrace, Estop, RobotState, SimTruth,
-                                 StainObservation, Stains, TorqueCommand)
+from interfaces.messages import (HOLD, ControllerStatus, ControllerTrace, Estop, RobotState, SimTruth, Stains,
+                                 TorqueCommand)
 from interfaces.loop_hygiene import LoopHygiene
 from interfaces.loop_stats import LoopStats
 from interfaces.session import ServiceNode
-from interfaces.transforms import transform_from_pose
 
-from lampskit.core.planner_types import Stain
 from lampskit.errors import PlanningError
 
 from .control.limits import load_scale
 from .control.watch import OverloadWatch
 from .core import TRACE_COLUMNS, ControllerCore
-from .executor_types import BoardPose, StainState
 from .params import ControllerParams
 from .planner_thread import PlannerThread
+from .stains_in import stains_update
 
 log = logging.getLogger(__name__)
 
@@ -116,41 +114,53 @@ class ControllerService:
             self._publish_status(force=True)
         return self.ticks
 
+    def lockstep_states(self):
+        """The lock-step state reader (an :class:`~interfaces.session.Inbox`), its counters in the status."""
+        self._state_reader = self.node.inbox(self.keys.robot_state, RobotState, maxlen=8)
+        return self._state_reader
+
     def _run_lockstep(self) -> None:
-        states = self.node.inbox(self.keys.robot_state, RobotState, maxlen=8)
-        self._state_reader = states
+        states = self.lockstep_states()
         last_state_wall = time.monotonic()
         t_prev = time.perf_counter_ns()
-        while not self._exit_now():
+        while not self.exit_now():
             t0 = time.perf_counter_ns()
             state = self._usable(states.get(0.02))
             now = time.monotonic()
-            self._poll_estop()
             if state is None:
+                self._poll_estop()
                 self._check_lost(now - last_state_wall)
                 self._publish_status()
                 continue
             last_state_wall = now
-            if state.seq == self._last_seq and self._last_command is not None and not self._lost:
-                self.node.publish(self.keys.robot_command, self._last_command)  # a re-sent state: same answer
-                self.counters["states_answered_again"] += 1
-                continue
-            if state.seq < self._last_seq or self._lost:
-                self._robot_back(state)
-            elif self._last_seq >= 0 and state.seq != self._last_seq + 1:
-                self.counters["states_skipped"] += state.seq - self._last_seq - 1
-            dt = self._dt_from_robot_clock(state)
-            self._poll_stains(state.robot_time_ns * 1e-9)
-            t1 = time.perf_counter_ns()
-            tau = self._control(state, dt)
-            t2 = time.perf_counter_ns()
-            self._send(state.seq, tau)
-            self._publish_status()
-            t3 = time.perf_counter_ns()
-            self.stats.add((t3 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
-            t_prev = t3
+            if self.answer(state, t0, t_prev):
+                t_prev = time.perf_counter_ns()
             if self.p.max_ticks and self.ticks >= self.p.max_ticks:
                 break
+
+    def answer(self, state: RobotState, t0_ns: int = 0, t_prev_ns: int = 0) -> bool:
+        """Answer one lock-step ``state`` (a usable one): the e-stop keys read, a re-sent state answered again,
+        a new one ticked and answered, the status when due; True when it was ticked. ``t0_ns``, ``t_prev_ns``:
+        when the wait for it began and the last tick ended (perf counter), for the loop's timing."""
+        self._poll_estop()
+        if state.seq == self._last_seq and self._last_command is not None and not self._lost:
+            self.node.publish(self.keys.robot_command, self._last_command)  # a re-sent state: same answer
+            self.counters["states_answered_again"] += 1
+            return False
+        if state.seq < self._last_seq or self._lost:
+            self._robot_back(state)
+        elif self._last_seq >= 0 and state.seq != self._last_seq + 1:
+            self.counters["states_skipped"] += state.seq - self._last_seq - 1
+        dt = self._dt_from_robot_clock(state)
+        self._poll_stains(state.robot_time_ns * 1e-9)
+        t1 = time.perf_counter_ns()
+        tau = self._control(state, dt)
+        t2 = time.perf_counter_ns()
+        self._send(state.seq, tau)
+        self._publish_status()
+        t3 = time.perf_counter_ns()
+        self.stats.add((t3 - (t_prev_ns or t1)) / 1e3, (t1 - (t0_ns or t1)) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+        return True
 
     def _run_realtime(self) -> None:
         """Real time, driven by the robot's clock: each state is answered as soon as it arrives (as an FRI client
@@ -172,7 +182,7 @@ class ControllerService:
         robot_period_ns = int(nominal_s * 1e9)
         t_prev = time.monotonic_ns()
         try:
-            while not self._exit_now():
+            while not self.exit_now():
                 new = self._usable(states.get(nominal_s))
                 t0 = time.monotonic_ns()
                 if new is not None:
@@ -225,7 +235,7 @@ class ControllerService:
             planner.shutdown(wait=False, cancel_futures=True)
 
     # ------------------------------------------------------------------ pieces
-    def _exit_now(self) -> bool:
+    def exit_now(self) -> bool:
         """After :attr:`stop` is set: True at once with the pad in the air; with it on the board (a cell stopped
         mid-wipe), e-stop (the fast lift) first and True once lifted, or after ``LIFT_ON_STOP_S``."""
         if not self.stop.is_set():
@@ -367,7 +377,7 @@ class ControllerService:
         msg = self._stains.take()
         ex = self.core.executor
         if msg is not None:
-            update = self._stains_update(msg)
+            update = stains_update(msg, self.p.executor.kappa_remaining, self.counters)
             if update is not None:
                 try:
                     ex.set_stains(*update)
@@ -379,34 +389,6 @@ class ControllerService:
         if self._stains_clock is not None and ex.stains_fresh and clock_s - self._stains_clock > self.p.stains_timeout_s:
             self.counters["stains_stale"] += 1
             ex.stains_stale(f"no stains update for {clock_s - self._stains_clock:.1f} s")
-
-    def _stains_update(self, msg) -> tuple[BoardPose, list[StainState]] | None:
-        if isinstance(msg, SimTruth):
-            if msg.T_board_to_world is None or len(msg.centres_board_m) != len(msg.stain_ids):
-                self.counters["truth_without_board"] += 1
-                return None
-            board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), (0.0, 0.0))
-            kappa_at = self.p.executor.kappa_remaining
-            if len(msg.sizes_m) != len(msg.stain_ids):
-                self.counters["stains_rejected: truth sizes do not match its ids"] += 1
-                return None
-            stains = [StainState(i, np.asarray(c, float), float(s), r <= kappa_at)
-                      for i, c, s, r in zip(msg.stain_ids, msg.centres_board_m, msg.sizes_m, msg.remaining)]
-            return (board, stains) if self._stains_ok(stains) else None
-        if msg.board == "lost":  # perception cannot see the board: nothing is known, not even what is clean
-            self.counters["stains_unknown"] += 1
-            return None
-        board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), msg.board_size_m)
-        stains = [_stain_state(s) for s in msg.stains]
-        return (board, stains) if self._stains_ok(stains) else None
-
-    def _stains_ok(self, stains: list[StainState]) -> bool:
-        for s in stains:
-            if s.centre_m.shape != (2,) or not np.all(np.isfinite(s.centre_m)) or not (s.size_m > 0
-                                                                                      and np.isfinite(s.size_m)):
-                self.counters["stains_rejected: a stain needs a finite 2-D centre and a positive size"] += 1
-                return False
-        return True
 
     def _follow_robot_estop(self, engaged: bool) -> None:
         """The robot side's e-stop and ours agree: while its e-stop is engaged (it holds whatever we send) we are
@@ -491,10 +473,3 @@ class ControllerService:
             seq=self._trace_seq, stamp_ns=time.monotonic_ns(), columns=list(TRACE_COLUMNS), first_tick=first,
             n_rows=len(rows), data=rows.astype("<f8").tobytes(), dropped=dropped))
 
-
-def _stain_state(s: StainObservation) -> StainState:
-    """The executor's view of one observed stain: centre, size, width and axis, and the ink left (if reported)."""
-    ink = None
-    if len(s.ink_centre_board_m) == 2 and s.ink_size_m > 0:
-        ink = Stain(s.id, np.asarray(s.ink_centre_board_m, float), s.ink_size_m, s.ink_width_m, s.ink_axis_board_rad)
-    return StainState(s.id, np.asarray(s.centre_board_m, float), s.size_m, s.kappa, s.width_m, s.axis_board_rad, ink)

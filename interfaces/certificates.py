@@ -37,6 +37,7 @@ from pathlib import Path
 from lampskit.atomic import write_atomic
 
 from .access import ROLES
+from .errors import ConfigError
 
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
 DEFAULT_DAYS = 825
@@ -145,6 +146,18 @@ def issue(name: str, hosts: tuple[str, ...], days: int, ca_key, ca_cert):
             .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
             .sign(ca_key, hashes.SHA256()))
     return key, cert
+
+
+def common_name(cert_path: Path) -> str:
+    """The common name of the PEM certificate at ``cert_path`` (what access control reads);
+    ConfigError naming the file when it cannot be read."""
+    x509, *_, NameOID = _crypto()
+    try:
+        cert = x509.load_pem_x509_certificate(Path(cert_path).read_bytes())
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"certificate {str(cert_path)!r} cannot be read: {exc}") from None
+    names = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    return str(names[0].value) if names else ""
 
 
 def _check_name(name: str) -> None:

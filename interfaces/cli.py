@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "controller": ("controller.cli:main", "run a skill on the robot: impedance control and the skill executor"),
     "perception": ("perception.cli:main", "stains and kappa from camera images (board markers, ink clustering)"),
     "up": ("launch.cli:up_main", "the whole cell from docker-compose.yml as local processes, recorded and reported"),
+    "teach": ("launch.teach:main", "hand-guide the arm (teach mode) and record the pad's path as a demonstration"),
     "record": (
         "launch.record_cli:record_main",
         "record every key into an MCAP file; report.json and plots when stopped",

@@ -27,7 +27,10 @@ then ``tls/...``), or ``tls_ca``, ``tls_certificate`` and ``tls_private_key``
 given one by one (all three or none); ``access_control`` (true: apply the
 cell's default-deny access list, subjects the certificates' common names);
 ``ros_namespaces`` (default ``["lbr", "camera"]``: the ROS topic namespaces
-zenoh-bridge-ros2dds carries, the keys the robot side and the bridge may put).
+zenoh-bridge-ros2dds carries, the keys the robot side and the bridge may put);
+``cells`` (shorthand ``LAMPS_ZENOH_CELLS``, comma-separated robot ids; default
+none): a router or site viewer serving several cells applies the site's
+access list (:func:`interfaces.access.site_acl`) instead of one cell's.
 Zenoh's user-password authentication is still there for a router-held
 dictionary: ``user`` (the role), ``password_file``, ``credentials_file``.
 Shorthands ``LAMPS_ZENOH_IDENTITY``, ``LAMPS_ZENOH_ACCESS_CONTROL``,
@@ -53,7 +56,7 @@ from typing import Annotated, Any
 
 import msgspec
 
-from .access import DEFAULT_ROS_NAMESPACES, ROLES
+from .access import DEFAULT_ROS_NAMESPACES, ROLES, check_cells
 from .errors import ConfigError
 from .keys import DEFAULT_ROBOT_ID, Keys
 
@@ -75,6 +78,7 @@ _SHORTHANDS = {
     "LAMPS_ZENOH_TLS_CERTIFICATE": ("zenoh", "tls_certificate"),
     "LAMPS_ZENOH_TLS_PRIVATE_KEY": ("zenoh", "tls_private_key"),
     "LAMPS_ZENOH_CONFIG_FILE": ("zenoh", "config_file"),
+    "LAMPS_ZENOH_CELLS": ("zenoh", "cells"),
 }
 
 
@@ -105,6 +109,7 @@ class ZenohSettings:
     tls_private_key: str = ""
     config_file: str = ""
     ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES
+    cells: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("mode", "robot_id", "key_prefix"):
@@ -144,6 +149,9 @@ class ZenohSettings:
         for ns in self.ros_namespaces:
             _check_ros_namespace(ns)
         object.__setattr__(self, "ros_namespaces", tuple(self.ros_namespaces))
+        if not isinstance(self.cells, (list, tuple)) or not all(isinstance(c, str) for c in self.cells):
+            raise ConfigError(f"[zenoh] cells must be a list of robot ids, got {self.cells!r}")
+        object.__setattr__(self, "cells", check_cells(self.cells))
         if self.mode not in ZENOH_MODES:
             raise ConfigError(f"[zenoh] mode must be one of {ZENOH_MODES}, got {self.mode!r}")
         for name in ("listen", "connect"):
@@ -204,7 +212,7 @@ def _env_overrides(env: Mapping[str, str]) -> list[tuple[tuple[str, ...], Any]]:
     for name, (section, key) in _SHORTHANDS.items():
         if name in env:
             raw = env[name]
-            if key in ("listen", "connect"):
+            if key in ("listen", "connect", "cells"):
                 value: Any = [e.strip() for e in raw.split(",") if e.strip()]
             else:
                 value = _parse_value(raw)

@@ -22,6 +22,15 @@ names and aliases of that role, ``localhost`` and ``127.0.0.1``, plus every
 opens. Elliptic-curve keys (P-256) and SHA-256 signatures, as
 :mod:`interfaces.certificates` makes them.
 
+``--cells ID1,ID2,...`` makes a *site*: several cells behind one router
+(:func:`interfaces.access.site_acl`), one CA. Each cell gets ``DIR/<robot
+id>/<role>/`` for every role (and its bridge's configuration), the common
+name ``<role>@<robot id>`` (``controller@iiwa-1``), so the router tells cell
+A's controller from cell B's; ``DIR/<robot id>`` is laid out as a one-cell
+``DIR``, so whatever takes a credentials folder takes a cell's. Beside them
+``DIR/router/`` (``lamps router --cells ...``) and ``DIR/site-viewer/`` (one
+recorder or live view reading every cell).
+
 Existing files are never overwritten: a cell keeps its identities until they
 are deleted on purpose (``--if-missing``: a complete set already there is
 kept, exit 0; a set made before the router's identity existed gets it from
@@ -39,7 +48,7 @@ from pathlib import Path
 
 from lampskit.atomic import write_atomic, write_text_atomic
 
-from .access import DEFAULT_ROS_NAMESPACES, IDENTITIES, cell_acl
+from .access import DEFAULT_ROS_NAMESPACES, IDENTITIES, RELAY, ROLES, SITE_VIEWER, cell_acl, check_cells, identity_name, role_and_cell
 from .certificates import DEFAULT_DAYS, DEFAULT_HOSTS, issue, new_ca, write_key_and_cert
 from .keys import Keys
 
@@ -58,6 +67,7 @@ ROLE_HOSTS = {
     "recorder": ("recorder", "foxglove"),
     "operator": ("operator",),
     "router": ("router",),
+    SITE_VIEWER: (SITE_VIEWER,),
 }
 #: zenoh-plugin-ros2dds settings (its DEFAULT_CONFIG.json5, 09d68c0): only the lbr stack's topics the adapter
 #: uses cross the bridge; the 1 kHz state goes first and unbatched (``pub_priorities`` ``1:express``, which the
@@ -73,9 +83,9 @@ BRIDGE_ROS2DDS = {
 }
 
 
-def identity_folder(directory: Path, role: str) -> Path:
-    """The folder of ``role``'s identity in a credentials folder ``directory``."""
-    return directory / role
+def identity_folder(directory: Path, role: str, cell: str | None = None) -> Path:
+    """The folder of ``role``'s identity in a credentials folder ``directory`` (of cell ``cell`` in a site's)."""
+    return directory / role if cell is None else directory / cell / role
 
 
 def identity_files(folder: Path) -> tuple[Path, Path, Path]:
@@ -83,23 +93,44 @@ def identity_files(folder: Path) -> tuple[Path, Path, Path]:
     return folder / CA_FILE, folder / CERT_FILE, folder / KEY_FILE
 
 
+def identities(directory: Path, cells: tuple[str, ...] = ()) -> dict[str, tuple[Path, str]]:
+    """Common name -> (folder, role) of every identity ``make_credentials`` puts in ``directory``."""
+    if not cells:
+        return {name: (identity_folder(directory, name), name) for name in IDENTITIES}
+    site = {name: (identity_folder(directory, name), name) for name in (RELAY, SITE_VIEWER)}
+    return {**site, **{identity_name(r, c): (identity_folder(directory, r, c), r) for c in cells for r in ROLES}}
+
+
+def cell_of(folder: Path) -> str | None:
+    """The robot id an identity folder's certificate names (``role@robot_id``), or None (a cell of its own)."""
+    from .certificates import common_name
+
+    return role_and_cell(common_name(identity_files(folder)[1]))[1]
+
+
 def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str, ...] = (),
-                     days: int = DEFAULT_DAYS) -> dict[str, Path]:
-    """Create the files (see the module docstring); role -> its identity folder. FileExistsError if any exists
-    (with ``if_missing``: only if some but not all exist; a complete set is kept as it is)."""
+                     days: int = DEFAULT_DAYS, cells: tuple[str, ...] = ()) -> dict[str, Path]:
+    """Create the files (see the module docstring); common name -> its identity folder. FileExistsError if any
+    exists (with ``if_missing``: only if some but not all exist; a complete set is kept as it is).
+
+    cells : the robot ids of a site (per-cell identities ``<role>@<robot id>``); empty: one cell, bare roles.
+    """
+    cells = check_cells(cells)
+    plan = identities(directory, cells)
+    bridges = [f for f, role in plan.values() if role == "bridge"]
     targets = [directory / CA_FOLDER / n for n in (CA_FILE, "ca.key")]
-    targets += [p for r in IDENTITIES for p in identity_files(identity_folder(directory, r))]
-    targets.append(identity_folder(directory, "bridge") / BRIDGE_CONFIG)
+    targets += [p for f, _ in plan.values() for p in identity_files(f)]
+    targets += [f / BRIDGE_CONFIG for f in bridges]
     present = [str(p) for p in targets if p.exists()]
-    folders = {role: identity_folder(directory, role) for role in IDENTITIES}
+    folders = {name: f for name, (f, _) in plan.items()}
     if if_missing and len(present) == len(targets):
         return folders
     missing = {r: f for r, f in folders.items() if not any(p.exists() for p in identity_files(f))}
     ca_there = all((directory / CA_FOLDER / n).exists() for n in (CA_FILE, "ca.key"))
-    if if_missing and ca_there and missing and len(present) == len(targets) - 3 * len(missing):
+    if if_missing and not cells and ca_there and missing and len(present) == len(targets) - 3 * len(missing):
         # a set made before an identity was added (the router): issue the missing ones with the same CA
         ca_key, ca_cert = _load_ca(directory / CA_FOLDER)
-        _issue_all(directory, missing, ca_key, ca_cert, hosts, days)
+        _issue_all(directory, {n: plan[n] for n in missing}, ca_key, ca_cert, hosts, days)
         return folders
     if present:
         raise FileExistsError(f"credentials already exist, not overwritten: {', '.join(present[:4])}"
@@ -107,8 +138,9 @@ def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str
     ca_key, ca_cert = new_ca(days)
     (directory / CA_FOLDER).mkdir(parents=True, exist_ok=True)
     write_key_and_cert(directory / CA_FOLDER / CA_FILE, directory / CA_FOLDER / "ca.key", ca_key, ca_cert)
-    _issue_all(directory, folders, ca_key, ca_cert, hosts, days)
-    write_bridge_config(folders["bridge"])
+    _issue_all(directory, plan, ca_key, ca_cert, hosts, days)
+    for c in cells or (None,):
+        write_bridge_config(identity_folder(directory, "bridge", c), c)
     return folders
 
 
@@ -122,31 +154,34 @@ def _load_ca(folder: Path):
     return key, cert
 
 
-def _issue_all(directory: Path, folders: dict[str, Path], ca_key, ca_cert, hosts: tuple[str, ...],
+def _issue_all(directory: Path, plan: dict[str, tuple[Path, str]], ca_key, ca_cert, hosts: tuple[str, ...],
                days: int) -> None:
+    """Issue each common name of ``plan`` (name -> (folder, role)) into its folder, with the CA's certificate."""
     ca_pem = (directory / CA_FOLDER / CA_FILE).read_bytes()
-    for role, folder in folders.items():
+    for name, (folder, role) in plan.items():
         folder.mkdir(parents=True, exist_ok=True)
-        key, cert = issue(role, (*ROLE_HOSTS[role], *DEFAULT_HOSTS, *hosts), days, ca_key, ca_cert)
+        key, cert = issue(name, (*ROLE_HOSTS[role], *DEFAULT_HOSTS, *hosts), days, ca_key, ca_cert)
         ca_path, cert_path, key_path = identity_files(folder)
         write_key_and_cert(cert_path, key_path, key, cert)
         write_atomic(ca_path, lambda f: f.write(ca_pem), mode=0o644)
 
 
 def bridge_config(secrets: str = BRIDGE_SECRETS, keys: Keys | None = None,
-                  ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES) -> dict:
-    """zenoh-bridge-ros2dds's configuration: the bridge identity at ``secrets``, the cell's access list."""
+                  ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES, cell: str | None = None) -> dict:
+    """zenoh-bridge-ros2dds's configuration: the bridge identity at ``secrets``, the cell's access list (of
+    cell ``cell`` of a site: its keys and its identities' names)."""
     ca, cert, key = (f"{secrets}/{n}" for n in (CA_FILE, CERT_FILE, KEY_FILE))
     return {"transport": {"link": {"tls": {"root_ca_certificate": ca, "enable_mtls": True,
                                            "listen_certificate": cert, "listen_private_key": key,
                                            "connect_certificate": cert, "connect_private_key": key}}},
-            "access_control": cell_acl(keys or Keys(), "cert_common_names", ros_namespaces),
+            "access_control": cell_acl(keys or (Keys.for_robot(cell) if cell else Keys()), "cert_common_names",
+                                       ros_namespaces, cell),
             "plugins": {"ros2dds": BRIDGE_ROS2DDS}}
 
 
-def write_bridge_config(folder: Path) -> Path:
+def write_bridge_config(folder: Path, cell: str | None = None) -> Path:
     path = folder / BRIDGE_CONFIG
-    write_text_atomic(path, json.dumps(bridge_config(), indent=2) + "\n", mode=0o644)
+    write_text_atomic(path, json.dumps(bridge_config(cell=cell), indent=2) + "\n", mode=0o644)
     return path
 
 
@@ -159,18 +194,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--days", type=int, default=DEFAULT_DAYS, help=f"validity [days] (default {DEFAULT_DAYS})")
     ap.add_argument("--if-missing", action="store_true",
                     help="keep a complete set that is already there (exit 0); a partial one is still an error")
+    ap.add_argument("--cells", metavar="ID,ID,...", default="",
+                    help="a site of several cells behind one router: per robot id DIR/<id>/<role>/ with common "
+                         "names <role>@<id>, plus DIR/router/ and DIR/site-viewer/ (default: one cell, DIR/<role>/)")
     args = ap.parse_args(argv)
     if not 1 <= args.days <= 3650:
         print(f"lamps credentials: --days must be in [1, 3650], got {args.days}", file=sys.stderr)
         return 2
+    cells = tuple(c.strip() for c in args.cells.split(",") if c.strip())
     try:
-        folders = make_credentials(args.directory, args.if_missing, tuple(args.host), args.days)
+        folders = make_credentials(args.directory, args.if_missing, tuple(args.host), args.days, cells)
     except (FileExistsError, OSError, ValueError) as exc:
         print(f"lamps credentials: {exc}", file=sys.stderr)
         return 1
     d = args.directory
-    print(f"identities of {', '.join(folders)} in {d}{'/'}<role>/ (the CA's key in {d / CA_FOLDER}: give it to "
-          "no service)")
+    if cells:
+        print(f"identities of cells {', '.join(cells)} in {d}/<robot id>/<role>/ (common names <role>@<robot id>), "
+              f"of {RELAY} and {SITE_VIEWER} in {d}/<name>/ (the CA's key in {d / CA_FOLDER}: give it to no service)")
+    else:
+        print(f"identities of {', '.join(folders)} in {d}{'/'}<role>/ (the CA's key in {d / CA_FOLDER}: give it "
+              "to no service)")
     print("a service runs as a role with  LAMPS_ZENOH_IDENTITY=<that role's folder>  tls/ endpoints and "
           "LAMPS_ZENOH_ACCESS_CONTROL=true")
     return 0

@@ -46,7 +46,8 @@ class Phase(StrEnum):
 
     INIT -> WAIT_PEERS -> APPROACH -> TRANSITION -> WIPE -> ... -> RETREAT
     -> DONE; PAUSED, FAULT and ESTOP are reachable from any phase
-    (:mod:`controller.executor`).
+    (:mod:`controller.executor`). TEACH: the arm is hand-guided (``lamps
+    teach``, :mod:`controller.teach`), no skill runs.
     """
 
     INIT = "INIT"
@@ -59,6 +60,7 @@ class Phase(StrEnum):
     PAUSED = "PAUSED"
     FAULT = "FAULT"
     ESTOP = "ESTOP"
+    TEACH = "TEACH"
 
 
 #: The phases' names, as :class:`ControllerStatus` carries them.

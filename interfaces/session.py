@@ -34,7 +34,7 @@ from typing import Generic, TypeVar
 
 import zenoh
 
-from .access import cell_acl
+from .access import cell_acl, role_and_cell, site_acl
 from .codec import Decoder, encode
 from .config import ZenohSettings
 from .errors import ConfigError, MessageDecodeError
@@ -97,8 +97,7 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
         cfg.insert_json5("transport/auth/usrpwd", json.dumps(
             {"user": settings.user, "password": password, "dictionary_file": settings.credentials_file}))
     if settings.access_control:
-        subject = "cert_common_names" if settings.tls_ca else "usernames"
-        cfg.insert_json5("access_control", json.dumps(cell_acl(settings.keys, subject, settings.ros_namespaces)))
+        cfg.insert_json5("access_control", json.dumps(access_list(settings)))
     if settings.tls_ca:
         for path, what in ((settings.tls_ca, "tls_ca"), (settings.tls_certificate, "tls_certificate"),
                            (settings.tls_private_key, "tls_private_key")):
@@ -108,6 +107,24 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
             "listen_certificate": settings.tls_certificate, "listen_private_key": settings.tls_private_key,
             "connect_certificate": settings.tls_certificate, "connect_private_key": settings.tls_private_key}))
     return cfg
+
+
+def access_list(settings: ZenohSettings) -> dict:
+    """The access list ``settings`` apply: the site's with ``cells``, else the cell's, its roles named as the
+    service's own certificate names them (``controller`` or ``controller@<robot_id>``,
+    :func:`interfaces.access.identity_name`). ConfigError when that certificate is another cell's."""
+    subject = "cert_common_names" if settings.tls_ca else "usernames"
+    if settings.cells:
+        return site_acl(settings.cells, subject)
+    cell = None
+    if settings.tls_ca:
+        from .certificates import common_name
+
+        role, cell = role_and_cell(common_name(Path(settings.tls_certificate)))
+        if cell is not None and Keys.for_robot(cell).prefix != settings.keys.prefix:
+            raise ConfigError(f"[zenoh] identity {settings.identity or settings.tls_certificate!r} is {role} of cell "
+                              f"{cell}, but the keys are under {settings.keys.prefix} (robot id {cell} expected)")
+    return cell_acl(settings.keys, subject, settings.ros_namespaces, cell)
 
 
 def _read_secret(path: str, what: str) -> str:

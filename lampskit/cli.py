@@ -209,18 +209,19 @@ def learn_main(argv: list[str]) -> int:
     p = _parser("learn", "Segment demonstrations, learn their periodic and transitional MPs, save a skill file. "
                          "Several demonstrations of one skill (same board, same phases in the same order) are "
                          "fused MP by MP (GMM-GMR over all of them) and their spread recorded.")
-    p.add_argument("demo", nargs="+", help="demonstration file(s) (.csv, .npz, QTM .tsv, or dataset.mat#INDEX)")
+    p.add_argument("demo", nargs="+", help="demonstration file(s) (.csv, .npz, QTM .tsv, or dataset.mat#INDEX) or "
+                                           "robot recording(s): a rosbag2 folder, an .mcap or .db3 file")
     p.add_argument("-o", "--output", type=Path, required=True, help="skill file to write (JSON)")
     p.add_argument("--method", choices=("optics", "kmeans", "affinity", "sklearn-optics"), default="optics")
     p.add_argument("--plots", type=Path, default=None, help="folder for the paper's Figs. 4-7 as PNG (first demo)")
+    _recording_options(p)
 
     def body(a: argparse.Namespace) -> int:
-        from lampskit.learn.demo_io import read_demo
         from lampskit.learn.learn import learn_skill_from_demos
         from lampskit.core.skill import save_skill
 
         _check_out_parent(a.output)
-        demos = [read_demo(spec) for spec in a.demo]
+        demos = _read_demos(a)
         skill, segs = learn_skill_from_demos(demos, method=a.method, progress=Progress())
         save_skill(a.output, skill)
         print(_skill_summary(skill))
@@ -234,6 +235,51 @@ def learn_main(argv: list[str]) -> int:
         return 0
 
     return _run("learn", p, argv, body)
+
+
+def _recording_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("robot recordings", "which path to learn from a rosbag2 folder, an MCAP file or the "
+                                                 "cell's recording.mcap (docs/real-robot.md#teaching-on-the-robot)")
+    g.add_argument("--topic", help="topic to read (default: the one LBRState, JointState, cell robot/state or "
+                                   "PoseStamped topic, in that order; /tf with --frame)")
+    g.add_argument("--frame", help="the frame to learn from /tf (and /tf_static)")
+    g.add_argument("--base-frame", help="express --frame in this frame (default: the root of its tree)")
+    g.add_argument("--tool-offset", metavar="X,Y,Z", type=_xyz,
+                   help="pad centre [m] in the flange frame (joints; default: the described eraser's pad) or in the "
+                        "recorded frame (poses; default 0,0,0)")
+    g.add_argument("--start", type=float, metavar="S", help="learn from S seconds after the topic's first sample")
+    g.add_argument("--end", type=float, metavar="S", help="learn up to S seconds after the topic's first sample")
+    g.add_argument("--max-gap", type=float, metavar="S",
+                   help="longest gap between samples [s] (default: 5 sample periods, at least 0.05 s)")
+
+
+def _xyz(text: str) -> tuple[float, float, float]:
+    try:
+        x, y, z = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not X,Y,Z in metres (e.g. 0,0,0.035)") from None
+    return x, y, z
+
+
+def _read_demos(a: argparse.Namespace) -> list:
+    """Every ``a.demo``: robot recordings through :mod:`lampskit.learn.bags` with the described arm, files by
+    :func:`~lampskit.learn.demo_io.read_demo`; the recording options only for recordings."""
+    from lampskit.learn.bags import BagOptions, is_recording, read_recording_demo
+    from lampskit.learn.demo_io import read_demo
+
+    options = BagOptions(a.topic, a.frame, a.base_frame, a.tool_offset, a.start, a.end, a.max_gap)
+    given = [f"--{k.replace('_', '-')}" for k in ("topic", "frame", "base_frame", "tool_offset", "start", "end",
+                                                  "max_gap") if getattr(a, k) is not None]
+    recordings = [spec for spec in a.demo if is_recording(spec)]
+    if given and not recordings:
+        raise LampsError(f"{', '.join(given)}: only for robot recordings (a rosbag2 folder, .mcap, .db3), "
+                         f"and {', '.join(a.demo)} holds none")
+    arm = None
+    if recordings:
+        from lampskit.arm import described_arm
+
+        arm = described_arm()
+    return [read_recording_demo(spec, arm, options) if is_recording(spec) else read_demo(spec) for spec in a.demo]
 
 
 def _skill_summary(skill) -> str:

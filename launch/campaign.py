@@ -150,10 +150,11 @@ def _write_outputs(out: Path, rows: list[dict[str, Any]], command: str, extra: d
 
 
 def _local_cells(todo: list[int], cells: list[Cell], skill: Path, out: Path, max_duration_s: float, port_base: int,
-                 jobs: int):
+                 jobs: int, network: bool):
     """(k, report or None, run folder, why) of each cell of ``todo`` as it finishes, ``jobs`` at once here."""
     with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-        futures = {pool.submit(run_cell, k, cells[k], skill, out, max_duration_s, port_base): k for k in todo}
+        futures = {pool.submit(run_cell, k, cells[k], skill, out, max_duration_s, port_base, network): k
+                   for k in todo}
         for fut in concurrent.futures.as_completed(futures):
             yield (futures[fut], *fut.result())
 
@@ -163,11 +164,13 @@ def _say(line: str) -> None:
 
 
 def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, max_duration_s: float,
-                 command: str, echo=_say, resume: bool = False, ray: str | None = None) -> dict[str, Any]:
+                 command: str, echo=_say, resume: bool = False, ray: str | None = None,
+                 network: bool = True) -> dict[str, Any]:
     """Run every cell (``jobs`` at once), write campaign.json, .md and .png into ``out`` after each cell (the table
     grows as cells finish); returns the json. ``resume``: the cells whose run folder holds a report are taken as
     they are, a cell folder without one (a campaign killed while it ran) is run again, the rest run. ``ray``:
-    run the cells as tasks on that Ray cluster (``local``: one started here), :mod:`launch.campaign_ray`."""
+    run the cells as tasks on that Ray cluster (``local``: one started here), :mod:`launch.campaign_ray`.
+    ``network``: each cell over Zenoh (``lamps up``); False: in one process without one (``--no-network``)."""
     out.mkdir(parents=True, exist_ok=True)
     stains, bounds, felt, v_plan, pad = _bounds(cells)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
@@ -186,7 +189,7 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
         todo.append(k)
     learned = out / "learn" / "skill.json"
     skill = skill or (learned if resume and learned.is_file() else _learn_skill(out))
-    extra = {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan}
+    extra = {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan, "network": network}
     if resume:
         echo(f"resuming: {len(cells) - len(todo)} of {len(cells)} cells already have a report, {len(todo)} to run")
     t0 = time.monotonic()
@@ -195,9 +198,9 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
     if ray is not None:
         from .campaign_ray import ray_cells
 
-        results = ray_cells(todo, cells, skill, out, max_duration_s, port_base, ray, jobs)
+        results = ray_cells(todo, cells, skill, out, max_duration_s, port_base, ray, jobs, network)
     else:
-        results = _local_cells(todo, cells, skill, out, max_duration_s, port_base, jobs)
+        results = _local_cells(todo, cells, skill, out, max_duration_s, port_base, jobs, network)
     for k, report, run_dir, why in results:
         rows[k] = row_of(cells[k], report, bounds[cells[k]], run_dir, why, stains[cells[k]], felt, v_plan)
         r = rows[k]
@@ -260,6 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                     help="run the cells as Ray tasks on the cluster at ADDRESS (ray start --head prints it; 'auto': "
                          "the local one); without ADDRESS a local cluster of --jobs CPUs (needs lamps[ray])")
+    ap.add_argument("--no-network", action="store_true",
+                    help="each cell in one process without Zenoh (lamps up --no-network: the same services, stepped "
+                         "in lock-step on an in-process bus); default: each cell over Zenoh as lamps up runs it")
     ap.add_argument("--resume", action="store_true",
                     help="--out is a campaign that was stopped: keep the cells that left a report, run the rest")
     ap.add_argument("--summarize", nargs="+", metavar="DIR", default=None,
@@ -304,7 +310,8 @@ def main(argv: list[str] | None = None) -> int:
         command = "lamps campaign " + " ".join(argv if argv is not None else sys.argv[1:])
         if a.resume and not (a.out and Path(a.out).is_dir()):
             raise CampaignError("--resume needs --out, the folder of the campaign to go on with")
-        result = run_campaign(cells, out, a.jobs, skill, a.max_duration, command, resume=a.resume, ray=a.ray)
+        result = run_campaign(cells, out, a.jobs, skill, a.max_duration, command, resume=a.resume, ray=a.ray,
+                              network=not a.no_network)
     except LampsError as exc:
         print(f"lamps campaign: error: {exc}", file=sys.stderr)
         return 1

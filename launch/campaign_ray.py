@@ -31,7 +31,7 @@ MAX_RETRIES = 2
 
 
 def _cell_task(k: int, cell: Cell, skill_bytes: bytes, out: str, max_duration_s: float,
-               port_base: int) -> tuple[dict | None, str, str]:
+               port_base: int, network: bool = True) -> tuple[dict | None, str, str]:
     """On a Ray worker: the skill written locally, the cell run as the local campaign runs it."""
     import shutil
 
@@ -45,11 +45,11 @@ def _cell_task(k: int, cell: Cell, skill_bytes: bytes, out: str, max_duration_s:
     with tempfile.TemporaryDirectory(prefix="lamps-skill-") as tmp:
         skill = Path(tmp) / "skill.json"
         skill.write_bytes(skill_bytes)
-        return run_cell(k, cell, skill, Path(out), max_duration_s, port_base)
+        return run_cell(k, cell, skill, Path(out), max_duration_s, port_base, network)
 
 
 def ray_cells(todo: list[int], cells: list[Cell], skill: Path, out: Path, max_duration_s: float, port_base: int,
-              address: str, jobs: int) -> Iterator[tuple[int, dict | None, str, str]]:
+              address: str, jobs: int, network: bool = True) -> Iterator[tuple[int, dict | None, str, str]]:
     """(k, report or None, run folder, why) of each cell of ``todo`` as its task finishes."""
     try:
         import ray
@@ -66,7 +66,8 @@ def ray_cells(todo: list[int], cells: list[Cell], skill: Path, out: Path, max_du
     try:
         task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(_cell_task)
         skill_bytes = skill.read_bytes()
-        pending = {task.remote(k, cells[k], skill_bytes, str(out), max_duration_s, port_base): k for k in todo}
+        pending = {task.remote(k, cells[k], skill_bytes, str(out), max_duration_s, port_base, network): k
+                   for k in todo}
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
             ref = ready[0]

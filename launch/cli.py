@@ -7,6 +7,10 @@ stays DONE (or on a fault held 5 s, a dead service, ``--max-duration`` or
 Ctrl-C), stops everything and prints the report the recorder wrote into the
 run folder. The recorder's own command, ``lamps record``, and ``lamps report``
 are in :mod:`launch.record_cli`.
+
+``--router ENDPOINT --credentials DIR`` runs the cell's services as clients
+of a Zenoh router with the cell's identities from ``DIR``; ``--cells N``
+runs N such cells side by side through one router (:mod:`launch.site`).
 """
 
 from __future__ import annotations
@@ -67,7 +71,21 @@ def build_up_parser() -> argparse.ArgumentParser:
     p.add_argument("--compose", metavar="FILE", help="compose file (default: docker-compose.yml of this checkout)")
     p.add_argument("--port-base", type=int, metavar="N",
                    help="listen on N, N+1, ... (default: free ports); a busy port is refused before anything starts")
-    p.add_argument("--robot-id", default=None, help="key prefix lamps/<robot-id> (default iiwa)")
+    p.add_argument("--robot-id", default=None, help="key prefix lamps/<robot-id> (default iiwa; with --cells the "
+                                                    "cells are <robot-id>-1 ... -N)")
+    p.add_argument("--cells", type=int, metavar="N", default=None,
+                   help="N cells side by side through one lamps router, each with its own identities (one CA), "
+                        "seed (SEED, SEED+1, ...) and run folder OUT/<robot id>/; --port-base: the router's port")
+    p.add_argument("--router", metavar="ENDPOINT", default=None,
+                   help="every service a client of the Zenoh router at ENDPOINT (tls/HOST:PORT), no peer links; "
+                        "needs --credentials")
+    p.add_argument("--credentials", metavar="DIR", default=None,
+                   help="the cell's identities: a folder of 'lamps credentials DIR', or DIR/<robot id> of "
+                        "'lamps credentials DIR --cells ...' (its robot id is the cell's); default: new ones in "
+                        "the run folder")
+    p.add_argument("--no-network", action="store_true",
+                   help="lock-step, sim only: the same services in one process on an in-process bus, no Zenoh "
+                        "(launch/local_cell.py; what lamps campaign --no-network runs)")
     p.add_argument("-q", "--quiet", action="store_true", help="do not echo the services' logs")
     p.add_argument("-v", "--verbose", action="store_true", help="log what the launcher does")
     return p
@@ -148,13 +166,28 @@ def _up(a, stop_requested: threading.Event) -> int:
 
     t_start = time.monotonic()
     skill = _learn(a, out, echo, stop_requested)
+    if a.cells is not None:
+        from .site import run_cells
+
+        return run_cells(a, skill, out, stop_requested)
     cell = _plan_cell(a, compose_path, board_vars, skill, out)
-    why = _run_cell(cell, a, echo, stop_requested, t_start)
+    if a.no_network:
+        from .local_cell import run as run_local
+
+        _print(f"lamps up: the cell in one process, no network; run folder {cell.out}")
+        why = run_local(cell.services, cell.env, out, cell.robot_id, skill, dict(vars(a)), a.max_duration,
+                        stop_requested, lambda *p: _print(_progress(*p)) if echo else None)
+    else:
+        why = _run_cell(cell, a, echo, stop_requested, t_start)
     return _show_report(out, why)
 
 
 def _check_options(a) -> None:
     """The numeric options in range (the others are checked where they are used)."""
+    if a.no_network and (a.mode != "lockstep" or a.foxglove is not None or a.robot not in (None, "sim")
+                         or a.cells is not None or a.router):
+        raise UpError("--no-network runs one simulated cell in lock-step only (no --mode realtime, --foxglove, "
+                      "--robot lbr-sim, --cells, --router: they need the network)")
     if a.stains < 0 or a.stains > 50:
         raise UpError(f"--stains must be in [0, 50], got {a.stains}")
     if not (a.max_duration > 0 and math.isfinite(a.max_duration)):
@@ -164,6 +197,16 @@ def _check_options(a) -> None:
             raise UpError(f"--foxglove PORT must be in 1..65535, got {a.foxglove}")
         if _port_busy(a.foxglove):
             raise UpError(f"--foxglove {a.foxglove}: the port is already in use (give another)")
+    if a.cells is not None:
+        if not 1 <= a.cells <= 16:
+            raise UpError(f"--cells must be in [1, 16], got {a.cells}")
+        if a.router or a.credentials:
+            raise UpError("--cells makes the router and the cells' credentials itself: not with --router or "
+                          "--credentials")
+        if a.robot == "lbr-sim":  # the lbr stack's ROS topics (lbr/**) are outside the cells' prefixes
+            raise UpError("--cells runs --robot sim only: the lbr stack's ROS namespaces would be shared")
+    if a.router and not (a.credentials and a.router.startswith("tls/")):
+        raise UpError(f"--router {a.router}: a tls/HOST:PORT endpoint and --credentials DIR (the cell's identities)")
 
 
 def _new_run_folder(out_option: str | None) -> Path:
@@ -186,14 +229,16 @@ class _Cell:
     out: Path
     credentials: Path  # the run's per-role identities (each container's /secrets is one role's folder)
     access_control: bool
+    router: str | None = None  # every service a client of this router (--router)
 
 
 def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, out: Path) -> _Cell:
     """The compose file read with the run's variables, its active services localised on their ports."""
     from .compose import compose_model, localize, run_locally
 
-    from interfaces.credentials import make_credentials
+    from .site import cell_credentials
 
+    credentials = cell_credentials(a, out)
     model = compose_model(compose_path, _compose_variables(a, board_vars, skill, out))
     if a.foxglove is not None:
         model = replace(model, profiles=(*model.profiles, "foxglove"))
@@ -203,14 +248,17 @@ def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, o
         raise UpError(f"{compose_path}: profiles {','.join(model.profiles) or '(none)'} give "
                       f"{len(sides)} robot sides ({', '.join(sides) or 'none'}); choose one with --robot "
                       f"{'|'.join(ROBOTS)} or COMPOSE_PROFILES")
-    credentials = out / "credentials"
-    make_credentials(credentials, if_missing=True)  # a new run folder: new identities (and CA) for this run
-    local = localize(services, _port_map(services, a.port_base), secrets=credentials)
+    router = getattr(a, "router", None)
+    local = localize(services, None if router else _port_map(services, a.port_base), secrets=credentials)
+    if router:
+        from .site import clients_of_router
+
+        local = clients_of_router(local, router)
     robot_id = next((s.environment.get("LAMPS_ROBOT_ID") for s in local if s.environment.get("LAMPS_ROBOT_ID")),
                     "iiwa")
     access = any(s.environment.get("LAMPS_ZENOH_ACCESS_CONTROL", "false").lower() == "true" for s in local)
     return _Cell(services=local, env={k: v for k, v in board_vars.items() if k.startswith("LAMPS__")},
-                 robot_id=robot_id, skill=skill, out=out, credentials=credentials, access_control=access)
+                 robot_id=robot_id, skill=skill, out=out, credentials=credentials, access_control=access, router=router)
 
 
 def _compose_variables(a, board_vars: dict[str, str], skill: Path, out: Path) -> dict[str, str]:
@@ -253,23 +301,33 @@ def _run_cell(cell: _Cell, a, echo, stop_requested: threading.Event, t_start: fl
     """Start the services, watch the run, stop everything and write ``run.json``; returns why the run ended."""
     children: list = []
     outcome, why = "stopped", "stopped by the user"
+    node = None
     try:
-        _start_services(cell, echo, children)
+        if cell.router:  # the services come up through the router: watched from the start, by their tokens
+            try:
+                node = _watcher(cell).__enter__()
+            except Exception as exc:  # zenoh.ZError: no router there, or it refused the operator's certificate
+                raise UpError(f"cannot join the router {cell.router}: {exc}") from None
+        _start_services(cell, echo, children, node)
         _print(f"lamps up: {', '.join(c.name for c in children)} running; run folder {cell.out}")
         if a.foxglove is not None:
             _print(f"lamps up: live in Foxglove: Open connection ws://127.0.0.1:{a.foxglove} "
                    f"(layout config/foxglove/lamps.json)")
-        outcome, why = _watch(cell, children, a.max_duration, stop_requested)
+        outcome, why = _watch(cell, children, a.max_duration, stop_requested, node)
     except UpError as exc:
         outcome, why = "failed", str(exc)
         print(f"lamps up: error: {exc}", file=sys.stderr)
     finally:
+        if node is not None:
+            node.close()
         _stop_services(children, cell, {"outcome": outcome, "why": why}, a, t_start)
     return why
 
 
-def _start_services(cell: _Cell, echo, children: list) -> None:
-    """Start the services in order, each listening on its ports before the next one starts.
+def _start_services(cell: _Cell, echo, children: list, node=None) -> None:
+    """Start the services in order, each listening on its ports (through a router: its liveliness token seen by
+    ``node``, counted, as a service names its token itself: ``robot``, not ``robot-lbr-sim``) before the next
+    one starts.
 
     ``children`` gets each child as it starts, so whatever started is stopped when a later one fails.
     """
@@ -279,6 +337,11 @@ def _start_services(cell: _Cell, echo, children: list) -> None:
         child = Child(svc.name, svc.argv, {**svc.environment, **cell.env, "MPLBACKEND": "Agg"}, cell.out / "logs",
                       echo)
         children.append(child)
+        deadline = time.monotonic() + 120.0
+        while node is not None and len(node.alive_services(0.5) - {"launcher"}) < len(children):
+            if child.returncode is not None or time.monotonic() > deadline:
+                raise UpError(f"service {svc.name} did not come up through the router {cell.router}: "
+                              f"{child.last_words()}")
         for port in svc.listen_ports:
             if not wait_port(port, child, 120.0):
                 code = child.returncode
@@ -359,20 +422,30 @@ def _port_busy(port: int) -> bool:
     return False
 
 
-def _watch(cell: _Cell, children, max_duration_s: float, stop_requested) -> tuple[str, str]:
-    """Progress on the terminal until the run ends; returns (outcome for run.json, why)."""
+def _watcher(cell: _Cell):
+    """The launcher's session, as the operator (its identity is in the run's credentials whether or not the list is
+    on): linked to every service, or a client of the router."""
     from interfaces.config import ZenohSettings
     from interfaces.credentials import identity_folder
-    from interfaces.messages import ControllerStatus, Phase, SimTruth, Stains
     from interfaces.session import ServiceNode
 
-    local, robot_id = cell.services, cell.robot_id
-    endpoints = [e for s in local for e in s.listen_endpoints]
-    # the launcher watches as the operator (its identity is in the run's credentials whether or not the list is on)
-    settings = ZenohSettings(connect=tuple(endpoints), robot_id=robot_id, access_control=cell.access_control,
+    endpoints = tuple(e for s in cell.services for e in s.listen_endpoints)
+    settings = ZenohSettings(connect=(cell.router,) if cell.router else endpoints,
+                             mode="client" if cell.router else "peer", robot_id=cell.robot_id,
+                             access_control=cell.access_control,
                              identity=str(identity_folder(cell.credentials, "operator")))
+    return ServiceNode("launcher", settings)
+
+
+def _watch(cell: _Cell, children, max_duration_s: float, stop_requested, node=None) -> tuple[str, str]:
+    """Progress on the terminal until the run ends (``node``: the launcher's session if open); returns (outcome
+    for run.json, why)."""
+    from contextlib import nullcontext
+
+    from interfaces.messages import ControllerStatus, SimTruth, Stains
+
     t0 = time.monotonic()
-    with ServiceNode("launcher", settings) as node:
+    with nullcontext(node) if node is not None else _watcher(cell) as node:
         keys = node.keys
         status = node.latest(keys.controller_status, ControllerStatus)
         truth = node.latest(keys.sim_truth, SimTruth)

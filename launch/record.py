@@ -220,7 +220,8 @@ class Recorder:
     """
 
     def __init__(self, session, keys: Keys, out_dir: Path, max_queue: int = 200_000,
-                 budget_bytes: int = DEFAULT_BUDGET_BYTES) -> None:
+                 budget_bytes: int = DEFAULT_BUDGET_BYTES, clock=time.time_ns) -> None:
+        self.clock = clock  # log_time of a sample [ns]: the wall clock, or the network-free cell's robot clock
         self.budget_bytes = budget_bytes
         self.over_budget = False
         self.keys = keys
@@ -254,7 +255,7 @@ class Recorder:
         n, last_ns = sink.carry_over(earlier)
         sink.write_json(RESUMED_TOPIC, "lamps.RecorderResumed",
                         {"carried_messages": n, "earlier_file": earlier.name, "earlier_finished": earlier == final,
-                         "last_earlier_ns": last_ns}, time.time_ns(), _RESUMED_SCHEMA)
+                         "last_earlier_ns": last_ns}, self.clock(), _RESUMED_SCHEMA)
         sink.flush()
         os.replace(fresh, self.partial)  # the open file follows the rename
         sink.path = self.partial
@@ -268,7 +269,7 @@ class Recorder:
     def _on_sample(self, sample) -> None:  # Zenoh thread: never waits
         if len(self._queue) == self._queue.maxlen:
             self.counters["dropped_queue_full"] += 1
-        self._queue.append((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+        self._queue.append((str(sample.key_expr), sample.payload.to_bytes(), self.clock()))
         self._wake.set()
 
     def _decoder(self, key: str) -> Decoder | None:

@@ -11,6 +11,13 @@ Services join it as clients (``LAMPS_ZENOH_MODE=client``,
 ``LAMPS_ZENOH_CONNECT=tls/<router host>:7447``, no listen endpoint) and keep
 their own access list, which lets in the router's relayed puts.
 
+With ``--cells ID,ID,...`` (``[zenoh] cells``) it routes a site of several
+cells: their identities from ``lamps credentials DIR --cells ...``, the
+site's access list (:func:`interfaces.access.site_acl`): each cell's roles
+put their own row under their own prefix only and hear nothing of another
+cell; the ``site-viewer`` reads them all. Each refusal is logged with
+``RUST_LOG=zenoh::net::routing::interceptor::access_control=debug``.
+
 A service that must not pay the extra hop (the controller and the robot
 side at 1 kHz) can stay a peer with a direct link to its partner and a
 link to the router for the rest. Runs until SIGTERM or Ctrl-C; with ``-v`` logs
@@ -42,11 +49,15 @@ def router_settings(settings, listen: tuple[str, ...]):
 
 
 def main(argv: list[str] | None = None) -> int:
+    from dataclasses import replace
+
     from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 
     ap = argparse.ArgumentParser(prog="lamps router", description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", help="TOML configuration ([zenoh]: identity, access_control, robot_id, ...)")
     ap.add_argument("--status-s", type=float, default=10.0, help="with -v: log the sessions routed this often (0: never)")
+    ap.add_argument("--cells", metavar="ID,ID,...",
+                    help="route several cells (robot ids) with the site's access list ([zenoh] cells)")
     ap.add_argument("-v", "--verbose", action="store_true", help="log what the router does (its sessions, its settings)")
     add_zenoh_options(ap)
     a = ap.parse_args(argv)
@@ -54,13 +65,17 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s router %(levelname)s %(message)s")
     try:
         cfg = load_config(a.config)
-        settings = router_settings(zenoh_with_options(cfg.zenoh, a), tuple(a.listen or ()))
+        settings = zenoh_with_options(cfg.zenoh, a)
+        if a.cells is not None:
+            settings = replace(settings, cells=tuple(c.strip() for c in a.cells.split(",") if c.strip()))
+        settings = router_settings(settings, tuple(a.listen or ()))
         if settings.tls_ca and not settings.access_control:
             log.warning("access control is off: every client with a cell certificate may put on every key")
         import zenoh
 
         from interfaces.session import zenoh_config
 
+        zenoh.try_init_log_from_env()  # RUST_LOG: Zenoh's own log on stderr (the refusals above); unset: quiet
         session = zenoh.open(zenoh_config(settings))
     except ConfigError as exc:
         print(f"lamps router: {exc}", file=sys.stderr)
@@ -71,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    log.info("routing for robot id %s on %s (access control %s, identity %s)", settings.robot_id,
+    log.info("routing for robot id%s %s on %s (access control %s, identity %s)", "s" if settings.cells else "",
+             ", ".join(settings.cells) or settings.robot_id,
              ", ".join(settings.listen), "on" if settings.access_control else "off",
              settings.tls_certificate or "none")
     print(f"lamps router: listening on {', '.join(settings.listen)}", flush=True)

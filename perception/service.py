@@ -74,17 +74,21 @@ class PerceptionService:
         """Serve until stopped (or a finite source ends); returns the number of frames processed."""
         while not self.stop.is_set():
             frame = self.source.read()
-            now = time.monotonic()
-            if frame is not None:
-                self._handle(frame, now)
-            elif self.source.ended:
+            if frame is None and self.source.ended:
                 break
-            self._keep_publishing(now)
-            self._publish_status(now)
+            self.serve_once(frame, time.monotonic())
             if frame is None:
                 self.stop.wait(IDLE_S)
         self._publish_status(time.monotonic(), force=True)
         return self.counters["frames_processed"]
+
+    def serve_once(self, frame, now: float) -> None:
+        """One pass of the loop at ``now`` [s, the loop's clock]: ``frame`` (or None) processed, the stains
+        re-published when due, the status when due."""
+        if frame is not None:
+            self._handle(frame, now)
+        self._keep_publishing(now)
+        self._publish_status(now)
 
     def _tool_at(self, frame, now: float) -> np.ndarray | None:
         """The tool box (8, 3) [m] at the frame's time from the joint states received so far, or None."""

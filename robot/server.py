@@ -218,10 +218,19 @@ class RobotServer:
         return True
 
     # -- loops -------------------------------------------------------------------------------------
-    def _run_lockstep(self) -> None:
+    def start_lockstep(self):
+        """The lock-step command reader (an :class:`~interfaces.session.Inbox`), the first state published."""
         inbox = self.node.inbox(self.keys.robot_command, TorqueCommand)
         self._sources = [inbox]
         self.publish_state()
+        return inbox
+
+    def housekeeping(self) -> None:
+        """What every pass of a loop does besides the cycle: the e-stop keys read, the status when due."""
+        self._publish_status()
+
+    def _run_lockstep(self) -> None:
+        inbox = self.start_lockstep()
         last_pub = time.monotonic()
         republish = self.p.republish_s
         t_prev = time.perf_counter_ns()
@@ -234,22 +243,30 @@ class RobotServer:
                 self.publish_state()
                 self.counters["states_republished"] += 1
                 last_pub = now
-            if cmd is None or not self._from_served_controller(cmd) or not self._in_sequence(cmd, self.steps):
+            if cmd is None or not self.lockstep_cycle(cmd, t0, t_prev):
                 continue
-            command = self.gate.accept(cmd)
-            if command is None:
-                continue
-            t1 = time.perf_counter_ns()
-            self._apply(command, cmd.seq)
-            self.port.after_cycle(lockstep=True)
-            t2 = time.perf_counter_ns()
-            self.publish_state()
             last_pub = now
-            t3 = time.perf_counter_ns()
-            self.stats.add((t3 - t_prev) / 1e3, (t1 - t0) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
-            t_prev = t3
+            t_prev = time.perf_counter_ns()
             if self.p.max_steps and self.steps >= self.p.max_steps:
                 break
+
+    def lockstep_cycle(self, cmd: TorqueCommand, t0_ns: int = 0, t_prev_ns: int = 0) -> bool:
+        """One lock-step cycle on ``cmd``: if it answers the current state (served controller, in sequence, passed
+        by the gate) the port is written, its extras run and the next state goes out; False when it was dropped
+        (counted). ``t0_ns``, ``t_prev_ns``: when the wait for it began and the last cycle ended (perf counter)."""
+        if not self._from_served_controller(cmd) or not self._in_sequence(cmd, self.steps):
+            return False
+        command = self.gate.accept(cmd)
+        if command is None:
+            return False
+        t1 = time.perf_counter_ns()
+        self._apply(command, cmd.seq)
+        self.port.after_cycle(lockstep=True)
+        t2 = time.perf_counter_ns()
+        self.publish_state()
+        t3 = time.perf_counter_ns()
+        self.stats.add((t3 - (t_prev_ns or t1)) / 1e3, (t1 - (t0_ns or t1)) / 1e3, (t2 - t1) / 1e3, (t3 - t2) / 1e3)
+        return True
 
     def _run_realtime(self) -> None:
         hygiene = LoopHygiene(counts=self.counters)

@@ -20,6 +20,7 @@ from interfaces.robot_model import RobotModel
 from .board import Board, board_from_params, check_board, start_configuration, wipe_region
 from .camera import camera_pose
 from .dirt import DirtGrid, random_stains, stains_from_specs
+from .hand import hand_from_params
 from .params import SimParams
 from .robot import Readout, SimRobot
 from .world import build_world
@@ -84,6 +85,11 @@ class SimCore:
         self.robot = SimRobot(self.world, self.tau_max, self.board.normal_world, params.gravity_compensated,
                               model.joints, params.dt_s)
         self.steps = 0
+        try:
+            self.hand = hand_from_params(params.hand, self.robot.out.tcp_R)  # holds the tool as it starts
+        except ConfigError:
+            self.close()
+            raise
         self._cos_tilt = math.cos(math.radians(params.dirt.max_tilt_deg))
         self._half_pad = (PAD_SIZE_M[0] / 2, PAD_SIZE_M[1] / 2)
         self._wipe_every = params.dirt.wipe_every_steps
@@ -105,7 +111,12 @@ class SimCore:
         return int(round(self.steps * 1e9 / self.params.rate_hz))
 
     def step(self, command: np.ndarray | str) -> Readout:
-        """Apply torques (7,) [Nm] (validated) or ``"hold"`` (brake), step once, read, wipe."""
+        """Apply torques (7,) [Nm] (validated) or ``"hold"`` (brake), step once, read, wipe. The hand (if a
+        script is set) acts on the pad through the step, from the last readout."""
+        if self.hand is not None:
+            o = self.robot.out
+            self.robot.external_wrench[:] = self.hand.update(self.steps * self.params.dt_s, o.tcp_p, o.tcp_v, o.tcp_R,
+                                                             o.tcp_w)
         if isinstance(command, str):
             if command != HOLD:
                 raise ValueError(f"command must be torques or {HOLD!r}, got {command!r}")

@@ -11,6 +11,7 @@ whiteboard in front of the robot, three seeded stains, a D435i-like camera)::
     [sim.contact]  friction, stiffness_n_m, damping_n_s_m
     [sim.dirt]     cell_m, stains (count), stain_size_m, threshold_force_n, rate_per_n_m, stain = [...]
     [sim.camera]   enabled, name, width, height, rate_hz, fx, fy, distance_m, elevation_deg, ...
+    [sim.hand]     script, stiffness_n_m, damping_n_s_m, ... (the operator's hand, for lamps teach)
 
 Every value is checked in ``__post_init__``; an unknown key or a value out
 of range raises :class:`~interfaces.errors.ConfigError` naming the key and
@@ -191,6 +192,34 @@ class CameraParams:
 
 
 @dataclass(frozen=True)
+class HandParams:
+    """The operator's hand on the tool, for teaching in the simulator (:mod:`sim.hand`).
+
+    script : a CSV file (``t,x,y,z`` [s, m]: the path the hand leads the pad
+    along, world frame; or ``t,fx,fy,fz`` [s, N]: a recorded hand force,
+    applied as it is); "" = no hand. The path is followed through a
+    spring-damper between the hand and the pad centre, stiffness_n_m [N/m]
+    and damping_n_s_m [N s/m] (a firm grip: a person's arm is 0.3-3 kN/m),
+    and the hand holds the tool's start orientation through
+    stiffness_nm_rad [Nm/rad] and damping_nm_s_rad [Nm s/rad]. The hand's
+    force is at most max_force_n [N]. Before the script's first time and
+    after its last the hand holds its first and last point.
+    """
+
+    script: str = ""
+    stiffness_n_m: Annotated[float, In(10.0, 2e4)] = 2000.0
+    damping_n_s_m: Annotated[float, In(0.0, 2000.0)] = 120.0
+    stiffness_nm_rad: Annotated[float, In(0.0, 500.0)] = 30.0
+    damping_nm_s_rad: Annotated[float, In(0.0, 50.0)] = 1.5
+    max_force_n: Annotated[float, In(1.0, 300.0)] = 80.0
+
+    def __post_init__(self) -> None:
+        check_declared(self, "sim.hand")
+        if not isinstance(self.script, str):
+            raise ConfigError(f"[sim.hand] script must be a file path (string), got {self.script!r}")
+
+
+@dataclass(frozen=True)
 class SimParams:
     """The whole simulator.
 
@@ -226,6 +255,7 @@ class SimParams:
     contact: ContactParams = field(default_factory=ContactParams)
     dirt: DirtParams = field(default_factory=DirtParams)
     camera: CameraParams = field(default_factory=CameraParams)
+    hand: HandParams = field(default_factory=HandParams)
 
     def __post_init__(self) -> None:
         s = "sim"
@@ -253,6 +283,7 @@ class SimParams:
         if "joint_damping_nm_s_rad" in table:
             raise ConfigError("[sim] joint_damping_nm_s_rad: joint friction is set per joint in the [joints] table "
                               "(viscous_nm_s_rad, coulomb_nm), which the controller's model reads too")
-        subs = {"board": BoardParams, "contact": ContactParams, "dirt": DirtParams, "camera": CameraParams}
+        subs = {"board": BoardParams, "contact": ContactParams, "dirt": DirtParams, "camera": CameraParams,
+                "hand": HandParams}
         parts = {name: _from_table(kind, f"sim.{name}", table.pop(name, {})) for name, kind in subs.items()}
         return _from_table(cls, "sim", table, **parts)

@@ -122,6 +122,7 @@ class CameraProcess:
         self.params = params
         self.intrinsics = intrinsics_of(cam)
         self.T_camera_to_world = camera_pose(cam, board)
+        self._pose = pose_from_transform(self.T_camera_to_world)
         self._dirt_shm = shared_memory.SharedMemory(create=True, size=int(np.prod(dirt_shape)) * 4)
         self._image_shm = shared_memory.SharedMemory(create=True, size=cam.width * cam.height * 3)
         self.dirt = np.ndarray(dirt_shape, np.float32, self._dirt_shm.buf)
@@ -185,25 +186,33 @@ class CameraProcess:
 
     def serve(self, publish: Callable[[CameraFrame], None], stop: threading.Event) -> None:
         """Publish frames as the renderer finishes them until ``stop`` is set (run in a thread)."""
-        cam = self.params.camera
-        pose = pose_from_transform(self.T_camera_to_world)
         while not stop.is_set():
-            try:
-                if not self._conn.poll(0.05):
-                    continue
-                _, render_s = self._conn.recv()
-            except (EOFError, OSError):
-                if not stop.is_set():
-                    self._mark_dead()
+            frame = self.take(0.05, stop)
+            if frame is not None:
+                publish(frame)
+            elif self.dead:
                 return
-            _state_seq, stamp_ns, robot_time_ns = self._pending
-            data = self.image.tobytes()
-            self._idle.set()
-            self.render_s.append(render_s)
-            del self.render_s[:-1000]
-            self.rendered += 1
-            publish(CameraFrame(seq=self.rendered, stamp_ns=stamp_ns, camera=cam.name, encoding="rgb8", data=data,
-                                intrinsics=self.intrinsics, T_camera_to_world=pose, robot_time_ns=robot_time_ns))
+
+    def take(self, timeout_s: float, stop: threading.Event | None = None) -> CameraFrame | None:
+        """The frame asked for last, once the renderer has finished it (waiting up to ``timeout_s``); None
+        meanwhile, or when the renderer is gone (then :attr:`dead`, unless ``stop`` was set)."""
+        try:
+            if not self._conn.poll(timeout_s):
+                return None
+            _, render_s = self._conn.recv()
+        except (EOFError, OSError):
+            if stop is None or not stop.is_set():
+                self._mark_dead()
+            return None
+        _state_seq, stamp_ns, robot_time_ns = self._pending
+        data = self.image.tobytes()
+        self._idle.set()
+        self.render_s.append(render_s)
+        del self.render_s[:-1000]
+        self.rendered += 1
+        cam = self.params.camera
+        return CameraFrame(seq=self.rendered, stamp_ns=stamp_ns, camera=cam.name, encoding="rgb8", data=data,
+                           intrinsics=self.intrinsics, T_camera_to_world=self._pose, robot_time_ns=robot_time_ns)
 
     def close(self) -> None:
         """Stop the renderer and free the shared memory (idempotent)."""

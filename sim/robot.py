@@ -71,6 +71,9 @@ class SimRobot:
                           else pb.getPhysicsEngineParameters(physicsClientId=self.c)["fixedTimeStep"])
         self.braked = False
         self.out = Readout()
+        #: (6,) a wrench [N, Nm] (world axes, at the pad centre) someone else puts on the tool for the next step
+        #: (the operator's hand, :mod:`.hand`); not in the contact wrench the readout reports
+        self.external_wrench = np.zeros(6)
         self._joints = list(world.joints)
         n = len(self._joints)
         self._zeros = [0.0] * n
@@ -105,11 +108,12 @@ class SimRobot:
         q, dq = o.q.tolist(), o.dq.tolist()
         M = np.array(pb.calculateMassMatrix(robot, q, physicsClientId=c))
         h_hat = np.array(pb.calculateInverseDynamics(robot, q, dq, self._zeros, physicsClientId=c))
-        if o.wrench.any():  # the contact of the last step stands for this one's: h_hat = C dq + g - J^T f
+        if o.wrench.any() or self.external_wrench.any():
+            # the contact of the last step stands for this one's, the hand's is this step's: h_hat = C dq + g - J^T f;
             # the TCP link's inertial frame is its link frame, about which the wrench is taken
             lin, ang = pb.calculateJacobian(robot, self.w.tcp_link, [0.0, 0.0, 0.0], q, self._zeros, self._zeros,
                                             physicsClientId=c)
-            h_hat -= np.array(lin + ang).T @ o.wrench
+            h_hat -= np.array(lin + ang).T @ (o.wrench + self.external_wrench)
         ok = drive_torque_into(self._tau_cmd, o.dq, self._fv, self._fc, self.joints.coulomb_velocity_rad_s, M, h_hat,
                                self._armature, self.dt_s, self._tau_pb, self._L, self._a)
         return self._tau_pb if ok else self._tau_cmd  # (M + Ia is positive definite for any arm PyBullet loads)
@@ -128,6 +132,13 @@ class SimRobot:
                                                     physicsClientId=self.c))
 
     def step(self) -> None:
+        """One physics step, with :attr:`external_wrench` on the pad (PyBullet clears external forces each step)."""
+        f = self.external_wrench
+        if f.any():
+            pb.applyExternalForce(self.w.robot, self.w.tcp_link, f[:3].tolist(), self.out.tcp_p.tolist(),
+                                  pb.WORLD_FRAME, physicsClientId=self.c)
+            pb.applyExternalTorque(self.w.robot, self.w.tcp_link, f[3:].tolist(), pb.WORLD_FRAME,
+                                   physicsClientId=self.c)
         pb.stepSimulation(physicsClientId=self.c)
 
     def read(self) -> Readout:

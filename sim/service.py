@@ -36,10 +36,14 @@ class SimPort(RobotPort):
     """The simulated arm as a stepped robot port; its extras (truth, camera frames) after each cycle.
 
     substeps : physics steps per cycle, the command held over them (a robot whose interface period is longer
-    than its physics step: the lbr peer at FRI 2 ms over 1 ms physics).
+    than its physics step: the lbr peer at FRI 2 ms over 1 ms physics). publish_frames : a thread publishes
+    each frame as the renderer finishes it; False: whoever steps the port takes them (``camera.take``), as the
+    network-free cell does (:mod:`launch.local_cell`).
     """
 
-    def __init__(self, params: SimParams, node: ServiceNode, core: SimCore, substeps: int = 1) -> None:
+    def __init__(self, params: SimParams, node: ServiceNode, core: SimCore, substeps: int = 1,
+                 publish_frames: bool = True) -> None:
+        self.publish_frames = publish_frames
         self.p = params
         self.substeps = substeps
         self.node = node
@@ -66,6 +70,8 @@ class SimPort(RobotPort):
         camera = CameraProcess(self.p, self.core.board, self.core.q_start, self.core.dirt.dirt.shape)
         camera.start()  # closes itself and raises RuntimeError if the renderer does not come up
         self.camera = camera
+        if not self.publish_frames:
+            return
         key = self.keys.camera_frame(self.p.camera.name)
         self._camera_stop = threading.Event()
         self._camera_thread = threading.Thread(target=self.camera.serve, name="sim-camera-publisher",

@@ -177,12 +177,14 @@ def test_bad_options_are_one_line_errors_before_anything_runs(tmp_path, args, ma
 
 @pytest.mark.slow
 def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the_table(tmp_path, learned_skill_file):
-    """One seeded one-stain cell on the wall board, fixed then adaptive, each a whole cell in lock-step; the
-    campaign is killed while the second runs (the table holds the first), ``--resume`` runs only the second;
-    then --summarize tables the campaign again from its folder."""
+    """One seeded one-stain cell on the wall board, fixed then adaptive, each a whole network-free cell in
+    lock-step; the campaign is killed while the second runs (the table holds the first), ``--resume`` runs only
+    the second; then --summarize tables the campaign again from its folder. The fixed cell again on a Ray
+    cluster gives the very same result (a network-free cell is deterministic for its seed), and as a Zenoh cell
+    (``lamps up``) the same outcome and dirt removed within 0.5 points."""
     out = tmp_path / "campaign"
     args = ["--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed,adaptive", "--jobs", "1",
-            "--skill", str(learned_skill_file), "--out", str(out)]
+            "--skill", str(learned_skill_file), "--out", str(out), "--no-network"]
     proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "campaign", *args], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
                             env={**os.environ, "MPLBACKEND": "Agg"})
@@ -239,17 +241,27 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     try:
         on_ray = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed",
                            "--jobs", "2", "--skill", str(learned_skill_file), "--out", str(tmp_path / "on-ray"),
-                           "--ray", f"127.0.0.1:{port}", env=env)
+                           "--ray", f"127.0.0.1:{port}", "--no-network", env=env)
     finally:
         subprocess.run([ray_bin, "stop", "--force"], capture_output=True, env=env, timeout=120)
     assert on_ray.returncode == 0, on_ray.stdout[-2000:] + on_ray.stderr[-2000:]
     ray_cells = json.loads((tmp_path / "on-ray" / "campaign.json").read_text())["cells"]
     assert [c["name"] for c in ray_cells] == ["wall-s0-n1"]
     local = {c["name"]: c for c in result["cells"]}
+    same = ("outcome", "faults", "dirt_removed", "robot_time_s", "peak_contact_force_n")
     for c in ray_cells:
         want = local[c["name"]]
-        assert (c["outcome"], c["faults"]) == (want["outcome"], want["faults"]), (c, want)
-        # lock-step fixes the robot's clock, not when perception's frames land: the robot time spreads a little
-        assert abs(c["dirt_removed"] - want["dirt_removed"]) < 0.005, (c, want)
-        assert abs(c["robot_time_s"] - want["robot_time_s"]) < 0.2 * want["robot_time_s"], (c, want)
+        assert {k: c[k] for k in same} == {k: want[k] for k in same}, (c, want)
         assert (Path(c["run_dir"]) / "report.json").is_file()
+
+    # the same cell over Zenoh (lamps up in lock-step: perception's frames land in wall time, so the robot time
+    # spreads a little): the same outcome, the dirt removed within 0.5 points
+    zenoh = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed", "--jobs", "1",
+                      "--skill", str(learned_skill_file), "--out", str(tmp_path / "zenoh"))
+    assert zenoh.returncode == 0, zenoh.stdout[-2000:] + zenoh.stderr[-2000:]
+    result_z = json.loads((tmp_path / "zenoh" / "campaign.json").read_text())
+    assert result_z["network"] is True and result["network"] is False
+    (c,), want = result_z["cells"], local["wall-s0-n1"]
+    assert (c["outcome"], c["faults"]) == (want["outcome"], want["faults"]), (c, want)
+    assert abs(c["dirt_removed"] - want["dirt_removed"]) < 0.005, (c, want)
+    assert abs(c["robot_time_s"] - want["robot_time_s"]) < 0.2 * want["robot_time_s"], (c, want)

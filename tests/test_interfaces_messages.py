@@ -151,7 +151,7 @@ def test_constructors_validate_too():
     with pytest.raises(ValueError, match="needs 24 bytes"):
         CameraFrame(seq=0, stamp_ns=0, camera="c", encoding="rgb8", data=b"123",
                     intrinsics=CameraIntrinsics(1.0, 1.0, 0.0, 0.0, 4, 2), T_camera_to_world=IDENTITY)
-    with pytest.raises(ValueError, match="phase must be one of INIT, WAIT_PEERS, .*, ESTOP, got 'DANCING'"):
+    with pytest.raises(ValueError, match="phase must be one of INIT, WAIT_PEERS, .*, ESTOP, TEACH, got 'DANCING'"):
         ControllerStatus(seq=0, stamp_ns=0, phase="DANCING")
     with pytest.raises(ValueError, match="unique"):
         Stains(seq=0, stamp_ns=0, T_board_to_world=IDENTITY, board_size_m=[1, 1],

@@ -382,10 +382,11 @@ def test_adaptive_wiping_cleans_a_long_slanted_streak_with_a_stroke_along_it(tmp
     out, base = tmp_path / "run", _port_base()
     env = {"LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true",
            "LAMPS__SIM__DIRT__STAIN": "[{centre_m = [0.45, 0.3], size_m = 0.16, aspect = 3.0, angle_deg = 30.0}]"}
-    r = _up(["--out", str(out), "--port-base", str(base), "--skill", str(learned_skill_file), "--max-duration", "240"],
-            env=env)
+    r = _up(["--out", str(out), "--port-base", str(base), "--skill", str(learned_skill_file), "--max-duration", "240",
+             "--no-network"], env=env)  # the skill, not the transport: the network-free cell
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     report = _check_run(out, base, stains=1)
+    assert json.loads((out / "run.json").read_text())["network"] == "none"
     assert report["dirt_removed_fraction"] >= 0.97, report["dirt_removed_fraction"]  # 98.7-99.0 % when last run
     assert report["counters"]["controller"]["adaptations"] >= 1
     planner = PlannerParams()
@@ -486,6 +487,10 @@ def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, lear
     (["--demo", "/nonexistent/demo.csv"], 1, "--demo /nonexistent/demo.csv: no such file"),
     (["--board", "diagonal"], 1, "--board 'diagonal': not one of"),
     (["--max-duration", "-1"], 1, "--max-duration must be a positive"),
+    (["--cells", "0"], 1, "--cells must be in [1, 16]"),
+    (["--cells", "2", "--router", "tls/127.0.0.1:7447"], 1, "not with --router or --credentials"),
+    (["--cells", "2", "--robot", "lbr-sim"], 1, "--cells runs --robot sim only"),
+    (["--router", "tcp/127.0.0.1:7447", "--credentials", "x"], 1, "a tls/HOST:PORT endpoint and --credentials"),
 ])
 def test_bad_options_are_refused_before_anything_starts(tmp_path, args, code, match):
     r = _up(["--out", str(tmp_path / "run"), *args], timeout_s=60)

@@ -2,11 +2,15 @@
 
 The router is the real command (the eclipse-zenoh library in router mode) started as a process; every other
 party is a Zenoh client of it with its role's identity from ``lamps credentials``: no link between clients, so
-whatever reaches a client came through the router and its access list.
+whatever reaches a client came through the router and its access list. A site of two cells (``lamps credentials
+--cells``, ``lamps router --cells``): each cell's roles are kept to their own cell, and ``lamps up --cells 2`` runs
+both cells side by side through one router.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 import threading
@@ -15,27 +19,33 @@ import time
 import pytest
 import zenoh
 
-from interfaces.access import RELAY, cell_acl
+from interfaces.access import RELAY, ROLES, SITE_VIEWER, cell_acl, role_and_cell, site_acl
 from interfaces.config import ZenohSettings
 from interfaces.credentials import identity_folder, make_credentials
+from interfaces.errors import ConfigError
 from interfaces.session import zenoh_config
 from launch.health import accepts
 
 from .conftest import REPO
-from .zenoh_helpers import free_port
+from .zenoh_helpers import free_port, wait_subscribed
 
 
 def _accepts(port: int) -> bool:
     return accepts("127.0.0.1", port, 0.2) is None
 
 
+#: Zenoh's access-control interceptor logs each message it refuses (and each it lets through) at trace level.
+DENIALS_LOG = "zenoh::net::routing::interceptor::access_control=trace"
+
+
 class _Router:
-    def __init__(self, tmp, robot_id: str, credentials, access: bool = True) -> None:
+    def __init__(self, tmp, robot_id: str, credentials, access: bool = True, cells: tuple[str, ...] = ()) -> None:
         self.port = free_port()
         self.endpoint = f"tls/127.0.0.1:{self.port}"
         env = {"LAMPS_ROBOT_ID": robot_id, "LAMPS_ZENOH_ACCESS_CONTROL": "true" if access else "false",
                "LAMPS_ZENOH_IDENTITY": str(identity_folder(credentials, RELAY)), "PATH": "/usr/bin:/bin",
-               "PYTHONPATH": str(REPO)}
+               "PYTHONPATH": str(REPO), "RUST_LOG": DENIALS_LOG, "NO_COLOR": "1",
+               **({"LAMPS_ZENOH_CELLS": ",".join(cells)} if cells else {})}
         self.proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "router", "--listen", self.endpoint,
                                       "--status-s", "0"], env=env, cwd=tmp, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True)
@@ -50,9 +60,11 @@ class _Router:
         return out
 
 
-def _client(router: _Router, robot_id: str, folder) -> zenoh.Session:
+def _client(router: _Router, robot_id: str, folder, acl: bool = True) -> zenoh.Session:
+    """A client of ``router`` with the identity in ``folder``; ``acl=False``: one that does not apply its own access
+    list (a stolen identity in a program of the thief's)."""
     return zenoh.open(zenoh_config(ZenohSettings(mode="client", connect=(router.endpoint,), robot_id=robot_id,
-                                                 access_control=True, identity=str(folder))))
+                                                 access_control=acl, identity=str(folder))))
 
 
 @pytest.fixture
@@ -141,22 +153,184 @@ def test_credentials_made_before_the_router_get_its_identity_from_the_same_ca(tm
     assert (creds / RELAY / "cert.pem").is_file() and (creds / RELAY / "ca.pem").read_bytes() == ca
 
 
-@pytest.mark.slow
-def test_a_lockstep_cell_runs_through_the_router_and_cleans_its_board(tmp_path, learned_skill_file):
-    from .cell_harness import Cell
+# ------------------------------------------------------------------------------------ a site: two cells, one router
+CELLS = ("cell-a", "cell-b")
 
-    with Cell(tmp_path / "run", learned_skill_file, "lockstep", router=True) as c:
-        c.wait_phase(("DONE",), 600.0)
-        report = c.finish("done", "the cell through the router is DONE")
-        router_log = (tmp_path / "run" / "logs" / "router.log").read_text()
-    assert report["final_phase"] == "DONE" and report["dirt_removed_fraction"] > 0.95, report["dirt_removed_fraction"]
-    assert "listening on" in router_log
+
+@pytest.fixture
+def site(tmp_path):
+    """Two cells' identities (``lamps credentials --cells``) and a router with the site's access list."""
+    creds = tmp_path / "credentials"
+    make_credentials(creds, cells=CELLS)
+    router = _Router(tmp_path, CELLS[0], creds, cells=CELLS)
+    yield router, creds
+    router.close()
+
+
+def _cross_cell_attack(site, role: str, key_of, legit_role: str, victim_role: str) -> tuple[dict, int]:
+    """Cell A's ``role`` (not applying its own list) and cell B's ``legit_role`` each put 20 times on cell B's key
+    ``key_of(keys)``, heard by cell B's ``victim_role`` and recorder (all of cell B); a second session of the
+    thief's subscribes to all of cell B. Returns (payloads per listener, the router's refusals of the thief's puts logged)."""
+    from interfaces.keys import Keys
+
+    router, creds = site
+    a, b = CELLS
+    key = key_of(Keys.for_robot(b))
+    got: dict[str, list[bytes]] = {"victim": [], "recorder": [], "thief": []}
+    lock = threading.Lock()
+
+    def keep(name):
+        def cb(sample):
+            with lock:
+                got[name].append(bytes(sample.payload.to_bytes()))
+        return cb
+
+    victim = _client(router, b, identity_folder(creds, victim_role, b))
+    recorder = _client(router, b, identity_folder(creds, "recorder", b))
+    legit = _client(router, b, identity_folder(creds, legit_role, b))
+    thief = _client(router, a, identity_folder(creds, role, a), acl=False)
+    eavesdropper = _client(router, a, identity_folder(creds, role, a), acl=False)
+    sessions = (victim, recorder, legit, thief, eavesdropper)
+    try:
+        subs = [victim.declare_subscriber(key, keep("victim")),
+                recorder.declare_subscriber(f"{Keys.for_robot(b).prefix}/**", keep("recorder")),
+                eavesdropper.declare_subscriber(f"{Keys.for_robot(b).prefix}/**", keep("thief"))]
+        wait_subscribed(legit, key)
+        for i in range(20):
+            thief.put(key, f"forged by {role}@{a}".encode())
+            legit.put(key, f"from {legit_role}@{b}".encode())
+            time.sleep(0.02)
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and (len(got["victim"]) < 20 or len(got["recorder"]) < 20):
+            time.sleep(0.05)
+        time.sleep(0.3)  # anything forged would have come with the legitimate puts interleaved with it
+        for sub in subs:
+            sub.undeclare()
+    finally:
+        for sess in sessions:
+            sess.close()
+    refused = sum(f"CertCommonName({role}@{a})" in line and f"unauthorized to Put (ingress) on {key}" in line
+                  for line in router.close().splitlines())
+    return got, refused
+
+
+@pytest.mark.attack("router, several cells: cell A's controller commands cell B's robot",
+                    "cell A's controller identity (its program not applying the list), a client of the site's router, "
+                    "puts 20 torque commands on cell B's robot/command and subscribes to all of cell B",
+                    "refused at the router, each refusal logged: cell B's robot and recorder get only cell B's "
+                    "controller's commands, the thief hears nothing of cell B")
+def test_a_cells_controller_cannot_command_another_cells_robot(site):
+    got, refused = _cross_cell_attack(site, "controller", lambda k: k.robot_command, "controller", "robot")
+    assert got["victim"] == [f"from controller@{CELLS[1]}".encode()] * 20, got["victim"][:3]
+    assert set(got["recorder"]) == {f"from controller@{CELLS[1]}".encode()} and len(got["recorder"]) == 20
+    assert got["thief"] == [], got["thief"][:3]
+    assert refused == 20, refused
+
+
+@pytest.mark.attack("router, several cells: cell A's operator releases cell B's e-stop",
+                    "cell A's operator identity (its program not applying the list), a client of the site's router, "
+                    "puts 20 releases on cell B's controller/estop/release",
+                    "refused at the router, each refusal logged: cell B's controller and recorder get only cell B's "
+                    "operator's releases")
+def test_a_cells_operator_cannot_release_another_cells_estop(site):
+    got, refused = _cross_cell_attack(site, "operator", lambda k: k.controller_estop_release, "operator",
+                                      "controller")
+    assert got["victim"] == [f"from operator@{CELLS[1]}".encode()] * 20, got["victim"][:3]
+    assert set(got["recorder"]) == {f"from operator@{CELLS[1]}".encode()} and len(got["recorder"]) == 20
+    assert refused == 20, refused
+
+
+def test_the_site_viewer_reads_every_cell_and_may_only_engage_their_estops(site):
+    from interfaces.keys import Keys
+
+    router, creds = site
+    heard: list[str] = []
+    viewer = zenoh.open(zenoh_config(ZenohSettings(mode="client", connect=(router.endpoint,), cells=CELLS,
+                                                   access_control=True, identity=str(creds / SITE_VIEWER))))
+    controllers = [_client(router, c, identity_folder(creds, "controller", c)) for c in CELLS]
+    robot = _client(router, CELLS[1], identity_folder(creds, "robot", CELLS[1]))
+    commands: list[bytes] = []
+    estops: list[bytes] = []
+    try:
+        subs = [viewer.declare_subscriber(Keys.for_robot(c).controller_status, lambda s: heard.append(str(s.key_expr)))
+                for c in CELLS]
+        robot_subs = [robot.declare_subscriber(Keys.for_robot(CELLS[1]).robot_command,
+                                               lambda s: commands.append(bytes(s.payload.to_bytes()))),
+                      robot.declare_subscriber(Keys.for_robot(CELLS[1]).controller_estop,
+                                               lambda s: estops.append(bytes(s.payload.to_bytes())))]
+        for c, ctl in zip(CELLS, controllers):
+            wait_subscribed(ctl, Keys.for_robot(c).controller_status)
+        wait_subscribed(viewer, Keys.for_robot(CELLS[1]).controller_estop)
+        for c, ctl in zip(CELLS, controllers):
+            ctl.put(Keys.for_robot(c).controller_status, b"status")
+        viewer.put(Keys.for_robot(CELLS[1]).robot_command, b"forged by the site viewer")
+        viewer.put(Keys.for_robot(CELLS[1]).controller_estop, b"engaged by the site viewer")
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and (len(heard) < 2 or not estops):
+            time.sleep(0.05)
+        time.sleep(0.3)
+        assert sorted(heard) == [Keys.for_robot(c).controller_status for c in CELLS], heard
+        assert estops == [b"engaged by the site viewer"] and commands == [], commands
+        for s in (*subs, *robot_subs):
+            s.undeclare()
+    finally:
+        for s in (viewer, *controllers, robot):
+            s.close()
+
+
+def test_the_site_list_confines_each_cells_roles_to_its_own_prefix():
+    acl = site_acl(CELLS)
+    rules = {r["id"]: r for r in acl["rules"]}
+    for policy in acl["policies"]:
+        name = policy["subjects"][0]
+        role, cell = role_and_cell(name)
+        exprs = [e for r in policy["rules"] for e in rules[r]["key_exprs"]]
+        if cell is not None:
+            assert role in ROLES and all(e.startswith(f"lamps/{cell}/") for e in exprs), (name, exprs)
+        else:
+            assert name in (SITE_VIEWER, RELAY), name
+    viewer = next(p for p in acl["policies"] if p["subjects"] == [SITE_VIEWER])
+    puts = [e for r in viewer["rules"] if r.startswith("put-") for e in rules[r]["key_exprs"]]
+    assert puts == [f"lamps/{c}/controller/estop" for c in CELLS]
+    assert acl["default_permission"] == "deny"
+
+
+def test_site_credentials_name_each_cells_roles_and_a_service_refuses_another_cells_identity(tmp_path):
+    from interfaces.credentials import cell_of
+
+    creds = tmp_path / "c"
+    folders = make_credentials(creds, cells=CELLS)
+    assert set(folders) == {RELAY, SITE_VIEWER, *(f"{r}@{c}" for r in ROLES for c in CELLS)}
+    assert cell_of(identity_folder(creds, "controller", CELLS[1])) == CELLS[1] and cell_of(creds / RELAY) is None
+    assert (identity_folder(creds, "bridge", CELLS[0]) / "zenoh-bridge.json5").is_file()
+    with pytest.raises(ConfigError, match="cell cell-b"):
+        zenoh_config(ZenohSettings(robot_id=CELLS[0], access_control=True,
+                                   identity=str(identity_folder(creds, "controller", CELLS[1]))))
+    with pytest.raises(ConfigError, match="credentials folder"):
+        make_credentials(tmp_path / "d", cells=("router",))
+
+
+@pytest.mark.slow
+def test_two_lockstep_cells_clean_their_boards_side_by_side_through_one_router(tmp_path, learned_skill_file):
+    """``lamps up --cells 2``: one router, two cells each a client of it with its own identities, one stain each."""
+    out = tmp_path / "site"
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--cells", "2", "--stains", "1", "--seed", "3",
+                        "--skill", str(learned_skill_file), "--out", str(out), "--max-duration", "400", "-q"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=900,
+                       env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"})
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    for cell in ("iiwa-1", "iiwa-2"):
+        report = json.loads((out / cell / "report.json").read_text())
+        assert report["final_phase"] == "DONE" and report["dirt_removed_fraction"] > 0.95, (cell, report)
+        assert json.loads((out / cell / "run.json").read_text())["key_prefix"] == f"lamps/{cell}"
+        assert any(line.startswith(f"{cell}: cleaned") for line in r.stdout.splitlines()), r.stdout[-2000:]
+    # the site viewer, one session through the router, saw both cells to the end
+    assert "seen through the router: iiwa-1 DONE, iiwa-2 DONE" in r.stdout, r.stdout[-2000:]
+    assert "listening on" in (out / "logs" / "router.log").read_text()
 
 
 def test_health_alive_sees_a_clients_token_through_the_router_and_names_a_missing_one(cell):
     """``lamps health --alive``: compose's probe of a router's client (no port of its own to probe)."""
-    import os
-
     from launch.health import alive
 
     router, robot_id, creds = cell

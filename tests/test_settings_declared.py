@@ -13,20 +13,20 @@ import tomllib
 
 import pytest
 
-from controller.params import ControllerParams, ExecutorParams, ForceParams, LimitParams
+from controller.params import ControllerParams, ExecutorParams, ForceParams, LimitParams, TeachParams
 from interfaces.config import declared_bounds
 from interfaces.errors import ConfigError
 from perception.params import (BoardParams as PBoard, CameraModelParams, InkParams, KappaParams, PerceptionParams,
                                StainParams)
 from robot.lbr.params import LbrParams
 from sim.lbr_stack.params import LbrPeerParams
-from sim.params import BoardParams as SBoard, CameraParams, ContactParams, DirtParams, SimParams
+from sim.params import BoardParams as SBoard, CameraParams, ContactParams, DirtParams, HandParams, SimParams
 
 from .conftest import REPO
 
-CLASSES = [ForceParams, LimitParams, ExecutorParams, ControllerParams, PBoard, InkParams, StainParams, KappaParams,
-           CameraModelParams, PerceptionParams, SBoard, ContactParams, DirtParams, CameraParams, SimParams,
-           LbrParams, LbrPeerParams]
+CLASSES = [ForceParams, LimitParams, ExecutorParams, TeachParams, ControllerParams, PBoard, InkParams, StainParams,
+           KappaParams, CameraModelParams, PerceptionParams, SBoard, ContactParams, DirtParams, CameraParams,
+           HandParams, SimParams, LbrParams, LbrPeerParams]
 CASES = [(cls, name, kind, lo, hi) for cls in CLASSES for name, kind, lo, hi in declared_bounds(cls)]
 
 

@@ -48,6 +48,9 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
    cluster joins it, a short cluster run becomes transitional (or joins the
    cluster around it); a short transitional run between two different
    clusters stays (a quick move between adjacent stains).
+5b. **Hops** (:mod:`.lifts`): a periodic run is cut where the pad leaves its surface between two wipes
+   (above the run's contact band for 0.3 s or more, inside the run, not repeating the strokes around it):
+   the lifted stretch is transitional.
 6. **Boundaries by recurrence.** Spatial clusters also swallow the ends of
    transitions that spiral into and out of a stroke, so each periodic run's
    ends are moved to where the motion stops repeating itself: with the
@@ -102,6 +105,7 @@ import numpy as np
 from lampskit.errors import SegmentationError
 from lampskit.learn.cluster_baselines import FIXED_THRESHOLD_M, affinity_labels, kmeans_labels, sklearn_optics_labels
 from lampskit.learn.demo import Demonstration
+from lampskit.learn.lifts import split_at_lifts
 from lampskit.learn.optics import OpticsResult, ProgressCallback, optics
 from lampskit.learn.reachability import (
     dbscan_labels,
@@ -392,7 +396,8 @@ def _segment_impl(
         runs = unite_alternating(runs, t, params.min_duration_s)
         runs = bridge_stays(runs, smooth)
         runs = merge_short_runs(runs, t, params.min_duration_s, transitions=True)
-        runs = _refine_thinned(runs, smooth, demo.rate_hz, len(t))
+        runs = _on_thinned(split_at_lifts, runs, smooth, demo.rate_hz, len(t))
+        runs = _on_thinned(refine_boundaries, runs, smooth, demo.rate_hz, len(t))
         runs = merge_short_runs(runs, t, params.min_duration_s, transitions=True)
         runs, rejected = check_periodic(runs, smooth, params.min_path_ratio)
         if not any(c >= 0 for c, _, _ in runs):
@@ -411,16 +416,17 @@ def _segment_impl(
     return Segmentation(segments, labels, method, eps, ms, step, keep, result, params)
 
 
-def _refine_thinned(runs: list, smooth: np.ndarray, rate_hz: float, n: int) -> list:
-    """Step 6 on every q-th sample of a recording faster than :data:`MAX_POINT_RATE_HZ` (q = ceil(rate / 200)):
-    the recurrence compares each sample with a period of lags, so its cost grows with the rate squared; a
-    hand's strokes hold nothing finer than 200 Hz. Boundaries come back to the full rate (within q samples)."""
+def _on_thinned(step, runs: list, smooth: np.ndarray, rate_hz: float, n: int) -> list:
+    """Steps 5b and 6 (``step(runs, smooth, rate_hz)``) on every q-th sample of a recording faster than
+    :data:`MAX_POINT_RATE_HZ` (q = ceil(rate / 200)): the recurrence compares each sample with a period of lags,
+    so its cost grows with the rate squared; a hand's strokes hold nothing finer than 200 Hz. Boundaries come
+    back to the full rate (within q samples)."""
     q = max(1, int(np.ceil(rate_hz / MAX_POINT_RATE_HZ - 1e-9)))
     if q == 1:
-        return refine_boundaries(runs, smooth, rate_hz)
+        return step(runs, smooth, rate_hz)
     m = (n + q - 1) // q
     thin = [(c, a // q, max(a // q + 1, min(-(-b // q), m))) for c, a, b in runs]
-    refined = refine_boundaries(join_runs(thin), smooth[::q], rate_hz / q)
+    refined = step(join_runs(thin), smooth[::q], rate_hz / q)
     labels = np.full(n, -1)
     for c, a, b in refined:
         labels[a * q:min(b * q, n)] = c

@@ -28,6 +28,14 @@ from a second random stream, so the plain demos stay as they were):
 
 Every such demo holds at least one of each (a revisit from two stains on).
 
+With ``hop=HopSpec(...)`` consecutive stains lie close together, one move
+of ``move_pads`` pad lengths (:data:`PAD_LENGTH_M`) apart, and the eraser
+goes from one to the next in a short *hop*: it rises ``lift_m`` off the
+board, crosses while up and comes down again, all in ``duration_s``. With
+``drift_m`` every stroke centre drifts that far, slowly, during its wipe
+(one wiping phase each). Both come from a third random stream: the strokes
+themselves stay those of the plain demo of that seed.
+
 Everything is C2 in time, sampled at 100-200 Hz with timestamp jitter and
 white position noise. The true per-sample labels come with it.
 """
@@ -47,6 +55,28 @@ from lampskit.errors import DemoError
 
 #: Board area in which stains are placed, board frame [m] (x range, y range).
 BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))
+#: The eraser pad's length [m], the unit of a hop's move (``interfaces.description.PAD_SIZE_M[0]``; the
+#: offline learner does not import the cell's description, a test keeps the two equal).
+PAD_LENGTH_M = 0.12
+
+
+@dataclass(frozen=True)
+class HopSpec:
+    """A short hop between consecutive nearby wipes (see the module docstring).
+
+    lift_m : peak height off the board [m] (0.005-0.3); move_pads : centre-to-centre move in pad lengths
+    (0.25-4); duration_s : the hop's duration, strokes fading out and in included [s] (0.5-5).
+    """
+
+    lift_m: float
+    move_pads: float
+    duration_s: float
+
+    def __post_init__(self) -> None:
+        for name, value, (lo, hi) in (("lift_m", self.lift_m, (0.005, 0.3)), ("move_pads", self.move_pads, (0.25, 4.0)),
+                                      ("duration_s", self.duration_s, (0.5, 5.0))):
+            if not (isinstance(value, (int, float)) and lo <= value <= hi):
+                raise DemoError(f"hop {name} must be between {lo} and {hi}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -87,6 +117,8 @@ def synthesize_demo(
     noise_m: float = 0.0004,
     revisit_first: bool = False,
     human: bool = False,
+    hop: HopSpec | None = None,
+    drift_m: float = 0.0,
 ) -> SyntheticDemo:
     """A human-like wiping demonstration over ``n_stains`` stains.
 
@@ -106,6 +138,10 @@ def synthesize_demo(
     human : bool
         Lift-offs, a revisit after a lift-off, pauses and a grip shift inside
         a wipe, as real people do (see the module docstring).
+    hop : HopSpec, optional
+        Consecutive stains one move apart, joined by short hops (see the module docstring).
+    drift_m : float
+        How far every stroke centre drifts, slowly, during its wipe [m] (0 to 0.15).
     """
     if not 1 <= int(n_stains) <= 8:
         raise DemoError(f"n_stains must be between 1 and 8, got {n_stains!r}")
@@ -115,9 +151,13 @@ def synthesize_demo(
         raise DemoError(f"noise_m must be between 0 and 0.01 m, got {noise_m!r}")
     if not (isinstance(seed, (int, np.integer)) and seed >= 0):
         raise DemoError(f"seed must be a non-negative integer, got {seed!r}")
+    if not 0.0 <= drift_m <= 0.15:
+        raise DemoError(f"drift_m must be between 0 and 0.15 m, got {drift_m!r}")
     rng = np.random.default_rng(seed)
     rate = float(rate_hz) if rate_hz is not None else float(rng.uniform(100.0, 200.0))
     strokes = _draw_strokes(int(n_stains), rng)
+    if hop is not None or drift_m > 0:
+        strokes = _hops_and_drift(strokes, hop, drift_m, np.random.default_rng([seed, 2]))
     order = list(range(len(strokes))) + ([0] if revisit_first else [])
     plan = _HumanPlan.draw(order, np.random.default_rng([seed, 1])) if human else None
     if plan is not None:
@@ -126,7 +166,7 @@ def synthesize_demo(
     if plan is not None:
         k = plan.shift_piece
         wiped[k] = replace(wiped[k], shift_m=plan.shift_m, shift_at=plan.shift_at)
-    pieces = _build_pieces(wiped, rng, plan)
+    pieces = _build_pieces(wiped, rng, plan, hop)
     t_end = sum(p.duration_s for p in pieces)
     dt = 1.0 / rate
     n = int(np.floor(t_end / dt))
@@ -160,7 +200,7 @@ def synthesize_demo(
     index = np.array(order + [-1])  # a piece's stain is its place in the wiping order; -1 stays -1
     stain = index[stain]
     segments = [(a, b, k, int(index[s])) for a, b, k, s in segments]
-    extra = ", human" if human else ""
+    extra = (", human" if human else "") + (f", {hop}" if hop else "") + (f", drift_m={drift_m:g}" if drift_m else "")
     demo = Demonstration(t, pos_world, q, source=f"synthetic(n_stains={n_stains}, seed={seed}{extra})")
     return SyntheticDemo(demo, periodic, stain, centres, tuple(strokes), tuple(segments), T)
 
@@ -194,6 +234,33 @@ def _draw_strokes(n: int, rng: np.random.Generator) -> list[StrokeSpec]:
     return strokes
 
 
+def _hops_and_drift(strokes: list[StrokeSpec], hop: HopSpec | None, drift_m: float,
+                    rng: np.random.Generator) -> list[StrokeSpec]:
+    """The strokes re-placed one hop apart (each next centre one move from where the last wipe ended, in a
+    direction that keeps it on the board and at least a move from every earlier stain), and given their drift."""
+    out: list[StrokeSpec] = []
+    lo, hi = np.array(BOARD_AREA_M).T
+    for k, s in enumerate(strokes):
+        angle = rng.uniform(0, 2 * np.pi)
+        drift = drift_m * np.array([np.cos(angle), np.sin(angle)])
+        centre = s.centre_m
+        if hop is not None and out:
+            move = hop.move_pads * PAD_LENGTH_M
+            start = out[-1].centre_m + out[-1].drift_m
+            for _ in range(2000):
+                a = rng.uniform(0, 2 * np.pi)
+                centre = start + move * np.array([np.cos(a), np.sin(a)])
+                ends = (centre, centre + drift)
+                if (all(np.all((lo <= c) & (c <= hi)) for c in ends)
+                        and all(np.linalg.norm(e - (o.centre_m + w * o.drift_m)) >= 0.999 * move
+                                for e in ends for o in out[:-1] for w in (0, 1))):
+                    break
+            else:
+                raise DemoError(f"could not place {len(strokes)} stains one hop of {move:.3f} m apart on the board")
+        out.append(replace(s, centre_m=centre, drift_m=drift))
+    return out
+
+
 def _board_pose(rng: np.random.Generator) -> np.ndarray:
     """A vertical board in front of the robot, slightly tilted at random."""
     tilt = rng.uniform(-0.08, 0.08, 2)
@@ -225,7 +292,8 @@ def _quat_wxyz_tool_on_board(R_board: np.ndarray) -> np.ndarray:
 # the pieces in time order (each maps local time (K,) -> board positions (K, 3), C2 in time: synth_pieces)
 
 
-def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator, plan: _HumanPlan | None = None) -> list:
+def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator, plan: _HumanPlan | None = None,
+                  hop: HopSpec | None = None) -> list:
     zero = np.zeros(3)
     runs = [
         _Stroke(
@@ -255,6 +323,10 @@ def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator, plan: _Hu
             pause = plan.pause_s if plan.pause_at == k else 0.0
             build = _lift_off if plan.lift[k] else _pause_on_board
             pieces.extend(build(run, runs[k + 1], pause, plan.rng))
+        elif hop is not None and k + 1 < len(runs):
+            fade = min(0.4, 0.35 / hop.duration_s)
+            pieces.append(_Transition(run.end_centre3, runs[k + 1].centre3, hop.duration_s,
+                                      np.array([0.0, 0.0, hop.lift_m]), run, runs[k + 1], fade, profile="hop"))
         elif k + 1 < len(runs):
             nxt = runs[k + 1]
             delta = nxt.centre3 - run.end_centre3

@@ -14,6 +14,8 @@ import numpy as np
 GRIP_SHIFT_S = 0.5
 #: Share of a lift-off's retract spent going up before moving along the board (mirrored for the approach).
 LIFT_FIRST = 0.3
+#: Share of a short hop spent rising (and, mirrored, coming down); it moves across from half of it to the mirror.
+HOP_RISE = 0.3
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,8 @@ class StrokeSpec:
         A grip shift inside the wipe: how far the stroke centre moves [m] (zeros: none).
     shift_at : float
         Where in the wipe the shift starts, as a share of its duration.
+    drift_m : array, shape (2,)
+        A slow drift of the stroke centre over the whole wipe [m] (a smoothstep from start to end; zeros: none).
     """
 
     centre_m: np.ndarray
@@ -48,6 +52,7 @@ class StrokeSpec:
     n_cycles: float
     shift_m: np.ndarray = field(default_factory=lambda: np.zeros(2))
     shift_at: float = 0.5
+    drift_m: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
 @dataclass
@@ -120,7 +125,16 @@ class _Stroke:
         if shifting:
             for k, w in enumerate((g, dg, ddg)):
                 out[k][:, :2] += w[:, None] * self.spec.shift_m
+        if np.any(self.spec.drift_m):
+            for k, w in enumerate(self._drift(t)):
+                out[k][:, :2] += w[:, None] * self.spec.drift_m
         return out[0], out[1], out[2]
+
+    def _drift(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The share of the centre's drift done (K,) with its two time derivatives: a smoothstep over the wipe."""
+        d = self.duration_s
+        g, dg, ddg = _smoothstep3(t / d)
+        return g, dg / d, ddg / d**2
 
     @property
     def centre3(self) -> np.ndarray:
@@ -129,14 +143,16 @@ class _Stroke:
 
     @property
     def end_centre3(self) -> np.ndarray:
-        """The stroke centre where the wipe ends (after any grip shift) (3,) [m]."""
-        return np.array([*(self.spec.centre_m + self.spec.shift_m), 0.0])
+        """The stroke centre where the wipe ends (after any grip shift and drift) (3,) [m]."""
+        return np.array([*(self.spec.centre_m + self.spec.shift_m + self.spec.drift_m), 0.0])
 
     def offset(self, t: np.ndarray) -> np.ndarray:
         """The stroke's offset from its (moving) centre (K, 3) [m], for fading it in and out of transitions."""
         p = self.evaluate(t)
         if np.any(self.spec.shift_m):
             p[:, :2] -= self._shift(np.asarray(t, float))[0][:, None] * self.spec.shift_m
+        if np.any(self.spec.drift_m):
+            p[:, :2] -= self._drift(np.asarray(t, float))[0][:, None] * self.spec.drift_m
         return p - self.centre3
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
@@ -164,7 +180,7 @@ class _Transition:
     next: "_Stroke | None" = None
     fade: float = 0.4
     stain: int = -1
-    profile: str = "smooth"  # "retract": off the board as a person does; "approach": back onto it
+    profile: str = "smooth"  # "retract": off the board as a person does; "approach": back onto it; "hop": see below
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
         t = np.asarray(t, dtype=float)
@@ -172,6 +188,11 @@ class _Transition:
         s = np.clip(t / T, 0.0, 1.0)[:, None]
         if self.profile == "smooth":
             p = self.start_m + _smoothstep(s) * (self.end_m - self.start_m)
+        elif self.profile == "hop":  # up to bulge_m[2], across while up, down; flat top, C2 everywhere
+            up = _smoothstep(np.clip(s / HOP_RISE, 0, 1)) * _smoothstep(np.clip((1 - s) / HOP_RISE, 0, 1))
+            along = _smoothstep(np.clip((s - HOP_RISE / 2) / (1 - HOP_RISE), 0, 1))
+            d = self.end_m - self.start_m
+            return self._faded(self.start_m + along * d + up * np.array([0.0, 0.0, self.bulge_m[2]]), s, t)
         else:  # height with a real retract's (approach's) profile; along the board mostly while up
             rising = self.profile == "retract"
             h = _retract(s) if rising else 1.0 - _retract(1.0 - s)
@@ -179,7 +200,11 @@ class _Transition:
                                 else np.clip(s / (1 - LIFT_FIRST), 0, 1))
             d = self.end_m - self.start_m
             p = self.start_m + along * np.array([d[0], d[1], 0.0]) + h * np.array([0.0, 0.0, d[2]])
-        p = p + 64.0 * s**3 * (1 - s) ** 3 * self.bulge_m
+        return self._faded(p + 64.0 * s**3 * (1 - s) ** 3 * self.bulge_m, s, t)
+
+    def _faded(self, p: np.ndarray, s: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """``p`` (K, 3) plus the previous stroke fading out and the next fading in."""
+        T = self.duration_s
         if self.prev is not None:
             w = 1.0 - _smoothstep(np.clip(s / self.fade, 0.0, 1.0))
             p = p + w * self.prev.offset(self.prev.duration_s + t)

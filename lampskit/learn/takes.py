@@ -17,7 +17,12 @@ with their hand labels); :func:`build_take` chains them as a person would:
   jitter (hundredths of a millimetre);
 * a *move inside a wipe* splits a wiping phase in the middle and shifts the
   rest of that piece by a few centimetres along the board through a short
-  in-contact quintic move (C2 at both ends): one wiping phase, still periodic.
+  in-contact quintic move (C2 at both ends): one wiping phase, still periodic;
+* a *hop* to a nearby spot: the previous piece ends with its wiping phase and
+  this one starts with its own (no retract, no approach); the pad goes from
+  one to the other along a quintic matching position, velocity and
+  acceleration at both ends, raised off the board by a flat-topped lift
+  (C2, :func:`hop_lift`) of a few centimetres; transitional.
 
 Labels: the recordings' wiping samples and the in-wipe moves are periodic;
 approaches, retracts, flights and pauses transitional. :data:`REAL_TAKES`
@@ -45,6 +50,8 @@ IN_WIPE_MOVE_S = 0.5
 SETTLE_S = 0.6
 #: Pose jitter while paused [m] (the recordings' own noise level).
 PAUSE_JITTER_M = 3e-5
+#: Share of a hop spent rising to its lift (and, mirrored, coming down).
+HOP_RISE = 0.3
 
 
 @dataclass(frozen=True)
@@ -52,13 +59,16 @@ class Piece:
     """One wipe of a recording placed on the board.
 
     demo : index into the recordings; spot_m : (2,) where its wiping centre lands on the board [m];
-    move_m : (2,) a move inside the wipe, at its middle [m] (zeros: none); pause_before_s : rest before it [s].
+    move_m : (2,) a move inside the wipe, at its middle [m] (zeros: none); pause_before_s : rest before it [s];
+    hop_before : (lift [m], duration [s]) of a hop from the previous piece's wiping phase into this one's
+    (duration 0: a retract, a flight and an approach instead).
     """
 
     demo: int
     spot_m: tuple[float, float]
     move_m: tuple[float, float] = (0.0, 0.0)
     pause_before_s: float = 0.0
+    hop_before: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -90,6 +100,9 @@ REAL_TAKES: tuple[TakeRecipe, ...] = (
     TakeRecipe("four-spots", (Piece(3, (0.10, 0.10)), Piece(2, (-0.10, 0.05), pause_before_s=1.5),
                               Piece(1, (0.15, -0.05), move_m=(0.0, 0.03)), Piece(0, (0.15, -0.05))),
                "four wipes in another order, a pause, a shift inside a wipe, a revisit"),
+    TakeRecipe("hops", (Piece(1, (0.0, 0.0)), Piece(0, (0.06, 0.0), hop_before=(0.02, 1.0)),
+                        Piece(3, (0.06, 0.12), hop_before=(0.05, 3.0)), Piece(2, (0.30, 0.12), hop_before=(0.08, 2.0))),
+               "hops of 2, 5 and 8 cm lifting the pad to a spot half, one and two pad lengths (12 cm) away"),
 )
 
 
@@ -159,7 +172,16 @@ def build_take(recipe: TakeRecipe, demos: list[Demonstration], labels: list[np.n
         if np.any(move):
             t, local, quats, per = _move_inside_wipe(t, local, quats, per, move, dt)
         world = board.world_from_surface(local)
-        if parts_t:
+        if parts_t and piece.hop_before[1] > 0:
+            first = int(np.flatnonzero(per)[0])
+            t, world, quats, per = t[first:] - t[first], world[first:], quats[first:], per[first:]
+            n_total -= _end_at_wipe(parts_t, parts_p, parts_q, parts_l)
+            t_end = float(parts_t[-1][-1])
+            hop = _hop(parts_t[-1], parts_p[-1], t, world, board, piece.hop_before, dt)
+            add(t_end + piece.hop_before[1] * np.arange(1, len(hop) + 1) / (len(hop) + 1), hop,
+                _slerp(parts_q[-1][-1], quats[0], len(hop)), np.zeros(len(hop), bool))
+            start = t_end + piece.hop_before[1] / (len(hop) + 1)
+        elif parts_t:
             prev_t, prev_p, prev_q = parts_t[-1], parts_p[-1], parts_q[-1]
             if piece.pause_before_s > 0:  # come to rest smoothly, then hold with the recording's jitter
                 v_end, a_end = _rates(prev_t, prev_p, True)
@@ -187,6 +209,37 @@ def build_take(recipe: TakeRecipe, demos: list[Demonstration], labels: list[np.n
     demo = Demonstration(np.concatenate(parts_t), np.vstack(parts_p), np.vstack(parts_q),
                          source=f"take {recipe.name}")
     return Take(recipe.name, demo, np.concatenate(parts_l), wipes)
+
+
+def hop_lift(s: np.ndarray) -> np.ndarray:
+    """Flat-topped 0 -> 1 -> 0 over ``s`` in [0, 1], flat to second order at both ends: up in the first
+    :data:`HOP_RISE` of the hop, down in the last."""
+    def step(x):
+        x = np.clip(x, 0.0, 1.0)
+        return 10 * x**3 - 15 * x**4 + 6 * x**5
+    return step(s / HOP_RISE) * step((1 - s) / HOP_RISE)
+
+
+def _end_at_wipe(parts_t: list, parts_p: list, parts_q: list, parts_l: list) -> int:
+    """Cut the last part after its last wiping sample (its retract goes: a hop follows); samples removed."""
+    keep = int(np.flatnonzero(parts_l[-1])[-1]) + 1
+    removed = len(parts_t[-1]) - keep
+    for parts in (parts_t, parts_p, parts_q, parts_l):
+        parts[-1] = parts[-1][:keep]
+    return removed
+
+
+def _hop(prev_t, prev_p, t, world, board, lift_duration: tuple[float, float], dt: float) -> np.ndarray:
+    """The hop's samples (n, 3) in the world frame from the end of ``prev_p`` to ``world[0]`` (module docstring)."""
+    lift, duration = lift_duration
+    a = board.surface_from_world(prev_p[-3:])
+    b = board.surface_from_world(world[:3])
+    v0, a0 = _rates(prev_t[-3:], a, True)
+    v1, a1 = _rates(t[:3], b, False)
+    path = hermite_quintic(a[-1], v0, a0, b[0], v1, a1, duration, dt)
+    s = np.arange(1, len(path) + 1) / (len(path) + 1)
+    path[:, 2] += lift * hop_lift(s)
+    return board.world_from_surface(path)
 
 
 def _rotated(q_wxyz: np.ndarray | None, R: np.ndarray, n: int) -> np.ndarray:

@@ -1,0 +1,210 @@
+"""The cell's keys without a network: an in-process bus behind the same :class:`~interfaces.session.ServiceNode`.
+
+A :class:`LocalNode` is a :class:`~interfaces.session.ServiceNode` whose
+session is a :class:`LocalSession` on a shared :class:`LocalBus` instead of
+a Zenoh session: the services publish (encoded by the same codec), read
+(decoded, checked and counted by the same :class:`~interfaces.session.Latest`
+and :class:`~interfaces.session.Inbox`) and declare liveliness exactly as on
+Zenoh, but a put is handed to every matching subscriber in the putting
+thread, at once, in order, never lost. Key expressions match as Zenoh
+matches them (``zenoh.KeyExpr.intersects``). There is no access control
+and no other process: one process holds every service of a cell
+(:mod:`launch.local_cell`, a campaign's network-free cell).
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+from collections import deque
+from typing import Callable
+
+import zenoh
+
+from .config import ZenohSettings
+from .session import Latest, ServiceNode
+
+_ids = itertools.count(1)
+
+
+class _Payload:
+    """What a subscriber reads of a sample's payload (``len``, ``to_bytes``), as Zenoh's ``ZBytes``."""
+
+    __slots__ = ("_data",)
+
+    def __init__(self, data: bytes) -> None:
+        self._data = data
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def to_bytes(self) -> bytes:
+        return self._data
+
+
+class _Sample:
+    __slots__ = ("key_expr", "payload")
+
+    def __init__(self, key: str, data: bytes) -> None:
+        self.key_expr = key
+        self.payload = _Payload(data)
+
+
+class _Subscriber:
+    """A callback subscriber, or (``depth``) a ring of the newest samples read with :meth:`try_recv`."""
+
+    def __init__(self, bus: "LocalBus", expr: str, callback: Callable | None, depth: int) -> None:
+        self.bus, self.expr, self.callback = bus, zenoh.KeyExpr(expr), callback
+        self._ring: deque[_Sample] | None = None if callback is not None else deque(maxlen=max(depth, 1))
+
+    def deliver(self, sample: _Sample) -> None:
+        if self._ring is None:
+            self.callback(sample)
+        else:
+            self._ring.append(sample)
+
+    def try_recv(self) -> _Sample | None:
+        try:
+            return self._ring.popleft()
+        except (IndexError, AttributeError):
+            return None
+
+    def undeclare(self) -> None:
+        self.bus._remove(self)
+
+
+class _Publisher:
+    __slots__ = ("bus", "key")
+
+    def __init__(self, bus: "LocalBus", key: str) -> None:
+        self.bus, self.key = bus, key
+
+    def put(self, data: bytes) -> None:
+        self.bus.put(self.key, data)
+
+    def undeclare(self) -> None:
+        pass
+
+
+class LocalBus:
+    """Subscriptions by key expression; :meth:`put` delivers to each matching one in the caller's thread."""
+
+    def __init__(self) -> None:
+        self._subs: list[_Subscriber] = []
+        self._routes: dict[str, tuple[_Subscriber, ...]] = {}  # concrete key -> its subscribers (cleared on change)
+        self._tokens: set[str] = set()
+        self._lock = threading.Lock()
+        self.puts = 0
+
+    def put(self, key: str, data: bytes) -> None:
+        subs = self._routes.get(key)
+        if subs is None:
+            k = zenoh.KeyExpr(key)
+            with self._lock:
+                subs = self._routes[key] = tuple(s for s in self._subs if s.expr.intersects(k))
+        self.puts += 1
+        sample = _Sample(key, data)
+        for s in subs:
+            s.deliver(sample)
+
+    def subscribe(self, expr: str, callback: Callable | None, depth: int = 1) -> _Subscriber:
+        sub = _Subscriber(self, expr, callback, depth)
+        with self._lock:
+            self._subs.append(sub)
+            self._routes.clear()
+        return sub
+
+    def _remove(self, sub: _Subscriber) -> None:
+        with self._lock:
+            if sub in self._subs:
+                self._subs.remove(sub)
+                self._routes.clear()
+
+    def tokens(self, expr: str) -> list[str]:
+        k = zenoh.KeyExpr(expr)
+        with self._lock:
+            return [t for t in self._tokens if zenoh.KeyExpr(t).intersects(k)]
+
+
+class _Token:
+    def __init__(self, bus: LocalBus, key: str) -> None:
+        self.bus, self.key = bus, key
+        with bus._lock:
+            bus._tokens.add(key)
+
+    def undeclare(self) -> None:
+        with self.bus._lock:
+            self.bus._tokens.discard(self.key)
+
+
+class _Reply:
+    class _Ok:
+        def __init__(self, key: str) -> None:
+            self.key_expr = key
+
+    def __init__(self, key: str) -> None:
+        self.ok = self._Ok(key)
+
+
+class _Liveliness:
+    def __init__(self, bus: LocalBus) -> None:
+        self.bus = bus
+
+    def declare_token(self, key: str) -> _Token:
+        return _Token(self.bus, key)
+
+    def get(self, expr: str, timeout: float = 1.0) -> list[_Reply]:
+        return [_Reply(t) for t in self.bus.tokens(expr)]
+
+
+class LocalSession:
+    """The part of ``zenoh.Session`` the services use, on a :class:`LocalBus`.
+
+    ``declare_subscriber(key, handler)``: a callable gets each sample in the putting thread; any other handler
+    (Zenoh's ``RingChannel``) makes a ring of :attr:`ring_depth` read by ``try_recv``.
+    """
+
+    def __init__(self, bus: LocalBus, ring_depth: int = 1) -> None:
+        self.bus = bus
+        self.ring_depth = ring_depth
+        self._zid = f"{next(_ids):032x}"
+
+    def zid(self) -> str:
+        return self._zid
+
+    def declare_subscriber(self, key: str, handler) -> _Subscriber:
+        return self.bus.subscribe(key, handler if callable(handler) else None, self.ring_depth)
+
+    def declare_publisher(self, key: str, **_qos) -> _Publisher:
+        return _Publisher(self.bus, key)
+
+    def liveliness(self) -> _Liveliness:
+        return _Liveliness(self.bus)
+
+    def with_ring(self, depth: int) -> "LocalSession":
+        """A view of the same bus and id whose ring subscribers keep ``depth`` samples (how :class:`Latest` gets
+        its depth)."""
+        view = LocalSession.__new__(LocalSession)
+        view.bus, view.ring_depth, view._zid = self.bus, depth, self._zid
+        return view
+
+    def close(self) -> None:
+        pass
+
+
+class LocalNode(ServiceNode):
+    """A :class:`ServiceNode` on a :class:`LocalBus`: same publishing, readers and liveliness, no network."""
+
+    def __init__(self, service: str, bus: LocalBus, settings: ZenohSettings | None = None) -> None:
+        super().__init__(service, settings or ZenohSettings())
+        self.bus = bus
+
+    def __enter__(self) -> "LocalNode":
+        self._session = LocalSession(self.bus)
+        self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
+        return self
+
+    def latest(self, key: str, msg_type, depth: int = 1) -> Latest:
+        reader = Latest(self.session.with_ring(depth), key, msg_type, depth)
+        self._readers.append(reader)
+        return reader
