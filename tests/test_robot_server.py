@@ -340,9 +340,11 @@ def test_a_joint_over_its_speed_brake_is_braked_whatever_is_commanded():
             speeds.append(abs(s.dq_rad_s[0]))
             applied.append(s.command_seq)
             srv.command(seq, tau)
-        st = srv.wait_status(lambda m: m.counters.get("joint_speed_brakes", 0) >= 2, "two speed-brake episodes")
-    speeds, applied = np.array(speeds), np.array(applied)
-    over = np.flatnonzero(speeds + 0.01 > 0.95)  # 10 rad/s^2: 0.01 rad/s more by the next cycle
+        speeds, applied = np.array(speeds), np.array(applied)
+        over = np.flatnonzero(speeds + 0.01 > 0.95)  # 10 rad/s^2: 0.01 rad/s more by the next cycle
+        # a status published between two episodes (a loaded machine) does not count them all yet: wait for one
+        # that has seen every state sent
+        st = srv.wait_status(lambda m: m.counters.get("commands_received", 0) >= 300, "every command counted")
     assert len(over) >= 2 and speeds.max() <= 0.95, speeds.max()
     assert all(applied[i + 1] == -1 and speeds[i + 1] == 0.0 for i in over if i + 1 < len(speeds)), \
         "the cycle after an over-speed state is a brake"
