@@ -1,5 +1,5 @@
-"""Short hops between nearby wipes (issue 38): each wiping phase is its own periodic MP however close the
-patches are, while one wipe whose stroke centre drifts stays one MP.
+"""Short hops between nearby wipes (a person lifts the pad briefly and moves it on): each wiping phase is its
+own periodic MP however close the patches are, while one wipe whose stroke centre drifts stays one MP.
 
 Synthetic demos over the grid of lifts {2, 5, 8} cm, moves {0.5, 1, 2} pad lengths and durations {1, 3} s;
 taught takes (the real recordings joined by such hops, skipped without ../shared/data) over its corners.
