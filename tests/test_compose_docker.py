@@ -24,7 +24,7 @@ from .docker_helpers import base_image, ensure_docker
 from .test_live_view import _check, _Client
 from .zenoh_helpers import free_port, wait_for
 
-pytestmark = [pytest.mark.slow, pytest.mark.docker]
+pytestmark = [pytest.mark.slow, pytest.mark.docker, pytest.mark.xdist_group("docker")]
 
 
 def _compose(project: str, env: dict, *args: str, timeout: float = 600) -> subprocess.CompletedProcess:

@@ -55,6 +55,7 @@ def test_every_service_is_a_client_of_the_router_on_its_own_network():
 
 @pytest.mark.slow
 @pytest.mark.docker
+@pytest.mark.xdist_group("docker")
 def test_docker_compose_through_the_router_cleans_a_board_and_perception_cannot_reach_the_sim(tmp_path):
     ensure_docker()
     host = tmp_path / "cell"
