@@ -10,14 +10,18 @@ from __future__ import annotations
 import signal
 import sys
 import threading
+from dataclasses import replace
 
 from lampskit.errors import LampsError
 
 
-def open_background_node(prog: str, service: str, args) -> tuple[object, object, threading.Event] | None:
+def open_background_node(prog: str, service: str, args, cells: tuple[str, ...] = ()
+                         ) -> tuple[object, object, threading.Event] | None:
     """(node, settings, stop event) for ``service``, or None after printing ``<prog>: error: ...``.
 
     args : parsed options with ``config`` and the options of ``interfaces.config.add_zenoh_options``.
+    cells : the robot ids of a site's cells the service follows (the site viewer: ``[zenoh] cells`` set to them,
+    the node's own keys, its liveliness token, the first cell's); () keeps the configured ones.
     """
     from interfaces.config import load_config, zenoh_with_options
     from interfaces.priority import BACKGROUND, set_service_priority
@@ -27,6 +31,9 @@ def open_background_node(prog: str, service: str, args) -> tuple[object, object,
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     try:
         settings = zenoh_with_options(load_config(args.config).zenoh, args)
+        if cells or settings.cells:
+            cells = tuple(cells or settings.cells)
+            settings = replace(settings, cells=cells, robot_id=cells[0], key_prefix="")
         set_service_priority(BACKGROUND)
         from interfaces.session import ServiceNode
 
@@ -38,3 +45,21 @@ def open_background_node(prog: str, service: str, args) -> tuple[object, object,
         print(f"{prog}: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
         return None
     return node, settings, stop
+
+
+def cells_option(a) -> tuple[str, ...]:
+    """The robot ids of ``--cells`` (none: one cell); ValueError naming a bad one."""
+    if a.cells is None:
+        return ()
+    from interfaces.access import check_cells
+    from interfaces.errors import ConfigError
+
+    try:
+        cells = check_cells([c.strip() for c in a.cells.split(",") if c.strip()])
+    except (ConfigError, ValueError) as exc:
+        raise ValueError(f"--cells {a.cells}: {exc}") from None
+    if not cells:
+        raise ValueError("--cells needs at least one robot id")
+    if a.robot_id:
+        raise ValueError("give --cells or --robot-id, not both")
+    return cells

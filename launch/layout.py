@@ -6,8 +6,9 @@ layout"): ``configById`` (one config per panel id ``<Type>!<name>``),
 ``layout`` (the mosaic tree of panel ids), ``globalVariables``,
 ``userNodes``, ``playbackConfig``. ``config/foxglove/lamps.json`` is it for
 the default cell (``lamps foxglove --write-layout FILE [--robot-id ID]``
-writes another). :func:`layout_paths` lists every topic and message path it
-reads, so the tests check each against a real recording.
+writes another; :func:`site_layout` a tab per cell of a site).
+:func:`layout_paths` lists every topic and message path it reads, so the
+tests check each against a real recording.
 
 Topics (see :mod:`launch.scene` and :mod:`launch.record`): the 3D panel
 shows ``scene/tf``, ``scene/robot`` (the arm), ``scene/board`` (board and
@@ -111,6 +112,36 @@ def cell_layout(keys: Keys | None = None, camera: str = "board") -> dict[str, An
                                                     "first": "Plot!joints", "second": "Plot!torques"}}}},
     }
     return {"configById": config, "layout": mosaic, "globalVariables": {}, "userNodes": {},
+            "playbackConfig": {"speed": 1.0}}
+
+
+def site_layout(cells: list[Keys], camera: str = "board") -> dict[str, Any]:
+    """The layout of a site's cells (``lamps foxglove --cells``): a Tab panel, one tab per cell, each tab the cell's
+    :func:`cell_layout` (panel ids ``<Type>!<name>-<robot id>``), its 3D panel following the cell's own frame tree
+    (``<robot id>/world``, :func:`launch.scene.cell_frames`)."""
+    from .scene import WORLD, cell_frames
+
+    if not cells:
+        raise ValueError("a site's layout needs at least one cell")
+    config: dict[str, Any] = {}
+    tabs = []
+    for keys in cells:
+        robot = cell_frames(keys)[:-1]
+        one = cell_layout(keys, camera)
+        ids = {pid: f"{pid}-{robot}" for pid in one["configById"]}
+        for pid, cfg in one["configById"].items():
+            if "followTf" in cfg:
+                cfg = {**cfg, "followTf": f"{robot}/{WORLD}",
+                       "transforms": {f"frame:{robot}/{WORLD}": {"visible": True}}}
+            config[ids[pid]] = cfg
+
+        def renamed(node):
+            if isinstance(node, str):
+                return ids[node]
+            return {k: renamed(v) if k in ("first", "second") else v for k, v in node.items()}
+        tabs.append({"title": robot, "layout": renamed(one["layout"])})
+    config["Tab!cells"] = {"activeTabIdx": 0, "tabs": tabs}
+    return {"configById": config, "layout": "Tab!cells", "globalVariables": {}, "userNodes": {},
             "playbackConfig": {"speed": 1.0}}
 
 

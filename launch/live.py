@@ -15,6 +15,11 @@ converts and logs. Each topic is thinned to at most ``--max-rate`` messages
 per second (the 1 kHz states and commands; a viewer needs no more), and a
 full queue drops the oldest samples (counted): a slow viewer never slows
 the cell. Nothing is written to disk.
+
+A site of several cells through one router (``lamps up --cells N``) is served by one view: ``lamps foxglove
+--cells ID,...`` joins as the site viewer (the identity that reads every cell) and serves every cell's topics
+(each under its own prefix) on one port, each cell's scene in a frame tree of its own (``<robot id>/world``);
+``--write-layout`` then writes a layout with a tab per cell.
 """
 
 from __future__ import annotations
@@ -35,34 +40,41 @@ DEFAULT_PORT = 8765
 
 
 class LiveView:
-    """Subscribes ``<prefix>/**`` on ``session`` and serves it on a Foxglove WebSocket server until :meth:`close`.
+    """Subscribes ``<prefix>/**`` of each cell on ``session`` and serves it on a Foxglove WebSocket server until
+    :meth:`close`.
 
-    counters : samples logged per topic kind, ``thinned`` (above the rate), ``undecodable``, ``unknown_key``,
-    ``dropped_queue_full``.
+    keys : the cell's :class:`~interfaces.keys.Keys`, or a sequence of them (a site: each cell's scene frames then
+    carry its robot id, :func:`launch.scene.cell_frames`).
+    counters : samples logged per topic kind (the key after the cell's prefix), ``thinned`` (above the rate),
+    ``undecodable``, ``unknown_key``, ``dropped_queue_full``.
     """
 
     def __init__(self, session, keys, host: str = "127.0.0.1", port: int = DEFAULT_PORT, max_rate_hz: float = 100.0,
                  max_queue: int = 20_000) -> None:
-        from .scene import SceneBuilder
+        from .scene import cells_of, scenes_of
         from .ws_server import FoxgloveWsServer
 
         if not max_rate_hz > 0:
             raise ValueError(f"max_rate_hz must be positive, got {max_rate_hz}")
-        self.keys = keys
+        self.cells = cells = cells_of(keys)
+        self.keys = cells[0]
         self.counters: Counter[str] = Counter()
         self._min_gap_ns = int(1e9 / max_rate_hz)
         self._last_ns: dict[str, int] = {}
         self._channels: dict[str, int] = {}  # topic -> channel id
-        self.scene = SceneBuilder(keys)
+        self.scenes = scenes_of(cells)
+        self.scene = self.scenes[self.keys.prefix]
         self._decoders: dict = {}
         self._queue: deque = deque(maxlen=max_queue)
         self._wake = threading.Event()
         self._stop = threading.Event()
-        self.server = FoxgloveWsServer(f"LAMPS cell {keys.prefix}", host, port)
+        many = len(cells) > 1
+        name = f"LAMPS site {', '.join(k.prefix for k in cells)}" if many else f"LAMPS cell {self.keys.prefix}"
+        self.server = FoxgloveWsServer(name, host, port)
         self.port = self.server.port
         self._thread = threading.Thread(target=self._run, name="foxglove-live", daemon=True)
         self._thread.start()
-        self._sub = session.declare_subscriber(f"{keys.prefix}/**", self._on_sample)
+        self._subs = [session.declare_subscriber(f"{k.prefix}/**", self._on_sample) for k in cells]
 
     def _on_sample(self, sample) -> None:  # Zenoh thread: never waits
         if len(self._queue) == self._queue.maxlen:
@@ -93,20 +105,24 @@ class LiveView:
         from interfaces.errors import MessageDecodeError
 
         from .record_json import json_records, message_type_of
+        from .scene import cell_of_key
 
         if key not in self._decoders:
-            t = message_type_of(self.keys, key)
-            self._decoders[key] = Decoder(t) if t is not None else None
-        dec = self._decoders[key]
-        if dec is None:
+            cell = cell_of_key(self.cells, key)
+            t = message_type_of(cell, key) if cell is not None else None
+            self._decoders[key] = (Decoder(t), self.scenes[cell.prefix], len(cell.prefix) + 1) if t is not None \
+                else None
+        entry = self._decoders[key]
+        if entry is None:
             self.counters["unknown_key"] += 1
             return
+        dec, scene, after_prefix = entry
         try:
             msg = dec(data)
         except MessageDecodeError:
             self.counters["undecodable"] += 1
             return
-        for topic, scene_msg in self.scene.on_message(key, msg, t_ns):  # thinned by the builder itself
+        for topic, scene_msg in scene.on_message(key, msg, t_ns):  # thinned by the builder itself
             def typed(m=scene_msg):
                 schema = type(m).get_schema()
                 return "protobuf", schema.name, base64.b64encode(bytes(schema.data)).decode("ascii"), "protobuf"
@@ -116,7 +132,7 @@ class LiveView:
         for topic, name, schema, payload, t in json_records(key, msg, t_ns):
             cid = self._channel(topic, lambda: ("json", name, json.dumps(schema()), "jsonschema"))
             self.server.send(cid, t, msgspec.json.encode(payload))
-        self.counters[key[len(self.keys.prefix) + 1:]] += 1
+        self.counters[key[after_prefix:]] += 1
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -131,7 +147,8 @@ class LiveView:
                     log.exception("live view: cannot publish a sample of %s", key)
 
     def close(self) -> None:
-        self._sub.undeclare()
+        for sub in self._subs:
+            sub.undeclare()
         self._stop.set()
         self._wake.set()
         self._thread.join(10.0)
@@ -152,32 +169,43 @@ def main(argv: list[str] | None = None) -> int:
                    help="only write the cell's Foxglove layout (3D scene, camera with stains, force, tracking, "
                         "phase, joints) for this --robot-id and --camera to FILE, then exit")
     p.add_argument("--camera", default="board", help="the camera the layout's image panel shows (default board)")
+    p.add_argument("--cells", metavar="ID,...", help="serve every one of these cells (robot ids) of a site, as the "
+                   "site viewer through the site's router ([zenoh] cells; --write-layout: a tab per cell)")
     p.add_argument("--config", metavar="FILE", help="TOML config with a [zenoh] table")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     add_zenoh_options(p)
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="lamps foxglove %(levelname)s: %(message)s")
+    from .background_node import cells_option
+
+    try:
+        cells = cells_option(a)
+    except ValueError as exc:
+        p.error(str(exc))
     if a.write_layout:
-        return _write_layout(a)
+        return _write_layout(a, cells)
     if not 0 < a.port < 65536:
         p.error(f"--port must be in 1..65535, got {a.port}")
     if not a.max_rate > 0:
         p.error(f"--max-rate must be positive, got {a.max_rate}")
     from .background_node import open_background_node
 
-    opened = open_background_node("lamps foxglove", "foxglove", a)
+    opened = open_background_node("lamps foxglove", "foxglove", a, cells)
     if opened is None:
         return 1
     node, settings, stop = opened
+    from interfaces.keys import Keys
+
     try:
         try:
-            view = LiveView(node.session, settings.keys, a.host, a.port, a.max_rate)
+            view = LiveView(node.session, [Keys.for_robot(c) for c in settings.cells] or settings.keys, a.host,
+                            a.port, a.max_rate)
         except RuntimeError as exc:  # the port is taken, or the address is not ours
             print(f"lamps foxglove: error: cannot serve on {a.host}:{a.port} ({exc})", file=sys.stderr)
             return 1
-        print(f"lamps foxglove: serving the cell on ws://{a.host}:{view.port} (Foxglove: Open connection)",
-              flush=True)
+        what = f"the cells {', '.join(settings.cells)}" if settings.cells else "the cell"
+        print(f"lamps foxglove: serving {what} on ws://{a.host}:{view.port} (Foxglove: Open connection)", flush=True)
         stop.wait()
         view.close()
     finally:
@@ -186,21 +214,25 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _write_layout(a) -> int:
+def _write_layout(a, cells: tuple[str, ...]) -> int:
     from pathlib import Path
 
     from interfaces.keys import Keys
     from lampskit.atomic import write_text_atomic
 
-    from .layout import cell_layout
+    from .layout import cell_layout, site_layout
 
     try:
-        keys = Keys.for_robot(a.robot_id) if a.robot_id else Keys()
-        write_text_atomic(Path(a.write_layout), json.dumps(cell_layout(keys, a.camera), indent=1) + "\n")
+        if cells:
+            layout, what = site_layout([Keys.for_robot(c) for c in cells], a.camera), f"the cells {', '.join(cells)}"
+        else:
+            keys = Keys.for_robot(a.robot_id) if a.robot_id else Keys()
+            layout, what = cell_layout(keys, a.camera), keys.prefix
+        write_text_atomic(Path(a.write_layout), json.dumps(layout, indent=1) + "\n")
     except (OSError, ValueError) as exc:
         print(f"lamps foxglove: error: cannot write the layout: {exc}", file=sys.stderr)
         return 1
-    print(f"wrote the Foxglove layout of {keys.prefix} to {a.write_layout} (Foxglove / Lichtblick: Import layout)")
+    print(f"wrote the Foxglove layout of {what} to {a.write_layout} (Foxglove / Lichtblick: Import layout)")
     return 0
 
 

@@ -211,6 +211,9 @@ def budget_from_env() -> int:
 class Recorder:
     """Subscribes ``<prefix>/**`` on ``session`` and writes ``out_dir/recording.mcap`` until :meth:`close`.
 
+    ``keys``: the cell's, or a sequence of cells' (a site's recording, ``lamps record --cells``: every cell's keys
+    under their own prefixes, each cell's scene in its own frame tree, :func:`launch.scene.cell_frames`).
+
     It records what the cell's receivers accept: a sample that does not decode as its key's message (bad
     bytes, over the key's size bound, an unknown key) is counted (``undecodable``, ``unknown_key``) and only
     described, its size and the error, on ``<key>/rejected``, for its first :data:`REJECTED_NOTES_PER_KEY`
@@ -219,12 +222,15 @@ class Recorder:
     finished as usual.
     """
 
-    def __init__(self, session, keys: Keys, out_dir: Path, max_queue: int = 200_000,
+    def __init__(self, session, keys: Keys | list[Keys], out_dir: Path, max_queue: int = 200_000,
                  budget_bytes: int = DEFAULT_BUDGET_BYTES, clock=time.time_ns) -> None:
+        from .scene import cells_of, scenes_of
+
+        self.cells = cells_of(keys)
         self.clock = clock  # log_time of a sample [ns]: the wall clock, or the network-free cell's robot clock
         self.budget_bytes = budget_bytes
         self.over_budget = False
-        self.keys = keys
+        self.keys = self.cells[0]
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.partial = self.out_dir / (RECORDING + ".partial")
@@ -233,14 +239,13 @@ class Recorder:
         self._queue: deque = deque(maxlen=max_queue)
         self._wake = threading.Event()
         self._stop = threading.Event()
-        self._decoders: dict[str, Decoder | None] = {}
+        self._decoders: dict[str, tuple | None] = {}  # key -> (decoder, its cell's scene, its prefix's length)
         self._rejected: Counter[str] = Counter()
-        from .scene import SceneBuilder
-
-        self.scene = SceneBuilder(keys)
+        self.scenes = scenes_of(self.cells)
+        self.scene = self.scenes[self.keys.prefix]
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
-        self._sub = session.declare_subscriber(f"{keys.prefix}/**", self._on_sample)
+        self._subs = [session.declare_subscriber(f"{k.prefix}/**", self._on_sample) for k in self.cells]
 
     def _open_sink(self) -> McapSink:
         """The sink at ``recording.mcap.partial``, holding first whatever an earlier recorder of this folder
@@ -272,10 +277,15 @@ class Recorder:
         self._queue.append((str(sample.key_expr), sample.payload.to_bytes(), self.clock()))
         self._wake.set()
 
-    def _decoder(self, key: str) -> Decoder | None:
+    def _decoder(self, key: str) -> tuple | None:
+        """(decoder, scene, prefix length) of ``key``, None for a key of no message type."""
         if key not in self._decoders:
-            t = message_type_of(self.keys, key)
-            self._decoders[key] = Decoder(t) if t is not None else None
+            from .scene import cell_of_key
+
+            cell = cell_of_key(self.cells, key)
+            t = message_type_of(cell, key) if cell is not None else None
+            self._decoders[key] = (Decoder(t), self.scenes[cell.prefix], len(cell.prefix) + 1) if t is not None \
+                else None
         return self._decoders[key]
 
     def _drain(self) -> None:
@@ -284,18 +294,18 @@ class Recorder:
             if self.over_budget or self._check_budget(t_ns):
                 self.counters["dropped_over_budget"] += 1
                 continue
-            dec = self._decoder(key)
-            short = key[len(self.keys.prefix) + 1:]
+            entry = self._decoder(key)
             try:
-                if dec is None:
+                if entry is None:
                     raise MessageDecodeError("no message type for this key")
+                dec, scene, after_prefix = entry
                 msg = dec(data)
                 self.sink.write(key, msg, t_ns)
-                self.counters[short] += 1
-                for topic, scene_msg in self.scene.on_message(key, msg, t_ns):
+                self.counters[key[after_prefix:]] += 1
+                for topic, scene_msg in scene.on_message(key, msg, t_ns):
                     self.sink.write_typed(topic, scene_msg, t_ns)
             except MessageDecodeError as exc:
-                self.counters["undecodable" if dec is not None else "unknown_key"] += 1
+                self.counters["undecodable" if entry is not None else "unknown_key"] += 1
                 self._rejected[key] += 1
                 if self._rejected[key] <= REJECTED_NOTES_PER_KEY:
                     self.sink.write_json(key + "/rejected", "lamps.Rejected",
@@ -323,7 +333,8 @@ class Recorder:
 
     def close(self) -> Path:
         """Stop, write what is queued, finish the file; returns the recording's final path."""
-        self._sub.undeclare()
+        for sub in self._subs:
+            sub.undeclare()
         self._stop.set()
         self._wake.set()
         self._thread.join(60.0)

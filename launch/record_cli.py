@@ -6,7 +6,8 @@
 done`` it also ends by itself once the controller is DONE (or stays in
 FAULT / ESTOP), exiting 0 only when the report says cleaned, so
 ``docker compose up --exit-code-from recorder`` runs one job and says how it
-went. ``lamps report``
+went. ``lamps record --cells ID,...`` records a site instead: every cell's keys, as the site viewer through
+the site's router, into one recording (no report: each cell's own recorder writes its own). ``lamps report``
 rebuilds the report and plots of a run folder from its recording alone.
 """
 
@@ -34,11 +35,21 @@ def record_main(argv: list[str] | None = None) -> int:
                         "DONE (or in FAULT / ESTOP), exit 0 only if the report says cleaned")
     p.add_argument("--max-duration", type=float, default=None, metavar="S",
                    help="with --until done: end after S seconds (wall) whatever the controller does")
+    p.add_argument("--cells", metavar="ID,...", help="record every one of these cells (robot ids) of a site into "
+                   "one file, as the site viewer ([zenoh] cells); only the recording")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     add_zenoh_options(p)
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="lamps record %(levelname)s: %(message)s")
+    from .background_node import cells_option
+
+    try:
+        cells = cells_option(a)
+    except ValueError as exc:
+        p.error(str(exc))
+    if cells and a.until == "done":
+        p.error("--until done follows one cell's controller: not with --cells")
     if a.max_duration is not None and not (a.max_duration > 0 and a.max_duration < float("inf")):
         p.error(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
     from .background_node import open_background_node
@@ -49,20 +60,23 @@ def record_main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"lamps record: error: {exc}", file=sys.stderr)
         return 1
-    opened = open_background_node("lamps record", "recorder", a)
+    opened = open_background_node("lamps record", "recorder", a, cells)
     if opened is None:
         return 1
     node, settings, stop = opened
     out = Path(a.out)
+    from interfaces.keys import Keys
+
     try:
-        rec = Recorder(node.session, settings.keys, out, budget_bytes=budget)
+        rec = Recorder(node.session, [Keys.for_robot(c) for c in settings.cells] or settings.keys, out,
+                       budget_bytes=budget)
         ended = _wait_for_end(node, stop, a.max_duration) if a.until == "done" else (stop.wait(), None)[1]
         path = rec.close()
     finally:
         node.close()
     print(f"recorded {sum(rec.counters.values())} messages into {path}"
           + (f"; the run ended: {ended[1]}" if ended else ""), flush=True)
-    if a.no_report:
+    if a.no_report or settings.cells:
         return 0
     code = _write_report(out, settings.keys)
     if a.until == "done" and code == 0:

@@ -65,6 +65,32 @@ def _colour(rgb: tuple[float, float, float], a: float = 0.8) -> fm.Color:
     return fm.Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
 
 
+def cell_frames(keys: Keys) -> str:
+    """The frame-id prefix of a cell in a view of several: its robot id and a slash (``iiwa-1/``; a key prefix of
+    its own, whole)."""
+    return keys.prefix.removeprefix("lamps/") + "/"
+
+
+def cells_of(keys) -> list[Keys]:
+    """The cells a recorder or live view follows: ``keys`` (one cell's :class:`Keys`) or a sequence of them, each
+    once; ValueError otherwise."""
+    cells = [keys] if isinstance(keys, Keys) else list(keys)
+    if not cells or len({k.prefix for k in cells}) != len(cells):
+        raise ValueError(f"one or more cells, each once, are needed; got {[k.prefix for k in cells]}")
+    return cells
+
+
+def scenes_of(cells: list[Keys]) -> dict[str, "SceneBuilder"]:
+    """A :class:`SceneBuilder` per cell by key prefix; with several cells each in its own frame tree."""
+    site = len(cells) > 1
+    return {k.prefix: SceneBuilder(k, frames=cell_frames(k) if site else "") for k in cells}
+
+
+def cell_of_key(cells: list[Keys], key: str) -> Keys | None:
+    """The cell whose prefix ``key`` is under, or None."""
+    return next((k for k in cells if key.startswith(k.prefix + "/")), None)
+
+
 def camera_frame_id(camera: str) -> str:
     """The frame of camera ``camera`` (its optical frame) in the scene and on its images."""
     return f"camera_{camera}"
@@ -156,11 +182,15 @@ class SceneBuilder:
     """Feed each decoded message with :meth:`on_message`; it returns the scene messages due, as (topic, message).
 
     One instance per consumer (it keeps Pinocchio scratch data, the last board
-    and the cameras seen, and when each output was last sent).
+    and the cameras seen, and when each output was last sent). ``frames`` is put
+    before every frame id it names (``world`` becomes ``iiwa-1/world``): a view of
+    several cells gives each its own tree (:func:`cell_frames`); "" for one cell.
     """
 
-    def __init__(self, keys: Keys, urdf_path: str | Path = URDF_PATH) -> None:
+    def __init__(self, keys: Keys, urdf_path: str | Path = URDF_PATH, frames: str = "") -> None:
         self.keys = keys
+        self.frames = frames
+        self.world = frames + WORLD
         self.model = pin.buildModelFromUrdf(str(urdf_path))
         self.data = self.model.createData()
         self.links = [f.name for f in self.model.frames if f.type == pin.FrameType.BODY]
@@ -213,7 +243,7 @@ class SceneBuilder:
         for name, fid in [*zip(self.links, self._link_ids), (PAD, self._tcp_id)]:
             oMf = self.data.oMf[fid]
             p = oMf.translation
-            tfs.append(fm.FrameTransform(timestamp=stamp, parent_frame_id=WORLD, child_frame_id=name,
+            tfs.append(fm.FrameTransform(timestamp=stamp, parent_frame_id=self.world, child_frame_id=self.frames + name,
                                          translation=fm.Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
                                          rotation=_quat_xyzw(oMf.rotation)))
         return fm.FrameTransforms(transforms=tfs)
@@ -233,7 +263,8 @@ class SceneBuilder:
                 prims["cubes"].append(fm.CubePrimitive(pose=_pose(v.p, v.R), size=size, color=col))
             else:
                 prims["spheres"].append(fm.SpherePrimitive(pose=_pose(v.p, v.R), size=size, color=col))
-        entities = [fm.SceneEntity(timestamp=stamp, frame_id=link, id=f"robot/{link}", frame_locked=True, **prims)
+        entities = [fm.SceneEntity(timestamp=stamp, frame_id=self.frames + link, id=f"robot/{link}", frame_locked=True,
+                                   **prims)
                     for link, prims in by_link.items()]
         return fm.SceneUpdate(entities=entities)
 
@@ -248,7 +279,7 @@ class SceneBuilder:
     def board_transform(self, s: Stains, t_ns: int) -> fm.FrameTransforms:
         p, R = _pose_matrix(s.T_board_to_world)
         return fm.FrameTransforms(transforms=[fm.FrameTransform(
-            timestamp=_stamp(t_ns), parent_frame_id=WORLD, child_frame_id=BOARD,
+            timestamp=_stamp(t_ns), parent_frame_id=self.world, child_frame_id=self.frames + BOARD,
             translation=fm.Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])), rotation=_quat_xyzw(R))])
 
     def board_scene(self, s: Stains, t_ns: int) -> fm.SceneUpdate:
@@ -257,7 +288,7 @@ class SceneBuilder:
         w, h = (float(v) for v in s.board_size_m)
         eye = np.eye(3)
         board = fm.SceneEntity(
-            timestamp=stamp, frame_id=BOARD, id="board", frame_locked=True,
+            timestamp=stamp, frame_id=self.frames + BOARD, id="board", frame_locked=True,
             cubes=[fm.CubePrimitive(pose=_pose((w / 2, h / 2, -0.003), eye), size=fm.Vector3(x=w, y=h, z=0.006),
                                     color=_BOARD_WHITE)],
             texts=[fm.TextPrimitive(pose=_pose((0.0, h + 0.03, 0.0), eye), billboard=True, font_size=14.0,
@@ -270,7 +301,7 @@ class SceneBuilder:
             ring = ellipse_on_board(st.centre_board_m, st.extent_board_m)
             pts = [fm.Point3(x=float(x), y=float(y), z=0.002) for x, y, _ in ring]
             entities.append(fm.SceneEntity(
-                timestamp=stamp, frame_id=BOARD, id=f"stain/{st.id}", frame_locked=True,
+                timestamp=stamp, frame_id=self.frames + BOARD, id=f"stain/{st.id}", frame_locked=True,
                 lines=[fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineLoop, pose=_pose((0, 0, 0), eye),
                                         thickness=4.0, scale_invariant=True, points=pts, color=colour)],
                 cylinders=[fm.CylinderPrimitive(
@@ -292,17 +323,17 @@ class SceneBuilder:
         self._cameras[key] = f
         p, R = _pose_matrix(f.T_camera_to_world)
         out = [(self.topic_tf, fm.FrameTransforms(transforms=[fm.FrameTransform(
-            timestamp=_stamp(t_ns), parent_frame_id=WORLD, child_frame_id=camera_frame_id(f.camera),
+            timestamp=_stamp(t_ns), parent_frame_id=self.world, child_frame_id=self.frames + camera_frame_id(f.camera),
             translation=fm.Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])), rotation=_quat_xyzw(R))]))]
         out.append((f"{key}/calibration", self.calibration(f, t_ns)))
         return out
 
-    @staticmethod
-    def calibration(f: CameraFrame, t_ns: int) -> fm.CameraCalibration:
+    def calibration(self, f: CameraFrame, t_ns: int) -> fm.CameraCalibration:
         """The pinhole of ``f`` (no distortion) in its optical frame, named as the image's frame_id."""
         k = f.intrinsics
         return fm.CameraCalibration(
-            timestamp=_stamp(t_ns), frame_id=camera_frame_id(f.camera), width=k.width, height=k.height, distortion_model="plumb_bob",
+            timestamp=_stamp(t_ns), frame_id=self.frames + camera_frame_id(f.camera), width=k.width, height=k.height,
+            distortion_model="plumb_bob",
             D=[0.0] * 5, K=[k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
             R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], P=[k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0,
                                                                 1.0, 0.0])

@@ -10,7 +10,9 @@ of the router with its cell's identity, the cell's own run folder, recording and
 
 One session of the launcher, the ``site-viewer`` identity (reads every cell, commands none), follows all cells
 through the router and prints their progress on one line; at the end one line per cell from its report. Exit 0
-only when every cell cleaned its board. Ctrl-C stops every cell the way ``lamps up`` stops one.
+only when every cell cleaned its board. Ctrl-C stops every cell the way ``lamps up`` stops one. With
+``--foxglove PORT`` one live view serves every cell on PORT (``lamps foxglove --cells``, as the site viewer
+through the router; its log ``OUT/logs/foxglove.log``).
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ def cell_credentials(a, out: Path) -> Path:
 
 def run_cells(a, skill: Path, out: Path, stop_requested) -> int:
     """Run ``a.cells`` cells through one router (see the module docstring); the exit code."""
-    from interfaces.access import RELAY
+    from interfaces.access import RELAY, SITE_VIEWER
     from interfaces.credentials import make_credentials
     from interfaces.keys import DEFAULT_ROBOT_ID
 
@@ -93,11 +95,20 @@ def run_cells(a, skill: Path, out: Path, stop_requested) -> int:
             {"LAMPS_ZENOH_IDENTITY": str(creds / RELAY), "LAMPS_ZENOH_ACCESS_CONTROL": "true"}, out / "logs", echo)
         if not wait_port(int(endpoint.rsplit(":", 1)[1]), router, 60.0):
             raise SiteError(f"the router did not start: {router.last_words()}")
+        if a.foxglove is not None:
+            children["foxglove"] = Child(
+                "foxglove", (*LAMPS, "foxglove", "--cells", ",".join(ids), "--port", str(a.foxglove), "--connect",
+                             endpoint, "-v"),
+                {"LAMPS_ZENOH_MODE": "client", "LAMPS_ZENOH_IDENTITY": str(creds / SITE_VIEWER),
+                 "LAMPS_ZENOH_ACCESS_CONTROL": "true"}, out / "logs", echo)
         with SiteView(endpoint, creds, ids) as view:
             for k, cell in enumerate(ids):
                 children[cell] = Child(cell, _cell_argv(a, k, cell, skill, out, endpoint), {"MPLBACKEND": "Agg"},
                                        out / "logs", echo)
             _print(f"lamps up: cells {', '.join(ids)} through the router at {endpoint}; run folders {out}/<robot id>")
+            if a.foxglove is not None:
+                _print(f"lamps up: every cell live in Foxglove: Open connection ws://127.0.0.1:{a.foxglove} (layout: "
+                       f"lamps foxglove --cells {','.join(ids)} --write-layout FILE)")
             _follow([children[c] for c in ids], view, router, stop_requested)
             _print(f"seen through the router: {view.phases()}")
     finally:
@@ -107,6 +118,9 @@ def run_cells(a, skill: Path, out: Path, stop_requested) -> int:
         for name in ids:
             if name in children:
                 children[name].stop(CELL_STOP_S)
+        if "foxglove" in children:
+            children["foxglove"].terminate()
+            children["foxglove"].stop()
         if RELAY in children:
             children[RELAY].stop()
     results = [_result(cell, out / cell, children.get(cell)) for cell in ids]
@@ -142,8 +156,6 @@ def _cell_argv(a, k: int, cell: str, skill: Path, out: Path, endpoint: str) -> t
         argv += ["--robot", a.robot]
     if a.compose:
         argv += ["--compose", a.compose]
-    if a.foxglove is not None:
-        argv += ["--foxglove", str(a.foxglove + k)]
     return tuple(argv)
 
 

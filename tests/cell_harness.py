@@ -283,7 +283,8 @@ class Cell:
                 if child.returncode is not None and name != "recorder":
                     raise AssertionError(f"{name} exited ({child.returncode}): {child.last_words()}")
             time.sleep(0.05)
-        raise AssertionError(f"no phase in {phases} within {timeout_s} s; phases seen: {self.phases[-8:]}")
+        raise AssertionError(f"no phase in {phases} within {timeout_s} s; phases seen: {self.phases[-8:]}; "
+                             f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
 
     def alive(self) -> dict[str, int | None]:
         return {name: c.returncode for name, c in self.children.items()}

@@ -424,7 +424,7 @@ def test_a_controller_stopped_mid_wipe_lifts_the_pad_off_before_it_exits(tmp_pat
 @pytest.mark.attack('faults', 'a sustained overload of the controller in real time',
                     'FAULT, the pad lifted off, the reason named')
 @pytest.mark.slow
-@pytest.mark.realtime
+@pytest.mark.alone
 def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp_path, learned_skill):
     """Graceful degradation: the real-time controller, its tick slowed to miss two robot states in three while it
     wipes, faults on the overload watch (not on the force cap) and lifts the pad off at the reduced rate; once the

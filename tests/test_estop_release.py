@@ -27,7 +27,7 @@ GOING = ("APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE")
 
 @pytest.mark.attack('4', "an operator's e-stop held 1 s and 3 s, then released (lock-step and real time)",
                     'ESTOP, then wiping again once both sides released')
-@pytest.mark.parametrize("mode", ["lockstep", pytest.param("realtime", marks=pytest.mark.realtime)])
+@pytest.mark.parametrize("mode", ["lockstep", pytest.param("realtime", marks=pytest.mark.alone)])
 def test_an_operator_estop_and_release_end_in_wiping_again(tmp_path, learned_skill_file, mode):
     with Cell(tmp_path / "run", learned_skill_file, mode) as cell:
         keys = cell.node.keys

@@ -22,7 +22,7 @@ from interfaces.session import ServiceNode
 from .cell_harness import Cell
 from .zenoh_helpers import wait_sample
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.alone]  # their checks read the services' wall-clock watchdogs
 
 WIPING = ("WIPE", "TRANSITION")
 GOING = ("APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE")
@@ -142,7 +142,6 @@ def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recor
 
 @pytest.mark.attack('faults', 'real time: the controller-robot link stalled 300 ms and cut, sim frozen 3 s, controller and recorder killed',
                     'the robot side brakes; wiping on; force and speeds within limits')
-@pytest.mark.realtime
 def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_controller_and_recorder(
         tmp_path, learned_skill_file):
     with Cell(tmp_path / "run", learned_skill_file, "realtime", proxy=True) as cell:
@@ -178,7 +177,6 @@ def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_contro
 
 @pytest.mark.attack('faults', 'real time: states thinned to 500/s, commands to 333/s, stains to 2/s',
                     'the board cleaned, no FAULT')
-@pytest.mark.realtime
 def test_realtime_cleans_the_board_with_samples_dropped_on_the_state_command_and_stains_keys(
         tmp_path, learned_skill_file):
     # Zenoh's own downsampling on each sender's egress: about every other state, two of three commands and

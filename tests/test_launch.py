@@ -443,7 +443,7 @@ def test_lamps_up_on_a_horizontal_board_with_a_given_skill(tmp_path, learned_ski
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("mode", ["lockstep", pytest.param("realtime", marks=pytest.mark.realtime)])
+@pytest.mark.parametrize("mode", ["lockstep", pytest.param("realtime", marks=pytest.mark.alone)])
 def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, learned_skill_file, mode):
     """--robot lbr-sim: the arm behind lbr_fri_ros2_stack's CDR messages (at the stack's 2 ms torque-command FRI
     period), the real adapter, the same controller."""

@@ -544,7 +544,7 @@ class ControllerThread:
 
 
 @pytest.mark.slow
-@pytest.mark.realtime
+@pytest.mark.alone
 def test_realtime_holds_a_silent_controller_then_disarms_and_keeps_sending_the_hold():
     """The stack re-applies its last message forever (lbr_torque_command_controller.cpp:42-55): a silent controller
     gets the hold (the measured pose, zero overlay) after the stale limit, a disarm after the hold timeout, and

@@ -371,7 +371,7 @@ def test_lockstep_peer_holds_the_joint_spring_and_reapplies_the_last_command_for
 
 
 @pytest.mark.slow
-@pytest.mark.realtime
+@pytest.mark.alone
 def test_realtime_open_loop_publishes_the_stacks_command_and_the_stack_exits_when_commanding_ends(tmp_path):
     """The stack's defaults but the torque mode: open_loop publishes its own command as measured
     (async_client.cpp:82-85), bitwise equal to the robot's commanded position, frozen while an overlay moves the arm;

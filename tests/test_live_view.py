@@ -159,3 +159,79 @@ def test_the_live_view_serves_the_cell_and_its_scene_to_a_foxglove_client(subpro
         view.close()
         view_node.close()
         pub.close()
+
+
+def test_one_view_serves_two_cells_each_in_a_frame_tree_of_its_own():
+    """``lamps foxglove --cells``: two cells' states on one port, each cell's scene rooted at ``<robot id>/world``
+    (two arms in one ``world`` would be one tree), a key of neither cell left unsubscribed."""
+    from interfaces.keys import Keys
+
+    zport, wport = free_port(), free_port()
+    cells = [Keys.for_robot("iiwa-1"), Keys.for_robot("iiwa-2")]
+    pub = ServiceNode("sim", ZenohSettings(listen=(f"tcp/127.0.0.1:{zport}",))).__enter__()
+    view_node = ServiceNode("foxglove", ZenohSettings(connect=(f"tcp/127.0.0.1:{zport}",))).__enter__()
+    view = LiveView(view_node.session, cells, port=wport, max_rate_hz=100.0)
+    client = None
+    try:
+        for keys in cells:
+            wait_subscribed(pub.session, keys.robot_state, what=f"the live view's subscription of {keys.prefix}")
+        client = _Client(view.port, "foxglove.websocket.v1")
+        wanted = [f"{k.prefix}/{what}" for k in cells for what in ("robot/state", "scene/tf")]
+        bursts = iter(range(10**6))
+
+        def publish() -> None:
+            i0 = next(bursts) * 100
+            for k in cells:
+                for i in range(i0, i0 + 30):
+                    pub.publish(k.robot_state, _state(i))
+            pub.publish(Keys.for_robot("iiwa-3").robot_state, _state(i0))  # not a cell of this view
+
+        wait_for(lambda: publish() or client.pump() or all(t in client.channels for t in wanted), 15.0,
+                 f"advertisements of {wanted}")
+        client.subscribe(wanted)
+        wait_for(lambda: publish() or client.pump(0.3) or all(client.got.get(t) for t in wanted), 20.0,
+                 "a message on every topic of both cells", period_s=0.0)
+        assert client.server_info["name"] == "LAMPS site lamps/iiwa-1, lamps/iiwa-2"
+        assert not any(t.startswith("lamps/iiwa-3/") for t in client.channels), sorted(client.channels)
+        for k in cells:
+            topic, robot = f"{k.prefix}/scene/tf", k.prefix.rsplit("/", 1)[1]
+            cls = _protobuf_class("foxglove.FrameTransforms", base64.b64decode(client.channels[topic]["schema"]))
+            tf = cls.FromString(client.got[topic][-1])
+            assert {x.parent_frame_id for x in tf.transforms} == {f"{robot}/world"}
+            assert all(x.child_frame_id.startswith(f"{robot}/") for x in tf.transforms)
+        assert view.counters["robot/state"] > 0 and view.counters["failed"] == 0
+    finally:
+        if client is not None:
+            client.ws.close()
+        view.close()
+        view_node.close()
+        pub.close()
+
+
+def test_a_sites_layout_has_a_tab_per_cell_with_its_own_panels_and_frames(tmp_path):
+    """``lamps foxglove --cells A,B --write-layout``: each tab is the cell's layout on its own topics."""
+    import subprocess
+    import sys
+
+    from interfaces.keys import Keys
+    from launch.layout import cell_layout, layout_paths
+
+    from .conftest import REPO
+
+    out = tmp_path / "site.json"
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--cells", "iiwa-1,iiwa-2",
+                        "--write-layout", str(out)], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "the cells iiwa-1, iiwa-2" in r.stdout, r.stderr
+    site = json.loads(out.read_text())
+    tab = site["configById"][site["layout"]]
+    assert [t["title"] for t in tab["tabs"]] == ["iiwa-1", "iiwa-2"]
+    topics, _ = layout_paths(site)
+    for robot in ("iiwa-1", "iiwa-2"):
+        one_topics, _ = layout_paths(cell_layout(Keys.for_robot(robot)))
+        assert one_topics <= topics
+        assert site["configById"][f"3D!scene-{robot}"]["followTf"] == f"{robot}/world"
+    assert len(site["configById"]) == 2 * len(cell_layout()["configById"]) + 1
+    bad = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--cells", "iiwa-1,site-viewer",
+                          "--write-layout", str(tmp_path / "x.json")], cwd=REPO, capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 2 and "--cells iiwa-1,site-viewer" in bad.stderr and not (tmp_path / "x.json").exists()

@@ -184,7 +184,7 @@ def test_the_gate_drops_wrong_lengths_clips_limits_and_rate_and_holds_on_request
 
 
 @pytest.mark.slow
-@pytest.mark.realtime
+@pytest.mark.alone
 def test_realtime_brakes_without_a_command_and_when_the_command_goes_stale():
     rate_hz, stale_s = 500.0, 0.03
     arm = MockArm(dt_s=1.0 / rate_hz)
@@ -302,7 +302,7 @@ class FreezingArm(MockArm):
 
 
 @pytest.mark.slow
-@pytest.mark.realtime
+@pytest.mark.alone
 def test_after_its_own_loop_froze_the_robot_side_brakes_until_the_controller_answers_a_fresh_state():
     """After the robot side's own loop froze, no pre-freeze command may be applied: the held command and an
     answer to a state from before the freeze are both dropped; the arm holds until an answer to a new state."""

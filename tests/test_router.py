@@ -9,6 +9,7 @@ both cells side by side through one router.
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import subprocess
@@ -27,6 +28,7 @@ from interfaces.session import zenoh_config
 from launch.health import accepts
 
 from .conftest import REPO
+from .mcap_check import _protobuf_class
 from .zenoh_helpers import free_port, wait_subscribed
 
 
@@ -56,7 +58,7 @@ class _Router:
 
     def close(self) -> str:
         self.proc.terminate()
-        out, _ = self.proc.communicate(timeout=20)
+        out, _ = self.proc.communicate(timeout=60)  # a loaded machine: its TLS links close first
         return out
 
 
@@ -278,6 +280,54 @@ def test_the_site_viewer_reads_every_cell_and_may_only_engage_their_estops(site)
             s.close()
 
 
+def test_one_recording_of_every_cell_through_the_router_as_the_site_viewer(site, tmp_path):
+    """``lamps record --cells A,B``: the site viewer's one recording holds both cells' states, each cell's scene in
+    its own frame tree (``<robot id>/world``)."""
+    import signal
+
+    from interfaces.codec import encode
+    from interfaces.keys import Keys
+    from launch.record import read_recording
+
+    from .test_live_view import _state
+
+    router, creds = site
+    out = tmp_path / "site-recording"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "LAMPS_ZENOH_MODE": "client", "LAMPS_ZENOH_CONNECT": router.endpoint,
+           "LAMPS_ZENOH_ACCESS_CONTROL": "true", "LAMPS_ZENOH_IDENTITY": str(creds / SITE_VIEWER)}
+    rec = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "record", "--cells", ",".join(CELLS), "--out",
+                            str(out)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    robots = [_client(router, c, identity_folder(creds, "robot", c)) for c in CELLS]
+    try:
+        for c, robot in zip(CELLS, robots):
+            wait_subscribed(robot, Keys.for_robot(c).robot_state, what=f"the site recorder's subscription of {c}")
+        for i in range(60):
+            for c, robot in zip(CELLS, robots):
+                robot.put(Keys.for_robot(c).robot_state, encode(_state(i)))
+            time.sleep(0.005)
+        time.sleep(1.0)
+        rec.send_signal(signal.SIGTERM)
+        stdout, stderr = rec.communicate(timeout=60)
+    finally:
+        if rec.poll() is None:
+            rec.kill()
+        for s in robots:
+            s.close()
+    assert rec.returncode == 0, stderr[-2000:]
+    assert not (out / "report.json").exists()  # each cell's own recorder reports; the site's only records
+    msgs = read_recording(out / "recording.mcap")
+    from mcap.reader import make_reader
+
+    frames: dict[str, set[str]] = {}
+    with open(out / "recording.mcap", "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(topics=[f"lamps/{c}/scene/tf" for c in CELLS]):
+            tf = _protobuf_class(schema.name, schema.data).FromString(message.data)
+            frames.setdefault(channel.topic, set()).update(x.parent_frame_id for x in tf.transforms)
+    for c in CELLS:
+        assert len(msgs[Keys.for_robot(c).robot_state]) >= 10, (c, sorted(msgs))  # the states may drop on the way
+        assert frames[f"lamps/{c}/scene/tf"] == {f"{c}/world"}, frames
+
+
 def test_the_site_list_confines_each_cells_roles_to_its_own_prefix():
     acl = site_acl(CELLS)
     rules = {r["id"]: r for r in acl["rules"]}
@@ -312,21 +362,50 @@ def test_site_credentials_name_each_cells_roles_and_a_service_refuses_another_ce
 
 @pytest.mark.slow
 def test_two_lockstep_cells_clean_their_boards_side_by_side_through_one_router(tmp_path, learned_skill_file):
-    """``lamps up --cells 2``: one router, two cells each a client of it with its own identities, one stain each."""
-    out = tmp_path / "site"
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--cells", "2", "--stains", "1", "--seed", "3",
-                        "--skill", str(learned_skill_file), "--out", str(out), "--max-duration", "400", "-q"],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=900,
-                       env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"})
-    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    """``lamps up --cells 2 --foxglove PORT``: one router, two cells each a client of it with its own identities,
+    one stain each; one live view (the site viewer through the router) serves both cells to a Foxglove client."""
+    from .test_live_view import _check, _Client
+    from .zenoh_helpers import wait_for
+
+    out, ws_port = tmp_path / "site", free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "up", "--cells", "2", "--stains", "1", "--seed",
+                             "3", "--skill", str(learned_skill_file), "--out", str(out), "--max-duration", "400", "-q",
+                             "--foxglove", str(ws_port)], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"})
+    try:
+        def connected():
+            try:
+                return _Client(ws_port, "foxglove.websocket.v1")
+            except OSError:
+                return None
+        client = wait_for(connected, 120.0, "the site's live view", period_s=0.5)
+        live = [f"lamps/{cell}/{what}" for cell in ("iiwa-1", "iiwa-2") for what in ("controller/status", "scene/tf")]
+        wait_for(lambda: client.pump(0.5) or all(t in client.channels for t in live), 120.0, f"advertised {live}")
+        client.subscribe(live)
+        wait_for(lambda: client.pump(0.5) or all(client.got.get(t) for t in live), 60.0, f"live messages on {live}")
+        for t in live:
+            _check(client.channels[t], client.got[t][-1])
+        assert "LAMPS site lamps/iiwa-1, lamps/iiwa-2" in client.server_info["name"], client.server_info
+        for cell in ("iiwa-1", "iiwa-2"):  # each cell's scene in a frame tree of its own
+            topic = f"lamps/{cell}/scene/tf"
+            tf = _protobuf_class("foxglove.FrameTransforms", base64.b64decode(client.channels[topic]["schema"]))
+            tf = tf.FromString(client.got[topic][-1])
+            assert {x.parent_frame_id for x in tf.transforms} == {f"{cell}/world"}, tf.transforms[0]
+        client.ws.close()
+        stdout, stderr = proc.communicate(timeout=900)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stdout[-3000:] + stderr[-3000:]
     for cell in ("iiwa-1", "iiwa-2"):
         report = json.loads((out / cell / "report.json").read_text())
         assert report["final_phase"] == "DONE" and report["dirt_removed_fraction"] > 0.95, (cell, report)
         assert json.loads((out / cell / "run.json").read_text())["key_prefix"] == f"lamps/{cell}"
-        assert any(line.startswith(f"{cell}: cleaned") for line in r.stdout.splitlines()), r.stdout[-2000:]
+        assert any(line.startswith(f"{cell}: cleaned") for line in stdout.splitlines()), stdout[-2000:]
     # the site viewer, one session through the router, saw both cells to the end
-    assert "seen through the router: iiwa-1 DONE, iiwa-2 DONE" in r.stdout, r.stdout[-2000:]
+    assert "seen through the router: iiwa-1 DONE, iiwa-2 DONE" in stdout, stdout[-2000:]
     assert "listening on" in (out / "logs" / "router.log").read_text()
+    assert "serving the cells iiwa-1, iiwa-2" in (out / "logs" / "foxglove.log").read_text()
 
 
 def test_health_alive_sees_a_clients_token_through_the_router_and_names_a_missing_one(cell):

@@ -159,7 +159,7 @@ def test_lockstep_runs_are_bit_identical_for_a_seed(tmp_path, model):
     assert truths[0] == truths[1]
 
 
-@pytest.mark.realtime
+@pytest.mark.alone
 @pytest.mark.parametrize("stale_limit_s, should_brake", [(0.02, True), (1.0, False)])
 def test_realtime_stale_command_makes_the_arm_brake_and_hold(tmp_path, model, stale_limit_s, should_brake):
     cfg = {"mode": "realtime", "stale_limit_s": stale_limit_s, "camera": NO_CAMERA,
