@@ -406,8 +406,8 @@ def test_adaptive_wiping_cleans_a_long_slanted_streak_with_a_stroke_along_it(tmp
 @pytest.mark.slow
 def test_lamps_up_on_a_horizontal_board_with_a_given_skill(tmp_path, learned_skill_file):
     """... served live to a Foxglove client meanwhile (lamps up --foxglove: the compose profile foxglove)."""
-    from .test_live_view import _check, _Client
-    from .zenoh_helpers import free_port, wait_for
+    from .test_live_view import follow_live
+    from .zenoh_helpers import free_port
 
     out, base, ws_port = tmp_path / "run", _port_base(), free_port()
     proc = subprocess.Popen([*LAMPS, "up", "-q", "--out", str(out), "--port-base", str(base), "--board", "horizontal",
@@ -415,20 +415,10 @@ def test_lamps_up_on_a_horizontal_board_with_a_given_skill(tmp_path, learned_ski
                              "--foxglove", str(ws_port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "MPLBACKEND": "Agg"}, cwd=REPO)
     try:
-        def connected():
-            try:
-                return _Client(ws_port, "foxglove.websocket.v1")
-            except OSError:
-                return None
-        client = wait_for(connected, 120.0, "the live view's WebSocket server", period_s=0.5)
         keys = Keys()
         live = [keys.controller_status, f"{keys.prefix}/scene/tf", f"{keys.prefix}/scene/board",
                 f"{keys.camera_frame('board')}/annotations"]
-        wait_for(lambda: client.pump(0.5) or all(t in client.channels for t in live), 120.0, f"advertised {live}")
-        client.subscribe(live)
-        wait_for(lambda: client.pump(0.5) or all(client.got.get(t) for t in live), 60.0, f"live messages on {live}")
-        for t in live:
-            _check(client.channels[t], client.got[t][-1])
+        client = follow_live(ws_port, live, "the live view's WebSocket server")
         client.ws.close()
         stdout, stderr = proc.communicate(timeout=300)
     finally:

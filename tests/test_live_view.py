@@ -81,6 +81,23 @@ class _Client:
         self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
 
 
+def follow_live(port: int, topics: list[str], what: str) -> "_Client":
+    """A ``foxglove.websocket.v1`` client of the live view on ``port`` once it serves (2 min), subscribed to
+    ``topics`` once advertised, after a message on each, every message checked against its channel's schema."""
+    def connected():
+        try:
+            return _Client(port, "foxglove.websocket.v1")
+        except OSError:
+            return None
+    client = wait_for(connected, 120.0, what, period_s=0.5)
+    wait_for(lambda: client.pump(0.5) or all(t in client.channels for t in topics), 120.0, f"advertised {topics}")
+    client.subscribe(topics)
+    wait_for(lambda: client.pump(0.5) or all(client.got.get(t) for t in topics), 60.0, f"live messages on {topics}")
+    for t in topics:
+        _check(client.channels[t], client.got[t][-1])
+    return client
+
+
 def _check(channel: dict, payload: bytes) -> None:
     """The payload is what the advertised schema says (JSON Schema with properties, or a protobuf type)."""
     if channel["encoding"] == "json":

@@ -364,8 +364,7 @@ def test_site_credentials_name_each_cells_roles_and_a_service_refuses_another_ce
 def test_two_lockstep_cells_clean_their_boards_side_by_side_through_one_router(tmp_path, learned_skill_file):
     """``lamps up --cells 2 --foxglove PORT``: one router, two cells each a client of it with its own identities,
     one stain each; one live view (the site viewer through the router) serves both cells to a Foxglove client."""
-    from .test_live_view import _check, _Client
-    from .zenoh_helpers import wait_for
+    from .test_live_view import follow_live
 
     out, ws_port = tmp_path / "site", free_port()
     proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "up", "--cells", "2", "--stains", "1", "--seed",
@@ -373,18 +372,8 @@ def test_two_lockstep_cells_clean_their_boards_side_by_side_through_one_router(t
                              "--foxglove", str(ws_port)], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"})
     try:
-        def connected():
-            try:
-                return _Client(ws_port, "foxglove.websocket.v1")
-            except OSError:
-                return None
-        client = wait_for(connected, 120.0, "the site's live view", period_s=0.5)
         live = [f"lamps/{cell}/{what}" for cell in ("iiwa-1", "iiwa-2") for what in ("controller/status", "scene/tf")]
-        wait_for(lambda: client.pump(0.5) or all(t in client.channels for t in live), 120.0, f"advertised {live}")
-        client.subscribe(live)
-        wait_for(lambda: client.pump(0.5) or all(client.got.get(t) for t in live), 60.0, f"live messages on {live}")
-        for t in live:
-            _check(client.channels[t], client.got[t][-1])
+        client = follow_live(ws_port, live, "the site's live view")
         assert "LAMPS site lamps/iiwa-1, lamps/iiwa-2" in client.server_info["name"], client.server_info
         for cell in ("iiwa-1", "iiwa-2"):  # each cell's scene in a frame tree of its own
             topic = f"lamps/{cell}/scene/tf"
