@@ -252,7 +252,10 @@ class Cell:
         self.kill(name)
         self.children[name].stop()
         time.sleep(down_s)
-        self.start(name)
+        if name == "router":  # on the same endpoint: its clients reconnect to what they were given
+            self._start_router()
+        else:
+            self.start(name)
         self._watching.clear()
         self._watcher.join(5.0)
         self.node.close()
