@@ -12,7 +12,8 @@ and dirt removed (within 0.5 points) as the baseline's, the largest
 difference in dirt removed, and the CPU time the campaign and its children
 used per cell (thread pool rows: Ray's workers are not the campaign's children).
 
-Run: ``.venv/bin/python bench/bench_campaign.py [--seeds 0-9] [--stains 1-3]`` (about 20 minutes on 2 cores).
+Run: ``.venv/bin/python bench/bench_campaign.py [--seeds 0-9] [--stains 1-3]`` (about 20 minutes on 2 cores);
+``--no-ray`` runs the two thread pool rows only.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ def main() -> int:
     ap.add_argument("--seeds", default="0-9")
     ap.add_argument("--stains", default="1-3")
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--no-ray", action="store_true", help="the thread pool rows only (no Ray cluster)")
     a = ap.parse_args()
     env = {**os.environ, "MPLBACKEND": "Agg", "RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token",
            "RAY_AUTH_TOKEN": secrets.token_hex(16)}
@@ -66,6 +68,7 @@ def main() -> int:
                 ("network-free cells, thread pool --jobs 2", 2, False, False),
                 ("network-free cells, Ray 1 worker", 1, True, False),
                 ("network-free cells, Ray 2 workers", 2, True, False)]
+        runs = [r for r in runs if not (a.no_ray and r[2])]
         rows = []
         base_cells = None
         for i, (name, jobs, ray, network) in enumerate(runs):

@@ -290,7 +290,7 @@ class ControllerService:
             self.core.executor.fault(f"control tick failed: {type(exc).__name__}: {exc}")
             self.core.shaper.reset(None)
             return None
-        if not np.all(np.isfinite(tau)):
+        if not np.isfinite(tau).all():
             self.counters["non_finite_torques"] += 1
             self.core.shaper.reset(None)
             self.core.executor.fault("the control law gave non-finite torques (absurd robot state?)")

@@ -24,9 +24,6 @@ import zenoh
 from .config import ZenohSettings
 from .session import Latest, ServiceNode
 
-_ids = itertools.count(1)
-
-
 class _Payload:
     """What a subscriber reads of a sample's payload (``len``, ``to_bytes``), as Zenoh's ``ZBytes``."""
 
@@ -95,6 +92,11 @@ class LocalBus:
         self._tokens: set[str] = set()
         self._lock = threading.Lock()
         self.puts = 0
+        self._ids = itertools.count(1)  # session ids, per bus: a cell's are the same whatever ran before it
+
+    def next_id(self) -> int:
+        """A new session id on this bus (1, 2, ...)."""
+        return next(self._ids)
 
     def put(self, key: str, data: bytes) -> None:
         subs = self._routes.get(key)
@@ -167,7 +169,7 @@ class LocalSession:
     def __init__(self, bus: LocalBus, ring_depth: int = 1) -> None:
         self.bus = bus
         self.ring_depth = ring_depth
-        self._zid = f"{next(_ids):032x}"
+        self._zid = f"{bus.next_id():032x}"
 
     def zid(self) -> str:
         return self._zid

@@ -6,6 +6,8 @@ the same :class:`~interfaces.messages.LoopTiming`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .messages import LoopTiming
@@ -41,6 +43,22 @@ class LoopStats:
         if m == 0:
             return LoopTiming(overruns=self.overruns)
         b = self.buf[:, :m]
-        p99 = np.percentile(b, 99, axis=1)  # one call: this runs inside the loop
+        p99 = p99_by_row(b)  # this runs inside the loop
         return LoopTiming(float(np.median(b[0])), float(p99[0]), float(b[0].max()), float(p99[1]), float(p99[2]),
                           float(p99[3]), self.n, self.overruns)
+
+
+def p99_by_row(b: np.ndarray) -> np.ndarray:
+    """``np.percentile(b, 99, axis=1)`` of ``b`` (k, m), no NaN in it, bit for bit (numpy's linear method: index
+    ``(m - 1) 0.99``, the two order statistics around it interpolated as numpy's ``_lerp`` does), from one partition
+    of each row: numpy's call partitions the transposed (m, k) view, several times slower."""
+    m = b.shape[1]
+    virtual = (m - 1) * 0.99
+    lo = math.floor(virtual)
+    if virtual >= m - 1:
+        return b.max(axis=1)
+    part = np.partition(b, (lo, lo + 1), axis=1)
+    below, above = part[:, lo], part[:, lo + 1]
+    gamma = virtual - lo
+    diff = above - below
+    return above - diff * (1 - gamma) if gamma >= 0.5 else below + diff * gamma

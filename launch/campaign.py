@@ -66,6 +66,7 @@ from lampskit.errors import LampsError
 
 from .campaign_bounds import lower_bound_s
 from .campaign_cells import CampaignError, Cell, cells_of, parse_range
+from .campaign_pool import WorkerPool
 from .campaign_run import PORT_BASES, run_cell
 from .campaign_table import CLEAN_SHARE, markdown, plot, row_of, summarize
 
@@ -151,10 +152,14 @@ def _write_outputs(out: Path, rows: list[dict[str, Any]], command: str, extra: d
 
 def _local_cells(todo: list[int], cells: list[Cell], skill: Path, out: Path, max_duration_s: float, port_base: int,
                  jobs: int, network: bool):
-    """(k, report or None, run folder, why) of each cell of ``todo`` as it finishes, ``jobs`` at once here."""
-    with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-        futures = {pool.submit(run_cell, k, cells[k], skill, out, max_duration_s, port_base, network): k
-                   for k in todo}
+    """(k, report or None, run folder, why) of each cell of ``todo`` as it finishes, ``jobs`` at once here: each a
+    ``lamps up`` process, or (not ``network``) in ``jobs`` long-lived workers (:mod:`launch.campaign_pool`)."""
+    with WorkerPool() as workers, concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
+        if network:
+            futures = {pool.submit(run_cell, k, cells[k], skill, out, max_duration_s, port_base, network): k
+                       for k in todo}
+        else:
+            futures = {pool.submit(workers.run_cell, k, cells[k], skill, out, max_duration_s): k for k in todo}
         for fut in concurrent.futures.as_completed(futures):
             yield (futures[fut], *fut.result())
 

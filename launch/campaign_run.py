@@ -1,6 +1,7 @@
 """One cell of a campaign run as ``lamps up`` in lock-step, on ports of its own or (``network=False``) in one process
-without a network (``lamps up --no-network``, :mod:`launch.local_cell`): the thread pool's and a Ray task's work
-(:mod:`launch.campaign`, :mod:`launch.campaign_ray`)."""
+without a network (``lamps up --no-network``, :mod:`launch.local_cell`): a Ray task's work (:mod:`launch.campaign`,
+:mod:`launch.campaign_ray`); the thread pool runs network-free cells in :mod:`launch.campaign_pool`'s workers with
+the same arguments and environment (:func:`up_argv`, :func:`cell_env`)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,25 @@ PORT_BASES, PORT_SLOTS, PORT_STRIDE = (20000, 23000, 26000), 100, 10
 log = logging.getLogger("launch.campaign")
 
 
+def up_argv(cell: Cell, skill: Path, run_dir: Path, max_duration_s: float, port_base: int | None) -> list[str]:
+    """``lamps up``'s arguments for ``cell`` in lock-step: on ports from ``port_base``, or (None) without a
+    network."""
+    return ["--seed", str(cell.seed), "--stains", str(cell.stains), "--board", cell.board, "--skill", str(skill),
+            "--out", str(run_dir), "--mode", "lockstep", "--max-duration", str(max_duration_s), "-q",
+            *(("--port-base", str(port_base)) if port_base is not None else ("--no-network",))]
+
+
+def cell_env(cell: Cell) -> dict[str, str]:
+    """What the cell adds to the campaign's environment: its wiping mode, plots without a display."""
+    return {"MPLBACKEND": "Agg",
+            "LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true" if cell.wiping == "adaptive" else "false"}
+
+
+def why_of(stderr: str, code: int) -> str:
+    """Why a cell left no report: the last line it wrote to stderr, else its exit code."""
+    return (stderr.strip().splitlines() or [f"exit {code}"])[-1]
+
+
 def run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
              port_base: int, network: bool = True) -> tuple[dict | None, str, str]:
     """``lamps up`` for one cell: (its report or None, its run folder, why there is none)."""
@@ -28,18 +48,15 @@ def run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
     base = port_base + (k % PORT_SLOTS) * PORT_STRIDE
     why = ""
     for attempt in range(3):  # a port taken by something else: again on another range
-        argv = [sys.executable, "-m", "interfaces.cli", "up", "--seed", str(cell.seed), "--stains", str(cell.stains),
-                "--board", cell.board, "--skill", str(skill), "--out", str(run_dir), "--mode", "lockstep",
-                "--max-duration", str(max_duration_s), "-q",
-                *(("--port-base", str(base + attempt * PORT_SLOTS * PORT_STRIDE)) if network else ("--no-network",))]
+        ports = base + attempt * PORT_SLOTS * PORT_STRIDE if network else None
+        argv = [sys.executable, "-m", "interfaces.cli", "up", *up_argv(cell, skill, run_dir, max_duration_s, ports)]
         log.info("cell %s: %s", cell.name, " ".join(argv[2:]))
-        env = {**os.environ, "MPLBACKEND": "Agg",
-               "LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true" if cell.wiping == "adaptive" else "false"}
-        r = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=max_duration_s + 120)
+        r = subprocess.run(argv, capture_output=True, text=True, env={**os.environ, **cell_env(cell)},
+                           timeout=max_duration_s + 120)
         report = run_dir / "report.json"
         if report.is_file():
             return json.loads(report.read_text()), str(run_dir), ""
-        why = (r.stderr.strip().splitlines() or [f"exit {r.returncode}"])[-1]
+        why = why_of(r.stderr, r.returncode)
         if not network or "already in use" not in why:
             break
     return None, str(run_dir), why

@@ -75,6 +75,32 @@ CHUNK_BYTES = 256 * 1024
 FLUSH_S = 1.0
 
 
+class _Counted:
+    """A binary stream that knows its position without asking the OS: :meth:`tell` is read once per message (the
+    disk budget), a system call each time on a file."""
+
+    def __init__(self, f) -> None:
+        self._f = f
+        self._pos = f.tell()
+
+    def write(self, data) -> int:
+        n = self._f.write(data)
+        self._pos += len(data)
+        return n
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self) -> None:
+        self._f.flush()
+
+    def fileno(self) -> int:
+        return self._f.fileno()
+
+    def close(self) -> None:
+        self._f.close()
+
+
 class McapSink:
     """Channels and schemas on demand; :meth:`write` one decoded message (or raw bytes) per call."""
 
@@ -82,7 +108,7 @@ class McapSink:
         """A new MCAP file at ``path``, or into the open binary ``stream`` (not closed by :meth:`finish`)."""
         self.path = path
         self._own = stream is None
-        self._f = open(path, "wb") if stream is None else stream
+        self._f = _Counted(open(path, "wb") if stream is None else stream)
         self._w = Writer(self._f, chunk_size=CHUNK_BYTES)
         self._last_flush = time.monotonic()
         self._w.start(profile="", library=library)
@@ -275,7 +301,8 @@ class Recorder:
         if len(self._queue) == self._queue.maxlen:
             self.counters["dropped_queue_full"] += 1
         self._queue.append((str(sample.key_expr), sample.payload.to_bytes(), self.clock()))
-        self._wake.set()
+        if not self._wake.is_set():  # set once until the writer wakes (a set Event costs a lock and a notify)
+            self._wake.set()
 
     def _decoder(self, key: str) -> tuple | None:
         """(decoder, scene, prefix length) of ``key``, None for a key of no message type."""
@@ -388,11 +415,12 @@ def read_recording(path: Path) -> dict[str, list[tuple[int, dict]]]:
     typed protobuf channels are left out)."""
     from mcap.reader import make_reader
 
+    loads = msgspec.json.Decoder().decode  # the same objects as json.loads gives, faster
     out: dict[str, list[tuple[int, dict]]] = {}
     with open(path, "rb") as f:
         for _schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
             if channel.message_encoding == "json":
-                out.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data)))
+                out.setdefault(channel.topic, []).append((message.log_time, loads(message.data)))
     return out
 
 

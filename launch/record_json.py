@@ -44,12 +44,17 @@ def message_type_of(keys: Keys, key: str) -> type[Message] | None:
     return None
 
 
+#: Values that stay as they are (exact types: checked without a call per value, the 1 kHz messages' many floats).
+_PLAIN = frozenset((float, int, str, bool, type(None)))
+
+
 def to_builtins(msg: Any) -> Any:
     """A message as plain JSON-able data with field names (array-like structs become objects)."""
     if isinstance(msg, msgspec.Struct):
-        return {f: to_builtins(getattr(msg, f)) for f in msg.__struct_fields__}
+        return {f: v if type(v) in _PLAIN else to_builtins(v)
+                for f, v in zip(msg.__struct_fields__, msgspec.structs.astuple(msg))}
     if isinstance(msg, (list, tuple)):
-        return [to_builtins(v) for v in msg]
+        return [v if type(v) in _PLAIN else to_builtins(v) for v in msg]
     if isinstance(msg, dict):
         return {str(k): to_builtins(v) for k, v in msg.items()}
     if isinstance(msg, (bytes, bytearray, memoryview)):

@@ -104,7 +104,7 @@ class ToolTrack:
 
     def add(self, robot_time_ns: int, q_rad, arrived_s: float) -> None:
         q = np.asarray(q_rad, float)
-        if q.shape != (self._model.nq,) or not np.all(np.isfinite(q)):
+        if q.shape != (self._model.nq,) or not np.isfinite(q).all():
             return  # the decoder checked the message; a wrong arm is not ours to mask
         self._states.append((int(robot_time_ns), float(arrived_s), q))
 

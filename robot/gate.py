@@ -56,14 +56,14 @@ class CommandGate:
             self.counters["commands_dropped_wrong_length"] += 1
             return None
         self.tau[:] = cmd.tau_nm
-        if not np.all(np.isfinite(self.tau)):
+        if not np.isfinite(self.tau).all():
             self.counters["commands_dropped_non_finite"] += 1
             return None
-        if np.any(np.abs(self.tau) > self.tau_max):
+        if (np.abs(self.tau) > self.tau_max).any():
             self.counters["commands_clipped"] += 1
             np.clip(self.tau, -self.tau_max, self.tau_max, out=self.tau)
         max_step = self._max_step if elapsed_s is None else max(self._max_step, self._rate * elapsed_s)
-        if self._have_prev and np.any(np.abs(self.tau - self._prev) > max_step):
+        if self._have_prev and (np.abs(self.tau - self._prev) > max_step).any():
             self.counters["commands_rate_limited"] += 1
             np.clip(self.tau, self._prev - max_step, self._prev + max_step, out=self.tau)
         self._prev[:] = self.tau

@@ -415,7 +415,7 @@ class RobotServer:
         np.maximum(ahead, 0.0, out=ahead)
         ahead += speed
         self._dq_prev[:] = speed
-        over = bool(np.any(ahead > cap))
+        over = bool((ahead > cap).any())
         if over and not self._over_speed:
             j = int(np.argmax(ahead / cap))
             log.warning("A%d at %.2f rad/s (%.2f by the next cycle), over %.0f %% of its limit: braking until "

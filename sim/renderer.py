@@ -10,13 +10,21 @@ second shared-memory buffer. A thread of the sim process (:class:`FramePublisher
 renderer's answer, wraps the image in a :class:`~interfaces.messages.CameraFrame`
 and publishes it, so neither rendering nor a megabyte-sized put sits in
 the physics loop.
+
+A process that runs cell after cell (a campaign's worker) can keep a run's
+renderer for the next run with the same scene (:func:`keep_renderers`,
+:func:`open_camera`, :func:`release_camera`): a frame depends only on the
+joint positions and the dirt of its request, so a kept renderer draws the
+same frames as a new one, without a new interpreter and scene per run.
 """
 
 from __future__ import annotations
 
+import atexit
 import logging
 import multiprocessing as mp
 import os
+import pickle
 import tempfile
 import threading
 import time
@@ -135,6 +143,11 @@ class CameraProcess:
         self._idle = threading.Event()
         self._closed = False
         self.dead = False
+        self.scene_key = scene_key(params, board, q_start, dirt_shape)
+        self._reset()
+
+    def _reset(self) -> None:
+        """No frame asked for or delivered yet (a new run)."""
         self._pending: tuple[int, int, int] | None = None
         self.requested = self.rendered = self.skipped = 0
         self.render_s: list[float] = []
@@ -233,3 +246,64 @@ class CameraProcess:
         for shm in (self._dirt_shm, self._image_shm):
             shm.close()
             shm.unlink()
+
+
+#: Renderers kept idle for the next run of this process (:func:`keep_renderers`): scene key -> renderer.
+_KEPT: dict[bytes, CameraProcess] = {}
+#: At most this many kept at once (one per board and camera a campaign's worker meets; the oldest goes).
+MAX_KEPT = 2
+_keeping = False
+
+
+def scene_key(params: SimParams, board: Board, q_start: np.ndarray, dirt_shape: tuple[int, int]) -> bytes:
+    """What a renderer's scene is built from: the camera, the contact model of the world, the board, the arm's
+    start and the dirt grid (not the stains, the seed or the physics rate: a frame draws them from its request)."""
+    return pickle.dumps((params.camera, params.contact, params.dirt.cell_m, np.asarray(board.T_board_to_world, float),
+                         np.asarray(board.size_m, float), float(board.thickness_m), np.asarray(q_start, float),
+                         tuple(dirt_shape)))
+
+
+def keep_renderers(on: bool = True) -> None:
+    """Keep each run's renderer, once released, for the next run of this process with the same scene key; the kept
+    ones are closed when the process exits."""
+    global _keeping
+    if on and not _keeping:
+        atexit.register(_close_kept)
+    _keeping = on
+    if not on:
+        _close_kept()
+
+
+def _close_kept() -> None:
+    while _KEPT:
+        _KEPT.pop(next(iter(_KEPT))).close()
+
+
+def open_camera(params: SimParams, board: Board, q_start: np.ndarray, dirt_shape: tuple[int, int]) -> CameraProcess:
+    """A started renderer for this scene: a kept one (counters back to zero) or a new one (RuntimeError if it does
+    not come up)."""
+    kept = _KEPT.pop(scene_key(params, board, q_start, dirt_shape), None)
+    if kept is not None and not kept.dead and kept._proc.is_alive():
+        kept._reset()
+        return kept
+    if kept is not None:
+        kept.close()
+    camera = CameraProcess(params, board, q_start, dirt_shape)
+    camera.start()  # closes itself and raises RuntimeError if the renderer does not come up
+    return camera
+
+
+def release_camera(camera: CameraProcess) -> None:
+    """The run is done with ``camera``: kept for the next run (when keeping, and it is alive with no frame in
+    flight, waiting up to 10 s for one asked for), else closed."""
+    if _keeping and not camera.dead and not camera.idle:
+        camera.take(10.0)  # the frame asked for last, never taken: the renderer is done with it first
+    if not _keeping or camera.dead or not camera.idle or not camera._proc.is_alive():
+        camera.close()
+        return
+    old = _KEPT.pop(camera.scene_key, None)
+    if old is not None and old is not camera:
+        old.close()
+    _KEPT[camera.scene_key] = camera
+    while len(_KEPT) > MAX_KEPT:
+        _KEPT.pop(next(iter(_KEPT))).close()

@@ -25,7 +25,7 @@ from robot.server import RobotServer, ServerParams
 
 from .core import SimCore
 from .params import SimParams
-from .renderer import CameraProcess
+from .renderer import CameraProcess, open_camera, release_camera
 
 log = logging.getLogger(__name__)
 
@@ -67,9 +67,8 @@ class SimPort(RobotPort):
         """Start the camera renderer (raises RuntimeError if it does not come up)."""
         if not self.p.camera.enabled:
             return
-        camera = CameraProcess(self.p, self.core.board, self.core.q_start, self.core.dirt.dirt.shape)
-        camera.start()  # closes itself and raises RuntimeError if the renderer does not come up
-        self.camera = camera
+        # a new renderer (or one a campaign worker kept from its previous cell, :func:`~.renderer.keep_renderers`)
+        self.camera = open_camera(self.p, self.core.board, self.core.q_start, self.core.dirt.dirt.shape)
         if not self.publish_frames:
             return
         key = self.keys.camera_frame(self.p.camera.name)
@@ -124,7 +123,7 @@ class SimPort(RobotPort):
             self._camera_thread.join(5.0)
             self._camera_thread = None
         if self.camera is not None:
-            self.camera.close()
+            release_camera(self.camera)
             self.camera = None
         try:  # the last truth, where the arm was left: what a stopped cell pressed when it stopped
             self._publish_truth()

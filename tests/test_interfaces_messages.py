@@ -275,3 +275,12 @@ def test_strings_are_bounded_on_the_wire_and_clipped_when_built():
     assert len(st.detail) == DETAIL_MAX and len(st.counters) == COUNTERS_MAX
     assert sum(st.counters.values()) == 1000 and "other counters" in st.counters
     assert decode(encode(st), ServiceStatus) == st
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 100, 101, 1999, 2000])
+def test_the_loops_99th_percentile_is_numpys_bit_for_bit(m):
+    from interfaces.loop_stats import p99_by_row
+
+    rng = np.random.default_rng(m)
+    for b in (rng.exponential(100.0, (4, m)), np.round(rng.normal(50.0, 20.0, (4, m))), np.full((4, m), 7.25)):
+        assert np.array_equal(p99_by_row(b), np.percentile(b, 99, axis=1))
