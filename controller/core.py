@@ -249,11 +249,14 @@ class ControllerCore:
         else:
             n = board.normal
             tool = self._measure_tool(board, n, kin, wrench, dt_s)
-            scale = self.override_used = self.override.scale
+            # a held cycle is a tick of time scale 0: the skill's clock, the reference's rates, the force integral
+            # and the override all stand (the arm is braked: a push along the path would wind up against the brake)
+            scale = self.override_used = 0.0 if robot_held else self.override.scale
             sp = self.executor.step(0.0 if robot_held else self._skill_step(dt_s) * scale, tool)
             self._reference_from_setpoint(board, n, sp, tool, scale)
-            self._regulate_force(n, sp, dt_s)
-            self._update_override(kin, sp, scale, dt_s)
+            self._regulate_force(n, sp, 0.0 if robot_held else dt_s)
+            if not robot_held:
+                self._update_override(kin, sp, scale, dt_s)
         self._shape_task(kin, dt_s)
         tau = self._torque(q, dq, kin, gravity_compensated, dt_s)
         if self.trace is not None:
