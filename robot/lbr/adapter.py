@@ -48,7 +48,7 @@ Hold (a late or missing controller answer, ``hold``): the last command
 again while it is younger than ``stale_limit_s`` (one late answer must not
 step the torque), then the hold; after ``hold_timeout_s`` of holding the
 adapter disarms (the hold stays). A state whose commanded torque is an
-overlay sent for a reading older than ``stale_limit_s`` plus two FRI
+overlay sent for a reading older than ``stale_limit_s`` plus two state
 periods, or none of ours, says the robot ran on an old message (ours are
 not reaching the stack, which re-applies the last one it got): the server
 reports no command applied for it (:meth:`LbrPort.applying`,
@@ -202,12 +202,15 @@ class LbrPort(RobotPort):
         if self._state is not None and st.stamp_ns == self._state.stamp_ns:
             self.counts["states_repeated"] += 1  # a peer re-sending while it waits: nothing new
             return False
+        # the state period: the FRI's, or the controller manager's when it runs slower (its states come slower)
+        period_s = st.sample_time_s if self._state is None else \
+            max(st.sample_time_s, (st.stamp_ns - self._state.stamp_ns) * 1e-9)
         self._take(st)
         self._poll_arm_requests()
         self._check_session()
         # the one-cycle pipeline and a repeated command make an overlay up to stale_limit_s + 2 periods old
         self._applying = not (self.armed and self.p.check_applied and self._sent.old(
-            st.tau_commanded_nm, st.stamp_ns, self.p.stale_limit_s + 2.0 * st.sample_time_s))
+            st.tau_commanded_nm, st.stamp_ns, self.p.stale_limit_s + 2.0 * period_s))
         if not self._applying:
             self.counts["states_on_an_old_command"] += 1
         if self.armed:
