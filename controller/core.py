@@ -222,11 +222,15 @@ class ControllerCore:
         (without gravity when the robot adds it), None when unknown (a hold,
         a skipped state): what the disturbance watch checks the motion against;
         robot_held : the robot braked over the last cycle instead of applying
-        a command (a stale or missing answer): the skill's clock stands still
-        for that cycle (the arm did not follow, so the reference must not run
-        ahead of it: released, it would leap to catch up and bounce off the
-        board), and a contact lost meanwhile is the brake's doing, so the
-        contact-loss watch starts counting again.
+        a command (a stale or missing answer; a robot found running on an old
+        command): a tick of time scale 0. The skill's clock stands still (the
+        arm did not follow, so the reference must not run ahead of it:
+        released, it would leap to catch up and bounce off the board), and so
+        do the reference's velocity and acceleration, the force integral and
+        the speed override (a reference standing with its velocity kept would
+        push along the path into the brake through the damping); a contact
+        lost meanwhile is the brake's doing, so the contact-loss watch starts
+        counting again.
         """
         self.time_s += dt_s
         self._q[:] = q  # the compiled law sees the same array types every tick (no recompilation)
