@@ -283,7 +283,7 @@ class ControllerCore:
             self.executor.fault(f"unexplained joint torque: A{j + 1} {watch.tau_d[j]:+.1f} Nm (limit "
                                 f"{watch.limit[j]:.0f} Nm for {watch.persist_s * 1000:.0f} ms): the arm is not "
                                 "moving as commanded (another controller's torques? a collision the force sensor "
-                                "does not see?)")
+                                "does not see?)", at_the_arm=True)
             watch.reset()
 
     def _hold_reference(self, kin: Kinematics) -> None:

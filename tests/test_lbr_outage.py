@@ -125,15 +125,19 @@ def test_an_outage_of_the_commands_to_the_stack_winds_nothing_up_and_releases_no
     (AppliedWatch, ``[lbr] check_applied``), so the controller's tick runs at time scale 0 instead of taking the
     standing arm for its own doing: no reference running ahead, no torque ramping up; (2) the adapter's steering
     moves the stack's command at most ``steer_speed_rad_s`` faster than the arm, so the first message after the
-    outage does not kick the joints through the robot's joint damping. Without both, the same outage faults
-    (unexplained joint torque) with the reference 36 mm ahead, the robot applies up to 180 Nm more than the
-    controller asks, and the wrist whips past the stack's guard (A6 2.45 rad/s), which exits; (1) alone leaves
-    the 180 Nm kick (joints at 0.61 of their limits), (2) alone the fault and the guard. With both: no fault,
-    the stack runs on, the joints under 0.43 of their limits, the robot within 17 Nm of the controller."""
+    outage does not kick the joints through the robot's joint damping; (3) a fault on a torque nothing explains
+    stops from the pose last measured, at rest, not from a reference that ran ahead of the arm.
+
+    Without (1) and (2), the outage faults (unexplained joint torque) and the robot applies up to 180 Nm more
+    than the controller asks (joints at 0.85 of their limits); without (3) as well, the reference stands 36 mm
+    ahead of the pad when the messages come and the wrist whips past the stack's guard (A6 2.45 rad/s), which
+    exits. (1) alone leaves the 180 Nm kick (0.61 of the limits), (2) alone the fault. With (1) and (2): no
+    fault, the stack runs on, the joints under 0.43 of their limits, the robot within 17 Nm of the
+    controller."""
     fixed = _outage(learned_skill, check_applied=True, steer_speed_rad_s=0.5)
     assert fixed["held"] >= 70, fixed
     assert not fixed["fault"] and not fixed["stack_exit"], fixed
     assert fixed["lag"] < 0.01 and fixed["speed"] < 0.5 and fixed["excess"] < 30.0, fixed
     bare = _outage(learned_skill, check_applied=False, steer_speed_rad_s=0.0)
-    assert bare["fault"].startswith("unexplained joint torque") and bare["lag"] > 0.03, bare
-    assert bare["excess"] > 100.0 and "Invalid command" in bare["stack_exit"], bare
+    assert bare["fault"].startswith("unexplained joint torque") and bare["excess"] > 100.0, bare
+    assert bare["lag"] < 0.01, f"the fault's stop kept the reference {bare['lag'] * 1000:.0f} mm off the pad"
