@@ -89,6 +89,9 @@ log = logging.getLogger(__name__)
 
 #: Damping of the pseudo-inverse that turns external joint torques into a tool wrench.
 WRENCH_DAMPING = 0.01
+#: States on no overlay of ours, none ever matched since arming, before the adapter warns that the robot's
+#: commanded torque may not be an echo of the overlay (``[lbr] check_applied``).
+NEVER_MATCHED_WARN = 500
 #: Joint speed [rad/s] under which the arm counts as at rest for arming on an FRI 2 state (no commanded
 #: position in it: the stack's command is taken to be where the arm rests).
 REST_SPEED_RAD_S = 0.05
@@ -213,6 +216,9 @@ class LbrPort(RobotPort):
             st.tau_commanded_nm, st.stamp_ns, self.p.stale_limit_s + 2.0 * period_s))
         if not self._applying:
             self.counts["states_on_an_old_command"] += 1
+            if self._sent.matched == 0 and self.counts["states_on_an_old_command"] == NEVER_MATCHED_WARN:
+                log.warning("lbr: the robot's commanded_torque has matched no overlay sent in %d states: if the stack "
+                            "does not echo it, set [lbr] check_applied = false", NEVER_MATCHED_WARN)
         if self.armed:
             why = self._freeze.update(st.q_rad, st.stamp_ns, self._overlay)
             if why is not None:

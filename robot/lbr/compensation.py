@@ -147,10 +147,12 @@ class AppliedWatch:
         self._overlay = np.zeros((n, 7))
         self._t_ns = np.zeros(n, dtype=np.int64)
         self._n = 0
+        self.matched = 0  # states whose commanded torque was one of the overlays kept, since the reset
 
     def reset(self) -> None:
         """Forget what was sent (arming: what the robot ran on before is not judged)."""
         self._n = 0
+        self.matched = 0
 
     def sent(self, overlay: np.ndarray, t_ns: int) -> None:
         """An overlay (7,) [Nm] went out answering the reading of robot time ``t_ns``."""
@@ -169,6 +171,7 @@ class AppliedWatch:
         limit_ns = max_age_s * 1e9
         match = np.max(np.abs(self._overlay[:n] - tau_commanded), axis=1) <= self.tol_nm
         if match.any():
+            self.matched += 1
             return t_ns - int(np.max(self._t_ns[:n][match])) > limit_ns
         return t_ns - int(np.min(self._t_ns[:n])) > limit_ns
 
