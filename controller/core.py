@@ -69,7 +69,8 @@ class Trace:
     in-plane reference (board frame) position/velocity/acceleration, measured
     board-frame pad position, world reference and measured positions [m],
     measured normal force and commanded press force [N], contact flag, the
-    skill's time scale (:class:`~controller.control.limits.SpeedOverride`);
+    skill's time scale (:class:`~controller.control.limits.SpeedOverride`; 0
+    on a cycle the robot held);
     the reference's rates are as executed (time-scaled).
     """
 
