@@ -69,7 +69,8 @@ class Trace:
     in-plane reference (board frame) position/velocity/acceleration, measured
     board-frame pad position, world reference and measured positions [m],
     measured normal force and commanded press force [N], contact flag, the
-    skill's time scale (:class:`~controller.control.limits.SpeedOverride`);
+    skill's time scale (:class:`~controller.control.limits.SpeedOverride`; 0
+    on a cycle the robot held);
     the reference's rates are as executed (time-scaled).
     """
 
@@ -222,11 +223,15 @@ class ControllerCore:
         (without gravity when the robot adds it), None when unknown (a hold,
         a skipped state): what the disturbance watch checks the motion against;
         robot_held : the robot braked over the last cycle instead of applying
-        a command (a stale or missing answer): the skill's clock stands still
-        for that cycle (the arm did not follow, so the reference must not run
-        ahead of it: released, it would leap to catch up and bounce off the
-        board), and a contact lost meanwhile is the brake's doing, so the
-        contact-loss watch starts counting again.
+        a command (a stale or missing answer; a robot found running on an old
+        command): a tick of time scale 0. The skill's clock stands still (the
+        arm did not follow, so the reference must not run ahead of it:
+        released, it would leap to catch up and bounce off the board), and so
+        do the reference's velocity and acceleration, the force integral and
+        the speed override (a reference standing with its velocity kept would
+        push along the path into the brake through the damping); a contact
+        lost meanwhile is the brake's doing, so the contact-loss watch starts
+        counting again.
         """
         self.time_s += dt_s
         self._q[:] = q  # the compiled law sees the same array types every tick (no recompilation)
@@ -249,11 +254,14 @@ class ControllerCore:
         else:
             n = board.normal
             tool = self._measure_tool(board, n, kin, wrench, dt_s)
-            scale = self.override_used = self.override.scale
+            # a held cycle is a tick of time scale 0: the skill's clock, the reference's rates, the force integral
+            # and the override all stand (the arm is braked: a push along the path would wind up against the brake)
+            scale = self.override_used = 0.0 if robot_held else self.override.scale
             sp = self.executor.step(0.0 if robot_held else self._skill_step(dt_s) * scale, tool)
             self._reference_from_setpoint(board, n, sp, tool, scale)
-            self._regulate_force(n, sp, dt_s)
-            self._update_override(kin, sp, scale, dt_s)
+            self._regulate_force(n, sp, 0.0 if robot_held else dt_s)
+            if not robot_held:
+                self._update_override(kin, sp, scale, dt_s)
         self._shape_task(kin, dt_s)
         tau = self._torque(q, dq, kin, gravity_compensated, dt_s)
         if self.trace is not None:
@@ -276,7 +284,7 @@ class ControllerCore:
             self.executor.fault(f"unexplained joint torque: A{j + 1} {watch.tau_d[j]:+.1f} Nm (limit "
                                 f"{watch.limit[j]:.0f} Nm for {watch.persist_s * 1000:.0f} ms): the arm is not "
                                 "moving as commanded (another controller's torques? a collision the force sensor "
-                                "does not see?)")
+                                "does not see?)", at_the_arm=True)
             watch.reset()
 
     def _hold_reference(self, kin: Kinematics) -> None:

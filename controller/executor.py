@@ -177,11 +177,17 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         else:
             self.reason = reason
 
-    def fault(self, reason: str) -> None:
-        """A fault (force cap, no contact found, planning failed): lift off, hold until :meth:`clear`."""
+    def fault(self, reason: str, at_the_arm: bool = False) -> None:
+        """A fault (force cap, no contact found, planning failed): lift off, hold until :meth:`clear`.
+
+        ``at_the_arm``: the arm does not follow the reference (a torque nothing explains): the stop starts from
+        the pose last measured, at rest, not from the reference, which may have run ahead of the arm; braking that
+        reference would keep the spring stretched between them and release it into the arm."""
         if self.phase not in _HALTED:
             self.counters["faults"] += 1
             log.error("FAULT: %s", reason)
+            if at_the_arm and self._last_tool is not None:
+                self.motion.rest_at(self._last_tool)
             self._stop(Phase.FAULT, reason)
 
     def clear(self) -> None:

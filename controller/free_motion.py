@@ -68,6 +68,17 @@ class FreeMotion:
         sp.contact, sp.force_n = False, 0.0
         self._turn = None
 
+    def rest_at(self, tool: ToolState) -> None:
+        """Setpoint = the measured pose (in contact: in the plane; the force stays), at rest."""
+        sp = self.setpoint
+        sp.xy[:] = tool.xy
+        sp.v_xy[:] = sp.a_xy[:] = 0.0
+        if not sp.contact:
+            sp.h, sp.v_h, sp.a_h = tool.h, 0.0, 0.0
+        sp.R[:] = tool.R
+        sp.omega[:] = sp.domega[:] = 0.0
+        self._turn = None
+
     def cancel_turn(self) -> None:
         self._turn = None
 

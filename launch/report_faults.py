@@ -41,6 +41,7 @@ ROBOT_EVENTS = {
     "controller_changes": "now serves another controller session (the one it served fell silent)",
     "commands_held_for_estop": "held commands while e-stopped",
     "joint_speed_brakes": "braked: a joint moved faster than its speed brake allows",
+    "states_on_an_old_command": "held: the robot ran on an old message (ours did not reach it), reported as such",
     "disarms": "the real-robot adapter disarmed: no more commands to the robot",
 }
 

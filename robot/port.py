@@ -104,6 +104,12 @@ class RobotPort(ABC):
         what sped it up). Default: :meth:`hold`."""
         self.hold()
 
+    def applying(self) -> bool:
+        """Whether the robot ran on the commands sent up to the newest reading (a clocked robot that re-applies an
+        old message while ours do not reach it did not; the server then reports no command applied). Default:
+        True."""
+        return True
+
     def after_cycle(self, lockstep: bool) -> None:
         """Called after each written cycle (a simulator publishes its extras here). Default: nothing."""
 

@@ -40,6 +40,12 @@ been silent for ``rebind_after_s``, when the newcomer (a restarted
 controller) takes over, logged and counted. The robot side holds in the
 meantime (stale commands brake).
 
+Each state says which command the robot applied over the last cycle
+(``command_seq``, -1 for a hold); a port that finds its robot running on
+an old command (:meth:`RobotPort.applying`: the lbr adapter reads the
+robot's commanded torque) makes it -1 too, so the controller does not take
+the motion for its own.
+
 Every command passes the :class:`~robot.gate.CommandGate` first; undecodable
 payloads, wrong lengths, out-of-sequence answers and late commands are
 dropped and counted by reason. Status (counters, loop timing) goes to the
@@ -401,7 +407,7 @@ class RobotServer:
             seq=self.steps if seq is None else seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
             dq_rad_s=r.dq_rad_s.tolist(), tau_nm=r.tau_nm.tolist(), wrench_world=r.wrench_world.tolist(),
             capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns(),
-            command_seq=self.applied_seq, estop=self.estop_reason is not None))
+            command_seq=self.applied_seq if self.port.applying() else -1, estop=self.estop_reason is not None))
 
     def _watch_speed(self, dq_rad_s: np.ndarray) -> None:
         """Set whether the next cycle must brake: a joint (n,) [rad/s] above its speed cap now or, at the change

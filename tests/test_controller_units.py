@@ -267,6 +267,34 @@ def test_estop_lifts_off_and_holds_until_released(learned_skill):
     assert "APPROACH" in phases(log) and ex.phase in ("WIPE", "TRANSITION")
 
 
+def test_a_fault_at_the_arm_stops_from_the_measured_pose_not_from_a_reference_ahead_of_it(learned_skill):
+    """A joint torque nothing explains: the arm is not following. The stop starts from the pose last measured,
+    at rest, and lifts from there; the ordinary fault brakes the reference on from where it ran."""
+    for at_the_arm in (True, False):
+        ex = SkillExecutor(learned_skill, ExecutorParams())
+        arm = IdealArm()
+        ex.set_stains(BOARD, stains())
+        for _ in range(20_000):
+            arm.follow(ex.step(0.001, arm.tool))
+            if ex._sp.contact and np.linalg.norm(ex._sp.v_xy) > 0.1:
+                break
+        assert ex._sp.contact and np.linalg.norm(ex._sp.v_xy) > 0.1, "moving on the board"
+        arm.tool.xy = arm.tool.xy - 0.03 * ex._sp.v_xy / np.linalg.norm(ex._sp.v_xy)  # 30 mm behind
+        stuck = arm.tool.xy.copy()
+        ex.step(0.001, arm.tool)
+        ex.fault("unexplained joint torque", at_the_arm=at_the_arm)
+        log = []
+        for _ in range(3000):
+            sp = ex.step(0.001, arm.tool)
+            log.append(np.linalg.norm(sp.xy - stuck))
+            arm.follow(sp)
+        assert ex.phase == "FAULT" and not ex._sp.contact
+        if at_the_arm:
+            assert max(log) < 1e-9, f"the stop moved {max(log) * 1000:.1f} mm off the measured pose"
+        else:
+            assert max(log) > 0.03, "the ordinary fault brakes the reference on"
+
+
 def test_a_vanished_stain_is_not_visited_and_new_stains_after_done_are(learned_skill):
     ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.0, max_passes=1))
     arm = IdealArm()

@@ -196,8 +196,8 @@ def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does
     22.4 mm and the contact lost for 0.2 s. With the override holding the wiping back, as it did before its
     look-ahead followed the motion: 3.3, 7.7 and 16 mm). Unflagged, a gap longer than two periods is our own
     stall and the skill's step is capped to two periods (core.SKILL_STEP_CAP_PERIODS). With the joints' rotor
-    inertia and friction (interfaces/joint_dynamics.py) the capped release loses the 2 N for up to 89 ms (6 ms
-    flagged; without friction 20 ms, without rotor inertia 0 ms): the friction holds the braked wrist back while
+    inertia and friction (interfaces/joint_dynamics.py) the capped release loses the 2 N for up to 89 ms (flagged
+    0 ms; without friction 20 ms, without rotor inertia 0 ms): the friction holds the braked wrist back while
     the force comes back; the reference running on loses it for 0.2 s."""
     before, lag, lost_s, phase, _ = _brake_then_release(learned_skill, held_flag=True)
     # unflagged, a 64 ms gap on the robot's clock is capped to two periods of the skill's (our processes stalled)
@@ -212,3 +212,57 @@ def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does
     assert lost_s < 0.05 and phase in (Phase.WIPE, Phase.TRANSITION), (lost_s, phase)
     assert lost_capped < 0.12 and phase_capped in (Phase.WIPE, Phase.TRANSITION), (lost_capped, phase_capped)
     assert lag_run_on > lag + 0.005, "running on, the reference leaps (the check can fail)"
+
+
+def _hold_mid_transition(skill, held: int = 150) -> tuple[np.ndarray, list, float, float]:
+    """At full speed in a transition on the board, the robot brakes for ``held`` cycles and says so each state
+    (``robot_held``, as the robot server does for a stale or missing answer). Returns (the torque sent on the
+    first held cycle, the torques (7,) sent on each held cycle, the largest executed reference speed over the
+    held cycles [m/s], the force integral's change over them [N])."""
+    core = ControllerCore(ControllerParams.from_table({}), skill)
+    sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
+    taus, ref_speed, integral0 = [], 0.0, 0.0
+    try:
+        for n in range(20_000):
+            if n % 100 == 0:
+                _stains(core, sim)
+            o = sim.out
+            if not taus:
+                tau = core.tick(o.q, o.dq, o.wrench, True, DT)
+                ex = core.executor
+                at_speed = ex.phase == Phase.TRANSITION and ex.pad_down and np.linalg.norm(core.ref.twist[:3]) > 0.25
+                sim.step(tau.copy())
+                if at_speed:
+                    integral0 = core.force.integral
+                    taus.append(None)
+                continue
+            tau = core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
+            taus.append(tau.copy())
+            ref_speed = max(ref_speed, float(np.linalg.norm(core.ref.twist[:3])),
+                            float(np.linalg.norm(core.ref.accel[:3])))
+            sim.step("hold")
+            if len(taus) > held:
+                break
+    finally:
+        sim.close()
+    assert len(taus) > held, "never at speed in a transition on the board"
+    return taus[1], taus[1:], ref_speed, core.force.integral - integral0
+
+
+@pytest.mark.slow
+def test_a_braked_robot_winds_up_no_torque_against_its_brake(learned_skill):
+    """The robot side brakes for a stale or missing answer and flags each such state (``command_seq < 0``). The
+    arm stands; the controller's torques are not applied. Guards: a held cycle is a tick of time scale 0, so the
+    executed reference stands whole (its velocity and acceleration too, not only its position), the force
+    regulator's integral and the speed override stand, and the commanded torque settles on what holds the arm at
+    the frozen reference instead of pushing along the path into the brake (150 ms held at 0.25 m/s in a
+    transition: with the reference's velocity kept, the largest joint torque rose from 10 to 27 Nm at the rate
+    limit (A1 -26.5 Nm) and the force integral moved by 1.4 N, a push the brake's release hands to the arm at
+    once; standing whole, the torques settle at 2.9 Nm at most)."""
+    first, taus, ref_rate, integral_change = _hold_mid_transition(learned_skill)
+    assert ref_rate == 0.0, f"the held reference moves: {ref_rate:.3f} (m/s or m/s^2)"
+    assert integral_change == 0.0, f"the force integral wound up by {integral_change:.2f} N while held"
+    peak = max(float(np.max(np.abs(t))) for t in taus)
+    assert peak <= float(np.max(np.abs(first))) + 1e-9, \
+        f"the torque rose while held: {np.max(np.abs(first)):.1f} -> {peak:.1f} Nm"
+    assert float(np.max(np.abs(taus[-1]))) < 6.0, taus[-1]

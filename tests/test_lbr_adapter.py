@@ -26,7 +26,7 @@ from interfaces.messages import ArmRequest, RobotState, ServiceStatus, TorqueCom
 from interfaces.robot_model import RobotModel
 from interfaces.session import zenoh_config
 from robot.lbr.adapter import LbrPort
-from robot.lbr.compensation import filter_alpha
+from robot.lbr.compensation import JointSpring, filter_alpha
 from robot.lbr.guards import GuardLimits, VelocityFilter, guard_trip
 from robot.lbr.msgs import (
     CLIENT_COMMAND_MODE_TORQUE,
@@ -83,14 +83,17 @@ class Stack:
 
 def lbr_state(q, stamp_ns: int, *, session=ACTIVE, safety=SafetyState.NORMAL_OPERATION, drive=DriveState.ACTIVE,
               tau_measured=None, tau_external=None, sample_time_s: float = 0.001, q_commanded=None,
-              command_mode=CLIENT_COMMAND_MODE_TORQUE, control_mode=CONTROL_MODE_JOINT_IMPEDANCE) -> LbrState:
-    """An FRI 1 state; the stack's joint position command ``q_commanded`` defaults to ``q`` (spring relaxed)."""
+              command_mode=CLIENT_COMMAND_MODE_TORQUE, control_mode=CONTROL_MODE_JOINT_IMPEDANCE,
+              tau_commanded=None) -> LbrState:
+    """An FRI 1 state; the stack's joint position command ``q_commanded`` defaults to ``q`` (spring relaxed), the
+    overlay the robot applied ``tau_commanded`` to zeros."""
     zeros = np.zeros(7)
     return LbrState(sample_time_s, int(session), int(safety), int(OperationMode.AUTOMATIC_MODE), int(drive),
                     int(command_mode), int(control_mode), stamp_ns, np.asarray(q, float),
                     zeros if tau_measured is None else np.asarray(tau_measured, float),
                     zeros if tau_external is None else np.asarray(tau_external, float),
-                    np.asarray(q if q_commanded is None else q_commanded, float))
+                    np.asarray(q if q_commanded is None else q_commanded, float),
+                    None if tau_commanded is None else np.asarray(tau_commanded, float))
 
 
 class Cell:
@@ -721,16 +724,60 @@ def test_an_fri2_state_to_an_fri1_adapter_is_named_and_refused_then_fri2_arms():
 def test_the_joint_spring_is_steered_onto_the_arm_and_its_rest_taken_off_the_overlay():
     """FRI 1 reports the stack's joint position command c: the message's target moves c by steer_share of its
     distance to q (the stack's PID gain p = 0.1), and the overlay is the controller's torque minus the spring
-    K (c_next - q) the robot will add."""
+    K (c_next - q) the robot will add (the steering's speed bound off here: the next test checks it)."""
     p = LbrParams()
     lag = np.array([0.01, -0.02, 0.0, 0.005, 0.0, 0.0, -0.01])  # q - c [rad]
     tau = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 0.5])
-    with Cell() as cell:
+    with Cell({"steer_speed_rad_s": 0.0}) as cell:
         cell.armed()
         _, jp, overlay = cell.answer(cell.step(Q0, q_commanded=Q0 - lag), tau)
     np.testing.assert_allclose(jp, Q0 + p.steer_share / p.pid_p * lag, atol=1e-12)
     c_next = Q0 - lag + p.steer_share * lag
     np.testing.assert_allclose(overlay, tau - np.array(p.joint_stiffness_nm_rad) * (c_next - Q0), atol=1e-9)
+
+
+def test_the_steering_moves_the_stack_command_at_most_its_speed_faster_than_the_arm():
+    """The robot damps the rate of its commanded position against the arm's (``D (dq_cmd - dq)``): a message that
+    closed a share of a large gap at once (the stack's PID runs c off the arm while messages do not reach it)
+    would kick the joint. The step of c is bounded to ``(dq +- steer_speed_rad_s) T``; in steady motion (c behind
+    by ``dq T / share``) the step is ``dq T`` and the bound does not act; the overlay takes off the spring that
+    the bounded step leaves."""
+    p, T = LbrParams(), 0.002
+    K = np.array(p.joint_stiffness_nm_rad)
+    spring = JointSpring(K, p.pid_p, p.steer_share, p.steer_speed_rad_s)
+    tau = np.linspace(-3.0, 3.0, 7)
+    gap = np.array([0.04, -0.04, 0.0, 0.001, -0.0005, 0.02, 0.0])  # q - c [rad] after an outage
+    spring.reset(Q0 - gap, 0)
+    target, overlay = spring.command(Q0, tau, np.zeros(7), T)
+    step = p.pid_p * (target - Q0)  # how far the stack's PID moves c with this target
+    expect = np.clip(p.steer_share * gap, -p.steer_speed_rad_s * T, p.steer_speed_rad_s * T)
+    np.testing.assert_allclose(step, expect, atol=1e-12)
+    np.testing.assert_allclose(overlay, tau - K * (Q0 - gap + step - Q0), atol=1e-9)
+    dq = np.array([1.0, -0.5, 0.2, 0.0, 1.5, -1.0, 0.3])  # steady motion: the bound does not act
+    spring.reset(Q0 - dq * T / p.steer_share, 0)
+    target, _ = spring.command(Q0, tau, dq, T)
+    np.testing.assert_allclose(p.pid_p * (target - Q0), dq * T, atol=1e-12)
+
+
+def test_a_state_on_an_old_overlay_says_no_command_was_applied():
+    """The stack re-applies the last message it got: when ours stop reaching it, the state's commanded torque
+    stays an old overlay while the answers go on. Once that overlay answered a reading more than stale_limit_s
+    (5 ms) plus two FRI periods older, the state says no command applied (``command_seq`` -1: the controller
+    stands still instead of taking the motion for its own); a state on a fresh overlay says applied again."""
+    with Cell() as cell:
+        cell.armed()
+        s = cell.step(Q0)
+        _, _, old = cell.answer(s, np.full(7, 0.5))
+        seqs, fresh = [], old
+        for k in range(1, 11):  # robot time k ms after the reading the old overlay answered
+            s = cell.step(Q0, tau_commanded=old)
+            seqs.append(s.command_seq)
+            _, _, fresh = cell.answer(s, np.full(7, 0.5 + 0.01 * k))
+        s = cell.step(Q0, tau_commanded=fresh)
+        st = cell.wait_status(lambda m: m.counters.get("states_on_an_old_command", 0) >= 3, "counted")
+    assert all(c >= 0 for c in seqs[:7]) and seqs[7:] == [-1, -1, -1], seqs
+    assert s.command_seq >= 0, s
+    assert st.counters["states_on_an_old_command"] == 3, st.counters
 
 
 def test_a_frozen_position_stream_disarms_as_open_loop():

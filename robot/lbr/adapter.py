@@ -47,7 +47,13 @@ last one (the pose where the arm came to rest).
 Hold (a late or missing controller answer, ``hold``): the last command
 again while it is younger than ``stale_limit_s`` (one late answer must not
 step the torque), then the hold; after ``hold_timeout_s`` of holding the
-adapter disarms (the hold stays). Speed brake: the adapter declares the
+adapter disarms (the hold stays). A state whose commanded torque is an
+overlay sent for a reading older than ``stale_limit_s`` plus two state
+periods, or none of ours, says the robot ran on an old message (ours are
+not reaching the stack, which re-applies the last one it got): the server
+reports no command applied for it (:meth:`LbrPort.applying`,
+``check_applied``), so the controller does not take that motion for its
+own and stands still instead of winding up. Speed brake: the adapter declares the
 guard's joint speeds as its velocity limits; the server holds while a joint
 moves faster than ``speed_brake_share`` of them.
 
@@ -72,7 +78,7 @@ from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.port import Reading, RobotPort
 
-from .compensation import FreezeWatch, JointSpring, TorqueUnfilter
+from .compensation import AppliedWatch, FreezeWatch, JointSpring, TorqueUnfilter
 from .guards import GuardLimits, VelocityFilter, guard_trip
 from .msgs import (ClientCommandMode, ControlMode, DriveState, LbrState, LbrWireError, SafetyState, SessionState,
                    decode_joint_names, decode_state, decode_wrench, encode_torque_command)
@@ -83,6 +89,9 @@ log = logging.getLogger(__name__)
 
 #: Damping of the pseudo-inverse that turns external joint torques into a tool wrench.
 WRENCH_DAMPING = 0.01
+#: States on no overlay of ours, none ever matched since arming, before the adapter warns that the robot's
+#: commanded torque may not be an echo of the overlay (``[lbr] check_applied``).
+NEVER_MATCHED_WARN = 500
 #: Joint speed [rad/s] under which the arm counts as at rest for arming on an FRI 2 state (no commanded
 #: position in it: the stack's command is taken to be where the arm rests).
 REST_SPEED_RAD_S = 0.05
@@ -117,7 +126,8 @@ class LbrPort(RobotPort):
         self._velocity = VelocityFilter(7, params.velocity_cutoff_hz)
         self._tau_measured = TorqueUnfilter(params.measured_torque_cutoff_hz)
         self._tau_external = TorqueUnfilter(params.external_torque_cutoff_hz)
-        self.spring = JointSpring(np.array(params.joint_stiffness_nm_rad), params.pid_p, params.steer_share)
+        self.spring = JointSpring(np.array(params.joint_stiffness_nm_rad), params.pid_p, params.steer_share,
+                                  params.steer_speed_rad_s)
         self._freeze = FreezeWatch(params.frozen_after_s)
         self._cond = threading.Condition()
         self._wake: threading.Event | None = None
@@ -133,6 +143,8 @@ class LbrPort(RobotPort):
         self._has_sent = False
         self._holding_since_ns: int | None = None
         self._last_state_ns: int | None = None
+        self._sent = AppliedWatch()  # the overlays sent: did the robot run on a recent one?
+        self._applying = True
         topics = params.topics
         s = node.session
         self._subs = [s.declare_subscriber(topics.key(topics.state), self._on_state),
@@ -193,15 +205,31 @@ class LbrPort(RobotPort):
         if self._state is not None and st.stamp_ns == self._state.stamp_ns:
             self.counts["states_repeated"] += 1  # a peer re-sending while it waits: nothing new
             return False
+        # the state period: the FRI's, or the controller manager's when it runs slower (its states come slower)
+        period_s = st.sample_time_s if self._state is None else \
+            max(st.sample_time_s, (st.stamp_ns - self._state.stamp_ns) * 1e-9)
         self._take(st)
         self._poll_arm_requests()
         self._check_session()
+        # the one-cycle pipeline and a repeated command make an overlay up to stale_limit_s + 2 periods old
+        self._applying = not (self.armed and self.p.check_applied and self._sent.old(
+            st.tau_commanded_nm, st.stamp_ns, self.p.stale_limit_s + 2.0 * period_s))
+        if not self._applying:
+            self.counts["states_on_an_old_command"] += 1
+            if self._sent.matched == 0 and self.counts["states_on_an_old_command"] == NEVER_MATCHED_WARN:
+                log.warning("lbr: the robot's commanded_torque has matched no overlay sent in %d states: if the stack "
+                            "does not echo it, set [lbr] check_applied = false", NEVER_MATCHED_WARN)
         if self.armed:
             why = self._freeze.update(st.q_rad, st.stamp_ns, self._overlay)
             if why is not None:
                 self.counts["frozen_positions"] += 1
                 self.disarm(why)
         return True
+
+    def applying(self) -> bool:
+        """False while the newest state's commanded torque is an old overlay of ours or none of them
+        (:class:`~robot.lbr.compensation.AppliedWatch`; ``[lbr] check_applied``)."""
+        return self._applying
 
     def set_wake(self, wake: threading.Event) -> None:
         self._wake = wake
@@ -224,7 +252,8 @@ class LbrPort(RobotPort):
             self.counts["guard_trips"] += 1
             self.disarm(f"guard: {reason}")
             return
-        target, overlay = self.spring.command(r.q_rad, np.asarray(tau_nm, float))
+        target, overlay = self.spring.command(r.q_rad, np.asarray(tau_nm, float), r.dq_rad_s,
+                                              self._state.sample_time_s)
         self._send(target, overlay)
         self._tau_prev = np.array(tau_nm, float)
         self._tau_prev_ns = r.robot_time_ns
@@ -239,7 +268,8 @@ class LbrPort(RobotPort):
             return
         if self._tau_prev is not None and \
                 (self._reading.robot_time_ns - self._tau_prev_ns) * 1e-9 <= self.p.stale_limit_s:
-            target, overlay = self.spring.command(self._reading.q_rad, self._tau_prev)
+            r = self._reading
+            target, overlay = self.spring.command(r.q_rad, self._tau_prev, r.dq_rad_s, self._state.sample_time_s)
             self._send(target, overlay)
             self.counts["commands_repeated"] += 1
             return
@@ -299,6 +329,7 @@ class LbrPort(RobotPort):
         self.armed, self.arm_pending = True, False
         self.disarm_reason = ""  # the status's why= is for not commanding; an old refusal must not show
         self._tau_prev, self._holding_since_ns = None, None
+        self._sent.reset()  # what the robot ran on before arming is not judged
         self.counts["arms"] += 1
         log.warning("lbr: ARMED (%s): commanding torques", reason or "request")
         return True
@@ -399,6 +430,7 @@ class LbrPort(RobotPort):
         self._command_pub.put(encode_torque_command(joint_position, overlay))
         self._overlay = np.asarray(overlay, float)
         self._has_sent = True
+        self._sent.sent(self._overlay, self._reading.robot_time_ns)
 
     def _send_hold(self) -> None:
         """The hold: joint_position the measured pose, zero overlay. The stack's PID then leaves its command where

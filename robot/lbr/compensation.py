@@ -13,11 +13,17 @@ cited by file and line (lbr_fri_ros2_stack ``rolling`` 218d723):
   of the message's ``joint_position`` (``c += p (target - q)`` per FRI
   cycle, filters.cpp:56-62, torque_command.cpp:33-37). The adapter steers
   that position onto the arm (``target = q + (share / p) (q - c)``: each
-  application moves ``c`` by ``share`` of its distance to ``q``) and takes
+  application moves ``c`` by ``share`` of its distance to ``q``, at most
+  ``speed`` faster than the arm moves: the robot damps ``dc/dt - dq``) and takes
   the rest of the spring, ``K (c_next - q)``, off the overlay, so the
   controller's torque is what reaches the joints. ``c`` is the state's
   ``commanded_joint_position`` (FRI 1) or, where the state lacks it (FRI 2),
   the same PID run on the states the adapter sees.
+* :class:`AppliedWatch`: the overlays sent, and whether the torque a state
+  says the robot applied (``commanded_torque``) is a recent one of them; the
+  stack re-applies the last message it got for as long as it runs
+  (lbr_torque_command_controller.cpp:42-55), so when ours stop reaching it
+  the robot runs on an old one.
 * :class:`FreezeWatch`: measured positions that do not change at all while
   the overlay does are not a robot's (the stack's ``open_loop`` publishes
   its own command as measured, async_client.cpp:82-85).
@@ -76,13 +82,15 @@ class JointSpring:
     """The robot's joint spring and the stack's PID, as the adapter knows them (module docstring).
 
     stiffness : (7,) [Nm/rad] the app's joint stiffness; pid_p : the stack's ``pid_p``; share : how much of
-    ``q - c`` one message closes (0 < share <= 1).
+    ``q - c`` one message closes (0 < share <= 1); speed_rad_s : how much faster than the arm that may move ``c``
+    [rad/s] (0: no bound).
     """
 
-    def __init__(self, stiffness: np.ndarray, pid_p: float, share: float) -> None:
+    def __init__(self, stiffness: np.ndarray, pid_p: float, share: float, speed_rad_s: float = 0.0) -> None:
         self.K = np.asarray(stiffness, float)
         self.p = pid_p
         self.share = share
+        self.speed = speed_rad_s
         self.c: np.ndarray | None = None  # the stack's joint position command, as last known or mirrored
         self._target: np.ndarray | None = None
         self._t_ns: int | None = None
@@ -105,17 +113,67 @@ class JointSpring:
                 self.c += self.p * (self._target - q)
         self._t_ns = t_ns
 
-    def command(self, q: np.ndarray, tau_nm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(joint_position target (7,), overlay (7,)) that make the joints see ``tau_nm`` at ``q``."""
+    def command(self, q: np.ndarray, tau_nm: np.ndarray, dq: np.ndarray | None = None,
+                sample_time_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """(joint_position target (7,), overlay (7,)) that make the joints see ``tau_nm`` at ``q``.
+
+        The step of ``c`` is ``share (q - c)``, bounded to ``(dq +- speed) sample_time_s`` when the arm's velocity
+        ``dq`` (7,) [rad/s] is given: the robot's joint damping acts on ``dc/dt - dq``, so a step of ``c`` is a
+        torque impulse (after a gap in the messages the stack's PID has run ``c`` off the arm; closing a share of
+        that in one cycle kicked a joint with D dc/dt, 180 Nm on A1 for 6 ms in the simulated stack)."""
         c = self.c if self.c is not None else q
-        target = q + (self.share / self.p) * (q - c) if self.p > 0 else np.array(q, float)
-        c_next = c + self.share * (q - c)
+        step = self.share * (q - c)
+        if dq is not None and self.speed > 0 and sample_time_s > 0:
+            drift = dq * sample_time_s
+            room = self.speed * sample_time_s
+            step = np.clip(step, drift - room, drift + room)
+        target = q + step / self.p if self.p > 0 else np.array(q, float)
         self._target = target
-        return target, tau_nm - self.K * (c_next - q)
+        return target, tau_nm - self.K * (c + step - q)
 
     def hold(self, target: np.ndarray) -> None:
         """A hold (``target``, zero overlay) went out: the mirror follows it."""
         self._target = np.array(target, float)
+
+
+class AppliedWatch:
+    """The last ``n`` overlays sent, each with the robot time [ns] of the reading it answered (a ring).
+
+    tol_nm : a state's commanded torque is an overlay sent when no joint differs by more than this [Nm].
+    """
+
+    def __init__(self, n: int = 32, tol_nm: float = 1e-3) -> None:
+        self.tol_nm = tol_nm
+        self._overlay = np.zeros((n, 7))
+        self._t_ns = np.zeros(n, dtype=np.int64)
+        self._n = 0
+        self.matched = 0  # states whose commanded torque was one of the overlays kept, since the reset
+
+    def reset(self) -> None:
+        """Forget what was sent (arming: what the robot ran on before is not judged)."""
+        self._n = 0
+        self.matched = 0
+
+    def sent(self, overlay: np.ndarray, t_ns: int) -> None:
+        """An overlay (7,) [Nm] went out answering the reading of robot time ``t_ns``."""
+        row = self._n % len(self._t_ns)
+        self._overlay[row] = overlay
+        self._t_ns[row] = t_ns
+        self._n += 1
+
+    def old(self, tau_commanded: np.ndarray | None, t_ns: int, max_age_s: float) -> bool:
+        """True when the robot ran (state of robot time ``t_ns``, commanded torque (7,) [Nm]) on an overlay sent for
+        a reading more than ``max_age_s`` older, or on none of those kept while they reach back that far. False
+        before anything is sent or without the commanded torque."""
+        n = min(self._n, len(self._t_ns))
+        if tau_commanded is None or n == 0:
+            return False
+        limit_ns = max_age_s * 1e9
+        match = np.max(np.abs(self._overlay[:n] - tau_commanded), axis=1) <= self.tol_nm
+        if match.any():
+            self.matched += 1
+            return t_ns - int(np.max(self._t_ns[:n][match])) > limit_ns
+        return t_ns - int(np.min(self._t_ns[:n])) > limit_ns
 
 
 class FreezeWatch:

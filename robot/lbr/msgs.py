@@ -179,6 +179,8 @@ class LbrState:
     tau_external_nm: np.ndarray
     q_commanded_rad: np.ndarray | None = field(default_factory=lambda: np.zeros(N_JOINTS))
     """The robot's commanded joint position (FRI 1 only; None in an FRI 2 state)."""
+    tau_commanded_nm: np.ndarray | None = None
+    """The torque overlay the robot applied in its last cycle (``commanded_torque``); None: not known."""
 
 
 def _typestore():
@@ -249,7 +251,8 @@ def decode_state(raw: bytes, fri_major: int = 1) -> LbrState:
         tau_measured_nm=_vector("measured_torque", m.measured_torque),
         tau_external_nm=_vector("external_torque", m.external_torque),
         q_commanded_rad=(_vector("commanded_joint_position", m.commanded_joint_position) if fri_major == 1
-                         else None))
+                         else None),
+        tau_commanded_nm=_vector("commanded_torque", m.commanded_torque))
 
 
 def encode_state(s: LbrState, *, connection_quality: int = 3, overlay_type: int = 1,
@@ -266,7 +269,8 @@ def encode_state(s: LbrState, *, connection_quality: int = 3, overlay_type: int 
         time_stamp_nano_sec=int(s.stamp_ns % 1_000_000_000),
         measured_joint_position=np.asarray(s.q_rad, float),
         measured_torque=np.asarray(s.tau_measured_nm, float),
-        commanded_torque=np.asarray(zeros if commanded_torque_nm is None else commanded_torque_nm, float),
+        commanded_torque=np.asarray(commanded_torque_nm if commanded_torque_nm is not None else
+                                    s.tau_commanded_nm if s.tau_commanded_nm is not None else zeros, float),
         external_torque=np.asarray(s.tau_external_nm, float),
         ipo_joint_position=np.asarray(s.q_rad if ipo_joint_position_rad is None else ipo_joint_position_rad, float),
         tracking_performance=float(tracking_performance))

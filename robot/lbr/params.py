@@ -15,6 +15,7 @@
     joint_stiffness_nm_rad = [200.0, ...]    # the LBRServer app's joint impedance stiffness, A1..A7
     pid_p = 0.1                              # the stack's pid_p (its joint_position PID; i and d must be 0)
     steer_share = 0.3                        # share of (q - stack command) one message closes
+    steer_speed_rad_s = 0.5                  # ... at most this fast relative to the arm's speed (0: no bound)
     measured_torque_cutoff_hz = 10.0         # the stack's low-pass cutoffs (undone from consecutive states)
     external_torque_cutoff_hz = 10.0
     frozen_after_s = 0.05                    # measured positions unchanged this long under a changing overlay: disarm
@@ -24,6 +25,7 @@
     velocity_cutoff_hz = 80.0                # low-pass of the position difference
     hold_timeout_s = 0.5                     # holding this long without a controller command: disarm (the hold stays)
     stale_limit_s = 0.005                    # a controller answer later than this is not sent; hold instead
+    check_applied = true                     # a state whose commanded torque is no recent overlay of ours: not applied
     max_joint_speed_scale = 0.8              # guard: this share of the description's joint speed limits
     speed_brake_share = 0.95                 # brake (hold) above this share of the guard's speed, or about to be
     tau_rate_nm_s = 5000.0                   # guard: torque change per second (the controller keeps to ~1000)
@@ -67,6 +69,7 @@ class LbrParams:
     joint_stiffness_nm_rad: tuple[float, ...] = field(default=APP_STIFFNESS)
     pid_p: Annotated[float, In(1e-3, 1.0)] = 0.1
     steer_share: Annotated[float, In(0.01, 1.0)] = 0.3
+    steer_speed_rad_s: Annotated[float, In(0.0, 100.0)] = 0.5
     measured_torque_cutoff_hz: Annotated[float, In(0.0, 10_000.0)] = 10.0
     external_torque_cutoff_hz: Annotated[float, In(0.0, 10_000.0)] = 10.0
     frozen_after_s: Annotated[float, In(0.005, 10.0)] = 0.05
@@ -76,6 +79,7 @@ class LbrParams:
     velocity_cutoff_hz: Annotated[float, In(1.0, 500.0)] = 80.0
     hold_timeout_s: Annotated[float, In(0.001, 10.0)] = 0.5
     stale_limit_s: Annotated[float, In(0.0005, 1.0)] = 0.005
+    check_applied: bool = True
     max_joint_speed_scale: Annotated[float, In(0.01, 1.0)] = 0.8
     speed_brake_share: Annotated[float, In(0.0, 1.0)] = 0.95
     tau_rate_nm_s: Annotated[float, In(1.0, 100_000.0)] = 5000.0
