@@ -69,8 +69,8 @@ class Trace:
     in-plane reference (board frame) position/velocity/acceleration, measured
     board-frame pad position, world reference and measured positions [m],
     measured normal force and commanded press force [N], contact flag, the
-    skill's time scale (:class:`~controller.control.limits.SpeedOverride`; 0
-    on a cycle the robot held);
+    skill's time scale (:class:`~controller.control.limits.SpeedOverride`; on
+    a cycle the robot held, the arm's own progress along the path);
     the reference's rates are as executed (time-scaled).
     """
 
@@ -165,6 +165,10 @@ class ControllerCore:
         self.disturbance = DisturbanceWatch(watch.disturbance_share * lim.tau_max, watch.disturbance_filter_s,
                                             watch.disturbance_persist_s)
         self._applied = np.zeros(self.model.nq)
+        self._sp_v_xy = np.zeros(2)  # the last setpoint's in-plane velocity at time scale 1 (board frame) [m/s]
+        self._xy_prev: np.ndarray | None = None  # the pad's in-plane position at the last tick (board frame) [m]
+        self._last_applied = np.zeros(self.model.nq)  # the newest torques the robot said it applied [Nm], as sent
+        self._applied_known = False
         self.contact_watch = ContactWatch(f.contact_threshold_n, f.contact_loss_s)
         self._compile_law()
 
@@ -207,6 +211,8 @@ class ControllerCore:
         self.force.reset()
         self.override.reset()
         self.disturbance.reset()
+        self._applied_known = False
+        self._xy_prev = None
         self.executor.restart()
 
     def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
@@ -224,14 +230,14 @@ class ControllerCore:
         a skipped state): what the disturbance watch checks the motion against;
         robot_held : the robot braked over the last cycle instead of applying
         a command (a stale or missing answer; a robot found running on an old
-        command): a tick of time scale 0. The skill's clock stands still (the
-        arm did not follow, so the reference must not run ahead of it:
-        released, it would leap to catch up and bounce off the board), and so
-        do the reference's velocity and acceleration, the force integral and
-        the speed override (a reference standing with its velocity kept would
-        push along the path into the brake through the damping); a contact
-        lost meanwhile is the brake's doing, so the contact-loss watch starts
-        counting again.
+        command): the skill's clock runs only as far as the arm went along the
+        path (:meth:`_held_step`: a braked arm stands, and the reference with
+        it, or it would run ahead and, released, the arm would leap to catch up
+        and bounce off the board; an arm coasting on the stack's last message
+        keeps the reference with it), the reference's rates at that time
+        scale, the force integral and the speed override stand, and the rate
+        limit counts from the torques last applied; a contact lost meanwhile
+        is not ours, so the contact-loss watch starts counting again.
         """
         self.time_s += dt_s
         self._q[:] = q  # the compiled law sees the same array types every tick (no recompilation)
@@ -245,8 +251,12 @@ class ControllerCore:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
         self._watch_disturbance(kin, dq, wrench, gravity_compensated, dt_s, applied_nm)
+        if applied_nm is not None:
+            self._last_applied[:] = applied_nm
+            self._applied_known = True
         if robot_held:
             self.contact_watch.lost_s = 0.0
+            self._rate_from_applied(kin, gravity_compensated)
         board = self.executor.board
         if board is None:
             self._hold_reference(kin)
@@ -254,14 +264,24 @@ class ControllerCore:
         else:
             n = board.normal
             tool = self._measure_tool(board, n, kin, wrench, dt_s)
-            # a held cycle is a tick of time scale 0: the skill's clock, the reference's rates, the force integral
-            # and the override all stand (the arm is braked: a push along the path would wind up against the brake)
-            scale = self.override_used = 0.0 if robot_held else self.override.scale
-            sp = self.executor.step(0.0 if robot_held else self._skill_step(dt_s) * scale, tool)
+            # a held cycle's clock runs only as far as the arm went along the path (braked: it stands; coasting on
+            # the stack's last message: it keeps pace); the force integral and the override stand
+            if robot_held:
+                step = self._held_step(tool, dt_s)
+                scale = step / dt_s if dt_s > 0 else 0.0
+            else:
+                scale = self.override.scale
+                step = self._skill_step(dt_s) * scale
+            self.override_used = scale
+            sp = self.executor.step(step, tool)
+            self._sp_v_xy[:] = sp.v_xy
             self._reference_from_setpoint(board, n, sp, tool, scale)
             self._regulate_force(n, sp, 0.0 if robot_held else dt_s)
             if not robot_held:
                 self._update_override(kin, sp, scale, dt_s)
+            if self._xy_prev is None:
+                self._xy_prev = np.zeros(2)
+            self._xy_prev[:] = tool.xy
         self._shape_task(kin, dt_s)
         tau = self._torque(q, dq, kin, gravity_compensated, dt_s)
         if self.trace is not None:
@@ -286,6 +306,40 @@ class ControllerCore:
                                 "moving as commanded (another controller's torques? a collision the force sensor "
                                 "does not see?)", at_the_arm=True)
             watch.reset()
+
+    def _held_step(self, tool: ToolState, dt_s: float) -> float:
+        """The skill's step [s] over a held cycle: the time the reference needs at its last setpoint velocity to
+        cover the pad's in-plane progress along it since the last tick, within ``[0, dt_s x the override]``.
+
+        A robot that held did not run our command: braked (the sim, a robot server) it stands, and so does the
+        reference; on the lbr stack it re-applies its last message, whose position target keeps the stack's PID
+        walking at nearly the arm's last speed, so the arm coasts on. A reference standing still there fell 13 mm
+        behind the pad over a 42 ms gap in a real-time lbr-sim run, and pulling the pad back from its run-out
+        pressed its edge into the board at 77 N.
+        """
+        xy, prev = tool.xy, self._xy_prev
+        v = self._sp_v_xy
+        vv = float(v @ v)
+        if prev is None or vv < 1e-8:
+            return 0.0
+        progress = float((xy[0] - prev[0]) * v[0] + (xy[1] - prev[1]) * v[1]) / vv
+        return min(max(progress, 0.0), dt_s * self.override.scale)
+
+    def _rate_from_applied(self, kin: Kinematics, gravity_compensated: bool) -> None:
+        """Over a held cycle the rate limit counts from the torques the robot last applied, not from our answers.
+
+        Those answers reached nothing (the robot braked, or re-applied its last message: the lbr stack does,
+        lbr_torque_command_controller.cpp:42-55); counted from them, 18 held cycles let the answers walk 18 Nm
+        away at 1 Nm a cycle, and the first message that arrived stepped the robot by all of it at once (a
+        real-time lbr-sim run: the pad bounced off the board and came back at 79 N). Counted from the applied
+        torques, the first command after a hold is within one rate step of what the robot was applying.
+        """
+        if not self._applied_known:
+            return
+        prev = self.shaper.prev
+        prev[:] = self._last_applied
+        if not gravity_compensated:  # the rate limit leaves gravity out (``limit_torque``), the answers carry it
+            prev -= kin.g
 
     def _hold_reference(self, kin: Kinematics) -> None:
         """No board yet: the executor waits and the reference holds the pose of the first such tick."""

@@ -217,8 +217,9 @@ def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does
 def _hold_mid_transition(skill, held: int = 150) -> tuple[np.ndarray, list, float, float]:
     """At full speed in a transition on the board, the robot brakes for ``held`` cycles and says so each state
     (``robot_held``, as the robot server does for a stale or missing answer). Returns (the torque sent on the
-    first held cycle, the torques (7,) sent on each held cycle, the largest executed reference speed over the
-    held cycles [m/s], the force integral's change over them [N])."""
+    first held cycle, the torques (7,) sent on each held cycle, the largest executed reference speed or
+    acceleration over the held cycles after the brake's first 10 ms [m/s, m/s^2], the force integral's change
+    over them [N])."""
     core = ControllerCore(ControllerParams.from_table({}), skill)
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
     taus, ref_speed, integral0 = [], 0.0, 0.0
@@ -238,8 +239,9 @@ def _hold_mid_transition(skill, held: int = 150) -> tuple[np.ndarray, list, floa
                 continue
             tau = core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
             taus.append(tau.copy())
-            ref_speed = max(ref_speed, float(np.linalg.norm(core.ref.twist[:3])),
-                            float(np.linalg.norm(core.ref.accel[:3])))
+            if len(taus) > 10:  # the brake stops the arm within a few ms; the reference goes as far as the arm
+                ref_speed = max(ref_speed, float(np.linalg.norm(core.ref.twist[:3])),
+                                float(np.linalg.norm(core.ref.accel[:3])))
             sim.step("hold")
             if len(taus) > held:
                 break
@@ -252,15 +254,16 @@ def _hold_mid_transition(skill, held: int = 150) -> tuple[np.ndarray, list, floa
 @pytest.mark.slow
 def test_a_braked_robot_winds_up_no_torque_against_its_brake(learned_skill):
     """The robot side brakes for a stale or missing answer and flags each such state (``command_seq < 0``). The
-    arm stands; the controller's torques are not applied. Guards: a held cycle is a tick of time scale 0, so the
-    executed reference stands whole (its velocity and acceleration too, not only its position), the force
+    arm stands; the controller's torques are not applied. Guards: a held cycle's clock runs only as far as the arm
+    went (the brake stops it within 4 ms), so the executed reference then stands whole (its velocity and
+    acceleration too, not only its position), the force
     regulator's integral and the speed override stand, and the commanded torque settles on what holds the arm at
     the frozen reference instead of pushing along the path into the brake (150 ms held at 0.25 m/s in a
     transition: with the reference's velocity kept, the largest joint torque rose from 10 to 27 Nm at the rate
     limit (A1 -26.5 Nm) and the force integral moved by 1.4 N, a push the brake's release hands to the arm at
     once; standing whole, the torques settle at 2.9 Nm at most)."""
     first, taus, ref_rate, integral_change = _hold_mid_transition(learned_skill)
-    assert ref_rate == 0.0, f"the held reference moves: {ref_rate:.3f} (m/s or m/s^2)"
+    assert ref_rate < 1e-3, f"the held reference moves with the arm braked: {ref_rate:.4f} (m/s or m/s^2)"
     assert integral_change == 0.0, f"the force integral wound up by {integral_change:.2f} N while held"
     peak = max(float(np.max(np.abs(t))) for t in taus)
     assert peak <= float(np.max(np.abs(first))) + 1e-9, \

@@ -49,7 +49,8 @@ def _outage(skill, check_applied: bool, steer_speed_rad_s: float, outage: int = 
     run's figures after the outage began: ``held`` (states reported not applied), ``fault`` (the executor's reason
     or ""), ``stack_exit`` (the stack's guard, or ""), ``speed`` (largest joint speed over its limit), ``excess``
     (largest |robot torque - controller torque| on any joint after the outage [Nm]), ``lag`` (reference to pad
-    at the outage's end [m])."""
+    at the outage's end [m]), ``drift`` (largest distance of an answer to a held state from the torques last
+    applied, any joint [Nm]), ``force`` (the largest contact force after the outage began [N])."""
     lbr = LbrParams(steer_speed_rad_s=steer_speed_rad_s)
     core = ControllerCore(ControllerParams.from_table({}), skill)
     core.follow_robot_rate(1.0 / T)
@@ -62,7 +63,9 @@ def _outage(skill, check_applied: bool, steer_speed_rad_s: float, outage: int = 
     K = np.array(lbr.joint_stiffness_nm_rad)
     spring = JointSpring(K, lbr.pid_p, lbr.steer_share, lbr.steer_speed_rad_s)
     watch = AppliedWatch()
-    out = {"held": 0, "fault": "", "stack_exit": "", "speed": 0.0, "excess": 0.0, "lag": 0.0}
+    out = {"held": 0, "fault": "", "stack_exit": "", "speed": 0.0, "excess": 0.0, "lag": 0.0, "drift": 0.0,
+           "force": 0.0}
+    applied = None  # the torques the robot last applied (the answer it was last reported on)
     pending = robot_cmd = snap = k0 = None
     sent = [None, None]  # the answers to the last two states: the older one acted over the last cycle
     try:
@@ -82,6 +85,10 @@ def _outage(skill, check_applied: bool, steer_speed_rad_s: float, outage: int = 
                 held = check_applied and watch.old(robot_cmd.torque, t_ns, lbr.stale_limit_s + 2 * T)
                 q, dq, wrench = snap
                 tau = core.tick(q, dq, wrench, True, T, None, None if held else sent[0], robot_held=held).copy()
+                if not held and sent[0] is not None:
+                    applied = sent[0]
+                elif held and applied is not None:
+                    out["drift"] = max(out["drift"], float(np.max(np.abs(tau - applied))))
                 sent = [sent[1], tau]
                 pending = spring.command(q, tau, dq, T)
                 watch.sent(pending[1], t_ns)
@@ -105,6 +112,7 @@ def _outage(skill, check_applied: bool, steer_speed_rad_s: float, outage: int = 
                 sim.step(tau_robot)
             if k0 is not None and k >= k0:
                 out["speed"] = max(out["speed"], float(np.max(np.abs(o.dq) / lim.dq_max)))
+                out["force"] = max(out["force"], float(np.linalg.norm(o.wrench[:3])))
                 if k >= k0 + outage:
                     out["excess"] = max(out["excess"], float(np.max(np.abs(tau_robot - sent[1]))))
                 if core.executor.phase == Phase.FAULT and not out["fault"]:
@@ -133,9 +141,13 @@ def test_an_outage_of_the_commands_to_the_stack_winds_nothing_up_and_releases_no
     ahead of the pad when the messages come and the wrist whips past the stack's guard (A6 2.45 rad/s), which
     exits. (1) alone leaves the 180 Nm kick (0.61 of the limits), (2) alone the fault. With (1) and (2): no
     fault, the stack runs on, the joints under 0.43 of their limits, the robot within 17 Nm of the
-    controller."""
+    controller. (4) Over the held states the rate limit counts from the torques the robot last applied, so no
+    answer is more than one rate step (1 Nm) from them when the messages come (counted from the unapplied answers
+    they walked 23 Nm away: what stepped the robot in a real-time run, the pad bouncing back at 79 N)."""
     fixed = _outage(learned_skill, check_applied=True, steer_speed_rad_s=0.5)
     assert fixed["held"] >= 70, fixed
+    assert fixed["drift"] <= 1.0 + 1e-9, f"answers to held states walked {fixed['drift']:.1f} Nm from the applied"
+
     assert not fixed["fault"] and not fixed["stack_exit"], fixed
     assert fixed["lag"] < 0.01 and fixed["speed"] < 0.5 and fixed["excess"] < 30.0, fixed
     bare = _outage(learned_skill, check_applied=False, steer_speed_rad_s=0.0)
