@@ -425,7 +425,9 @@ class SimTruth(Message, frozen=True):
 
     stain_ids and remaining: (k,) stain ids and remaining dirt fraction in
     [0, 1]; total_dirt: sum of the dirt grid [cell units]; contact_force_n:
-    normal force of the eraser on the board [N]. centres_board_m and
+    normal force of the eraser on the board [N] at this step; peak_force_n: the
+    largest such force over every physics step since the last truth [N] (a
+    truth every 100 ms would miss a 20 ms impact). centres_board_m and
     sizes_m: (k, 2) true stain centres in the board frame and (k,) their
     larger extents [m]; T_board_to_world: the board pose (tests compare
     perception against these).
@@ -441,12 +443,13 @@ class SimTruth(Message, frozen=True):
     centres_board_m: list[list[float]] = msgspec.field(default_factory=list)
     sizes_m: list[float] = msgspec.field(default_factory=list)
     T_board_to_world: Pose | None = None
+    peak_force_n: float = 0.0
 
     def __post_init__(self) -> None:
         if len(self.stain_ids) != len(self.remaining):
             raise ValueError(f"{len(self.stain_ids)} stain_ids but {len(self.remaining)} remaining values")
         _finite("remaining", self.remaining)
-        _finite("total_dirt/contact_force_n", (self.total_dirt, self.contact_force_n))
+        _finite("total_dirt/contact_force_n/peak_force_n", (self.total_dirt, self.contact_force_n, self.peak_force_n))
 
 
 #: Every message type, for decoders and tests.

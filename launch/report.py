@@ -39,7 +39,7 @@
   and look before it are not counted; null without one).
 * ``loop_timing``: the controller's last reported loop statistics.
 * ``max_contact_force_n`` (the sim's truth: the physical contact force,
-  whatever the controller measured) and ``max_joint_speed_ratio`` (the
+  whatever the controller measured, its peak over every physics step) and ``max_joint_speed_ratio`` (the
   largest ``|dq| / dq_max`` of any joint in any recorded ``robot/state``):
   the cell's safety, across restarts of any service.
 * ``faults``, in time order, each with a wall time, a phase and a reason: every entry into PAUSED, FAULT
@@ -196,7 +196,8 @@ def _safety_section(run: _Run) -> dict[str, float]:
         dq = m.get("dq_rad_s") or []
         if len(dq) == len(dq_max):
             worst = max(worst, float(np.max(np.abs(np.asarray(dq, float)) / dq_max)))
-    return {"max_contact_force_n": max((float(t["contact_force_n"]) for t in run.truth), default=0.0),
+    return {"max_contact_force_n": max((max(float(t["contact_force_n"]), float(t.get("peak_force_n", 0.0)))
+                                        for t in run.truth), default=0.0),
             "max_joint_speed_ratio": worst}
 
 

@@ -85,6 +85,7 @@ class SimCore:
         self.robot = SimRobot(self.world, self.tau_max, self.board.normal_world, params.gravity_compensated,
                               model.joints, params.dt_s)
         self.steps = 0
+        self.peak_force_n = 0.0  # the largest normal force since the last take_peak_force_n() [N]
         try:
             self.hand = hand_from_params(params.hand, self.robot.out.tcp_R)  # holds the tool as it starts
         except ConfigError:
@@ -126,9 +127,16 @@ class SimCore:
         self.robot.step()
         self.steps += 1
         out = self.robot.read()
+        if out.normal_force_n > self.peak_force_n:
+            self.peak_force_n = out.normal_force_n
         if self.steps % self._wipe_every == 0:
             self._wipe(out)
         return out
+
+    def take_peak_force_n(self) -> float:
+        """The largest normal force of the pad on the board [N] over the steps since the last call; restarts."""
+        peak, self.peak_force_n = self.peak_force_n, self.robot.out.normal_force_n
+        return max(peak, self.peak_force_n)
 
     def _wipe(self, o: Readout) -> None:
         if o.normal_force_n <= self.params.dirt.threshold_force_n:

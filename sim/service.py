@@ -138,7 +138,8 @@ class SimPort(RobotPort):
             seq=self.core.steps, stamp_ns=time.monotonic_ns(), stain_ids=d.stain_ids,
             remaining=[float(v) for v in d.remaining()], total_dirt=d.total(),
             contact_force_n=float(self.core.out.normal_force_n), robot_time_ns=self.core.time_ns,
-            centres_board_m=self._centres, sizes_m=self._sizes, T_board_to_world=self._board_pose))
+            centres_board_m=self._centres, sizes_m=self._sizes, T_board_to_world=self._board_pose,
+            peak_force_n=self.core.take_peak_force_n()))
 
 
 class SimService:
