@@ -10,7 +10,7 @@ whiteboard in front of the robot, three seeded stains, a D435i-like camera)::
     [sim.board]    preset = "wall" | "table" | "custom"; size_m, origin_m, quat_wxyz, ...
     [sim.contact]  friction, stiffness_n_m, damping_n_s_m
     [sim.dirt]     cell_m, stains (count), stain_size_m, threshold_force_n, rate_per_n_m, stain = [...]
-    [sim.camera]   enabled, name, width, height, rate_hz, fx, fy, distance_m, elevation_deg, ...
+    [sim.camera]   enabled, name, width, height, rate_hz, fx, fy, distance_m, elevation_deg, renderer, ...
     [sim.hand]     script, stiffness_n_m, damping_n_s_m, ... (the operator's hand, for lamps teach)
 
 Every value is checked in ``__post_init__``; an unknown key or a value out
@@ -35,6 +35,7 @@ from interfaces.errors import ConfigError
 
 MODES = ("lockstep", "realtime")
 BOARD_PRESETS = ("wall", "table", "custom")
+RENDERERS = ("analytic", "tiny")
 
 
 @dataclass(frozen=True)
@@ -148,6 +149,9 @@ class CameraParams:
     the distance that fits the board with ``margin`` (fraction).
     light_direction : (3,) world direction towards the light, or None for
     a light in front of and above the board (``sim.camera.light_towards``).
+    renderer : ``analytic`` (the arm drawn as shaded polygons over a board
+    image rendered once, ``sim.analytic_camera``) or ``tiny`` (PyBullet's
+    TinyRenderer every frame).
     """
 
     enabled: bool = True
@@ -166,10 +170,13 @@ class CameraParams:
     margin: Annotated[float, In(0.0, 1.0)] = 0.15
     shadow: bool = True
     light_direction: tuple[float, float, float] | None = None
+    renderer: str = "analytic"
 
     def __post_init__(self) -> None:
         s = "sim.camera"
         check_declared(self, s)
+        if self.renderer not in RENDERERS:
+            raise ConfigError(f"[{s}] renderer must be one of {', '.join(RENDERERS)}, got {self.renderer!r}")
         if not isinstance(self.enabled, bool) or not isinstance(self.shadow, bool):
             raise ConfigError(f"[{s}] enabled and shadow must be true or false")
         if not isinstance(self.name, str) or not re.fullmatch(r"[A-Za-z0-9_\-.]+", self.name):

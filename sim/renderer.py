@@ -4,7 +4,8 @@ The sim process owns a :class:`CameraProcess`. When the renderer is idle,
 :meth:`CameraProcess.request` copies the dirt grid into shared memory and
 sends the joint positions of the state to show; the renderer process
 (``_render_main``, its own PyBullet client with the same robot and board)
-poses the arm, renders with TinyRenderer, draws the dirt where the board is
+poses the arm, renders (``[sim.camera] renderer``: the analytic camera of
+:mod:`sim.analytic_camera`, or PyBullet's TinyRenderer), draws the dirt where the board is
 visible (:func:`~sim.camera.composite_dirt`) and writes the RGB image into a
 second shared-memory buffer. A thread of the sim process (:class:`FramePublisher`) waits for the
 renderer's answer, wraps the image in a :class:`~interfaces.messages.CameraFrame`
@@ -91,6 +92,12 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
         proj = projection_matrix(intrinsics_of(cam))
         light = light_towards(cam, setup.board)
         cells = board_cell_index(intrinsics_of(cam), T_camera, setup.board, setup.cell_m, setup.dirt_shape)
+        analytic = None
+        if cam.renderer == "analytic":
+            from .analytic_camera import AnalyticCamera
+
+            analytic = AnalyticCamera(world, cam, intrinsics_of(cam), T_camera, np.asarray(light),
+                                      setup.board.origin_m, setup.board.normal_world)
         conn.send(("ready", 0.0))
         while True:
             request = conn.recv()
@@ -98,13 +105,17 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
                 break
             q, _dirt_version = request
             t0 = time.perf_counter()
-            for j, qj in zip(world.joints, q):
-                pb.resetJointState(world.robot, j, float(qj), physicsClientId=client)
-            out = pb.getCameraImage(cam.width, cam.height, view, proj, renderer=pb.ER_TINY_RENDERER,
-                                    shadow=int(cam.shadow), lightDirection=light,
-                                    physicsClientId=client)
-            image[...] = np.asarray(out[2], np.uint8).reshape(cam.height, cam.width, 4)[..., :3]
-            composite_dirt(image, np.asarray(out[4]).reshape(-1) == world.board, cells, dirt)
+            if analytic is not None:
+                visible = analytic.render(image, q)
+            else:
+                for j, qj in zip(world.joints, q):
+                    pb.resetJointState(world.robot, j, float(qj), physicsClientId=client)
+                out = pb.getCameraImage(cam.width, cam.height, view, proj, renderer=pb.ER_TINY_RENDERER,
+                                        shadow=int(cam.shadow), lightDirection=light,
+                                        physicsClientId=client)
+                image[...] = np.asarray(out[2], np.uint8).reshape(cam.height, cam.width, 4)[..., :3]
+                visible = np.asarray(out[4]).reshape(-1) == world.board
+            composite_dirt(image, visible, cells, dirt)
             conn.send(("frame", time.perf_counter() - t0))
     except (EOFError, KeyboardInterrupt, BrokenPipeError):
         pass
