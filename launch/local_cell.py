@@ -160,13 +160,16 @@ def run(services, extra_env: dict[str, str], out: Path, robot_id: str, skill: Pa
     except RuntimeError as exc:  # the camera's renderer did not come up or died
         outcome, why = "failed", f"sim: {exc}"
     finally:
-        stopping_ns = time.time_ns()
+        # on the recording's clock (the robot's, from the wall time the cell started), as the report reads them
+        # against its log times: a cell faster than the wall stopped at a wall time its recording had not reached,
+        # and the report took the phase before it (a DONE cell read as mid-wipe)
+        stopping_ns = cell._clock_ns()
         try:
             cell.server.housekeeping()
         finally:
             final = cell.close()
         codes = {n: (0 if outcome != "failed" else 1) for n in (*NEEDED, "recorder")}
-        record = {"outcome": outcome, "why": why, "stopping_wall_ns": stopping_ns, "ended_wall_ns": time.time_ns(),
+        record = {"outcome": outcome, "why": why, "stopping_wall_ns": stopping_ns, "ended_wall_ns": cell._clock_ns(),
                   "duration_s": time.monotonic() - t_start, "services": codes, "key_prefix": f"lamps/{robot_id}",
                   "skill": str(skill), "options": options, "network": "none", "steps": steps}
         from lampskit.atomic import write_text_atomic

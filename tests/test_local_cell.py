@@ -174,4 +174,12 @@ def test_a_cell_gives_the_same_report_first_or_second_in_a_worker(tmp_path, lear
         assert len(pool._all) == 1
     assert first["outcome"] == "cleaned" and not first["faults"]
     assert _results(second) == _results(first)
-    assert json.loads((Path(tmp_path / "b" / "cells" / cell.name / "run.json")).read_text())["network"] == "none"
+    run = json.loads((Path(tmp_path / "b" / "cells" / cell.name / "run.json")).read_text())
+    assert run["network"] == "none"
+    # the stop on the recording's clock, which runs faster than the wall here: a wall time read against it took a
+    # DONE cell's phase from mid-wipe (outcome "incomplete")
+    from launch.record import RECORDING, read_recording
+
+    status = read_recording(tmp_path / "b" / "cells" / cell.name / RECORDING)[run["key_prefix"] + "/controller/status"]
+    assert status[0][0] <= run["stopping_wall_ns"] <= status[-1][0] + 10**9, (run["stopping_wall_ns"], status[-1][0])
+    assert status[-1][1]["phase"] == "DONE"
