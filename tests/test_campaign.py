@@ -255,7 +255,8 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
         assert (Path(c["run_dir"]) / "report.json").is_file()
 
     # the same cell over Zenoh (lamps up in lock-step: perception's frames land in wall time, so the robot time
-    # spreads a little): the same outcome, the dirt removed within 0.5 points
+    # spreads, more on a loaded machine: 20 % longer at two test workers): the same outcome, the dirt removed
+    # within 0.5 points
     zenoh = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed", "--jobs", "1",
                       "--skill", str(learned_skill_file), "--out", str(tmp_path / "zenoh"))
     assert zenoh.returncode == 0, zenoh.stdout[-2000:] + zenoh.stderr[-2000:]
@@ -264,4 +265,4 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     (c,), want = result_z["cells"], local["wall-s0-n1"]
     assert (c["outcome"], c["faults"]) == (want["outcome"], want["faults"]), (c, want)
     assert abs(c["dirt_removed"] - want["dirt_removed"]) < 0.005, (c, want)
-    assert abs(c["robot_time_s"] - want["robot_time_s"]) < 0.2 * want["robot_time_s"], (c, want)
+    assert abs(c["robot_time_s"] - want["robot_time_s"]) < 0.4 * want["robot_time_s"], (c, want)
