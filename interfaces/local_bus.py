@@ -25,18 +25,33 @@ from .config import ZenohSettings
 from .session import Latest, ServiceNode
 
 class _Payload:
-    """What a subscriber reads of a sample's payload (``len``, ``to_bytes``), as Zenoh's ``ZBytes``."""
+    """What a subscriber reads of a sample's payload (``len``, ``to_bytes``), as Zenoh's ``ZBytes``; and
+    :meth:`decoded`, the message decoded once for every reader of one type (a robot state has three readers in
+    a cell: on Zenoh each process decodes its own copy, here they would decode the same bytes three times)."""
 
-    __slots__ = ("_data",)
+    __slots__ = ("_data", "_msgs")
 
     def __init__(self, data: bytes) -> None:
         self._data = data
+        self._msgs: dict | None = None
 
     def __len__(self) -> int:
         return len(self._data)
 
     def to_bytes(self) -> bytes:
         return self._data
+
+    def decoded(self, decode):
+        """``decode(bytes)`` once per message type (a :class:`~interfaces.codec.Decoder`); a payload that does not
+        decode raises for each reader, which each count it, as on Zenoh."""
+        msgs = self._msgs
+        if msgs is None:
+            msgs = self._msgs = {}
+        t = decode.msg_type
+        msg = msgs.get(t)
+        if msg is None:
+            msg = msgs[t] = decode(self._data)
+        return msg
 
 
 class _Sample:

@@ -178,8 +178,7 @@ class Latest(Generic[M]):
         """The sample's message, or None (counted in :attr:`bad`)."""
         self.received += 1
         try:
-            self._decode.check_size(len(sample.payload))  # before copying it out: a huge one is never parsed
-            return self._decode(sample.payload.to_bytes())
+            return _message(self._decode, sample)
         except MessageDecodeError as exc:
             self._bad.count(str(exc))
             return None
@@ -188,6 +187,16 @@ class Latest(Generic[M]):
         if self._sub is not None:
             self._sub.undeclare()
             self._sub = None
+
+
+def _message(decode: Decoder, sample):
+    """The message of ``sample`` (raises MessageDecodeError). The size is checked before the payload is copied
+    out (a huge one is never parsed). A payload of the in-process bus (:mod:`interfaces.local_bus`) is decoded
+    once for all its readers of one type (``decoded``: the messages are frozen); Zenoh's, by each reader."""
+    payload = sample.payload
+    decode.check_size(len(payload))
+    shared = getattr(payload, "decoded", None)
+    return shared(decode) if shared is not None else decode(payload.to_bytes())
 
 
 class _BadSamples:
@@ -231,8 +240,7 @@ class Inbox(Generic[M]):
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
-            self._decode.check_size(len(sample.payload))  # before copying it out: a huge one is never parsed
-            msg = self._decode(sample.payload.to_bytes())
+            msg = _message(self._decode, sample)
         except MessageDecodeError as exc:
             with self._ready:
                 self.received += 1

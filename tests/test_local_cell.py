@@ -48,13 +48,18 @@ def test_a_put_reaches_every_matching_reader_at_once_in_order_decoded_and_checke
         assert elsewhere.get(0.0) is None  # another cell's prefix hears nothing
         assert [str(s.key_expr) for s in everything] == [settings.keys.robot_state] * 5
         sub.undeclare()
+        # one decode per put for its readers of a type (frozen messages): the inbox's and the ring's are one object
+        twice = ctrl.inbox(ctrl.keys.robot_state, RobotState)
+        sim.publish(sim.keys.robot_state, _state(9))
+        assert twice.get(0.0) is newest.take() is inbox.get(0.0)
         # bytes that are not the key's message are counted and dropped by the same readers as on Zenoh
         bus.put(settings.keys.robot_state, b"\x93not a state")
-        assert inbox.get(0.0) is None and sum(inbox.bad.values()) == 1 and inbox.received == 6
+        assert inbox.get(0.0) is None and sum(inbox.bad.values()) == 1 and inbox.received == 7
+        assert sum(twice.bad.values()) == 1  # each reader counts a bad payload, as each process would
         assert len(everything) == 5
         # a TorqueCommand on the state key is refused as on the wire
         sim.publish(sim.keys.robot_state, TorqueCommand(seq=1, stamp_ns=1, tau_nm=[0.0] * 7))
-        assert inbox.get(0.0) is None and sum(inbox.bad.values()) == 2
+        assert inbox.get(0.0) is None and sum(inbox.bad.values()) == 2 and sum(twice.bad.values()) == 2
         # liveliness: every node's token, under its cell's prefix
         assert ctrl.alive_services() == {"sim", "controller"} and other.alive_services() == {"other"}
     assert bus.tokens(f"{settings.keys.prefix}/**") == []  # closed nodes take their tokens with them
