@@ -20,7 +20,8 @@
 * ``max_junction_accel_jump`` [m/s^2]: the largest change of the in-plane
   reference acceleration across one tick at an MP junction, and
   ``junction_step_ratio_max``: that change over the largest ordinary
-  one-tick change in the 5 ticks around it (<= ~1: continuous).
+  one-tick change in the 5 ticks around it (<= ~1: continuous); junctions
+  with a tick the robot held nearby are left out (its scale follows the arm).
 * ``tracking_rms_m``: in-plane reference vs measured pad while wiping.
 * ``motion_peaks``: per phase (and ``all``), the peak speed [m/s],
   acceleration [m/s^2] and jerk [m/s^3] of the in-plane reference as

@@ -39,6 +39,8 @@ def test_a_cell_through_the_router_wipes_on_after_the_router_died_and_came_back(
     assert before is not None  # the watching client followed the cell until the router went
     reasons = [f["reason"] for f in report["faults"]]
     assert not any("exited" in r for r in _reasons(report, "SERVICE")), reasons  # no service died of the outage
-    # the controller lost the robot (lock-step: the robot side waited for it), and lifted the pad on its return
-    assert any(r.startswith("no robot state for") for r in reasons), reasons
+    # the controller lost the robot (lock-step: the robot side waited for it), and lifted the pad on its return;
+    # its status saying so may go unrecorded (the recorder, a client of the same router, may reconnect after the
+    # robot side: "nothing recorded for 7.1 s"), its counter does not
+    assert report["counters"]["controller"].get("robot_lost", 0) >= 1, (report["counters"]["controller"], reasons)
     assert any(r.startswith("robot back with the pad on the board") for r in reasons), reasons
