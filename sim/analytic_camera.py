@@ -237,7 +237,8 @@ class AnalyticCamera:
         if self.casts_shadow:
             self._hulls(self._shadow, self._pixels(shadow_on_plane(verts, self.board_origin, self.board_normal,
                                                                    self.light_m)))
-            np.copyto(image, self.shadowed, where=self._shadow[..., None].astype(bool))
+            if cv2.copyTo(self.shadowed, self._shadow, image) is not image:  # in place when image is contiguous
+                np.copyto(image, self.shadowed, where=self._shadow[..., None].astype(bool))
         pixels = self._pixels(verts)
         facing = np.einsum("fi,fi->f", normals, self.o_cam - centres) > 0.0
         depth = (centres - self.o_cam) @ self.R_cam[:, 2]

@@ -189,3 +189,41 @@ def composite_dirt(rgb: np.ndarray, visible: np.ndarray, cell_index: np.ndarray,
     c = flat[sel].astype(np.float32)
     shade = c.mean(axis=1, keepdims=True) / float(BOARD_RGB.mean())
     flat[sel] = np.clip((1.0 - d) * c + d * INK_RGB * shade, 0, 255).astype(np.uint8)
+
+
+class DirtCompositor:
+    """:func:`composite_dirt` for one fixed camera and board, the same pixels, at a cost that follows the dirt.
+
+    ``cell_index`` (H * W,) is :func:`board_cell_index`'s map; the board pixels are sorted by their cell once, so
+    a frame reads the dirt grid's cells, finds the few that carry ink and tints only their pixels, instead of
+    gathering the dirt of every board pixel.
+    """
+
+    def __init__(self, cell_index: np.ndarray) -> None:
+        cell_index = np.asarray(cell_index, np.int64).reshape(-1)
+        board = np.flatnonzero(cell_index >= 0)
+        order = np.argsort(cell_index[board], kind="stable")
+        self._pixels = board[order]  # (n,) board pixels sorted by cell
+        self._cells = cell_index[self._pixels]
+        self._n_cells = int(self._cells.max()) + 1 if self._cells.size else 0
+        bounds = np.searchsorted(self._cells, np.arange(self._n_cells + 1))
+        self._start, self._count = bounds[:-1], np.diff(bounds)  # (n_cells,) each cell's run in _pixels
+
+    def __call__(self, rgb: np.ndarray, visible: np.ndarray, dirt: np.ndarray) -> None:
+        """Tint ``rgb`` (H, W, 3) uint8 in place where ``visible`` (H * W,) bool shows the board, by ``dirt``."""
+        d_cells = dirt.reshape(-1)[:self._n_cells]
+        dirty = np.flatnonzero((d_cells > 1e-3) & (self._count[:d_cells.size] > 0))
+        if dirty.size == 0:
+            return
+        counts = self._count[dirty]
+        # the pixel runs of the dirty cells, concatenated: each run's start, then +1 along it
+        offsets = np.repeat(self._start[dirty] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+        sel = self._pixels[offsets]
+        shown = visible[sel]
+        sel, d = sel[shown], np.repeat(d_cells[dirty], counts)[shown, None]
+        if sel.size == 0:
+            return
+        flat = rgb.reshape(-1, 3)
+        c = flat[sel].astype(np.float32)
+        shade = c.mean(axis=1, keepdims=True) / float(BOARD_RGB.mean())
+        flat[sel] = np.clip((1.0 - d) * c + d * INK_RGB * shade, 0, 255).astype(np.uint8)

@@ -6,7 +6,7 @@ sends the joint positions of the state to show; the renderer process
 (``_render_main``, its own PyBullet client with the same robot and board)
 poses the arm, renders (``[sim.camera] renderer``: the analytic camera of
 :mod:`sim.analytic_camera`, or PyBullet's TinyRenderer), draws the dirt where the board is
-visible (:func:`~sim.camera.composite_dirt`) and writes the RGB image into a
+visible (:class:`~sim.camera.DirtCompositor`) and writes the RGB image into a
 second shared-memory buffer. A thread of the sim process (:class:`FramePublisher`) waits for the
 renderer's answer, wraps the image in a :class:`~interfaces.messages.CameraFrame`
 and publishes it, so neither rendering nor a megabyte-sized put sits in
@@ -41,7 +41,7 @@ from interfaces.priority import BACKGROUND, set_service_priority
 from interfaces.transforms import pose_from_transform
 
 from .board import Board
-from .camera import (board_cell_index, board_texture, camera_pose, composite_dirt, intrinsics_of, light_towards,
+from .camera import (DirtCompositor, board_cell_index, board_texture, camera_pose, intrinsics_of, light_towards,
                      marker_layer, projection_matrix, view_matrix)
 from .params import SimParams
 from lampskit.errors import LampsError
@@ -91,7 +91,8 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
         view = view_matrix(T_camera)
         proj = projection_matrix(intrinsics_of(cam))
         light = light_towards(cam, setup.board)
-        cells = board_cell_index(intrinsics_of(cam), T_camera, setup.board, setup.cell_m, setup.dirt_shape)
+        composite_dirt = DirtCompositor(board_cell_index(intrinsics_of(cam), T_camera, setup.board, setup.cell_m,
+                                                         setup.dirt_shape))
         analytic = None
         if cam.renderer == "analytic":
             from .analytic_camera import AnalyticCamera
@@ -115,7 +116,7 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
                                         physicsClientId=client)
                 image[...] = np.asarray(out[2], np.uint8).reshape(cam.height, cam.width, 4)[..., :3]
                 visible = np.asarray(out[4]).reshape(-1) == world.board
-            composite_dirt(image, visible, cells, dirt)
+            composite_dirt(image, visible, dirt)
             conn.send(("frame", time.perf_counter() - t0))
     except (EOFError, KeyboardInterrupt, BrokenPipeError):
         pass

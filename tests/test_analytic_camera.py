@@ -17,8 +17,8 @@ from perception.params import PerceptionParams
 from perception.pipeline import Perception
 from sim.analytic_camera import (AMBIENT, LIGHT_DISTANCE_M, SHADOW_KEEP, AnalyticCamera, box_mesh, cylinder_mesh,
                                  face_frames, shadow_on_plane)
-from sim.camera import (BOARD_RGB, board_cell_index, board_texture, camera_pose, composite_dirt, intrinsics_of,
-                        light_towards, marker_layer, projection_matrix, view_matrix)
+from sim.camera import (BOARD_RGB, DirtCompositor, board_cell_index, board_texture, camera_pose, composite_dirt,
+                        intrinsics_of, light_towards, marker_layer, projection_matrix, view_matrix)
 from sim.core import SimCore
 from sim.params import SimParams
 from sim.world import build_world
@@ -227,3 +227,23 @@ def test_perception_finds_the_same_stains_in_both_images(scene):
         assert np.linalg.norm(np.subtract(a.centre_board_m, t.centre_board_m)) < 0.005
         assert abs(a.size_m - t.size_m) < 0.1 * t.size_m
         assert abs(a.visible - t.visible) < 0.05
+
+
+def test_the_renderers_dirt_compositor_tints_the_pixels_composite_dirt_tints(scene):
+    """The renderer's per-scene compositor against the per-frame reference, pixel for pixel: the seeded stains,
+    a board dirty nearly everywhere, a clean one, with the arm in front of the board."""
+    compositor = DirtCompositor(scene.cells)
+    rng = np.random.default_rng(3)
+    q = scene.core.q_start + rng.uniform(-0.2, 0.2, 7)
+    base = np.zeros((scene.cam.height, scene.cam.width, 3), np.uint8)
+    visible = scene.analytic.render(base, q)
+    assert 0 < visible.sum() < (scene.cells >= 0).sum()
+    stains = scene.core.dirt.dirt
+    assert (stains > 1e-3).any()
+    for dirt, tinted in ((stains, True), (rng.random(stains.shape).astype(np.float32), True),
+                         (np.zeros_like(stains), False)):
+        want, got = base.copy(), base.copy()
+        composite_dirt(want, visible, scene.cells, dirt)
+        compositor(got, visible, dirt)
+        assert np.array_equal(got, want)
+        assert (not np.array_equal(got, base)) == tinted
