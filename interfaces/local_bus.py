@@ -2,11 +2,15 @@
 
 A :class:`LocalNode` is a :class:`~interfaces.session.ServiceNode` whose
 session is a :class:`LocalSession` on a shared :class:`LocalBus` instead of
-a Zenoh session: the services publish (encoded by the same codec), read
-(decoded, checked and counted by the same :class:`~interfaces.session.Latest`
-and :class:`~interfaces.session.Inbox`) and declare liveliness exactly as on
-Zenoh, but a put is handed to every matching subscriber in the putting
-thread, at once, in order, never lost. Key expressions match as Zenoh
+a Zenoh session: the services publish, read (through the same
+:class:`~interfaces.session.Latest` and :class:`~interfaces.session.Inbox`,
+bad payloads counted alike) and declare liveliness exactly as on Zenoh, but a
+put is handed to every matching subscriber in the putting thread, at once, in
+order, never lost. A published message travels as itself (messages are
+frozen; built through their checks): a reader of its type gets the object, a
+reader of another type or an old schema version gets the codec's bytes and
+its refusal, and ``to_bytes`` encodes on demand (the codec's path itself is
+what the Zenoh cell and the codec's tests run). Key expressions match as Zenoh
 matches them (``zenoh.KeyExpr.intersects``). There is no access control
 and no other process: one process holds every service of a cell
 (:mod:`launch.local_cell`, a campaign's network-free cell).
@@ -21,45 +25,54 @@ from typing import Callable
 
 import zenoh
 
+from .codec import encode
 from .config import ZenohSettings
+from .messages import SCHEMA_VERSION, Message
 from .session import Latest, ServiceNode
 
 class _Payload:
     """What a subscriber reads of a sample's payload (``len``, ``to_bytes``), as Zenoh's ``ZBytes``; and
-    :meth:`decoded`, the message decoded once for every reader of one type (a robot state has three readers in
-    a cell: on Zenoh each process decodes its own copy, here they would decode the same bytes three times)."""
+    :meth:`decoded`, the message for a reader of one type: the published message itself when it is of that type
+    and schema version, else the bytes decoded once for every reader of that type (raising, for each reader,
+    what the codec raises)."""
 
-    __slots__ = ("_data", "_msgs")
+    __slots__ = ("_data", "_msg", "_msgs")
 
-    def __init__(self, data: bytes) -> None:
+    def __init__(self, data: bytes | None, msg=None) -> None:
         self._data = data
+        self._msg = msg
         self._msgs: dict | None = None
 
     def __len__(self) -> int:
-        return len(self._data)
+        return len(self.to_bytes())
 
     def to_bytes(self) -> bytes:
+        if self._data is None:
+            self._data = encode(self._msg)
         return self._data
 
     def decoded(self, decode):
-        """``decode(bytes)`` once per message type (a :class:`~interfaces.codec.Decoder`); a payload that does not
+        """The message as ``decode`` (a :class:`~interfaces.codec.Decoder`) reads it; a payload that does not
         decode raises for each reader, which each count it, as on Zenoh."""
+        msg = self._msg
+        t = decode.msg_type
+        if msg is not None and type(msg) is t and msg.version == SCHEMA_VERSION:
+            return msg
         msgs = self._msgs
         if msgs is None:
             msgs = self._msgs = {}
-        t = decode.msg_type
-        msg = msgs.get(t)
-        if msg is None:
-            msg = msgs[t] = decode(self._data)
-        return msg
+        out = msgs.get(t)
+        if out is None:
+            out = msgs[t] = decode(self.to_bytes())
+        return out
 
 
 class _Sample:
     __slots__ = ("key_expr", "payload")
 
-    def __init__(self, key: str, data: bytes) -> None:
+    def __init__(self, key: str, data: bytes | None, msg=None) -> None:
         self.key_expr = key
-        self.payload = _Payload(data)
+        self.payload = _Payload(data, msg)
 
 
 class _Subscriber:
@@ -94,6 +107,9 @@ class _Publisher:
     def put(self, data: bytes) -> None:
         self.bus.put(self.key, data)
 
+    def put_message(self, msg: Message) -> None:
+        self.bus.put(self.key, None, msg)
+
     def undeclare(self) -> None:
         pass
 
@@ -113,14 +129,15 @@ class LocalBus:
         """A new session id on this bus (1, 2, ...)."""
         return next(self._ids)
 
-    def put(self, key: str, data: bytes) -> None:
+    def put(self, key: str, data: bytes | None, msg: Message | None = None) -> None:
+        """Hand ``data`` (bytes), or the message ``msg`` (``data`` None), to every subscriber matching ``key``."""
         subs = self._routes.get(key)
         if subs is None:
             k = zenoh.KeyExpr(key)
             with self._lock:
                 subs = self._routes[key] = tuple(s for s in self._subs if s.expr.intersects(k))
         self.puts += 1
-        sample = _Sample(key, data)
+        sample = _Sample(key, data, msg)
         for s in subs:
             s.deliver(sample)
 
@@ -220,6 +237,13 @@ class LocalNode(ServiceNode):
         self._session = LocalSession(self.bus)
         self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
         return self
+
+    def publish(self, key: str, msg: Message) -> None:
+        """Put ``msg`` on ``key`` as itself (see the module's notes)."""
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self._publishers[key] = self.session.declare_publisher(key)
+        pub.put_message(msg)
 
     def latest(self, key: str, msg_type, depth: int = 1) -> Latest:
         reader = Latest(self.session.with_ring(depth), key, msg_type, depth)

@@ -191,12 +191,15 @@ class Latest(Generic[M]):
 
 def _message(decode: Decoder, sample):
     """The message of ``sample`` (raises MessageDecodeError). The size is checked before the payload is copied
-    out (a huge one is never parsed). A payload of the in-process bus (:mod:`interfaces.local_bus`) is decoded
-    once for all its readers of one type (``decoded``: the messages are frozen); Zenoh's, by each reader."""
+    out (a huge one is never parsed). A payload of the in-process bus (:mod:`interfaces.local_bus`) is the
+    published message itself, or decoded once for all its readers of one type (``decoded``: the messages are
+    frozen); Zenoh's is decoded by each reader."""
     payload = sample.payload
-    decode.check_size(len(payload))
     shared = getattr(payload, "decoded", None)
-    return shared(decode) if shared is not None else decode(payload.to_bytes())
+    if shared is not None:
+        return shared(decode)
+    decode.check_size(len(payload))
+    return decode(payload.to_bytes())
 
 
 class _BadSamples:

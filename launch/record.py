@@ -300,7 +300,9 @@ class Recorder:
     def _on_sample(self, sample) -> None:  # Zenoh thread: never waits
         if len(self._queue) == self._queue.maxlen:
             self.counters["dropped_queue_full"] += 1
-        self._queue.append((str(sample.key_expr), sample.payload.to_bytes(), self.clock()))
+        payload = sample.payload  # the in-process bus's payload is kept as it is (its message, decoded once)
+        self._queue.append((str(sample.key_expr), payload if hasattr(payload, "decoded") else payload.to_bytes(),
+                            self.clock()))
         if not self._wake.is_set():  # set once until the writer wakes (a set Event costs a lock and a notify)
             self._wake.set()
 
@@ -326,7 +328,7 @@ class Recorder:
                 if entry is None:
                     raise MessageDecodeError("no message type for this key")
                 dec, scene, after_prefix = entry
-                msg = dec(data)
+                msg = dec(data) if isinstance(data, bytes) else data.decoded(dec)
                 self.sink.write(key, msg, t_ns)
                 self.counters[key[after_prefix:]] += 1
                 for topic, scene_msg in scene.on_message(key, msg, t_ns):

@@ -63,6 +63,7 @@ class SimRobot:
         self.w = world
         self.c = world.client
         self.tau_max = np.asarray(tau_max, float)
+        self._tau_min = -self.tau_max
         self.normal = np.asarray(board_normal, float)
         self.gravity_compensated = gravity_compensated
         self.joints = joints or JointDynamics()
@@ -97,7 +98,7 @@ class SimRobot:
         tau = np.asarray(tau_nm, float)
         if self.gravity_compensated:
             tau = tau + self.gravity()
-        np.clip(tau, -self.tau_max, self.tau_max, out=self._tau_cmd)
+        np.maximum(np.minimum(tau, self.tau_max, out=self._tau_cmd), self._tau_min, out=self._tau_cmd)  # np.clip's cost
         applied = self._tau_cmd if self._rigid else self._drive_torque()
         pb.setJointMotorControlArray(self.w.robot, self._joints, pb.TORQUE_CONTROL, forces=applied.tolist(),
                                      physicsClientId=self.c)

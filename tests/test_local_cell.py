@@ -16,12 +16,14 @@ import threading
 import time
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
 from interfaces.config import ZenohSettings
+from interfaces.codec import encode
 from interfaces.local_bus import LocalBus, LocalNode
-from interfaces.messages import Capabilities, Estop, RobotState, TorqueCommand
+from interfaces.messages import SCHEMA_VERSION, Capabilities, Estop, RobotState, TorqueCommand
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -48,18 +50,26 @@ def test_a_put_reaches_every_matching_reader_at_once_in_order_decoded_and_checke
         assert elsewhere.get(0.0) is None  # another cell's prefix hears nothing
         assert [str(s.key_expr) for s in everything] == [settings.keys.robot_state] * 5
         sub.undeclare()
-        # one decode per put for its readers of a type (frozen messages): the inbox's and the ring's are one object
+        # a published message reaches its readers as itself (frozen messages): one object for every reader
         twice = ctrl.inbox(ctrl.keys.robot_state, RobotState)
-        sim.publish(sim.keys.robot_state, _state(9))
-        assert twice.get(0.0) is newest.take() is inbox.get(0.0)
+        published = _state(9)
+        sim.publish(sim.keys.robot_state, published)
+        assert twice.get(0.0) is newest.take() is inbox.get(0.0) is published
+        # bytes put on the bus are decoded once for the readers of a type
+        bus.put(settings.keys.robot_state, encode(_state(10)))
+        got = twice.get(0.0)
+        assert got == _state(10) and got is not _state(10) and newest.take() is got is inbox.get(0.0)
         # bytes that are not the key's message are counted and dropped by the same readers as on Zenoh
         bus.put(settings.keys.robot_state, b"\x93not a state")
-        assert inbox.get(0.0) is None and sum(inbox.bad.values()) == 1 and inbox.received == 7
+        assert inbox.get(0.0) is None and sum(inbox.bad.values()) == 1 and inbox.received == 8
         assert sum(twice.bad.values()) == 1  # each reader counts a bad payload, as each process would
         assert len(everything) == 5
         # a TorqueCommand on the state key is refused as on the wire
         sim.publish(sim.keys.robot_state, TorqueCommand(seq=1, stamp_ns=1, tau_nm=[0.0] * 7))
         assert inbox.get(0.0) is None and sum(inbox.bad.values()) == 2 and sum(twice.bad.values()) == 2
+        # and a state of another schema version, as the codec refuses it
+        sim.publish(sim.keys.robot_state, msgspec.structs.replace(_state(11), version=SCHEMA_VERSION + 1))
+        assert inbox.get(0.0) is None and sum(inbox.bad.values()) == 3 and sum(twice.bad.values()) == 3
         # liveliness: every node's token, under its cell's prefix
         assert ctrl.alive_services() == {"sim", "controller"} and other.alive_services() == {"other"}
     assert bus.tokens(f"{settings.keys.prefix}/**") == []  # closed nodes take their tokens with them
