@@ -271,6 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--no-network", action="store_true",
                     help="each cell in one process without Zenoh (lamps up --no-network: the same services, stepped "
                          "in lock-step on an in-process bus); default: each cell over Zenoh as lamps up runs it")
+    ap.add_argument("--cell-plots", action="store_true",
+                    help="each cell's report also draws its plots (default: report.json only; lamps report "
+                         "CELL_DIR draws them later from the cell's recording)")
     ap.add_argument("--resume", action="store_true",
                     help="--out is a campaign that was stopped: keep the cells that left a report, run the rest")
     ap.add_argument("--summarize", nargs="+", metavar="DIR", default=None,
@@ -311,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise CampaignError(f"--skill {a.skill}: no such file")
         out = Path(a.out or f"runs/campaign-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
         wipings = tuple(w.strip() for w in a.wiping.split(",") if w.strip())
-        cells = cells_of(seeds, stains, boards, wipings)
+        cells = cells_of(seeds, stains, boards, wipings, plots=a.cell_plots)
         command = "lamps campaign " + " ".join(argv if argv is not None else sys.argv[1:])
         if a.resume and not (a.out and Path(a.out).is_dir()):
             raise CampaignError("--resume needs --out, the folder of the campaign to go on with")

@@ -3,7 +3,7 @@ how they are picked from ``--seeds``, ``--stains``, ``--boards`` and ``--wiping`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from lampskit.errors import LampsError
@@ -17,12 +17,15 @@ class CampaignError(LampsError):
 
 @dataclass(frozen=True)
 class Cell:
-    """One seeded board: ``seed``, ``stains`` (count), ``board`` (preset name or TOML file), ``wiping`` mode."""
+    """One seeded board: ``seed``, ``stains`` (count), ``board`` (preset name or TOML file), ``wiping`` mode;
+    ``plots``: whether its run draws the report's plots (not part of what the cell is: ``lamps report`` draws
+    them later from its recording)."""
 
     seed: int
     stains: int
     board: str
     wiping: str = "fixed"
+    plots: bool = field(default=False, compare=False)
 
     @property
     def name(self) -> str:
@@ -46,13 +49,13 @@ def parse_range(text: str, what: str) -> list[int]:
     return sorted(out)
 
 
-def cells_of(seeds: list[int], stains: list[int], boards: list[str], wipings: tuple[str, ...] = ("fixed",)
-             ) -> list[Cell]:
+def cells_of(seeds: list[int], stains: list[int], boards: list[str], wipings: tuple[str, ...] = ("fixed",),
+             plots: bool = False) -> list[Cell]:
     """The campaign's cells: seed s gets ``stains[s mod len]`` stains on ``boards[s mod len]``, once per wiping
-    mode."""
+    mode; ``plots``: each run draws its report's plots."""
     if not seeds or not stains or not boards or not wipings:
         raise CampaignError("a campaign needs at least one seed, one stain count, one board and one wiping mode")
     bad = [w for w in wipings if w not in WIPINGS]
     if bad:
         raise CampaignError(f"--wiping: {bad[0]!r} is not one of {WIPINGS}")
-    return [Cell(s, stains[s % len(stains)], boards[s % len(boards)], w) for s in seeds for w in wipings]
+    return [Cell(s, stains[s % len(stains)], boards[s % len(boards)], w, plots) for s in seeds for w in wipings]

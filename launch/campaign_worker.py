@@ -14,7 +14,7 @@ collected and what is left is frozen (``gc.freeze``), so the next cell's
 collections do not walk the imported modules again.
 
 Protocol: one JSON object per line on stdin, ``{"seed", "stains",
-"board", "wiping", "skill", "run_dir", "max_duration_s"}``; one JSON line
+"board", "wiping", "plots", "skill", "run_dir", "max_duration_s"}``; one JSON line
 back per cell, ``{"code": exit code of lamps up, "why": its last line on
 stderr}``, on the stdout the worker had when it started (anything else
 written to stdout, by a C library say, goes to stderr). End of stdin ends
@@ -77,7 +77,8 @@ def main() -> int:
     try:
         for line in sys.stdin:
             job = json.loads(line)
-            cell = Cell(int(job["seed"]), int(job["stains"]), str(job["board"]), str(job["wiping"]))
+            cell = Cell(int(job["seed"]), int(job["stains"]), str(job["board"]), str(job["wiping"]),
+                        bool(job.get("plots", False)))
             code, why, crashed = run_here(cell, Path(job["skill"]), Path(job["run_dir"]), float(job["max_duration_s"]))
             answers.write(json.dumps({"code": code, "why": why}) + "\n")
             if crashed:

@@ -111,11 +111,11 @@ def _wait_for_end(node, stop: threading.Event, max_duration_s: float | None) -> 
     return None
 
 
-def _write_report(out: Path, keys=None) -> int:
+def _write_report(out: Path, keys=None, plots: bool | None = None) -> int:
     from .report import summary_lines, write_report
 
     try:
-        report = write_report(out, keys=keys)
+        report = write_report(out, keys=keys, plots=plots)
     except Exception as exc:  # a report must never lose the recording: say why and keep it
         print(f"lamps report: error: cannot build the report of {out}: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
@@ -148,4 +148,4 @@ def report_main(argv: list[str] | None = None) -> int:
     if not final.is_file():
         print(f"lamps report: error: {run}: no {RECORDING} (is this a run folder?)", file=sys.stderr)
         return 1
-    return _write_report(run)
+    return _write_report(run, plots=True)

@@ -54,12 +54,15 @@
   recording over) or did not finish (a recording recovered from its ``.partial`` file), phase ``RECORDER``; the launcher's end of the run when a service died, failed
   or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
 * ``services``: exit codes from the launcher (if any); ``counters``: the
-  last status counters of each service; ``plots``: the PNG files written.
+  last status counters of each service; ``plots``: the PNG files written
+  (none when :data:`PLOTS_ENV` is ``0``: a campaign's cells, ``lamps report``
+  draws them later).
 """
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -81,12 +84,27 @@ SCHEMA = "lamps-run-report/1"
 CLEANED_FRACTION = 0.95
 #: A stain counts as wiped in the truth at or below this remaining fraction (perception's kappa level).
 TRUTH_LEVEL = 0.03
+#: ``0`` in the environment: the report of a run (the recorder's, ``lamps up``'s) draws no plots (``1``, unset: it
+#: does); a campaign sets it per cell (``lamps campaign --cell-plots``). ``lamps report`` always draws them.
+PLOTS_ENV = "LAMPS_REPORT_PLOTS"
 _OUTCOME_RANK = {"cleaned": 0, "incomplete": 1, "timeout": 2, "stopped": 2, "fault": 3, "failed": 4}
 
 
-def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None) -> dict[str, Any]:
-    """The report of ``run_dir`` from its ``recording.mcap`` (and ``run.json`` from the launcher, if there)."""
+def plots_from_env() -> bool:
+    """Whether reports draw their plots, from :data:`PLOTS_ENV` (ValueError naming it for another value)."""
+    raw = os.environ.get(PLOTS_ENV, "").strip().lower()
+    if raw not in ("", "0", "1", "true", "false", "yes", "no"):
+        raise ValueError(f"{PLOTS_ENV} must be 0 or 1, got {raw!r}")
+    return raw not in ("0", "false", "no")
+
+
+def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None,
+                 plots: bool | None = None) -> dict[str, Any]:
+    """The report of ``run_dir`` from its ``recording.mcap`` (and ``run.json`` from the launcher, if there);
+    ``plots``: draw the PNG plots too (None: as :data:`PLOTS_ENV` says)."""
     run_dir = Path(run_dir)
+    if plots is None:
+        plots = plots_from_env()
     run = _read_run(run_dir, keys, cap_n)
     report: dict[str, Any] = {"schema": SCHEMA, "run_dir": run_dir.name}
     report.update(_progress_section(run))
@@ -108,7 +126,8 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report["outcome"] = _outcome(report["final_phase"], report["dirt_removed_fraction"], run.launcher.get("outcome"))
     report["services"] = run.launcher.get("services", {})
     report["counters"] = _counters_section(run)
-    report["plots"] = write_plots(run_dir, run.rec, run.keys, run.tr, run.col, run.truth, run.stains_msgs)
+    report["plots"] = write_plots(run_dir, run.rec, run.keys, run.tr, run.col, run.truth, run.stains_msgs) \
+        if plots else []
     return report
 
 

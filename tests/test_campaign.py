@@ -221,6 +221,13 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     md = (out / "campaign.md").read_text()
     assert "| all fixed | 1 | 100% |" in md and "| all adaptive | 1 | 100% |" in md and "wall-s0-n1-adaptive" in md
     assert (out / "campaign.png").stat().st_size > 10_000
+    # a campaign's cell writes report.json without plots; lamps report draws them from its recording
+    cell_dir = Path(result["cells"][0]["run_dir"])
+    assert report["plots"] == [] and not list(cell_dir.glob("*.png"))
+    drawn = subprocess.run([sys.executable, "-m", "interfaces.cli", "report", str(cell_dir)], cwd=REPO,
+                           capture_output=True, text=True, env={**os.environ, "MPLBACKEND": "Agg"}, timeout=300)
+    assert drawn.returncode == 0, drawn.stderr[-2000:]
+    assert len(json.loads((cell_dir / "report.json").read_text())["plots"]) >= 3 and list(cell_dir.glob("*.png"))
     again = _campaign("--summarize", str(out), "--out", str(tmp_path / "joint"))
     assert again.returncode == 0, again.stderr
     joint = json.loads((tmp_path / "joint" / "campaign.json").read_text())
@@ -241,7 +248,7 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     try:
         on_ray = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed",
                            "--jobs", "2", "--skill", str(learned_skill_file), "--out", str(tmp_path / "on-ray"),
-                           "--ray", f"127.0.0.1:{port}", "--no-network", env=env)
+                           "--ray", f"127.0.0.1:{port}", "--no-network", "--cell-plots", env=env)
     finally:
         subprocess.run([ray_bin, "stop", "--force"], capture_output=True, env=env, timeout=120)
     assert on_ray.returncode == 0, on_ray.stdout[-2000:] + on_ray.stderr[-2000:]
@@ -253,6 +260,7 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
         want = local[c["name"]]
         assert {k: c[k] for k in same} == {k: want[k] for k in same}, (c, want)
         assert (Path(c["run_dir"]) / "report.json").is_file()
+        assert list(Path(c["run_dir"]).glob("*.png"))  # --cell-plots reaches the cell on a Ray worker
 
     # the same cell over Zenoh (lamps up in lock-step: perception's frames land in wall time, so the robot time
     # spreads, more on a loaded machine: 20 % longer at two test workers): the same outcome, the dirt removed
@@ -262,6 +270,7 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     assert zenoh.returncode == 0, zenoh.stdout[-2000:] + zenoh.stderr[-2000:]
     result_z = json.loads((tmp_path / "zenoh" / "campaign.json").read_text())
     assert result_z["network"] is True and result["network"] is False
+    assert not list(Path(result_z["cells"][0]["run_dir"]).glob("*.png"))  # the recorder's report drew none
     (c,), want = result_z["cells"], local["wall-s0-n1"]
     assert (c["outcome"], c["faults"]) == (want["outcome"], want["faults"]), (c, want)
     assert abs(c["dirt_removed"] - want["dirt_removed"]) < 0.005, (c, want)

@@ -67,3 +67,18 @@ def test_a_junction_with_a_held_tick_is_not_the_skills_step():
     stepped = tr.copy()
     stepped[j:, 1] += 0.3  # the skill's own step at the junction, scale untouched
     assert _junction_steps(stepped, col)[1] > 10.0
+
+
+def test_reports_draw_plots_unless_the_environment_says_0_and_another_value_is_named(monkeypatch):
+    import pytest
+
+    from launch.report import PLOTS_ENV, plots_from_env
+
+    for value, want in (("", True), ("1", True), ("0", False), ("false", False), ("yes", True)):
+        monkeypatch.setenv(PLOTS_ENV, value)
+        assert plots_from_env() is want
+    monkeypatch.delenv(PLOTS_ENV)
+    assert plots_from_env() is True
+    monkeypatch.setenv(PLOTS_ENV, "sometimes")
+    with pytest.raises(ValueError, match="LAMPS_REPORT_PLOTS must be 0 or 1, got 'sometimes'"):
+        plots_from_env()
