@@ -164,3 +164,30 @@ def test_the_joints_table_and_its_environment_overrides_reach_the_figures(tmp_pa
 def test_sim_joint_damping_points_to_the_joints_table():
     with pytest.raises(ConfigError, match=r"joint_damping_nm_s_rad: joint friction is set per joint in the \[joints\]"):
         SimParams.from_table({"joint_damping_nm_s_rad": 0.2})
+
+
+def test_the_brake_stops_every_joint_together_over_its_stop_time_and_then_holds():
+    """sim.robot.BRAKE_STOP_S: each joint's speed falls from what it was to zero along one ramp, all joints in
+    proportion (the arm stays on its path, a path-maintaining stop), and then the arm stands; a brake that locked
+    every joint within a step pressed a wiping pad into the board for that step (36 N at 10 N wiping)."""
+    from interfaces.messages import HOLD
+    from sim.robot import BRAKE_STOP_S
+
+    sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
+    try:
+        push = np.array([4.0, -6.0, 3.0, 5.0, -2.0, 1.5, 1.0])  # the arm swings away from its start in free space
+        for _ in range(150):
+            sim.step(push)
+        dq0 = sim.out.dq.copy()
+        assert np.abs(dq0).max() > 0.3
+        steps = int(round(BRAKE_STOP_S / sim.params.dt_s))
+        speeds = []
+        for _ in range(steps + 30):
+            sim.step(HOLD)
+            speeds.append(sim.out.dq.copy())
+    finally:
+        sim.close()
+    for k in (steps // 4, steps // 2, 3 * steps // 4):  # on the ramp: the same share of every joint's speed
+        want = dq0 * (1.0 - (k + 1) / steps)
+        assert np.abs(speeds[k] - want).max() < 0.05 * np.abs(dq0).max(), (k, speeds[k], want)
+    assert np.abs(speeds[steps + 5]).max() < 1e-3 and np.abs(speeds[-1]).max() < 1e-3  # then it stands
