@@ -235,8 +235,10 @@ class ControllerCore:
         it, or it would run ahead and, released, the arm would leap to catch up
         and bounce off the board; an arm coasting on the stack's last message
         keeps the reference with it), the reference's rates at that time
-        scale, the force integral and the speed override stand, and the rate
-        limit counts from the torques last applied; a contact lost meanwhile
+        scale, the speed override drops to that pace and climbs back once
+        commands apply again (:meth:`SpeedOverride.held`: a released arm is
+        not asked to be at full speed at once), the force integral stands, and
+        the rate limit counts from the torques last applied; a contact lost meanwhile
         is not ours, so the contact-loss watch starts counting again.
         """
         self.time_s += dt_s
@@ -265,10 +267,12 @@ class ControllerCore:
             n = board.normal
             tool = self._measure_tool(board, n, kin, wrench, dt_s)
             # a held cycle's clock runs only as far as the arm went along the path (braked: it stands; coasting on
-            # the stack's last message: it keeps pace); the force integral and the override stand
+            # the stack's last message: it keeps pace) and the override drops to that pace; the force integral
+            # stands
             if robot_held:
                 step = self._held_step(tool, dt_s)
                 scale = step / dt_s if dt_s > 0 else 0.0
+                self.override.held(scale)  # released, the skill speeds up again from the pace the arm kept
             else:
                 scale = self.override.scale
                 step = self._skill_step(dt_s) * scale
@@ -309,7 +313,8 @@ class ControllerCore:
 
     def _held_step(self, tool: ToolState, dt_s: float) -> float:
         """The skill's step [s] over a held cycle: the time the reference needs at its last setpoint velocity to
-        cover the pad's in-plane progress along it since the last tick, within ``[0, dt_s x the override]``.
+        cover the pad's in-plane progress along it since the last tick, within ``[0, dt_s x the override]`` (the
+        override before the hold began).
 
         A robot that held did not run our command: braked (the sim, a robot server) it stands, and so does the
         reference; on the lbr stack it re-applies its last message, whose position target keeps the stack's PID
@@ -323,7 +328,7 @@ class ControllerCore:
         if prev is None or vv < 1e-8:
             return 0.0
         progress = float((xy[0] - prev[0]) * v[0] + (xy[1] - prev[1]) * v[1]) / vv
-        return min(max(progress, 0.0), dt_s * self.override.scale)
+        return min(max(progress, 0.0), dt_s * max(self.override.scale, self.override.resume_to))
 
     def _rate_from_applied(self, kin: Kinematics, gravity_compensated: bool) -> None:
         """Over a held cycle the rate limit counts from the torques the robot last applied, not from our answers.

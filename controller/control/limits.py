@@ -136,6 +136,9 @@ OVERRIDE_DOWN_RATE_1_S = 8.0
 OVERRIDE_JERK_FLOOR_RATE_1_S = 1.0
 #: The share of the jerk bound the override's scale changes aim at (the next acceleration is extrapolated).
 OVERRIDE_JERK_MARGIN = 0.98
+#: How fast the scale climbs back [1/s] to where it was before the robot held (:meth:`SpeedOverride.held`): from a
+#: braked arm at rest to a 0.3 m/s stroke in about 90 ms, 3 m/s^2 along the path.
+OVERRIDE_RESUME_RATE_1_S = 10.0
 
 
 class SpeedOverride:
@@ -158,6 +161,7 @@ class SpeedOverride:
     release_1_s : how fast the held peak demand falls [share/s].
     jerk_bound_m_s3 : the executed in-plane jerk the scale's changes keep to [m/s^3] (inf: no such limit).
     jerk_floor_rate_1_s : how fast the scale may fall whatever the jerk [1/s].
+    resume_rate_1_s : how fast the scale climbs back to its value before a hold [1/s] (:meth:`held`).
 
     The caller may also cap the scale with :attr:`load_cap` (a loop that cannot keep up with the robot slows the
     motion: :func:`load_scale`); the cap is reached through the same rate limits.
@@ -183,7 +187,8 @@ class SpeedOverride:
     def __init__(self, dq_max_rad_s: np.ndarray, share: float, min_scale: float = 0.05,
                  down_rate_1_s: float = OVERRIDE_DOWN_RATE_1_S, up_rate_1_s: float = 0.5, release_1_s: float = 0.5,
                  jerk_bound_m_s3: float = math.inf,
-                 jerk_floor_rate_1_s: float = OVERRIDE_JERK_FLOOR_RATE_1_S) -> None:
+                 jerk_floor_rate_1_s: float = OVERRIDE_JERK_FLOOR_RATE_1_S,
+                 resume_rate_1_s: float = OVERRIDE_RESUME_RATE_1_S) -> None:
         self.inv_dq_max = 1.0 / np.asarray(dq_max_rad_s, float)
         self.share = float(share)
         self.min_scale = float(min_scale)
@@ -198,13 +203,26 @@ class SpeedOverride:
         self.jerk_bound = float(jerk_bound_m_s3) * OVERRIDE_JERK_MARGIN
         self.jerk_floor = float(jerk_floor_rate_1_s)
         self.jerk_limited_ticks = 0
+        self.resume = float(resume_rate_1_s)
+        self.resume_to = 0.0  #: the scale before the last hold, climbed back to at ``resume`` (0: none)
         self._a_prev = self._a_prev2 = (0.0, 0.0)
         self._n_prev = 0  # accelerations seen (up to 2)
 
     def reset(self) -> None:
         self.scale = 1.0
         self.demand_share = 0.0
+        self.resume_to = 0.0
         self._n_prev = 0
+
+    def held(self, pace: float) -> None:
+        """The robot held over the last tick and the skill went at ``pace`` (its step over the tick, a share of
+        the tick in [0, scale]: a braked arm 0, one coasting on its last command about the scale): the scale
+        drops to that pace (not below ``min_scale``), and climbs back to where it was at ``resume`` per second once
+        commands apply again, so a released arm is not asked to be at full speed at once."""
+        pace = max(float(pace), self.min_scale)
+        if pace < self.scale:
+            self.resume_to = max(self.resume_to, self.scale)
+            self.scale = pace
 
     def update(self, demand_rad_s: np.ndarray, dt_s: float, accel: np.ndarray | None = None) -> float:
         """The scale for the next tick, given the joint speeds (n,) the unscaled reference needs now and, for the
@@ -216,7 +234,8 @@ class SpeedOverride:
             target = max(self.load_cap, self.min_scale)
             self.load_limited_ticks += 1
         s0 = self.scale
-        s = max(target, s0 - self.down * dt_s) if target < s0 else min(target, s0 + self.up * dt_s)
+        up = self.up if s0 >= self.resume_to else max(self.up, self.resume)
+        s = max(target, s0 - self.down * dt_s) if target < s0 else min(target, s0 + up * dt_s)
         if accel is not None:
             ax, ay = float(accel[0]), float(accel[1])
             if s != s0 and self.jerk_bound < math.inf:
@@ -231,6 +250,8 @@ class SpeedOverride:
             self._a_prev = (ax, ay)
             self._n_prev = min(self._n_prev + 1, 2)
         self.scale = s
+        if s >= self.resume_to or s >= target:  # back where it was, or where the motion now wants it
+            self.resume_to = 0.0
         if s < 1.0:
             self.slowed_ticks += 1
         return s
