@@ -50,7 +50,7 @@ def test_a_thief_with_perceptions_identity_moves_nothing_is_not_recorded_and_can
         report = cell.finish()
     assert worst < 0.5, worst
     assert report["final_phase"] == "DONE" and report["dirt_removed_fraction"] > 0.95, report["dirt_removed_fraction"]
-    assert report["max_contact_force_n"] <= report["force_cap_n"] and forced < 40.0
+    assert report["peak_contact_force_n"] <= report["force_cap_n"] and forced < 40.0
     assert report["max_joint_speed_ratio"] < 0.95, report["max_joint_speed_ratio"]
     from launch.record import read_recording
 

@@ -94,7 +94,7 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
         # nothing may have faulted, stopped or lifted the arm
         unsafe = [f for f in report["faults"] if f["phase"] != "SERVICE"]
         assert report["dirt_removed_fraction"] >= 0.98 and not unsafe, report
-        assert report["max_contact_force_n"] <= report["force_cap_n"], report
+        assert report["peak_contact_force_n"] <= report["force_cap_n"], report
         from mcap.reader import make_reader
 
         with open(run / "recording.mcap", "rb") as f:

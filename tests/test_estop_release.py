@@ -49,5 +49,5 @@ def test_an_operator_estop_and_release_end_in_wiping_again(tmp_path, learned_ski
             time.sleep(1.0)
             assert cell.phases[-1][1] != "ESTOP", cell.phases[-6:]
         report = cell.finish()
-    assert report["max_contact_force_n"] <= report["force_cap_n"], report["max_contact_force_n"]
+    assert report["peak_contact_force_n"] <= report["force_cap_n"], report["peak_contact_force_n"]
     assert sum(1 for f in report["faults"] if f["phase"] == "ESTOP") >= 2, report["faults"]

@@ -33,7 +33,9 @@ def _reasons(report: dict, phase: str) -> list[str]:
 
 
 def _assert_safe(report: dict) -> None:
-    assert report["max_contact_force_n"] <= report["force_cap_n"], report["max_contact_force_n"]
+    # the true contact force over every physics step (not only its 10 Hz samples): a brake's stop or a release
+    # lasts a few ms and the samples miss it
+    assert report["peak_contact_force_n"] <= report["force_cap_n"], report["peak_contact_force_n"]
     assert report["time_above_cap_s"] == 0.0, report["time_above_cap_s"]
     assert 0.0 < report["max_joint_speed_ratio"] < 1.0, report["max_joint_speed_ratio"]
     assert all(f["wall_ns"] > 0 and f["reason"] for f in report["faults"]), report["faults"]
