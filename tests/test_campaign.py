@@ -9,6 +9,7 @@ import secrets
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -179,8 +180,9 @@ def test_bad_options_are_one_line_errors_before_anything_runs(tmp_path, args, ma
 def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the_table(tmp_path, learned_skill_file):
     """One seeded one-stain cell on the wall board, fixed then adaptive, each a whole network-free cell in
     lock-step; the campaign is killed while the second runs (the table holds the first), ``--resume`` runs only
-    the second; then --summarize tables the campaign again from its folder. The fixed cell again on a Ray
-    cluster gives the very same result (a network-free cell is deterministic for its seed), and as a Zenoh cell
+    the second; then --summarize tables the campaign again from its folder. The two cells again as a campaign on
+    a Ray cluster of two workers give the very same results (a network-free cell is deterministic for its seed),
+    each drawing its plots (``--cell-plots``); and the fixed cell as a Zenoh cell
     (``lamps up``) the same outcome and dirt removed within 0.5 points."""
     out = tmp_path / "campaign"
     args = ["--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed,adaptive", "--jobs", "1",
@@ -188,15 +190,22 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "campaign", *args], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
                             env={**os.environ, "MPLBACKEND": "Agg"})
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)  # what it printed so far
+    reader.start()
     try:
         deadline = time.monotonic() + 600
-        while not (out / "campaign.json").is_file() or not (out / "cells" / "wall-s0-n1-adaptive").is_dir():
-            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[0][-2000:]
-            time.sleep(0.5)
+        # the first cell's progress line out (its table written just before) and the second cell's folder made
+        while not any("[1/2 done" in line for line in lines) \
+                or not (out / "cells" / "wall-s0-n1-adaptive").is_dir():
+            assert proc.poll() is None and time.monotonic() < deadline, "".join(lines)[-2000:]
+            time.sleep(0.2)
         time.sleep(2.0)  # the second cell under way
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
-        printed = proc.communicate()[0]
+        proc.wait()
+        reader.join(10.0)
+    printed = "".join(lines)
     assert "[1/2 done, 0 failed" in printed and "s left] wall-s0-n1:" in printed, printed[-2000:]
     half = json.loads((out / "campaign.json").read_text())
     assert [c["name"] for c in half["cells"]] == ["wall-s0-n1"]  # what it finished, kept
@@ -235,7 +244,7 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     twice = _campaign("--summarize", str(out), str(out), "--out", str(tmp_path / "twice"))
     assert twice.returncode == 1 and "share cells (wall-s0-n1)" in twice.stderr
 
-    # the fixed cell again as a task on a Ray cluster started with `ray start --head`: the same results
+    # both cells again as tasks on a Ray cluster started with `ray start --head` (two workers): the same results
     port = free_port()
     ray_bin = str(Path(sys.executable).parent / "ray")
     # token authentication on, the token given to the cluster and the campaign (Ray's RAY_AUTH_TOKEN)
@@ -246,14 +255,14 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
                            capture_output=True, text=True, env=env, timeout=180)
     assert start.returncode == 0, start.stderr[-2000:]
     try:
-        on_ray = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed",
+        on_ray = _campaign("--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed,adaptive",
                            "--jobs", "2", "--skill", str(learned_skill_file), "--out", str(tmp_path / "on-ray"),
                            "--ray", f"127.0.0.1:{port}", "--no-network", "--cell-plots", env=env)
     finally:
         subprocess.run([ray_bin, "stop", "--force"], capture_output=True, env=env, timeout=120)
     assert on_ray.returncode == 0, on_ray.stdout[-2000:] + on_ray.stderr[-2000:]
     ray_cells = json.loads((tmp_path / "on-ray" / "campaign.json").read_text())["cells"]
-    assert [c["name"] for c in ray_cells] == ["wall-s0-n1"]
+    assert sorted(c["name"] for c in ray_cells) == ["wall-s0-n1", "wall-s0-n1-adaptive"]
     local = {c["name"]: c for c in result["cells"]}
     same = ("outcome", "faults", "dirt_removed", "robot_time_s", "peak_contact_force_n")
     for c in ray_cells:

@@ -110,7 +110,8 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
         # Docker's start order is lamps up's: each after the one it needs was healthy
         names = {s: f"{project}-{s}-1" for s in ("sim", "controller", "perception", "recorder", "foxglove")}
         started = {s: _started(c) for s, c in names.items()}
-        assert started["sim"] < started["controller"] < started["perception"] < started["recorder"], started
+        assert started["sim"] < started["controller"] < started["perception"], started
+        assert started["recorder"] < started["controller"], started  # recording before the robot can move
         assert started["perception"] < started["foxglove"], started
     finally:
         down = _compose(project, env, "down", "--volumes", "--remove-orphans", "--timeout", "30", timeout=300)

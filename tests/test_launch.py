@@ -68,7 +68,8 @@ def test_compose_file_describes_the_cell_with_explicit_endpoints_and_multicast_o
         on = active(services, (profile,))
         assert [s.name for s in on if "robot" in s.aliases] == [robot], profile
         order = [s.name for s in on]
-        assert order.index(robot) < order.index("controller") < order.index("perception") < order.index("recorder")
+        # the recorder first: listening before the robot moves
+        assert order.index("recorder") < order.index(robot) < order.index("controller") < order.index("perception")
     assert [s.name for s in active(services, ("lbr-sim",)) if "camera" in s.aliases] == ["lbr-peer"]
     assert services["robot-lbr-sim"].environment["LAMPS__LBR__ARM"] == "true"  # the peer's operator has started
     assert services["robot-lbr"].environment["LAMPS__LBR__ARM"] == "false"  # a real robot is armed by a person
@@ -206,7 +207,8 @@ def test_a_broken_compose_file_is_refused_with_the_reason(tmp_path, text, match)
 
 def test_a_connect_to_a_service_that_is_not_there_is_named():
     # the real profile's bridge is compose's alone (its own image): as local processes the adapter has nobody
-    services = run_locally(active(load_compose(COMPOSE, {}), ("real",)))
+    # (the real profile's camera is the user's: here its endpoint is the robot's, so the bridge is what is missing)
+    services = run_locally(active(load_compose(COMPOSE, {"LAMPS_CAMERA_ENDPOINT": "tls/robot:7447"}), ("real",)))
     with pytest.raises(ConfigError, match="'robot-lbr' connects to 'tls/bridge:7447', but no active service"):
         localize(services)
 
