@@ -98,8 +98,8 @@ def test_docker_compose_through_the_router_cleans_a_board_and_perception_cannot_
         assert "listening on tls/0.0.0.0:7447" in _compose(project, env, "logs", "router").stdout
         # the liveliness healthchecks gave the start order
         started = {s: _started(f"{project}-{s}-1") for s in ("router", "sim", "controller", "perception", "recorder")}
-        assert started["router"] < started["sim"] < started["controller"] < started["perception"] \
-            < started["recorder"], started
+        assert started["router"] < started["sim"] < started["controller"] < started["perception"], started
+        assert started["router"] < started["recorder"] < started["controller"], started  # recording before motion
     finally:
         down = _compose(project, env, "down", "--volumes", "--remove-orphans", "--timeout", "30", timeout=300)
         assert down.returncode == 0, down.stderr
