@@ -33,7 +33,13 @@ def _clip(v, limit) -> None:
 
 
 def numpy_law(k, q, dq, ref, params, q_rest, add_gravity, shaping, modes):
-    """(tau, F, e, de, tau_null) of the impedance law with the terms ``k`` of :func:`numpy_kinematics`."""
+    """(tau, F, e, de, tau_null, slack) of the impedance law with the terms ``k`` of :func:`numpy_kinematics`.
+
+    ``slack`` bounds, for tau and tau_null, the rounding the null-space projection can leave [N m]: it
+    subtracts from tau0 a term of the same size, through Lambda, whose inverse (J M^-1 J^T) reaches a
+    condition number of 1e8 near a singular pose; two formulations agree there only to
+    eps * cond * size, not to rounding of the (smaller) difference.
+    """
     e = np.concatenate([ref.p_m - k["p"], pin.log3(ref.R @ k["R"].T)])
     _clip(e[:3], shaping.max_position_error_m)
     _clip(e[3:], shaping.max_rotation_error_rad)
@@ -52,11 +58,15 @@ def numpy_law(k, q, dq, ref, params, q_rest, add_gravity, shaping, modes):
         F[:3] += shaping.extra_force_n
     kn = params.nullspace_stiffness_nm_rad
     tau0 = k["M"] @ (kn * (q_rest - q) - 2.0 * np.sqrt(kn) * dq)
-    tau_null = tau0 - k["J"].T @ (Lam @ (k["J"] @ (k["M_inv"] @ tau0)))
-    tau = k["J"].T @ F + tau_null + k["nle"]
+    projected = k["J"].T @ (Lam @ (k["J"] @ (k["M_inv"] @ tau0)))
+    tau_null = tau0 - projected
+    task = k["J"].T @ F
+    tau = task + tau_null + k["nle"]
     if not add_gravity:
         tau -= k["g"]
-    return tau, F, e, de, tau_null
+    cond = np.linalg.cond(k["J"] @ k["M_inv"] @ k["J"].T + 1e-6 * np.eye(6))
+    bound = 4.0 * np.finfo(float).eps * cond * max(np.abs(tau0).max(), np.abs(projected).max())
+    return tau, F, e, de, tau_null, {"tau": bound, "tau_null": bound}
 
 
 def numpy_modes(Lam, K, zeta, cap):

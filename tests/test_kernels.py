@@ -11,6 +11,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+import zlib
 
 import numpy as np
 import pinocchio as pin
@@ -26,7 +27,12 @@ from interfaces.robot_model import RobotModel
 
 from .numpy_law import numpy_kinematics, numpy_law, numpy_modes
 
-RNG = np.random.default_rng(7)
+
+
+@pytest.fixture
+def rng(request):
+    """A generator of the test's own, seeded by its id: a failure reproduces whichever worker ran it."""
+    return np.random.default_rng(zlib.crc32(request.node.nodeid.encode()))
 
 
 @pytest.fixture(scope="module")
@@ -42,9 +48,9 @@ def _random_state(model, rng):
 
 # ---------------------------------------------------------------------------------------------- the kernels
 @pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-5, 1e-3, 0.4, 1.5, 2.9, np.pi - 2e-3, np.pi - 1e-5, np.pi])
-def test_log3_matches_pinocchio_over_the_whole_range(angle):
+def test_log3_matches_pinocchio_over_the_whole_range(angle, rng):
     for _ in range(20):
-        axis = RNG.normal(size=3)
+        axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
         R = pin.exp3(angle * axis)
         out = np.zeros(3)
@@ -56,9 +62,9 @@ def test_log3_matches_pinocchio_over_the_whole_range(angle):
             np.testing.assert_allclose(out, ref, atol=1e-12)
 
 
-def test_spd_inverse_matches_numpy_and_refuses_an_indefinite_matrix():
+def test_spd_inverse_matches_numpy_and_refuses_an_indefinite_matrix(rng):
     for _ in range(50):
-        X = RNG.normal(size=(6, 6))
+        X = rng.normal(size=(6, 6))
         A = X @ X.T + 1e-3 * np.eye(6)
         out, L = np.zeros((6, 6)), np.zeros((6, 6))
         assert kernels.spd_inverse_into(A, out, L)
@@ -66,10 +72,10 @@ def test_spd_inverse_matches_numpy_and_refuses_an_indefinite_matrix():
     assert not kernels.spd_inverse_into(-np.eye(6), out, L)
 
 
-def test_kinematics_equal_the_numpy_formulation(model):
+def test_kinematics_equal_the_numpy_formulation(model, rng):
     kin = Kinematics(model)
     for _ in range(30):
-        q, dq = _random_state(model, RNG)
+        q, dq = _random_state(model, rng)
         kin.update(q, dq)
         ref = numpy_kinematics(model, q, dq)
         for name, want in ref.items():
@@ -81,31 +87,33 @@ def test_kinematics_equal_the_numpy_formulation(model):
 @pytest.mark.parametrize("axis", [False, True])
 @pytest.mark.parametrize("extra", [False, True])
 @pytest.mark.parametrize("gravity", [False, True])
-def test_the_impedance_law_equals_the_numpy_formulation(model, axis, extra, gravity):
+def test_the_impedance_law_equals_the_numpy_formulation(model, axis, extra, gravity, rng):
     params = ImpedanceParams(nullspace_stiffness_nm_rad=30.0)
     kin = Kinematics(model)
     for _ in range(20):
-        q, dq = _random_state(model, RNG)
+        q, dq = _random_state(model, rng)
         kin.update(q, dq)
-        ref = Reference(kin.p + RNG.normal(0, 0.03, 3), pin.exp3(RNG.normal(0, 0.3, 3)) @ kin.R,
-                        RNG.normal(0, 0.2, 6), RNG.normal(0, 2.0, 6))
-        n = RNG.normal(size=3)
+        ref = Reference(kin.p + rng.normal(0, 0.03, 3), pin.exp3(rng.normal(0, 0.3, 3)) @ kin.R,
+                        rng.normal(0, 0.2, 6), rng.normal(0, 2.0, 6))
+        n = rng.normal(size=3)
         shaping = TaskShaping(force_axis=n / np.linalg.norm(n) if axis else None, press_n=8.0,
                               normal_damping_1_s=20.0, stiffness_scale=0.7, max_position_error_m=0.02,
-                              max_rotation_error_rad=0.2, extra_force_n=RNG.normal(0, 5, 3) if extra else None)
+                              max_rotation_error_rad=0.2, extra_force_n=rng.normal(0, 5, 3) if extra else None)
         modes = task_modes(kin.Lambda, task_stiffness(params, 0.7), params.damping_factor, 80.0)
-        q_rest = q + RNG.normal(0, 0.2, model.nq)
+        q_rest = q + rng.normal(0, 0.2, model.nq)
         terms = impedance_torque(model, q, dq, ref, params, q_rest, gravity, shaping, kin, modes)
-        want = numpy_law(numpy_kinematics(model, q, dq), q, dq, ref, params, q_rest, gravity, shaping, modes)
+        *want, slack = numpy_law(numpy_kinematics(model, q, dq), q, dq, ref, params, q_rest, gravity, shaping,
+                                 modes)
         for got, w, name in zip((terms.tau_nm, terms.wrench_task, terms.pose_error, terms.twist_error,
                                  terms.tau_nullspace), want, ("tau", "F", "e", "de", "tau_null")):
-            np.testing.assert_allclose(got, w, rtol=1e-9, atol=1e-9 * max(1.0, np.abs(w).max()), err_msg=name)
+            atol = 1e-9 * max(1.0, np.abs(w).max()) + slack.get(name, 0.0)  # + what the pose's conditioning allows
+            np.testing.assert_allclose(got, w, rtol=1e-9, atol=atol, err_msg=name)
 
 
-def test_task_modes_give_the_numpy_stiffness_and_damping(model):
+def test_task_modes_give_the_numpy_stiffness_and_damping(model, rng):
     kin = Kinematics(model)
     for cap in (40.0, 120.0, 1e6):
-        q, dq = _random_state(model, RNG)
+        q, dq = _random_state(model, rng)
         kin.update(q, dq)
         K = task_stiffness(ImpedanceParams())
         modes = task_modes(kin.Lambda, K, 0.8, cap)
@@ -114,18 +122,18 @@ def test_task_modes_give_the_numpy_stiffness_and_damping(model):
         np.testing.assert_allclose(modes.damping(), D_want, rtol=1e-8, atol=1e-8 * np.abs(D_want).max())
 
 
-def test_limits_equal_the_numpy_formulation(model):
+def test_limits_equal_the_numpy_formulation(model, rng):
     lim = model.limits
     n = model.nq
     for gravity in (False, True):
         shaper = TorqueShaper(lim.tau_max, 1000.0)
-        prev = RNG.normal(0, 20, n)
+        prev = rng.normal(0, 20, n)
         shaper.prev[:] = prev
-        q = lim.q_max - RNG.uniform(0.0, 0.2, n)  # some joints inside the margin
-        dq = RNG.normal(0, 1.5, n)
-        tau = RNG.normal(0, 60, n)
-        M_diag = RNG.uniform(0.05, 2.0, n)
-        g = RNG.normal(0, 30, n)
+        q = lim.q_max - rng.uniform(0.0, 0.2, n)  # some joints inside the margin
+        dq = rng.normal(0, 1.5, n)
+        tau = rng.normal(0, 60, n)
+        M_diag = rng.uniform(0.05, 2.0, n)
+        g = rng.normal(0, 30, n)
         onset = 0.8 * lim.dq_max
         # numpy: repulsion, brake, then the rate limit on tau - g and the absolute limit on the sum
         lo_d = np.clip(lim.q_min + 0.1 - q, 0.0, None)
@@ -145,24 +153,24 @@ def test_limits_equal_the_numpy_formulation(model):
         assert hit & 1  # 60 Nm from a random previous command is always more than 1 Nm away
 
 
-def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model):
+def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model, rng):
     kin = Kinematics(model)
-    q, dq = _random_state(model, RNG)
+    q, dq = _random_state(model, rng)
     kin.update(q, dq)
     n = model.nq
     # disturbance: one low-pass step of M (dq - dq_prev) / dt + nle - applied - J^T w
     watch = DisturbanceWatch(np.full(n, 30.0), 0.02, 0.05)
-    dq_prev = dq + RNG.normal(0, 0.01, n)
+    dq_prev = dq + rng.normal(0, 0.01, n)
     watch.skip(dq_prev)
-    applied, wrench = RNG.normal(0, 10, n), RNG.normal(0, 5, 6)
+    applied, wrench = rng.normal(0, 10, n), rng.normal(0, 5, 6)
     watch.update(kin.M, kin.nle, kin.J, dq, applied, wrench, 0.001)
     raw = kin.M @ ((dq - dq_prev) / 0.001) + kin.nle - applied - kin.J.T @ wrench
     np.testing.assert_allclose(watch.tau_d, raw * (0.001 / 0.021), rtol=1e-10)
     # reference of a board-frame setpoint, time-scaled
-    Rb = pin.exp3(RNG.normal(0, 1, 3))
-    origin = RNG.normal(0, 1, 3)
-    xy, v, a = RNG.normal(size=2), RNG.normal(size=2), RNG.normal(size=2)
-    om, dom = RNG.normal(size=3), RNG.normal(size=3)
+    Rb = pin.exp3(rng.normal(0, 1, 3))
+    origin = rng.normal(0, 1, 3)
+    xy, v, a = rng.normal(size=2), rng.normal(size=2), rng.normal(size=2)
+    om, dom = rng.normal(size=3), rng.normal(size=3)
     p, R, tw, ac = np.zeros(3), np.zeros((3, 3)), np.zeros(6), np.zeros(6)
     kernels.reference_into(origin, Rb, xy, 0.01, v, 0.2, a, 0.3, Rb, om, dom, 0.6, p, R, tw, ac)
     np.testing.assert_allclose(p, origin + Rb @ np.r_[xy, 0.01], atol=1e-14)
