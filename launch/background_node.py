@@ -24,11 +24,11 @@ def open_background_node(prog: str, service: str, args, cells: tuple[str, ...] =
     the node's own keys, its liveliness token, the first cell's); () keeps the configured ones.
     """
     from interfaces.config import load_config, zenoh_with_options
-    from interfaces.priority import BACKGROUND, set_service_priority
+    from interfaces.priority import BACKGROUND, set_service_priority, stop_handler
 
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, stop_handler(stop))  # which also leaves the background priority
+    signal.signal(signal.SIGINT, stop_handler(stop))
     try:
         settings = zenoh_with_options(load_config(args.config).zenoh, args)
         if cells or settings.cells:

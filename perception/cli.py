@@ -24,7 +24,7 @@ import msgspec
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
-from interfaces.priority import BACKGROUND, set_service_priority, wanted_nice
+from interfaces.priority import BACKGROUND, set_service_priority, stop_handler, wanted_nice
 
 from .params import PerceptionParams, parse_source
 
@@ -191,8 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     if debug_dir and params.debug_images:
         os.makedirs(debug_dir, exist_ok=True)
     service = PerceptionService(params, node, source, sink, debug_dir if params.debug_images else None)
-    signal.signal(signal.SIGTERM, lambda *_: service.stop.set())
-    signal.signal(signal.SIGINT, lambda *_: service.stop.set())
+    signal.signal(signal.SIGTERM, stop_handler(service.stop))  # which also leaves the background priority
+    signal.signal(signal.SIGINT, stop_handler(service.stop))
     try:
         frames = service.run()
     finally:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 
@@ -82,3 +83,45 @@ def test_a_check_run_leaves_the_callers_priority_alone():
     before = os.getpriority(os.PRIO_PROCESS, 0)
     assert cli.main(["--board", "table", "--check"]) == 0
     assert os.getpriority(os.PRIO_PROCESS, 0) == before
+
+
+# A background service waiting for its stop: a second thread, the SIGTERM handler of interfaces.priority; prints
+# "ready", then, once stopped, every thread's nice value.
+STOP_PROBE = """
+import json, os, signal, sys, threading
+from interfaces.priority import BACKGROUND, set_service_priority, stop_handler
+if os.geteuid() == 0:
+    os.setpriority(os.PRIO_PROCESS, 0, 0)
+if len(sys.argv) > 1:
+    os.setgid(65534); os.setuid(65534)  # an unprivileged user: no CAP_SYS_NICE
+stop, done = threading.Event(), threading.Event()
+worker = threading.Thread(target=done.wait, daemon=True); worker.start()
+set_service_priority(BACKGROUND)
+signal.signal(signal.SIGTERM, stop_handler(stop))
+print("ready", os.getpriority(os.PRIO_PROCESS, 0), flush=True)
+stopped = stop.wait(60)
+print(json.dumps({"stopped": stopped, "main": os.getpriority(os.PRIO_PROCESS, 0),
+                  "worker": os.getpriority(os.PRIO_PROCESS, worker.native_id)}), flush=True)
+done.set()
+"""
+
+
+def _stopped_background(*extra: str) -> dict:
+    p = subprocess.Popen([sys.executable, "-c", STOP_PROBE, *extra], cwd=REPO, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().split() == ["ready", "10"], p.stderr.read()
+        p.send_signal(signal.SIGTERM)
+        out, err = p.communicate(timeout=60)
+    finally:
+        p.kill()
+    assert p.returncode == 0, err
+    return json.loads(out)
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="raising a priority needs CAP_SYS_NICE (root here and in CI)")
+def test_a_background_service_told_to_stop_leaves_its_low_priority_with_every_thread():
+    # another cell's loops at -10 would otherwise leave its exit ~1 % of a core (a perception was killed so)
+    assert _stopped_background() == {"stopped": True, "main": 0, "worker": 0}
+    # without CAP_SYS_NICE it cannot, and still stops (the loops then run at 0, not -10, either)
+    assert _stopped_background("as-nobody") == {"stopped": True, "main": 10, "worker": 10}
