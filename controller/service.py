@@ -44,6 +44,7 @@ from .control.watch import OverloadWatch
 from .core import TRACE_COLUMNS, ControllerCore
 from .params import ControllerParams
 from .planner_thread import PlannerThread
+from .robot_holds import RobotHolds
 from .stains_in import stains_update
 
 log = logging.getLogger(__name__)
@@ -74,6 +75,7 @@ class ControllerService:
         self._trace_sent = 0
         self._trace_seq = 0
         self._last_seq = -1
+        self._holds = RobotHolds()  # a hold in the states skipped, from the robot's count
         self._last_robot_ns: int | None = None
         self._last_command: TorqueCommand | None = None
         # the torques sent for the last SENT_RING states (row seq % SENT_RING; -1: a hold), for the disturbance watch
@@ -283,7 +285,8 @@ class ControllerService:
                      self.core.mode_cap_rad_s)
         try:
             tau = self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm),
-                                 applied, robot_held=state.command_seq < 0)
+                                 applied, robot_held=self._holds.held_since_last(state.command_seq,
+                                                                                  state.held_cycles))
         except Exception as exc:  # a bug or an absurd state must not end the loop: fault, count, go on
             self.counters["tick_errors"] += 1
             log.exception("control tick failed")
@@ -439,7 +442,7 @@ class ControllerService:
                         robot_estop_engaged=int(self._robot_estop), estop_latched=int(self._estop_ours),
                         overload_slowed_ticks=core.override.load_limited_ticks,
                         override_jerk_limited_ticks=core.override.jerk_limited_ticks,
-                        skill_steps_capped=core.skill_steps_capped)
+                        skill_steps_capped=core.skill_steps_capped, robot_holds_in_skipped_states=self._holds.missed)
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
                              ("estop", self._estops), ("estop_release", self._releases)):
             if reader is None:

@@ -28,7 +28,7 @@ from interfaces.message_checks import (DETAIL_MAX, NAME_MAX, TEXT_MAX, Counters,
                                        _same_length, bounded_counters)
 
 #: Bump when a change could make an old reader misread a new message.
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 #: Commands the robot side understands.
 #: TorqueCommand modes: apply the torques, or brake and hold position (torques ignored).
@@ -129,7 +129,10 @@ class RobotState(Message, frozen=True):
     controller check that the arm moved as it was told. ``estop``: the
     robot side's own e-stop is engaged (it holds whatever is commanded until
     the operator's release reaches it); the controller keeps its phase in
-    ESTOP while it is, so the two agree.
+    ESTOP while it is, so the two agree. ``held_cycles`` counts the cycles
+    the robot side has held since it started (each state with
+    ``command_seq`` -1, once): a controller that answers only the newest
+    state still learns of a hold in the states it skipped.
     """
 
     seq: int
@@ -143,6 +146,7 @@ class RobotState(Message, frozen=True):
     wall_ns: int = 0
     command_seq: int = -1
     estop: bool = False
+    held_cycles: int = 0
 
     def __post_init__(self) -> None:
         names = ("q_rad", "dq_rad_s", "tau_nm")
@@ -155,6 +159,8 @@ class RobotState(Message, frozen=True):
             raise ValueError("capabilities.torque_limits_nm must have one entry per joint")
         if self.seq < 0:
             raise ValueError(f"seq must be >= 0, got {self.seq}")
+        if self.held_cycles < 0:
+            raise ValueError(f"held_cycles must be >= 0, got {self.held_cycles}")
 
 
 class TorqueCommand(Message, frozen=True):

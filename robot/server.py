@@ -44,7 +44,8 @@ Each state says which command the robot applied over the last cycle
 (``command_seq``, -1 for a hold); a port that finds its robot running on
 an old command (:meth:`RobotPort.applying`: the lbr adapter reads the
 robot's commanded torque) makes it -1 too, so the controller does not take
-the motion for its own.
+the motion for its own. Each also carries the count of such cycles so far
+(``held_cycles``), so a controller that skipped states still sees a hold.
 
 Every command passes the :class:`~robot.gate.CommandGate` first; undecodable
 payloads, wrong lengths, out-of-sequence answers and late commands are
@@ -124,6 +125,8 @@ class RobotServer:
         self.steps = 0
         self.braked = True
         self.applied_seq = -1  # the seq of the controller's command written in the last cycle; -1: none (a hold)
+        self.held_cycles = 0  # states published saying -1 (each seq once): RobotState.held_cycles
+        self._held_counted_seq = -1
         self._sources: list = []
         self._status_period_s = 1.0 / params.status_rate_hz
         self._next_status = 0.0
@@ -403,11 +406,16 @@ class RobotServer:
         r = self.port.read()
         if self._speed_cap is not None:
             self._watch_speed(r.dq_rad_s)
+        seq = self.steps if seq is None else seq
+        applied = self.applied_seq if self.port.applying() else -1
+        if applied < 0 and seq != self._held_counted_seq:  # a state said again (lock-step) is one cycle
+            self.held_cycles += 1
+            self._held_counted_seq = seq
         self.node.publish(self.keys.robot_state, RobotState(
-            seq=self.steps if seq is None else seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
+            seq=seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
             dq_rad_s=r.dq_rad_s.tolist(), tau_nm=r.tau_nm.tolist(), wrench_world=r.wrench_world.tolist(),
             capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns(),
-            command_seq=self.applied_seq if self.port.applying() else -1, estop=self.estop_reason is not None))
+            command_seq=applied, estop=self.estop_reason is not None, held_cycles=self.held_cycles))
 
     def _watch_speed(self, dq_rad_s: np.ndarray) -> None:
         """Set whether the next cycle must brake: a joint (n,) [rad/s] above its speed cap now or, at the change

@@ -257,12 +257,15 @@ def test_the_robot_side_holds_while_the_estop_is_engaged_whatever_is_commanded()
 def test_commands_are_bound_to_the_controller_session_served_and_each_state_says_which_it_applied():
     """A second controller (another session, even answering the right state) is dropped and counted while the one
     served keeps commanding; once that one has been silent for ``rebind_after_s`` the newcomer (a restarted
-    controller) is served. Each state names the command applied over the cycle before it (-1: a hold)."""
+    controller) is served. Each state names the command applied over the cycle before it (-1: a hold) and counts
+    the held cycles so far (a state said again while waiting is one cycle)."""
     arm = MockArm(q0_rad=np.zeros(7))
     with ServerThread(lambda node: arm, lockstep(rebind_after_s=0.3)) as srv:
-        assert srv.state_seq(0).command_seq == -1
+        first = srv.state_seq(0)
+        assert first.command_seq == -1 and first.held_cycles == 1
         srv.command(0, [1.0] * 7, session="ctl-a")
-        assert srv.state_seq(1).command_seq == 0
+        second = srv.state_seq(1)
+        assert second.command_seq == 0 and second.held_cycles == 1
         srv.command(1, [-30.0] * 7, session="ctl-b")  # the right seq, the wrong controller
         srv.command(1, [1.0] * 7, session="ctl-a")
         assert srv.state_seq(2).command_seq == 1
@@ -272,9 +275,11 @@ def test_commands_are_bound_to_the_controller_session_served_and_each_state_says
         assert "controller=ctl-a" in st.detail
         srv.command(2, [0.0] * 7, mode=HOLD, session="ctl-a")
         assert srv.state_seq(3).command_seq == -1, "a hold applies none of the controller's torques"
+        assert srv.state_seq(3).held_cycles == 2
         time.sleep(0.4)  # ctl-a silent longer than rebind_after_s: ctl-b (a restarted controller) takes over
         srv.command(3, [1.0] * 7, session="ctl-b")
-        assert srv.state_seq(4).command_seq == 3
+        fourth = srv.state_seq(4)
+        assert fourth.command_seq == 3 and fourth.held_cycles == 2, "state 3, said again while waiting, is one cycle"
         srv.command(4, [1.0] * 7, session="ctl-a")  # the old session is now the other one
         srv.command(4, [1.0] * 7, session="ctl-b")
         srv.state_seq(5)
