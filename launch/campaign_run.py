@@ -32,8 +32,8 @@ def up_argv(cell: Cell, skill: Path, run_dir: Path, max_duration_s: float, port_
 
 def cell_env(cell: Cell) -> dict[str, str]:
     """What the cell adds to the campaign's environment: its wiping mode, whether its report draws plots
-    (:data:`launch.report.PLOTS_ENV`), plots without a display."""
-    from .report import PLOTS_ENV
+    (:data:`launch.report_options.PLOTS_ENV`), plots without a display."""
+    from .report_options import PLOTS_ENV
 
     return {"MPLBACKEND": "Agg", PLOTS_ENV: "1" if cell.plots else "0",
             "LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true" if cell.wiping == "adaptive" else "false"}

@@ -55,14 +55,13 @@
   or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
 * ``services``: exit codes from the launcher (if any); ``counters``: the
   last status counters of each service; ``plots``: the PNG files written
-  (none when :data:`PLOTS_ENV` is ``0``: a campaign's cells, ``lamps report``
+  (none when :data:`~launch.report_options.PLOTS_ENV` is ``0``: a campaign's cells, ``lamps report``
   draws them later).
 """
 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +75,7 @@ from .report_faults import (_cell_faults, _faults_section, _recorder_faults, _re
                             _service_faults)
 from .report_maths import (_WIPING, _dirt_removed, _junction_steps, _motion_peaks, cap_watch_force, final_retreat,
                            job_end, phase_times, skill_start)
+from .report_options import plots_from_env
 from .report_plots import write_plots
 from .report_run import _Run, _read_run, _topic
 
@@ -84,24 +84,13 @@ SCHEMA = "lamps-run-report/1"
 CLEANED_FRACTION = 0.95
 #: A stain counts as wiped in the truth at or below this remaining fraction (perception's kappa level).
 TRUTH_LEVEL = 0.03
-#: ``0`` in the environment: the report of a run (the recorder's, ``lamps up``'s) draws no plots (``1``, unset: it
-#: does); a campaign sets it per cell (``lamps campaign --cell-plots``). ``lamps report`` always draws them.
-PLOTS_ENV = "LAMPS_REPORT_PLOTS"
 _OUTCOME_RANK = {"cleaned": 0, "incomplete": 1, "timeout": 2, "stopped": 2, "fault": 3, "failed": 4}
-
-
-def plots_from_env() -> bool:
-    """Whether reports draw their plots, from :data:`PLOTS_ENV` (ValueError naming it for another value)."""
-    raw = os.environ.get(PLOTS_ENV, "").strip().lower()
-    if raw not in ("", "0", "1", "true", "false", "yes", "no"):
-        raise ValueError(f"{PLOTS_ENV} must be 0 or 1, got {raw!r}")
-    return raw not in ("0", "false", "no")
 
 
 def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None,
                  plots: bool | None = None) -> dict[str, Any]:
     """The report of ``run_dir`` from its ``recording.mcap`` (and ``run.json`` from the launcher, if there);
-    ``plots``: draw the PNG plots too (None: as :data:`PLOTS_ENV` says)."""
+    ``plots``: draw the PNG plots too (None: as :data:`~launch.report_options.PLOTS_ENV` says)."""
     run_dir = Path(run_dir)
     if plots is None:
         plots = plots_from_env()

@@ -72,7 +72,7 @@ def test_a_junction_with_a_held_tick_is_not_the_skills_step():
 def test_reports_draw_plots_unless_the_environment_says_0_and_another_value_is_named(monkeypatch):
     import pytest
 
-    from launch.report import PLOTS_ENV, plots_from_env
+    from launch.report_options import PLOTS_ENV, plots_from_env
 
     for value, want in (("", True), ("1", True), ("0", False), ("false", False), ("yes", True)):
         monkeypatch.setenv(PLOTS_ENV, value)
