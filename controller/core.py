@@ -217,7 +217,7 @@ class ControllerCore:
 
     def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
              dt_s: float, tau_max_nm: np.ndarray | None = None, applied_nm: np.ndarray | None = None,
-             robot_held: bool = False) -> np.ndarray:
+             robot_held: bool = False, running_nm: np.ndarray | None = None) -> np.ndarray:
         """Torques (7,) [Nm] to send for the measured state (an internal buffer: copy to keep).
 
         q, dq : (7,) [rad], [rad/s]; wrench : (6,) contact wrench on the pad
@@ -239,7 +239,10 @@ class ControllerCore:
         commands apply again (:meth:`SpeedOverride.held`: a released arm is
         not asked to be at full speed at once), the force integral stands, and
         the rate limit counts from the torques last applied; a contact lost meanwhile
-        is not ours, so the contact-loss watch starts counting again.
+        is not ours, so the contact-loss watch starts counting again;
+        running_nm : (7,) the torques of the command the robot ran on over the
+        last cycle when ``applied_nm`` is None for states skipped since (the
+        robot's count said it held in one of them): where the rate limit counts from.
         """
         self.time_s += dt_s
         self._q[:] = q  # the compiled law sees the same array types every tick (no recompilation)
@@ -253,8 +256,9 @@ class ControllerCore:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
         self._watch_disturbance(kin, dq, wrench, gravity_compensated, dt_s, applied_nm)
-        if applied_nm is not None:
-            self._last_applied[:] = applied_nm
+        known = applied_nm if applied_nm is not None else running_nm
+        if known is not None:
+            self._last_applied[:] = known
             self._applied_known = True
         if robot_held:
             self.contact_watch.lost_s = 0.0

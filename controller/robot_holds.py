@@ -26,6 +26,10 @@ class RobotHolds:
         self._seen: int | None = None
         self.missed = 0
 
+    def reset(self) -> None:
+        """A robot side back after a loss or a restart: its next state sets the count afresh."""
+        self._seen = None
+
     def held_since_last(self, command_seq: int, held_cycles: int) -> bool:
         """True if the robot held over any cycle since the last state passed here: this state's (``command_seq``
         < 0) or one in between (``held_cycles`` grew by more than this state accounts for). The first state and a

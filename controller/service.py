@@ -286,7 +286,8 @@ class ControllerService:
         try:
             tau = self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm),
                                  applied, robot_held=self._holds.held_since_last(state.command_seq,
-                                                                                  state.held_cycles))
+                                                                                  state.held_cycles),
+                                 running_nm=self._running(state) if applied is None else None)
         except Exception as exc:  # a bug or an absurd state must not end the loop: fault, count, go on
             self.counters["tick_errors"] += 1
             log.exception("control tick failed")
@@ -303,8 +304,15 @@ class ControllerService:
     def _applied(self, state: RobotState) -> np.ndarray | None:
         """The torques of ours the robot applied between the last answered state and ``state``; None when that is
         not one known command (a hold, a state in between not seen, an answer no longer kept)."""
+        if self._last_seq < 0 or state.seq != self._last_seq + 1:
+            return None
+        return self._running(state)
+
+    def _running(self, state: RobotState) -> np.ndarray | None:
+        """The torques of the command the robot ran on over the cycle before ``state`` (states skipped or not), if
+        it is one of ours still kept; None for a hold."""
         c = state.command_seq
-        if c < 0 or self._last_seq < 0 or state.seq != self._last_seq + 1:
+        if c < 0:
             return None
         row = c % SENT_RING
         return self._sent_tau[row] if self._sent_seq[row] == c else None
@@ -373,6 +381,7 @@ class ControllerService:
         self._last_seq = -1
         self._last_command = None
         self._sent_seq[:] = -1  # a new robot counts its states from 0 again
+        self._holds.reset()  # and its held cycles
         self._stains_clock = None  # a new sim's clock starts again
         self.core.restart()
 

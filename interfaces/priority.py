@@ -52,6 +52,9 @@ STOPPING_NICE = 0
 REPORT = ""
 #: The kind of service this process was set up as by :func:`set_service_priority` ("" before: a test, a tool).
 KIND = ""
+#: :func:`set_service_priority` stepped this process back to :data:`BACKGROUND_NICE` by default (not by
+#: ``LAMPS_NICE``, whose value is the user's): what :func:`leave_background` may undo.
+_STEPPED_BACK = False
 
 
 def wanted_nice(kind: str, env: dict | os._Environ | None = None) -> int | None:
@@ -89,8 +92,9 @@ def set_service_priority(kind: str, env: dict | os._Environ | None = None) -> st
 
     Raises ConfigError for a bad ``LAMPS_NICE``; a refusal by the operating system is reported, not raised.
     """
-    global REPORT, KIND
+    global REPORT, KIND, _STEPPED_BACK
     wanted = wanted_nice(kind, env)
+    _STEPPED_BACK = False
     KIND = kind
     now = os.getpriority(os.PRIO_PROCESS, 0)
     if wanted is None or wanted == now:
@@ -103,6 +107,8 @@ def set_service_priority(kind: str, env: dict | os._Environ | None = None) -> st
                 except ProcessLookupError:
                     pass  # a thread that ended meanwhile
             REPORT = f"nice {wanted}"
+            given = (os.environ if env is None else env).get("LAMPS_NICE", "").strip()
+            _STEPPED_BACK = kind == BACKGROUND and not given
         except PermissionError:
             REPORT = f"nice {now} (asked {wanted}: refused, needs CAP_SYS_NICE)"
             log.warning("%s priority: %s", kind, REPORT)
@@ -114,11 +120,12 @@ def set_service_priority(kind: str, env: dict | os._Environ | None = None) -> st
 
 
 def leave_background() -> bool:
-    """Every thread of a :data:`BACKGROUND` process back to :data:`STOPPING_NICE` (a stop is due: its exit
-    holds up the others); True if done, False if there was nothing to do or the system refused it (without
-    ``CAP_SYS_NICE``: then the loops did not get -10 either). Safe in a signal handler: no logging, no lock."""
+    """Every thread of a :data:`BACKGROUND` process that :func:`set_service_priority` stepped back by default
+    (not by ``LAMPS_NICE``) to :data:`STOPPING_NICE` (a stop is due: its exit holds up the others); True if done,
+    False if there was nothing to do or the system refused it (without ``CAP_SYS_NICE``: then the loops did not
+    get -10 either). Safe in a signal handler: no logging, no lock."""
     global REPORT
-    if KIND != BACKGROUND or os.getpriority(os.PRIO_PROCESS, 0) <= STOPPING_NICE:
+    if not _STEPPED_BACK or os.getpriority(os.PRIO_PROCESS, 0) <= STOPPING_NICE:
         return False
     try:
         for tid in _threads():

@@ -24,7 +24,7 @@ def open_background_node(prog: str, service: str, args, cells: tuple[str, ...] =
     the node's own keys, its liveliness token, the first cell's); () keeps the configured ones.
     """
     from interfaces.config import load_config, zenoh_with_options
-    from interfaces.priority import BACKGROUND, set_service_priority, stop_handler
+    from interfaces.priority import BACKGROUND, leave_background, set_service_priority, stop_handler
 
     stop = threading.Event()
     signal.signal(signal.SIGTERM, stop_handler(stop))  # which also leaves the background priority
@@ -35,6 +35,8 @@ def open_background_node(prog: str, service: str, args, cells: tuple[str, ...] =
             cells = tuple(cells or settings.cells)
             settings = replace(settings, cells=cells, robot_id=cells[0], key_prefix="")
         set_service_priority(BACKGROUND)
+        if stop.is_set():  # stopped before it stepped back: its handler found nothing to leave
+            leave_background()
         from interfaces.session import ServiceNode
 
         node = ServiceNode(service, settings).__enter__()

@@ -322,3 +322,24 @@ def test_a_released_arm_is_not_asked_for_full_speed_at_once(learned_skill):
         assert after < before + 5.0, f"held {held} ms: {after:.1f} N after the release, {before:.1f} N wiping"
     before, _, kept = _released_after_a_hold(learned_skill, 40, override_drops=False)
     assert kept > before + 8.0, f"without the guard the release pressed {kept:.1f} N ({before:.1f} N wiping)"
+
+
+def test_after_a_hold_seen_only_through_the_count_the_rate_limit_counts_from_the_command_the_robot_runs(
+        learned_skill):
+    """States skipped, the robot's count says it held in one of them, and the newest state names the command it
+    runs on now (``running_nm``): the next answer is within one rate step of that command, not of an older one
+    applied before the skipped states (a torque step the rate limit exists to prevent)."""
+    core = ControllerCore(ControllerParams.from_table({}), learned_skill)
+    sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
+    try:
+        o = sim.out
+        tau = None
+        for _ in range(50):
+            tau = core.tick(o.q, o.dq, o.wrench, True, DT, None, tau).copy()
+        step = core.shaper.rate * DT
+        running = tau + np.where(np.arange(7) % 2 == 0, 6.0, -6.0)  # answers to the states skipped walked away
+        out = core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True, running_nm=running)
+        assert np.max(np.abs(out - running)) <= step + 1e-9, (out - running)
+        assert np.max(np.abs(out - tau)) > 4.0, "counted from the old applied torques"
+    finally:
+        sim.close()

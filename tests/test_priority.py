@@ -106,9 +106,9 @@ done.set()
 """
 
 
-def _stopped_background(*extra: str) -> dict:
+def _stopped_background(*extra: str, env: dict | None = None) -> dict:
     p = subprocess.Popen([sys.executable, "-c", STOP_PROBE, *extra], cwd=REPO, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
+                         stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})})
     try:
         assert p.stdout.readline().split() == ["ready", "10"], p.stderr.read()
         p.send_signal(signal.SIGTERM)
@@ -125,3 +125,5 @@ def test_a_background_service_told_to_stop_leaves_its_low_priority_with_every_th
     assert _stopped_background() == {"stopped": True, "main": 0, "worker": 0}
     # without CAP_SYS_NICE it cannot, and still stops (the loops then run at 0, not -10, either)
     assert _stopped_background("as-nobody") == {"stopped": True, "main": 10, "worker": 10}
+    # a nice the user gave (LAMPS_NICE) is theirs: kept
+    assert _stopped_background(env={"LAMPS_NICE": "10"}) == {"stopped": True, "main": 10, "worker": 10}

@@ -32,3 +32,12 @@ def test_a_robot_side_without_the_count_leaves_the_flag_alone():
     h = RobotHolds()
     assert [h.held_since_last(c, 0) for c in (-1, 0, 1, -1, -1, 4)] == [True, False, False, True, True, False]
     assert h.missed == 0
+
+
+def test_a_robot_back_after_a_loss_sets_the_count_afresh():
+    """A real-time robot side restarted holds at 1 kHz until answered: those holds were no skipped states."""
+    h = RobotHolds()
+    assert not h.held_since_last(10, 1)
+    h.reset()  # the controller's robot_back
+    assert not h.held_since_last(0, 397) and h.missed == 0
+    assert h.held_since_last(3, 398) and h.missed == 1
