@@ -30,12 +30,13 @@ from interfaces.loop_hygiene import LoopHygiene  # noqa: E402
 from interfaces.messages import RobotState, TorqueCommand  # noqa: E402
 from interfaces.priority import REALTIME, set_service_priority  # noqa: E402
 from interfaces.session import ServiceNode  # noqa: E402
+from interfaces.stop_signals import on_stop_signals  # noqa: E402
 
 
 def run(connect: str, robot_id: str, seconds: float) -> dict:
     set_service_priority(REALTIME)
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    on_stop_signals(stop, signals=(signal.SIGTERM,))
     with ServiceNode("controller", ZenohSettings(connect=(connect,), robot_id=robot_id)) as node:
         states = node.inbox(node.keys.robot_state, RobotState, maxlen=1)
         periods_us = np.zeros(int(seconds * 1200) + 100)  # every period of the run (1 kHz, margin)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import time
 
@@ -24,6 +23,7 @@ from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
+from interfaces.stop_signals import on_stop_signals
 
 SERVICE = "controller"
 #: A real-time rate is refused when the control law's median tick takes more than this share of the period.
@@ -165,8 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     core = ControllerCore(params, skill, model)
     service = ControllerService(params, node, core)
-    signal.signal(signal.SIGTERM, lambda *_: service.stop.set())
-    signal.signal(signal.SIGINT, lambda *_: service.stop.set())
+    on_stop_signals(service.stop)
     try:
         ticks = service.run()
     finally:

@@ -22,7 +22,8 @@ from -20 to 19), ``LAMPS_NICE=keep`` leaves the inherited one. The report
 it returns goes into the service's status (:data:`REPORT`).
 
 A background service told to stop leaves its low priority
-(:func:`stop_handler`, :func:`leave_background`): its exit now holds up the
+(:func:`leave_background`, from its signal handler:
+:func:`interfaces.stop_signals.on_stop_signals`): its exit now holds up the
 launcher, and on a shared machine another cell's loops at nice -10 would
 leave it about 1 % of a core for it (a perception once took more than the
 launcher's 10 s to close its session so, and was killed).
@@ -138,12 +139,3 @@ def leave_background() -> bool:
     REPORT = f"nice {STOPPING_NICE} (stopping)"
     return True
 
-
-def stop_handler(stop: threading.Event):
-    """A SIGTERM / SIGINT handler for a service's ``stop`` event that also :func:`leave_background`."""
-
-    def handle(*_) -> None:
-        stop.set()
-        leave_background()
-
-    return handle

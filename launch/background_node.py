@@ -7,7 +7,6 @@ with the command's name and None returned, so the command exits 1.
 
 from __future__ import annotations
 
-import signal
 import sys
 import threading
 from dataclasses import replace
@@ -24,11 +23,11 @@ def open_background_node(prog: str, service: str, args, cells: tuple[str, ...] =
     the node's own keys, its liveliness token, the first cell's); () keeps the configured ones.
     """
     from interfaces.config import load_config, zenoh_with_options
-    from interfaces.priority import BACKGROUND, leave_background, set_service_priority, stop_handler
+    from interfaces.priority import BACKGROUND, leave_background, set_service_priority
+    from interfaces.stop_signals import on_stop_signals
 
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, stop_handler(stop))  # which also leaves the background priority
-    signal.signal(signal.SIGINT, stop_handler(stop))
+    on_stop_signals(stop, background=True)
     try:
         settings = zenoh_with_options(load_config(args.config).zenoh, args)
         if cells or settings.cells:

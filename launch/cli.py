@@ -20,7 +20,6 @@ import json
 import logging
 import math
 import os
-import signal
 import sys
 import threading
 import time
@@ -141,9 +140,10 @@ def up_main(argv: list[str] | None = None) -> int:
     a = build_up_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="lamps up %(levelname)s: %(message)s")
+    from interfaces.stop_signals import on_stop_signals
+
     stop_requested = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop_requested.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop_requested.set())
+    on_stop_signals(stop_requested)
     try:
         return _up(a, stop_requested)
     except LampsError as exc:

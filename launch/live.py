@@ -189,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--port must be in 1..65535, got {a.port}")
     if not a.max_rate > 0:
         p.error(f"--max-rate must be positive, got {a.max_rate}")
+    from interfaces.stop_signals import wait_for
+
     from .background_node import open_background_node
 
     opened = open_background_node("lamps foxglove", "foxglove", a, cells)
@@ -206,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         what = f"the cells {', '.join(settings.cells)}" if settings.cells else "the cell"
         print(f"lamps foxglove: serving {what} on ws://{a.host}:{view.port} (Foxglove: Open connection)", flush=True)
-        stop.wait()
+        wait_for(stop)  # in slices: a signal another thread took still reaches this one
         view.close()
     finally:
         node.close()

@@ -52,6 +52,8 @@ def record_main(argv: list[str] | None = None) -> int:
         p.error("--until done follows one cell's controller: not with --cells")
     if a.max_duration is not None and not (a.max_duration > 0 and a.max_duration < float("inf")):
         p.error(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
+    from interfaces.stop_signals import wait_for
+
     from .background_node import open_background_node
     from .record import Recorder, budget_from_env
 
@@ -70,7 +72,7 @@ def record_main(argv: list[str] | None = None) -> int:
     try:
         rec = Recorder(node.session, [Keys.for_robot(c) for c in settings.cells] or settings.keys, out,
                        budget_bytes=budget)
-        ended = _wait_for_end(node, stop, a.max_duration) if a.until == "done" else (stop.wait(), None)[1]
+        ended = _wait_for_end(node, stop, a.max_duration) if a.until == "done" else (wait_for(stop), None)[1]
         path = rec.close()
     finally:
         node.close()

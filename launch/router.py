@@ -28,11 +28,11 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 
 from interfaces.errors import ConfigError
+from interfaces.stop_signals import on_stop_signals, wait_for
 
 log = logging.getLogger("lamps.router")
 
@@ -84,15 +84,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"lamps router: cannot start: {exc}", file=sys.stderr)
         return 1
     stop = threading.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
+    on_stop_signals(stop)
     log.info("routing for robot id%s %s on %s (access control %s, identity %s)", "s" if settings.cells else "",
              ", ".join(settings.cells) or settings.robot_id,
              ", ".join(settings.listen), "on" if settings.access_control else "off",
              settings.tls_certificate or "none")
     print(f"lamps router: listening on {', '.join(settings.listen)}", flush=True)
     try:
-        while not stop.wait(a.status_s if a.status_s > 0 else None):
+        while not wait_for(stop, a.status_s if a.status_s > 0 else None):
             info = session.info
             log.info("sessions: %d peers, %d routers", len(list(info.peers_zid())), len(list(info.routers_zid())))
     finally:

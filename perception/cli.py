@@ -16,7 +16,6 @@ import argparse
 import json
 import logging
 import os
-import signal
 import sys
 
 import msgspec
@@ -24,7 +23,8 @@ import msgspec
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
-from interfaces.priority import BACKGROUND, set_service_priority, stop_handler, wanted_nice
+from interfaces.priority import BACKGROUND, set_service_priority, wanted_nice
+from interfaces.stop_signals import on_stop_signals
 
 from .params import PerceptionParams, parse_source
 
@@ -191,8 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     if debug_dir and params.debug_images:
         os.makedirs(debug_dir, exist_ok=True)
     service = PerceptionService(params, node, source, sink, debug_dir if params.debug_images else None)
-    signal.signal(signal.SIGTERM, stop_handler(service.stop))  # which also leaves the background priority
-    signal.signal(signal.SIGINT, stop_handler(service.stop))
+    on_stop_signals(service.stop, background=True)
     try:
         frames = service.run()
     finally:

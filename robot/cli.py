@@ -17,13 +17,13 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 
 from interfaces.config import add_zenoh_options, check_range, load_config, zenoh_with_options
 from interfaces.errors import ConfigError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
+from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
 
 SERVICE = "robot"
@@ -112,8 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         port = _port(a.backend, lbr_params, node)
         server = RobotServer(port, node, server_params, SERVICE, node.keys.robot_status)
-        signal.signal(signal.SIGTERM, lambda *_: server.stop.set())
-        signal.signal(signal.SIGINT, lambda *_: server.stop.set())
+        on_stop_signals(server.stop)
         server.run()
         port.close()
     finally:

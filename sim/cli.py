@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
@@ -20,6 +19,7 @@ from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
+from interfaces.stop_signals import on_stop_signals
 
 SERVICE = "sim"
 
@@ -133,8 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"lamps sim: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
         return 1
     service = SimService(params, node, core)
-    signal.signal(signal.SIGTERM, lambda *_: service.stop.set())
-    signal.signal(signal.SIGINT, lambda *_: service.stop.set())
+    on_stop_signals(service.stop)
     try:
         steps = service.run()
     except (RuntimeError, OSError) as exc:

@@ -85,11 +85,12 @@ def test_a_check_run_leaves_the_callers_priority_alone():
     assert os.getpriority(os.PRIO_PROCESS, 0) == before
 
 
-# A background service waiting for its stop: a second thread, the SIGTERM handler of interfaces.priority; prints
+# A background service waiting for its stop: a second thread, the handler of interfaces.stop_signals; prints
 # "ready", then, once stopped, every thread's nice value.
 STOP_PROBE = """
 import json, os, signal, sys, threading
-from interfaces.priority import BACKGROUND, set_service_priority, stop_handler
+from interfaces.priority import BACKGROUND, set_service_priority
+from interfaces.stop_signals import on_stop_signals
 if os.geteuid() == 0:
     os.setpriority(os.PRIO_PROCESS, 0, 0)
 if len(sys.argv) > 1:
@@ -97,7 +98,7 @@ if len(sys.argv) > 1:
 stop, done = threading.Event(), threading.Event()
 worker = threading.Thread(target=done.wait, daemon=True); worker.start()
 set_service_priority(BACKGROUND)
-signal.signal(signal.SIGTERM, stop_handler(stop))
+on_stop_signals(stop, background=True)
 print("ready", os.getpriority(os.PRIO_PROCESS, 0), flush=True)
 stopped = stop.wait(60)
 print(json.dumps({"stopped": stopped, "main": os.getpriority(os.PRIO_PROCESS, 0),

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
+from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
 
 PROG = "lamps lbr-peer"
@@ -104,8 +104,7 @@ def _serve(zenoh_settings, params, sim_params, core) -> int:
         core.close()
         node.close()
         raise
-    signal.signal(signal.SIGTERM, lambda *_: peer.stop.set())
-    signal.signal(signal.SIGINT, lambda *_: peer.stop.set())
+    on_stop_signals(peer.stop)
     try:
         steps = peer.run()
     except (RuntimeError, OSError) as exc:
