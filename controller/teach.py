@@ -141,10 +141,10 @@ class TeachCore:
 
     def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool, dt_s: float,
              tau_max_nm: np.ndarray | None = None, applied_nm: np.ndarray | None = None,
-             robot_held: bool = False) -> np.ndarray:
+             robot_held: bool = False, running_nm: np.ndarray | None = None) -> np.ndarray:
         """Torques (7,) [Nm] for the measured state (an internal buffer); arguments as
-        :meth:`ControllerCore.tick <controller.core.ControllerCore.tick>` (``applied_nm`` and ``robot_held``
-        unused: no disturbance watch, no skill clock)."""
+        :meth:`ControllerCore.tick <controller.core.ControllerCore.tick>` (``applied_nm``, ``robot_held`` and
+        ``running_nm`` unused: no disturbance watch, no skill clock)."""
         self.time_s += dt_s
         q = np.asarray(q, float)
         dq = np.asarray(dq, float)
