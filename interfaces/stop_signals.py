@@ -6,7 +6,7 @@ Two ways a Python service can miss its stop signal, and what this module does:
   threads running often not the main one. Python runs the handler in the
   main thread, but only once that thread comes back to Python code: a main
   thread blocked in ``Event.wait()`` without a timeout never does (a
-  ``lamps router`` at ``--status-s 0`` hung so in CI, 3 stops in 25 on a
+  ``lamps router`` at ``--status-s 0`` hung so in CI, 4 stops in 37 on a
   loaded machine here). :func:`wait_for` waits in slices of
   :data:`SIGNAL_POLL_S`.
 * The handler runs between two bytecodes of the main thread; when those are
