@@ -44,7 +44,8 @@ class Proc:
         self.name = name
         self.log_path = log_dir / f"{name}.log"
         self._log = open(self.log_path, "w+")  # noqa: SIM115 (open for the process's life)
-        env = dict(os.environ, PYTHONUNBUFFERED="1", **(env or {}))
+        # a bench's services run plain TCP on loopback on purpose unless given identities (interfaces/service_security)
+        env = dict(os.environ, PYTHONUNBUFFERED="1", **{"LAMPS_ZENOH_INSECURE": "true", **(env or {})})
         self.proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT, text=True)
 
     def output(self) -> str:

@@ -24,9 +24,13 @@ key (under the prefix)            who may put it
 robot/command                     controller
 robot/state, robot/status,        robot (the sim, a robot adapter, the
 sim/**, camera/**                 lbr peer's simulated side)
-<ros namespace>/** (not under     robot, bridge (zenoh-bridge-ros2dds
-the prefix: ``lbr`` and           next to lbr_fri_ros2_stack and the
-``camera`` by default)            camera's ROS driver)
+<ros ns>/command/** (not under    robot (the lbr adapter: the commands go
+the prefix: ``lbr`` and           *into* the stack; the stand-in's side
+``camera`` by default)            publishes the states as robot too)
+<ros ns>/state, joint_states,     robot, bridge (zenoh-bridge-ros2dds next
+force_torque_broadcaster/wrench,  to lbr_fri_ros2_stack and the camera's
+**/image_raw[/compressed],        ROS driver: what the stack and the camera
+**/camera_info                    publish, never a command)
 robot/arm                         operator
 perception/**                     perception
 controller/status,                controller
@@ -37,15 +41,34 @@ controller/estop/release          operator
 ================================  =====================================
 
 The recorder writes nothing the cell acts on (its identity can engage the
-e-stop and read); the bridge only the ROS topics it carries.
+e-stop and read); the bridge only the ROS topics the stack and the camera
+publish: its puts are the states, never the commands (a stolen bridge
+identity cannot move the arm). lbr_fri_ros2_stack ``rolling`` 218d723
+publishes ``state`` (``lbr_ros2_control/src/controllers/lbr_state_broadcaster.cpp:19``),
+``joint_states`` and ``force_torque_broadcaster/wrench`` (ros2_control's
+broadcasters, ``lbr_ros2_control/config/lbr_controllers.yaml:8-12``) and
+takes every command under ``command/`` (``lbr_torque_command_controller.cpp:27-28``
+``command/torque``; ``command/joint_position``, ``command/wrench``,
+``command/twist`` in the other controllers' ``on_init``).
+
+Liveliness tokens (``alive/<service>``: start-up and compose's health
+checks gate on them) are each role's own: a role may declare only the
+tokens of its services (:data:`ROLE_SERVICES`), so perception's identity
+cannot pretend the controller is up.
 
 **A router** (``lamps router``, identity ``router``, :data:`RELAY`) is not a
 role: it writes nothing of its own but forwards what its clients put. On the
 router the same list decides what each client may put (ingress, by the
-client's certificate) and what it is sent; on a service the router's puts
-are let in on every key of the cell (the router already filtered them by
-their sender). Whoever holds the router's key can therefore write anything:
-it belongs on the infrastructure host, like the CA.
+client's certificate) and what it is sent. The router relays, it does not
+vouch: a service accepts the router's identity only when it is the
+router's *client* (``mode = "client"``: its one link is the router it
+connected to and checked); a service in peer mode has no policy for it, so
+the router's key used as a peer gets nothing. And what moves the arm is
+checked end to end behind the router (:mod:`interfaces.arm_auth`): the
+robot side applies only commands authenticated by a session the
+controller's own key signed, and an e-stop release or an arming only when
+signed by the operator's key, whoever relayed them. The router's key is
+kept with the CA, never in a service's folder.
 
 **Several cells through one router** (a *site*, :func:`site_acl`): each
 cell has its own robot id and its own identities, whose common names carry
@@ -84,8 +107,22 @@ IDENTITIES = (*ROLES, RELAY)
 SITE_VIEWER = "site-viewer"
 #: Between the role and the cell in a common name: ``controller@iiwa-1`` (never in a robot id).
 CELL_MARK = "@"
+#: The services (``alive/<service>`` liveliness tokens) each role runs; a role declares only its own tokens.
+ROLE_SERVICES: dict[str, tuple[str, ...]] = {
+    "controller": ("controller",),
+    "robot": ("robot", "sim", "lbr-peer", "camera"),
+    "perception": ("perception",),
+    "recorder": ("recorder", "foxglove"),
+    "operator": ("launcher", "teach", "operator"),
+    "bridge": (),
+}
+#: The topics (relative to a ROS namespace) zenoh-bridge-ros2dds carries *out of* the stack and the camera:
+#: the bridge's puts. lbr_fri_ros2_stack publishes ``state``, ``joint_states`` and the wrench broadcaster's
+#: ``force_torque_broadcaster/wrench``; a camera driver ``<camera>/image_raw[/compressed]``, ``camera_info``.
+ROS_PUBLISHED = ("state", "joint_states", "force_torque_broadcaster/wrench", "**/image_raw", "**/image_raw/compressed",
+                 "**/camera_info")
 #: Zenoh message kinds a role may send to and receive from another role (besides the puts of its row).
-_DECLARATIONS = ["declare_subscriber", "declare_queryable", "query", "reply", "liveliness_token",
+_DECLARATIONS = ["declare_subscriber", "declare_queryable", "query", "reply",
                  "declare_liveliness_subscriber", "liveliness_query"]
 _DATA = ["put", "delete"]
 
@@ -117,13 +154,15 @@ def check_cells(cells: Sequence[str]) -> tuple[str, ...]:
 def writers(keys: Keys, ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES) -> dict[str, tuple[str, ...]]:
     """Key expression -> the roles that may put on it (the table of the module docstring)."""
     p = keys.prefix
+    ros = [ns.strip("/") for ns in ros_namespaces]
     return {
         keys.robot_command: ("controller",),
         keys.robot_state: ("robot",),
         keys.robot_status: ("robot",),
         f"{p}/sim/**": ("robot",),
         f"{p}/camera/**": ("robot",),
-        **{f"{ns.strip('/')}/**": ("robot", "bridge") for ns in ros_namespaces},
+        **{f"{ns}/command/**": ("robot",) for ns in ros},
+        **{f"{ns}/{topic}": ("robot", "bridge") for ns in ros for topic in ROS_PUBLISHED},
         keys.robot_arm: ("operator",),
         f"{p}/perception/**": ("perception",),
         keys.controller_status: ("controller",),
@@ -147,13 +186,29 @@ def _check_subject(subject: str) -> None:
         raise ValueError(f"subject must be cert_common_names or usernames, got {subject!r}")
 
 
+def _token_rules(name: str, keys: Keys, role: str | None) -> tuple[list[dict[str, Any]], list[str]]:
+    """(rules, their ids) for liveliness tokens: everyone's are delivered (egress) under the cell's prefix; a role
+    declares (ingress) only its services' ``alive/<service>`` (:data:`ROLE_SERVICES`); ``role`` None: every token
+    (a relay)."""
+    rules = [{"id": f"tokens-out-{name}", "permission": "allow", "flows": ["egress"], "messages": ["liveliness_token"],
+              "key_exprs": [f"{keys.prefix}/**"]}]
+    own = [f"{keys.prefix}/**"] if role is None else [keys.alive(s) for s in ROLE_SERVICES[role]]
+    if own:  # Zenoh refuses a rule without keys
+        rules.append({"id": f"tokens-in-{name}", "permission": "allow", "flows": ["ingress"],
+                      "messages": ["liveliness_token"], "key_exprs": own})
+    return rules, [r["id"] for r in rules]
+
+
 def cell_acl(keys: Keys, subject: str = "cert_common_names",
-             ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES, cell: str | None = None) -> dict[str, Any]:
+             ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES, cell: str | None = None,
+             relay: bool = False) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for a cell under ``keys`` (default deny, see the module docstring).
 
     subject : how a peer's role is told: ``cert_common_names`` (mutual TLS, the default) or ``usernames``.
     cell : the robot id of a cell of a site: its roles are named ``<role>@<cell>`` (:func:`identity_name`);
     None: by the bare role.
+    relay : accept the router's identity (:data:`RELAY`) and the puts it relays: only for a router's client (its
+    one link is the router it connected to) or a router; a peer never accepts it.
     """
     _check_subject(subject)
     scope = [f"{keys.prefix}/**", *(f"{ns.strip('/')}/**" for ns in ros_namespaces)]
@@ -167,10 +222,20 @@ def cell_acl(keys: Keys, subject: str = "cert_common_names",
         exprs = [k for k, allowed in writers(keys, ros_namespaces).items() if role in allowed]
         rules.append({"id": f"put-{role}", "permission": "allow", "flows": ["ingress"], "messages": _DATA,
                       "key_exprs": exprs})
-        policies.append({"id": f"as-{role}", "rules": ["talk", "deliver", f"put-{role}"], "subjects": [role]})
-    rules.append({"id": "relay", "permission": "allow", "flows": ["ingress"], "messages": _DATA, "key_exprs": scope})
-    policies.append({"id": f"as-{RELAY}", "rules": ["talk", "deliver", "relay"], "subjects": [RELAY]})
-    subjects = [{"id": role, subject: [identity_name(role, cell) if role in ROLES else role]} for role in IDENTITIES]
+        tokens, token_ids = _token_rules(role, keys, role)
+        rules += tokens
+        policies.append({"id": f"as-{role}", "rules": ["talk", "deliver", f"put-{role}", *token_ids],
+                         "subjects": [role]})
+    names = list(ROLES)
+    if relay:
+        rules.append({"id": "relay", "permission": "allow", "flows": ["ingress"], "messages": _DATA,
+                      "key_exprs": scope})
+        tokens, token_ids = _token_rules(RELAY, keys, None)
+        rules += tokens
+        policies.append({"id": f"as-{RELAY}", "rules": ["talk", "deliver", "relay", *token_ids],
+                         "subjects": [RELAY]})
+        names.append(RELAY)
+    subjects = [{"id": n, subject: [identity_name(n, cell) if n in ROLES else n]} for n in names]
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
 
@@ -194,6 +259,11 @@ def site_acl(cells: Sequence[str], subject: str = "cert_common_names") -> dict[s
                       "key_exprs": scope})
         return [f"talk-{name}", f"deliver-{name}"]
 
+    def tokens(name: str, keys: Keys, role: str | None) -> list[str]:
+        made, ids = _token_rules(name, keys, role)
+        rules.extend(made)
+        return ids
+
     def put(name: str, exprs: list[str]) -> list[str]:
         if not exprs:  # Zenoh refuses a rule without keys; nothing to put is the default anyway
             return []
@@ -208,12 +278,15 @@ def site_acl(cells: Sequence[str], subject: str = "cert_common_names") -> dict[s
         for role in ROLES:
             name = identity_name(role, c)
             own = put(name, [k for k, allowed in rows.items() if role in allowed])
-            policies.append({"id": f"as-{name}", "rules": [*talk, *own], "subjects": [name]})
+            policies.append({"id": f"as-{name}", "rules": [*talk, *own, *tokens(name, keys, role)],
+                             "subjects": [name]})
     estops = [Keys.for_robot(c).controller_estop for c in cells]
+    viewer_tokens = [i for c in cells for i in tokens(f"{SITE_VIEWER}-{c}", Keys.for_robot(c), "recorder")]
+    relay_tokens = [i for c in cells for i in tokens(f"{RELAY}-{c}", Keys.for_robot(c), None)]
     policies.append({"id": f"as-{SITE_VIEWER}", "subjects": [SITE_VIEWER],
-                     "rules": [*reach(SITE_VIEWER, every), *put(SITE_VIEWER, estops)]})
+                     "rules": [*reach(SITE_VIEWER, every), *put(SITE_VIEWER, estops), *viewer_tokens]})
     policies.append({"id": f"as-{RELAY}", "subjects": [RELAY],
-                     "rules": [*reach(RELAY, every), *put(RELAY, every)]})
+                     "rules": [*reach(RELAY, every), *put(RELAY, every), *relay_tokens]})
     names = [p["subjects"][0] for p in policies]
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": [{"id": n, subject: [n]} for n in names], "policies": policies}

@@ -25,7 +25,12 @@ access control (:mod:`interfaces.access`, :mod:`interfaces.credentials`):
 role's certificate and key and the cell's CA; mutual TLS, every endpoint
 then ``tls/...``), or ``tls_ca``, ``tls_certificate`` and ``tls_private_key``
 given one by one (all three or none); ``access_control`` (true: apply the
-cell's default-deny access list, subjects the certificates' common names);
+cell's default-deny access list, subjects the certificates' common names;
+unset: on whenever the service has an identity); ``insecure`` (shorthand
+``LAMPS_ZENOH_INSECURE``, option ``--insecure``: a service started without
+an identity, or with the access list off, runs only when told so, and says
+so in every status, :mod:`interfaces.service_security`; never for the robot
+role's access list nor a real robot);
 ``ros_namespaces`` (default ``["lbr", "camera"]``: the ROS topic namespaces
 zenoh-bridge-ros2dds carries, the keys the robot side and the bridge may put);
 ``cells`` (shorthand ``LAMPS_ZENOH_CELLS``, comma-separated robot ids; default
@@ -73,6 +78,7 @@ _SHORTHANDS = {
     "LAMPS_ZENOH_PASSWORD_FILE": ("zenoh", "password_file"),
     "LAMPS_ZENOH_CREDENTIALS_FILE": ("zenoh", "credentials_file"),
     "LAMPS_ZENOH_ACCESS_CONTROL": ("zenoh", "access_control"),
+    "LAMPS_ZENOH_INSECURE": ("zenoh", "insecure"),
     "LAMPS_ZENOH_IDENTITY": ("zenoh", "identity"),
     "LAMPS_ZENOH_TLS_CA": ("zenoh", "tls_ca"),
     "LAMPS_ZENOH_TLS_CERTIFICATE": ("zenoh", "tls_certificate"),
@@ -102,7 +108,8 @@ class ZenohSettings:
     user: str = ""
     password_file: str = ""
     credentials_file: str = ""
-    access_control: bool = False
+    access_control: bool | None = None
+    insecure: bool = False
     identity: str = ""
     tls_ca: str = ""
     tls_certificate: str = ""
@@ -119,8 +126,10 @@ class ZenohSettings:
                      "tls_private_key", "config_file"):
             if not isinstance(getattr(self, name), str):
                 raise ConfigError(f"[zenoh] {name} must be a string, got {getattr(self, name)!r}")
-        if not isinstance(self.access_control, bool):
+        if self.access_control is not None and not isinstance(self.access_control, bool):
             raise ConfigError(f"[zenoh] access_control must be true or false, got {self.access_control!r}")
+        if not isinstance(self.insecure, bool):
+            raise ConfigError(f"[zenoh] insecure must be true or false, got {self.insecure!r}")
         if self.user and self.user not in ROLES:
             raise ConfigError(f"[zenoh] user must be one of the cell's roles {ROLES}, got {self.user!r}")
         if self.user and not (self.password_file and self.credentials_file):
@@ -136,6 +145,8 @@ class ZenohSettings:
                                   "and tls_private_key, not both")
             for name, path in zip(("tls_ca", "tls_certificate", "tls_private_key"), files):
                 object.__setattr__(self, name, path)
+        if self.access_control is None:  # an identity brings its cell's access list unless turned off on purpose
+            object.__setattr__(self, "access_control", bool(self.tls_ca))
         if self.access_control and not (self.user or self.tls_ca):
             raise ConfigError("[zenoh] access_control needs an identity (LAMPS_ZENOH_IDENTITY: the service's folder "
                               "from 'lamps credentials DIR') or a user and its password")
@@ -352,12 +363,22 @@ def add_zenoh_options(parser) -> None:
     parser.add_argument("--zenoh-config", metavar="FILE",
                         help="a Zenoh configuration file (JSON5) to start from: QoS, buffers, interceptors "
                              "([zenoh] config_file)")
+    parser.add_argument("--insecure", action="store_true", default=None,
+                        help="run without an identity (plain TCP, no access list) or with the access list off, on "
+                             "purpose; every status says so ([zenoh] insecure; never for a real robot)")
 
 
 def zenoh_with_options(settings: ZenohSettings, args) -> ZenohSettings:
-    """``settings`` with the options of :func:`add_zenoh_options` that were given (they win over the file)."""
+    """``settings`` with the options of :func:`add_zenoh_options` that were given (they win over the file).
+
+    These are the settings a service starts with: ConfigError when they would run it without an identity or
+    without its access list unasked (:func:`interfaces.service_security.check_service_security`)."""
+    from .service_security import check_service_security
+
     over = {k: v for k, v in (("listen", args.listen), ("connect", args.connect), ("robot_id", args.robot_id),
-                              ("config_file", getattr(args, "zenoh_config", None))) if v is not None}
-    if not over:
-        return settings
-    return ZenohSettings(**{**{f: getattr(settings, f) for f in settings.__dataclass_fields__}, **over})
+                              ("config_file", getattr(args, "zenoh_config", None)),
+                              ("insecure", getattr(args, "insecure", None))) if v is not None}
+    if over:
+        settings = ZenohSettings(**{**{f: getattr(settings, f) for f in settings.__dataclass_fields__}, **over})
+    check_service_security(settings)
+    return settings

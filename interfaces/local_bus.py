@@ -234,12 +234,16 @@ class LocalNode(ServiceNode):
         self.bus = bus
 
     def __enter__(self) -> "LocalNode":
+        from .service_security import IN_PROCESS
+
+        self.security = IN_PROCESS
         self._session = LocalSession(self.bus)
         self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
         return self
 
     def publish(self, key: str, msg: Message) -> None:
         """Put ``msg`` on ``key`` as itself (see the module's notes)."""
+        msg = self._with_security(msg)
         pub = self._publishers.get(key)
         if pub is None:
             pub = self._publishers[key] = self.session.declare_publisher(key)

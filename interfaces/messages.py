@@ -350,6 +350,8 @@ class ControllerStatus(Message, frozen=True):
     counters: Counters = msgspec.field(default_factory=dict)
     wall_ns: int = 0
     robot_time_ns: int = 0
+    #: how the controller joined (``mtls+acl as controller``, or ``INSECURE: ...``), set by its node on publishing
+    security: Name = ""
 
     def __post_init__(self) -> None:
         _clip(self, reason=TEXT_MAX, current_mp=TEXT_MAX)
@@ -392,6 +394,8 @@ class ServiceStatus(Message, frozen=True):
     counters: Counters = msgspec.field(default_factory=dict)
     detail: Detail = ""
     timing: LoopTiming = msgspec.field(default_factory=LoopTiming)
+    #: how the service joined (``mtls+acl as robot``, or ``INSECURE: ...``), set by its node on publishing
+    security: Name = ""
 
     def __post_init__(self) -> None:
         _clip(self, detail=DETAIL_MAX)

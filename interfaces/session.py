@@ -32,6 +32,7 @@ from collections import Counter, deque
 from pathlib import Path
 from typing import Generic, TypeVar
 
+import msgspec
 import zenoh
 
 from .access import cell_acl, role_and_cell, site_acl
@@ -39,7 +40,7 @@ from .codec import Decoder, encode
 from .config import ZenohSettings
 from .errors import ConfigError, MessageDecodeError
 from .keys import Keys
-from .messages import Message
+from .messages import ControllerStatus, Message, ServiceStatus
 
 log = logging.getLogger(__name__)
 M = TypeVar("M", bound=Message)
@@ -96,12 +97,13 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
         _read_secret(settings.credentials_file, "credentials_file")
         cfg.insert_json5("transport/auth/usrpwd", json.dumps(
             {"user": settings.user, "password": password, "dictionary_file": settings.credentials_file}))
-    if settings.access_control:
-        cfg.insert_json5("access_control", json.dumps(access_list(settings)))
-    if settings.tls_ca:
+    if settings.tls_ca:  # first: a missing identity file is named as the setting that gives it
         for path, what in ((settings.tls_ca, "tls_ca"), (settings.tls_certificate, "tls_certificate"),
                            (settings.tls_private_key, "tls_private_key")):
             _read_secret(path, what)
+    if settings.access_control:
+        cfg.insert_json5("access_control", json.dumps(access_list(settings)))
+    if settings.tls_ca:
         cfg.insert_json5("transport/link/tls", json.dumps({
             "root_ca_certificate": settings.tls_ca, "enable_mtls": True,
             "listen_certificate": settings.tls_certificate, "listen_private_key": settings.tls_private_key,
@@ -124,7 +126,9 @@ def access_list(settings: ZenohSettings) -> dict:
         if cell is not None and Keys.for_robot(cell).prefix != settings.keys.prefix:
             raise ConfigError(f"[zenoh] identity {settings.identity or settings.tls_certificate!r} is {role} of cell "
                               f"{cell}, but the keys are under {settings.keys.prefix} (robot id {cell} expected)")
-    return cell_acl(settings.keys, subject, settings.ros_namespaces, cell)
+    # the router's identity is accepted only by its clients (their one link is the router they checked) and by
+    # routers linked to it; a peer never accepts it (interfaces.access, "the router relays, it does not vouch")
+    return cell_acl(settings.keys, subject, settings.ros_namespaces, cell, relay=settings.mode in ("client", "router"))
 
 
 def _read_secret(path: str, what: str) -> str:
@@ -303,9 +307,14 @@ class ServiceNode:
         self._token = None
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._readers: list[Latest | Inbox] = []
+        #: how this node joined, carried by every status it publishes (:mod:`interfaces.service_security`)
+        self.security = ""
 
     def __enter__(self) -> "ServiceNode":
+        from .service_security import security_summary
+
         zenoh.try_init_log_from_env()  # RUST_LOG (e.g. zenoh=info) shows Zenoh's own log on stderr; unset: quiet
+        self.security = security_summary(self.settings)
         self._session = zenoh.open(zenoh_config(self.settings))
         self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
         return self
@@ -320,11 +329,18 @@ class ServiceNode:
         return self._session
 
     def publish(self, key: str, msg: Message) -> None:
-        """Encode and put ``msg`` on ``key`` (publisher declared on first use with the key's QoS, then reused)."""
+        """Encode and put ``msg`` on ``key`` (publisher declared on first use with the key's QoS, then reused).
+        A status (:class:`ServiceStatus`, :class:`ControllerStatus`) goes out saying how this node joined."""
+        msg = self._with_security(msg)
         pub = self._publishers.get(key)
         if pub is None:
             pub = self._publishers[key] = self.session.declare_publisher(key, **publisher_qos(self.keys, key))
         pub.put(encode(msg))
+
+    def _with_security(self, msg: Message) -> Message:
+        if type(msg) in (ServiceStatus, ControllerStatus) and not msg.security:
+            return msgspec.structs.replace(msg, security=self.security)
+        return msg
 
     def latest(self, key: str, msg_type: type[M], depth: int = 1) -> Latest[M]:
         """A newest-sample reader of ``key`` decoding ``msg_type`` (``depth``: the newest samples kept, for

@@ -29,6 +29,17 @@ def _die_with_parent() -> None:  # runs in the child between fork and exec
         pass
 
 
+#: Switches that weaken a service's security: a launcher never passes them on from its own environment, only
+#: when it sets them itself (interfaces/service_security.py: no silent insecurity).
+SECURITY_SWITCHES = ("LAMPS_ZENOH_INSECURE", "LAMPS_ZENOH_ACCESS_CONTROL", "LAMPS_ACCESS_CONTROL",
+                     "LAMPS__ZENOH__INSECURE", "LAMPS__ZENOH__ACCESS_CONTROL")
+
+
+def inherited_environment() -> dict[str, str]:
+    """Our environment less :data:`SECURITY_SWITCHES`: what a service started by a launcher inherits."""
+    return {k: v for k, v in os.environ.items() if k not in SECURITY_SWITCHES}
+
+
 class Child:
     """One running service. ``tail`` keeps its last output lines (for error messages)."""
 
@@ -40,7 +51,7 @@ class Child:
         log_dir.mkdir(parents=True, exist_ok=True)
         self._log: TextIO = open(log_dir / f"{name}.log", "a", encoding="utf-8")
         self._echo = echo
-        self.proc = subprocess.Popen(argv, env={**os.environ, **env}, stdout=subprocess.PIPE,
+        self.proc = subprocess.Popen(argv, env={**inherited_environment(), **env}, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, bufsize=1,
                                      start_new_session=True,
                                      preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None)

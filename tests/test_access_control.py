@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from interfaces.access import IDENTITIES, RELAY, ROLES, cell_acl, may_put, writers
+from interfaces.access import IDENTITIES, RELAY, ROLE_SERVICES, ROLES, cell_acl, may_put, writers
 from interfaces.certificates import issue, new_ca, write_key_and_cert
 from interfaces.config import ZenohSettings
 from interfaces.credentials import (BRIDGE_CONFIG, CA_FOLDER, identity_files, identity_folder,
@@ -119,22 +119,34 @@ def test_a_bad_security_setting_is_refused_with_its_name(creds, tmp_path):
 
 def test_the_access_list_denies_by_default_and_lets_each_role_put_its_own_keys_only():
     keys = Keys.for_robot("acl")
-    acl = cell_acl(keys)
-    assert acl["enabled"] and acl["default_permission"] == "deny"
-    assert [s["cert_common_names"] for s in acl["subjects"]] == [[r] for r in IDENTITIES]
-    rules = {r["id"]: r for r in acl["rules"]}
-    for policy in acl["policies"]:
-        (role,) = policy["subjects"]
-        puts = [k for rule in policy["rules"] for k in rules[rule]["key_exprs"]
-                if "put" in rules[rule]["messages"] and "ingress" in rules[rule]["flows"]]
-        if role == RELAY:  # the router relays: every key of the cell, each already checked at the router
-            assert set(puts) == {"lamps/acl/**", "lbr/**", "camera/**"}
-            continue
-        assert set(puts) == {k for k, allowed in writers(keys).items() if role in allowed}, role
+    for relay in (False, True):
+        acl = cell_acl(keys, relay=relay)
+        assert acl["enabled"] and acl["default_permission"] == "deny"
+        # a peer has no policy for the router's identity: the router relays, it does not vouch
+        assert [s["cert_common_names"] for s in acl["subjects"]] == [[r] for r in (IDENTITIES if relay else ROLES)]
+        rules = {r["id"]: r for r in acl["rules"]}
+        for policy in acl["policies"]:
+            (role,) = policy["subjects"]
+            puts = [k for rule in policy["rules"] for k in rules[rule]["key_exprs"]
+                    if "put" in rules[rule]["messages"] and "ingress" in rules[rule]["flows"]]
+            tokens = [k for rule in policy["rules"] for k in rules[rule]["key_exprs"]
+                      if "liveliness_token" in rules[rule]["messages"] and "ingress" in rules[rule]["flows"]]
+            if role == RELAY:  # a router's client takes what it relays: every key of the cell, checked at the router
+                assert set(puts) == {"lamps/acl/**", "lbr/**", "camera/**"}
+                continue
+            assert set(puts) == {k for k, allowed in writers(keys).items() if role in allowed}, role
+            assert set(tokens) == {keys.alive(s) for s in ROLE_SERVICES[role]}, role
     assert may_put(keys, "operator", keys.controller_estop_release)
     assert not any(may_put(keys, r, keys.controller_estop_release) for r in ROLES if r != "operator")
     assert [r for r in ROLES if may_put(keys, r, keys.robot_command)] == ["controller"]
     assert all(may_put(keys, r, keys.controller_estop) for r in ROLES if r != "bridge"), "engaging is never refused"
+    # the bridge carries the stack's states out, never a command in: lbr_fri_ros2_stack's command topics
+    for topic in ("lbr/command/torque", "lbr/command/joint_position", "lbr/command/wrench", "lbr/command/twist"):
+        assert [r for r in ROLES if may_put(keys, r, topic)] == ["robot"], topic
+    for topic in ("lbr/state", "lbr/joint_states", "lbr/force_torque_broadcaster/wrench", "camera/color/image_raw",
+                  "camera/color/image_raw/compressed", "camera/color/camera_info"):
+        assert may_put(keys, "bridge", topic) and may_put(keys, "robot", topic), topic
+    assert not any(may_put(keys, r, "lbr/forward_position_controller/commands") for r in ROLES)
 
 
 # --------------------------------------------------------------------------------------- the matrix, over Zenoh

@@ -114,8 +114,10 @@ def test_every_zenoh_service_of_every_profile_joins_with_its_roles_identity_and_
     local = {s.name: s for s in localize(run_locally(active(services, ("sim",))), secrets=tmp_path / "c")}
     assert local["controller"].environment["LAMPS_ZENOH_IDENTITY"] == str(tmp_path / "c" / "controller")
     assert local["perception"].environment["LAMPS_ZENOH_IDENTITY"] == str(tmp_path / "c" / "perception")
-    off = load_compose(COMPOSE, {"LAMPS_ACCESS_CONTROL": "false"})
-    assert off["controller"].environment["LAMPS_ZENOH_ACCESS_CONTROL"] == "false"
+    # no variable of the environment turns the list off (no silent insecurity: interfaces/service_security.py)
+    off = load_compose(COMPOSE, {"LAMPS_ACCESS_CONTROL": "false", "LAMPS_ZENOH_INSECURE": "true"})
+    assert all(s.environment.get("LAMPS_ZENOH_ACCESS_CONTROL") == "true" and "LAMPS_ZENOH_INSECURE" not in
+               s.environment for n, s in off.items() if n not in ("skill", "bridge", "credentials", "folders")), off
 
 
 @pytest.mark.attack("1", "read every file each compose service can reach (its volumes, made by compose's "

@@ -137,7 +137,9 @@ def test_a_client_with_another_cas_certificate_gets_no_session(cell, tmp_path):
 def test_clients_access_list_lets_the_routers_relayed_puts_in_and_nothing_else_unnamed():
     from interfaces.keys import Keys
 
-    acl = cell_acl(Keys.for_robot("x"))
+    assert not [p for p in cell_acl(Keys.for_robot("x"))["policies"] if p["subjects"] == [RELAY]], \
+        "a peer never accepts the router's identity"
+    acl = cell_acl(Keys.for_robot("x"), relay=True)  # a router's client does
     relay = next(p for p in acl["policies"] if p["subjects"] == [RELAY])
     rule = next(r for r in acl["rules"] if r["id"] == "relay")
     assert "relay" in relay["rules"] and rule["flows"] == ["ingress"] and "lamps/x/**" in rule["key_exprs"]
