@@ -39,6 +39,7 @@ from interfaces.session import ServiceNode
 
 from lampskit.errors import PlanningError
 
+from .command_auth import ControllerAuth
 from .control.limits import load_scale
 from .control.watch import OverloadWatch
 from .core import TRACE_COLUMNS, ControllerCore
@@ -82,6 +83,7 @@ class ControllerService:
         self._sent_tau = np.zeros((SENT_RING, core.model.nq))
         self._sent_seq = np.full(SENT_RING, -1, dtype=np.int64)
         self._session_id = str(node.session.zid())
+        self._auth = ControllerAuth(node, self._session_id, self.counters)  # commands' MACs, signed releases
         self._stop_since: float | None = None  # the robot side serves one controller session
         lim = params.limits
         self._overload = OverloadWatch(lim.overload_share, lim.overload_filter_s, lim.overload_persist_s,
@@ -146,6 +148,7 @@ class ControllerService:
         when the wait for it began and the last tick ended (perf counter), for the loop's timing."""
         self._poll_estop()
         if state.seq == self._last_seq and self._last_command is not None and not self._lost:
+            self._last_command = self._auth.with_mac(self._last_command)  # a key proven since it was sent
             self.node.publish(self.keys.robot_command, self._last_command)  # a re-sent state: same answer
             self.counters["states_answered_again"] += 1
             return False
@@ -330,11 +333,14 @@ class ControllerService:
         row = seq % SENT_RING
         if tau is None:
             self.counters["holds_sent"] += 1
-            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=[0.0] * self._nq, mode=HOLD,
-                                session=self._session_id)
+            zeros = [0.0] * self._nq
+            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=zeros, mode=HOLD,
+                                session=self._session_id, mac=self._auth.mac(seq, HOLD, zeros))
             self._sent_seq[row] = -1
         else:
-            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau.tolist(), session=self._session_id)
+            tau_nm = tau.tolist()
+            cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau_nm, session=self._session_id,
+                                mac=self._auth.mac(seq, "torque", tau_nm))
             self._sent_tau[row] = tau
             self._sent_seq[row] = seq
         self._last_command = cmd
@@ -429,6 +435,8 @@ class ControllerService:
                     log.warning("e-stop from %s: %s", e.source or "?", e.reason)
                     self._estop_ours = True
                     self.core.executor.estop(f"e-stop: {e.reason}" + (f" ({e.source})" if e.source else ""))
+                elif release_key and not self._auth.release_ok(e):
+                    continue  # not the operator's signature, or a replay: counted and logged
                 elif release_key:
                     log.warning("e-stop released by %s", e.source or "?")
                     self.counters["estop_releases"] += 1
@@ -467,6 +475,7 @@ class ControllerService:
                                 robot_time_ns=int(core.time_s * 1e9))
 
     def _publish_status(self, force: bool = False) -> None:
+        self._auth.housekeeping()  # introductions: a try_recv and a clock read unless one is due
         now = time.monotonic()
         if not force and now < self._next_status:
             return

@@ -23,7 +23,8 @@ key (under the prefix)            who may put it
 ================================  =====================================
 robot/command                     controller
 robot/state, robot/status,        robot (the sim, a robot adapter, the
-sim/**, camera/**                 lbr peer's simulated side)
+robot/introduction, sim/**,       lbr peer's simulated side)
+camera/**
 <ros ns>/command/** (not under    robot (the lbr adapter: the commands go
 the prefix: ``lbr`` and           *into* the stack; the stand-in's side
 ``camera`` by default)            publishes the states as robot too)
@@ -34,7 +35,8 @@ force_torque_broadcaster/wrench,  to lbr_fri_ros2_stack and the camera's
 robot/arm                         operator
 perception/**                     perception
 controller/status,                controller
-controller/trace
+controller/trace,
+controller/introduction
 controller/estop                  every role but the bridge (engaging
                                   is never refused)
 controller/estop/release          operator
@@ -159,6 +161,7 @@ def writers(keys: Keys, ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES
         keys.robot_command: ("controller",),
         keys.robot_state: ("robot",),
         keys.robot_status: ("robot",),
+        keys.robot_introduction: ("robot",),
         f"{p}/sim/**": ("robot",),
         f"{p}/camera/**": ("robot",),
         **{f"{ns}/command/**": ("robot",) for ns in ros},
@@ -167,6 +170,7 @@ def writers(keys: Keys, ros_namespaces: tuple[str, ...] = DEFAULT_ROS_NAMESPACES
         f"{p}/perception/**": ("perception",),
         keys.controller_status: ("controller",),
         keys.controller_trace: ("controller",),
+        keys.controller_introduction: ("controller",),
         keys.controller_estop: tuple(r for r in ROLES if r != "bridge"),
         keys.controller_estop_release: ("operator",),
     }

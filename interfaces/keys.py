@@ -113,6 +113,18 @@ class Keys:
         return self._k("robot/status")
 
     @property
+    def robot_introduction(self) -> str:
+        """robot side -> controller, every 0.5 s: :class:`~interfaces.messages.Introduction` (its certificate and the
+        nonce of this start: :mod:`interfaces.arm_auth`)."""
+        return self._k("robot/introduction")
+
+    @property
+    def controller_introduction(self) -> str:
+        """controller -> robot side, every 0.5 s: :class:`~interfaces.messages.Introduction` (its certificate and
+        session: :mod:`interfaces.arm_auth`)."""
+        return self._k("controller/introduction")
+
+    @property
     def robot_arm(self) -> str:
         """operator -> real-robot adapter, event: :class:`~interfaces.messages.ArmRequest`."""
         return self._k("robot/arm")

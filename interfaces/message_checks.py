@@ -21,6 +21,11 @@ COUNTERS_MAX = 256
 Name = Annotated[str, msgspec.Meta(max_length=NAME_MAX)]
 Text = Annotated[str, msgspec.Meta(max_length=TEXT_MAX)]
 Detail = Annotated[str, msgspec.Meta(max_length=DETAIL_MAX)]
+#: A command's MAC, a nonce, a certificate (PEM) and an ECDSA signature (DER): bounded bytes (interfaces.arm_auth).
+Mac = Annotated[bytes, msgspec.Meta(max_length=32)]
+Nonce = Annotated[bytes, msgspec.Meta(max_length=32)]
+Certificate = Annotated[bytes, msgspec.Meta(max_length=4096)]
+Signature = Annotated[bytes, msgspec.Meta(max_length=160)]
 Counters = Annotated[dict[Annotated[str, msgspec.Meta(max_length=COUNTER_KEY_MAX)], int],
                      msgspec.Meta(max_length=COUNTERS_MAX)]
 

@@ -24,7 +24,8 @@ from typing import Annotated
 import msgspec
 from msgspec.structs import force_setattr
 
-from interfaces.message_checks import (DETAIL_MAX, NAME_MAX, TEXT_MAX, Counters, Detail, Name, Text, _clip, _finite,
+from interfaces.message_checks import (DETAIL_MAX, NAME_MAX, TEXT_MAX, Certificate, Counters, Detail, Mac, Name, Nonce,
+                                       Signature, Text, _clip, _finite,
                                        _same_length, bounded_counters)
 
 #: Bump when a change could make an old reader misread a new message.
@@ -169,7 +170,9 @@ class TorqueCommand(Message, frozen=True):
     tau_nm : (n,) joint torques [Nm] (without gravity when the robot
     compensates it). mode ``"hold"``: brake and hold position, torques ignored.
     ``session``: the sending controller's session (its Zenoh id); the robot
-    side serves one controller session at a time.
+    side serves one controller session at a time. ``mac``: the command's
+    authentication under the key the controller and the robot side share
+    (:mod:`interfaces.arm_auth`; empty in a cell without identities).
     """
 
     seq: int
@@ -177,6 +180,7 @@ class TorqueCommand(Message, frozen=True):
     tau_nm: list[float]
     mode: Name = "torque"
     session: Name = ""
+    mac: Mac = b""
 
     def __post_init__(self) -> None:
         _finite("tau_nm", self.tau_nm)
@@ -403,12 +407,20 @@ class ServiceStatus(Message, frozen=True):
 
 
 class Estop(Message, frozen=True):
-    """Emergency stop (``engaged=True``) or its release (``engaged=False``), with who and why."""
+    """Emergency stop (``engaged=True``) or its release (``engaged=False``), with who and why.
+
+    A release in a cell with identities is signed by the operator (:func:`interfaces.arm_auth.sign_release`):
+    ``wall_ns`` its wall-clock stamp [ns since the epoch], ``certificate`` the operator's (PEM), ``signature``
+    ECDSA over the cell, the stamp, reason and source.
+    """
 
     stamp_ns: int
     engaged: bool
     reason: Text
     source: Name = ""
+    wall_ns: int = 0
+    certificate: Certificate = b""
+    signature: Signature = b""
 
     def __post_init__(self) -> None:
         _clip(self, reason=TEXT_MAX, source=NAME_MAX)
@@ -428,6 +440,21 @@ class ArmRequest(Message, frozen=True):
 
     def __post_init__(self) -> None:
         _clip(self, reason=TEXT_MAX, source=NAME_MAX)
+
+
+class Introduction(Message, frozen=True):
+    """Controller or robot side -> the other, every half second: who it is, for authenticated commands
+    (:mod:`interfaces.arm_auth`).
+
+    role : ``controller`` or ``robot``; session : the controller's session (what its commands carry);
+    nonce : the robot side's, drawn at each start; certificate : the sender's certificate (PEM).
+    """
+
+    stamp_ns: int
+    role: Name
+    certificate: Certificate
+    session: Name = ""
+    nonce: Nonce = b""
 
 
 class SimTruth(Message, frozen=True):
@@ -465,7 +492,7 @@ class SimTruth(Message, frozen=True):
 #: Every message type, for decoders and tests.
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     RobotState, TorqueCommand, CameraFrame, Stains, ControllerStatus, ControllerTrace, ServiceStatus, Estop, SimTruth,
-    ArmRequest,
+    ArmRequest, Introduction,
 )
 
 #: The largest payload [bytes] each message type may legitimately have. Receivers drop a larger one, counted,
@@ -474,6 +501,6 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
 #: (1920x1080 raw: 6.2 MB), a 50 ms trace batch about 15 kB, a status with its counters a few kB.
 MAX_PAYLOAD_BYTES: dict[type[Message], int] = {
     RobotState: 16_384, TorqueCommand: 4_096, CameraFrame: 16_000_000, Stains: 262_144,
-    ControllerStatus: 65_536, ControllerTrace: 1_048_576, ServiceStatus: 65_536, Estop: 4_096,
-    SimTruth: 262_144, ArmRequest: 4_096,
+    ControllerStatus: 65_536, ControllerTrace: 1_048_576, ServiceStatus: 65_536, Estop: 8_192,
+    SimTruth: 262_144, ArmRequest: 4_096, Introduction: 8_192,
 }

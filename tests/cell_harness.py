@@ -123,14 +123,15 @@ class Cell:
 
     mode : ``lockstep`` or ``realtime``; proxy : route the controller's link to the sim through a
     :class:`TcpProxy` (:attr:`proxy`); router : run ``lamps router`` (the router identity, the cell's access
-    list) and every service as its client (no listen endpoint, no link between services); thin : service name -> {key suffix (``robot/state``): samples per
+    list; ``router_acl=False``: its list off, ``--insecure``) and every service as its client (no listen endpoint, no link between services); thin : service name -> {key suffix (``robot/state``): samples per
     second}: Zenoh's own downsampling on that service's egress drops the samples of that key that come
     sooner than 1 / rate after the last one let through (given to the service as a Zenoh configuration
     file, ``LAMPS_ZENOH_CONFIG_FILE``).
     """
 
     def __init__(self, out: Path, skill: Path, mode: str = "lockstep", proxy: bool = False,
-                 thin: dict[str, dict[str, float]] | None = None, router: bool = False) -> None:
+                 thin: dict[str, dict[str, float]] | None = None, router: bool = False,
+                 router_acl: bool = True) -> None:
         from launch.cli import _plan_cell
 
         self.out = out
@@ -148,6 +149,7 @@ class Cell:
             ctl.environment["LAMPS_ZENOH_CONNECT"] = ctl.environment["LAMPS_ZENOH_CONNECT"].replace(
                 f":{sim_port}", f":{self.proxy.port}")
         self.router_endpoint = f"tls/127.0.0.1:{free_port()}" if router else None
+        self.router_acl = router_acl  # False: the router relays everything (--insecure, its list off)
         if router:
             for svc in self.services.values():
                 svc.environment.update(LAMPS_ZENOH_MODE="client", LAMPS_ZENOH_CONNECT=self.router_endpoint,
@@ -191,7 +193,9 @@ class Cell:
     def _start_router(self) -> None:
         from launch.procs import Child, wait_port
 
-        env = {**self.cell.env, "LAMPS_ROBOT_ID": self.cell.robot_id, "LAMPS_ZENOH_ACCESS_CONTROL": "true",
+        env = {**self.cell.env, "LAMPS_ROBOT_ID": self.cell.robot_id,
+               "LAMPS_ZENOH_ACCESS_CONTROL": "true" if self.router_acl else "false",
+               "LAMPS_ZENOH_INSECURE": "false" if self.router_acl else "true",
                "LAMPS_ZENOH_IDENTITY": str(identity_folder(self.cell.credentials, "router"))}
         child = Child("router", (sys.executable, "-m", "interfaces.cli", "router", "--listen", self.router_endpoint,
                                  "--status-s", "0"), env,

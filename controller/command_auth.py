@@ -1,0 +1,111 @@
+"""The controller's end of authenticated commands and releases (:mod:`interfaces.arm_auth`).
+
+:class:`ControllerAuth` introduces the controller (its certificate and
+session, on ``controller/introduction`` every half second, and at once when
+a robot side it has not seen introduces itself), reads the robot side's
+introduction, and once that certificate proved the robot role of this cell
+derives the key the robot side derives: each command then carries its MAC
+(:meth:`ControllerAuth.mac`, 2 us). Before that, commands go without one
+and the robot side holds (counted here as
+``commands_before_the_robot_side_introduced_itself``). A release of the
+e-stop counts only when the operator signed it.
+
+Without an identity (``--insecure``, the in-process cell) nothing is added
+and every release is taken.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+
+import msgspec
+
+from interfaces.arm_auth import (AuthError, CommandMac, LocalIdentity, check_release, command_key, load_identity,
+                                 peer_public_key)
+from interfaces.messages import Estop, Introduction, TorqueCommand
+
+log = logging.getLogger(__name__)
+
+#: The controller introduces itself this often [s].
+INTRODUCE_EVERY_S = 0.5
+_LOG_EVERY_S = 5.0
+
+
+class ControllerAuth:
+    """Authentication of one controller session. ``node``: its open ServiceNode; ``session``: what its commands
+    carry; ``counters``: the service's."""
+
+    def __init__(self, node, session: str, counters: Counter) -> None:
+        s = node.settings
+        self.identity: LocalIdentity | None = load_identity(s.tls_ca, s.tls_certificate, s.tls_private_key)
+        self.node = node
+        self.session = session
+        self.counters = counters
+        self._mac: CommandMac | None = None
+        self._nonce = b""
+        self._next_intro = 0.0
+        self._last_release_wall_ns = 0
+        self._last_log = -float("inf")
+        self._intros = None
+        if self.identity is not None:
+            self._intros = node.latest(node.keys.robot_introduction, Introduction)
+
+    def housekeeping(self) -> None:
+        """Introduce the controller when due; take a new robot side's introduction (an ECDH, a few per run)."""
+        if self.identity is None:
+            return
+        intro = self._intros.take()
+        if intro is not None and intro.nonce != self._nonce:
+            try:
+                key = peer_public_key(intro.certificate, self.identity, "robot")
+            except AuthError as exc:
+                self._refuse("robot_introductions_refused", str(exc))
+            else:
+                self._mac = CommandMac(command_key(self.identity, key, self.session, intro.nonce))
+                self._nonce = intro.nonce
+                self._next_intro = 0.0  # a robot side that just started hears of us at once
+                log.info("robot side introduced and proven: commands authenticated from now on")
+        now = time.monotonic()
+        if now >= self._next_intro:
+            self._next_intro = now + INTRODUCE_EVERY_S
+            self.node.publish(self.node.keys.controller_introduction, Introduction(
+                stamp_ns=time.monotonic_ns(), role="controller", certificate=self.identity.certificate_pem,
+                session=self.session))
+
+    def mac(self, seq: int, mode: str, tau_nm) -> bytes:
+        """The MAC a command of ``seq``, ``mode`` and torques (n,) [Nm] carries (b"" without an identity, or
+        before the robot side introduced itself)."""
+        if self._mac is None:
+            if self.identity is not None:
+                self.counters["commands_before_the_robot_side_introduced_itself"] += 1
+            return b""
+        return self._mac.mac(seq, mode, tau_nm)
+
+    def with_mac(self, cmd: TorqueCommand) -> TorqueCommand:
+        """``cmd`` as sent again: with its MAC made now when it went without one before the robot side introduced
+        itself (a lock-step robot side re-sends the state it waits for; the same answer must now pass)."""
+        if cmd.mac or self._mac is None:
+            return cmd
+        return msgspec.structs.replace(cmd, mac=self._mac.mac(cmd.seq, cmd.mode, cmd.tau_nm))
+
+    def release_ok(self, release: Estop) -> bool:
+        """True when the e-stop release is the operator's, fresh and new (always, without an identity)."""
+        if self.identity is None:
+            return True
+        try:
+            check_release(self.identity, self.node.keys.prefix, release.certificate, release.signature,
+                          release.wall_ns, release.reason, release.source, self._last_release_wall_ns)
+        except AuthError as exc:
+            return self._refuse("estop_releases_refused", str(exc))
+        self._last_release_wall_ns = release.wall_ns
+        return True
+
+    def _refuse(self, counter: str, why: str) -> bool:
+        self.counters[f"{counter}: {why.split(':')[0][:60]}"] += 1
+        now = time.monotonic()
+        if now - self._last_log >= _LOG_EVERY_S:
+            self._last_log = now
+            log.warning("%s: %s", counter.replace("_", " "), why)
+        return False
