@@ -68,6 +68,7 @@ from interfaces.loop_stats import LoopStats
 from interfaces.messages import HOLD, Estop, RobotState, ServiceStatus, TorqueCommand
 from interfaces.session import ServiceNode
 
+from .command_auth import CommandAuth
 from .gate import DEFAULT_TAU_RATE_NM_S, CommandGate
 from .port import RobotPort
 
@@ -143,6 +144,7 @@ class RobotServer:
         self._speed_braking = False
         self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
         self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
+        self.auth = CommandAuth(node, self.counters)  # commands' MACs and signed releases, whoever relayed them
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def run(self) -> int:
@@ -169,6 +171,8 @@ class RobotServer:
                         log.warning("e-stop from %s: %s; holding whatever is commanded", e.source or "?", e.reason)
                     self.counters["estops"] += 1
                     self.estop_reason = f"{e.reason[:80]} ({e.source[:40] or '?'})"
+                elif release_key and not self.auth.release_ok(e):
+                    continue  # not signed by the operator, or a replay: counted and logged
                 elif release_key:
                     if self.estop_reason is not None:
                         log.warning("e-stop released by %s", e.source or "?")
@@ -206,7 +210,10 @@ class RobotServer:
 
     def _from_served_controller(self, cmd: TorqueCommand) -> bool:
         """True for a command of the controller session served (binding the first; re-binding to a newcomer only
-        after the served one has been silent for ``rebind_after_s``); another session's command is counted."""
+        after the served one has been silent for ``rebind_after_s``); another session's command is counted. A
+        command whose MAC is not its session's (:mod:`robot.command_auth`) is refused first, counted."""
+        if not self.auth.command_ok(cmd):
+            return False
         now = time.monotonic_ns()
         if cmd.session != self.controller:
             if self.controller is not None and now - self._controller_seen_ns < self.p.rebind_after_s * 1e9:
@@ -463,6 +470,7 @@ class RobotServer:
                              detail=f"{detail} {extra}".strip(), timing=self.stats.summary())
 
     def _publish_status(self, force: bool = False) -> None:
+        self.auth.housekeeping()  # introductions: a poll and a clock read unless one is due
         self._poll_estop()  # also while no command comes (a lock-step robot waiting for its answer)
         now = time.monotonic()
         if not force and now < self._next_status:
