@@ -25,6 +25,7 @@ import msgspec
 from interfaces.arm_auth import (AuthError, CommandMac, LocalIdentity, check_release, command_key, load_identity,
                                  peer_public_key)
 from interfaces.messages import Estop, Introduction, TorqueCommand
+from interfaces.service_security import IN_PROCESS
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +40,9 @@ class ControllerAuth:
 
     def __init__(self, node, session: str, counters: Counter) -> None:
         s = node.settings
-        self.identity: LocalIdentity | None = load_identity(s.tls_ca, s.tls_certificate, s.tls_private_key)
+        # in process (the network-free cell) nothing travels between the services: nothing to authenticate
+        self.identity: LocalIdentity | None = None if node.security == IN_PROCESS else \
+            load_identity(s.tls_ca, s.tls_certificate, s.tls_private_key)
         self.node = node
         self.session = session
         self.counters = counters

@@ -19,14 +19,11 @@ Everything else refused names the problem and the way out (:class:`ConfigError`)
 
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 from .access import role_and_cell
 from .config import ZenohSettings
 from .errors import ConfigError
-
-log = logging.getLogger(__name__)
 
 #: What a status says of a service on the in-process bus (no network, nothing to authenticate).
 IN_PROCESS = "in-process (no network)"
@@ -72,10 +69,7 @@ def check_service_security(settings: ZenohSettings) -> str:
         raise ConfigError(f"[zenoh] access_control is off for the {role or 'given'} role: every peer of the cell could put "
                           "anything here. Remove the setting (an identity brings its access list), or run with "
                           "--insecure on purpose")
-    summary = security_summary(settings)
-    if summary.startswith("INSECURE"):
-        log.warning("%s (--insecure): every status says so", summary)
-    return summary
+    return security_summary(settings)  # the node warns when it opens (after the rest of the configuration)
 
 
 def check_real_robot(settings: ZenohSettings) -> None:

@@ -315,6 +315,8 @@ class ServiceNode:
 
         zenoh.try_init_log_from_env()  # RUST_LOG (e.g. zenoh=info) shows Zenoh's own log on stderr; unset: quiet
         self.security = security_summary(self.settings)
+        if self.security.startswith("INSECURE"):
+            log.warning("%s: %s (--insecure); every status says so", self.service, self.security)
         self._session = zenoh.open(zenoh_config(self.settings))
         self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
         return self

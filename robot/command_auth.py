@@ -9,8 +9,8 @@ the operator signed it. Every refusal is counted by reason
 (``commands_unauthenticated: <why>``, ``estop_releases_refused: <why>``) and
 logged at most every few seconds.
 
-Without an identity (an ``--insecure`` robot side, the in-process cell)
-there is nothing to check with: every command and release is taken, as
+Without an identity (an ``--insecure`` robot side), or in process (the
+network-free cell), there is nothing to check with: every command and release is taken, as
 before, and the status says the robot side is insecure.
 """
 
@@ -23,6 +23,7 @@ from collections import Counter, OrderedDict
 from interfaces.arm_auth import (AuthError, CommandMac, LocalIdentity, check_release, command_key, load_identity,
                                  new_nonce, peer_public_key)
 from interfaces.messages import Estop, Introduction, TorqueCommand
+from interfaces.service_security import IN_PROCESS
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +40,9 @@ class CommandAuth:
 
     def __init__(self, node, counters: Counter) -> None:
         s = node.settings
-        self.identity: LocalIdentity | None = load_identity(s.tls_ca, s.tls_certificate, s.tls_private_key)
+        # in process (the network-free cell) nothing travels between the services: nothing to authenticate
+        self.identity: LocalIdentity | None = None if node.security == IN_PROCESS else \
+            load_identity(s.tls_ca, s.tls_certificate, s.tls_private_key)
         self.node = node
         self.counters = counters
         self.nonce = new_nonce()
