@@ -34,7 +34,9 @@ PAUSED(reason), FAULT(reason) and ESTOP reachable from any phase.
   ramps down (fast on an e-stop), the pad lifts off and holds. PAUSED
   resumes by itself when stains are fresh again; FAULT and ESTOP wait for
   :meth:`clear` (an e-stop release), except a lost robot, which the
-  service restarts with :meth:`restart` when states come back.
+  service restarts with :meth:`restart` when states come back. Released
+  before the pad is off (an e-stop's lift stands still while the robot
+  side holds the arm), the lift finishes PAUSED, no longer ESTOP.
 
 An MP runner's step that reports an error (a negative status) is a FAULT
 naming the MP and the status, never an exception in the loop.
@@ -63,6 +65,9 @@ from .params import ExecutorParams, ForceParams
 from .stain_book import StainBook
 
 log = logging.getLogger(__name__)
+
+#: The reason of PAUSED after an e-stop or fault released before its stop had lifted the pad off (:meth:`clear`).
+RELEASED_LIFTING = "released: lifting off before going on"
 
 
 class SkillExecutor(BoardWatch, ExecutorStops):
@@ -191,12 +196,18 @@ class SkillExecutor(BoardWatch, ExecutorStops):
             self._stop(Phase.FAULT, reason)
 
     def clear(self) -> None:
-        """Release an e-stop or a fault: re-approach the open stains (PAUSED while they are stale, DONE if none)."""
+        """Release an e-stop or a fault: re-approach the open stains (PAUSED while they are stale, DONE if none).
+
+        A stop that has not lifted off yet (its motion stood still while the robot side held the arm) finishes its
+        lift first, PAUSED (:data:`RELEASED_LIFTING`): the e-stop or fault is over, and a watcher that ends a run
+        held in ESTOP or FAULT must not count that lift as one."""
         self._estop = None
         if self.phase in _HALTED and self._initialised:
             self._resume_after_lift = True
             if self._stage == Stage.HOLD:
                 self._resume()
+            else:
+                self._set_phase(Phase.PAUSED, RELEASED_LIFTING)
 
     def robot_lost(self, reason: str) -> None:
         """No robot to command: FAULT at once, no motion (nothing would execute it)."""
@@ -316,7 +327,7 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         if self.phase == Phase.RETREAT:
             if not self._begin_look():
                 self._done()
-        elif self._resume_after_lift and self.phase in _HALTED:
+        elif self._resume_after_lift:  # released while lifting (PAUSED)
             self._resume()
 
     def _on_look(self, dt: float, tool: ToolState) -> None:
