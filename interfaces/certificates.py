@@ -15,7 +15,20 @@ atomically (private keys mode 0600):
   one-machine cell).
 
 Elliptic-curve keys (P-256), SHA-256 signatures, made with the maintained
-``cryptography`` library. Existing files are never overwritten;
+``cryptography`` library. The CA may sign only end-entity certificates
+(basic constraints ``CA:TRUE, pathlen:0``, key usage certificate and CRL
+signing): to a verifier that reads the trust anchor's path length
+(OpenSSL, ``cryptography``'s) a leaf issued by an intermediate under it is
+no good; Zenoh's TLS (rustls / webpki) reads nothing of an anchor but its
+name and key, so there only the CA's key guards against such a chain
+(``tests/test_credential_lifetimes.py``). Each service's
+certificate is no CA (``CA:FALSE``, which rustls enforces: a certificate
+signed with a service's key gets no link), for TLS server and client
+authentication (extended key usage), its key for signatures and key
+agreement (key usage: the TLS handshake; the static ECDH of
+:mod:`interfaces.arm_auth`). Everything is valid for ``--days``
+(:data:`DEFAULT_DAYS`, 365) from the moment it is made (5 minutes earlier,
+for clocks a little behind). Existing files are never overwritten;
 ``--if-missing`` keeps a complete set (exit 0), ``--add NAME`` signs one
 more service's certificate with the existing CA.
 
@@ -40,7 +53,12 @@ from .access import ROLES
 from .errors import ConfigError
 
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
-DEFAULT_DAYS = 825
+#: Validity of certificates made for a site, by ``lamps certificates`` and ``lamps credentials`` [days].
+DEFAULT_DAYS = 365
+#: The longest validity either command makes [days].
+MAX_DAYS = 3650
+#: Certificates are valid from this long before they are made (a peer whose clock is a little behind) [min].
+BACKDATE_MIN = 5
 #: Host names every certificate carries unless ``hosts`` is given.
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
 
@@ -81,23 +99,30 @@ def _san(hosts: tuple[str, ...]):
     return x509.SubjectAlternativeName(names)
 
 
-def _make_ca(directory: Path, days: int):
+def _validity(days: float):
+    """(not valid before, not valid after) of a certificate made now and valid ``days`` (fractions: 1/24 is an
+    hour)."""
+    now = dt.datetime.now(dt.timezone.utc)
+    return now - dt.timedelta(minutes=BACKDATE_MIN), now + dt.timedelta(days=days)
+
+
+def _make_ca(directory: Path, days: float):
     key, cert = new_ca(days)
     write_key_and_cert(directory / CA_CERT, directory / CA_KEY, key, cert)
     return key, cert
 
 
-def new_ca(days: int = DEFAULT_DAYS):
-    """A new self-signed CA: (private key, certificate) objects of ``cryptography``."""
+def new_ca(days: float = DEFAULT_DAYS):
+    """A new self-signed CA valid ``days``: (private key, certificate) objects of ``cryptography``. It signs end
+    entities only (``pathlen:0``; see the module docstring for who enforces it)."""
     x509, hashes, _, ec, _, NameOID = _crypto()
     key = ec.generate_private_key(ec.SECP256R1())
     name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "LAMPS cell CA")])
-    now = dt.datetime.now(dt.timezone.utc)
+    start, end = _validity(days)
     cert = (x509.CertificateBuilder().subject_name(name).issuer_name(name).public_key(key.public_key())
-            .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(minutes=5))
-            .not_valid_after(now + dt.timedelta(days=days))
+            .serial_number(x509.random_serial_number()).not_valid_before(start).not_valid_after(end)
             .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-            .add_extension(x509.KeyUsage(digital_signature=True, key_cert_sign=True, crl_sign=True,
+            .add_extension(x509.KeyUsage(digital_signature=False, key_cert_sign=True, crl_sign=True,
                                          content_commitment=False, key_encipherment=False, data_encipherment=False,
                                          key_agreement=False, encipher_only=False, decipher_only=False),
                            critical=True)
@@ -118,31 +143,33 @@ def _load_ca(directory: Path):
     return key, cert
 
 
-def _sign(directory: Path, name: str, hosts: tuple[str, ...], days: int, ca_key, ca_cert) -> Path:
+def _sign(directory: Path, name: str, hosts: tuple[str, ...], days: float, ca_key, ca_cert) -> Path:
     key, cert = issue(name, hosts, days, ca_key, ca_cert)
     cert_path, key_path = cert_paths(directory, name)
     write_key_and_cert(cert_path, key_path, key, cert)
     return cert_path
 
 
-def issue(name: str, hosts: tuple[str, ...], days: int, ca_key, ca_cert):
-    """A new key and a certificate for it signed by the CA: common name ``name`` (the role access control
-    reads), subject alternative names ``hosts``, server and client use; (private key, certificate)."""
+def issue(name: str, hosts: tuple[str, ...], days: float, ca_key, ca_cert):
+    """A new key and a certificate for it signed by the CA, valid ``days`` (fractions: 1/24 is an hour; never past
+    the CA's end): common name ``name`` (the role access control reads), subject alternative names ``hosts``, no
+    CA, server and client use, the key for signatures and key agreement; (private key, certificate)."""
     x509, hashes, _, ec, EKU, NameOID = _crypto()
     key = ec.generate_private_key(ec.SECP256R1())
-    now = dt.datetime.now(dt.timezone.utc)
+    start, end = _validity(days)
+    end = min(end, ca_cert.not_valid_after_utc)  # never outlives its CA
     cert = (x509.CertificateBuilder()
             .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)]))
             .issuer_name(ca_cert.subject).public_key(key.public_key())
-            .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(minutes=5))
-            .not_valid_after(now + dt.timedelta(days=days))
+            .serial_number(x509.random_serial_number()).not_valid_before(start).not_valid_after(end)
             .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
             .add_extension(x509.KeyUsage(digital_signature=True, key_encipherment=False, key_cert_sign=False,
                                          crl_sign=False, content_commitment=False, data_encipherment=False,
-                                         key_agreement=False, encipher_only=False, decipher_only=False),
+                                         key_agreement=True, encipher_only=False, decipher_only=False),
                            critical=True)
             .add_extension(x509.ExtendedKeyUsage([EKU.SERVER_AUTH, EKU.CLIENT_AUTH]), critical=False)
             .add_extension(_san(hosts), critical=False)
+            .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
             .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
             .sign(ca_key, hashes.SHA256()))
     return key, cert
@@ -166,7 +193,7 @@ def _check_name(name: str) -> None:
 
 
 def make_certificates(directory: Path, names: tuple[str, ...] = ROLES, hosts: tuple[str, ...] = (),
-                      days: int = DEFAULT_DAYS, if_missing: bool = False) -> dict[str, Path]:
+                      days: float = DEFAULT_DAYS, if_missing: bool = False) -> dict[str, Path]:
     """A new CA and one certificate per name (SANs: ``hosts``, default the name plus :data:`DEFAULT_HOSTS`);
     name -> certificate path. FileExistsError if any target exists (``if_missing``: unless all do)."""
     for n in names:
@@ -182,7 +209,7 @@ def make_certificates(directory: Path, names: tuple[str, ...] = ROLES, hosts: tu
     return {n: _sign(directory, n, hosts or (n, *DEFAULT_HOSTS), days, ca_key, ca_cert) for n in names}
 
 
-def add_certificate(directory: Path, name: str, hosts: tuple[str, ...] = (), days: int = DEFAULT_DAYS) -> Path:
+def add_certificate(directory: Path, name: str, hosts: tuple[str, ...] = (), days: float = DEFAULT_DAYS) -> Path:
     """One more service's certificate signed by the CA already in ``directory``."""
     _check_name(name)
     existing = [str(p) for p in cert_paths(directory, name) if p.exists()]
@@ -203,8 +230,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--add", metavar="NAME", help="sign one more service's certificate with the existing CA")
     ap.add_argument("--if-missing", action="store_true", help="keep a complete set that is already there (exit 0)")
     args = ap.parse_args(argv)
-    if not 1 <= args.days <= 3650:
-        print(f"lamps certificates: --days must be in [1, 3650], got {args.days}", file=sys.stderr)
+    if not 1 <= args.days <= MAX_DAYS:
+        print(f"lamps certificates: --days must be in [1, {MAX_DAYS}], got {args.days}", file=sys.stderr)
         return 2
     try:
         if args.add:

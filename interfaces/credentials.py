@@ -20,7 +20,16 @@ Each certificate names the hosts its role is reached at (the compose service
 names and aliases of that role, ``localhost`` and ``127.0.0.1``, plus every
 ``--host``): Zenoh checks the listener's name on every TLS link a service
 opens. Elliptic-curve keys (P-256) and SHA-256 signatures, as
-:mod:`interfaces.certificates` makes them.
+:mod:`interfaces.certificates` makes them (a CA that certifies end entities
+only, ``pathlen:0``).
+
+Lifetimes: ``lamps credentials DIR`` (a site's, compose's ``./secrets``)
+are valid :data:`~interfaces.certificates.DEFAULT_DAYS` (365) days, or
+``--days N``; :func:`make_credentials` called without ``days`` (what
+``lamps up`` makes in each run folder, ``<run>/credentials/``) makes
+one-run credentials, valid :data:`RUN_DAYS` (24 hours). A complete set
+whose CA or any certificate has expired is refused by ``--if-missing``,
+naming the date: delete the folder and make new ones.
 
 ``--cells ID1,ID2,...`` makes a *site*: several cells behind one router
 (:func:`interfaces.access.site_acl`), one CA. Each cell gets ``DIR/<robot
@@ -49,13 +58,15 @@ from pathlib import Path
 from lampskit.atomic import write_atomic, write_text_atomic
 
 from .access import DEFAULT_ROS_NAMESPACES, IDENTITIES, RELAY, ROLES, SITE_VIEWER, cell_acl, check_cells, identity_name, role_and_cell
-from .certificates import DEFAULT_DAYS, DEFAULT_HOSTS, issue, new_ca, write_key_and_cert
+from .certificates import DEFAULT_DAYS, DEFAULT_HOSTS, MAX_DAYS, issue, new_ca, write_key_and_cert
 from .keys import Keys
 
 CA_FOLDER = "ca"
 #: The files of an identity folder: the CA's certificate, the role's certificate, its private key.
 CA_FILE, CERT_FILE, KEY_FILE = "ca.pem", "cert.pem", "key.pem"
 BRIDGE_CONFIG = "zenoh-bridge.json5"
+#: Validity of one-run credentials (``lamps up``'s, in the run folder) [days]: 24 hours.
+RUN_DAYS = 1.0
 #: Where the bridge's container finds its identity (compose mounts ./secrets/bridge there).
 BRIDGE_SECRETS = "/secrets"
 #: The host names each role is reached at in docker-compose.yml (service names and network aliases).
@@ -109,11 +120,13 @@ def cell_of(folder: Path) -> str | None:
 
 
 def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str, ...] = (),
-                     days: int = DEFAULT_DAYS, cells: tuple[str, ...] = ()) -> dict[str, Path]:
+                     days: float = RUN_DAYS, cells: tuple[str, ...] = ()) -> dict[str, Path]:
     """Create the files (see the module docstring); common name -> its identity folder. FileExistsError if any
-    exists (with ``if_missing``: only if some but not all exist; a complete set is kept as it is).
+    exists (with ``if_missing``: only if some but not all exist; a complete set is kept as it is unless a
+    certificate of it has expired: :class:`CredentialsExpired`).
 
-    cells : the robot ids of a site (per-cell identities ``<role>@<robot id>``); empty: one cell, bare roles.
+    days : validity (default :data:`RUN_DAYS`, one run's; ``lamps credentials`` passes ``--days``, default
+    365). cells : the robot ids of a site (per-cell identities ``<role>@<robot id>``); empty: one cell, bare roles.
     """
     cells = check_cells(cells)
     plan = identities(directory, cells)
@@ -124,6 +137,8 @@ def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str
     present = [str(p) for p in targets if p.exists()]
     folders = {name: f for name, (f, _) in plan.items()}
     if if_missing and len(present) == len(targets):
+        certificates = [identity_files(f)[1] for f in folders.values()]
+        check_not_expired(directory, [directory / CA_FOLDER / CA_FILE, *certificates])
         return folders
     missing = {r: f for r, f in folders.items() if not any(p.exists() for p in identity_files(f))}
     ca_there = all((directory / CA_FOLDER / n).exists() for n in (CA_FILE, "ca.key"))
@@ -142,6 +157,24 @@ def make_credentials(directory: Path, if_missing: bool = False, hosts: tuple[str
     for c in cells or (None,):
         write_bridge_config(identity_folder(directory, "bridge", c), c)
     return folders
+
+
+class CredentialsExpired(FileExistsError):
+    """A complete set of credentials is there but a certificate of it has expired; the message names it."""
+
+
+def check_not_expired(directory: Path, certificates: list[Path], now=None) -> None:
+    """CredentialsExpired naming the first of ``certificates`` (PEM files) no longer valid at ``now`` (UTC)."""
+    import datetime as dt
+
+    from cryptography import x509
+
+    now = now or dt.datetime.now(dt.timezone.utc)
+    for path in certificates:
+        end = x509.load_pem_x509_certificate(path.read_bytes()).not_valid_after_utc
+        if end < now:
+            raise CredentialsExpired(f"credentials in {directory} expired on {end:%Y-%m-%d %H:%M} UTC ({path}): "
+                                     f"delete {directory} and make new ones")
 
 
 def _load_ca(folder: Path):
@@ -191,15 +224,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--host", action="append", default=[],
                     help="one more host name or address every role may be reached at (repeatable; a cell on "
                          "several machines)")
-    ap.add_argument("--days", type=int, default=DEFAULT_DAYS, help=f"validity [days] (default {DEFAULT_DAYS})")
+    ap.add_argument("--days", type=int, default=DEFAULT_DAYS,
+                    help=f"validity of the CA and every certificate [days] (default {DEFAULT_DAYS}; lamps up's "
+                         f"one-run credentials: {RUN_DAYS * 24:g} hours)")
     ap.add_argument("--if-missing", action="store_true",
                     help="keep a complete set that is already there (exit 0); a partial one is still an error")
     ap.add_argument("--cells", metavar="ID,ID,...", default="",
                     help="a site of several cells behind one router: per robot id DIR/<id>/<role>/ with common "
                          "names <role>@<id>, plus DIR/router/ and DIR/site-viewer/ (default: one cell, DIR/<role>/)")
     args = ap.parse_args(argv)
-    if not 1 <= args.days <= 3650:
-        print(f"lamps credentials: --days must be in [1, 3650], got {args.days}", file=sys.stderr)
+    if not 1 <= args.days <= MAX_DAYS:
+        print(f"lamps credentials: --days must be in [1, {MAX_DAYS}], got {args.days}", file=sys.stderr)
         return 2
     cells = tuple(c.strip() for c in args.cells.split(",") if c.strip())
     try:
