@@ -16,6 +16,17 @@ per second (the 1 kHz states and commands; a viewer needs no more), and a
 full queue drops the oldest samples (counted): a slow viewer never slows
 the cell. Nothing is written to disk.
 
+Who may watch: the view serves on ``127.0.0.1`` (``--host``). Served on
+any other address (``--host 0.0.0.0``, as in its container) it reaches
+beyond this machine and starts only with a token, which clients from other
+machines present as ``ws://HOST:PORT/?token=TOKEN``
+(:mod:`launch.ws_server`): ``--token-file FILE`` (its first line),
+``LAMPS_LIVE_TOKEN``, or ``--token-from-identity``, a token derived from the
+private key of the view's Zenoh identity (:func:`live_token`: the same for
+every start with that identity, gone with it when credentials are made
+anew), which ``--print-token`` prints. Without one it refuses to start,
+naming the problem.
+
 A site of several cells through one router (``lamps up --cells N``) is served by one view: ``lamps foxglove
 --cells ID,...`` joins as the site viewer (the identity that reads every cell) and serves every cell's topics
 (each under its own prefix) on one port, each cell's scene in a frame tree of its own (``<robot id>/world``);
@@ -28,15 +39,59 @@ import argparse
 import base64
 import json
 import logging
+import os
 import sys
 import threading
 import time
 from collections import Counter, deque
+from pathlib import Path
 
 log = logging.getLogger(__name__)
 
 #: The WebSocket port Foxglove's app connects to by default.
 DEFAULT_PORT = 8765
+#: The environment variable that may carry the live view's token.
+TOKEN_ENV = "LAMPS_LIVE_TOKEN"
+#: HKDF's ``info`` for the token derived from an identity's key (:func:`live_token`).
+_TOKEN_INFO = b"lamps live view token v1"
+
+
+def live_token(private_key_pem: Path) -> str:
+    """The live view's token of the identity whose private key (PEM, an elliptic-curve key as ``lamps
+    credentials`` makes) is at ``private_key_pem``: HKDF-SHA256 of the key's secret scalar, ``info``
+    :data:`_TOKEN_INFO`, 18 bytes, URL-safe base64 (24 characters, 144 bits). Whoever can read the key can compute
+    it; nobody else can."""
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.hazmat.primitives.kdf.hkdf import HKDF
+
+    key = serialization.load_pem_private_key(Path(private_key_pem).read_bytes(), password=None)
+    if not isinstance(key, ec.EllipticCurvePrivateKey):
+        raise ValueError(f"{private_key_pem}: not an elliptic-curve private key")
+    scalar = key.private_numbers().private_value.to_bytes((key.curve.key_size + 7) // 8, "big")
+    raw = HKDF(algorithm=hashes.SHA256(), length=18, salt=None, info=_TOKEN_INFO).derive(scalar)
+    return base64.urlsafe_b64encode(raw).decode("ascii")
+
+
+def token_of(a, settings=None) -> str | None:
+    """The token the options give: ``--token-file`` (its first line), ``--token-from-identity`` (of
+    ``settings``' identity), else ``LAMPS_LIVE_TOKEN``; None if none. ValueError naming what cannot be read."""
+    if a.token_file:
+        try:
+            lines = Path(a.token_file).read_text().splitlines()
+        except OSError as exc:
+            raise ValueError(f"--token-file {a.token_file}: {exc.strerror or exc}") from None
+        return lines[0].strip() if lines else ""
+    if a.token_from_identity:
+        key = getattr(settings, "tls_private_key", "")
+        if not key:
+            raise ValueError("--token-from-identity: the live view has no identity (LAMPS_ZENOH_IDENTITY, [zenoh] "
+                             "identity: a folder of 'lamps credentials')")
+        try:
+            return live_token(Path(key))
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"--token-from-identity: {key}: {exc}") from None
+    return os.environ.get(TOKEN_ENV) or None
 
 
 class LiveView:
@@ -50,7 +105,7 @@ class LiveView:
     """
 
     def __init__(self, session, keys, host: str = "127.0.0.1", port: int = DEFAULT_PORT, max_rate_hz: float = 100.0,
-                 max_queue: int = 20_000) -> None:
+                 max_queue: int = 20_000, token: str | None = None) -> None:
         from .scene import cells_of, scenes_of
         from .ws_server import FoxgloveWsServer
 
@@ -70,7 +125,7 @@ class LiveView:
         self._stop = threading.Event()
         many = len(cells) > 1
         name = f"LAMPS site {', '.join(k.prefix for k in cells)}" if many else f"LAMPS cell {self.keys.prefix}"
-        self.server = FoxgloveWsServer(name, host, port)
+        self.server = FoxgloveWsServer(name, host, port, token)  # before anything: it refuses a host without token
         self.port = self.server.port
         self._thread = threading.Thread(target=self._run, name="foxglove-live", daemon=True)
         self._thread.start()
@@ -161,8 +216,18 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="lamps foxglove", description=(
         "Serve the running cell to the Foxglove app over its WebSocket protocol (open ws://HOST:PORT in the app; "
         "layout: config/foxglove/lamps.json) until stopped (SIGTERM or Ctrl-C)."))
-    p.add_argument("--host", default="127.0.0.1", help="address to serve on (0.0.0.0 in a container)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to serve on (default 127.0.0.1: this machine only; any other, e.g. 0.0.0.0 in a "
+                        "container, needs a token)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"WebSocket port (default {DEFAULT_PORT})")
+    token = p.add_mutually_exclusive_group()
+    token.add_argument("--token-file", metavar="FILE",
+                       help=f"the token clients from other machines present (ws://HOST:PORT/?token=...): the "
+                            f"file's first line (default: ${TOKEN_ENV})")
+    token.add_argument("--token-from-identity", action="store_true",
+                       help="the token derived from the private key of the view's Zenoh identity (the same at every "
+                            "start with it; --print-token shows it)")
+    p.add_argument("--print-token", action="store_true", help="print the token and the URL clients open, then exit")
     p.add_argument("--max-rate", type=float, default=100.0, metavar="HZ",
                    help="at most this many messages per second per topic (default 100)")
     p.add_argument("--write-layout", metavar="FILE",
@@ -189,6 +254,13 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--port must be in 1..65535, got {a.port}")
     if not a.max_rate > 0:
         p.error(f"--max-rate must be positive, got {a.max_rate}")
+    try:
+        token = _checked_token(a)
+    except ValueError as exc:
+        print(f"lamps foxglove: error: {exc}", file=sys.stderr)
+        return 1
+    if a.print_token:
+        return _print_token(a, token)
     from interfaces.stop_signals import wait_for
 
     from .background_node import open_background_node
@@ -202,17 +274,44 @@ def main(argv: list[str] | None = None) -> int:
     try:
         try:
             view = LiveView(node.session, [Keys.for_robot(c) for c in settings.cells] or settings.keys, a.host,
-                            a.port, a.max_rate)
+                            a.port, a.max_rate, token=token)
         except RuntimeError as exc:  # the port is taken, or the address is not ours
             print(f"lamps foxglove: error: cannot serve on {a.host}:{a.port} ({exc})", file=sys.stderr)
             return 1
         what = f"the cells {', '.join(settings.cells)}" if settings.cells else "the cell"
-        print(f"lamps foxglove: serving {what} on ws://{a.host}:{view.port} (Foxglove: Open connection)", flush=True)
+        print(f"lamps foxglove: serving {what} on ws://{a.host}:{view.port} (Foxglove: Open connection"
+              f"{'; from another machine with ?token=, --print-token shows it' if token else ''})", flush=True)
         wait_for(stop)  # in slices: a signal another thread took still reaches this one
         view.close()
     finally:
         node.close()
     log.info("live view counters: %s", dict(view.counters))
+    return 0
+
+
+def _checked_token(a) -> str | None:
+    """The token of the options (None: none) if the view may serve on ``--host`` with it; ValueError saying why
+    not (no token beyond loopback, a short one, an identity or a file that cannot be read)."""
+    from interfaces.config import load_config, zenoh_with_options
+    from lampskit.errors import LampsError
+
+    from .ws_server import check_token
+
+    try:
+        settings = zenoh_with_options(load_config(a.config).zenoh, a) if a.token_from_identity else None
+    except LampsError as exc:
+        raise ValueError(str(exc)) from None
+    token = token_of(a, settings)
+    if a.print_token and not token:
+        raise ValueError(f"no token to print: give --token-file FILE, {TOKEN_ENV} or --token-from-identity")
+    check_token(a.host, token)  # TokenRequired is a ValueError
+    return token
+
+
+def _print_token(a, token: str) -> int:
+    host = "HOST" if a.host in ("0.0.0.0", "::", "") else a.host
+    print(token)
+    print(f"clients from other machines open ws://{host}:{a.port}/?token={token}", file=sys.stderr)
     return 0
 
 

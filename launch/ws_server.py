@@ -15,17 +15,34 @@ The server runs an asyncio loop on a thread of its own; :meth:`add_channel`
 and :meth:`send` are called from any thread and never wait on a client:
 each client has a bounded queue, and a client that falls behind loses its
 oldest messages (counted in :attr:`dropped`), never the cell's time.
+
+Who may connect: the server binds ``127.0.0.1`` unless told otherwise.
+Bound to any other address (``0.0.0.0`` in a container) it reaches beyond
+this machine and starts only with a token (:class:`TokenRequired`
+otherwise); a client that connects from another machine must then present
+it in the URL's query, ``ws://HOST:PORT/?token=TOKEN`` (a browser's
+WebSocket can set no header, and the sub-protocol is fixed by Foxglove's
+protocol), checked at the opening handshake in constant time; without it
+the handshake is answered 401 and counted in :attr:`refused`. A client from
+a loopback address is served without a token, as every client of a view
+bound to loopback is (so a reverse proxy on the same machine must check
+clients itself).
 """
 
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import hmac
+import ipaddress
 import json
 import logging
 import struct
 import threading
 import time
 from dataclasses import dataclass, field
+from http import HTTPStatus
+from urllib.parse import parse_qs, urlsplit
 
 log = logging.getLogger(__name__)
 
@@ -33,6 +50,44 @@ SUBPROTOCOLS = ("foxglove.websocket.v1", "foxglove.sdk.v1")
 MESSAGE_DATA = 0x01
 #: Frames queued per client before the oldest are dropped.
 CLIENT_QUEUE = 2000
+#: The shortest token accepted [characters] (``secrets.token_urlsafe(16)`` gives 22).
+MIN_TOKEN_CHARS = 16
+
+
+class TokenRequired(ValueError):
+    """A server that reaches beyond this machine was given no token (or one too short); the message says how to
+    give one."""
+
+
+def is_loopback(host: str) -> bool:
+    """True for ``localhost`` and loopback addresses (``127.0.0.0/8``, ``::1``, IPv4-mapped ``::ffff:127.x``);
+    anything else (``0.0.0.0``, ``""``, another name or address) reaches beyond this machine."""
+    if host == "localhost":
+        return True
+    try:
+        ip = ipaddress.ip_address(host.split("%", 1)[0])
+    except ValueError:
+        return False
+    mapped = getattr(ip, "ipv4_mapped", None)
+    return (mapped or ip).is_loopback
+
+
+def check_token(host: str, token: str | None) -> None:
+    """TokenRequired unless serving on ``host`` is allowed with ``token``: any on loopback; beyond it, a token of
+    :data:`MIN_TOKEN_CHARS` or more."""
+    if is_loopback(host):
+        return
+    if not token:
+        raise TokenRequired(f"serving on {host or 'every interface'} reaches beyond this machine and the live view "
+                            "would be open to anyone on the network: give it a token (--token-file FILE, "
+                            "LAMPS_LIVE_TOKEN or --token-from-identity), or serve on 127.0.0.1")
+    if len(token) < MIN_TOKEN_CHARS:
+        raise TokenRequired(f"the live view's token has {len(token)} characters: at least {MIN_TOKEN_CHARS} "
+                            "(python -c 'import secrets; print(secrets.token_urlsafe(24))' makes one)")
+
+
+def _digest(text: str) -> bytes:
+    return hashlib.sha256(text.encode()).digest()
 
 
 @dataclass(eq=False)  # hashed by identity: one per connection
@@ -43,11 +98,18 @@ class _Client:
 
 
 class FoxgloveWsServer:
-    """Serves channels to Foxglove clients on ``ws://host:port`` (port 0: any free one; see :attr:`port`)."""
+    """Serves channels to Foxglove clients on ``ws://host:port`` (port 0: any free one; see :attr:`port`).
 
-    def __init__(self, name: str, host: str = "127.0.0.1", port: int = 8765) -> None:
+    token : what a client from another machine must present (``?token=``); needed when ``host`` is not loopback
+    (:func:`check_token`). refused : handshakes answered 401 (no token, or a wrong one).
+    """
+
+    def __init__(self, name: str, host: str = "127.0.0.1", port: int = 8765, token: str | None = None) -> None:
+        check_token(host, token)
         self.name = name
         self.dropped = 0
+        self.refused = 0
+        self._token_digest = _digest(token) if token else None
         self._channels: dict[int, dict] = {}
         self._clients: set[_Client] = set()
         self._lock = threading.Lock()
@@ -104,10 +166,23 @@ class FoxgloveWsServer:
 
         self._stop_event = asyncio.Event()
         async with serve(self._handler, host, port, subprotocols=list(SUBPROTOCOLS), max_size=2**20,
-                         compression=None) as server:
+                         compression=None, process_request=self._admit) as server:
             self.port = server.sockets[0].getsockname()[1]
             self._ready.set()
             await self._stop_event.wait()
+
+    def _admit(self, connection, request):
+        """At the opening handshake: None (go on) for a client from loopback or one presenting the token in the
+        query (constant-time comparison of digests); else a 401 response, counted and logged."""
+        peer = connection.remote_address[0] if connection.remote_address else ""
+        if is_loopback(str(peer)):
+            return None
+        given = parse_qs(urlsplit(request.path).query).get("token", [""])[-1]
+        if self._token_digest is not None and hmac.compare_digest(_digest(given), self._token_digest):
+            return None
+        self.refused += 1
+        log.warning("live view: refused %s (%s)", peer, "a wrong token" if given else "no token")
+        return connection.respond(HTTPStatus.UNAUTHORIZED, "this live view needs its token: ws://HOST:PORT/?token=\n")
 
     def _broadcast(self, text: str) -> None:
         for c in self._clients:

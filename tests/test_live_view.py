@@ -5,30 +5,38 @@ A real Zenoh session publishes the cell's messages on loopback; the live view
 speaking ``foxglove.websocket.v1`` (Lichtblick's) or ``foxglove.sdk.v1``
 (current Foxglove apps') subscribes and checks every message it gets against
 the schema the server advertised (JSON Schema, or Foxglove's protobuf types).
+
+Who may watch: the view binds loopback unless told otherwise; beyond it, it
+refuses to start without a token, and a client from another address (this
+machine's own network address stands in for another machine) gets its
+handshake answered 401 without the token in the URL's query, or with a
+wrong one.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+import os
 import struct
 import time
 
 import jsonschema
 import numpy as np
 import pytest
+from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from interfaces.config import ZenohSettings
 from interfaces.messages import (CameraFrame, CameraIntrinsics, Capabilities, ControllerStatus, RobotState)
 from interfaces.session import ServiceNode
-from launch.live import LiveView
+from launch.live import LiveView, live_token
+from launch.ws_server import FoxgloveWsServer, TokenRequired, check_token, is_loopback
 
 from .mcap_check import _protobuf_class
 from .test_scene import _camera, _stains
 from .zenoh_helpers import free_port, wait_for, wait_subscribed
 
-pytestmark = pytest.mark.slow
 
 
 def _state(i: int) -> RobotState:
@@ -47,8 +55,9 @@ def _frame() -> CameraFrame:
 class _Client:
     """A Foxglove WebSocket protocol client: advertised channels by topic, subscriptions, message frames."""
 
-    def __init__(self, port: int, subprotocol: str) -> None:
-        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=[subprotocol], open_timeout=10)
+    def __init__(self, port: int, subprotocol: str, host: str = "127.0.0.1", token: str | None = None) -> None:
+        query = f"/?token={token}" if token is not None else ""
+        self.ws = connect(f"ws://{host}:{port}{query}", subprotocols=[subprotocol], open_timeout=10)
         assert self.ws.subprotocol == subprotocol
         self.channels: dict[str, dict] = {}
         self.by_sub: dict[int, dict] = {}
@@ -110,6 +119,7 @@ def _check(channel: dict, payload: bytes) -> None:
         assert cls.FromString(payload).ListFields(), channel["topic"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("subprotocol", ["foxglove.websocket.v1", "foxglove.sdk.v1"])
 def test_the_live_view_serves_the_cell_and_its_scene_to_a_foxglove_client(subprotocol):
     zport, wport = free_port(), free_port()
@@ -178,6 +188,7 @@ def test_the_live_view_serves_the_cell_and_its_scene_to_a_foxglove_client(subpro
         pub.close()
 
 
+@pytest.mark.slow
 def test_one_view_serves_two_cells_each_in_a_frame_tree_of_its_own():
     """``lamps foxglove --cells``: two cells' states on one port, each cell's scene rooted at ``<robot id>/world``
     (two arms in one ``world`` would be one tree), a key of neither cell left unsubscribed."""
@@ -225,6 +236,7 @@ def test_one_view_serves_two_cells_each_in_a_frame_tree_of_its_own():
         pub.close()
 
 
+@pytest.mark.slow
 def test_a_sites_layout_has_a_tab_per_cell_with_its_own_panels_and_frames(tmp_path):
     """``lamps foxglove --cells A,B --write-layout``: each tab is the cell's layout on its own topics."""
     import subprocess
@@ -252,3 +264,104 @@ def test_a_sites_layout_has_a_tab_per_cell_with_its_own_panels_and_frames(tmp_pa
                           "--write-layout", str(tmp_path / "x.json")], cwd=REPO, capture_output=True, text=True,
                          timeout=60)
     assert bad.returncode == 2 and "--cells iiwa-1,site-viewer" in bad.stderr and not (tmp_path / "x.json").exists()
+
+
+# ------------------------------------------------------------------------------------------------- who may watch
+def _own_address() -> str | None:
+    """This machine's address on its default route (no packet is sent), or None without one."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.connect(("10.255.255.255", 1))
+        except OSError:
+            return None
+        address = s.getsockname()[0]
+    return None if is_loopback(address) else address
+
+
+@pytest.mark.parametrize("host, loopback", [("127.0.0.1", True), ("127.3.0.1", True), ("::1", True),
+                                            ("localhost", True), ("::ffff:127.0.0.1", True), ("0.0.0.0", False),
+                                            ("::", False), ("", False), ("192.0.2.7", False),
+                                            ("cell-laptop.local", False)])
+def test_only_loopback_counts_as_this_machine(host, loopback):
+    assert is_loopback(host) == loopback
+    if loopback:
+        check_token(host, None)  # no token needed
+    else:
+        with pytest.raises(TokenRequired, match="reaches beyond this machine.*--token-file FILE, LAMPS_LIVE_TOKEN"):
+            check_token(host, None)
+        with pytest.raises(TokenRequired, match="7 characters: at least 16"):
+            check_token(host, "short12")
+        check_token(host, "a" * 16)
+
+
+def test_a_view_beyond_loopback_without_a_token_refuses_to_start_and_says_why(tmp_path):
+    import subprocess
+    import sys
+
+    from .conftest import REPO
+
+    with pytest.raises(TokenRequired, match="0.0.0.0 reaches beyond this machine"):
+        FoxgloveWsServer("x", "0.0.0.0", free_port())
+    env = {k: v for k, v in os.environ.items() if k != "LAMPS_LIVE_TOKEN"}
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--host", "0.0.0.0", "--port",
+                        str(free_port()), "--insecure"], cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
+    assert r.returncode == 1, r.stderr
+    assert "error: serving on 0.0.0.0 reaches beyond this machine" in r.stderr and "--token-from-identity" in r.stderr
+    short = tmp_path / "token"
+    short.write_text("abc\n")
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--host", "0.0.0.0", "--token-file",
+                        str(short), "--insecure"], cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
+    assert r.returncode == 1 and "3 characters: at least 16" in r.stderr, r.stderr
+
+
+def test_the_identity_token_is_its_keys_own_and_printed_for_the_clients(tmp_path):
+    import subprocess
+    import sys
+
+    from interfaces.credentials import identity_files, identity_folder, make_credentials
+
+    from .conftest import REPO
+
+    make_credentials(tmp_path / "a")
+    make_credentials(tmp_path / "b")
+    key_a = identity_files(identity_folder(tmp_path / "a", "recorder"))[2]
+    token = live_token(key_a)
+    assert len(token) == 24 and token == live_token(key_a)
+    assert token != live_token(identity_files(identity_folder(tmp_path / "b", "recorder"))[2])
+    assert token != live_token(identity_files(identity_folder(tmp_path / "a", "perception"))[2])
+    env = {**os.environ, "LAMPS_ZENOH_IDENTITY": str(identity_folder(tmp_path / "a", "recorder"))}
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--host", "0.0.0.0", "--port", "8765",
+                        "--token-from-identity", "--print-token"], cwd=REPO, capture_output=True, text=True,
+                       timeout=60, env=env)
+    assert r.returncode == 0 and r.stdout.strip() == token, r.stderr
+    assert f"ws://HOST:8765/?token={token}" in r.stderr
+    env.pop("LAMPS_ZENOH_IDENTITY")
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--token-from-identity", "--print-token",
+                        "--insecure"], cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
+    assert r.returncode == 1 and "--token-from-identity: the live view has no identity" in r.stderr, r.stderr
+
+
+def test_a_client_from_another_address_needs_the_token_in_the_url_one_from_loopback_does_not():
+    """Bound to every interface with a token: from this machine's network address (another machine, to the
+    server), no token and a wrong one are answered 401 and counted; the token in the query is let in; a client from
+    127.0.0.1 is let in without one."""
+    address = _own_address()
+    if address is None:
+        pytest.skip("no network address besides loopback")
+    token = "correct-horse-battery-staple"
+    server = FoxgloveWsServer("LAMPS test", "0.0.0.0", 0, token)
+    try:
+        for given in (None, "", "correct-horse-battery-stapl", "correct-horse-battery-staplf", token + "x"):
+            with pytest.raises(InvalidStatus, match="401"):
+                _Client(server.port, "foxglove.websocket.v1", host=address, token=given)
+        assert server.refused == 5
+        for host, given in ((address, token), ("127.0.0.1", None)):
+            client = _Client(server.port, "foxglove.sdk.v1", host=host, token=given)
+            client.pump(1.0)
+            assert client.server_info is not None and client.server_info["name"] == "LAMPS test", host
+            client.ws.close()
+        assert server.refused == 5
+    finally:
+        server.stop()
