@@ -38,28 +38,28 @@ has only the partial file.
 from __future__ import annotations
 
 import base64
-import json
 import logging
 import os
-import struct
 import threading
 import time
-import zlib
 from collections import Counter, deque
 from pathlib import Path
-from typing import Any
 
 import msgspec
 import numpy as np
-import zstandard as zstd
-from mcap.writer import Writer
 
 from interfaces.codec import Decoder
 from interfaces.errors import MessageDecodeError
 from interfaces.keys import Keys
-from interfaces.messages import Message
 
-from .record_json import json_records, message_type_of
+from .record_budget import SHUT, THIN_FROM, Account, Budget
+from .record_json import message_type_of
+# the file itself; re-exported here, where the recording's readers and the tests have always found them
+from .record_sink import CHUNK_BYTES, FLUSH_S, RECORDER_ACCOUNT, McapSink, iter_records, recover_recording
+
+__all__ = ["CHUNK_BYTES", "FLUSH_S", "McapSink", "iter_records", "recover_recording", "Recorder", "RECORDING",
+           "RESUMED_TOPIC", "STATUS_TOPIC", "SELF_REPORTS_TOPIC", "budget_from_env", "read_recording",
+           "trace_array"]
 
 log = logging.getLogger(__name__)
 
@@ -69,155 +69,43 @@ RESUMED_TOPIC = "recorder/resumed"
 _RESUMED_SCHEMA = {"type": "object", "title": "lamps.RecorderResumed",
                    "properties": {"carried_messages": {"type": "integer"}, "earlier_file": {"type": "string"},
                                   "earlier_finished": {"type": "boolean"}, "last_earlier_ns": {"type": "integer"}}}
-#: MCAP chunk size [bytes]: small, so a crash loses little (a chunk is on the disk only once complete).
-CHUNK_BYTES = 256 * 1024
-#: The recording is pushed to the disk this often [s].
-FLUSH_S = 1.0
-
-
-class _Counted:
-    """A binary stream that knows its position without asking the OS: :meth:`tell` is read once per message (the
-    disk budget), a system call each time on a file."""
-
-    def __init__(self, f) -> None:
-        self._f = f
-        self._pos = f.tell()
-
-    def write(self, data) -> int:
-        n = self._f.write(data)
-        self._pos += len(data)
-        return n
-
-    def tell(self) -> int:
-        return self._pos
-
-    def flush(self) -> None:
-        self._f.flush()
-
-    def fileno(self) -> int:
-        return self._f.fileno()
-
-    def close(self) -> None:
-        self._f.close()
-
-
-class McapSink:
-    """Channels and schemas on demand; :meth:`write` one decoded message (or raw bytes) per call."""
-
-    def __init__(self, path: Path | None = None, *, stream=None, library: str = "lamps") -> None:
-        """A new MCAP file at ``path``, or into the open binary ``stream`` (not closed by :meth:`finish`)."""
-        self.path = path
-        self._own = stream is None
-        self._f = _Counted(open(path, "wb") if stream is None else stream)
-        self._w = Writer(self._f, chunk_size=CHUNK_BYTES)
-        self._last_flush = time.monotonic()
-        self._w.start(profile="", library=library)
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self._seq: Counter[str] = Counter()
-
-    def _schema(self, name: str, schema: dict) -> int:
-        if name not in self._schemas:
-            self._schemas[name] = self._w.register_schema(name=name, encoding="jsonschema",
-                                                          data=json.dumps(schema).encode())
-        return self._schemas[name]
-
-    def _channel(self, topic: str, schema_name: str, schema: dict) -> int:
-        if topic not in self._channels:
-            self._channels[topic] = self._w.register_channel(topic=topic, message_encoding="json",
-                                                             schema_id=self._schema(schema_name, schema))
-        return self._channels[topic]
-
-    def write_typed(self, topic: str, msg, t_ns: int) -> None:
-        """One Foxglove typed message (``foxglove.messages.*``) on ``topic``, protobuf with the SDK's schema."""
-        if topic not in self._channels:
-            schema = type(msg).get_schema()
-            if schema.name not in self._schemas:
-                self._schemas[schema.name] = self._w.register_schema(name=schema.name, encoding=schema.encoding,
-                                                                     data=bytes(schema.data))
-            self._channels[topic] = self._w.register_channel(topic=topic, message_encoding=schema.encoding,
-                                                             schema_id=self._schemas[schema.name])
-        self._seq[topic] += 1
-        self._w.add_message(channel_id=self._channels[topic], log_time=t_ns, publish_time=t_ns,
-                            sequence=self._seq[topic], data=msg.encode())
-
-    def carry_over(self, path: Path) -> tuple[int, int]:
-        """Write every complete message of the earlier recording ``path`` (finished or cut), with its own times and
-        sequence numbers, channels and schemas merged by topic and name, streamed (a recording of hours never sits
-        in memory); returns (messages written, the last one's log time [ns], 0 if none)."""
-        from mcap.records import Channel as ChannelRecord
-        from mcap.records import Schema as SchemaRecord
-
-        schema_ids: dict[int, int] = {}
-        channel_ids: dict[int, tuple[int, str]] = {}
-        n = last_ns = 0
-        for rec in iter_records(path):
-            if isinstance(rec, SchemaRecord):
-                if rec.name not in self._schemas:
-                    self._schemas[rec.name] = self._w.register_schema(name=rec.name, encoding=rec.encoding,
-                                                                      data=rec.data)
-                schema_ids[rec.id] = self._schemas[rec.name]
-            elif isinstance(rec, ChannelRecord):
-                if (rec.schema_id in schema_ids or rec.schema_id == 0) and rec.topic not in self._channels:
-                    self._channels[rec.topic] = self._w.register_channel(
-                        topic=rec.topic, message_encoding=rec.message_encoding,
-                        schema_id=schema_ids.get(rec.schema_id, 0), metadata=rec.metadata)
-                if rec.topic in self._channels:
-                    channel_ids[rec.id] = (self._channels[rec.topic], rec.topic)
-            elif rec.channel_id in channel_ids:  # a message
-                ch, topic = channel_ids[rec.channel_id]
-                self._w.add_message(channel_id=ch, log_time=rec.log_time, publish_time=rec.publish_time,
-                                    sequence=rec.sequence, data=rec.data)
-                self._seq[topic] = max(self._seq[topic], rec.sequence)
-                n += 1
-                last_ns = max(last_ns, rec.log_time)
-        return n, last_ns
-
-    def write_json(self, topic: str, schema_name: str, data: Any, t_ns: int, schema: dict | None = None) -> None:
-        """One JSON message on ``topic``; ``schema`` (full properties) is needed the first time ``schema_name``
-        is seen."""
-        if schema_name not in self._schemas and schema is None:
-            raise ValueError(f"{schema_name}: a channel needs its schema with properties the first time")
-        ch = self._channel(topic, schema_name, schema or {})
-        self._seq[topic] += 1
-        self._w.add_message(channel_id=ch, log_time=t_ns, publish_time=t_ns, sequence=self._seq[topic],
-                            data=msgspec.json.encode(data))
-
-    def write(self, key: str, msg: Message, t_ns: int) -> None:
-        """``msg`` received on ``key`` at ``t_ns``, as the JSON channels of :func:`json_records`."""
-        for topic, name, schema, data, t in json_records(key, msg, t_ns):
-            self.write_json(topic, name, data, t, None if name in self._schemas else schema())
-
-    def bytes_written(self) -> int:
-        """Bytes in the file so far (whole chunks; the open chunk is not counted until it is written out)."""
-        return self._f.tell()
-
-    def flush(self, every_s: float = 0.0) -> None:
-        """Push the complete chunks written so far to the disk (at most every ``every_s``)."""
-        now = time.monotonic()
-        if now - self._last_flush >= every_s:
-            self._f.flush()
-            os.fsync(self._f.fileno())
-            self._last_flush = now
-
-    def finish(self) -> None:
-        self._w.finish()
-        if self._own:
-            self._f.flush()
-            os.fsync(self._f.fileno())
-            self._f.close()
-
-
+#: The recorder's account of every key, once a second and when it closes (``final``): what it received,
+#: recorded and dropped and why, and what each key takes of its share of the disk budget.
+STATUS_TOPIC = "recorder/status"
+#: At its close: which messages of the services' own statuses and truth it wrote from what it kept whatever its
+#: budget, because the recording of their key had stopped or thinned before them.
+SELF_REPORTS_TOPIC = "recorder/self_reports"
+#: The recorder's status is written this often [s].
+STATUS_PERIOD_S = 1.0
+#: For each key of :data:`~launch.record_budget.SELF_REPORTS`, the newest message of each of the last this many
+#: seconds is kept (a controller stopped mid-wipe lifts the pad for up to 6 s before it exits: its status from
+#: before the cell began stopping is among them).
+SELF_REPORT_SECONDS = 16
 #: At most this many rejected samples per key are described on ``<key>/rejected`` (their size and the error,
-#: never their bytes); the rest are only counted.
+#: never their bytes), and as many of every other key together; the rest are only counted.
 REJECTED_NOTES_PER_KEY = 100
 #: The recording's disk budget [bytes] by default (``LAMPS_RECORD_MAX_MB`` sets it in MiB).
 DEFAULT_BUDGET_BYTES = 4 * 1024**3
+_OTHER_KEYS = "keys of no message type"
 _REJECTED_SCHEMA = {"type": "object", "title": "lamps.Rejected",
                     "properties": {"error": {"type": "string"}, "bytes": {"type": "integer"},
                                    "rejected_so_far": {"type": "integer"}}}
 _BUDGET_SCHEMA = {"type": "object", "title": "lamps.RecorderBudget",
-                  "properties": {"budget_bytes": {"type": "integer"}, "message": {"type": "string"}}}
+                  "properties": {"budget_bytes": {"type": "integer"}, "message": {"type": "string"},
+                                 "key": {"type": "string"}, "state": {"type": "string"},
+                                 "share_bytes": {"type": "integer"}}}
+_ACCOUNT_SCHEMA = {"type": "object", "properties": {
+    "key": {"type": "string"}, "state": {"type": "string"}, "share_bytes": {"type": "integer"},
+    "used_bytes": {"type": "integer"}, "received": {"type": "integer"}, "recorded": {"type": "integer"},
+    "dropped": {"type": "object", "additionalProperties": {"type": "integer"}}}}
+_STATUS_SCHEMA = {"type": "object", "title": "lamps.RecorderStatus", "properties": {
+    "final": {"type": "boolean"}, "budget_bytes": {"type": "integer"}, "file_bytes": {"type": "integer"},
+    "over_budget": {"type": "boolean"}, "queued_bytes": {"type": "integer"},
+    "counters": {"type": "object", "additionalProperties": {"type": "integer"}},
+    "keys": {"type": "array", "items": _ACCOUNT_SCHEMA}}}
+_SELF_REPORTS_SCHEMA = {"type": "object", "title": "lamps.RecorderSelfReports", "properties": {
+    "messages": {"type": "array", "items": {"type": "object", "properties": {
+        "key": {"type": "string"}, "log_time_ns": {"type": "integer"}}}}}}
 
 
 def budget_from_env() -> int:
@@ -234,18 +122,28 @@ def budget_from_env() -> int:
     return int(mb * 1024**2)
 
 
+def _mib(n_bytes: int) -> str:
+    return f"{n_bytes / 1024**2:.3g} MiB"
+
+
 class Recorder:
     """Subscribes ``<prefix>/**`` on ``session`` and writes ``out_dir/recording.mcap`` until :meth:`close`.
 
     ``keys``: the cell's, or a sequence of cells' (a site's recording, ``lamps record --cells``: every cell's keys
     under their own prefixes, each cell's scene in its own frame tree, :func:`launch.scene.cell_frames`).
 
-    It records what the cell's receivers accept: a sample that does not decode as its key's message (bad
-    bytes, over the key's size bound, an unknown key) is counted (``undecodable``, ``unknown_key``) and only
-    described, its size and the error, on ``<key>/rejected``, for its first :data:`REJECTED_NOTES_PER_KEY`
-    samples. ``budget_bytes`` bounds the file: past it nothing more is recorded (counted as
-    ``dropped_over_budget``), one ``recorder/budget`` message and an error in the log say so, and the file is
-    finished as usual.
+    It records what the cell's receivers accept, within each key's share of ``budget_bytes``
+    (:mod:`launch.record_budget`): a sample of a key of no message type, or over its type's size bound, is
+    counted (``unknown_key``, ``undecodable``) and dropped in Zenoh's thread, before its bytes are copied; one
+    that does not decode is counted by the writer. Each is described, its size and the error, on
+    ``<key>/rejected``, for its key's first :data:`REJECTED_NOTES_PER_KEY`. A sample past its key's part of the
+    queue, or of an image past its share, or of a thinned key within a second of the last kept, is counted
+    (``dropped_queue_full``, ``dropped_over_share``, ``dropped_thinned``) and dropped there too. A key that
+    reaches :data:`~launch.record_budget.THIN_FROM` of its share or all of it says so once on
+    ``recorder/budget``; past the whole budget nothing more is recorded (``dropped_over_budget``), said there
+    too, and the file is finished as usual. Every second, and when it closes, the recorder writes its account
+    of every key on :data:`STATUS_TOPIC`; at its close it also writes the services' newest statuses and truth
+    it kept that the recording of their key had missed (:data:`SELF_REPORTS_TOPIC` names them).
     """
 
     def __init__(self, session, keys: Keys | list[Keys], out_dir: Path, max_queue: int = 200_000,
@@ -255,6 +153,7 @@ class Recorder:
         self.cells = cells_of(keys)
         self.clock = clock  # log_time of a sample [ns]: the wall clock, or the network-free cell's robot clock
         self.budget_bytes = budget_bytes
+        self.budget = Budget(self.cells, budget_bytes)
         self.over_budget = False
         self.keys = self.cells[0]
         self.out_dir = Path(out_dir)
@@ -262,11 +161,19 @@ class Recorder:
         self.partial = self.out_dir / (RECORDING + ".partial")
         self.counters: Counter[str] = Counter()
         self.sink = self._open_sink()
-        self._queue: deque = deque(maxlen=max_queue)
+        for acc in self.budget.accounts.values():  # what an earlier recorder of the folder recorded counts too
+            state = acc.charge(self.sink.used(acc.name))
+            if state is not None:
+                self._say_share(acc, state, self.clock())
+        self.max_queue = max_queue
+        self._queue: deque = deque()  # (key, payload or None, t_ns, account or None, bytes queued or a note)
         self._wake = threading.Event()
         self._stop = threading.Event()
-        self._decoders: dict[str, tuple | None] = {}  # key -> (decoder, its cell's scene, its prefix's length)
+        self._decoders: dict[str, tuple] = {}  # key -> (decoder, its cell's scene, its prefix's length)
         self._rejected: Counter[str] = Counter()
+        self._newest: dict[str, deque] = {}  # self-report key -> (second, t_ns, payload) of its last seconds
+        self._last_recorded: dict[str, int] = {}
+        self._next_status = time.monotonic() + STATUS_PERIOD_S
         self.scenes = scenes_of(self.cells)
         self.scene = self.scenes[self.keys.prefix]
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
@@ -275,15 +182,15 @@ class Recorder:
 
     def _open_sink(self) -> McapSink:
         """The sink at ``recording.mcap.partial``, holding first whatever an earlier recorder of this folder
-        recorded (its ``.partial`` if it died, else its finished file). The earlier file is replaced only once
-        the copy is on the disk."""
+        recorded (its ``.partial`` if it died, else its finished file), charged to its keys' shares. The earlier
+        file is replaced only once the copy is on the disk."""
         final = self.out_dir / RECORDING
         earlier = self.partial if self.partial.is_file() else final if final.is_file() else None
         if earlier is None:
             return McapSink(self.partial)
         fresh = self.partial.with_name(self.partial.name + ".new")
         sink = McapSink(fresh)
-        n, last_ns = sink.carry_over(earlier)
+        n, last_ns = sink.carry_over(earlier, self.budget.account_of_topic)
         sink.write_json(RESUMED_TOPIC, "lamps.RecorderResumed",
                         {"carried_messages": n, "earlier_file": earlier.name, "earlier_finished": earlier == final,
                          "last_earlier_ns": last_ns}, self.clock(), _RESUMED_SCHEMA)
@@ -297,119 +204,193 @@ class Recorder:
                     earlier.name)
         return sink
 
-    def _on_sample(self, sample) -> None:  # Zenoh thread: never waits
-        if len(self._queue) == self._queue.maxlen:
-            self.counters["dropped_queue_full"] += 1
-        payload = sample.payload  # the in-process bus's payload is kept as it is (its message, decoded once)
-        self._queue.append((str(sample.key_expr), payload if hasattr(payload, "decoded") else payload.to_bytes(),
-                            self.clock()))
+    # -- Zenoh's thread: checks, then queues; never waits, never copies what it drops ---------------------------
+    def _on_sample(self, sample) -> None:
+        key, t_ns, payload = str(sample.key_expr), self.clock(), sample.payload
+        local = hasattr(payload, "decoded")  # the in-process bus's payload: its message, decoded once
+        n = 0 if local else len(payload)
+        acc = self.budget.account_of(key)
+        if acc is None:
+            self._reject(key, None, n, t_ns, "unknown_key", "no message type for this key")
+            return
+        if acc.self_report:
+            self._keep_newest(key, payload, t_ns)
+        if not local:
+            try:
+                self._decoder(key)[0].check_size(n)
+            except MessageDecodeError as exc:
+                self.budget.refused(acc, "oversized")
+                self._reject(key, acc, n, t_ns, "undecodable", str(exc))
+                return
+        why = self.budget.admit(acc, n, t_ns, room=len(self._queue) < self.max_queue)
+        if why is not None:
+            self.counters[f"dropped_{why}"] += 1
+            return
+        self._queue.append((key, payload if local else payload.to_bytes(), t_ns, acc, n))
         if not self._wake.is_set():  # set once until the writer wakes (a set Event costs a lock and a notify)
             self._wake.set()
 
-    def _decoder(self, key: str) -> tuple | None:
-        """(decoder, scene, prefix length) of ``key``, None for a key of no message type."""
-        if key not in self._decoders:
+    def _reject(self, key: str, acc: Account | None, n_bytes: int, t_ns: int, counter: str, error: str,
+                queue: bool = True) -> None:
+        """Count a rejected sample; describe it on ``<key>/rejected`` while its key has notes left."""
+        self.counters[counter] += 1
+        notes = key if acc is not None else _OTHER_KEYS
+        self._rejected[notes] += 1
+        if self._rejected[notes] > REJECTED_NOTES_PER_KEY:
+            return
+        note = {"error": error[:200], "bytes": n_bytes, "rejected_so_far": self._rejected[notes]}
+        if not queue:
+            self.sink.write_json(key + "/rejected", "lamps.Rejected", note, t_ns, _REJECTED_SCHEMA)
+            return
+        self._queue.append((key, None, t_ns, None, note))
+        self._wake.set()
+
+    def _keep_newest(self, key: str, payload, t_ns: int) -> None:
+        """The newest message of each second of ``key``'s last :data:`SELF_REPORT_SECONDS` (its payload: not
+        copied)."""
+        ring = self._newest.get(key)
+        if ring is None:
+            ring = self._newest[key] = deque(maxlen=SELF_REPORT_SECONDS)
+        second = t_ns // 10**9
+        if ring and ring[-1][0] == second:
+            ring[-1] = (second, t_ns, payload)
+        else:
+            ring.append((second, t_ns, payload))
+
+    def _decoder(self, key: str) -> tuple:
+        """(decoder, scene, prefix length) of ``key``, a key of the cell's (:meth:`Budget.account_of`)."""
+        entry = self._decoders.get(key)
+        if entry is None:
             from .scene import cell_of_key
 
             cell = cell_of_key(self.cells, key)
-            t = message_type_of(cell, key) if cell is not None else None
-            self._decoders[key] = (Decoder(t), self.scenes[cell.prefix], len(cell.prefix) + 1) if t is not None \
-                else None
-        return self._decoders[key]
+            entry = self._decoders[key] = (Decoder(message_type_of(cell, key)), self.scenes[cell.prefix],
+                                           len(cell.prefix) + 1)
+        return entry
 
+    # -- the writer's thread ---------------------------------------------------------------------------------
     def _drain(self) -> None:
         while self._queue:
-            key, data, t_ns = self._queue.popleft()
+            key, data, t_ns, acc, extra = self._queue.popleft()
+            if acc is not None:
+                self.budget.taken(acc, extra)
             if self.over_budget or self._check_budget(t_ns):
                 self.counters["dropped_over_budget"] += 1
-                continue
-            entry = self._decoder(key)
-            try:
-                if entry is None:
-                    raise MessageDecodeError("no message type for this key")
-                dec, scene, after_prefix = entry
-                msg = dec(data) if isinstance(data, bytes) else data.decoded(dec)
-                self.sink.write(key, msg, t_ns)
-                self.counters[key[after_prefix:]] += 1
-                for topic, scene_msg in scene.on_message(key, msg, t_ns):
-                    self.sink.write_typed(topic, scene_msg, t_ns)
-            except MessageDecodeError as exc:
-                self.counters["undecodable" if entry is not None else "unknown_key"] += 1
-                self._rejected[key] += 1
-                if self._rejected[key] <= REJECTED_NOTES_PER_KEY:
-                    self.sink.write_json(key + "/rejected", "lamps.Rejected",
-                                         {"error": str(exc)[:200], "bytes": len(data),
-                                          "rejected_so_far": self._rejected[key]}, t_ns, _REJECTED_SCHEMA)
+                self.budget.refused(acc, "over_budget")
+            elif acc is None:
+                self.sink.write_json(key + "/rejected", "lamps.Rejected", extra, t_ns, _REJECTED_SCHEMA)
+            elif acc.state == SHUT:  # its share was used up while it waited
+                self.counters["dropped_over_share"] += 1
+                self.budget.refused(acc, "over_share")
+            else:
+                self._write(key, data, t_ns, acc)
+
+    def _write(self, key: str, data, t_ns: int, acc: Account) -> None:
+        """Decode and write one sample of ``key``, its scene messages too, all charged to its account."""
+        dec, scene, after_prefix = self._decoder(key)
+        self.sink.account = acc.name
+        try:
+            msg = dec(data) if isinstance(data, bytes) else data.decoded(dec)
+            self.sink.write(key, msg, t_ns)
+            for topic, scene_msg in scene.on_message(key, msg, t_ns):
+                self.sink.write_typed(topic, scene_msg, t_ns)
+        except MessageDecodeError as exc:
+            self.sink.account = RECORDER_ACCOUNT
+            self.budget.refused(acc, "undecodable")
+            self._reject(key, acc, len(data) if isinstance(data, bytes) else 0, t_ns, "undecodable", str(exc),
+                         queue=False)
+            return
+        finally:
+            self.sink.account = RECORDER_ACCOUNT
+        acc.recorded += 1
+        self.counters[key[after_prefix:]] += 1
+        self._last_recorded[key] = t_ns
+        state = acc.charge(self.sink.used(acc.name))
+        if state is not None:
+            self._say_share(acc, state, t_ns)
+
+    def _say_share(self, acc: Account, state: str, t_ns: int) -> None:
+        """One ``recorder/budget`` message (and a warning) when ``acc`` is thinned or shut."""
+        share = f"{_mib(acc.share_bytes)} of the {_mib(self.budget_bytes)} disk budget (LAMPS_RECORD_MAX_MB)"
+        message = (f"{acc.name} used its share, {share}: no more of it is recorded" if state == SHUT else
+                   f"{acc.name} used {THIN_FROM:.0%} of its share, {share}: one message a second from now on")
+        log.warning("%s", message)
+        self.sink.write_json("recorder/budget", "lamps.RecorderBudget",
+                             {"budget_bytes": self.budget_bytes, "key": acc.name, "state": state,
+                              "share_bytes": acc.share_bytes, "message": message}, t_ns, _BUDGET_SCHEMA)
 
     def _check_budget(self, t_ns: int) -> bool:
         """True (and said once) when the file has reached its disk budget."""
         if self.sink.bytes_written() < self.budget_bytes:
             return False
         self.over_budget = True
-        message = (f"the recording reached its disk budget of {self.budget_bytes / 1024**2:.0f} MiB "
-                   "(LAMPS_RECORD_MAX_MB): nothing more is recorded in this run")
+        message = (f"the recording reached its disk budget of {_mib(self.budget_bytes)} (LAMPS_RECORD_MAX_MB): "
+                   "nothing more is recorded in this run")
         log.error("%s", message)
         self.sink.write_json("recorder/budget", "lamps.RecorderBudget",
                              {"budget_bytes": self.budget_bytes, "message": message}, t_ns, _BUDGET_SCHEMA)
         return True
+
+    def status(self, final: bool = False) -> dict:
+        """The recorder's account (what :data:`STATUS_TOPIC` carries): its counters and every key's that has seen
+        a sample."""
+        accounts = list(self.budget.accounts.values())
+        return {"final": final, "budget_bytes": self.budget_bytes, "file_bytes": self.sink.bytes_written(),
+                "over_budget": self.over_budget, "counters": dict(self.counters),
+                "queued_bytes": sum(a.queued_in - a.queued_out for a in accounts),
+                "keys": [a.summary() for a in accounts if a.received or a.used_bytes]}
+
+    def _write_status(self, final: bool = False) -> None:
+        self.sink.write_json(STATUS_TOPIC, "lamps.RecorderStatus", self.status(final), self.clock(), _STATUS_SCHEMA)
+
+    def _write_self_reports(self) -> None:
+        """The newest statuses and truth kept (:meth:`_keep_newest`) that are newer than their key's last recorded
+        message, on their keys; and on :data:`SELF_REPORTS_TOPIC`, which they are. Whatever the budget: at most
+        :data:`SELF_REPORT_SECONDS` messages of a few keys."""
+        added = []
+        for key, ring in self._newest.items():
+            dec = self._decoder(key)[0]
+            for _, t_ns, payload in ring:
+                if t_ns <= self._last_recorded.get(key, -1):
+                    continue
+                try:
+                    msg = payload.decoded(dec) if hasattr(payload, "decoded") else dec(payload.to_bytes())
+                except MessageDecodeError:
+                    continue
+                self.sink.account = self.budget.account_of(key).name
+                self.sink.write(key, msg, t_ns)
+                added.append({"key": key, "log_time_ns": t_ns})
+        self.sink.account = RECORDER_ACCOUNT
+        if added:
+            self.sink.write_json(SELF_REPORTS_TOPIC, "lamps.RecorderSelfReports", {"messages": added}, self.clock(),
+                                 _SELF_REPORTS_SCHEMA)
+            self.counters["self_reports_written_at_close"] = len(added)
 
     def _run(self) -> None:
         while not self._stop.is_set():
             self._wake.wait(0.1)
             self._wake.clear()
             self._drain()
+            if time.monotonic() >= self._next_status and not self.over_budget:
+                self._next_status = time.monotonic() + STATUS_PERIOD_S
+                self._write_status()
             self.sink.flush(FLUSH_S)
 
     def close(self) -> Path:
-        """Stop, write what is queued, finish the file; returns the recording's final path."""
+        """Stop, write what is queued, the services' last statuses the recording missed and the recorder's final
+        account, finish the file; returns the recording's final path."""
         for sub in self._subs:
             sub.undeclare()
         self._stop.set()
         self._wake.set()
         self._thread.join(60.0)
         self._drain()
+        self._write_self_reports()
+        self._write_status(final=True)
         self.sink.finish()
         final = self.out_dir / RECORDING
         os.replace(self.partial, final)
         return final
-
-
-def iter_records(path: Path):
-    """Every complete Schema, Channel and Message record of the MCAP file ``path`` in file order, finished or
-    not (its writer died): a tolerant stream read that stops at the first damaged or cut record, having yielded
-    everything before it."""
-    from mcap.exceptions import McapError
-    from mcap.records import Channel as ChannelRecord
-    from mcap.records import Message as MessageRecord
-    from mcap.records import Schema as SchemaRecord
-    from mcap.stream_reader import StreamReader
-
-    with open(path, "rb") as f:
-        try:
-            for record in StreamReader(f, validate_crcs=True).records:
-                if isinstance(record, (SchemaRecord, ChannelRecord, MessageRecord)):
-                    yield record
-        except (McapError, EOFError, ValueError, struct.error, zlib.error, zstd.ZstdError):
-            return  # the cut: everything before it is whole (each chunk carries its own CRC)
-        except Exception as exc:  # a damaged chunk can fail inside a decompressor in other ways
-            log.warning("reading %s: stopped at %s: %s", path, type(exc).__name__, exc)
-
-
-def recover_recording(partial: Path, final: Path) -> int:
-    """Write ``final`` (atomically) with every message of the complete records of ``partial``, an unfinished MCAP
-    (its writer died); returns how many messages were recovered. Reading stops at the first damaged or cut
-    record; what came before it is kept. Streamed, like :meth:`McapSink.carry_over`, which it is."""
-    from lampskit.atomic import write_atomic
-
-    count = [0]
-
-    def write(out) -> None:
-        sink = McapSink(stream=out, library="lamps (recovered)")
-        count[0], _ = sink.carry_over(partial)
-        sink.finish()
-
-    write_atomic(final, write)
-    return count[0]
 
 
 def read_recording(path: Path) -> dict[str, list[tuple[int, dict]]]:

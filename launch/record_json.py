@@ -34,8 +34,8 @@ def message_type_of(keys: Keys, key: str) -> type[Message] | None:
     table = {keys.robot_state: RobotState, keys.robot_command: TorqueCommand, keys.perception_stains: Stains,
              keys.perception_status: ServiceStatus, keys.perception_debug: CameraFrame,
              keys.controller_status: ControllerStatus, keys.controller_trace: ControllerTrace,
-             keys.controller_estop: Estop, keys.sim_truth: SimTruth, keys.sim_status: ServiceStatus,
-             keys.robot_status: ServiceStatus, keys.robot_arm: ArmRequest}
+             keys.controller_estop: Estop, keys.controller_estop_release: Estop, keys.sim_truth: SimTruth,
+             keys.sim_status: ServiceStatus, keys.robot_status: ServiceStatus, keys.robot_arm: ArmRequest}
     if key in table:
         return table[key]
     cam = keys.camera_frame("x")[:-len("x/frame")]
@@ -101,8 +101,8 @@ def json_records(key: str, msg: Message, t_ns: int):
             yield (key, "foxglove.CompressedImage", lambda: _COMPRESSED_IMAGE_SCHEMA,
                    {"timestamp": {"sec": stamp // 10**9, "nsec": stamp % 10**9}, "frame_id": camera_frame_id(msg.camera),
                     "data": base64.b64encode(jpeg).decode("ascii"), "format": "jpeg"}, t_ns)
-        info = to_builtins(msg)
-        info.pop("data", None)
+        info = {f: v if type(v) in _PLAIN else to_builtins(v)  # all but the pixels (never base64-encoded to be dropped)
+                for f, v in zip(msg.__struct_fields__, msgspec.structs.astuple(msg)) if f != "data"}
         yield key + "/info", "lamps.CameraFrameInfo", _camera_info_schema, info, t_ns
         return
     name = f"lamps.{type(msg).__name__}"

@@ -51,10 +51,17 @@
   each safety action of the robot side (a brake on stale commands or after its own freeze, commands of
   another controller dropped, a change of the controller served, commands held while e-stopped:
   :data:`.report_faults.ROBOT_EVENTS`), phase ``ROBOT``; a recorder that stalled, restarted (carrying its predecessor's
-  recording over) or did not finish (a recording recovered from its ``.partial`` file), phase ``RECORDER``; the launcher's end of the run when a service died, failed
+  recording over), thinned or stopped a key past its share of the disk budget or did not finish (a recording
+  recovered from its ``.partial`` file), phase ``RECORDER``; the launcher's end of the run when a service died, failed
   or the run timed out (phase ``CELL``, the reason ``lamps up`` gave).
 * ``services``: exit codes from the launcher (if any); ``counters``: the
-  last status counters of each service; ``plots``: the PNG files written
+  last status counters of each service, and the recorder's of each key
+  (received, recorded, dropped and why); ``recording`` and ``sources``: which
+  keys the recorder thinned or stopped past their share of its disk budget and, per
+  figure, whether it comes from the recording (whole or not) or from the
+  services' own last statuses and truth, which the recorder writes at its
+  close when the recording of their key had stopped
+  (:mod:`.report_sources`); ``plots``: the PNG files written
   (none when :data:`~launch.report_options.PLOTS_ENV` is ``0``: a campaign's cells, ``lamps report``
   draws them later).
 """
@@ -77,7 +84,8 @@ from .report_maths import (_WIPING, _dirt_removed, _junction_steps, _motion_peak
                            job_end, phase_times, skill_start)
 from .report_options import plots_from_env
 from .report_plots import write_plots
-from .report_run import _Run, _read_run, _topic
+from .report_run import _Run, _read_run, _topic, cell_series
+from .report_sources import recording_section, sources_section
 
 SCHEMA = "lamps-run-report/1"
 #: Fraction of the dirt that must be gone for the outcome ``cleaned``.
@@ -111,10 +119,13 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     faults = (_faults_section(run.status) + _service_faults(run, _recorder_stalls(run)) + _robot_events(run)
               + recorder + _cell_faults(run.launcher))
     report["faults"] = sorted(faults, key=lambda f: f["wall_ns"])
-    report["final_phase"] = _final_phase(run)
+    final_ns, final_status = _final_status(run)
+    report["final_phase"] = final_status["phase"] if final_status else "none"
     report["outcome"] = _outcome(report["final_phase"], report["dirt_removed_fraction"], run.launcher.get("outcome"))
     report["services"] = run.launcher.get("services", {})
-    report["counters"] = _counters_section(run)
+    report["recording"], recorder_counts = recording_section(run)
+    report["counters"] = {**_counters_section(run), "recorder": recorder_counts}
+    report["sources"] = sources_section(run, report["recording"], recorder_counts, final_ns)
     report["plots"] = write_plots(run_dir, run.rec, run.keys, run.tr, run.col, run.truth, run.stains_msgs) \
         if plots else []
     return report
@@ -122,7 +133,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
 
 def _progress_section(run: _Run) -> dict[str, float]:
     """``duration_s`` (the launcher's, else the recording's span), ``sim_time_s`` and ``dirt_removed_fraction``."""
-    times = [t for msgs in run.rec.values() for t, _ in msgs[:1] + msgs[-1:]]
+    times = [t for msgs in cell_series(run.rec) for t, _ in msgs[:1] + msgs[-1:]]
     truth, tr = run.truth, run.tr
     return {"duration_s": run.launcher.get("duration_s", (max(times) - min(times)) * 1e-9 if times else 0.0),
             "sim_time_s": truth[-1]["robot_time_ns"] * 1e-9 if truth else (float(tr[-1, 0]) if len(tr) else 0.0),
@@ -187,14 +198,14 @@ def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n
             "trace_ticks": len(tr)}
 
 
-def _final_phase(run: _Run) -> str:
-    """The controller's phase when the launcher began stopping the cell (what the stop itself does, e.g. the lift
-    of a pad stopped mid-wipe, is in the faults, not the outcome); the last one without a launcher."""
+def _final_status(run: _Run) -> tuple[int | None, dict | None]:
+    """(its log time [ns], the controller's status) when the launcher began stopping the cell (what the stop itself
+    does, e.g. the lift of a pad stopped mid-wipe, is in the faults, not the outcome); the last one without a
+    launcher; (None, None) without a status."""
     msgs = run.rec.get(run.keys.controller_status, [])
     stopping = int(run.launcher.get("stopping_wall_ns", 0))
-    before = [m for t, m in msgs if t < stopping] if stopping else []
-    last = before[-1] if before else (msgs[-1][1] if msgs else None)
-    return last["phase"] if last else "none"
+    before = [(t, m) for t, m in msgs if t < stopping] if stopping else []
+    return before[-1] if before else (msgs[-1] if msgs else (None, None))
 
 
 def _safety_section(run: _Run) -> dict[str, float]:

@@ -11,7 +11,8 @@ import numpy as np
 from interfaces.messages import Phase
 
 from .record import RECORDING, RESUMED_TOPIC
-from .report_run import _Run
+from .report_run import _Run, cell_series
+from .report_sources import budget_faults, deaf_from
 
 #: A service whose status is not heard for this long [s], or four of its status periods if that is longer,
 #: went silent: a fault.
@@ -19,12 +20,15 @@ SERVICE_SILENCE_S = 1.0
 
 
 def _recorder_stalls(run: _Run) -> list[tuple[int, int]]:
-    """(start, end) [wall ns] of every stretch longer than ``SERVICE_SILENCE_S`` in which nothing was recorded."""
-    times = np.sort(np.fromiter((t for msgs in run.rec.values() for t, _ in msgs), dtype=np.int64))
+    """(start, end) [wall ns] of every stretch longer than ``SERVICE_SILENCE_S`` in which nothing the cell sent was
+    recorded (before the recording reached its whole disk budget: past it nothing is, on purpose)."""
+    times = np.sort(np.fromiter((t for msgs in cell_series(run.rec) for t, _ in msgs), dtype=np.int64))
     if len(times) < 2:
         return []
     gaps = np.diff(times)
-    return [(int(times[i]), int(times[i + 1])) for i in np.flatnonzero(gaps * 1e-9 > SERVICE_SILENCE_S)]
+    full = deaf_from(run).get("*")
+    return [(int(times[i]), int(times[i + 1])) for i in np.flatnonzero(gaps * 1e-9 > SERVICE_SILENCE_S)
+            if full is None or times[i] < full]
 
 
 def _unheard_s(t0: int, t1: int, stalls: list[tuple[int, int]]) -> float:
@@ -88,42 +92,51 @@ def _robot_line(name: str, key: str, burst: list) -> dict[str, Any]:
     return {"wall_ns": first, "phase": "ROBOT", "reason": f"{name}: {ROBOT_EVENTS[key]} ({key} +{n}{span}){why}"}
 
 
+_NEVER = 2**63 - 1
+
+
 def _service_faults(run: _Run, stalls: list[tuple[int, int]]) -> list[dict[str, Any]]:
-    """Each silence of a service's status longer than ``SERVICE_SILENCE_S`` (not counting the recorder's own stalls)
-    and each restart (its status seq going back), until the launcher began stopping the cell (services then stop
-    one by one) or the recording ends."""
+    """Each silence of a service's status longer than ``SERVICE_SILENCE_S`` (not counting the recorder's own stalls,
+    nor its thinning or stopping of a key past its share: :func:`.report_sources.deaf_from`) and each restart (its
+    status seq going back), until the launcher began stopping the cell (services then stop one by one) or the
+    recording ends."""
     k = run.keys
-    last_ns = max((msgs[-1][0] for msgs in run.rec.values() if msgs), default=0)
+    last_ns = max((msgs[-1][0] for msgs in cell_series(run.rec) if msgs), default=0)
     end_ns = min(int(run.launcher.get("stopping_wall_ns", 0)) or last_ns, last_ns) or None
+    deaf = deaf_from(run)
     out: list[dict[str, Any]] = []
     for name, topic in (("sim", k.sim_status), ("robot", k.robot_status), ("controller", k.controller_status),
                         ("perception", k.perception_status)):
         msgs = run.rec.get(topic, [])
         if len(msgs) < 2:
             continue
+        # past its share the recorder keeps a status a second, then none: a gap from then is the recorder's doing
+        partial = min(deaf.get(topic, _NEVER), deaf.get("*", _NEVER))
         # a service's own status period sets what counts as silent (the sim and perception report at 2 Hz)
         silence_s = max(SERVICE_SILENCE_S, 4.0 * float(np.median(np.diff([t for t, _ in msgs]))) * 1e-9)
         for (t0, m0), (t1, m1) in zip(msgs, msgs[1:]):
             if end_ns is not None and t0 >= end_ns:
                 break
             gap = (t1 - t0) * 1e-9
-            if gap > silence_s and _unheard_s(t0, t1, stalls) > silence_s:
+            if gap > silence_s and t1 <= partial and _unheard_s(t0, t1, stalls) > silence_s:
                 out.append({"wall_ns": t0, "phase": "SERVICE",
                             "reason": f"{name}: no status for {gap:.1f} s (frozen, stopped or dead)"})
             if m1.get("seq", 0) < m0.get("seq", 0):
                 out.append({"wall_ns": t1, "phase": "SERVICE",
                             "reason": f"{name}: restarted (status count {m0.get('seq')} -> {m1.get('seq')})"})
-        if end_ns is not None and _unheard_s(msgs[-1][0], end_ns, stalls) > silence_s:
+        if end_ns is not None and end_ns <= partial and _unheard_s(msgs[-1][0], end_ns, stalls) > silence_s:
             out.append({"wall_ns": msgs[-1][0], "phase": "SERVICE", "reason": f"{name}: silent for the last "
                         f"{(end_ns - msgs[-1][0]) * 1e-9:.1f} s before the cell stopped (dead or frozen)"})
     return out
 
 
 def _recorder_faults(run: _Run, run_dir: Path) -> list[dict[str, Any]]:
-    """The recorder stalled (nothing recorded on any key for ``SERVICE_SILENCE_S``) or died (recovered recording)."""
+    """The recorder stalled (nothing recorded on any key for ``SERVICE_SILENCE_S``), thinned or stopped a key past
+    its share of the disk budget or reached the whole budget, or died (recovered recording)."""
     out: list[dict[str, Any]] = [{"wall_ns": a, "phase": "RECORDER",
                                   "reason": f"nothing recorded for {(b - a) * 1e-9:.1f} s (the recorder stalled)"}
                                  for a, b in _recorder_stalls(run)]
+    out += budget_faults(run)
     for t_ns, m in run.rec.get(RESUMED_TOPIC, []):
         how = "had finished" if m.get("earlier_finished") else "had died"
         out.append({"wall_ns": t_ns, "phase": "RECORDER",
@@ -131,7 +144,7 @@ def _recorder_faults(run: _Run, run_dir: Path) -> list[dict[str, Any]]:
                               f"the last earlier message (its predecessor {how}); {m.get('carried_messages', 0)} "
                               f"earlier messages carried over from {m.get('earlier_file', '?')}"[:500]})
     if (run_dir / (RECORDING + ".partial")).is_file():
-        last_ns = max((msgs[-1][0] for msgs in run.rec.values() if msgs), default=0)
+        last_ns = max((msgs[-1][0] for msgs in cell_series(run.rec) if msgs), default=0)
         out.append({"wall_ns": last_ns, "phase": "RECORDER",
                     "reason": "the recorder did not finish: the recording was recovered from its .partial file "
                               "and ends here"})

@@ -18,6 +18,12 @@ def _topic(rec: dict, key: str) -> list[dict]:
     return [m for _, m in rec.get(key, [])]
 
 
+def cell_series(rec: dict) -> list[list[tuple[int, dict]]]:
+    """The recorded messages of every topic but the recorder's own (``recorder/...``: its status once a second
+    from its start, its notes): what the cell sent."""
+    return [msgs for topic, msgs in rec.items() if not topic.startswith("recorder/")]
+
+
 @dataclass(frozen=True)
 class _Run:
     """What a report is built from: a run folder's recording, split by topic, and the launcher's ``run.json``.

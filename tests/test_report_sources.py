@@ -1,0 +1,85 @@
+"""A report from a recording that stopped recording a key: right about the end of the run, and saying why.
+
+Issue 46: the recording stopped at the disk budget while the cell went on, and the report said "incomplete,
+69 %" of a board that was clean. Here, over a real Zenoh session pair, the controller's statuses and the sim's
+truth outgrow their shares of a 1 MiB budget within the first second and are no longer recorded; the cell goes
+on to DONE with 1 % of the dirt left. The recorder writes, at its close, the newest statuses and truth it kept
+(what the services last said of themselves): the report says cleaned, 99 %, DONE, and that those figures come
+from the services' own reports; no service is called silent for the recorder's gaps.
+"""
+
+from __future__ import annotations
+
+import secrets
+import time
+
+from interfaces.config import ZenohSettings
+from interfaces.messages import ControllerStatus, SimTruth
+from interfaces.session import ServiceNode
+from launch.record import SELF_REPORTS_TOPIC, Recorder, read_recording
+from launch.record_budget import SHUT
+from launch.report import build_report
+
+from .zenoh_helpers import free_port, wait_for, wait_subscribed
+
+RUN_S, WIPE_S, RATE_HZ = 4.0, 3.0, 20
+
+
+def _status(i: int, phase: str) -> ControllerStatus:
+    return ControllerStatus(seq=i, stamp_ns=i, phase=phase, wall_ns=time.time_ns(),
+                            counters={secrets.token_hex(8): j for j in range(200)})  # hard to compress
+
+
+def _truth(i: int, dirt: float) -> SimTruth:
+    n = 2000
+    return SimTruth(seq=i, stamp_ns=i, stain_ids=list(range(n)), remaining=[dirt / 100.0] * (n - 100) +
+                    [float(x) / 256 for x in secrets.token_bytes(100)], total_dirt=dirt, contact_force_n=9.0,
+                    robot_time_ns=i * 10**9 // RATE_HZ)
+
+
+def test_past_their_shares_the_end_of_the_run_comes_from_the_services_own_reports(tmp_path):
+    port = free_port()
+    rid = f"src{port}"
+    rec_node = ServiceNode("recorder", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
+    cell = ServiceNode("cell", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
+    k = cell.keys
+    try:
+        rec = Recorder(rec_node.session, rec_node.keys, tmp_path, budget_bytes=1024**2)
+        for key in (k.controller_status, k.sim_truth):
+            wait_subscribed(cell.session, key)
+        t0 = time.monotonic()
+        for i in range(int(RUN_S * RATE_HZ)):
+            t = i / RATE_HZ
+            dirt = max(1.0, 100.0 - 99.0 * t / WIPE_S)
+            cell.publish(k.controller_status, _status(i, "DONE" if t >= WIPE_S else "WIPE"))
+            cell.publish(k.sim_truth, _truth(i, dirt))
+            time.sleep(max(0.0, t0 + t + 1.0 / RATE_HZ - time.monotonic()))
+        accounts = [rec.budget.account_of(key) for key in (k.controller_status, k.sim_truth)]
+        wait_for(lambda: all(a.received == int(RUN_S * RATE_HZ) for a in accounts), 10.0, "every sample received")
+        assert all(a.state == SHUT for a in accounts), [a.summary() for a in accounts]
+        path = rec.close()
+    finally:
+        cell.close()
+        rec_node.close()
+
+    msgs = read_recording(path)
+    (_, copies), = msgs[SELF_REPORTS_TOPIC]
+    copied = {(c["key"], c["log_time_ns"]) for c in copies["messages"]}
+    recorded = [m for t, m in msgs[k.sim_truth] if (k.sim_truth, t) not in copied]
+    assert recorded[-1]["total_dirt"] > 50, "the recording of the truth stopped early"
+    assert [m["phase"] for t, m in msgs[k.controller_status] if (k.controller_status, t) not in copied][-1] == "WIPE"
+
+    report = build_report(tmp_path, keys=k, plots=False)
+    assert (report["outcome"], report["final_phase"]) == ("cleaned", "DONE")
+    assert abs(report["dirt_removed_fraction"] - 0.99) < 1e-9
+    for figure in ("outcome", "final_phase", "dirt_removed_fraction", "sim_time_s", "counters"):
+        assert report["sources"][figure]["from"] == "self-reports", (figure, report["sources"][figure])
+        assert report["sources"][figure]["complete"] is False
+    assert report["sources"]["max_contact_force_n"]["from"] == "recording"
+    assert report["sources"]["dirt_removed_fraction"]["missing"]["sim/truth"] > 0
+    assert report["recording"]["account"] == "final"
+    assert report["recording"]["incomplete"] == ["controller/status", "sim/truth"]
+    assert set(report["recording"]["self_reports"]) == {"controller/status", "sim/truth"}
+    assert not [f for f in report["faults"] if f["phase"] == "SERVICE"], report["faults"]
+    said = [f["reason"] for f in report["faults"] if f["phase"] == "RECORDER"]
+    assert any("controller/status used its share" in r for r in said) and any("sim/truth used" in r for r in said)
