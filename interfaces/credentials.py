@@ -5,8 +5,9 @@ Writes, each file atomically (private keys mode 0600):
 * ``DIR/ca/ca.pem`` and ``DIR/ca/ca.key``: the cell's certificate
   authority. No service is given the CA's key (compose mounts no service
   ``DIR/ca``): it is needed only to add a host or remake an identity.
-* ``DIR/<role>/`` for every role of :data:`interfaces.access.ROLES` and the
-  router (:data:`interfaces.access.RELAY`, ``lamps router``):
+* ``DIR/<role>/`` for every role of :data:`interfaces.access.ROLES`, and
+  ``DIR/ca/router/`` for the router (:data:`interfaces.access.RELAY`,
+  ``lamps router``: kept with the CA, never beside a service's folder):
   ``ca.pem`` (the CA's certificate, to check peers), ``cert.pem`` (the
   role's certificate: common name = the role, which is what access control
   reads) and ``key.pem`` (its private key). A service is given its own
@@ -95,7 +96,10 @@ BRIDGE_ROS2DDS = {
 
 
 def identity_folder(directory: Path, role: str, cell: str | None = None) -> Path:
-    """The folder of ``role``'s identity in a credentials folder ``directory`` (of cell ``cell`` in a site's)."""
+    """The folder of ``role``'s identity in a credentials folder ``directory`` (of cell ``cell`` in a site's). The
+    router's (:data:`RELAY`) is kept with the CA, ``DIR/ca/router``, never beside a service's folder."""
+    if role == RELAY:
+        return directory / CA_FOLDER / RELAY
     return directory / role if cell is None else directory / cell / role
 
 
@@ -245,10 +249,11 @@ def main(argv: list[str] | None = None) -> int:
     d = args.directory
     if cells:
         print(f"identities of cells {', '.join(cells)} in {d}/<robot id>/<role>/ (common names <role>@<robot id>), "
-              f"of {RELAY} and {SITE_VIEWER} in {d}/<name>/ (the CA's key in {d / CA_FOLDER}: give it to no service)")
+              f"of {SITE_VIEWER} in {d}/{SITE_VIEWER}/, of {RELAY} with the CA in {identity_folder(d, RELAY)} (the "
+              f"CA's key in {d / CA_FOLDER}: give it to no service)")
     else:
-        print(f"identities of {', '.join(folders)} in {d}{'/'}<role>/ (the CA's key in {d / CA_FOLDER}: give it "
-              "to no service)")
+        print(f"identities of the roles in {d}{'/'}<role>/, of {RELAY} with the CA in {identity_folder(d, RELAY)} "
+              f"(the CA's key in {d / CA_FOLDER}: give it to no service)")
     print("a service runs as a role with  LAMPS_ZENOH_IDENTITY=<that role's folder>  tls/ endpoints and "
           "LAMPS_ZENOH_ACCESS_CONTROL=true")
     return 0

@@ -75,6 +75,7 @@ def cell_credentials(a, out: Path) -> Path:
 def run_cells(a, skill: Path, out: Path, stop_requested) -> int:
     """Run ``a.cells`` cells through one router (see the module docstring); the exit code."""
     from interfaces.access import RELAY, SITE_VIEWER
+    from interfaces.credentials import identity_folder
     from interfaces.credentials import make_credentials
     from interfaces.keys import DEFAULT_ROBOT_ID
 
@@ -92,7 +93,8 @@ def run_cells(a, skill: Path, out: Path, stop_requested) -> int:
     try:
         router = children[RELAY] = Child(
             RELAY, (*LAMPS, "router", "--listen", endpoint, "--cells", ",".join(ids), "--status-s", "0"),
-            {"LAMPS_ZENOH_IDENTITY": str(creds / RELAY), "LAMPS_ZENOH_ACCESS_CONTROL": "true"}, out / "logs", echo)
+            {"LAMPS_ZENOH_IDENTITY": str(identity_folder(creds, RELAY)), "LAMPS_ZENOH_ACCESS_CONTROL": "true"},
+            out / "logs", echo)
         if not wait_port(int(endpoint.rsplit(":", 1)[1]), router, 60.0):
             raise SiteError(f"the router did not start: {router.last_words()}")
         if a.foxglove is not None:

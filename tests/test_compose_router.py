@@ -41,7 +41,7 @@ def test_every_service_is_a_client_of_the_router_on_its_own_network():
     router = services["router"]
     assert set(router["networks"]) == set(NETWORK.values())
     assert router["environment"]["LAMPS_ZENOH_LISTEN"] == "tls/0.0.0.0:7447"
-    assert router["volumes"][0]["target"] == "/secrets" and router["volumes"][0]["source"].endswith("secrets/router")
+    assert router["volumes"][0]["target"] == "/secrets" and router["volumes"][0]["source"].endswith("secrets/ca/router")
     for name, net in NETWORK.items():
         s = services[name]
         env_ = s["environment"]

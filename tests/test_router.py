@@ -152,9 +152,11 @@ def test_credentials_made_before_the_router_get_its_identity_from_the_same_ca(tm
     creds = tmp_path / "c"
     make_credentials(creds)
     ca = (creds / "ca" / "ca.pem").read_bytes()
-    shutil.rmtree(creds / RELAY)
+    shutil.rmtree(identity_folder(creds, RELAY))
     make_credentials(creds, if_missing=True)
-    assert (creds / RELAY / "cert.pem").is_file() and (creds / RELAY / "ca.pem").read_bytes() == ca
+    router = identity_folder(creds, RELAY)
+    assert router == creds / "ca" / RELAY, "the router's key is kept with the CA, never beside a service's"
+    assert (router / "cert.pem").is_file() and (router / "ca.pem").read_bytes() == ca
 
 
 # ------------------------------------------------------------------------------------ a site: two cells, one router
@@ -353,7 +355,7 @@ def test_site_credentials_name_each_cells_roles_and_a_service_refuses_another_ce
     creds = tmp_path / "c"
     folders = make_credentials(creds, cells=CELLS)
     assert set(folders) == {RELAY, SITE_VIEWER, *(f"{r}@{c}" for r in ROLES for c in CELLS)}
-    assert cell_of(identity_folder(creds, "controller", CELLS[1])) == CELLS[1] and cell_of(creds / RELAY) is None
+    assert cell_of(identity_folder(creds, "controller", CELLS[1])) == CELLS[1] and cell_of(identity_folder(creds, RELAY)) is None
     assert (identity_folder(creds, "bridge", CELLS[0]) / "zenoh-bridge.json5").is_file()
     with pytest.raises(ConfigError, match="cell cell-b"):
         zenoh_config(ZenohSettings(robot_id=CELLS[0], access_control=True,
