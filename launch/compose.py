@@ -15,8 +15,9 @@ The variables are :mod:`.compose_interp`'s.
 this machine: service host names and aliases become ``127.0.0.1``, every
 Zenoh port a service listens on becomes a local port (free ones by default,
 so several cells and the tests can run side by side), and ``lamps`` becomes
-this interpreter's entry point. Nothing else changes: ``lamps up`` and the
-compose tests run exactly the commands and environments the containers get.
+this interpreter's entry point, and a ``--host 0.0.0.0`` (the live view's
+in its container) binds ``127.0.0.1``. Nothing else changes: ``lamps up``
+and the compose tests run the commands and environments the containers get.
 """
 
 from __future__ import annotations
@@ -319,6 +320,16 @@ def secrets_role(s: ComposeService) -> str | None:
     return None
 
 
+def _on_loopback(argv: tuple[str, ...]) -> tuple[str, ...]:
+    """``argv`` with a ``--host 0.0.0.0`` (what a container binds to be reached through its published port) made
+    ``--host 127.0.0.1``: on this machine a service is reached from here only, like the Zenoh endpoints."""
+    out = list(argv)
+    for i, a in enumerate(out[:-1]):
+        if a == "--host" and out[i + 1] == "0.0.0.0":
+            out[i + 1] = "127.0.0.1"
+    return tuple(out)
+
+
 def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], int] | None = None,
              lamps_argv0: tuple[str, ...] | None = None, secrets: Path | None = None) -> list[LocalService]:
     """The services as local processes (see the module docstring).
@@ -366,6 +377,7 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
                 # two names of one service (robot, camera) become one endpoint, once
                 env[key] = ",".join(dict.fromkeys(endpoint(e, s.name) for e in env[key].split(",") if e.strip()))
         argv = (*lamps, *s.command[1:]) if s.command[0] == "lamps" else s.command
+        argv = _on_loopback(argv)
         out.append(LocalService(s.name, tuple(argv), env, tuple(ports[(s.name, p)] for p in listen_ports(s)),
                                 "SYS_NICE" in s.cap_add))
     return out

@@ -114,6 +114,10 @@ def test_every_zenoh_service_of_every_profile_joins_with_its_roles_identity_and_
     local = {s.name: s for s in localize(run_locally(active(services, ("sim",))), secrets=tmp_path / "c")}
     assert local["controller"].environment["LAMPS_ZENOH_IDENTITY"] == str(tmp_path / "c" / "controller")
     assert local["perception"].environment["LAMPS_ZENOH_IDENTITY"] == str(tmp_path / "c" / "perception")
+    # the live view binds all interfaces in its container (reached through its published port), loopback here
+    view = {s.name: s for s in localize(run_locally(active(services, ("sim", "foxglove"))), secrets=tmp_path / "c")}
+    argv = view["foxglove"].argv
+    assert argv[argv.index("--host") + 1] == "127.0.0.1" and "--token-from-identity" in argv, argv
     # no variable of the environment turns the list off (no silent insecurity: interfaces/service_security.py)
     off = load_compose(COMPOSE, {"LAMPS_ACCESS_CONTROL": "false", "LAMPS_ZENOH_INSECURE": "true"})
     assert all(s.environment.get("LAMPS_ZENOH_ACCESS_CONTROL") == "true" and "LAMPS_ZENOH_INSECURE" not in
