@@ -38,12 +38,13 @@ def _limit(which: int) -> str:
     return "-1" if hard == resource.RLIM_INFINITY else str(hard)
 
 
-def _connect(port: int):
-    """A client that got the server's hello, or None (docker's port proxy accepts before the service listens)."""
+def _connect(port: int, token: str | None = None):
+    """A client that got the server's hello, or None (docker's port proxy accepts before the service listens).
+    ``token``: the live view's (a client through docker's port proxy is not on the container's loopback)."""
     from websockets.exceptions import WebSocketException
 
     try:
-        client = _Client(port, "foxglove.sdk.v1")
+        client = _Client(port, "foxglove.sdk.v1", token=token)
         client.pump(2.0)
     except (OSError, EOFError, WebSocketException):
         return None
@@ -75,7 +76,12 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
         up = _compose(project, env, "up", "-d", timeout=900)
         assert up.returncode == 0, f"docker compose up failed:\n{up.stderr[-4000:]}"
         # the live view (profile foxglove) serves the running cell on the host's port
-        client = wait_for(lambda: _connect(ws_port), 120.0, "the foxglove service's WebSocket port", period_s=1.0)
+        from interfaces.credentials import identity_files, identity_folder
+        from launch.live import live_token
+
+        token = live_token(identity_files(identity_folder(host / "secrets", "recorder"))[2])
+        client = wait_for(lambda: _connect(ws_port, token), 120.0, "the foxglove service's WebSocket port",
+                          period_s=1.0)
         tf = f"{Keys().prefix}/scene/tf"
         wait_for(lambda: client.pump(0.5) or tf in client.channels, 120.0, f"{tf} advertised")
         client.subscribe([tf])
