@@ -29,8 +29,8 @@ cell's default-deny access list, subjects the certificates' common names;
 unset: on whenever the service has an identity); ``insecure`` (shorthand
 ``LAMPS_ZENOH_INSECURE``, option ``--insecure``: a service started without
 an identity, or with the access list off, runs only when told so, and says
-so in every status, :mod:`interfaces.service_security`; never for the robot
-role's access list nor a real robot);
+so in every status, :mod:`interfaces.service_security`; the robot role's
+access list stays on whatever it says);
 ``ros_namespaces`` (default ``["lbr", "camera"]``: the ROS topic namespaces
 zenoh-bridge-ros2dds carries, the keys the robot side and the bridge may put);
 ``cells`` (shorthand ``LAMPS_ZENOH_CELLS``, comma-separated robot ids; default
@@ -365,7 +365,7 @@ def add_zenoh_options(parser) -> None:
                              "([zenoh] config_file)")
     parser.add_argument("--insecure", action="store_true", default=None,
                         help="run without an identity (plain TCP, no access list) or with the access list off, on "
-                             "purpose; every status says so ([zenoh] insecure; never for a real robot)")
+                             "purpose; every status says so ([zenoh] insecure; the robot role's list stays on)")
 
 
 def zenoh_with_options(settings: ZenohSettings, args) -> ZenohSettings:

@@ -407,11 +407,9 @@ class ServiceStatus(Message, frozen=True):
 
 
 class Estop(Message, frozen=True):
-    """Emergency stop (``engaged=True``) or its release (``engaged=False``), with who and why.
-
-    A release in a cell with identities is signed by the operator (:func:`interfaces.arm_auth.sign_release`):
-    ``wall_ns`` its wall-clock stamp [ns since the epoch], ``certificate`` the operator's (PEM), ``signature``
-    ECDSA over the cell, the stamp, reason and source.
+    """Emergency stop (``engaged=True``) or its release (``engaged=False``), with who and why. A release in a cell
+    with identities is the operator's, signed (:mod:`interfaces.arm_auth`): ``wall_ns`` its wall-clock stamp
+    [ns since the epoch], ``certificate`` the operator's (PEM), ``signature`` ECDSA over cell, stamp, reason, source.
     """
 
     stamp_ns: int
@@ -443,12 +441,8 @@ class ArmRequest(Message, frozen=True):
 
 
 class Introduction(Message, frozen=True):
-    """Controller or robot side -> the other, every half second: who it is, for authenticated commands
-    (:mod:`interfaces.arm_auth`).
-
-    role : ``controller`` or ``robot``; session : the controller's session (what its commands carry);
-    nonce : the robot side's, drawn at each start; certificate : the sender's certificate (PEM).
-    """
+    """Controller or robot side -> the other, every 0.5 s, for authenticated commands (:mod:`interfaces.arm_auth`):
+    role (``controller``, ``robot``), its certificate (PEM), the controller's session, the robot side's nonce."""
 
     stamp_ns: int
     role: Name

@@ -11,8 +11,7 @@ live view, router, teach) starts only
   (:func:`security_summary`, carried by :class:`~interfaces.session.ServiceNode`).
 
 Whatever the flag, the robot role's access list cannot be turned off (its
-identity moves the arm), and a real robot (:func:`check_real_robot`) never
-runs without an identity and its access list.
+identity moves the arm).
 
 Everything else refused names the problem and the way out (:class:`ConfigError`).
 """
@@ -20,10 +19,13 @@ Everything else refused names the problem and the way out (:class:`ConfigError`)
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .access import role_and_cell
-from .config import ZenohSettings
 from .errors import ConfigError
+
+if TYPE_CHECKING:  # interfaces.config calls check_service_security
+    from .config import ZenohSettings
 
 #: What a status says of a service on the in-process bus (no network, nothing to authenticate).
 IN_PROCESS = "in-process (no network)"
@@ -70,13 +72,3 @@ def check_service_security(settings: ZenohSettings) -> str:
                           "anything here. Remove the setting (an identity brings its access list), or run with "
                           "--insecure on purpose")
     return security_summary(settings)  # the node warns when it opens (after the rest of the configuration)
-
-
-def check_real_robot(settings: ZenohSettings) -> None:
-    """A real robot runs with an identity and its access list, whatever ``insecure`` says; ConfigError naming
-    what is missing."""
-    if role_of(settings) is None:
-        raise ConfigError("a real robot needs its identity (LAMPS_ZENOH_IDENTITY: the robot role's folder from "
-                          "'lamps credentials DIR'); --insecure is refused on a real robot")
-    if not settings.access_control:
-        raise ConfigError("a real robot needs its access list on; --insecure is refused on a real robot")

@@ -23,6 +23,7 @@ from interfaces.messages import (
     ControllerStatus,
     ControllerTrace,
     Estop,
+    Introduction,
     PHASES,
     LoopTiming,
     Phase,
@@ -67,6 +68,10 @@ def samples():
         Estop(stamp_ns=11, engaged=True, reason="operator", source="pendant"),
         SimTruth(seq=4, stamp_ns=5, stain_ids=[0, 1], remaining=[0.25, 1.0], total_dirt=1234.5, contact_force_n=10.1),
         ArmRequest(stamp_ns=12, armed=True, reason="T1 first run", source="operator"),
+        Introduction(stamp_ns=13, role="robot", certificate=b"-----BEGIN CERTIFICATE-----", nonce=b"n" * 16),
+        TorqueCommand(seq=14, stamp_ns=15, tau_nm=[0.5] * 7, session="s", mac=b"m" * 16),
+        Estop(stamp_ns=16, engaged=False, reason="ok", source="operator", wall_ns=17, certificate=b"c",
+              signature=b"s" * 70),
     ]
 
 
