@@ -283,23 +283,30 @@ class Recorder:
                 self.counters["dropped_over_share"] += 1
                 self.budget.refused(acc, "over_share")
             else:
-                self._write(key, data, t_ns, acc)
+                msg = self._decoded(key, data, t_ns, acc)
+                data = None  # the payload goes before its message is written: a 12 MB frame is one copy less
+                if msg is not None:
+                    self._write(key, msg, t_ns, acc)
 
-    def _write(self, key: str, data, t_ns: int, acc: Account) -> None:
-        """Decode and write one sample of ``key``, its scene messages too, all charged to its account."""
-        dec, scene, after_prefix = self._decoder(key)
-        self.sink.account = acc.name
+    def _decoded(self, key: str, data, t_ns: int, acc: Account):
+        """The message of a queued sample of ``key``, or None when it does not decode (counted, described)."""
+        dec = self._decoder(key)[0]
         try:
-            msg = dec(data) if isinstance(data, bytes) else data.decoded(dec)
-            self.sink.write(key, msg, t_ns)
-            for topic, scene_msg in scene.on_message(key, msg, t_ns):
-                self.sink.write_typed(topic, scene_msg, t_ns)
+            return dec(data) if isinstance(data, bytes) else data.decoded(dec)
         except MessageDecodeError as exc:
-            self.sink.account = RECORDER_ACCOUNT
             self.budget.refused(acc, "undecodable")
             self._reject(key, acc, len(data) if isinstance(data, bytes) else 0, t_ns, "undecodable", str(exc),
                          queue=False)
-            return
+            return None
+
+    def _write(self, key: str, msg, t_ns: int, acc: Account) -> None:
+        """Write one message of ``key``, its scene messages too, all charged to its account."""
+        _, scene, after_prefix = self._decoder(key)
+        self.sink.account = acc.name
+        try:
+            self.sink.write(key, msg, t_ns)
+            for topic, scene_msg in scene.on_message(key, msg, t_ns):
+                self.sink.write_typed(topic, scene_msg, t_ns)
         finally:
             self.sink.account = RECORDER_ACCOUNT
         acc.recorded += 1

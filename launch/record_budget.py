@@ -17,7 +17,7 @@ from 235 to 520 MB (payloads were queued before any check). The rule now, with `
   (camera frames, perception's debug frames) are recorded until their share is used, then no more. Every
   other key (the states, the commands, the trace, the statuses, the truth, the stains, the e-stops, the arm
   requests) is always recorded: at full rate up to :data:`THIN_FROM` of its share, then thinned to one
-  message a second (:data:`THIN_PERIOD_S`) for the rest of it (at the default budget, days of it).
+  message a second (:data:`THIN_PERIOD_S`) for the rest of it (at the default budget, hours of it).
 * The shares add up to 95 %: the rest is the file's index and the recorder's own messages (its status once a
   second, at most a hundred notes per key), bounded by their rate and count. The file as a whole still
   stops at ``B``.

@@ -76,7 +76,10 @@ def record_main(argv: list[str] | None = None) -> int:
         path = rec.close()
     finally:
         node.close()
-    print(f"recorded {sum(rec.counters.values())} messages into {path}"
+    accounts = rec.budget.accounts.values()
+    dropped = sum(sum(a.dropped.values()) for a in accounts)
+    print(f"recorded {sum(a.recorded for a in accounts)} messages into {path}"
+          + (f", dropped {dropped} (recorder/status says of which keys and why)" if dropped else "")
           + (f"; the run ended: {ended[1]}" if ended else ""), flush=True)
     if a.no_report or settings.cells:
         return 0
