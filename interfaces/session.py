@@ -84,9 +84,19 @@ def _base_config(path: str) -> zenoh.Config:
     return cfg
 
 
-def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
-    """The ``zenoh.Config`` for ``settings``: its ``config_file`` (or Zenoh's defaults) with the settings over it."""
+def zenoh_config(settings: ZenohSettings, max_message_bytes: int | None = None) -> zenoh.Config:
+    """The ``zenoh.Config`` for ``settings``: its ``config_file`` (or Zenoh's defaults) with the settings over it.
+
+    max_message_bytes : Zenoh's limit on a whole message this session takes [bytes] (a larger one is dropped while
+    reassembled, :mod:`interfaces.message_limits`); default the cell's largest message bound, unless the
+    ``config_file`` sets one.
+    """
+    from .message_limits import MAX_MESSAGE_SIZE_PATH, max_message_bytes as cell_max
+
     cfg = _base_config(settings.config_file)
+    if max_message_bytes is not None or cfg.get_json(MAX_MESSAGE_SIZE_PATH) == zenoh.Config().get_json(
+            MAX_MESSAGE_SIZE_PATH):
+        cfg.insert_json5(MAX_MESSAGE_SIZE_PATH, json.dumps(int(max_message_bytes or cell_max())))
     cfg.insert_json5("mode", json.dumps(settings.mode))
     cfg.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
     cfg.insert_json5("scouting/gossip/enabled", json.dumps(settings.gossip))
@@ -299,9 +309,10 @@ class ServiceNode:
     Use as ``with ServiceNode("sim", settings) as node: ...``.
     """
 
-    def __init__(self, service: str, settings: ZenohSettings) -> None:
+    def __init__(self, service: str, settings: ZenohSettings, max_message_bytes: int | None = None) -> None:
         self.service = service
         self.settings = settings
+        self.max_message_bytes = max_message_bytes  # None: the cell's (interfaces.message_limits)
         self.keys: Keys = settings.keys
         self._session: zenoh.Session | None = None
         self._token = None
@@ -317,7 +328,7 @@ class ServiceNode:
         self.security = security_summary(self.settings)
         if self.security.startswith("INSECURE"):
             log.warning("%s: %s (--insecure); every status says so", self.service, self.security)
-        self._session = zenoh.open(zenoh_config(self.settings))
+        self._session = zenoh.open(zenoh_config(self.settings, self.max_message_bytes))
         self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
         return self
 

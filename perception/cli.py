@@ -178,7 +178,10 @@ def main(argv: list[str] | None = None) -> int:
     node = None
     if not a.no_zenoh:
         try:
-            node = ServiceNode(SERVICE, zenoh_settings).__enter__()
+            from interfaces.message_limits import max_message_bytes
+
+            # ROS images through the bridge may be larger than the cell's own frames (message_limits)
+            node = ServiceNode(SERVICE, zenoh_settings, max_message_bytes(ros_images=kind == "ros")).__enter__()
         except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
             print(f"lamps perception: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
             return 1

@@ -123,3 +123,15 @@ def test_a_128_mb_put_costs_a_limited_receiver_a_few_times_the_limit_not_the_put
     else:
         assert after["got"] == [128 * 1024**2, 5], after
         assert grew_mb > 128, (before, after)  # Zenoh's default takes the put whole: what the limit prevents
+
+
+def test_every_session_of_the_cell_takes_the_cells_limit_unless_told_otherwise(tmp_path):
+    from interfaces.config import ZenohSettings
+    from interfaces.session import zenoh_config
+
+    path = MAX_MESSAGE_SIZE_PATH
+    assert json.loads(zenoh_config(ZenohSettings()).get_json(path)) == max_message_bytes()
+    assert json.loads(zenoh_config(ZenohSettings(), 1_000_000).get_json(path)) == 1_000_000
+    own = tmp_path / "zenoh.json5"
+    own.write_text('{transport: {link: {rx: {max_message_size: 2000000}}}}')
+    assert json.loads(zenoh_config(ZenohSettings(config_file=str(own))).get_json(path)) == 2_000_000
