@@ -144,6 +144,9 @@ def _flood(perception: ServiceNode, until: threading.Event, sent: dict) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.attack("7", "perception's identity floods the recorder with 12 MB debug frames (GBs in 8 s) and 64 MiB "
+                         "puts while the cell runs",
+                   "every state, command, status and truth recorded; the report right; the recorder's memory bounded")
 def test_a_perception_flood_to_the_budget_leaves_the_cell_recorded_the_report_right_and_the_memory_bounded(
         tmp_path):
     creds = tmp_path / "credentials"
