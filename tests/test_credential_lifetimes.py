@@ -204,6 +204,9 @@ def test_a_verifier_that_reads_the_cas_path_length_refuses_a_leaf_of_an_intermed
 
 
 @pytest.mark.slow
+@pytest.mark.attack("identity", "a certificate for the controller signed with perception's stolen key (a leaf used "
+                                "as a CA) opens a link, either side",
+                   "no TLS session")
 def test_a_certificate_signed_with_a_stolen_role_key_gets_no_tls_session(tmp_path):
     """Every leaf is ``CA:FALSE``, which Zenoh's TLS (rustls / webpki) enforces on every certificate between the
     leaf and the CA: a thief of perception's key who signs a ``controller`` certificate with it gets no session,

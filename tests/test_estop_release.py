@@ -164,6 +164,9 @@ def _drain(stream, lines: list[str]) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.attack("4", "under lamps up, the operator's identity of the run folder engages the e-stop mid-wipe, "
+                         "holds it 3 s and releases it (signed)",
+                   "ESTOP left once both sides released, wiping again, the run cleaned")
 def test_under_lamps_up_an_operators_estop_released_mid_wipe_ends_in_wiping_again_and_cleaned(tmp_path,
                                                                                           learned_skill_file):
     """``lamps up`` (lock-step) watched and stopped by the operator's tools: the operator's identity of the run

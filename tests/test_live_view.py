@@ -343,6 +343,9 @@ def test_the_identity_token_is_its_keys_own_and_printed_for_the_clients(tmp_path
     assert r.returncode == 1 and "--token-from-identity: the live view has no identity" in r.stderr, r.stderr
 
 
+@pytest.mark.attack("live view", "clients from another address open the live view served beyond loopback without a "
+                                 "token and with wrong ones",
+                   "answered 401 and counted; only the token in the URL is served")
 def test_a_client_from_another_address_needs_the_token_in_the_url_one_from_loopback_does_not():
     """Bound to every interface with a token: from this machine's network address (another machine, to the
     server), no token and a wrong one are answered 401 and counted; the token in the query is let in; a client from
