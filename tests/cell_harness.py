@@ -123,7 +123,8 @@ class Cell:
 
     mode : ``lockstep`` or ``realtime``; proxy : route the controller's link to the sim through a
     :class:`TcpProxy` (:attr:`proxy`); router : run ``lamps router`` (the router identity, the cell's access
-    list; ``router_acl=False``: its list off, ``--insecure``) and every service as its client (no listen endpoint, no link between services); thin : service name -> {key suffix (``robot/state``): samples per
+    list; ``router_acl=False``: its list off, ``--insecure``) and every service as its client; robot : ``sim``
+    or ``lbr-sim`` (the arm behind the simulated lbr stack, as ``lamps up --robot``) (no listen endpoint, no link between services); thin : service name -> {key suffix (``robot/state``): samples per
     second}: Zenoh's own downsampling on that service's egress drops the samples of that key that come
     sooner than 1 / rate after the last one let through (given to the service as a Zenoh configuration
     file, ``LAMPS_ZENOH_CONFIG_FILE``).
@@ -131,11 +132,11 @@ class Cell:
 
     def __init__(self, out: Path, skill: Path, mode: str = "lockstep", proxy: bool = False,
                  thin: dict[str, dict[str, float]] | None = None, router: bool = False,
-                 router_acl: bool = True) -> None:
+                 router_acl: bool = True, robot: str = "sim") -> None:
         from launch.cli import _plan_cell
 
         self.out = out
-        self.a = SimpleNamespace(robot="sim", foxglove=None, seed=0, stains=3, mode=mode, robot_id=f"f{free_port()}",
+        self.a = SimpleNamespace(robot=robot, foxglove=None, seed=0, stains=3, mode=mode, robot_id=f"f{free_port()}",
                                  port_base=None, skill=str(skill), max_duration=0.0, quiet=True)
         self.cell = _plan_cell(self.a, COMPOSE, {}, Path(skill), out)
         self.services = {s.name: s for s in self.cell.services}

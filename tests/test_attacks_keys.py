@@ -185,3 +185,45 @@ def test_a_role_cannot_declare_another_roles_presence(tmp_path):
         wait_for(lambda: "perception" in robot.alive_services(0.5), 10.0, "perception's own token")
         time.sleep(0.3)
         assert "controller" not in robot.alive_services(0.5), "perception's identity declared the controller"
+
+
+@pytest.mark.slow
+@pytest.mark.attack("1", "in an lbr-sim cell with the operator's e-stop engaged, the bridge's identity (its program "
+                         "not applying the list, linked to every service and the stack) puts 30 Nm torque commands "
+                         "on lbr/command/torque and e-stop releases for 3 s",
+                   "nothing applied: the arm within 1 mrad, ESTOP held")
+def test_the_bridges_identity_cannot_command_the_stack_nor_release_the_estop(tmp_path, learned_skill_file):
+    from robot.lbr import msgs
+
+    with Cell(tmp_path / "run", learned_skill_file, robot="lbr-sim") as cell:
+        keys = cell.node.keys
+        joints: list[np.ndarray] = []
+        cell.node.session.declare_subscriber("lbr/state", lambda s: joints.append(
+            msgs.decode_state(s.payload.to_bytes()).q_rad.copy()))
+        cell.wait_phase(("WIPE",), 240.0)
+        t = time.monotonic()
+        cell.node.publish(keys.controller_estop, Estop(stamp_ns=time.monotonic_ns(), engaged=True, reason="test hold",
+                                                       source="operator"))
+        cell.wait_phase(("ESTOP",), 10.0, since=t)
+        time.sleep(0.5)
+        wait_for(lambda: bool(joints), 10.0, "the stack's states")
+        q0 = joints[-1].copy()
+        n0 = len(joints)
+        thief = ServiceNode("bridge", cell.operator_settings("bridge", access_control=False)).__enter__()
+        try:
+            sent = 0
+            t_end = time.monotonic() + 3.0
+            while time.monotonic() < t_end:
+                thief.session.put("lbr/command/torque", msgs.encode_torque_command(q0, np.full(7, 30.0)))
+                thief.session.put(keys.controller_estop_release, encode(Estop(
+                    stamp_ns=time.monotonic_ns(), engaged=False, reason="forged", source="operator",
+                    wall_ns=time.time_ns())))
+                sent += 2
+                time.sleep(0.002)
+        finally:
+            thief.close()
+        moved = max(float(np.abs(q - q0).max()) for q in joints[n0:])
+        assert cell.phases[-1][1] == "ESTOP", cell.phases[-4:]
+        cell.finish()
+    assert sent > 1000 and len(joints) - n0 > 100
+    assert moved < 1e-3, f"the arm moved {moved:.4f} rad"
