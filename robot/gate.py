@@ -4,8 +4,15 @@ A :class:`~interfaces.messages.TorqueCommand` is dropped when it has the
 wrong number of joints (NaN and inf are already refused when the message is
 decoded; checked again here for commands built in-process); torques beyond
 the joint limits are clipped to them, and so is a step larger than the
-torque-rate limit allows since the last applied command. Every outcome is
-counted by reason.
+torque-rate limit allows from the torques the arm last ran on. Every outcome
+is counted by reason.
+
+The rate reference is never dropped. After a cycle that applied none of the
+gate's torques (a brake, a hold, a yield, an e-stop) the robot side tells the
+gate what the arm ran on instead (:meth:`CommandGate.ran`: what the brakes
+held, in command terms), and the next command is ramped from there at the
+rate limit: a brake ends with the torque climbing back from what the arm
+holds, never with a jump to the command that had to be braked.
 """
 
 from __future__ import annotations
@@ -19,6 +26,11 @@ from interfaces.messages import HOLD, TorqueCommand
 #: Default torque-rate limit at the robot side [Nm/s]: 10 Nm per ms, for gross errors only (the
 #: controller limits its own rate to about 1 Nm/ms).
 DEFAULT_TAU_RATE_NM_S = 10_000.0
+#: Default torque-rate limit while the pad touches something [Nm/s]: 2 Nm per ms, twice the controller's own
+#: rate. A pressed pad turns a torque step into force within a step (in the sim, a 10 Nm step on every joint
+#: pressed 33 N more one cycle later); at 2 Nm/ms the force climbs slowly enough for the robot side's force
+#: limit to see it coming. The lbr adapter's own guard refuses steps over the same rate.
+DEFAULT_CONTACT_TAU_RATE_NM_S = 2_000.0
 
 
 class CommandGate:
@@ -29,29 +41,61 @@ class CommandGate:
     tau_max : (n,) joint torque limits [Nm].
     counters : shared counters (``commands_applied``, ``commands_clipped``, ``commands_rate_limited``,
         ``commands_dropped_wrong_length``, ``commands_dropped_non_finite``, ``commands_hold``).
-    tau_rate_nm_s : torque-rate limit [Nm/s] between two applied commands; ``dt_s`` the cycle [s].
+    tau_rate_nm_s : torque-rate limit [Nm/s] between two applied commands; ``dt_s`` the cycle [s];
+    contact_tau_rate_nm_s : the limit while :attr:`touching` (the robot side sets it from the contact force).
     """
 
     def __init__(self, tau_max: np.ndarray, counters: Counter, tau_rate_nm_s: float = DEFAULT_TAU_RATE_NM_S,
-                 dt_s: float = 0.001) -> None:
+                 dt_s: float = 0.001, contact_tau_rate_nm_s: float | None = None) -> None:
         self.tau_max = np.asarray(tau_max, float)
         self.counters = counters
         self.tau = np.zeros_like(self.tau_max)
         self._prev = np.zeros_like(self.tau_max)
-        self._have_prev = False
-        self._rate = float(tau_rate_nm_s)
-        self._max_step = self._rate * float(dt_s)
+        self._step = np.zeros_like(self.tau_max)  # scratch: the 1 kHz path allocates nothing here
+        self._have_prev = False  # the first command of a lock-step run, before anything held the arm, has none
+        free = float(tau_rate_nm_s)
+        self._rates = (free, min(free, float(contact_tau_rate_nm_s or free)))  # free, touching
+        self._dt_s = float(dt_s)
+        self.touching = False
+        self._held = False  # the reference is what a hold applied: one cycle's step from it, however late
+        self.rated = False  # the last output was rate-limited, or a hold set the reference (False: no reference yet)
 
-    def accept(self, cmd: TorqueCommand, elapsed_s: float | None = None) -> np.ndarray | str | None:
-        """Clipped torques (n,) [Nm] (a buffer reused by the next call), ``"hold"``, or None if dropped.
+    def ran(self, tau_nm: np.ndarray) -> None:
+        """The arm ran on ``tau_nm`` (n,) [Nm] (command terms: without the gravity a compensating robot adds) over
+        the last cycle instead of the gate's last output: the next step counts from it."""
+        self._prev[:] = tau_nm
+        self._have_prev = self.rated = True
+        self._held = True
 
-        ``elapsed_s`` : time since the last applied command [s] (default one cycle): the rate limit allows
-        ``tau_rate_nm_s`` times that, so commands that come late or after skipped periods are not clipped.
-        """
+    def limit_rate(self, tau_nm: np.ndarray, elapsed_s: float | None = None) -> np.ndarray:
+        """``tau_nm`` (n,) [Nm] (within the limits) moved at most the rate limit from the reference: a buffer reused
+        by the next call, which becomes the reference. For a command applied again, e.g. after a brake."""
+        self.tau[:] = tau_nm
+        self._limit_rate(elapsed_s)
+        return self.tau
+
+    def _limit_rate(self, elapsed_s: float | None) -> None:
+        self.rated = self._have_prev
+        rate = self._rates[self.touching]
+        late = elapsed_s is not None and not self._held  # the cycles in between ran on the last command
+        max_step = rate * max(self._dt_s, elapsed_s) if late else rate * self._dt_s
+        step = self._step
+        np.subtract(self.tau, self._prev, out=step)
+        if self._have_prev and np.abs(step, out=step).max() > max_step:
+            self.counters["commands_rate_limited"] += 1
+            np.subtract(self.tau, self._prev, out=step)
+            np.clip(step, -max_step, max_step, out=step)
+            np.add(self._prev, step, out=self.tau)
+        self._prev[:] = self.tau
+        self._have_prev = True
+        self._held = False
+
+    def check(self, cmd: TorqueCommand) -> np.ndarray | str | None:
+        """The command's torques (n,) [Nm] clipped to the limits (a buffer reused by the next call), ``"hold"``, or
+        None if dropped; no rate limit (:meth:`limit_rate` applies it cycle by cycle)."""
         if cmd.mode == HOLD:
             self.counters["commands_hold"] += 1
-            self._have_prev = False  # after a brake the controller ramps in; no rate reference
-            return HOLD
+            return HOLD  # the reference stays: the robot side sets it to what the hold applied (:meth:`ran`)
         if len(cmd.tau_nm) != len(self.tau_max):
             self.counters["commands_dropped_wrong_length"] += 1
             return None
@@ -62,11 +106,18 @@ class CommandGate:
         if (np.abs(self.tau) > self.tau_max).any():
             self.counters["commands_clipped"] += 1
             np.clip(self.tau, -self.tau_max, self.tau_max, out=self.tau)
-        max_step = self._max_step if elapsed_s is None else max(self._max_step, self._rate * elapsed_s)
-        if self._have_prev and (np.abs(self.tau - self._prev) > max_step).any():
-            self.counters["commands_rate_limited"] += 1
-            np.clip(self.tau, self._prev - max_step, self._prev + max_step, out=self.tau)
-        self._prev[:] = self.tau
-        self._have_prev = True
         self.counters["commands_applied"] += 1
         return self.tau
+
+    def accept(self, cmd: TorqueCommand, elapsed_s: float | None = None) -> np.ndarray | str | None:
+        """:meth:`check`, then the rate limit: torques (n,) [Nm] (a buffer reused by the next call), ``"hold"``, or
+        None if dropped.
+
+        ``elapsed_s`` : time since the last applied command [s] (default one cycle): the rate limit allows
+        ``tau_rate_nm_s`` times that, so commands that come late or after skipped periods are not clipped (the
+        arm ran on the last one meanwhile); after a hold (:meth:`ran`) one cycle's step only.
+        """
+        tau = self.check(cmd)
+        if isinstance(tau, np.ndarray):
+            self._limit_rate(elapsed_s)
+        return tau

@@ -23,10 +23,14 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from interfaces.messages import Capabilities
+
+if TYPE_CHECKING:
+    from interfaces.robot_model import RobotModel
 
 
 @dataclass
@@ -59,11 +63,17 @@ class RobotPort(ABC):
         True when the robot has its own clock (see the module docstring).
     velocity_limits_rad_s : array, shape (n,), or None
         The joints' speed limits [rad/s] the server's speed brake watches (None: the port has its own).
+    limits_model : RobotModel or None
+        The description the joints follow, for the server's limits on the pad (its speed, its press speed) and its
+        prediction of each command (None: joint speeds and the contact force only, by their trends). Used on the
+        server's loop thread only. The lbr adapter does not declare it yet: its joint speeds are a filtered
+        estimate, with which the pad limits are untried on the arm.
     """
 
     capabilities: Capabilities
     clocked: bool = False
     velocity_limits_rad_s: np.ndarray | None = None
+    limits_model: RobotModel | None = None
 
     @property
     def n_joints(self) -> int:
@@ -103,6 +113,23 @@ class RobotPort(ABC):
         """Hold for one cycle because a joint is too fast: at once, no repeat of the last command (which is
         what sped it up). Default: :meth:`hold`."""
         self.hold()
+
+    def yield_hold(self, tau_nm: np.ndarray) -> None:
+        """Yield for one cycle because the contact force is over the robot side's cap: apply ``tau_nm`` (n,) [Nm]
+        (the server's joint damping) on top of gravity compensation and nothing else, so whatever presses on the
+        tool pushes the arm back. Default: :meth:`speed_hold` (a port whose hold does not press, such as the lbr
+        adapter's joint spring at the measured pose, needs nothing more)."""
+        self.speed_hold()
+
+    def held_torque_nm(self) -> np.ndarray | None:
+        """The torques (n,) [Nm] the arm ran on over the last cycle, a hold, in command terms (without the gravity a
+        compensating robot adds): where the gate's rate limit counts from after it. None: the port cannot tell, and
+        the gate counts from the torques last applied (the lbr adapter: its hold repeats the last command while it
+        is fresh, then sends its zero overlay). Default: the measured torques for a robot that does not compensate
+        gravity (they are what the brakes hold), None for one that does."""
+        if self.capabilities.gravity_compensated:
+            return None
+        return np.array(self.read().tau_nm, float)
 
     def applying(self) -> bool:
         """Whether the robot ran on the commands sent up to the newest reading (a clocked robot that re-applies an

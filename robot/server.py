@@ -19,13 +19,29 @@ and reads ``robot/command`` (:class:`~interfaces.messages.TorqueCommand`):
   each answer (the lbr peer's lock-step): no deadline, the unanswered state
   is re-sent every ``republish_s``.
 
-A joint faster than ``speed_brake_share`` of its limit (ports that declare
-``velocity_limits_rad_s``: the sim), or about to be by the next cycle at its
-present acceleration, makes the robot side brake whatever is commanded, as a
-robot's safety controller does, until every joint is back under it; each such
-episode is counted (``joint_speed_brakes``) and logged
-with the joint. A controller starved of CPU answering late can drive a light
-wrist joint unstable; this stops it at the robot, not in the controller.
+The robot side holds the arm to limits of its own whatever is commanded
+(:class:`~robot.guard.RobotGuard`, thresholds in :class:`ServerParams`,
+stated in docs/security.md): a joint faster than ``speed_brake_share`` of its
+limit (ports that declare ``velocity_limits_rad_s``), the pad faster than
+that share of ``tool_speed_limit_m_s``, or pressing into the surface it
+last touched faster than that share of ``press_speed_limit_m_s`` (ports that
+declare a ``limits_model``), now, by its trend or under the command about to
+be applied, brakes every joint until all are back under
+``speed_release_share``; a contact force over ``force_cap_n`` (or about to
+be) yields (gravity compensated, damped, no task torque:
+:meth:`RobotPort.yield_hold`) until it is under ``force_release_share`` of the
+cap. Each episode is counted (``joint_speed_brakes``, ``tool_speed_brakes``,
+``press_speed_brakes``, ``contact_force_yields``) and logged. After any cycle
+that applied none of the controller's torques the gate's rate limit counts
+from what the arm ran on (:meth:`RobotPort.held_torque_nm`; the torques last
+applied when the port cannot tell), so a brake ends with the torque climbing
+back at the rate limit, not with a jump to a command that went on while it
+held (``contact_tau_rate_nm_s`` while the pad touches). A controller that
+keeps running into these limits (``fault_episodes`` within
+``fault_window_s``) latches a FAULT-hold: every cycle holds, whatever is
+commanded, until the operator's e-stop release; the state says ``estop``
+meanwhile (the controller follows it), the status names it
+(``guard=FAULT``, ``guard_faults``, ``guard_fault_latched``).
 
 The e-stop is the robot side's too: an engaging :class:`~interfaces.messages.Estop`
 on ``controller/estop`` makes every cycle a hold (:meth:`RobotPort.estop_hold`)
@@ -60,32 +76,55 @@ import threading
 import time
 from collections import Counter
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 
+from interfaces.config import In, check_declared
+from interfaces.description import PAD_SIZE_M
+from interfaces.errors import ConfigError
 from interfaces.loop_hygiene import LoopHygiene
 from interfaces.loop_stats import LoopStats
 from interfaces.messages import HOLD, Estop, RobotState, ServiceStatus, TorqueCommand
 from interfaces.session import ServiceNode
 
 from .command_auth import CommandAuth
-from .gate import DEFAULT_TAU_RATE_NM_S, CommandGate
-from .port import RobotPort
+from .gate import DEFAULT_CONTACT_TAU_RATE_NM_S, DEFAULT_TAU_RATE_NM_S, CommandGate
+from .guard import Action, GuardLimits, RobotGuard
+from .port import Reading, RobotPort
 
 log = logging.getLogger(__name__)
+
+#: The counter of each kind of limit episode (:meth:`RobotGuard.observe`'s names).
+_EPISODE_COUNTERS = {"joint_speed": "joint_speed_brakes", "tool_speed": "tool_speed_brakes",
+                     "press_speed": "press_speed_brakes", "contact_force": "contact_force_yields",
+                     "fault": "guard_faults"}
 
 
 @dataclass(frozen=True)
 class ServerParams:
-    """Timing of the protocol.
+    """Timing of the protocol and the robot side's own limits (``[robot]``; docs/security.md states them).
 
     mode : ``"lockstep"`` or ``"realtime"`` (clocked ports are always driven by their own clock);
     rate_hz : the real-time rate [Hz]; stale_limit_s : a command older than this is not applied [s];
     republish_s : lock-step re-send period of an unanswered state [s]; max_steps : stop after this
     many written cycles (0: never); status_rate_hz : status publications per second (wall);
-    tau_rate_nm_s : the gate's torque-rate limit [Nm/s]; rebind_after_s : another controller session is
-    served only after the served one has sent nothing for this long [s]; speed_brake_share : brake while a
-    joint moves faster than this share of its limit (ports declaring limits; 0: off).
+    tau_rate_nm_s : the gate's torque-rate limit [Nm/s]; contact_tau_rate_nm_s : the same while the pad touches
+    (a contact force over ``contact_n``) [Nm/s]; rebind_after_s : another controller session is served only after
+    the served one has sent nothing for this long [s].
+
+    The limits (:mod:`robot.guard`; docs/security.md, "The robot side's limits"): speed_brake_share : brake
+    while a joint moves faster than this share of its limit (ports declaring limits), or the pad faster than
+    this share of ``tool_speed_limit_m_s`` or of ``press_speed_limit_m_s`` into the surface it last pressed on,
+    or would by the next cycle (0: no speed brakes); speed_release_share : a speed brake lets go once all
+    these are under this share; tool_speed_limit_m_s : the pad centre's speed limit [m/s] (ports declaring a
+    ``limits_model``; 0: none); press_speed_limit_m_s : the speed limit [m/s] of the pad's fastest corner into
+    the surface it last pressed on while within ``press_zone_m`` [m] of it (0: none); contact_n : a contact
+    force over this [N] marks the surface (and makes a press too fast a yield, not a brake); force_cap_n : yield
+    while the contact force is over this [N] (0: never); force_release_share : the yield lets go under this
+    share of the cap; yield_damping_share : each joint's damping in a yield, as the share of its torque limit it
+    gives at its speed limit; fault_episodes, fault_window_s : that many brake or yield episodes within that long [s]
+    (robot time) latch the FAULT-hold until the operator's e-stop release (0 episodes: never).
     """
 
     mode: str = "lockstep"
@@ -95,8 +134,44 @@ class ServerParams:
     max_steps: int = 0
     status_rate_hz: float = 10.0
     tau_rate_nm_s: float = DEFAULT_TAU_RATE_NM_S
+    contact_tau_rate_nm_s: Annotated[float, In(10.0, 1e6)] = DEFAULT_CONTACT_TAU_RATE_NM_S
     rebind_after_s: float = 0.5
-    speed_brake_share: float = 0.95
+    speed_brake_share: Annotated[float, In(0.0, 1.0)] = 0.95
+    speed_release_share: Annotated[float, In(0.0, 1.0)] = 0.8
+    tool_speed_limit_m_s: Annotated[float, In(0.0, 5.0)] = 1.0
+    press_speed_limit_m_s: Annotated[float, In(0.0, 1.0)] = 0.05
+    press_zone_m: Annotated[float, In(0.0, 0.2)] = 0.01
+    contact_n: Annotated[float, In(0.1, 100.0)] = 5.0
+    force_cap_n: Annotated[float, In(0.0, 1000.0)] = 45.0
+    force_release_share: Annotated[float, In(0.0, 1.0)] = 0.8
+    yield_damping_share: Annotated[float, In(0.0, 1.0)] = 0.1
+    fault_episodes: Annotated[int, In(0, 1000)] = 5
+    fault_window_s: Annotated[float, In(0.0, 60.0)] = 1.0
+
+    def __post_init__(self) -> None:
+        check_declared(self, "robot")
+        if self.speed_brake_share > 0 and self.speed_release_share > self.speed_brake_share:
+            raise ConfigError(f"[robot] speed_release_share ({self.speed_release_share}) must not be above "
+                              f"speed_brake_share ({self.speed_brake_share})")
+
+    def guard_limits(self, port: RobotPort) -> GuardLimits:
+        """The limits of :class:`~robot.guard.RobotGuard` for ``port`` (its declared speed limits and model)."""
+        tau_max = np.asarray(port.capabilities.torque_limits_nm, float)
+        speeds = port.velocity_limits_rad_s
+        if speeds is None and port.limits_model is not None:
+            speeds = port.limits_model.limits.dq_max
+        brakes = self.speed_brake_share > 0
+        damping = np.zeros_like(tau_max) if speeds is None else \
+            self.yield_damping_share * tau_max / np.asarray(speeds, float)
+        return GuardLimits(
+            joint_speed_rad_s=None if port.velocity_limits_rad_s is None or not brakes else
+            np.asarray(port.velocity_limits_rad_s, float),
+            tool_speed_m_s=self.tool_speed_limit_m_s if brakes else 0.0,
+            press_speed_m_s=self.press_speed_limit_m_s if brakes else 0.0, press_zone_m=self.press_zone_m,
+            pad_half_m=(PAD_SIZE_M[0] / 2, PAD_SIZE_M[1] / 2),
+            brake_share=self.speed_brake_share, release_share=self.speed_release_share, contact_n=self.contact_n,
+            force_cap_n=self.force_cap_n, force_release_share=self.force_release_share,
+            damping_nm_s_rad=damping, fault_episodes=self.fault_episodes, fault_window_s=self.fault_window_s)
 
 
 class RobotServer:
@@ -118,7 +193,7 @@ class RobotServer:
         self.status_key = status_key
         self.counters: Counter[str] = Counter()
         self.gate = CommandGate(np.asarray(port.capabilities.torque_limits_nm), self.counters,
-                                params.tau_rate_nm_s, 1.0 / params.rate_hz)
+                                params.tau_rate_nm_s, 1.0 / params.rate_hz, params.contact_tau_rate_nm_s)
         self.stop = threading.Event()
         self.stats = LoopStats()
         self._latency_us = np.zeros(2000)  # clocked: state published -> its answer forwarded [us], a ring
@@ -134,14 +209,10 @@ class RobotServer:
         self.estop_reason: str | None = None
         self.controller: str | None = None  # the controller session served
         self._controller_seen_ns = 0
-        lim = port.velocity_limits_rad_s
-        self._speed_cap = None if lim is None or params.speed_brake_share <= 0 else \
-            np.asarray(lim, float) * params.speed_brake_share  # (n,) [rad/s]
-        self._over_speed = False  # the last published state had a joint above its cap (or about to be)
-        self._dq_prev: np.ndarray | None = None  # |dq| (n,) of the last reading [rad/s]
-        self._dq_next = None if self._speed_cap is None else np.zeros_like(self._speed_cap)
-        self._dq_abs = None if self._speed_cap is None else np.zeros_like(self._speed_cap)  # |dq| (n,) [rad/s]
-        self._speed_braking = False
+        self.guard = RobotGuard(params.guard_limits(port), port.limits_model, port.capabilities.gravity_compensated)
+        self._reading: Reading | None = None  # the last reading published
+        self._damping = np.zeros(port.n_joints)  # the yield's torques (n,) [Nm], reused
+        self._written = np.zeros(port.n_joints)  # the torques last applied (n,) [Nm]
         self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
         self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
         self.auth = CommandAuth(node, self.counters)  # commands' MACs and signed releases, whoever relayed them
@@ -176,37 +247,69 @@ class RobotServer:
                 elif release_key:
                     if self.estop_reason is not None:
                         log.warning("e-stop released by %s", e.source or "?")
+                    if self.guard.release():
+                        log.warning("FAULT-hold released by %s: serving commands again", e.source or "?")
+                        self.counters["guard_fault_releases"] += 1
                     self.counters["estop_releases"] += 1
                     self.estop_reason = None
                 else:
                     self.counters["estop_releases_ignored_on_the_engage_key"] += 1
 
     def _apply(self, command: np.ndarray | str, seq: int = -1) -> None:
-        """Write ``command`` (gated torques answering state ``seq``, or ``"hold"``) to the port: one cycle (a hold
-        while e-stopped). The next state reports ``seq`` as applied, or -1 when the cycle was a hold."""
+        """Write ``command`` (gated torques answering state ``seq``, or ``"hold"``) to the port: one cycle, or what
+        the e-stop or the guard makes of it (a hold, a brake, a yield). The next state reports ``seq`` as applied, or
+        -1 when the cycle applied none of the controller's torques; then the gate counts from what the arm held."""
         self._poll_estop()
         self.applied_seq = -1
+        action = self.guard.action
+        torques = not isinstance(command, str)
+        was_braked, self.braked = self.braked, True
         if self.estop_reason is not None:
-            if not isinstance(command, str):
+            if torques:
                 self.counters["commands_held_for_estop"] += 1
             self.port.estop_hold()
-            self.braked = True
-        elif isinstance(command, str):
-            if not self.braked:
+        elif action != Action.APPLY:  # before the controller's own hold too: a held pad presses on, a repeat speeds on
+            self._guard_hold(action, torques)
+        elif not torques:
+            if not was_braked:
                 self.counters["holds_applied"] += 1
             self.port.hold()
-            self.braked = True
-        elif self._over_speed:
-            if not self._speed_braking:
-                self.counters["joint_speed_brakes"] += 1
-                self._speed_braking = True
-            self.port.speed_hold()
-            self.braked = True
         else:
-            self.port.write(command)
-            self.braked = False
-            self.applied_seq = seq
+            # rate-limited again (a command applied again after a hold climbs from what held the arm), and predicted;
+            # not a lock-step run's first command, before which nothing held the arm: taken as the gate passed it
+            first = not self.gate.rated
+            tau = command if first else self.gate.limit_rate(command)
+            if not first and self._speeds_over(tau):
+                self._guard_hold(self.guard.action, torques)
+            else:
+                self.port.write(tau)
+                self._written[:] = tau
+                self.braked = False
+                self.applied_seq = seq
+        if self.braked:
+            held = self.port.held_torque_nm()
+            self.gate.ran(self._written if held is None else held)
         self.steps += 1
+
+    def _guard_hold(self, action: Action, torques: bool) -> None:
+        """One cycle of what the guard asks instead of the command: a yield, the FAULT's e-stop hold, or a brake."""
+        if torques and self.guard.latch.latched:
+            self.counters["commands_held_for_guard_fault"] += 1
+        if action == Action.YIELD:
+            self.port.yield_hold(self.guard.damping_into(self._reading.dq_rad_s, self._damping))
+        elif action == Action.FAULT:
+            self.port.estop_hold()
+        else:
+            self.port.speed_hold()
+
+    def _speeds_over(self, tau_nm: np.ndarray) -> bool:
+        """Whether one cycle of ``tau_nm`` (n,) [Nm] would take a joint or the tool over its speed brake (the guard's
+        prediction; counted and logged as an episode): then the cycle brakes instead."""
+        r, rate_hz = self._reading, self.port.capabilities.state_rate_hz or self.p.rate_hz  # a clocked robot's own
+        entered = self.guard.check_command(r.q_rad, r.dq_rad_s, tau_nm, 1.0 / rate_hz, r.robot_time_ns * 1e-9)
+        if entered:
+            self._log_guard(entered, r)
+        return bool(entered)
 
     def _from_served_controller(self, cmd: TorqueCommand) -> bool:
         """True for a command of the controller session served (binding the first; re-binding to a newcomer only
@@ -310,7 +413,7 @@ class RobotServer:
                 if cmd is not None and cmd.seq < first_seq:
                     self.counters["commands_from_before_a_freeze"] += 1
                 elif cmd is not None and self._from_served_controller(cmd):
-                    accepted = self.gate.accept(cmd, (t0 - last_cmd_ns) * 1e-9)
+                    accepted = self.gate.check(cmd)  # the rate limit applies cycle by cycle (_apply)
                     if accepted is not None:
                         held = accepted if isinstance(accepted, str) else accepted.copy()
                         held_seq, last_cmd_ns = cmd.seq, t0
@@ -410,9 +513,11 @@ class RobotServer:
     # -- outputs -----------------------------------------------------------------------------------
     def publish_state(self, seq: int | None = None) -> None:
         """Publish the port's reading as state ``seq`` (default: the cycles written so far)."""
-        r = self.port.read()
-        if self._speed_cap is not None:
-            self._watch_speed(r.dq_rad_s)
+        r = self._reading = self.port.read()
+        entered = self.guard.observe(r.q_rad, r.dq_rad_s, r.wrench_world, r.robot_time_ns * 1e-9)
+        if entered:
+            self._log_guard(entered, r)
+        self.gate.touching = self.guard.touching
         seq = self.steps if seq is None else seq
         applied = self.applied_seq if self.port.applying() else -1
         if applied < 0 and seq != self._held_counted_seq:  # a state said again (lock-step) is one cycle
@@ -422,29 +527,34 @@ class RobotServer:
             seq=seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
             dq_rad_s=r.dq_rad_s.tolist(), tau_nm=r.tau_nm.tolist(), wrench_world=r.wrench_world.tolist(),
             capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns(),
-            command_seq=applied, estop=self.estop_reason is not None, held_cycles=self.held_cycles))
+            command_seq=applied, estop=self.estop_reason is not None or self.guard.latch.latched,
+            held_cycles=self.held_cycles))
 
-    def _watch_speed(self, dq_rad_s: np.ndarray) -> None:
-        """Set whether the next cycle must brake: a joint (n,) [rad/s] above its speed cap now or, at the change
-        since the last reading, by the next one (a wrist accelerating at 200 rad/s^2 gains 0.2 rad/s a cycle);
-        logs each entry."""
-        cap, ahead, speed = self._speed_cap, self._dq_next, self._dq_abs
-        np.abs(dq_rad_s, out=speed)
-        if self._dq_prev is None:
-            self._dq_prev = speed.copy()
-        np.subtract(speed, self._dq_prev, out=ahead)  # the gain in speed over the last cycle (a loss is no risk)
-        np.maximum(ahead, 0.0, out=ahead)
-        ahead += speed
-        self._dq_prev[:] = speed
-        over = bool((ahead > cap).any())
-        if over and not self._over_speed:
-            j = int(np.argmax(ahead / cap))
-            log.warning("A%d at %.2f rad/s (%.2f by the next cycle), over %.0f %% of its limit: braking until "
-                        "every joint is under it", j + 1, abs(float(dq_rad_s[j])), float(ahead[j]),
-                        self.p.speed_brake_share * 100)
-        elif not over:
-            self._speed_braking = False
-        self._over_speed = over
+    def _log_guard(self, entered: tuple[str, ...], r: Reading) -> None:
+        """Count and log each limit episode that began (and the FAULT-hold, if they latched it)."""
+        g, p = self.guard, self.p
+        brake, release = p.speed_brake_share * 100, p.speed_release_share * 100
+        for what in entered:
+            self.counters[_EPISODE_COUNTERS[what]] += 1
+            ahead = g.entry_value.get(what, 0.0)
+            if what == "joint_speed":
+                j = g.worst_joint
+                log.warning("A%d at %.2f rad/s (%.2f by the next cycle), over %.0f %% of its limit: braking until "
+                            "every joint is under %.0f %%", j + 1, abs(float(r.dq_rad_s[j])), ahead, brake, release)
+            elif what == "tool_speed":
+                log.warning("tool at %.2f m/s (%.2f by the next cycle), over %.0f %% of its %.2f m/s limit: braking "
+                            "until under %.0f %%", g.tool_speed_m_s, ahead, brake, p.tool_speed_limit_m_s, release)
+            elif what == "press_speed":
+                log.warning("pad moving into the surface at %.3f m/s (%.3f by the next cycle), over %.0f %% of its "
+                            "%.2f m/s limit: %s until under %.0f %%", g.press_speed_m_s, ahead, brake,
+                            p.press_speed_limit_m_s, "yielding" if g.touching else "braking", release)
+            elif what == "contact_force":
+                log.warning("contact force %.1f N (%.1f by the next cycle) over the cap %.0f N: yielding (gravity "
+                            "compensated, damped) until under %.0f N", g.force_n, ahead, p.force_cap_n,
+                            p.force_cap_n * p.force_release_share)
+            else:
+                log.error("FAULT-hold: %s; holding whatever is commanded until the operator's e-stop release",
+                          g.fault_reason)
 
     def status(self) -> ServiceStatus:
         counters = dict(self.counters)
@@ -458,13 +568,15 @@ class RobotServer:
             p50, p99 = np.percentile(lat, [50, 99])
             counters.update(answer_latency_p50_us=int(p50), answer_latency_p99_us=int(p99))
         counters["estop_engaged"] = int(self.estop_reason is not None)
+        counters["guard_fault_latched"] = int(self.guard.latch.latched)
         for name, source in (("estop", self._estops), ("estop_release", self._releases)):
             for reason, n in list(source.bad.items()):
                 counters[f"{name}_dropped: {reason}"] = n
         estop = "" if self.estop_reason is None else f" estop=engaged ({self.estop_reason})"
         served = "" if self.controller is None else f" controller={self.controller[:12] or '?'}"
+        fault = "" if self.guard.fault_reason is None else f" guard=FAULT ({self.guard.fault_reason})"
         detail = (f"mode={'clocked' if self.port.clocked else self.p.mode} step={self.steps} braked={self.braked}"
-                  f"{served}{estop}")
+                  f"{served}{estop}{fault}")
         extra = self.port.detail()
         return ServiceStatus(service=self.service, seq=self.steps, stamp_ns=time.monotonic_ns(), counters=counters,
                              detail=f"{detail} {extra}".strip(), timing=self.stats.summary())

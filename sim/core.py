@@ -49,11 +49,12 @@ class SimCore:
     robot : SimRobot
     q_start : (7,) start joint positions [rad]
     steps : physics steps taken
+    model : the description the arm was built from
     """
 
     def __init__(self, params: SimParams, model: RobotModel | None = None) -> None:
         self.params = params
-        model = model or RobotModel()
+        self.model = model = model or RobotModel()  # the robot side's limits use it too (its thread)
         self.joints = model.joints
         self.tau_max = model.limits.tau_max.copy()
         self.dq_max = model.limits.dq_max.copy()

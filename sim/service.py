@@ -52,6 +52,8 @@ class SimPort(RobotPort):
         self.capabilities = Capabilities(params.gravity_compensated, core.tau_max.tolist(), "sim",
                                          params.rate_hz / substeps)
         self.velocity_limits_rad_s = core.dq_max
+        self.limits_model = core.model
+        self._zeros = np.zeros(len(core.tau_max))
         self.camera: CameraProcess | None = None
         self._camera_thread: threading.Thread | None = None
         self._extra: Counter[str] = Counter()
@@ -92,6 +94,24 @@ class SimPort(RobotPort):
     def hold(self) -> None:
         for _ in range(self.substeps):
             self.core.step(HOLD)
+
+    def yield_hold(self, tau_nm: np.ndarray) -> None:
+        """``tau_nm`` (7,) [Nm] on top of gravity compensation (the sim's own, at each step's pose): no brake, no task
+        torque; a pad pressed into the board is pushed back by it."""
+        robot = self.core.robot
+        for _ in range(self.substeps):
+            self.core.step(tau_nm if self.p.gravity_compensated else tau_nm + robot.gravity())
+
+    def held_torque_nm(self) -> np.ndarray:
+        """What the arm ran on over the last step in command terms: the applied torques (the brakes' while braked),
+        gravity taken off when the sim adds it; before the first step, what holds the arm against gravity."""
+        robot = self.core.robot
+        if self.core.steps == 0:
+            return self._zeros.copy() if self.p.gravity_compensated else robot.gravity()
+        tau = np.array(robot.out.tau)
+        if self.p.gravity_compensated:
+            tau -= robot.gravity()
+        return tau
 
     def after_cycle(self, lockstep: bool) -> None:
         k, n = self.core.steps, self.substeps
