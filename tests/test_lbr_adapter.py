@@ -84,16 +84,16 @@ class Stack:
 def lbr_state(q, stamp_ns: int, *, session=ACTIVE, safety=SafetyState.NORMAL_OPERATION, drive=DriveState.ACTIVE,
               tau_measured=None, tau_external=None, sample_time_s: float = 0.001, q_commanded=None,
               command_mode=CLIENT_COMMAND_MODE_TORQUE, control_mode=CONTROL_MODE_JOINT_IMPEDANCE,
-              tau_commanded=None) -> LbrState:
+              tau_commanded=None, connection_quality: int = 3) -> LbrState:
     """An FRI 1 state; the stack's joint position command ``q_commanded`` defaults to ``q`` (spring relaxed), the
-    overlay the robot applied ``tau_commanded`` to zeros."""
+    overlay the robot applied ``tau_commanded`` to zeros, the connection quality to EXCELLENT."""
     zeros = np.zeros(7)
     return LbrState(sample_time_s, int(session), int(safety), int(OperationMode.AUTOMATIC_MODE), int(drive),
                     int(command_mode), int(control_mode), stamp_ns, np.asarray(q, float),
                     zeros if tau_measured is None else np.asarray(tau_measured, float),
                     zeros if tau_external is None else np.asarray(tau_external, float),
                     np.asarray(q if q_commanded is None else q_commanded, float),
-                    None if tau_commanded is None else np.asarray(tau_commanded, float))
+                    None if tau_commanded is None else np.asarray(tau_commanded, float), int(connection_quality))
 
 
 class Cell:
@@ -186,10 +186,11 @@ class Cell:
     def wait_status(self, accept, what: str, timeout_s: float = 5.0) -> ServiceStatus:
         return wait_sample(self.status, accept, timeout_s, what)
 
-    def armed(self, q=Q0) -> ServiceStatus:
-        """Arm in COMMANDING_ACTIVE at ``q``: one state first, answered (zeros, refused), so that the adapter knows
-        the session and the next state is not late (a late state is held, and armed, a hold goes out)."""
-        self.answer(self.step(q), np.zeros(7), sent=False)
+    def armed(self, q=Q0, dt_s: float = 0.001) -> ServiceStatus:
+        """Arm in COMMANDING_ACTIVE at ``q`` (FRI period ``dt_s``): one state first, answered (zeros, refused), so
+        that the adapter knows the session and the next state is not late (a late state is held, and armed, a hold
+        goes out)."""
+        self.answer(self.step(q, dt_s), np.zeros(7), sent=False)
         st = self.request(True, "arms")
         assert "armed=True" in st.detail, st.detail
         return st
@@ -254,7 +255,7 @@ def test_a_robot_with_a_10ms_fri_period_gets_each_prompt_answer_and_no_hold():
     slower than the stale limit (the LBRServer app offers 1 to 10 ms) is not held before the controller could
     answer."""
     with Cell(server={"stale_limit_s": LbrParams().stale_limit_s}) as cell:
-        cell.armed()
+        cell.armed(dt_s=0.010)
         next_t = time.monotonic()
         for k in range(20):
             next_t += 0.010
@@ -759,23 +760,48 @@ def test_the_steering_moves_the_stack_command_at_most_its_speed_faster_than_the_
     np.testing.assert_allclose(p.pid_p * (target - Q0), dq * T, atol=1e-12)
 
 
+def test_a_slower_controller_manager_applies_a_message_for_several_fri_cycles_and_the_steering_spreads_its_step():
+    """A manager at 100 Hz against a 2 ms FRI cycle: the stack's PID applies each message's joint_position in each
+    of the 5 FRI cycles until the next (filters.cpp:56-62, torque_command.cpp:33-37). The steering spreads its step
+    over them, so the stack's command moves ``share (q - c)`` a message (not 5 times that: an overshoot the spring
+    turns into torque), and the overlay takes off the spring's mean over the 5 cycles: the joints see the
+    controller's torque on average."""
+    from sim.lbr_stack.stack import JointPid
+
+    p, T, n = LbrParams(), 0.002, 5
+    K = np.array(p.joint_stiffness_nm_rad)
+    gap = np.array([0.04, -0.02, 0.0, 0.001, -0.0005, 0.02, 0.003])  # q - c [rad]
+    tau = np.linspace(-3.0, 3.0, 7)
+    spring = JointSpring(K, p.pid_p, p.steer_share, 0.0)
+    spring.reset(Q0 - gap, 0)
+    target, overlay = spring.command(Q0, tau, np.zeros(7), T, cycles=n)
+    pid, c, springs = JointPid(p.pid_p, 0.0, 0.0, 0.0, 0.0), Q0 - gap, []
+    for _ in range(n):
+        pid.step(target, Q0, T, c)
+        springs.append(K * (c - Q0))
+    np.testing.assert_allclose(c - (Q0 - gap), p.steer_share * gap, atol=1e-12)
+    np.testing.assert_allclose(overlay + np.mean(springs, axis=0), tau, atol=1e-9)
+
+
 def test_a_state_on_an_old_overlay_says_no_command_was_applied():
     """The stack re-applies the last message it got: when ours stop reaching it, the state's commanded torque
     stays an old overlay while the answers go on. Once that overlay answered a reading more than stale_limit_s
-    (5 ms) plus two FRI periods older, the state says no command applied (``command_seq`` -1: the controller
-    stands still instead of taking the motion for its own); a state on a fresh overlay says applied again."""
+    (5 ms) plus two state periods and two FRI periods older (our answer, the manager's cycle taking it, the FRI
+    cycles applying and reporting it, the manager's cycle publishing that), the state says no command applied
+    (``command_seq`` -1: the controller stands still instead of taking the motion for its own); a state on a fresh
+    overlay says applied again."""
     with Cell() as cell:
         cell.armed()
         s = cell.step(Q0)
         _, _, old = cell.answer(s, np.full(7, 0.5))
         seqs, fresh = [], old
-        for k in range(1, 11):  # robot time k ms after the reading the old overlay answered
+        for k in range(1, 13):  # robot time k ms after the reading the old overlay answered
             s = cell.step(Q0, tau_commanded=old)
             seqs.append(s.command_seq)
             _, _, fresh = cell.answer(s, np.full(7, 0.5 + 0.01 * k))
         s = cell.step(Q0, tau_commanded=fresh)
         st = cell.wait_status(lambda m: m.counters.get("states_on_an_old_command", 0) >= 3, "counted")
-    assert all(c >= 0 for c in seqs[:7]) and seqs[7:] == [-1, -1, -1], seqs
+    assert all(c >= 0 for c in seqs[:9]) and seqs[9:] == [-1, -1, -1], seqs
     assert s.command_seq >= 0, s
     assert st.counters["states_on_an_old_command"] == 3, st.counters
 

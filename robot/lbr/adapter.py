@@ -20,15 +20,12 @@ Nm/rad) towards the joint position the stack's PID makes of the message's
 ``joint_position``; the torque overlay is added. The adapter steers that
 position onto the arm and takes the spring's rest off the overlay
 (:class:`~robot.lbr.compensation.JointSpring`), so the joints get the
-controller's torque. Nothing is sent before the adapter is **armed**: with
-``--arm`` (``[lbr] arm = true``) at the first controller command the robot
-allows, or by an :class:`~interfaces.messages.ArmRequest` on
-``robot/arm``. Arming is refused, the reason named, unless: a state has
-come in the configured layout, the session is COMMANDING_ACTIVE, safety is
-normal, the drives are active, the client command mode is TORQUE, the
-control mode is joint impedance, the stack runs with ``open_loop: false``
-(``[lbr] open_loop``), the torque filter can be undone and the joint names
-are the configured ones. Every command passes
+controller's torque (spread over the FRI cycles a slower controller
+manager applies one message for). Nothing is sent before the adapter is
+**armed**: with ``--arm`` (``[lbr] arm = true``) at the first controller
+command the robot allows, or by an :class:`~interfaces.messages.ArmRequest`
+on ``robot/arm``. Arming is refused, the reason named, unless the stack and
+the robot are as :func:`~robot.lbr.arming.arming_refusal` needs. Every command passes
 :func:`~robot.lbr.guards.guard_trip` first; a trip disarms.
 
 **A stop that stops.** The stack re-applies the last message for as long
@@ -57,9 +54,17 @@ own and stands still instead of winding up. Speed brake: the adapter declares th
 guard's joint speeds as its velocity limits; the server holds while a joint
 moves faster than ``speed_brake_share`` of them.
 
+The link (:mod:`robot.lbr.watches`, which cites the stack): liveness from the robot's clock, since a lost
+FRI link leaves the stack re-publishing its last state; a time stamp still for ``frozen_stamp_periods``
+after our answer, a changed sample time or a clock going back disarm (the hold is the stack's last
+message). The connection quality is in the status, warned about from FAIR, disarmed on at
+``disarm_at_quality`` and named when commanding ends. The applied check tolerates the robot's own
+resolution and, armed with no state on a recent overlay for ``applied_stall_s``, disarms saying why.
+
 Disarming (stop, signal, controller loss, guard trip, a frozen position
-stream, session lost, no robot state for ``hold_timeout_s``) says why (log,
-status). When the robot leaves COMMANDING_ACTIVE the stack exits
+stream, a frozen clock, a poor connection, a stalled applied check, session
+lost, no robot state for ``hold_timeout_s``) says why (log, status). When
+the robot leaves COMMANDING_ACTIVE the stack exits
 (system_interface.cpp:307-318): states stop, the adapter disarms, and the
 stack must be launched again before the adapter can arm.
 """
@@ -78,23 +83,22 @@ from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.port import Reading, RobotPort
 
+from .arming import arming_refusal
 from .compensation import AppliedWatch, FreezeWatch, JointSpring, TorqueUnfilter
 from .guards import GuardLimits, VelocityFilter, guard_trip
-from .msgs import (ClientCommandMode, ControlMode, DriveState, LbrState, LbrWireError, SafetyState, SessionState,
-                   decode_joint_names, decode_state, decode_wrench, encode_torque_command)
+from .msgs import (ConnectionQuality, DriveState, LbrState, LbrWireError, SafetyState, SessionState, decode_joint_names,
+                   decode_state, decode_wrench, encode_torque_command, enum_name)
 from .params import LbrParams
 from .tip import stack_wrench_to_tcp
+from .watches import Clock, ClockWatch, QualityWatch, TorqueResolution, quality_name
 
 log = logging.getLogger(__name__)
 
+#: The most FRI cycles a message is taken to be applied for (a longer gap between states is a gap, not a rate).
+MAX_CYCLES_PER_STATE = 20
+
 #: Damping of the pseudo-inverse that turns external joint torques into a tool wrench.
 WRENCH_DAMPING = 0.01
-#: States on no overlay of ours, none ever matched since arming, before the adapter warns that the robot's
-#: commanded torque may not be an echo of the overlay (``[lbr] check_applied``).
-NEVER_MATCHED_WARN = 500
-#: Joint speed [rad/s] under which the arm counts as at rest for arming on an FRI 2 state (no commanded
-#: position in it: the stack's command is taken to be where the arm rests).
-REST_SPEED_RAD_S = 0.05
 
 
 class LbrPort(RobotPort):
@@ -131,7 +135,7 @@ class LbrPort(RobotPort):
         self._freeze = FreezeWatch(params.frozen_after_s)
         self._cond = threading.Condition()
         self._wake: threading.Event | None = None
-        self._inbox: LbrState | None = None
+        self._inbox: tuple[LbrState, int] | None = None  # the newest state and its arrival [monotonic ns]
         self._state: LbrState | None = None
         self._layout_error = ""
         self._reading = Reading(np.zeros(7), np.zeros(7), np.zeros(7), np.zeros(6), 0, dq_estimated=True)
@@ -143,8 +147,14 @@ class LbrPort(RobotPort):
         self._has_sent = False
         self._holding_since_ns: int | None = None
         self._last_state_ns: int | None = None
-        self._sent = AppliedWatch()  # the overlays sent: did the robot run on a recent one?
+        self._sent = AppliedWatch(tol_nm=params.applied_tolerance_nm)  # the overlays sent: did the robot run on one?
+        self._resolution = TorqueResolution(params.applied_tolerance_nm, params.applied_tolerance_max_nm)
         self._applying = True
+        self._clock = ClockWatch(params.frozen_stamp_periods)
+        self._quality = QualityWatch(ConnectionQuality[params.disarm_at_quality])
+        self._answered = (-1, 0)  # (the robot time of the reading our last message answered, when we first did)
+        self._armed_ns = 0  # the robot time at arming
+        self._cycles_per_state = 1  # FRI cycles between the newest two states: how long a message will be applied
         topics = params.topics
         s = node.session
         self._subs = [s.declare_subscriber(topics.key(topics.state), self._on_state),
@@ -168,7 +178,7 @@ class LbrPort(RobotPort):
             return
         with self._cond:
             self.counts["states_received"] += 1
-            self._inbox = st
+            self._inbox = (st, time.monotonic_ns())
             self._cond.notify()
         if self._wake is not None:
             self._wake.set()
@@ -194,37 +204,80 @@ class LbrPort(RobotPort):
 
     # -- the port ----------------------------------------------------------------------------------
     def wait_reading(self, timeout_s: float) -> bool:
-        """Wait for the next LBRState with a new time stamp; update velocity, torques, wrench, arming state."""
+        """Wait for the next LBRState with a new time stamp; update velocity, torques, wrench, arming state, and the
+        watches on the robot's clock, its connection quality and the commands it applied."""
         with self._cond:
             if self._inbox is None and not self._cond.wait_for(lambda: self._inbox is not None, timeout_s):
                 self._poll_arm_requests()
                 self._check_states_flow()
                 return False
-            st, self._inbox = self._inbox, None
+            (st, arrival_ns), self._inbox = self._inbox, None
         self._last_state_ns = time.monotonic_ns()  # a re-sent state too: the robot is there, waiting
-        if self._state is not None and st.stamp_ns == self._state.stamp_ns:
-            self.counts["states_repeated"] += 1  # a peer re-sending while it waits: nothing new
+        answered = self._answered[1] if self._answered[0] == self._clock.stamp_ns else None
+        clock = self._clock.update(st.stamp_ns, st.sample_time_s, arrival_ns, answered)
+        if clock in (Clock.REPEATED, Clock.FROZEN):
+            self.counts["states_repeated"] += 1  # a manager faster than the FRI cycle, or a peer waiting: nothing new
+            if clock == Clock.FROZEN:
+                self.counts["frozen_stamps"] += 1
+                self._link_fault(self._clock.reason)
+            self._poll_arm_requests()
             return False
         # the state period: the FRI's, or the controller manager's when it runs slower (its states come slower)
         period_s = st.sample_time_s if self._state is None else \
             max(st.sample_time_s, (st.stamp_ns - self._state.stamp_ns) * 1e-9)
+        self._cycles_per_state = min(max(round(period_s / st.sample_time_s), 1), MAX_CYCLES_PER_STATE)
         self._take(st)
+        if clock != Clock.ADVANCED:
+            self.counts["clock_went_back" if clock == Clock.WENT_BACK else "sample_time_changes"] += 1
+            self._link_fault(self._clock.reason)
+        self._watch_quality(st)
         self._poll_arm_requests()
         self._check_session()
-        # the one-cycle pipeline and a repeated command make an overlay up to stale_limit_s + 2 periods old
-        self._applying = not (self.armed and self.p.check_applied and self._sent.old(
-            st.tau_commanded_nm, st.stamp_ns, self.p.stale_limit_s + 2.0 * period_s))
-        if not self._applying:
-            self.counts["states_on_an_old_command"] += 1
-            if self._sent.matched == 0 and self.counts["states_on_an_old_command"] == NEVER_MATCHED_WARN:
-                log.warning("lbr: the robot's commanded_torque has matched no overlay sent in %d states: if the stack "
-                            "does not echo it, set [lbr] check_applied = false", NEVER_MATCHED_WARN)
+        self._watch_applied(st, period_s)
         if self.armed:
             why = self._freeze.update(st.q_rad, st.stamp_ns, self._overlay)
             if why is not None:
                 self.counts["frozen_positions"] += 1
                 self.disarm(why)
         return True
+
+    def _link_fault(self, reason: str) -> None:
+        """The robot's clock says the link failed: disarm (the hold goes out); disarmed, the status says it."""
+        log.error("lbr: %s", reason)
+        if self.armed:
+            self.disarm(reason)
+        else:
+            self.disarm_reason = reason
+
+    def _watch_quality(self, st: LbrState) -> None:
+        """Log a change of the FRI connection quality (a warning from FAIR down); disarm at ``disarm_at_quality``."""
+        event = self._quality.update(st.connection_quality)
+        if event is not None:
+            level, text = event
+            log.log(level, "lbr: %s", text)
+        if self.armed:
+            why = self._quality.disarm_reason()
+            if why is not None:
+                self.counts["quality_disarms"] += 1
+                self.disarm(why)
+
+    def _watch_applied(self, st: LbrState, period_s: float) -> None:
+        """Whether the robot ran on a recent overlay of ours (:class:`AppliedWatch`, within the robot's learned
+        resolution); armed and none for ``applied_stall_s`` of robot time: disarm and say which it is."""
+        self._resolution.update(st.tau_commanded_nm)
+        checking = self.armed and self.p.check_applied
+        # answer, manager cycle, FRI cycles applying and reporting it, manager cycle publishing: 2 periods of each
+        self._applying = not (checking and self._sent.old(st.tau_commanded_nm, st.stamp_ns,
+                                                           self.p.stale_limit_s + 2.0 * (period_s + st.sample_time_s),
+                                                           self._resolution.tolerance_nm()))
+        if not self._applying:
+            self.counts["states_on_an_old_command"] += 1
+        if not (checking and self._sent.sent_any):
+            return
+        since_ns = st.stamp_ns - (self._sent.applied_ns if self._sent.applied_ns is not None else self._armed_ns)
+        if since_ns * 1e-9 > self.p.applied_stall_s:
+            self.counts["applied_stalls"] += 1
+            self.disarm(self._sent.stall_reason(since_ns * 1e-9, self._resolution.tolerance_nm()))
 
     def applying(self) -> bool:
         """False while the newest state's commanded torque is an old overlay of ours or none of them
@@ -253,7 +306,7 @@ class LbrPort(RobotPort):
             self.disarm(f"guard: {reason}")
             return
         target, overlay = self.spring.command(r.q_rad, np.asarray(tau_nm, float), r.dq_rad_s,
-                                              self._state.sample_time_s)
+                                              self._state.sample_time_s, self._cycles_per_state)
         self._send(target, overlay)
         self._tau_prev = np.array(tau_nm, float)
         self._tau_prev_ns = r.robot_time_ns
@@ -269,7 +322,8 @@ class LbrPort(RobotPort):
         if self._tau_prev is not None and \
                 (self._reading.robot_time_ns - self._tau_prev_ns) * 1e-9 <= self.p.stale_limit_s:
             r = self._reading
-            target, overlay = self.spring.command(r.q_rad, self._tau_prev, r.dq_rad_s, self._state.sample_time_s)
+            target, overlay = self.spring.command(r.q_rad, self._tau_prev, r.dq_rad_s, self._state.sample_time_s,
+                                                  self._cycles_per_state)
             self._send(target, overlay)
             self.counts["commands_repeated"] += 1
             return
@@ -327,6 +381,7 @@ class LbrPort(RobotPort):
         self.spring.reset(st.q_commanded_rad if st.q_commanded_rad is not None else st.q_rad, st.stamp_ns)
         self._freeze.reset()
         self.armed, self.arm_pending = True, False
+        self._armed_ns = st.stamp_ns
         self.disarm_reason = ""  # the status's why= is for not commanding; an old refusal must not show
         self._tau_prev, self._holding_since_ns = None, None
         self._sent.reset()  # what the robot ran on before arming is not judged
@@ -346,38 +401,8 @@ class LbrPort(RobotPort):
         self.disarm_reason = reason
 
     def _cannot_arm(self) -> str | None:
-        st = self._state
-        if self._layout_error:
-            return self._layout_error
-        if st is None:
-            return "no robot state received yet (the stack publishes from COMMANDING_WAIT on)"
-        if st.session_state != SessionState.COMMANDING_ACTIVE:
-            return (f"session state {_name(SessionState, st.session_state)}: start the LBRServer application "
-                    "(JOINT_IMPEDANCE_CONTROL, TORQUE) on the smartPAD first")
-        if st.safety_state != SafetyState.NORMAL_OPERATION:
-            return f"safety state {_name(SafetyState, st.safety_state)}"
-        if st.drive_state != DriveState.ACTIVE:
-            return f"drives {_name(DriveState, st.drive_state)}"
-        if st.client_command_mode != ClientCommandMode.TORQUE:
-            return (f"client command mode {_name(ClientCommandMode, st.client_command_mode)}: choose TORQUE in the "
-                    "LBRServer app and client_command_mode: torque in the stack's config")
-        if st.control_mode != ControlMode.JOINT_IMP_CONTROL_MODE:
-            return (f"control mode {_name(ControlMode, st.control_mode)}: choose JOINT_IMPEDANCE_CONTROL in the "
-                    "LBRServer app (torque overlay needs it)")
-        if self.p.open_loop:
-            return ("[lbr] open_loop = true: with the stack's open_loop: true (its default) the published measured "
-                    "position is the stack's own command, not the encoders; set open_loop: false in the stack's "
-                    "config and [lbr] open_loop = false")
-        for name, unfilter in (("measured", self._tau_measured), ("external", self._tau_external)):
-            if unfilter.alpha(st.sample_time_s) <= 1e-9:
-                return (f"the stack's {name}_torque_cutoff_frequency {unfilter.cutoff_hz:g} Hz at a "
-                        f"{st.sample_time_s * 1e3:g} ms sample time gives its filter alpha 0: that torque never "
-                        "changes; choose a cutoff below the sample rate")
-        if self._names_ok is False:
-            return f"joint names on {self.p.joint_states_topic} are not {list(self.p.joint_names)}"
-        if st.q_commanded_rad is None and float(np.max(np.abs(self._reading.dq_rad_s))) > REST_SPEED_RAD_S:
-            return "the arm is moving: an FRI 2 state has no commanded position, so arming waits for the arm at rest"
-        return None
+        return arming_refusal(self._state, self.p, layout_error=self._layout_error, names_ok=self._names_ok,
+                              clock=self._clock, dq_rad_s=self._reading.dq_rad_s)
 
     def _poll_arm_requests(self) -> None:
         req = self._arm_requests.take()
@@ -394,15 +419,16 @@ class LbrPort(RobotPort):
             silent_s = (time.monotonic_ns() - self._last_state_ns) * 1e-9
             if silent_s > self.p.hold_timeout_s:
                 self.disarm(f"no robot state for {silent_s * 1e3:.0f} ms (the stack exits when the robot leaves "
-                            "COMMANDING_ACTIVE: launch it again; or the bridge is gone)")
+                            f"COMMANDING_ACTIVE: launch it again; or the bridge is gone){self._quality.note()}")
 
     def _check_session(self) -> None:
         st = self._state
         if self.armed and (st.session_state != SessionState.COMMANDING_ACTIVE
                            or st.safety_state != SafetyState.NORMAL_OPERATION
                            or st.drive_state != DriveState.ACTIVE):
-            self.disarm(f"robot left commanding (session {_name(SessionState, st.session_state)}, safety "
-                        f"{_name(SafetyState, st.safety_state)}, drives {_name(DriveState, st.drive_state)})")
+            self.disarm(f"robot left commanding (session {enum_name(SessionState, st.session_state)}, safety "
+                        f"{enum_name(SafetyState, st.safety_state)}, drives {enum_name(DriveState, st.drive_state)})"
+                        f"{self._quality.note()}")
 
     # -- pieces ------------------------------------------------------------------------------------
     def _take(self, st: LbrState) -> None:
@@ -430,6 +456,8 @@ class LbrPort(RobotPort):
         self._command_pub.put(encode_torque_command(joint_position, overlay))
         self._overlay = np.asarray(overlay, float)
         self._has_sent = True
+        if self._answered[0] != self._reading.robot_time_ns:
+            self._answered = (self._reading.robot_time_ns, time.monotonic_ns())
         self._sent.sent(self._overlay, self._reading.robot_time_ns)
 
     def _send_hold(self) -> None:
@@ -451,13 +479,18 @@ class LbrPort(RobotPort):
     def counters(self) -> dict[str, int]:
         counts = dict(self.counts)
         counts["torques_passed_filtered"] = self._tau_external.passed_filtered
+        if self._quality.quality is not None:
+            counts["connection_quality"] = self._quality.quality
+        counts["connection_quality_warnings"] = self._quality.warnings
+        counts["applied_tolerance_unm"] = round(self._resolution.tolerance_nm() * 1e6)
         return counts
 
     def detail(self) -> str:
         st = self._state
-        session = _name(SessionState, st.session_state) if st is not None else "none"
-        return (f"armed={self.armed} session={session} fri={self.p.fri_major} "
-                f"why={self.disarm_reason[:160]!r}")
+        session = enum_name(SessionState, st.session_state) if st is not None else "none"
+        quality = quality_name(self._quality.quality)
+        return (f"armed={self.armed} session={session} quality={quality} fri={self.p.fri_major} "
+                f"why={self.disarm_reason[:240]!r}")
 
     def close(self) -> None:
         for sub in self._subs:
@@ -465,9 +498,3 @@ class LbrPort(RobotPort):
         self._subs = []
         self._command_pub.undeclare()
 
-
-def _name(enum, value: int) -> str:
-    try:
-        return enum(value).name
-    except ValueError:
-        return f"unknown({value})"

@@ -20,10 +20,14 @@ cited by file and line (lbr_fri_ros2_stack ``rolling`` 218d723):
   ``commanded_joint_position`` (FRI 1) or, where the state lacks it (FRI 2),
   the same PID run on the states the adapter sees.
 * :class:`AppliedWatch`: the overlays sent, and whether the torque a state
-  says the robot applied (``commanded_torque``) is a recent one of them; the
-  stack re-applies the last message it got for as long as it runs
+  says the robot applied (``commanded_torque``) is a recent one of them,
+  within a tolerance the robot's own resolution may widen
+  (:class:`~robot.lbr.watches.TorqueResolution`); the stack re-applies the
+  last message it got for as long as it runs
   (lbr_torque_command_controller.cpp:42-55), so when ours stop reaching it
-  the robot runs on an old one.
+  the robot runs on an old one. It keeps when a state was last on a recent
+  overlay and how close the robot's value came, so that a robot that never
+  echoes is named, not stalled on.
 * :class:`FreezeWatch`: measured positions that do not change at all while
   the overlay does are not a robot's (the stack's ``open_loop`` publishes
   its own command as measured, async_client.cpp:82-85).
@@ -114,22 +118,28 @@ class JointSpring:
         self._t_ns = t_ns
 
     def command(self, q: np.ndarray, tau_nm: np.ndarray, dq: np.ndarray | None = None,
-                sample_time_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                sample_time_s: float = 0.0, cycles: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """(joint_position target (7,), overlay (7,)) that make the joints see ``tau_nm`` at ``q``.
 
-        The step of ``c`` is ``share (q - c)``, bounded to ``(dq +- speed) sample_time_s`` when the arm's velocity
-        ``dq`` (7,) [rad/s] is given: the robot's joint damping acts on ``dc/dt - dq``, so a step of ``c`` is a
-        torque impulse (after a gap in the messages the stack's PID has run ``c`` off the arm; closing a share of
-        that in one cycle kicked a joint with D dc/dt, 180 Nm on A1 for 6 ms in the simulated stack)."""
+        The step of ``c`` is ``share (q - c)``, bounded to ``(dq +- speed) cycles sample_time_s`` when the arm's
+        velocity ``dq`` (7,) [rad/s] is given: the robot's joint damping acts on ``dc/dt - dq``, so a step of ``c``
+        is a torque impulse (after a gap in the messages the stack's PID has run ``c`` off the arm; closing a share
+        of that in one cycle kicked a joint with D dc/dt, 180 Nm on A1 for 6 ms in the simulated stack).
+
+        ``cycles`` : the FRI cycles the message will be applied for (a controller manager slower than the FRI
+        cycle hands the same message to the PID each cycle until its next one): the step is spread over them,
+        ``target = q + step / (p cycles)``, and the overlay takes off the spring's mean over them,
+        ``K (c + step (cycles + 1) / (2 cycles) - q)`` (one cycle: ``K (c + step - q)``)."""
         c = self.c if self.c is not None else q
+        n = max(int(cycles), 1)
         step = self.share * (q - c)
         if dq is not None and self.speed > 0 and sample_time_s > 0:
-            drift = dq * sample_time_s
-            room = self.speed * sample_time_s
+            drift = dq * sample_time_s * n
+            room = self.speed * sample_time_s * n
             step = np.clip(step, drift - room, drift + room)
-        target = q + step / self.p if self.p > 0 else np.array(q, float)
+        target = q + step / (self.p * n) if self.p > 0 else np.array(q, float)
         self._target = target
-        return target, tau_nm - self.K * (c + step - q)
+        return target, tau_nm - self.K * (c + step * (n + 1) / (2 * n) - q)
 
     def hold(self, target: np.ndarray) -> None:
         """A hold (``target``, zero overlay) went out: the mirror follows it."""
@@ -139,7 +149,8 @@ class JointSpring:
 class AppliedWatch:
     """The last ``n`` overlays sent, each with the robot time [ns] of the reading it answered (a ring).
 
-    tol_nm : a state's commanded torque is an overlay sent when no joint differs by more than this [Nm].
+    tol_nm : a state's commanded torque is an overlay sent when no joint differs by more than this [Nm] (a call may
+    give its own: the robot's resolution, :class:`~robot.lbr.watches.TorqueResolution`).
     """
 
     def __init__(self, n: int = 32, tol_nm: float = 1e-3) -> None:
@@ -148,11 +159,20 @@ class AppliedWatch:
         self._t_ns = np.zeros(n, dtype=np.int64)
         self._n = 0
         self.matched = 0  # states whose commanded torque was one of the overlays kept, since the reset
+        self.applied_ns: int | None = None  # robot time of the last state on a recent overlay, since the reset
+        self.closest_nm = math.inf  # the smallest distance of a state's commanded torque to an overlay kept
+        self.closest_joint = 0  # ... on this joint (0-based), since the reset
 
     def reset(self) -> None:
         """Forget what was sent (arming: what the robot ran on before is not judged)."""
         self._n = 0
         self.matched = 0
+        self.applied_ns = None
+        self.closest_nm = math.inf
+
+    @property
+    def sent_any(self) -> bool:
+        return self._n > 0
 
     def sent(self, overlay: np.ndarray, t_ns: int) -> None:
         """An overlay (7,) [Nm] went out answering the reading of robot time ``t_ns``."""
@@ -161,7 +181,7 @@ class AppliedWatch:
         self._t_ns[row] = t_ns
         self._n += 1
 
-    def old(self, tau_commanded: np.ndarray | None, t_ns: int, max_age_s: float) -> bool:
+    def old(self, tau_commanded: np.ndarray | None, t_ns: int, max_age_s: float, tol_nm: float | None = None) -> bool:
         """True when the robot ran (state of robot time ``t_ns``, commanded torque (7,) [Nm]) on an overlay sent for
         a reading more than ``max_age_s`` older, or on none of those kept while they reach back that far. False
         before anything is sent or without the commanded torque."""
@@ -169,11 +189,31 @@ class AppliedWatch:
         if tau_commanded is None or n == 0:
             return False
         limit_ns = max_age_s * 1e9
-        match = np.max(np.abs(self._overlay[:n] - tau_commanded), axis=1) <= self.tol_nm
+        diff = np.abs(self._overlay[:n] - tau_commanded)
+        dist = np.max(diff, axis=1)
+        best = int(np.argmin(dist))
+        if dist[best] < self.closest_nm:
+            self.closest_nm = float(dist[best])
+            self.closest_joint = int(np.argmax(diff[best]))
+        match = dist <= (self.tol_nm if tol_nm is None else tol_nm)
         if match.any():
             self.matched += 1
-            return t_ns - int(np.max(self._t_ns[:n][match])) > limit_ns
-        return t_ns - int(np.min(self._t_ns[:n])) > limit_ns
+            is_old = t_ns - int(np.max(self._t_ns[:n][match])) > limit_ns
+        else:
+            is_old = t_ns - int(np.min(self._t_ns[:n])) > limit_ns
+        if not is_old and match.any():
+            self.applied_ns = t_ns
+        return is_old
+
+    def stall_reason(self, since_s: float, tol_nm: float) -> str:
+        """Why no state has been on a recent overlay for ``since_s`` [s]: a robot that never echoed one since the
+        reset (the closest it came named), or ours not reaching the stack."""
+        if self.matched == 0:
+            return (f"commanded_torque matched none of our overlays in {since_s:.1f} s since arming (closest "
+                    f"{self.closest_nm:.4f} Nm off on A{self.closest_joint + 1}, tolerance {tol_nm:.4f}): the robot "
+                    "does not echo the overlay; set [lbr] check_applied = false or applied_tolerance_nm")
+        return (f"no state on a recent overlay of ours for {since_s:.1f} s: the robot runs on an old message (ours "
+                "do not reach the stack)")
 
 
 class FreezeWatch:

@@ -16,7 +16,8 @@ their ``.msg`` text; encoding and decoding are rosbags'. Both layouts are
 fixed-size, so the number of bytes tells them apart (:func:`state_layout`).
 
 FRI enumerations carried as ``int8`` in ``LBRState`` (KUKA::FRI, friClientIf.h):
-:class:`SessionState`, :class:`SafetyState`, :class:`OperationMode`, :class:`DriveState`.
+:class:`SessionState`, :class:`ConnectionQuality`, :class:`SafetyState`, :class:`OperationMode`,
+:class:`DriveState`.
 """
 
 from __future__ import annotations
@@ -80,6 +81,16 @@ class SessionState(IntEnum):
     COMMANDING_ACTIVE = 4
 
 
+class ConnectionQuality(IntEnum):
+    """KUKA::FRI::EConnectionQuality (lbr-stack/fri ``ros2-fri-1.15`` friClientIf.h:80-86): FAIR is "insufficient for
+    command mode", GOOD "sufficient"; the stack copies it into every state (state.cpp:15)."""
+
+    POOR = 0
+    FAIR = 1
+    GOOD = 2
+    EXCELLENT = 3
+
+
 class SafetyState(IntEnum):
     """KUKA::FRI::ESafetyState."""
 
@@ -131,6 +142,16 @@ CONTROL_MODE_JOINT_IMPEDANCE = int(ControlMode.JOINT_IMP_CONTROL_MODE)
 FRI_MAJORS = (1, 2)
 
 
+def enum_name(enum, value: int | None) -> str:
+    """The name of ``value`` in the FRI enumeration ``enum``; ``unknown(v)`` for another number, ``none`` for None."""
+    if value is None:
+        return "none"
+    try:
+        return enum(value).name
+    except ValueError:
+        return f"unknown({value})"
+
+
 def stack_joint_names(branch: str, robot_name: str = "lbr") -> tuple[str, ...]:
     """The stack's joint names in A1..A7 order: ``<robot_name>_A1`` .. on ``rolling`` / ``jazzy``, ``A1`` ..
     on ``humble`` (the branch's ros2_control xacro and its torque command controller name them so)."""
@@ -180,7 +201,9 @@ class LbrState:
     q_commanded_rad: np.ndarray | None = field(default_factory=lambda: np.zeros(N_JOINTS))
     """The robot's commanded joint position (FRI 1 only; None in an FRI 2 state)."""
     tau_commanded_nm: np.ndarray | None = None
-    """The torque overlay the robot applied in its last cycle (``commanded_torque``); None: not known."""
+    """The robot's "last commanded joint torques" (``commanded_torque``, friLBRState.h:204-209); None: not known."""
+    connection_quality: int = int(ConnectionQuality.EXCELLENT)
+    """The FRI connection quality the robot reports (:class:`ConnectionQuality`)."""
 
 
 def _typestore():
@@ -252,17 +275,20 @@ def decode_state(raw: bytes, fri_major: int = 1) -> LbrState:
         tau_external_nm=_vector("external_torque", m.external_torque),
         q_commanded_rad=(_vector("commanded_joint_position", m.commanded_joint_position) if fri_major == 1
                          else None),
-        tau_commanded_nm=_vector("commanded_torque", m.commanded_torque))
+        tau_commanded_nm=_vector("commanded_torque", m.commanded_torque),
+        connection_quality=int(m.connection_quality))
 
 
-def encode_state(s: LbrState, *, connection_quality: int = 3, overlay_type: int = 1,
+def encode_state(s: LbrState, *, connection_quality: int | None = None, overlay_type: int = 1,
                  commanded_torque_nm: np.ndarray | None = None, tracking_performance: float = 1.0,
                  fri_major: int = 1, ipo_joint_position_rad: np.ndarray | None = None) -> bytes:
-    """The CDR bytes of an ``LBRState`` of the FRI ``fri_major`` layout (what the stack publishes)."""
+    """The CDR bytes of an ``LBRState`` of the FRI ``fri_major`` layout (what the stack publishes); the connection
+    quality is the state's unless given."""
     zeros = np.zeros(N_JOINTS)
     fields = dict(
         sample_time=float(s.sample_time_s), session_state=int(s.session_state),
-        connection_quality=int(connection_quality), safety_state=int(s.safety_state),
+        connection_quality=int(s.connection_quality if connection_quality is None else connection_quality),
+        safety_state=int(s.safety_state),
         operation_mode=int(s.operation_mode), drive_state=int(s.drive_state),
         client_command_mode=int(s.client_command_mode), overlay_type=int(overlay_type),
         control_mode=int(s.control_mode), time_stamp_sec=int(s.stamp_ns // 1_000_000_000),

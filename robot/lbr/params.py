@@ -26,6 +26,11 @@
     hold_timeout_s = 0.5                     # holding this long without a controller command: disarm (the hold stays)
     stale_limit_s = 0.005                    # a controller answer later than this is not sent; hold instead
     check_applied = true                     # a state whose commanded torque is no recent overlay of ours: not applied
+    applied_tolerance_nm = 0.001             # ... "ours" within this on every joint, or half the robot's learned step,
+    applied_tolerance_max_nm = 0.05          # ... but never wider than this
+    applied_stall_s = 1.0                    # armed, no state on a recent overlay for this robot time: disarm, say why
+    frozen_stamp_periods = 20                # states arriving, their time stamp still for this many periods: link lost
+    disarm_at_quality = "POOR"               # FRI connection quality at which to disarm ("POOR" or "FAIR")
     max_joint_speed_scale = 0.8              # guard: this share of the description's joint speed limits
     speed_brake_share = 0.95                 # brake (hold) above this share of the guard's speed, or about to be
     tau_rate_nm_s = 5000.0                   # guard: torque change per second (the controller keeps to ~1000)
@@ -46,6 +51,7 @@ from interfaces.errors import ConfigError
 from .msgs import FRI_MAJORS, N_JOINTS, LbrTopics, stack_joint_names
 
 WRENCH_SOURCES = ("external_torque", "stack")
+DISARM_QUALITIES = ("POOR", "FAIR")
 BRANCHES = ("rolling", "jazzy", "humble")
 DEFAULT_JOINT_NAMES = stack_joint_names("rolling")
 #: LBRServer.java's JointImpedanceControlMode(200, 200, 200, 200, 200, 200, 200) (lbr-stack/fri ros2-fri-1.15:82,
@@ -80,6 +86,11 @@ class LbrParams:
     hold_timeout_s: Annotated[float, In(0.001, 10.0)] = 0.5
     stale_limit_s: Annotated[float, In(0.0005, 1.0)] = 0.005
     check_applied: bool = True
+    applied_tolerance_nm: Annotated[float, In(1e-9, 1.0)] = 0.001
+    applied_tolerance_max_nm: Annotated[float, In(1e-9, 10.0)] = 0.05
+    applied_stall_s: Annotated[float, In(0.01, 60.0)] = 1.0
+    frozen_stamp_periods: Annotated[int, In(2, 100_000)] = 20
+    disarm_at_quality: str = "POOR"
     max_joint_speed_scale: Annotated[float, In(0.01, 1.0)] = 0.8
     speed_brake_share: Annotated[float, In(0.0, 1.0)] = 0.95
     tau_rate_nm_s: Annotated[float, In(1.0, 100_000.0)] = 5000.0
@@ -105,9 +116,15 @@ class LbrParams:
         object.__setattr__(self, "joint_names", names)
         if self.fri_major not in FRI_MAJORS or isinstance(self.fri_major, bool):
             raise ConfigError(f"[{s}] fri_major must be one of {FRI_MAJORS}, got {self.fri_major!r}")
-        for name in ("open_loop", "arm"):
+        for name in ("open_loop", "arm", "check_applied"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"[{s}] {name} must be true or false, got {getattr(self, name)!r}")
+        if self.disarm_at_quality not in DISARM_QUALITIES:
+            raise ConfigError(f"[{s}] disarm_at_quality must be one of {DISARM_QUALITIES}, got "
+                              f"{self.disarm_at_quality!r}")
+        if self.applied_tolerance_max_nm < self.applied_tolerance_nm:
+            raise ConfigError(f"[{s}] applied_tolerance_max_nm must be at least applied_tolerance_nm "
+                              f"({self.applied_tolerance_nm!r}), got {self.applied_tolerance_max_nm!r}")
         if self.wrench_source not in WRENCH_SOURCES:
             raise ConfigError(f"[{s}] wrench_source must be one of {WRENCH_SOURCES}, got {self.wrench_source!r}")
         k = self.joint_stiffness_nm_rad

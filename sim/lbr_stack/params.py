@@ -14,6 +14,10 @@ fri_major : 1 | 2: the FRI client SDK the stack was built with (lbr_fri_idl ``fr
 mode : ``lockstep`` | ``realtime``. sample_time_s : the FRI send period the app runs with [s].
 update_rate_hz : the controller manager's rate; 0: the branch's default (lbr_controllers.yaml:5: 100 on rolling,
 200 on humble) [Hz].
+manager_clock : ``own`` | ``fri``: in real time the controller manager runs on its own clock (``own``, as the real
+one does: its update_rate on the robot PC's clock, not locked to the robot's FRI cycle), so states are published
+twice or skipped against FRI cycles; ``fri`` locks it to every ``cm_every``-th FRI cycle. Lock-step always locks it.
+manager_drift_ppm : how much slower the manager's clock runs than the robot's (its own clock only) [ppm].
 client_command_mode : ``position`` | ``torque`` | ``wrench``: the stack's and the app's (they must agree).
 control_mode : ``joint_impedance`` | ``position`` | ``cartesian_impedance``: the app's robot-side controller.
 open_loop : the stack publishes its own joint position command as measured (lbr_system_config.yaml: true).
@@ -26,6 +30,13 @@ ft_update_rate_hz, ft_damping, ft_force_threshold_n, ft_torque_threshold_nm : th
 commanding_after_s : robot time at which the operator has started the app (COMMANDING_WAIT) [s].
 commanding_wait_s : how long COMMANDING_WAIT lasts before the overlay is active [s].
 stop_app_after_s : robot time at which the operator stops the app (0: never) [s].
+link_lost_at_s, link_lost_for_s : robot time at which the FRI link is lost (0: never) and for how long (0: for
+good) [s]: no packet either way; the stack's FRI thread waits and its manager re-publishes the last state.
+quality_drop_at_s : robot time at which the connection quality falls to GOOD (0: never), then one level lower
+every ``quality_step_s`` [s]; a lost link lowers it the same way. quality_abort_after_s : how long the robot
+stays COMMANDING_ACTIVE with a quality below GOOD before it ends commanding [s].
+commanded_torque_resolution_nm, commanded_torque_offset_nm : the ``commanded_torque`` the robot reports is the
+overlay rounded to the resolution (0: exact) plus the offset on every joint [Nm]: a robot that does not echo.
 operation_mode : ``T1`` | ``T2`` | ``AUT`` (reported). joint_states_rate_hz : JointState rate [Hz].
 lockstep_wait_s : lock-step: wall time the robot waits for an answer before it runs on, re-applying the
 last command as the stack does [s]. republish_s : lock-step re-send of an unanswered state [s].
@@ -46,6 +57,7 @@ from robot.lbr.msgs import (FRI_MAJORS, N_JOINTS, ClientCommandMode, ControlMode
                             stack_joint_names)
 
 MODES = ("lockstep", "realtime")
+MANAGER_CLOCKS = ("own", "fri")
 BRANCHES = ("rolling", "jazzy", "humble")
 OPERATION_MODES = {"T1": OperationMode.TEST_MODE_1, "T2": OperationMode.TEST_MODE_2,
                    "AUT": OperationMode.AUTOMATIC_MODE}
@@ -69,6 +81,8 @@ class LbrPeerParams:
     mode: str = "lockstep"
     sample_time_s: Annotated[float, In(0.001, 0.01)] = 0.001
     update_rate_hz: Annotated[float, In(0.0, 10_000.0)] = 0.0
+    manager_clock: str = "own"
+    manager_drift_ppm: Annotated[float, In(-10_000.0, 10_000.0)] = 50.0
     client_command_mode: str = "position"
     control_mode: str = "joint_impedance"
     open_loop: bool = True
@@ -88,6 +102,13 @@ class LbrPeerParams:
     commanding_after_s: Annotated[float, In(0.0, 3600.0)] = 0.0
     commanding_wait_s: Annotated[float, In(0.0, 60.0)] = 0.05
     stop_app_after_s: Annotated[float, In(0.0, 1e6)] = 0.0
+    link_lost_at_s: Annotated[float, In(0.0, 1e6)] = 0.0
+    link_lost_for_s: Annotated[float, In(0.0, 1e6)] = 0.0
+    quality_drop_at_s: Annotated[float, In(0.0, 1e6)] = 0.0
+    quality_step_s: Annotated[float, In(0.001, 60.0)] = 0.1
+    quality_abort_after_s: Annotated[float, In(0.0, 60.0)] = 0.0
+    commanded_torque_resolution_nm: Annotated[float, In(0.0, 10.0)] = 0.0
+    commanded_torque_offset_nm: Annotated[float, In(-100.0, 100.0)] = 0.0
     operation_mode: str = "T1"
     joint_states_rate_hz: float = 100.0
     lockstep_wait_s: Annotated[float, In(0.001, 10.0)] = 0.5
@@ -102,6 +123,7 @@ class LbrPeerParams:
                               f"'/'-separated), got {self.namespace!r}")
         object.__setattr__(self, "namespace", self.namespace.strip("/"))
         for name, allowed in (("mode", MODES), ("branch", BRANCHES), ("operation_mode", tuple(OPERATION_MODES)),
+                              ("manager_clock", MANAGER_CLOCKS),
                               ("client_command_mode", tuple(COMMAND_MODES)),
                               ("control_mode", tuple(CONTROL_MODES))):
             if getattr(self, name) not in allowed:

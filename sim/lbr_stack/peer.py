@@ -31,9 +31,28 @@ files, lines and commits is docs/real-robot.md):
   holds; the driver must be launched again.
 * **The wrench** (``force_torque_broadcaster/wrench``) is the stack's
   estimate at ``lbr_link_ee``, tip axes, soft deadband, ``ft_update_rate_hz``.
-* **The controller manager** runs every ``cm_every`` FRI cycles
-  (``update_rate_hz``): states are published at that rate and a message
-  reaches the robot at the manager's next cycle.
+* **The controller manager** runs at ``update_rate_hz``: in real time on
+  its own clock (``manager_clock = "own"``, drifting ``manager_drift_ppm``
+  against the robot's), as the real one does, so a state is published
+  twice or skipped against FRI cycles; locked to every ``cm_every``-th FRI
+  cycle in lock-step (or with ``manager_clock = "fri"``). A message reaches
+  the robot at the FRI cycle after the manager's next cycle.
+* **A lost FRI link** (``link_lost_at_s``, ``link_lost_for_s``): no packet
+  either way. The stack's FRI socket has no receive timeout (app.cpp:7,
+  friUdpConnection.h:93-98), so its FRI thread waits while the manager
+  re-publishes the last state, time stamp and COMMANDING_ACTIVE included
+  (system_interface.cpp:291-297); the messages the manager takes wait in
+  its command buffer. The robot keeps its last command meanwhile (assumed)
+  and its connection quality falls; when the link is back the stack applies
+  the newest message.
+* **The connection quality** (``quality_drop_at_s``, ``quality_step_s``)
+  falls EXCELLENT, GOOD, FAIR, POOR; below GOOD for
+  ``quality_abort_after_s`` the robot ends commanding (MONITORING_WAIT) and
+  the stack exits.
+* **commanded_torque** is the robot's last command, rounded to
+  ``commanded_torque_resolution_nm`` and biased by
+  ``commanded_torque_offset_nm`` when those are set (a robot that does not
+  echo the overlay exactly).
 
 Keys (namespace ``lbr``): ``lbr/state`` (LBRState), ``lbr/joint_states``,
 ``lbr/force_torque_broadcaster/wrench`` out; ``lbr/command/torque`` in
@@ -61,36 +80,33 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import Counter, deque
+from collections import Counter
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
-import zenoh
 
 from interfaces.errors import ConfigError
 from interfaces.loop_stats import LoopStats
 from interfaces.messages import HOLD, ServiceStatus
 from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
-from robot.lbr.msgs import (N_JOINTS, DriveState, LbrState, LbrWireError, SafetyState, SessionState,
-                            decode_torque_command, encode_joint_state, encode_state, encode_wrench)
+from robot.lbr.msgs import (N_JOINTS, DriveState, LbrState, SafetyState, SessionState, encode_joint_state,
+                            encode_state, encode_wrench)
 from robot.lbr.tip import tip_jacobian, tip_pose
 from sim.core import SimCore
 from sim.params import SimParams
 from sim.service import SimPort
 
+from .commands import CommandBox
 from .params import COMMAND_MODES, CONTROL_MODES, OPERATION_MODES, LbrPeerParams
-from .stack import (FriCommand, RobotSession, StackClient, StackError, estimated_wrench, impedance_damping,
-                    joint_impedance_torque)
+from .stack import (FriCommand, FriLink, RobotSession, StackClient, StackError, estimated_wrench, impedance_damping,
+                    joint_impedance_torque, reported_commanded_torque)
 
 log = logging.getLogger(__name__)
 
 SERVICE = "lbr-peer"
-#: A CDR LBRTorqueCommand: 4-byte encapsulation header, then two float64[7] (fixed arrays, no length field).
-TORQUE_COMMAND_BYTES = 4 + 2 * N_JOINTS * 8
-_LOG_PERIOD_S = 5.0
 
 
 def sim_params_for_peer(sim_table: Mapping[str, Any], p: LbrPeerParams) -> SimParams:
@@ -113,6 +129,17 @@ def _ns(seconds: float) -> int:
     return round(seconds * 1e9)
 
 
+def next_manager_deadline(deadline_ns: int, period_ns: int, now_ns: int) -> tuple[int, int]:
+    """(the manager's deadline after ``deadline_ns``, the periods it missed): missed ones are skipped (as
+    ros2_control's loop sleeps to its next period), not caught up."""
+    deadline_ns += period_ns
+    missed = 0
+    if now_ns > deadline_ns:
+        missed = (now_ns - deadline_ns) // period_ns + 1
+        deadline_ns += missed * period_ns
+    return deadline_ns, int(missed)
+
+
 def external_torque_nm(jacobian: np.ndarray, wrench: np.ndarray) -> np.ndarray:
     """``tau_ext = J^T w`` (7,) [Nm]: the joint torques of a wrench the environment exerts on the tool.
 
@@ -120,108 +147,6 @@ def external_torque_nm(jacobian: np.ndarray, wrench: np.ndarray) -> np.ndarray:
     torque about the TCP [Nm], world axes (virtual work: ``tau_ext . dq = w . J dq``).
     """
     return jacobian.T @ wrench
-
-
-def drop_reason(raw: bytes, exc: LbrWireError) -> str:
-    """Why a torque command was dropped: ``non_finite``, ``wrong_length``, ``not_cdr`` or ``malformed_cdr``."""
-    text = str(exc)
-    if "NaN" in text:
-        return "non_finite"
-    if "must hold" in text:
-        return "wrong_length"
-    if len(raw) < 4 or raw[0] != 0 or raw[1] > 0x0B:  # no CDR encapsulation header
-        return "not_cdr"
-    return "wrong_length" if len(raw) != TORQUE_COMMAND_BYTES else "malformed_cdr"  # fixed arrays: size = length
-
-
-class CommandBox:
-    """``LBRTorqueCommand`` samples of one key; bad ones counted by reason, dropped.
-
-    Lock-step waits for the oldest with :meth:`get` (decoded in Zenoh's thread, handed over under a lock).
-    Real time (``channel=True``) takes the newest with :meth:`newest`: Zenoh queues the raw samples in a ring
-    of ``maxlen`` without Python, and the loop decodes them itself. A Python callback needs the GIL, which the
-    simulator's step holds (PyBullet does not release it): with a busy loop a command could wait up to
-    the interpreter's switch interval (5 ms) per sample, and they piled up (a 100 ms pile-up tripped the
-    watchdog in a real-time run).
-    """
-
-    def __init__(self, session, key: str, maxlen: int = 64, channel: bool = False) -> None:
-        self.key = key
-        self.received = 0
-        self.overflowed = 0
-        self.dropped: Counter[str] = Counter()
-        self._queue: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=maxlen)
-        self._ready = threading.Condition()
-        self._last_log = -float("inf")
-        self._channel = channel
-        if channel:
-            self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(maxlen))
-        else:
-            self._sub = session.declare_subscriber(key, self._on_sample)
-
-    def _decode(self, raw: bytes) -> tuple[np.ndarray, np.ndarray] | None:
-        """The command in ``raw``, or None (counted by reason, logged at most every few seconds)."""
-        try:
-            return decode_torque_command(raw)
-        except LbrWireError as exc:
-            with self._ready:
-                self.received += 1
-                self.dropped[drop_reason(raw, exc)] += 1
-            now = time.monotonic()
-            if now - self._last_log >= _LOG_PERIOD_S:
-                self._last_log = now
-                log.warning("dropped a torque command on %s (%d so far): %s", self.key,
-                            sum(self.dropped.values()), exc)
-            return None
-
-    def _on_sample(self, sample) -> None:
-        command = self._decode(sample.payload.to_bytes())
-        if command is None:
-            return
-        with self._ready:
-            self.received += 1
-            if len(self._queue) == self._queue.maxlen:
-                self.overflowed += 1
-            self._queue.append(command)
-            self._ready.notify()
-
-    def get(self, timeout_s: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """The oldest valid command not yet taken, waiting up to ``timeout_s``; None on timeout (lock-step)."""
-        if self._channel:
-            raise RuntimeError("CommandBox.get needs the callback box (channel=False)")
-        with self._ready:
-            if not self._queue and not self._ready.wait_for(lambda: bool(self._queue), timeout_s):
-                return None
-            return self._queue.popleft()
-
-    def newest(self) -> tuple[tuple[np.ndarray, np.ndarray] | None, int]:
-        """(the newest valid command or None, how many older valid ones it superseded); never blocks."""
-        if self._channel:
-            newest, valid = None, 0
-            while (sample := self._sub.try_recv()) is not None:
-                command = self._decode(sample.payload.to_bytes())
-                if command is not None:
-                    newest, valid = command, valid + 1
-            with self._ready:
-                self.received += valid
-            return newest, max(valid - 1, 0)
-        with self._ready:
-            if not self._queue:
-                return None, 0
-            command, superseded = self._queue[-1], len(self._queue) - 1
-            self._queue.clear()
-            return command, superseded
-
-    def counters(self) -> dict[str, int]:
-        with self._ready:
-            out = {"commands_received": self.received, "commands_overflowed": self.overflowed}
-            out.update({f"commands_dropped_{reason}": n for reason, n in self.dropped.items()})
-        return out
-
-    def close(self) -> None:
-        if self._sub is not None:
-            self._sub.undeclare()
-            self._sub = None
 
 
 # -- the peer -------------------------------------------------------------------------------------------
@@ -247,6 +172,7 @@ class LbrPeer:
         lim = self.model.limits
         self.stack = StackClient(params, lim.q_min, lim.q_max, lim.dq_max)
         self.session = RobotSession(params)
+        self.link = FriLink(params)
         self.stack_up = True
         self.stack_exit = ""
         self.activated = False  # the stack's hardware interface is past on_activate: it publishes
@@ -263,6 +189,10 @@ class LbrPeer:
         self.spring_max_nm = 0.0  # the largest joint spring torque K |q_cmd - q| the robot applied [Nm]
         self._ft_every = max(round(1.0 / (self._dt * params.ft_update_rate_hz)), 1)
         self._joints_every = max(round(1.0 / (self._dt * params.joint_states_rate_hz)), 1)
+        # manager cycles between publications of the wrench and the joint states
+        self._ft_every_cm = max(round(params.update_rate_hz / params.ft_update_rate_hz), 1)
+        self._joints_every_cm = max(round(params.update_rate_hz / params.joint_states_rate_hz), 1)
+        self._cm_cycles = 0
         self._wrench_tip = np.zeros(6)
         self._frame_id = f"{params.robot_name}/link_ee" if params.branch == "humble" else \
             f"{params.robot_name}_link_ee"
@@ -304,17 +234,28 @@ class LbrPeer:
     # -- one FRI cycle (robot time advances by the FRI period) ------------------------------------------
     def fri_cycle(self) -> None:
         """The robot's cycle: the session, the stack's FRI answer, the robot's joint impedance over the physics
-        steps of one FRI period (or the arm held), the robot's extras."""
+        steps of one FRI period (or the arm held), the robot's extras. While the link is lost the stack's FRI side
+        does not run and the robot keeps its last command."""
         core, o = self.core, self.core.out
-        session = self.session.advance(core.time_ns)
+        t_ns = core.time_ns
+        quality = self.link.quality(t_ns)
+        session = self.session.advance(t_ns, quality)
         command = None
-        if self.stack_up:
-            q_commanded = self._robot_command.joint_position if self._robot_command is not None else o.q
+        if self.stack_up and self.link.up(t_ns):
+            last = self._robot_command
+            q_commanded = last.joint_position if last is not None else o.q
+            reported = reported_commanded_torque(last.torque if last is not None else self._zeros,
+                                                 self.p.commanded_torque_resolution_nm,
+                                                 self.p.commanded_torque_offset_nm)
             try:
                 command = self.stack.fri_cycle(session, o.q, q_commanded, o.tau, self._external_torque(),
-                                               self._command_mode, self._dt)
+                                               self._command_mode, self._dt, stamp_ns=t_ns,
+                                               connection_quality=quality, tau_commanded=reported)
             except StackError as exc:
                 self._exit(str(exc))
+        elif self.stack_up:
+            command = self._robot_command  # no packet: the robot keeps the last command it got (assumed)
+            self.counters["fri_cycles_link_lost"] += 1
         if command is not None and session == SessionState.COMMANDING_ACTIVE and \
                 self._control_mode == CONTROL_MODES["joint_impedance"]:
             prev = self._robot_command
@@ -355,6 +296,7 @@ class LbrPeer:
         except StackError as exc:
             self._exit(str(exc))
             return
+        self._cm_cycles += 1
         self._publish_outputs()
 
     def _exit(self, reason: str) -> None:
@@ -383,31 +325,61 @@ class LbrPeer:
                                             threshold_in_tip=p.branch == "humble")
 
     def _publish_outputs(self) -> None:
-        st, t_ns, k = self.stack.state, self.core.time_ns, self._cycles
-        cmd = self._robot_command
+        """The broadcasters: the stack's state as its last FRI cycle left it (a lost link leaves it, time stamp
+        included), the wrench and the joint states every few manager cycles."""
+        st, k = self.stack.state, self._cm_cycles
         state = LbrState(
-            sample_time_s=self._dt, session_state=int(st.session), safety_state=int(SafetyState.NORMAL_OPERATION),
-            operation_mode=int(OPERATION_MODES[self.p.operation_mode]), drive_state=int(DriveState.ACTIVE),
-            client_command_mode=self._command_mode, control_mode=self._control_mode, stamp_ns=t_ns,
-            q_rad=st.q_rad, tau_measured_nm=st.tau_measured_nm, tau_external_nm=st.tau_external_nm,
-            q_commanded_rad=st.q_commanded_rad)
-        self._state_bytes = encode_state(state, commanded_torque_nm=cmd.torque if cmd is not None else self._zeros,
-                                         fri_major=self.p.fri_major, ipo_joint_position_rad=st.ipo_rad)
+            sample_time_s=st.sample_time_s or self._dt, session_state=int(st.session),
+            safety_state=int(SafetyState.NORMAL_OPERATION), operation_mode=int(OPERATION_MODES[self.p.operation_mode]),
+            drive_state=int(DriveState.ACTIVE), client_command_mode=self._command_mode,
+            control_mode=self._control_mode, stamp_ns=st.stamp_ns, q_rad=st.q_rad,
+            tau_measured_nm=st.tau_measured_nm, tau_external_nm=st.tau_external_nm, q_commanded_rad=st.q_commanded_rad,
+            tau_commanded_nm=st.tau_commanded_nm, connection_quality=st.connection_quality)
+        self._state_bytes = encode_state(state, fri_major=self.p.fri_major, ipo_joint_position_rad=st.ipo_rad)
         self._pub_state.put(self._state_bytes)
         self.counters["states_published"] += 1
-        if k % self._ft_every < self.p.cm_every:
-            self._pub_wrench.put(encode_wrench(self._frame_id, self._wrench_tip, t_ns))
-        if k % self._joints_every < self.p.cm_every:
-            self._pub_joints.put(encode_joint_state(self.p.joint_names, st.q_rad, t_ns))
+        if k % self._ft_every_cm == 0:
+            self._pub_wrench.put(encode_wrench(self._frame_id, self._wrench_tip, st.stamp_ns))
+        if k % self._joints_every_cm == 0:
+            self._pub_joints.put(encode_joint_state(self.p.joint_names, st.q_rad, st.stamp_ns))
 
     # -- loops ------------------------------------------------------------------------------------------
     def _run_realtime(self) -> None:
         # no SCHED_FIFO here: the peer's loop is the simulator, busy for most of each FRI period, and as a FIFO
         # thread it starved the Zenoh threads of every process on its core
+        if self.p.manager_clock == "own":
+            self._run_own_clock()
+            return
         period_ns = _ns(self._dt)
         next_ns = time.monotonic_ns()
         while not self.stop.is_set():
             next_ns = self._paced(next_ns, period_ns, take_newest=True)
+
+    def _run_own_clock(self) -> None:
+        """Real time with the controller manager on its own clock: the robot's FRI cycle and the manager's cycle
+        each on their own wall-clock deadlines (the manager's period longer by ``manager_drift_ppm``, half a period
+        out of phase). When both are due the robot's cycle runs first; missed deadlines are skipped, not caught
+        up (the manager's counted in ``manager_overruns``)."""
+        fri_ns = _ns(self._dt)
+        cm_ns = _ns((1.0 + self.p.manager_drift_ppm * 1e-6) / self.p.update_rate_hz)
+        next_fri = time.monotonic_ns()
+        next_cm = next_fri + cm_ns // 2
+        while not self.stop.is_set():
+            t0 = time.monotonic_ns()
+            if t0 >= next_fri:
+                self.fri_cycle()
+                t1 = time.monotonic_ns()
+                self.stats.add((t0 - self._t_prev_ns) / 1e3, 0.0, (t1 - t0) / 1e3, 0.0)
+                self._t_prev_ns = t0
+                next_fri = self.stats.next_deadline(next_fri, fri_ns, t1)
+            if time.monotonic_ns() >= next_cm:
+                message, superseded = self.commands.newest()
+                self.counters["commands_superseded"] += superseded
+                self.cm_cycle(message)
+                next_cm, missed = next_manager_deadline(next_cm, cm_ns, time.monotonic_ns())
+                self.counters["manager_overruns"] += missed
+            self._publish_status()
+            time.sleep(max(min(next_fri, next_cm) - time.monotonic_ns(), 0) / 1e9)
 
     def _paced(self, next_ns: int, period_ns: int, take_newest: bool) -> int:
         """One FRI period on the wall clock (a manager cycle first when one is due); the next deadline."""
@@ -476,7 +448,11 @@ class LbrPeer:
         counters.update(self.port.counters())
         counters.update(session_state=int(self.session.state), steps=self.core.steps,
                         stack_up=int(self.stack_up), spring_max_mnm=round(self.spring_max_nm * 1e3))
+        t_ns = self.core.time_ns
+        link = "" if self.link.up(t_ns) else " link=lost"
+        manager = "fri" if self._lockstep else self.p.manager_clock
         detail = (f"mode={self.p.mode} step={self.core.steps} session={self.session.state.name} "
+                  f"quality={self.link.quality(t_ns).name}{link} manager={manager} "
                   f"namespace={self.p.namespace} fri={self.p.fri_major} branch={self.p.branch} "
                   f"open_loop={self.p.open_loop}" + (f" stack exited: {self.stack_exit[:120]}" if not self.stack_up
                                                      else ""))

@@ -11,7 +11,10 @@ file and line are in its docstring and in docs/real-robot.md.
 * :class:`StackClient`: the FRI client side of the stack (async_client.cpp,
   torque_command.cpp, base_command.cpp) and its ros2_control loop
   (system_interface.cpp, lbr_torque_command_controller.cpp).
-* :class:`RobotSession`: the session states the robot reports.
+* :class:`RobotSession`: the session states the robot reports, and its end of commanding on a poor link.
+* :class:`FriLink`: the FRI link (lost for a while or for good) and the connection quality the robot reports.
+* :func:`reported_commanded_torque`: the ``commanded_torque`` the robot reports for an overlay (an exact echo by
+  default, or rounded, or off by a bias: the SDK documents it only as the robot's "last commanded joint torques").
 * :func:`joint_impedance_torque`: the app's joint impedance with the torque
   overlay (LBRServer.java: JointImpedanceControlMode(200, ...)).
 * :func:`estimated_wrench`: the stack's force-torque estimate (ft_estimator.cpp).
@@ -20,12 +23,12 @@ file and line are in its docstring and in docs/real-robot.md.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from robot.lbr.compensation import filter_alpha
-from robot.lbr.msgs import N_JOINTS, ClientCommandMode, SessionState
+from robot.lbr.msgs import N_JOINTS, ClientCommandMode, ConnectionQuality, SessionState
 
 from .params import COMMAND_MODES, LbrPeerParams
 
@@ -133,10 +136,13 @@ class CommandGuard:
 
 class RobotSession:
     """The session the robot reports, over robot time [ns]: the operator starts the app, the overlay becomes
-    active, the operator may stop the app.
+    active, the operator may stop the app, a poor link ends it.
 
     MONITORING_READY -(commanding_after_s)-> COMMANDING_WAIT -(commanding_wait_s)-> COMMANDING_ACTIVE
-    -(stop_app_after_s, or :meth:`stop_app`)-> MONITORING_READY.
+    -(stop_app_after_s, or :meth:`stop_app`)-> MONITORING_READY. A connection quality below GOOD for
+    ``quality_abort_after_s`` ends commanding too, in MONITORING_WAIT while the quality stays below GOOD (the FRI
+    SDK's friClientIf.h:72-86: MONITORING_WAIT is "monitoring mode with insufficient connection quality", FAIR
+    "insufficient for command mode"; how soon the robot ends the overlay is not in any code read: a setting).
     """
 
     def __init__(self, p: LbrPeerParams) -> None:
@@ -144,16 +150,25 @@ class RobotSession:
         self._wait_ns = round(p.commanding_after_s * 1e9)
         self._active_ns = self._wait_ns + round(p.commanding_wait_s * 1e9)
         self._stop_ns = round(p.stop_app_after_s * 1e9) if p.stop_app_after_s > 0 else None
+        self._abort_ns = round(p.quality_abort_after_s * 1e9)
+        self._low_since_ns: int | None = None  # robot time the quality fell below GOOD while commanding
         self.stopped = False
 
     def stop_app(self) -> None:
         """The operator ends the app (or a safety stop ends the motion): the overlay ends."""
         self.stopped = True
 
-    def advance(self, t_ns: int) -> SessionState:
+    def advance(self, t_ns: int, quality: int = ConnectionQuality.EXCELLENT) -> SessionState:
+        if self.state == SessionState.COMMANDING_ACTIVE and quality < ConnectionQuality.GOOD:
+            self._low_since_ns = t_ns if self._low_since_ns is None else self._low_since_ns
+            if t_ns - self._low_since_ns >= self._abort_ns:
+                self.stopped = True
+        else:
+            self._low_since_ns = None
         if self.stopped or (self._stop_ns is not None and t_ns >= self._stop_ns):
             self.stopped = True
-            self.state = SessionState.MONITORING_READY
+            self.state = SessionState.MONITORING_WAIT if quality < ConnectionQuality.GOOD else \
+                SessionState.MONITORING_READY
         elif t_ns >= self._active_ns:
             self.state = SessionState.COMMANDING_ACTIVE
         elif t_ns >= self._wait_ns:
@@ -161,10 +176,55 @@ class RobotSession:
         return self.state
 
 
+class FriLink:
+    """The FRI link between the robot and the stack's FRI thread, and the connection quality the robot reports.
+
+    Lost from ``link_lost_at_s`` for ``link_lost_for_s`` (0: for good) of robot time: no packet either way. The
+    stack opens its socket without a receive timeout (app.cpp:7, ``UdpConnection()``; the SDK's
+    friUdpConnection.h:93-98: "0 = wait forever"), so its FRI thread waits in ``step()``
+    (friClientApplication.cpp:118) and its state keeps the last values, time stamp included. The quality the robot
+    reports falls one level (EXCELLENT, GOOD, FAIR, POOR) per ``quality_step_s``: from ``quality_drop_at_s`` (at
+    which it is GOOD), and over an outage (GOOD after one step without answers); it is EXCELLENT again once the
+    link is back. KUKA's own measure (latency, jitter, lost packets) is not in any code read: the ladder is a model.
+    """
+
+    def __init__(self, p: LbrPeerParams) -> None:
+        self._lost_ns = round(p.link_lost_at_s * 1e9) if p.link_lost_at_s > 0 else None
+        self._back_ns = self._lost_ns + round(p.link_lost_for_s * 1e9) if self._lost_ns is not None and \
+            p.link_lost_for_s > 0 else None
+        self._drop_ns = round(p.quality_drop_at_s * 1e9) if p.quality_drop_at_s > 0 else None
+        self._step_ns = round(p.quality_step_s * 1e9)
+
+    def up(self, t_ns: int) -> bool:
+        """Whether the robot and the stack exchange packets at robot time ``t_ns``."""
+        return self._lost_ns is None or t_ns < self._lost_ns or (self._back_ns is not None and t_ns >= self._back_ns)
+
+    def quality(self, t_ns: int) -> ConnectionQuality:
+        """The connection quality the robot reports at robot time ``t_ns``."""
+        down = 0
+        if self._drop_ns is not None and t_ns >= self._drop_ns:
+            down = 1 + (t_ns - self._drop_ns) // self._step_ns
+        if not self.up(t_ns):
+            down = max(down, (t_ns - self._lost_ns) // self._step_ns)
+        return ConnectionQuality(max(int(ConnectionQuality.EXCELLENT) - int(down), int(ConnectionQuality.POOR)))
+
+
+def reported_commanded_torque(overlay_nm: np.ndarray, resolution_nm: float, offset_nm: float) -> np.ndarray:
+    """(7,) [Nm] the ``commanded_torque`` the robot reports for the overlay (7,) it last commanded: rounded to
+    ``resolution_nm`` (0: not rounded), plus ``offset_nm`` on every joint. The SDK documents ``getCommandedTorque()``
+    only as "the last commanded joint torques of the robot" (friLBRState.h:204-209); the stack copies it
+    (state.cpp:13-14). Whether the robot echoes the overlay bit for bit is not in any code read."""
+    out = np.array(overlay_nm, float)
+    if resolution_nm > 0:
+        out = np.round(out / resolution_nm) * resolution_nm
+    return out + offset_nm if offset_nm else out
+
+
 @dataclass
 class StackState:
     """The stack's state interface (what ``LBRState`` carries), SI units; ``q_rad`` is what it publishes as
-    measured (the encoder, or its own command with ``open_loop``)."""
+    measured (the encoder, or its own command with ``open_loop``); the robot's time stamp [ns], sample time [s],
+    connection quality and commanded torque (7,) [Nm] as the robot last reported them (state.cpp:13-15,30-33)."""
 
     q_rad: np.ndarray
     q_commanded_rad: np.ndarray
@@ -172,6 +232,10 @@ class StackState:
     tau_external_nm: np.ndarray
     ipo_rad: np.ndarray
     session: SessionState
+    stamp_ns: int = 0
+    sample_time_s: float = 0.0
+    connection_quality: int = int(ConnectionQuality.EXCELLENT)
+    tau_commanded_nm: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
 
 
 class StackClient:
@@ -210,8 +274,14 @@ class StackClient:
 
     # -- the FRI side (every robot cycle) ------------------------------------------------------------------
     def fri_cycle(self, session: SessionState, q: np.ndarray, q_commanded: np.ndarray, tau_measured: np.ndarray,
-                  tau_external: np.ndarray, robot_command_mode: int, sample_time_s: float) -> FriCommand | None:
-        """One FRI callback with the robot's state; the command sent back, or None (monitoring)."""
+                  tau_external: np.ndarray, robot_command_mode: int, sample_time_s: float, *, stamp_ns: int = 0,
+                  connection_quality: int = ConnectionQuality.EXCELLENT,
+                  tau_commanded: np.ndarray | None = None) -> FriCommand | None:
+        """One FRI callback with the robot's state; the command sent back, or None (monitoring). The robot's time
+        stamp [ns], connection quality and commanded torque (7,) [Nm] go into the state as they are."""
+        st = self.state
+        st.stamp_ns, st.sample_time_s, st.connection_quality = stamp_ns, sample_time_s, int(connection_quality)
+        st.tau_commanded_nm = np.zeros(N_JOINTS) if tau_commanded is None else np.array(tau_commanded, float)
         if self._session_prev is not None and session != self._session_prev:
             self._set_state(session, q, q_commanded, tau_measured, tau_external, sample_time_s)
             self._init_command()

@@ -1,0 +1,74 @@
+"""What the stack and the robot must be before the adapter commands: one pure check, the first reason it may not.
+
+Each refusal names the setting to change; the stack's code behind each
+(lbr_fri_ros2_stack ``rolling`` 218d723) is in docs/real-robot.md, step 5:
+nothing is published before COMMANDING_WAIT (system_interface.cpp:249-265),
+commands are buffered only in COMMANDING_ACTIVE (system_interface.cpp:347-354),
+the torque interface throws outside the TORQUE client command mode
+(torque_command.cpp:11-19), torque overlay needs joint impedance (FRI SDK
+friLBRCommand.h:118-127), ``open_loop: true`` publishes the stack's own
+command as measured (async_client.cpp:82-93), a torque filter of alpha 0
+never moves (filters.cpp:13-17,23-28), command mode needs a connection
+quality of GOOD or better (friClientIf.h:74-75,83-84), and a frozen clock is
+a lost FRI link (:class:`~robot.lbr.watches.ClockWatch`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .compensation import filter_alpha
+from .msgs import (ClientCommandMode, ConnectionQuality, ControlMode, DriveState, LbrState, SafetyState, SessionState,
+                   enum_name)
+from .params import LbrParams
+from .watches import ClockWatch
+
+#: Joint speed [rad/s] under which the arm counts as at rest for arming on an FRI 2 state (no commanded
+#: position in it: the stack's command is taken to be where the arm rests).
+REST_SPEED_RAD_S = 0.05
+
+
+def arming_refusal(st: LbrState | None, p: LbrParams, *, layout_error: str, names_ok: bool | None,
+                   clock: ClockWatch, dq_rad_s: np.ndarray) -> str | None:
+    """Why the adapter may not arm on the newest state ``st`` (None: none yet), or None when it may.
+
+    layout_error : the other FRI layout's message, if states came in it; names_ok : whether the joint names seen
+    on ``joint_states`` are the configured ones (None: none seen); clock : the watch on the robot's clock;
+    dq_rad_s : (7,) the estimated joint velocity [rad/s].
+    """
+    if layout_error:
+        return layout_error
+    if st is None:
+        return "no robot state received yet (the stack publishes from COMMANDING_WAIT on)"
+    if clock.frozen:
+        return clock.reason
+    if st.connection_quality < ConnectionQuality.GOOD:
+        return (f"FRI connection quality {enum_name(ConnectionQuality, st.connection_quality)}: insufficient for "
+                "command mode")
+    if st.session_state != SessionState.COMMANDING_ACTIVE:
+        return (f"session state {enum_name(SessionState, st.session_state)}: start the LBRServer application "
+                "(JOINT_IMPEDANCE_CONTROL, TORQUE) on the smartPAD first")
+    if st.safety_state != SafetyState.NORMAL_OPERATION:
+        return f"safety state {enum_name(SafetyState, st.safety_state)}"
+    if st.drive_state != DriveState.ACTIVE:
+        return f"drives {enum_name(DriveState, st.drive_state)}"
+    if st.client_command_mode != ClientCommandMode.TORQUE:
+        return (f"client command mode {enum_name(ClientCommandMode, st.client_command_mode)}: choose TORQUE in the "
+                "LBRServer app and client_command_mode: torque in the stack's config")
+    if st.control_mode != ControlMode.JOINT_IMP_CONTROL_MODE:
+        return (f"control mode {enum_name(ControlMode, st.control_mode)}: choose JOINT_IMPEDANCE_CONTROL in the "
+                "LBRServer app (torque overlay needs it)")
+    if p.open_loop:
+        return ("[lbr] open_loop = true: with the stack's open_loop: true (its default) the published measured "
+                "position is the stack's own command, not the encoders; set open_loop: false in the stack's "
+                "config and [lbr] open_loop = false")
+    for name, cutoff_hz in (("measured", p.measured_torque_cutoff_hz), ("external", p.external_torque_cutoff_hz)):
+        if filter_alpha(cutoff_hz, st.sample_time_s) <= 1e-9:
+            return (f"the stack's {name}_torque_cutoff_frequency {cutoff_hz:g} Hz at a "
+                    f"{st.sample_time_s * 1e3:g} ms sample time gives its filter alpha 0: that torque never "
+                    "changes; choose a cutoff below the sample rate")
+    if names_ok is False:
+        return f"joint names on {p.joint_states_topic} are not {list(p.joint_names)}"
+    if st.q_commanded_rad is None and float(np.max(np.abs(dq_rad_s))) > REST_SPEED_RAD_S:
+        return "the arm is moving: an FRI 2 state has no commanded position, so arming waits for the arm at rest"
+    return None
