@@ -312,7 +312,7 @@ def test_a_falling_connection_quality_is_warned_at_fair_and_disarms_at_poor(tmp_
     c = pressing.counters
     print(f"\nquality: disarmed {latency_ms:.1f} ms after the first POOR state; pad {force_before:.1f} N before, "
           f"{force_after:.2f} N from 1 s after; learned tolerance {c['applied_tolerance_unm']} uNm, "
-          f"{c.get('states_on_an_old_command', 0)} of {c['states_received']} states not applied\n{c}")
+          f"{c.get('states_on_an_old_command', 0)} of {c['states_received']} states not applied")
     assert c["applied_tolerance_unm"] == 5050 and c.get("applied_stalls", 0) == 0, c
     assert c.get("states_on_an_old_command", 0) <= 0.01 * c["states_received"], c
     assert "armed=True" in fair.detail and fair.counters["connection_quality_warnings"] == 1, fair

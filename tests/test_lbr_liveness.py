@@ -73,6 +73,18 @@ def test_a_frozen_stamp_is_judged_from_our_answer_not_from_a_robot_waiting_for_i
     assert st.counters["states_repeated"] >= 1, st.counters
 
 
+def test_a_lock_step_robot_that_waits_for_us_is_not_judged_by_its_clock():
+    """In lock-step the robot's clock stands while the cell is slow: the stand-in re-sends its state until its
+    answer arrives, and a starved stand-in re-sends it after our answer too. No lost link is judged then."""
+    with Cell(server={"mode": "lockstep"}) as cell:
+        cell.armed()
+        cell.answer(cell.step(Q0), np.ones(7))
+        received = cell.port.counts["states_received"]
+        _republish(cell, cell.t_ns, 60)
+        st = cell.wait_status(lambda m: m.counters.get("states_received", 0) >= received + 60, "the repeats come")
+    assert "armed=True" in st.detail and "frozen_stamps" not in st.counters, st
+
+
 def test_a_changed_sample_time_disarms():
     with Cell() as cell:
         cell.armed()

@@ -41,32 +41,25 @@ against joint friction. A disarmed adapter sends the hold in answer to
 every state for as long as it runs; if it dies, the stack re-applies the
 last one (the pose where the arm came to rest).
 
-Hold (a late or missing controller answer, ``hold``): the last command
-again while it is younger than ``stale_limit_s`` (one late answer must not
-step the torque), then the hold; after ``hold_timeout_s`` of holding the
-adapter disarms (the hold stays). A state whose commanded torque is an
-overlay sent for a reading older than ``stale_limit_s`` plus two state
-periods, or none of ours, says the robot ran on an old message (ours are
-not reaching the stack, which re-applies the last one it got): the server
-reports no command applied for it (:meth:`LbrPort.applying`,
-``check_applied``), so the controller does not take that motion for its
-own and stands still instead of winding up. Speed brake: the adapter declares the
-guard's joint speeds as its velocity limits; the server holds while a joint
-moves faster than ``speed_brake_share`` of them.
+Hold (a late or missing controller answer, ``hold``): the last command again while it is younger than
+``stale_limit_s`` (one late answer must not step the torque), then the hold; after ``hold_timeout_s`` of
+holding the adapter disarms (the hold stays). A state whose commanded torque is no recent overlay of ours
+says the robot ran on an old message (ours do not reach the stack): the server reports no command applied
+for it (:meth:`LbrPort.applying`, ``check_applied``), so the controller stands still instead of winding
+up. Speed brake: the adapter declares the guard's joint speeds; the server holds above
+``speed_brake_share`` of them.
 
-The link (:mod:`robot.lbr.watches`, which cites the stack): liveness from the robot's clock, since a lost
-FRI link leaves the stack re-publishing its last state; a time stamp still for ``frozen_stamp_periods``
-after our answer, a changed sample time or a clock going back disarm (the hold is the stack's last
-message). The connection quality is in the status, warned about from FAIR, disarmed on at
-``disarm_at_quality`` and named when commanding ends. The applied check tolerates the robot's own
-resolution and, armed with no state on a recent overlay for ``applied_stall_s``, disarms saying why.
+The link (:mod:`robot.lbr.watches` cites the stack): liveness from the robot's clock, since a lost FRI
+link leaves the stack re-publishing its last state; a stamp still for ``frozen_stamp_periods`` after our
+answer (in real time: a lock-step robot waits for us), a changed sample time or a clock going back disarm.
+The connection quality is in the status, warned about from FAIR, disarmed on at ``disarm_at_quality`` and
+named when commanding ends. The applied check tolerates the robot's own resolution and, armed with no
+state on a recent overlay for ``applied_stall_s``, disarms saying why.
 
-Disarming (stop, signal, controller loss, guard trip, a frozen position
-stream, a frozen clock, a poor connection, a stalled applied check, session
-lost, no robot state for ``hold_timeout_s``) says why (log, status). When
-the robot leaves COMMANDING_ACTIVE the stack exits
-(system_interface.cpp:307-318): states stop, the adapter disarms, and the
-stack must be launched again before the adapter can arm.
+Disarming (stop, signal, controller loss, guard trip, a frozen position stream, a frozen clock, a poor
+connection, a stalled applied check, session lost, no robot state for ``hold_timeout_s``) says why (log,
+status). When the robot leaves COMMANDING_ACTIVE the stack exits (system_interface.cpp:307-318): states
+stop, the adapter disarms, and the stack must be launched again before the adapter can arm.
 """
 
 from __future__ import annotations
@@ -155,6 +148,7 @@ class LbrPort(RobotPort):
         self._answered = (-1, 0)  # (the robot time of the reading our last message answered, when we first did)
         self._armed_ns = 0  # the robot time at arming
         self._cycles_per_state = 1  # FRI cycles between the newest two states: how long a message will be applied
+        self._robot_waits = False  # the server runs lock-step: the robot's clock waits for our answers
         topics = params.topics
         s = node.session
         self._subs = [s.declare_subscriber(topics.key(topics.state), self._on_state),
@@ -213,7 +207,7 @@ class LbrPort(RobotPort):
                 return False
             (st, arrival_ns), self._inbox = self._inbox, None
         self._last_state_ns = time.monotonic_ns()  # a re-sent state too: the robot is there, waiting
-        answered = self._answered[1] if self._answered[0] == self._clock.stamp_ns else None
+        answered = self._answered[1] if self._answered[0] == self._clock.stamp_ns and not self._robot_waits else None
         clock = self._clock.update(st.stamp_ns, st.sample_time_s, arrival_ns, answered)
         if clock in (Clock.REPEATED, Clock.FROZEN):
             self.counts["states_repeated"] += 1  # a manager faster than the FRI cycle, or a peer waiting: nothing new
@@ -278,6 +272,11 @@ class LbrPort(RobotPort):
         if since_ns * 1e-9 > self.p.applied_stall_s:
             self.counts["applied_stalls"] += 1
             self.disarm(self._sent.stall_reason(since_ns * 1e-9, self._resolution.tolerance_nm()))
+
+    def after_cycle(self, lockstep: bool) -> None:
+        """In lock-step the robot waits for each answer (the simulated stack's lock-step), so its clock standing
+        still while we are slow is no lost link: the clock watch does not judge it."""
+        self._robot_waits = lockstep
 
     def applying(self) -> bool:
         """False while the newest state's commanded torque is an old overlay of ours or none of them
