@@ -235,14 +235,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="keep a complete set that is already there (exit 0); a partial one is still an error")
     ap.add_argument("--cells", metavar="ID,ID,...", default="",
                     help="a site of several cells behind one router: per robot id DIR/<id>/<role>/ with common "
-                         "names <role>@<id>, plus DIR/router/ and DIR/site-viewer/ (default: one cell, DIR/<role>/)")
+                         "names <role>@<id>, plus DIR/ca/router/ and DIR/site-viewer/ (default: one cell, DIR/<role>/)")
     args = ap.parse_args(argv)
     if not 1 <= args.days <= MAX_DAYS:
         print(f"lamps credentials: --days must be in [1, {MAX_DAYS}], got {args.days}", file=sys.stderr)
         return 2
     cells = tuple(c.strip() for c in args.cells.split(",") if c.strip())
     try:
-        folders = make_credentials(args.directory, args.if_missing, tuple(args.host), args.days, cells)
+        make_credentials(args.directory, args.if_missing, tuple(args.host), args.days, cells)
     except (FileExistsError, OSError, ValueError) as exc:
         print(f"lamps credentials: {exc}", file=sys.stderr)
         return 1

@@ -87,7 +87,7 @@ def _base_config(path: str) -> zenoh.Config:
 def zenoh_config(settings: ZenohSettings, max_message_bytes: int | None = None) -> zenoh.Config:
     """The ``zenoh.Config`` for ``settings``: its ``config_file`` (or Zenoh's defaults) with the settings over it.
 
-    max_message_bytes : Zenoh's limit on a whole message this session takes [bytes] (a larger one is dropped while
+    max_message_bytes : Zenoh's limit on a whole message the session takes [bytes] (a larger one is dropped while
     reassembled, :mod:`interfaces.message_limits`); default the cell's largest message bound, unless the
     ``config_file`` sets one.
     """
