@@ -103,7 +103,10 @@ def run_local(sim_p, ctrl_p, envs_joints, recorder: PathRecorder, duration_s: fl
         server = RobotServer(port, sim_node, ServerParams(
             mode="lockstep", rate_hz=sim_p.rate_hz, stale_limit_s=sim_p.stale_limit_s,
             republish_s=sim_p.lockstep_republish_s, status_rate_hz=sim_p.status_rate_hz,
-            speed_brake_share=sim_p.speed_brake_share), "sim", sim_node.keys.sim_status)
+            speed_brake_share=sim_p.speed_brake_share,
+            # the hand moves and presses the arm here, not a controller: the teach's own force cap holds it, and
+            # the robot side's press-speed and force yields (limits against a controller) would fight the hand
+            press_speed_limit_m_s=0.0, force_cap_n=0.0), "sim", sim_node.keys.sim_status)
         ctrl = _controller(ctrl_p, ctrl_node, RobotModel(joints=envs_joints))
         states_seen = watch.inbox(watch.keys.robot_state, RobotState, maxlen=16)
         states = ctrl.lockstep_states()
