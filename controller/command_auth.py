@@ -87,11 +87,13 @@ class ControllerAuth:
         return self._mac.mac(seq, mode, tau_nm)
 
     def with_mac(self, cmd: TorqueCommand) -> TorqueCommand:
-        """``cmd`` as sent again: with its MAC made now when it went without one before the robot side introduced
-        itself (a lock-step robot side re-sends the state it waits for; the same answer must now pass)."""
-        if cmd.mac or self._mac is None:
+        """``cmd`` as sent again, its MAC made under the key proven now: it went without one before the robot side
+        introduced itself, or under the key of a robot side that has since restarted (a lock-step robot side
+        re-sends the state it waits for; the same answer must pass the robot side there is now)."""
+        if self._mac is None:
             return cmd
-        return msgspec.structs.replace(cmd, mac=self._mac.mac(cmd.seq, cmd.mode, cmd.tau_nm))
+        mac = self._mac.mac(cmd.seq, cmd.mode, cmd.tau_nm)
+        return cmd if mac == cmd.mac else msgspec.structs.replace(cmd, mac=mac)
 
     def release_ok(self, release: Estop) -> bool:
         """True when the e-stop release is the operator's, fresh and new (always, without an identity)."""
