@@ -451,7 +451,10 @@ def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp
             lifted = wait_sample(truth, lambda m: m.contact_force_n == 0.0, 20.0, "the pad off the board")
             assert lifted.contact_force_n == 0.0
             assert ctl.service.counters["overload_trips"] >= 1
-            assert "force cap" not in reason and ctl.core.executor.counters["faults"] == 1
+            # a busy host can make the watch see calm while the loop is still slow, start again and fault again on
+            # the overload (seen once in a CI-like run): every fault is still the overload's, never the force cap's
+            assert "force cap" not in reason
+            assert 1 <= ctl.core.executor.counters["faults"] <= ctl.service.counters["overload_trips"]
             # before the fault the motion slowed with the load (the speed override's load cap set the pace)
             assert ctl.core.override.load_limited_ticks > 0
             # the status reports the override's count (the loop still ticks: read it between two live reads)
@@ -465,6 +468,6 @@ def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp
             t1 = time.monotonic()
             try:
                 ctl.wait_phase(("APPROACH", "WIPE", "TRANSITION"), 30.0)
-                assert time.monotonic() - t1 >= 2.5 and ctl.service.counters["overload_recoveries"] == 1
+                assert time.monotonic() - t1 >= 2.5 and ctl.service.counters["overload_recoveries"] >= 1
             except AssertionError:
                 assert ctl.phase == "FAULT" and ctl.service._overload.share >= 0.05, ctl.service._overload.share
