@@ -203,3 +203,43 @@ def release_estop(settings, reason: str, source: str):
     return Estop(stamp_ns=time.monotonic_ns(), engaged=False, reason=reason, source=source, wall_ns=wall_ns,
                  certificate=identity.certificate_pem,
                  signature=sign_release(identity, settings.keys.prefix, wall_ns, reason, source))
+
+
+class AuthAccount:
+    """One receiver's account of what it refused, and its check of e-stop releases (shared by the robot side and the
+    controller): each refusal counted by reason in ``counters`` (``<counter>: <why>``) and logged at most every
+    :data:`LOG_EVERY_S`; releases taken only as :func:`check_release` allows, each newer than the last."""
+
+    LOG_EVERY_S = 5.0
+
+    def __init__(self, identity: LocalIdentity | None, prefix: str, counters, logger) -> None:
+        self.identity = identity
+        self.prefix = prefix
+        self.counters = counters
+        self._log = logger
+        self._last_log = -float("inf")
+        self._last_release_wall_ns = 0
+
+    def refuse(self, counter: str, why: str) -> bool:
+        """Count and (rate-limited) log a refusal; False, for ``return account.refuse(...)``."""
+        import time
+
+        self.counters[f"{counter}: {why.split(':')[0][:60]}"] += 1
+        now = time.monotonic()
+        if now - self._last_log >= self.LOG_EVERY_S:
+            self._last_log = now
+            self._log.warning("%s: %s", counter.replace("_", " "), why)
+        return False
+
+    def release_ok(self, release) -> bool:
+        """True when the e-stop release (an :class:`~interfaces.messages.Estop`) is the operator's, fresh and new
+        (always, without an identity)."""
+        if self.identity is None:
+            return True
+        try:
+            check_release(self.identity, self.prefix, release.certificate, release.signature, release.wall_ns,
+                          release.reason, release.source, self._last_release_wall_ns)
+        except AuthError as exc:
+            return self.refuse("estop_releases_refused", str(exc))
+        self._last_release_wall_ns = release.wall_ns
+        return True

@@ -20,7 +20,7 @@ import logging
 import time
 from collections import Counter, OrderedDict
 
-from interfaces.arm_auth import (AuthError, CommandMac, LocalIdentity, check_release, command_key, load_identity,
+from interfaces.arm_auth import (AuthAccount, AuthError, CommandMac, LocalIdentity, command_key, load_identity,
                                  new_nonce, peer_public_key)
 from interfaces.messages import Estop, Introduction, TorqueCommand
 from interfaces.service_security import IN_PROCESS
@@ -31,7 +31,6 @@ log = logging.getLogger(__name__)
 INTRODUCE_EVERY_S = 0.5
 #: Controller sessions whose keys are kept (the newest; a restarted controller is a new session).
 MAX_SESSIONS = 8
-_LOG_EVERY_S = 5.0
 
 
 class CommandAuth:
@@ -48,8 +47,7 @@ class CommandAuth:
         self.nonce = new_nonce()
         self._keys: OrderedDict[str, CommandMac] = OrderedDict()
         self._next_intro = 0.0
-        self._last_release_wall_ns = 0
-        self._last_log = -float("inf")
+        self._account = AuthAccount(self.identity, node.keys.prefix, counters, log)
         self._intros = None
         if self.identity is not None:
             self._intros = node.inbox(node.keys.controller_introduction, Introduction, maxlen=16)
@@ -101,22 +99,8 @@ class CommandAuth:
         return True
 
     def release_ok(self, release: Estop) -> bool:
-        """True when the e-stop release ``release`` is the operator's, fresh and new (always, without an
-        identity)."""
-        if self.identity is None:
-            return True
-        try:
-            check_release(self.identity, self.node.keys.prefix, release.certificate, release.signature,
-                          release.wall_ns, release.reason, release.source, self._last_release_wall_ns)
-        except AuthError as exc:
-            return self._refuse("estop_releases_refused", str(exc))
-        self._last_release_wall_ns = release.wall_ns
-        return True
+        """True when the e-stop release is the operator's, fresh and new (always, without an identity)."""
+        return self._account.release_ok(release)
 
     def _refuse(self, counter: str, why: str) -> bool:
-        self.counters[f"{counter}: {why.split(':')[0][:60]}"] += 1
-        now = time.monotonic()
-        if now - self._last_log >= _LOG_EVERY_S:
-            self._last_log = now
-            log.warning("%s: %s", counter.replace("_", " "), why)
-        return False
+        return self._account.refuse(counter, why)
