@@ -68,10 +68,11 @@ def _listening_thief_attacks(cell: Cell) -> float:
         truth = thief.latest(keys.sim_truth, SimTruth)
         wait_sample(truth, timeout_s=15.0, what="the sim's truth at the thief: the sim opened a link to it")
         captured = thief.inbox(keys.robot_command, TorqueCommand, maxlen=5000)
-        time.sleep(1.0)
-        stolen = []
-        while (c := captured.get(0.0)) is not None:
-            stolen.append(c)
+        stolen: list[TorqueCommand] = []
+        t_listen = time.monotonic() + 15.0  # lock-step runs as fast as a loaded host lets it: count, not seconds
+        while len(stolen) <= 50 and time.monotonic() < t_listen:
+            if (c := captured.get(0.1)) is not None:
+                stolen.append(c)
         assert len(stolen) > 50, "the thief hears the controller's commands (every role may read)"
         session = stolen[-1].session
         forced, sent = 0.0, 0
