@@ -1,7 +1,9 @@
 """The stack's tip frame (``lbr_link_ee``) on our arm, and its wrench estimate brought to the pad.
 
-lbr_description places ``<robot>_link_ee`` 0.035 m along link 7's z axis
-(``urdf/iiwa14/iiwa14_description.xacro``:288-292, rolling 218d723); its
+lbr_description places ``<robot>_link_ee`` 0.035 m along its own link 7's z
+axis (``urdf/iiwa14/iiwa14_description.xacro``:288-292, rolling 218d723),
+which is 0.045 m above our ``iiwa_link_7`` (the flange): the offset is
+derived from the stack's chain in :mod:`robot.lbr.stack_chain`. Its
 ``force_torque_broadcaster`` publishes the estimated wrench there, in the
 tip's axes, with a soft deadband (each component below its threshold is
 0, above it it loses the threshold: ``lbr_fri_ros2/include/lbr_fri_ros2/
@@ -18,9 +20,10 @@ import pinocchio as pin
 
 from interfaces.robot_model import RobotModel
 
-#: Link 7 of our description and the stack's tip offset along its z axis [m].
-LINK7_FRAME = "iiwa_link_7"
-TIP_OFFSET_M = np.array([0.0, 0.0, 0.035])
+from .stack_chain import LINK7_FRAME, tip_in_link7
+
+#: The stack's tip (``lbr_link_ee``) in our link 7: position [m] and rotation.
+TIP_OFFSET_M, TIP_ROTATION = tip_in_link7()
 
 
 def tip_pose(model: RobotModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -28,7 +31,7 @@ def tip_pose(model: RobotModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     fid = model.model.getFrameId(LINK7_FRAME)
     pin.framesForwardKinematics(model.model, model.data, q)
     oMf = model.data.oMf[fid]
-    return oMf.translation + oMf.rotation @ TIP_OFFSET_M, oMf.rotation.copy()
+    return oMf.translation + oMf.rotation @ TIP_OFFSET_M, oMf.rotation @ TIP_ROTATION
 
 
 def tip_jacobian(model: RobotModel, q: np.ndarray) -> np.ndarray:
