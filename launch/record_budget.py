@@ -44,7 +44,8 @@ SHARES: dict[str, tuple[float, bool]] = {
     "controller/status": (0.03, True), "sim/truth": (0.03, True), "sim/status": (0.01, True),
     "robot/status": (0.01, True), "perception/status": (0.01, True), "controller/estop": (0.005, True),
     "controller/estop/release": (0.005, True), "robot/arm": (0.005, True), "perception/stains": (0.05, True),
-    "camera/*/frame": (0.10, False), "perception/debug": (0.055, False),
+    "robot/introduction": (0.005, True), "controller/introduction": (0.005, True),
+    "camera/*/frame": (0.10, False), "perception/debug": (0.045, False),
 }
 #: The keys whose newest messages the recorder keeps whatever its budget, to write at its close what the
 #: services last said of themselves (their status, the sim's truth) when the recording of them had stopped.

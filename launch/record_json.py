@@ -14,8 +14,8 @@ import numpy as np
 
 from interfaces.keys import Keys
 from launch.schemas import json_schema_of
-from interfaces.messages import (ArmRequest, CameraFrame, ControllerStatus, ControllerTrace, Estop, Message,
-                                 RobotState, ServiceStatus, SimTruth, Stains, TorqueCommand)
+from interfaces.messages import (ArmRequest, CameraFrame, ControllerStatus, ControllerTrace, Estop, Introduction,
+                                 Message, RobotState, ServiceStatus, SimTruth, Stains, TorqueCommand)
 
 _COMPRESSED_IMAGE_SCHEMA = {
     "type": "object",
@@ -35,7 +35,8 @@ def message_type_of(keys: Keys, key: str) -> type[Message] | None:
              keys.perception_status: ServiceStatus, keys.perception_debug: CameraFrame,
              keys.controller_status: ControllerStatus, keys.controller_trace: ControllerTrace,
              keys.controller_estop: Estop, keys.controller_estop_release: Estop, keys.sim_truth: SimTruth,
-             keys.sim_status: ServiceStatus, keys.robot_status: ServiceStatus, keys.robot_arm: ArmRequest}
+             keys.sim_status: ServiceStatus, keys.robot_status: ServiceStatus, keys.robot_arm: ArmRequest,
+             keys.robot_introduction: Introduction, keys.controller_introduction: Introduction}
     if key in table:
         return table[key]
     cam = keys.camera_frame("x")[:-len("x/frame")]
