@@ -22,6 +22,7 @@ from .camera import camera_pose
 from .dirt import DirtGrid, random_stains, stains_from_specs
 from .hand import hand_from_params
 from .params import SimParams
+from .plant import Measurement, plant_joints, plant_urdf
 from .robot import Readout, SimRobot
 from .world import build_world
 
@@ -39,8 +40,9 @@ class SimCore:
     """Physics, dirt and robot of one cell. Raises :class:`ConfigError` for an impossible set-up.
 
     ``model`` (default ``RobotModel()``) gives the limits, the start pose and, in
-    ``model.joints``, the rotor inertia and friction the simulated drives get: a controller
-    built on the same model has the simulated arm's inertia.
+    ``model.joints``, the rotor inertia and friction the simulated drives get unless
+    ``[sim.plant]`` gives them its own; the arm's links and tool are the description's
+    changed by ``[sim.plant]`` (:mod:`sim.plant`), the controller's model is never.
 
     Attributes
     ----------
@@ -49,13 +51,16 @@ class SimCore:
     robot : SimRobot
     q_start : (7,) start joint positions [rad]
     steps : physics steps taken
-    model : the description the arm was built from
+    model : the description the arm was built from (limits, start pose)
+    joints : the simulated drives' rotor inertia and friction
+    measured : (q, dq, tau, wrench) as the robot's sensors report them (delayed, biased, noisy per the plant)
     """
 
     def __init__(self, params: SimParams, model: RobotModel | None = None) -> None:
         self.params = params
         self.model = model = model or RobotModel()  # the robot side's limits use it too (its thread)
-        self.joints = model.joints
+        plant = params.plant
+        self.joints = plant_joints(plant, model.joints)
         self.tau_max = model.limits.tau_max.copy()
         self.dq_max = model.limits.dq_max.copy()
         self.board = board_from_params(params.board)
@@ -78,13 +83,21 @@ class SimCore:
                 raise ConfigError(f"[sim.camera] {exc}") from None
         self.client = pb.connect(pb.DIRECT)
         try:
-            self.world = build_world(self.client, self.board, params.contact, self.q_start, params.dt_s)
+            urdf = None if plant.body_is_described else plant_urdf(plant)
+            self.world = build_world(self.client, self.board, params.contact, self.q_start, params.dt_s,
+                                     urdf_text=urdf)
             self._check_start_clear()
         except Exception:
             pb.disconnect(self.client)
             raise
+        load = None
+        if not plant.load_is_true:
+            (m_true, c_true), (m_load, c_load) = plant.true_tool(), plant.load_data()
+            load = (m_true, np.array(c_true), m_load, np.array(c_load))
         self.robot = SimRobot(self.world, self.tau_max, self.board.normal_world, params.gravity_compensated,
-                              model.joints, params.dt_s)
+                              self.joints, params.dt_s, load)
+        self._measurement = None if plant.measurement_is_exact else Measurement(plant)
+        self.measured = self._measure(self.robot.out)
         self.steps = 0
         self.peak_force_n = 0.0  # the largest normal force since the last take_peak_force_n() [N]
         try:
@@ -128,11 +141,17 @@ class SimCore:
         self.robot.step()
         self.steps += 1
         out = self.robot.read()
+        self.measured = self._measure(out)
         if out.normal_force_n > self.peak_force_n:
             self.peak_force_n = out.normal_force_n
         if self.steps % self._wipe_every == 0:
             self._wipe(out)
         return out
+
+    def _measure(self, o: Readout) -> tuple[np.ndarray, ...]:
+        if self._measurement is None:
+            return o.q, o.dq, o.tau, o.wrench
+        return self._measurement.measure(o.q, o.dq, o.tau, o.wrench)
 
     def take_peak_force_n(self) -> float:
         """The largest normal force of the pad on the board [N] over the steps since the last call; restarts."""

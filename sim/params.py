@@ -12,6 +12,7 @@ whiteboard in front of the robot, three seeded stains, a D435i-like camera)::
     [sim.dirt]     cell_m, stains (count), stain_size_m, threshold_force_n, rate_per_n_m, stain = [...]
     [sim.camera]   enabled, name, width, height, rate_hz, fx, fy, distance_m, elevation_deg, renderer, ...
     [sim.hand]     script, stiffness_n_m, damping_n_s_m, ... (the operator's hand, for lamps teach)
+    [sim.plant]    the simulated arm where it is not the description (sim.plant_params)
 
 Every value is checked in ``__post_init__``; an unknown key or a value out
 of range raises :class:`~interfaces.errors.ConfigError` naming the key and
@@ -32,6 +33,8 @@ from interfaces.config import check_vector as _vector
 from interfaces.config import dataclass_from_table as _from_table
 from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
+
+from .plant_params import PlantParams
 
 MODES = ("lockstep", "realtime")
 BOARD_PRESETS = ("wall", "table", "custom")
@@ -263,6 +266,7 @@ class SimParams:
     dirt: DirtParams = field(default_factory=DirtParams)
     camera: CameraParams = field(default_factory=CameraParams)
     hand: HandParams = field(default_factory=HandParams)
+    plant: PlantParams = field(default_factory=PlantParams)
 
     def __post_init__(self) -> None:
         s = "sim"
@@ -291,6 +295,6 @@ class SimParams:
             raise ConfigError("[sim] joint_damping_nm_s_rad: joint friction is set per joint in the [joints] table "
                               "(viscous_nm_s_rad, coulomb_nm), which the controller's model reads too")
         subs = {"board": BoardParams, "contact": ContactParams, "dirt": DirtParams, "camera": CameraParams,
-                "hand": HandParams}
+                "hand": HandParams, "plant": PlantParams}
         parts = {name: _from_table(kind, f"sim.{name}", table.pop(name, {})) for name, kind in subs.items()}
         return _from_table(cls, "sim", table, **parts)

@@ -18,7 +18,8 @@ import pybullet as pb
 from interfaces.joint_dynamics import JointDynamics
 
 from .drive import drive_torque_into
-from .world import World
+from .plant import tool_gravity_torque
+from .world import GRAVITY_M_S2, World
 
 
 @dataclass
@@ -58,21 +59,25 @@ class SimRobot:
     ----------
     tau_max : (7,) joint torque limits [Nm]; the brakes hold up to these (stopping over :data:`BRAKE_STOP_S`).
     board_normal : (3,) outward normal of the board (pressing force is along -normal).
-    gravity_compensated : add gravity torques to every command, like the real iiwa.
+    gravity_compensated : add :meth:`compensation` to every command, like the real iiwa.
     joints : rotor inertia and friction of the drives (default: the cited iiwa figures); the
-        controller's :class:`~interfaces.robot_model.RobotModel` should carry the same.
+        simulated arm's own (:func:`sim.plant.plant_joints`), which the controller's model need not share.
     dt_s : physics step [s] (default: the client's).
+    load : None when the robot's load data is the tool it carries; else (true tool mass [kg], its centre of
+        mass (3,) in the eraser (flange) frame [m], load data mass [kg], load data centre of mass (3,) [m]).
     """
 
     def __init__(self, world: World, tau_max: np.ndarray, board_normal: np.ndarray,
                  gravity_compensated: bool = False, joints: JointDynamics | None = None,
-                 dt_s: float | None = None) -> None:
+                 dt_s: float | None = None,
+                 load: tuple[float, np.ndarray, float, np.ndarray] | None = None) -> None:
         self.w = world
         self.c = world.client
         self.tau_max = np.asarray(tau_max, float)
         self._tau_min = -self.tau_max
         self.normal = np.asarray(board_normal, float)
         self.gravity_compensated = gravity_compensated
+        self.load = load
         self.joints = joints or JointDynamics()
         self._rigid = self.joints.is_rigid
         self.dt_s = float(dt_s if dt_s is not None
@@ -107,7 +112,7 @@ class SimRobot:
             self.braked = False
         tau = np.asarray(tau_nm, float)
         if self.gravity_compensated:
-            tau = tau + self.gravity()
+            tau = tau + self.compensation()
         np.maximum(np.minimum(tau, self.tau_max, out=self._tau_cmd), self._tau_min, out=self._tau_cmd)  # np.clip's cost
         applied = self._tau_cmd if self._rigid else self._drive_torque()
         pb.setJointMotorControlArray(self.w.robot, self._joints, pb.TORQUE_CONTROL, forces=applied.tolist(),
@@ -147,6 +152,17 @@ class SimRobot:
         """(7,) gravity torques [Nm] at the current joint positions (arm and eraser)."""
         return np.array(pb.calculateInverseDynamics(self.w.robot, self.out.q.tolist(), self._zeros, self._zeros,
                                                     physicsClientId=self.c))
+
+    def compensation(self) -> np.ndarray:
+        """(7,) what a gravity-compensated robot adds [Nm]: its own weight by its true model, the tool by its load
+        data (:attr:`load`): g(q) + m_load g J_z(c_load)^T - m_tool g J_z(c_tool)^T."""
+        g = self.gravity()
+        if self.load is not None:
+            m_true, c_true, m_load, c_load = self.load
+            q, c, robot, link = self.out.q.tolist(), self.c, self.w.robot, self.w.tcp_link
+            g += tool_gravity_torque(c, robot, link, q, m_load, c_load, self._zeros, GRAVITY_M_S2)
+            g -= tool_gravity_torque(c, robot, link, q, m_true, c_true, self._zeros, GRAVITY_M_S2)
+        return g
 
     def step(self) -> None:
         """One physics step, with :attr:`external_wrench` on the pad (PyBullet clears external forces each step)."""

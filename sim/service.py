@@ -84,8 +84,9 @@ class SimPort(RobotPort):
         """The arm is left braked where it is; nothing steps any more."""
 
     def read(self) -> Reading:
-        o = self.core.out
-        return Reading(o.q, o.dq, o.tau, o.wrench, self.core.time_ns)
+        """The measured state (the simulated one, or through ``[sim.plant]``'s sensors and delay)."""
+        q, dq, tau, wrench = self.core.measured
+        return Reading(q, dq, tau, wrench, self.core.time_ns)
 
     def write(self, tau_nm: np.ndarray) -> None:
         for _ in range(self.substeps):
@@ -96,21 +97,22 @@ class SimPort(RobotPort):
             self.core.step(HOLD)
 
     def yield_hold(self, tau_nm: np.ndarray) -> None:
-        """``tau_nm`` (7,) [Nm] on top of gravity compensation (the sim's own, at each step's pose): no brake, no task
-        torque; a pad pressed into the board is pushed back by it."""
+        """``tau_nm`` (7,) [Nm] on top of gravity compensation (the sim's own, at each step's pose: the robot's
+        compensation when it compensates, else the true weight): no brake, no task torque; a pad pressed into the
+        board is pushed back by it."""
         robot = self.core.robot
         for _ in range(self.substeps):
             self.core.step(tau_nm if self.p.gravity_compensated else tau_nm + robot.gravity())
 
     def held_torque_nm(self) -> np.ndarray:
         """What the arm ran on over the last step in command terms: the applied torques (the brakes' while braked),
-        gravity taken off when the sim adds it; before the first step, what holds the arm against gravity."""
+        the compensation taken off when the sim adds it; before the first step, what holds the arm against gravity."""
         robot = self.core.robot
         if self.core.steps == 0:
             return self._zeros.copy() if self.p.gravity_compensated else robot.gravity()
         tau = np.array(robot.out.tau)
         if self.p.gravity_compensated:
-            tau -= robot.gravity()
+            tau -= robot.compensation()
         return tau
 
     def after_cycle(self, lockstep: bool) -> None:

@@ -8,7 +8,9 @@ to PyBullet's scalar-last order here and nowhere else.
 
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pybullet as pb
@@ -60,18 +62,18 @@ def _board_face_mesh(board: Board) -> dict:
 
 
 def build_world(client: int, board: Board, contact: ContactParams, q_start: np.ndarray,
-                dt_s: float = 1e-3, visual: bool = False) -> World:
+                dt_s: float = 1e-3, visual: bool = False, urdf_text: str | None = None) -> World:
     """Load robot and board into ``client``; joints at ``q_start`` (7,) [rad], motors off (torque control).
 
+    urdf_text : the arm as URDF text (the simulated plant, :func:`sim.plant.plant_urdf`); None: the description.
     The joints get no damping of PyBullet's own: rotor inertia and friction act in the torque path
-    (:mod:`.drive`), where they share one model with the controller.
+    (:mod:`.drive`), with the simulated drives' figures (:func:`sim.plant.plant_joints`).
     """
     pb.resetSimulation(physicsClientId=client)
     pb.setGravity(0, 0, -GRAVITY_M_S2, physicsClientId=client)
     pb.setTimeStep(dt_s, physicsClientId=client)
     pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, numSolverIterations=50, physicsClientId=client)
-    robot = pb.loadURDF(str(URDF_PATH), useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE,
-                        physicsClientId=client)
+    robot = _load_arm(client, urdf_text)
     joints = _joint_indices(client, robot)
     eraser, tcp = _link_index(client, robot, ERASER_LINK), _link_index(client, robot, TCP_FRAME)
     for j, q in zip(joints, q_start):
@@ -86,6 +88,17 @@ def build_world(client: int, board: Board, contact: ContactParams, q_start: np.n
                       contactDamping=contact.damping_n_s_m, physicsClientId=client)
     board_body = _add_board(client, board, visual)
     return World(client, robot, board_body, joints, eraser, tcp)
+
+
+def _load_arm(client: int, urdf_text: str | None) -> int:
+    """The arm from the description's file, or from ``urdf_text`` through a file of its own (no meshes to find)."""
+    if urdf_text is None:
+        return pb.loadURDF(str(URDF_PATH), useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE,
+                           physicsClientId=client)
+    with tempfile.TemporaryDirectory(prefix="lamps-plant-") as tmp:
+        path = Path(tmp) / URDF_PATH.name
+        path.write_text(urdf_text)
+        return pb.loadURDF(str(path), useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
 
 
 def _add_board(client: int, board: Board, visual: bool) -> int:
