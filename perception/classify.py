@@ -56,6 +56,7 @@ import cv2
 import numpy as np
 
 from .params import InkParams
+from .unmix import finish_into, unmix_into
 
 #: Side of the blocks the board-wide white is measured on [m].
 WHITE_BLOCK_M = 0.05
@@ -169,6 +170,11 @@ class InkClassifier:
             A = np.column_stack([np.ones(3), -a])
             self._to_st.append(np.hstack([M, m[:, None]]).astype(np.float32))
             self._to_residual.append(np.hstack([np.eye(3) - A @ M, -(A @ m)[:, None]]).astype(np.float32))
+        self._to_st, self._to_residual = np.array(self._to_st), np.array(self._to_residual)  # (k, 2, 4), (k, 3, 4)
+        self._limits = np.array([*params.illumination_range, *D_RANGE, params.max_residual, params.chroma_tolerance],
+                                np.float32)
+        self._no_local, self._no_edges = np.zeros((0, 0, 3), np.float32), np.zeros((0, 0), bool)
+        self._follow = np.array(params.white_follow, np.float32)
         self._sum3 = np.ones((1, 3), np.float32)
         r = int(np.ceil(params.occlusion_margin_m / resolution_m))
         self._grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)) if r > 0 else None
@@ -188,6 +194,13 @@ class InkClassifier:
         edge), or None without a local white."""
         if not self._cell:
             return white_g, None
+        local, edges = self._local_unkept(rgb)
+        lo, hi = self.p.white_follow
+        return np.minimum(np.maximum(local, white_g * lo), white_g * hi), edges
+
+    def _local_unkept(self, rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The local white before it is kept within ``white_follow`` of the board-wide white, and the light steps
+        (:meth:`local_white`; the keeping is done per pixel in :func:`~perception.unmix.unmix_into`)."""
         rows, cols = self.looked_at.shape
         k = self._cell
         small = cv2.resize(rgb, (max(cols // k, 1), max(rows // k, 1)), interpolation=cv2.INTER_AREA)
@@ -197,9 +210,7 @@ class InkClassifier:
         edges = (spread > self.p.light_step * cv2.dilate(lum, self._edge_kernel)).view(np.uint8)
         edges = cv2.resize(edges, (cols, rows), interpolation=cv2.INTER_NEAREST).view(bool)
         small = cv2.blur(small, (3, 3))
-        local = cv2.resize(small, (cols, rows), interpolation=cv2.INTER_LINEAR)
-        lo, hi = self.p.white_follow
-        return np.minimum(np.maximum(local, white_g * lo), white_g * hi), edges
+        return cv2.resize(small, (cols, rows), interpolation=cv2.INTER_LINEAR), edges
 
     def classify(self, rect_rgb: np.ndarray, hidden: np.ndarray | None = None) -> InkMap:
         """The :class:`InkMap` of ``rect_rgb`` (rows, cols, 3) uint8 RGB; ``hidden`` (rows, cols) bool: pixels
@@ -207,36 +218,17 @@ class InkClassifier:
         whatever their colour."""
         p = self.p
         rgb = rect_rgb.astype(np.float32)
-        coef = fit_white(rgb, self.looked_at, self.block_px)
-        white = cv2.transform(self._affine_basis, coef.astype(np.float32))  # (rows, cols, 3)
-        np.maximum(white, 1.0, out=white)
-        local, edges = self.local_white(rgb, white)
-        if edges is None:
-            x = cv2.divide(rgb, white)
-        else:  # light above the board's own white is added (glare): ink takes away a share of the board's white
-            x = 1.0 - cv2.divide(local - rgb, np.minimum(local, white))
-        lo, hi = p.illumination_range
-        best = None
-        for k, (to_st, to_residual) in enumerate(zip(self._to_st, self._to_residual)):
-            s, t = cv2.split(cv2.transform(x, to_st))
-            e = cv2.transform(x, to_residual)
-            residual2 = cv2.transform(cv2.multiply(e, e), self._sum3)
-            d_k = cv2.divide(t, s)  # s ~ 0 (black: outside the camera image) is out of the illumination range below
-            if best is None:
-                best, d, ink, s_best = residual2, d_k, np.zeros(d_k.shape, np.uint8), s
-                continue
-            better = residual2 < best
-            np.copyto(best, residual2, where=better)
-            np.copyto(d, d_k, where=better)
-            np.copyto(s_best, s, where=better)
-            ink[better] = k
-        tol = p.max_residual + p.chroma_tolerance * np.clip(d, 0.0, 1.0) if p.chroma_tolerance else \
-            np.float32(p.max_residual)
-        ok = cv2.inRange(s_best, lo, hi) & cv2.inRange(d, D_RANGE[0], D_RANGE[1]) \
-            & (best <= tol * tol).view(np.uint8) * 255
-        bad = ok == 0
-        if edges is not None:  # and the sensor's clipped pixels (glare): nothing is measured there
-            bad |= edges | (cv2.inRange(rect_rgb, (0, 0, 0), (SATURATED - 1,) * 3) == 0)
+        coef = fit_white(rgb, self.looked_at, self.block_px).astype(np.float32)
+        local, edges = self._local_unkept(rgb) if self._cell else (self._no_local, self._no_edges)
+        # per pixel: the white W (the affine fit), x = rgb / W, or with a local white L (kept within white_follow
+        # of W) x = 1 - (L - rgb) / min(L, W) (light above the board's own white is added, glare: ink takes away
+        # a share of the board's white), unmixed per ink, one compiled pass
+        rows, cols = self.looked_at.shape
+        d, ink, bad8 = (np.empty((rows, cols), np.float32), np.empty((rows, cols), np.uint8),
+                        np.empty((rows, cols), np.uint8))
+        unmix_into(rect_rgb, coef, local, self._follow, edges, self._to_st, self._to_residual, self._limits,
+                   SATURATED, d, ink, bad8)
+        bad = bad8.view(bool)
         if self._speck is not None:  # colour fringes at strokes, JPEG blocks: too small to be the arm
             bad = cv2.morphologyEx(bad.view(np.uint8), cv2.MORPH_OPEN, self._speck).view(bool)
         if hidden is not None:
@@ -248,6 +240,6 @@ class InkClassifier:
         if self._grow is not None:
             bad = cv2.dilate(bad.view(np.uint8), self._grow).view(bool)
         occluded = bad & self.looked_at
-        visible = self.looked_at & ~occluded
-        d = np.where(visible, np.clip(d, 0.0, 1.0), 0.0).astype(np.float32)
-        return InkMap(d, occluded, visible & (d >= p.stain_level), self.looked_at, ink, self.names)
+        stain = np.empty(occluded.shape, bool)
+        finish_into(d, occluded, self.looked_at, p.stain_level, stain)
+        return InkMap(d, occluded, stain, self.looked_at, ink, self.names)

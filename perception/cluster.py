@@ -28,14 +28,24 @@ def disc(radius_px: float) -> np.ndarray:
 def cluster_pixels(mask: np.ndarray, eps_px: float) -> tuple[int, np.ndarray]:
     """``(n, labels)``: single-linkage clusters of the True pixels of ``mask`` (rows, cols).
 
-    labels : (rows, cols) int32, 1..n on mask pixels, 0 elsewhere.
+    labels : (rows, cols) int32, 1..n on mask pixels (numbered in raster order of their first pixel), 0
+    elsewhere. The work is done on the bounding box of the True pixels grown by the disc (a board's ink covers
+    a small share of it): the same labels as on the whole image.
     """
-    grown = cv2.dilate(mask.view(np.uint8), disc(eps_px / 2.0)) if eps_px >= 2.0 else mask.view(np.uint8)
+    out = np.zeros(mask.shape, np.int32)
+    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
+    if w == 0:
+        return 0, out
+    k = int(np.floor(eps_px / 2.0)) + 1 if eps_px >= 2.0 else 1
+    r0, r1, c0, c1 = max(y - k, 0), min(y + h + k, mask.shape[0]), max(x - k, 0), min(x + w + k, mask.shape[1])
+    sub = mask[r0:r1, c0:c1]
+    grown = cv2.dilate(sub.view(np.uint8), disc(eps_px / 2.0)) if eps_px >= 2.0 else sub.view(np.uint8)
     n, comp = cv2.connectedComponents(grown, connectivity=8, ltype=cv2.CV_32S)
-    labels = np.where(mask, comp, 0)
+    labels = np.where(sub, comp, 0)
     used = np.unique(labels[labels > 0])
     if used.size != n - 1:  # renumber 1..n
         lut = np.zeros(n, np.int32)
         lut[used] = np.arange(1, used.size + 1)
         labels = lut[labels]
-    return int(used.size), labels.astype(np.int32)
+    out[r0:r1, c0:c1] = labels
+    return int(used.size), out

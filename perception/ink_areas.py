@@ -41,15 +41,16 @@ class InkArea:
 
 
 def stroke_inks(ink: InkMap) -> np.ndarray:
-    """(rows, cols) uint8: each stain pixel's ink made that of its stroke (8-connected stain pixels), the ink
+    """(rows, cols) uint8 (meaningful on stain pixels): each stain pixel's ink made that of its stroke (8-connected stain pixels), the ink
     with the largest summed ink fraction over it; a stroke is one marker, its faint or mixed edge pixels are
     not another ink."""
     if ink.ink is None or len(ink.names) == 1:
         return np.zeros(ink.stain.shape, np.uint8)
     n, labels = cv2.connectedComponents(ink.stain.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
     k = len(ink.names)
-    weights = np.bincount((labels * k + ink.ink).ravel(), weights=ink.d.ravel(), minlength=n * k).reshape(n, k)
-    return weights.argmax(axis=1).astype(np.uint8)[labels]
+    on = ink.stain
+    weights = np.bincount(labels[on] * k + ink.ink[on], weights=ink.d[on], minlength=n * k).reshape(n, k)
+    return weights.argmax(axis=1).astype(np.uint8)[labels]  # (off the stain pixels: 0)
 
 
 def drawing_inks(ink: InkMap, link_px: float) -> np.ndarray:
@@ -67,10 +68,12 @@ def drawing_inks(ink: InkMap, link_px: float) -> np.ndarray:
     main = counts.argmax(axis=1)
     minor = (counts > 0) & (counts < MINOR_INK_SHARE * counts.sum(axis=1, keepdims=True))
     for c in np.flatnonzero(minor[1:].any(axis=1)) + 1:
-        drawing = labels == c
-        inside = hull(drawing & (strokes == main[c]))
-        move = drawing & inside & minor[c][strokes]
-        strokes[move] = main[c]
+        x, y, w, h = cv2.boundingRect((labels == c).view(np.uint8))  # the drawing's box: the work is done there
+        lab, st = labels[y:y + h, x:x + w], strokes[y:y + h, x:x + w]
+        drawing = lab == c
+        inside = hull(drawing & (st == main[c]))
+        move = drawing & inside & minor[c][st]
+        st[move] = main[c]
     return strokes
 
 

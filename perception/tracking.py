@@ -80,6 +80,9 @@ class Track:
     seen: float = 0.0
     born_t: float = 0.0
     colour: int = 0
+    reach: np.ndarray | None = None  # (box rows, box cols) bool: the core grown by link_m (kept while it holds)
+    near: np.ndarray | None = None  # (box rows, box cols) bool: the region grown by link_m
+    shape_stale: bool = True  # the core changed since ``shape`` was measured
 
     @property
     def kappa(self) -> bool:
@@ -127,7 +130,10 @@ class StainTracker:
         self._merge_touching()
         for tr in self.tracks:
             self._observe(tr, ink, visible, t_s)
-        near = cv2.dilate(owned.view(np.uint8), self._link).view(bool) if self.tracks else owned
+        near = owned.copy()  # within link_m of a stain's region: each region grown inside its box (it fits there)
+        for tr in self.tracks:
+            r0, r1, c0, c1 = tr.box
+            near[r0:r1, c0:c1] |= tr.near
         free = ink.stain & ~near
         if strokes is None:
             self._detect(free, ink, visible, t_s, 0)
@@ -138,8 +144,7 @@ class StainTracker:
     def _grow(self, tr: Track, ink: InkMap, owned: np.ndarray, strokes: np.ndarray | None) -> None:
         """Stain pixels of the stain's ink within ``link_m`` of the core (and nobody's) join the stain."""
         r0, r1, c0, c1 = tr.box
-        reach = cv2.dilate(tr.core[r0:r1, c0:c1].view(np.uint8), self._link).view(bool)
-        new = reach & ink.stain[r0:r1, c0:c1] & ~tr.core[r0:r1, c0:c1] & ~owned[r0:r1, c0:c1]
+        new = tr.reach & ink.stain[r0:r1, c0:c1] & ~tr.core[r0:r1, c0:c1] & ~owned[r0:r1, c0:c1]
         if strokes is not None:
             new &= strokes[r0:r1, c0:c1] == tr.colour
         if not new.any():
@@ -155,14 +160,11 @@ class StainTracker:
         while i < len(self.tracks):
             a = self.tracks[i]
             r0, r1, c0, c1 = a.box
-            reach = None
             for b in list(self.tracks[i + 1:]):
                 q0, q1, p0, p1 = b.box
                 if b.colour != a.colour or q0 >= r1 or r0 >= q1 or p0 >= c1 or c0 >= p1:
                     continue
-                if reach is None:
-                    reach = cv2.dilate(a.core[r0:r1, c0:c1].view(np.uint8), self._link).view(bool)
-                if not (reach & b.core[r0:r1, c0:c1]).any():
+                if not (a.reach & b.core[r0:r1, c0:c1]).any():
                     continue
                 a.core |= b.core
                 np.maximum(a.d_ref, b.d_ref, out=a.d_ref)
@@ -172,14 +174,19 @@ class StainTracker:
                 self.tracks.remove(b)
                 self._set_region(a)
                 r0, r1, c0, c1 = a.box
-                reach = None
                 self.merges += 1
             i += 1
 
     def _set_region(self, tr: Track) -> None:
+        """After the core changed: its box, region, the core and the region grown by ``link_m`` (each fits in
+        the box: the box reaches ``link_m`` + ``region_margin_m`` + 1 px past the core), the shape to measure."""
         tr.box = _box_of(tr.core, self._pad)
         r0, r1, c0, c1 = tr.box
-        tr.region[r0:r1, c0:c1] = cv2.dilate(tr.core[r0:r1, c0:c1].view(np.uint8), self._margin).view(bool)
+        core = tr.core[r0:r1, c0:c1].view(np.uint8)
+        tr.region[r0:r1, c0:c1] = cv2.dilate(core, self._margin).view(bool)
+        tr.reach = cv2.dilate(core, self._link).view(bool)
+        tr.near = cv2.dilate(tr.region[r0:r1, c0:c1].view(np.uint8), self._link).view(bool)
+        tr.shape_stale = True
 
     def _observe(self, tr: Track, ink: InkMap, visible: np.ndarray, t_s: float) -> None:
         r0, r1, c0, c1 = tr.box
@@ -198,10 +205,11 @@ class StainTracker:
         tr.visible = int(vis.sum()) / max(n, 1)
         tr.seen = int(np.count_nonzero(t_s - t_seen[reg] <= self.kp.memory_s)) / max(n, 1)
         tr.latch.update(t_s, tr.remaining, tr.seen)
-        core = tr.core[r0:r1, c0:c1]
-        rows, cols = np.nonzero(core)
-        if rows.size:
-            tr.shape = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m)
+        if tr.shape_stale:
+            tr.shape_stale = False
+            rows, cols = np.nonzero(tr.core[r0:r1, c0:c1])
+            if rows.size:
+                tr.shape = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m)
         if t_s - tr.ink_t >= INK_EVERY_S or t_s < tr.ink_t:
             tr.ink_t = t_s
             rows, cols = np.nonzero(reg & (d_last >= self.ink_level))
