@@ -28,18 +28,13 @@ on ``robot/arm``. Arming is refused, the reason named, unless the stack and
 the robot are as :func:`~robot.lbr.arming.arming_refusal` needs. Every command passes
 :func:`~robot.lbr.guards.guard_trip` first; a trip disarms.
 
-**A stop that stops.** The stack re-applies the last message for as long
-as it runs and answers every FRI cycle itself, so the robot's FRI watchdog
-never fires when commands stop (lbr_torque_command_controller.cpp:42-55,
-async_client.cpp:74-93). Holding and disarming therefore send a *hold*:
-``joint_position`` the measured pose and a zero overlay. The stack's PID
-(``c += p (target - measured)``) then leaves its joint position command
-where it is, and the robot's joint spring-damper (200 Nm/rad) brings the
-arm to rest there. A frozen target would not do: the PID integrates
-towards it, which holds a pad pressed on the board at its force and hunts
-against joint friction. A disarmed adapter sends the hold in answer to
-every state for as long as it runs; if it dies, the stack re-applies the
-last one (the pose where the arm came to rest).
+**A stop that stops.** The stack re-applies the last message for as long as it runs and answers every FRI
+cycle itself (lbr_torque_command_controller.cpp:42-55, async_client.cpp:74-93): no FRI watchdog fires.
+Holding and disarming send a *hold* (``joint_position`` the measured pose, zero overlay: the stack's PID leaves
+its command where it is, the robot's joint spring-damper brings the arm to rest), new in answer to every state
+for as long as the adapter runs; a frozen target would have the PID integrate towards it. The adapter's last
+message is the *release* (:mod:`robot.lbr.release`: the stack re-initialises its command at the measured pose,
+safe under either damping law); if it dies without one, the watchdog (:mod:`robot.lbr.watchdog`) sends it.
 
 Hold (a late or missing controller answer, ``hold``): the last command again while it is younger than
 ``stale_limit_s`` (one late answer must not step the torque), then the hold; after ``hold_timeout_s`` of
@@ -49,17 +44,13 @@ for it (:meth:`LbrPort.applying`, ``check_applied``), so the controller stands s
 up. Speed brake: the adapter declares the guard's joint speeds; the server holds above
 ``speed_brake_share`` of them.
 
-The link (:mod:`robot.lbr.watches` cites the stack): liveness from the robot's clock, since a lost FRI
-link leaves the stack re-publishing its last state; a stamp still for ``frozen_stamp_periods`` after our
-answer (in real time: a lock-step robot waits for us), a changed sample time or a clock going back disarm.
-The connection quality is in the status, warned about from FAIR, disarmed on at ``disarm_at_quality`` and
-named when commanding ends. The applied check tolerates the robot's own resolution and, armed with no
-state on a recent overlay for ``applied_stall_s``, disarms saying why.
-
-Disarming (stop, signal, controller loss, guard trip, a frozen position stream, a frozen clock, a poor
-connection, a stalled applied check, session lost, no robot state for ``hold_timeout_s``) says why (log,
-status). When the robot leaves COMMANDING_ACTIVE the stack exits (system_interface.cpp:307-318): states
-stop, the adapter disarms, and the stack must be launched again before the adapter can arm.
+The link (:mod:`robot.lbr.watches` cites the stack): liveness from the robot's clock (a lost FRI link leaves
+the stack re-publishing its last state): a stamp still for ``frozen_stamp_periods`` after our answer, a changed
+sample time or a clock going back disarm; the connection quality warned about from FAIR, disarmed on at
+``disarm_at_quality``; the applied check tolerant of the robot's resolution, disarming after ``applied_stall_s``
+with no state on a recent overlay. At rest (:mod:`robot.lbr.rest_checks`): a pad pressing refuses arming, a
+tool mass off the load data is named at arming. Every disarm says why (log, status). When the robot leaves
+COMMANDING_ACTIVE the stack exits (system_interface.cpp:307-318): launch it again before the adapter can arm.
 """
 
 from __future__ import annotations
@@ -76,12 +67,14 @@ from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.port import Reading, RobotPort
 
-from .arming import arming_refusal
+from .arming import REST_SPEED_RAD_S, arming_refusal
 from .compensation import AppliedWatch, FreezeWatch, JointSpring, TorqueUnfilter
 from .guards import GuardLimits, VelocityFilter, guard_trip
 from .msgs import (ConnectionQuality, DriveState, LbrState, LbrWireError, SafetyState, SessionState, decode_joint_names,
                    decode_state, decode_wrench, encode_torque_command, enum_name)
 from .params import LbrParams
+from .release import RELEASE_BYTES
+from .rest_checks import load_note, pad_wrench
 from .tip import stack_wrench_to_tcp
 from .watches import Clock, ClockWatch, QualityWatch, TorqueResolution, quality_name
 
@@ -89,9 +82,6 @@ log = logging.getLogger(__name__)
 
 #: The most FRI cycles a message is taken to be applied for (a longer gap between states is a gap, not a rate).
 MAX_CYCLES_PER_STATE = 20
-
-#: Damping of the pseudo-inverse that turns external joint torques into a tool wrench.
-WRENCH_DAMPING = 0.01
 
 
 class LbrPort(RobotPort):
@@ -133,6 +123,8 @@ class LbrPort(RobotPort):
         self._layout_error = ""
         self._reading = Reading(np.zeros(7), np.zeros(7), np.zeros(7), np.zeros(6), 0, dq_estimated=True)
         self._stack_wrench: np.ndarray | None = None
+        self._ext_wrench = np.zeros(6)  # the pad wrench the external torque explains (world axes)
+        self.load_note = ""  # the tool mass the external torque at rest implied at arming, when off
         self._names_ok: bool | None = None
         self._tau_prev: np.ndarray | None = None  # the controller's last torque sent
         self._tau_prev_ns = 0
@@ -386,6 +378,11 @@ class LbrPort(RobotPort):
         self._sent.reset()  # what the robot ran on before arming is not judged
         self.counts["arms"] += 1
         log.warning("lbr: ARMED (%s): commanding torques", reason or "request")
+        self.load_note = load_note(self._ext_wrench, self.p.tool_mass_kg, self.p.tool_mass_tolerance_kg) or "" \
+            if float(np.max(np.abs(self._reading.dq_rad_s))) <= REST_SPEED_RAD_S else ""
+        if self.load_note:
+            self.counts["load_mismatches"] += 1
+            log.warning("lbr: %s", self.load_note)
         return True
 
     def disarm(self, reason: str) -> None:
@@ -401,7 +398,7 @@ class LbrPort(RobotPort):
 
     def _cannot_arm(self) -> str | None:
         return arming_refusal(self._state, self.p, layout_error=self._layout_error, names_ok=self._names_ok,
-                              clock=self._clock, dq_rad_s=self._reading.dq_rad_s)
+                              clock=self._clock, dq_rad_s=self._reading.dq_rad_s, wrench=self._ext_wrench)
 
     def _poll_arm_requests(self) -> None:
         req = self._arm_requests.take()
@@ -443,13 +440,13 @@ class LbrPort(RobotPort):
         tau_ext = self._tau_external.update(st.tau_external_nm, st.stamp_ns, st.sample_time_s)
         r.robot_time_ns = st.stamp_ns
         self.spring.observe(st.q_rad, st.stamp_ns, st.sample_time_s, st.q_commanded_rad)
-        if self.p.wrench_source == "stack":
+        if self.p.wrench_source == "stack":  # the stack's estimate; the rest checks use the external torque's
             w = self._stack_wrench
             r.wrench_world = np.zeros(6) if w is None else stack_wrench_to_tcp(
                 self.model, st.q_rad, w, self.p.wrench_force_threshold_n, self.p.wrench_torque_threshold_nm)
-        else:
-            J = self.model.tcp_jacobian(st.q_rad)
-            r.wrench_world = np.linalg.solve(J @ J.T + WRENCH_DAMPING**2 * np.eye(6), J @ tau_ext)
+        self._ext_wrench = pad_wrench(self.model, st.q_rad, tau_ext)
+        if self.p.wrench_source != "stack":
+            r.wrench_world = self._ext_wrench
 
     def _send(self, joint_position: np.ndarray, overlay: np.ndarray) -> None:
         self._command_pub.put(encode_torque_command(joint_position, overlay))
@@ -489,9 +486,12 @@ class LbrPort(RobotPort):
         session = enum_name(SessionState, st.session_state) if st is not None else "none"
         quality = quality_name(self._quality.quality)
         return (f"armed={self.armed} session={session} quality={quality} fri={self.p.fri_major} "
-                f"why={self.disarm_reason[:240]!r}")
+                f"why={self.disarm_reason[:240]!r}" + (f" load={self.load_note[:160]!r}" if self.load_note else ""))
 
     def close(self) -> None:
+        if self._has_sent:  # the last message: the release, not a hold the stack's PID would integrate towards
+            self._command_pub.put(RELEASE_BYTES)
+            log.warning("lbr: sent the release (the stack re-initialises its command at the measured pose)")
         for sub in self._subs:
             sub.undeclare()
         self._subs = []

@@ -9,8 +9,10 @@ the torque interface throws outside the TORQUE client command mode
 friLBRCommand.h:118-127), ``open_loop: true`` publishes the stack's own
 command as measured (async_client.cpp:82-93), a torque filter of alpha 0
 never moves (filters.cpp:13-17,23-28), command mode needs a connection
-quality of GOOD or better (friClientIf.h:74-75,83-84), and a frozen clock is
-a lost FRI link (:class:`~robot.lbr.watches.ClockWatch`).
+quality of GOOD or better (friClientIf.h:74-75,83-84), a frozen clock is
+a lost FRI link (:class:`~robot.lbr.watches.ClockWatch`), and a pad that
+presses at rest is a stack holding a command away from the arm
+(:func:`~robot.lbr.rest_checks.preload_refusal`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from .compensation import filter_alpha
 from .msgs import (ClientCommandMode, ConnectionQuality, ControlMode, DriveState, LbrState, SafetyState, SessionState,
                    enum_name)
 from .params import LbrParams
+from .rest_checks import preload_refusal
 from .watches import ClockWatch
 
 #: Joint speed [rad/s] under which the arm counts as at rest for arming on an FRI 2 state (no commanded
@@ -29,12 +32,13 @@ REST_SPEED_RAD_S = 0.05
 
 
 def arming_refusal(st: LbrState | None, p: LbrParams, *, layout_error: str, names_ok: bool | None,
-                   clock: ClockWatch, dq_rad_s: np.ndarray) -> str | None:
+                   clock: ClockWatch, dq_rad_s: np.ndarray, wrench: np.ndarray | None = None) -> str | None:
     """Why the adapter may not arm on the newest state ``st`` (None: none yet), or None when it may.
 
     layout_error : the other FRI layout's message, if states came in it; names_ok : whether the joint names seen
     on ``joint_states`` are the configured ones (None: none seen); clock : the watch on the robot's clock;
-    dq_rad_s : (7,) the estimated joint velocity [rad/s].
+    dq_rad_s : (7,) the estimated joint velocity [rad/s]; wrench : (6,) the pad wrench the external torque
+    explains [N, Nm], world axes (None: not judged).
     """
     if layout_error:
         return layout_error
@@ -69,6 +73,9 @@ def arming_refusal(st: LbrState | None, p: LbrParams, *, layout_error: str, name
                     "changes; choose a cutoff below the sample rate")
     if names_ok is False:
         return f"joint names on {p.joint_states_topic} are not {list(p.joint_names)}"
-    if st.q_commanded_rad is None and float(np.max(np.abs(dq_rad_s))) > REST_SPEED_RAD_S:
+    at_rest = float(np.max(np.abs(dq_rad_s))) <= REST_SPEED_RAD_S
+    if st.q_commanded_rad is None and not at_rest:
         return "the arm is moving: an FRI 2 state has no commanded position, so arming waits for the arm at rest"
+    if wrench is not None and at_rest:
+        return preload_refusal(wrench, p.arm_preload_max_n, p.tool_mass_kg)
     return None

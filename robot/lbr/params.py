@@ -35,6 +35,10 @@
     speed_brake_share = 0.95                 # brake (hold) above this share of the guard's speed, or about to be
     tau_rate_nm_s = 5000.0                   # guard: torque change per second (the controller keeps to ~1000)
     limit_margin_rad = 0.05                  # guard: distance kept from the joint position limits
+    arm_preload_max_n = 3.0                  # at rest, a pad force over this (external torque) refuses arming
+    tool_mass_kg = 0.15                      # the tool's load data as set on the smartPAD (the eraser: 0.15 kg)
+    tool_mass_tolerance_kg = 0.05            # the external torque at rest implying a tool further off: say so
+    watchdog_after_s = 0.2                   # --watchdog: no command this long while states arrive: the release
     arm = false                              # arm at start-up (else: an ArmRequest on robot/arm)
 """
 
@@ -95,6 +99,10 @@ class LbrParams:
     speed_brake_share: Annotated[float, In(0.0, 1.0)] = 0.95
     tau_rate_nm_s: Annotated[float, In(1.0, 100_000.0)] = 5000.0
     limit_margin_rad: Annotated[float, In(0.0, 0.5)] = 0.05
+    arm_preload_max_n: Annotated[float, In(0.5, 100.0)] = 3.0
+    tool_mass_kg: Annotated[float, In(0.0, 14.0)] = 0.15
+    tool_mass_tolerance_kg: Annotated[float, In(0.001, 5.0)] = 0.05
+    watchdog_after_s: Annotated[float, In(0.01, 10.0)] = 0.2
     arm: bool = False
 
     def __post_init__(self) -> None:

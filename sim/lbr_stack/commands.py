@@ -2,7 +2,8 @@
 
 The lbr peer's (:mod:`sim.lbr_stack.peer`) inbox for ``<namespace>/command/torque``: valid messages kept in order
 (lock-step) or the newest taken (real time); undecodable, wrong-length or non-finite ones dropped and counted by
-reason (the bridge would not deliver them as ``LBRTorqueCommand``).
+reason (the bridge would not deliver them as ``LBRTorqueCommand``), except the release (robot/lbr/release.py:
+``joint_position`` NaN, zero torque), which reaches the stack as it would the real one (counted ``releases_received``).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 import zenoh
 
 from robot.lbr.msgs import N_JOINTS, LbrWireError, decode_torque_command
+from robot.lbr.release import RELEASE_JOINT_POSITION, RELEASE_TORQUE, is_release
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +53,7 @@ class CommandBox:
         self.key = key
         self.received = 0
         self.overflowed = 0
+        self.releases = 0
         self.dropped: Counter[str] = Counter()
         self._queue: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=maxlen)
         self._ready = threading.Condition()
@@ -63,6 +66,10 @@ class CommandBox:
 
     def _decode(self, raw: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         """The command in ``raw``, or None (counted by reason, logged at most every few seconds)."""
+        if is_release(raw):
+            with self._ready:
+                self.releases += 1
+            return RELEASE_JOINT_POSITION.copy(), RELEASE_TORQUE.copy()
         try:
             return decode_torque_command(raw)
         except LbrWireError as exc:
@@ -116,7 +123,8 @@ class CommandBox:
 
     def counters(self) -> dict[str, int]:
         with self._ready:
-            out = {"commands_received": self.received, "commands_overflowed": self.overflowed}
+            out = {"commands_received": self.received, "commands_overflowed": self.overflowed,
+                   "releases_received": self.releases}
             out.update({f"commands_dropped_{reason}": n for reason, n in self.dropped.items()})
         return out
 

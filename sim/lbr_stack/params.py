@@ -25,6 +25,10 @@ pid_p, pid_i, pid_d, pid_i_max, pid_i_min : the stack's PID on the commanded joi
 measured_torque_cutoff_hz, external_torque_cutoff_hz : the stack's low-pass on those torques [Hz].
 joint_stiffness_nm_rad : the app's joint impedance (LBRServer.java: 200 on every joint) [Nm/rad].
 joint_damping_ratio : its damping (not set by the app: the robot's default, 0.7).
+joint_damping_law : ``relative`` | ``absolute``: the robot damps the commanded position's rate against the arm's
+(``D (dq_cmd - dq)``) or the arm's rate alone (``-D dq``); KUKA's law is in no public code (robot/lbr/release.py).
+tool_load_error_kg : the tool's mass the robot's load data leaves out (0: set right; the eraser's 0.15: none set):
+its weight is not compensated and shows in the external torque [kg].
 ft_update_rate_hz, ft_damping, ft_force_threshold_n, ft_torque_threshold_nm : the stack's wrench estimate
 (rate 0: the branch's, a 100 Hz thread on rolling, every controller-manager cycle on humble).
 commanding_after_s : robot time at which the operator has started the app (COMMANDING_WAIT) [s].
@@ -58,6 +62,7 @@ from robot.lbr.msgs import (FRI_MAJORS, N_JOINTS, ClientCommandMode, ControlMode
 
 MODES = ("lockstep", "realtime")
 MANAGER_CLOCKS = ("own", "fri")
+DAMPING_LAWS = ("relative", "absolute")
 BRANCHES = ("rolling", "jazzy", "humble")
 OPERATION_MODES = {"T1": OperationMode.TEST_MODE_1, "T2": OperationMode.TEST_MODE_2,
                    "AUT": OperationMode.AUTOMATIC_MODE}
@@ -95,6 +100,8 @@ class LbrPeerParams:
     external_torque_cutoff_hz: Annotated[float, In(0.0, 10_000.0)] = 10.0
     joint_stiffness_nm_rad: Annotated[float, In(0.0, 5000.0)] = 200.0
     joint_damping_ratio: Annotated[float, In(0.0, 1.0)] = 0.7
+    joint_damping_law: str = "relative"
+    tool_load_error_kg: Annotated[float, In(-14.0, 14.0)] = 0.0
     ft_update_rate_hz: float = 0.0
     ft_damping: Annotated[float, In(0.0, 10.0)] = 0.2
     ft_force_threshold_n: Annotated[float, In(0.0, 1000.0)] = 2.0
@@ -123,7 +130,7 @@ class LbrPeerParams:
                               f"'/'-separated), got {self.namespace!r}")
         object.__setattr__(self, "namespace", self.namespace.strip("/"))
         for name, allowed in (("mode", MODES), ("branch", BRANCHES), ("operation_mode", tuple(OPERATION_MODES)),
-                              ("manager_clock", MANAGER_CLOCKS),
+                              ("manager_clock", MANAGER_CLOCKS), ("joint_damping_law", DAMPING_LAWS),
                               ("client_command_mode", tuple(COMMAND_MODES)),
                               ("control_mode", tuple(CONTROL_MODES))):
             if getattr(self, name) not in allowed:

@@ -49,6 +49,13 @@ files, lines and commits is docs/real-robot.md):
   falls EXCELLENT, GOOD, FAIR, POOR; below GOOD for
   ``quality_abort_after_s`` the robot ends commanding (MONITORING_WAIT) and
   the stack exits.
+* **The joint damping law** (``joint_damping_law``): ``D (dq_cmd - dq)``
+  or ``-D dq`` (robot/lbr/release.py: the hold a dead adapter leaves is
+  stable under the first only). **The tool's load data**
+  (``tool_load_error_kg``): the mass it leaves out weighs on the arm and
+  shows in the external torque.
+* **The release** (``joint_position`` NaN): the stack re-initialises its
+  command at the measured pose every cycle (torque_command.cpp:20-25).
 * **commanded_torque** is the robot's last command, rounded to
   ``commanded_torque_resolution_nm`` and biased by
   ``commanded_torque_offset_nm`` when those are set (a robot that does not
@@ -259,12 +266,13 @@ class LbrPeer:
         if command is not None and session == SessionState.COMMANDING_ACTIVE and \
                 self._control_mode == CONTROL_MODES["joint_impedance"]:
             prev = self._robot_command
-            dq_cmd = (command.joint_position - prev.joint_position) / self._dt if prev is not None else self._zeros
+            dq_cmd = (command.joint_position - prev.joint_position) / self._dt \
+                if prev is not None and self.p.joint_damping_law == "relative" else self._zeros
             self._robot_command = command
             damping = impedance_damping(self._stiffness, self.p.joint_damping_ratio, self._inertia_diag(o.q))
             for _ in range(self.port.substeps):
                 core.step(joint_impedance_torque(command.torque, command.joint_position, dq_cmd, o.q, o.dq,
-                                                 self._stiffness, damping))
+                                                 self._stiffness, damping) + self._unloaded_torque())
             self.counters["cycles_commanding"] += 1
             spring = float(np.max(np.abs(self._stiffness * (command.joint_position - o.q))))
             self.spring_max_nm = max(self.spring_max_nm, spring)
@@ -310,8 +318,16 @@ class LbrPeer:
     def _external_torque(self) -> np.ndarray:
         o = self.core.out
         if np.any(o.wrench):
-            return external_torque_nm(self.model.tcp_jacobian(o.q), o.wrench)
-        return self._zeros  # free space: no Jacobian needed
+            return external_torque_nm(self.model.tcp_jacobian(o.q), o.wrench) + self._unloaded_torque()
+        return self._unloaded_torque()  # free space: no contact
+
+    def _unloaded_torque(self) -> np.ndarray:
+        """(7,) [Nm] the weight of the tool mass the robot's load data leaves out (``tool_load_error_kg``), at the
+        pad: not compensated by the robot, so it is in the torque it applies and in the external torque."""
+        m = self.p.tool_load_error_kg
+        if m == 0.0:
+            return self._zeros
+        return external_torque_nm(self.model.tcp_jacobian(self.core.out.q), np.array([0, 0, -m * 9.81, 0, 0, 0]))
 
     def _inertia_diag(self, q: np.ndarray) -> np.ndarray:
         return np.diag(pin.crba(self.model.model, self.model.data, q)).copy()
