@@ -27,7 +27,6 @@ Order: profile, then the random errors, then ``mass_scale`` / ``inertia_scale`` 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Annotated, Any
 
@@ -143,7 +142,3 @@ class PlantParams:
         m = m0 + self.tool_mass_kg
         return m, tuple((m0 * a + self.tool_mass_kg * b) / m for a, b in zip(c0, self.tool_com_m))
 
-
-def com_offset_bound_ok(offsets: tuple[tuple[float, float, float], ...], bound_m: float) -> bool:
-    """Every (3,) offset no longer than ``bound_m`` [m] (a test's check of the random errors)."""
-    return all(math.sqrt(sum(v * v for v in o)) <= bound_m + 1e-12 for o in offsets)
