@@ -1,6 +1,6 @@
 """Today's controller on simulated arms that are not its model: the baseline for issue 49's controller work.
 
-Usage: .venv/bin/python bench/bench_plant.py [--seed 0] [--modes off,on] [--json OUT]
+Usage: .venv/bin/python bench/bench_plant.py [--seed 0] [--modes off,on] [--plants main|extra|all] [--json OUT]
 
 Each plant is one network-free lock-step cell (``lamps up --no-network``, :mod:`launch.local_cell`: the
 compose file's sim, controller, perception and recorder in one process), the default wall board with the
@@ -13,6 +13,10 @@ the sim only); the controller loads the description as always. Plants:
   eraser's centre of mass (0, 0, 0.0175) m;
 * ``+30 % links, +1.0 kg tool``: x1.30 and 1.0 kg;
 * ``stuerz2017``: the identified link masses (:data:`sim.plant_params.STUERZ_2017_LINK_MASS_KG`).
+
+``--plants extra`` (or ``all``): the measured state 3 periods late on the nominal arm, and one seeded plant of
+issue 49's campaign bounds (link masses and inertias within +-30 %, centres of mass within 2 cm, 1.5 kg more
+on the flange; plant seed 1).
 
 Each in both robot modes unless ``--modes`` says otherwise: ``off`` (``gravity_compensated = false``, the
 default cell: the controller compensates gravity with its nominal model) and ``on`` (the simulated robot
@@ -42,6 +46,12 @@ PLANTS: dict[str, dict[str, str]] = {
     "+30 % links, +1.0 kg tool": {"MASS_SCALE": "1.3", "INERTIA_SCALE": "1.3", "TOOL_MASS_KG": "1.0"},
     "stuerz2017 (identified link masses)": {"PROFILE": '"stuerz2017"'},
 }
+#: More plants (``--plants extra``): label -> [sim.plant] overrides.
+EXTRA: dict[str, dict[str, str]] = {
+    "nominal, measured state 3 periods late": {"STATE_DELAY_PERIODS": "3"},
+    "random links +-30 %, CoM <= 2 cm, +1.5 kg tool (plant seed 1)": {
+        "RANDOM_MASS_ERROR": "0.3", "RANDOM_COM_ERROR_M": "0.02", "TOOL_MASS_KG": "1.5", "SEED": "1"},
+}
 MODES = {"off": "false", "on": "true"}
 
 
@@ -69,8 +79,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--modes", default="off,on", help="robot gravity compensation: off, on or off,on")
+    ap.add_argument("--plants", choices=("main", "extra", "all"), default="main")
     ap.add_argument("--json", type=Path, help="also write the figures as JSON")
     a = ap.parse_args()
+    plants = {"main": PLANTS, "extra": EXTRA, "all": {**PLANTS, **EXTRA}}[a.plants]
     modes = [m.strip() for m in a.modes.split(",") if m.strip()]
     if not modes or any(m not in MODES for m in modes):
         ap.error(f"--modes takes {', '.join(MODES)} (comma separated), got {a.modes!r}")
@@ -78,7 +90,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench-plant-") as tmp:
         skill = None
         for mode in modes:
-            for i, (label, plant) in enumerate(PLANTS.items()):
+            for i, (label, plant) in enumerate(plants.items()):
                 out = Path(tmp) / f"{mode}-{i}"
                 res = run_cell(out, a.seed, plant, mode, skill)
                 if skill is None:
@@ -96,7 +108,8 @@ def main() -> int:
               f"{r['tracking_rms_m'] * 1e3:.1f} mm |")
     print(f"\n{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}")
     cmd = ".venv/bin/python bench/bench_plant.py" + (f" --seed {a.seed}" if a.seed else "") \
-        + ("" if a.modes == "off,on" else f" --modes {a.modes}")
+        + ("" if a.modes == "off,on" else f" --modes {a.modes}") \
+        + ("" if a.plants == "main" else f" --plants {a.plants}")
     print(f"reproduce: {cmd}")
     if a.json:
         from lampskit.atomic import write_text_atomic
