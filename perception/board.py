@@ -26,6 +26,11 @@ from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
 
 from .params import BoardParams
 
+#: A marker is looked for again within this share of its size around its last corners.
+WINDOW_PAD = 0.6
+#: ... and at least this many pixels (the detector's threshold windows and corner refinement fit inside) [px].
+WINDOW_MIN_PX = 32
+
 
 def make_detector(layout: MarkerLayout = DEFAULT_LAYOUT) -> cv2.aruco.ArucoDetector:
     """An ArUco detector for the layout's dictionary with sub-pixel corner refinement."""
@@ -175,11 +180,12 @@ class BoardTracker:
         self.detector = make_detector(self.layout)
         self.size_m: tuple[float, float] | None = None if params.size_m == (0.0, 0.0) else params.size_m
         self.last: BoardEstimate | None = None
+        self._corners: dict[int, np.ndarray] = {}  # the markers seen in the last frame
         self.why = ""  # why the last frame gave no fresh pose
 
     def update(self, grey: np.ndarray, K: np.ndarray, T_camera_to_world: np.ndarray, t_s: float) -> BoardEstimate | None:
         """The board in this frame (``grey`` (H, W) uint8); None until it has been found once."""
-        markers = detect_markers(self.detector, grey, self.layout.ids)
+        markers = self._detect(grey)
         reason = self._why_not(markers)
         T_bc, size = None, self.size_m
         if not reason:
@@ -207,6 +213,30 @@ class BoardTracker:
         self.last = BoardEstimate(T_bw, T_bc, size, "seen", tuple(sorted(markers)), t_s, moved)
         return self.last
 
+    def _detect(self, grey: np.ndarray) -> dict[int, np.ndarray]:
+        """The board's markers in ``grey``: where all four were in the last frame, each is looked for in a window
+        around its last corners (:data:`WINDOW_PAD` of its size on every side: a frame at 30 Hz moves a marker
+        a few pixels); when one is not found there, or fewer were seen, in the whole image. The detector's
+        thresholds are local (windows of at most 23 px) and its corner refinement is local too, so a window
+        gives the corners the whole image gives, in a fraction of the pixels."""
+        last = self._corners
+        if len(last) == len(self.layout.ids):
+            found: dict[int, np.ndarray] = {}
+            rows, cols = grey.shape[:2]
+            for i, c in last.items():
+                pad = max(WINDOW_PAD * float(np.ptp(c, axis=0).max()), WINDOW_MIN_PX)
+                x0, y0 = (max(int(np.floor(v - pad)), 0) for v in c.min(axis=0))
+                x1, y1 = int(np.ceil(c[:, 0].max() + pad)), int(np.ceil(c[:, 1].max() + pad))
+                got = detect_markers(self.detector, grey[y0:min(y1, rows), x0:min(x1, cols)], (i,))
+                if i not in got:
+                    break
+                found[i] = got[i] + np.array([x0, y0], float)
+            else:
+                self._corners = found
+                return found
+        self._corners = detect_markers(self.detector, grey, self.layout.ids)
+        return self._corners
+
     def _why_not(self, markers: dict[int, np.ndarray]) -> str:
         if not markers:
             return "no markers seen"
@@ -228,4 +258,5 @@ class BoardTracker:
     def reset(self) -> None:
         """Forget the board (and its measured size unless configured)."""
         self.last = None
+        self._corners = {}
         self.size_m = None if self.p.size_m == (0.0, 0.0) else self.p.size_m

@@ -55,6 +55,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .occlusion import BorderClosing, open_local
 from .params import InkParams
 from .unmix import finish_into, unmix_into
 
@@ -181,7 +182,8 @@ class InkClassifier:
         o = int(np.ceil(params.occlusion_min_m / resolution_m / 2))
         self._speck = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * o + 1, 2 * o + 1)) if o > 0 else None
         c = int(np.ceil(params.occlusion_fill_m / resolution_m / 2))
-        self._fill = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * c + 1, 2 * c + 1)) if c > 0 else None
+        self._fill = BorderClosing(~looked_at, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * c + 1, 2 * c + 1))
+                                   ) if c > 0 else None
         # the local white: cells of a quarter of white_fill_m, closed over white_fill_m (4 cells + 1)
         self._cell = max(int(round(params.white_fill_m / 4 / resolution_m)), 1) if params.white_fill_m > 0 else 0
         if self._cell:
@@ -230,12 +232,11 @@ class InkClassifier:
                    SATURATED, d, ink, bad8)
         bad = bad8.view(bool)
         if self._speck is not None:  # colour fringes at strokes, JPEG blocks: too small to be the arm
-            bad = cv2.morphologyEx(bad.view(np.uint8), cv2.MORPH_OPEN, self._speck).view(bool)
+            bad = open_local(bad.view(np.uint8), self._speck).view(bool)
         if hidden is not None:
             bad |= hidden
         if self._fill is not None:  # highlights on the arm, gaps between its links: not board to judge
-            bad |= ~self.looked_at
-            bad = cv2.morphologyEx(bad.view(np.uint8), cv2.MORPH_CLOSE, self._fill).view(bool)
+            bad = self._fill.close(bad.view(np.uint8)).view(bool)  # closed together with the border never judged
         bad &= self.looked_at
         if self._grow is not None:
             bad = cv2.dilate(bad.view(np.uint8), self._grow).view(bool)
