@@ -181,6 +181,9 @@ class BoardTracker:
         self.size_m: tuple[float, float] | None = None if params.size_m == (0.0, 0.0) else params.size_m
         self.last: BoardEstimate | None = None
         self._corners: dict[int, np.ndarray] = {}  # the markers seen in the last frame
+        self._windows = make_detector(self.layout)
+        self._image_params = self.detector.getDetectorParameters()
+        self._window_params = self._windows.getDetectorParameters()
         self.why = ""  # why the last frame gave no fresh pose
 
     def update(self, grey: np.ndarray, K: np.ndarray, T_camera_to_world: np.ndarray, t_s: float) -> BoardEstimate | None:
@@ -227,7 +230,8 @@ class BoardTracker:
                 pad = max(WINDOW_PAD * float(np.ptp(c, axis=0).max()), WINDOW_MIN_PX)
                 x0, y0 = (max(int(np.floor(v - pad)), 0) for v in c.min(axis=0))
                 x1, y1 = int(np.ceil(c[:, 0].max() + pad)), int(np.ceil(c[:, 1].max() + pad))
-                got = detect_markers(self.detector, grey[y0:min(y1, rows), x0:min(x1, cols)], (i,))
+                window = grey[y0:min(y1, rows), x0:min(x1, cols)]
+                got = detect_markers(self._window_detector(max(rows, cols) / max(window.shape)), window, (i,))
                 if i not in got:
                     break
                 found[i] = got[i] + np.array([x0, y0], float)
@@ -236,6 +240,16 @@ class BoardTracker:
                 return found
         self._corners = detect_markers(self.detector, grey, self.layout.ids)
         return self._corners
+
+    def _window_detector(self, scale: float) -> cv2.aruco.ArucoDetector:
+        """The detector for a window ``scale`` times smaller than the image: its perimeter limits are rates of
+        the image's size, so they are scaled to keep the whole image's limits in pixels (a window's own would
+        let every small contour in it be tried as a marker)."""
+        params = self._window_params
+        params.minMarkerPerimeterRate = self._image_params.minMarkerPerimeterRate * scale
+        params.maxMarkerPerimeterRate = self._image_params.maxMarkerPerimeterRate * scale
+        self._windows.setDetectorParameters(params)
+        return self._windows
 
     def _why_not(self, markers: dict[int, np.ndarray]) -> str:
         if not markers:

@@ -236,7 +236,8 @@ class InkClassifier:
         if hidden is not None:
             bad |= hidden
         if self._fill is not None:  # highlights on the arm, gaps between its links: not board to judge
-            bad = self._fill.close(bad.view(np.uint8)).view(bool)  # closed together with the border never judged
+            # closed together with the border never judged (what is not board there is in the border already)
+            bad = self._fill.close((bad & self.looked_at).view(np.uint8)).view(bool)
         bad &= self.looked_at
         if self._grow is not None:
             bad = cv2.dilate(bad.view(np.uint8), self._grow).view(bool)

@@ -135,7 +135,9 @@ class StainTracker:
             r0, r1, c0, c1 = tr.box
             near[r0:r1, c0:c1] |= tr.near
         free = ink.stain & ~near
-        if strokes is None:
+        if not free.any():  # no new ink anywhere: every candidate is gone (what each ink's search would find)
+            self._candidates = []
+        elif strokes is None:
             self._detect(free, ink, visible, t_s, 0)
         else:
             for k in range(len(ink.names)):

@@ -14,8 +14,10 @@ calls per ink plus a dozen full-image temporaries (a real board with six
 inks: ~40 ms a 0.8 x 0.7 m board at 2 mm). Here it is one loop over the
 pixels that reads the rectified image and the white once, keeps every
 intermediate in registers and writes ``d``, the ink index and the bad mask:
-the arithmetic is the same, in float32 (results equal the array
-formulation to float32 rounding: ``tests/test_perception_units.py``).
+the arithmetic is the same, in float32, with the reassociation and
+contraction of ``fastmath`` (no assumption about NaN or infinity): results
+equal the array formulation within float32 rounding
+(``tests/test_perception_rate.py``).
 ``cache=True`` keeps the machine code in ``__pycache__`` (or
 ``NUMBA_CACHE_DIR``); the kernel lets go of the GIL (``nogil``: a frame's
 few milliseconds should not hold the service's Zenoh threads).
@@ -27,7 +29,7 @@ import numba as nb
 import numpy as np
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath={"nsz", "arcp", "contract", "reassoc"})
 def unmix_into(rgb: np.ndarray, white_coef: np.ndarray, local: np.ndarray, follow: np.ndarray, edges: np.ndarray,
                to_st: np.ndarray, to_res: np.ndarray, limits: np.ndarray, saturated: int, d_out: np.ndarray,
                ink_out: np.ndarray, bad_out: np.ndarray) -> None:
@@ -85,6 +87,7 @@ def unmix_into(rgb: np.ndarray, white_coef: np.ndarray, local: np.ndarray, follo
             q0, q1, q2, q3 = to_res[k, 1, 0], to_res[k, 1, 1], to_res[k, 1, 2], to_res[k, 1, 3]
             r0, r1, r2, r3 = to_res[k, 2, 0], to_res[k, 2, 1], to_res[k, 2, 2], to_res[k, 2, 3]
             kk = np.uint8(k)
+            first = k == 0
             for j in range(cols):
                 u0, u1, u2 = x0[j], x1[j], x2[j]
                 e0 = p0 * u0 + p1 * u1 + p2 * u2 + p3
@@ -93,7 +96,7 @@ def unmix_into(rgb: np.ndarray, white_coef: np.ndarray, local: np.ndarray, follo
                 res2 = e0 * e0 + e1 * e1 + e2 * e2
                 s = a0 * u0 + a1 * u1 + a2 * u2 + a3
                 t = b0 * u0 + b1 * u1 + b2 * u2 + b3
-                take = k == 0 or res2 < best[j]  # the first ink on a tie
+                take = first or res2 < best[j]  # the first ink on a tie
                 best[j] = res2 if take else best[j]
                 s_best[j] = s if take else s_best[j]
                 t_best[j] = t if take else t_best[j]
@@ -111,7 +114,7 @@ def unmix_into(rgb: np.ndarray, white_coef: np.ndarray, local: np.ndarray, follo
             bad_out[i, j] = 1 if bad else 0
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def finish_into(d: np.ndarray, occluded: np.ndarray, looked_at: np.ndarray, stain_level: float,
                 stain_out: np.ndarray) -> None:
     """In place: ``d`` (rows, cols) float32 clipped to [0, 1] where visible (``looked_at`` and not ``occluded``,
