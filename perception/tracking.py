@@ -45,6 +45,7 @@ from .cluster import cluster_pixels, disc
 from .kappa import KappaLatch
 from .params import KappaParams, StainParams
 from .rectify import BoardGrid
+from .track_kernels import observe_into
 
 #: The shape of a stain's remaining ink is refreshed at most this often [s].
 INK_EVERY_S = 0.2
@@ -193,19 +194,13 @@ class StainTracker:
     def _observe(self, tr: Track, ink: InkMap, visible: np.ndarray, t_s: float) -> None:
         r0, r1, c0, c1 = tr.box
         reg = tr.region[r0:r1, c0:c1]
-        vis = visible[r0:r1, c0:c1] & reg
         d = cv2.blur(ink.d[r0:r1, c0:c1], (3, 3))  # 3x3 mean: the reference, a maximum over time, not raised by noise
-        d_last, d_ref, t_seen = tr.d_last[r0:r1, c0:c1], tr.d_ref[r0:r1, c0:c1], tr.t_seen[r0:r1, c0:c1]
-        d_last[vis] = d[vis]
-        t_seen[vis] = t_s
-        np.maximum(d_ref, np.where(vis, d, 0.0), out=d_ref)
-        n = int(reg.sum())
-        c = self.clean_level
-        ref = float(np.maximum(d_ref[reg] - c, 0.0).sum())
-        left = float(np.maximum(d_last[reg] - c, 0.0).sum())
+        d_last = tr.d_last[r0:r1, c0:c1]
+        n, ref, left, n_vis, n_seen = observe_into(reg, visible[r0:r1, c0:c1], d, d_last, tr.d_ref[r0:r1, c0:c1],
+                                                   tr.t_seen[r0:r1, c0:c1], t_s, self.clean_level, self.kp.memory_s)
         tr.remaining = float(np.clip(left / ref, 0.0, 1.0)) if ref > 0 else 1.0
-        tr.visible = int(vis.sum()) / max(n, 1)
-        tr.seen = int(np.count_nonzero(t_s - t_seen[reg] <= self.kp.memory_s)) / max(n, 1)
+        tr.visible = n_vis / max(n, 1)
+        tr.seen = n_seen / max(n, 1)
         tr.latch.update(t_s, tr.remaining, tr.seen)
         if tr.shape_stale:
             tr.shape_stale = False
