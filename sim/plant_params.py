@@ -57,12 +57,15 @@ DESCRIBED_TOOL_COM_M = (0.0, 0.0, 0.0175)
 
 def _vector_in(section: str, name: str, value: Any, n: int, lo: float, hi: float) -> tuple[float, ...]:
     """``value`` as ``n`` floats each in [lo, hi] (a single number is taken for all ``n``), else ConfigError."""
+    given = value
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         value = [value] * n
-    out = check_vector(section, name, value, n)
-    for v in out:
-        if not lo <= v <= hi:
-            raise ConfigError(f"[{section}] {name} must be {n} numbers each in [{lo}, {hi}], got {list(value)!r}")
+    try:
+        out = check_vector(section, name, value, n)
+    except ConfigError:
+        out = ()
+    if len(out) != n or not all(lo <= v <= hi for v in out):
+        raise ConfigError(f"[{section}] {name} must be {n} numbers each in [{lo}, {hi}], got {given!r}")
     return out
 
 

@@ -67,7 +67,7 @@ def test_a_declared_plant_setting_holds_its_default_and_refuses_values_past_eith
 
 
 @pytest.mark.parametrize("table, match", [
-    ({"mass_scale": [1.0] * 6}, r"\[sim.plant\] mass_scale must be a list of 7"),
+    ({"mass_scale": [1.0] * 6}, r"\[sim.plant\] mass_scale must be 7 numbers each in \[0.2, 3.0\], got \[1.0,"),
     ({"mass_scale": [1.0] * 6 + [4.0]}, r"\[sim.plant\] mass_scale must be 7 numbers each in \[0.2, 3.0\]"),
     ({"inertia_scale": 0.1}, r"\[sim.plant\] inertia_scale must be 7 numbers each in \[0.2, 3.0\]"),
     ({"com_offset_m": [[0, 0, 0]] * 6}, r"\[sim.plant\] com_offset_m must be 7 rows"),
