@@ -9,6 +9,7 @@ Layout (every key optional)::
     tool_mask = true            # the robot's tool (from robot/state) is not board: masked out of the image
     tool_margin_m = 0.01        # ... its shadow from the camera on the board grown by this [m]
     tool_max_age_s = 0.1        # ... from the joint state nearest the frame's time, if this near [s]
+    arm_mask = false            # every link of the arm masked too, grown by the state's age times its speed
     [perception.board]   size_m, resolution_m, min_markers, hold_s, max_reprojection_px, ...
     [perception.ink]     inks, board_rgb, stain_level, clean_level, illumination_range, white_fill_m, ...
     [perception.stains]  link_m, min_area_m2, confirm_s, region_margin_m
@@ -290,6 +291,7 @@ class PerceptionParams:
     tool_mask: bool = True
     tool_margin_m: Annotated[float, In(0.0, 0.1)] = 0.01
     tool_max_age_s: Annotated[float, In(0.001, 5.0)] = 0.1
+    arm_mask: bool = False
     board: BoardParams = field(default_factory=BoardParams)
     ink: InkParams = field(default_factory=InkParams)
     stains: StainParams = field(default_factory=StainParams)
@@ -306,6 +308,8 @@ class PerceptionParams:
             raise ConfigError(f"[{s}] debug_images must be true or false, got {self.debug_images!r}")
         if not isinstance(self.tool_mask, bool):
             raise ConfigError(f"[{s}] tool_mask must be true or false, got {self.tool_mask!r}")
+        if not isinstance(self.arm_mask, bool):
+            raise ConfigError(f"[{s}] arm_mask must be true or false, got {self.arm_mask!r}")
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any]) -> "PerceptionParams":

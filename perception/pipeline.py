@@ -20,6 +20,7 @@ import numpy as np
 from interfaces.messages import StainObservation, Stains
 from interfaces.transforms import pose_from_transform
 
+from .arm_mask import ArmSilhouette, ArmState
 from .board import BoardEstimate, BoardTracker
 from .classify import InkClassifier, InkMap
 from .frames import Frame
@@ -64,6 +65,7 @@ class Perception:
         self._last_t: float | None = None
         self._seq = 0
         self.resets = 0
+        self.arm_silhouette: ArmSilhouette | None = None  # made at the first frame with an arm state
 
     def reset(self) -> None:
         """Forget the board and its stains (a restarted source, another board)."""
@@ -72,9 +74,11 @@ class Perception:
         self._first_fix_t = None
         self.resets += 1
 
-    def process(self, frame: Frame, tool_world_m: np.ndarray | None = None) -> Result:
+    def process(self, frame: Frame, tool_world_m: np.ndarray | None = None, arm: ArmState | None = None) -> Result:
         """The board and its stains in ``frame``; ``tool_world_m`` (n, 3) [m]: the robot's tool box at the
-        frame's time (:mod:`perception.self_filter`), whose shadow from the camera on the board is occluded."""
+        frame's time (:mod:`perception.self_filter`), whose shadow from the camera on the board is occluded;
+        ``arm``: the joint state nearest the frame, whose every link's shadow is occluded
+        (:mod:`perception.arm_mask`)."""
         timing: dict[str, float] = {}
         t0 = time.perf_counter()
         if self._last_t is not None and frame.t_s < self._last_t - CLOCK_RESTART_S:
@@ -103,6 +107,13 @@ class Perception:
             camera = frame.T_camera_to_world[:3, 3]
             hidden = shadow_mask(self.grid, board_shadow(tool_world_m, est.T_board_to_world, camera),
                                  self.p.tool_margin_m)
+        if arm is not None:
+            if self.arm_silhouette is None:
+                self.arm_silhouette = ArmSilhouette()
+            links = self.arm_silhouette.board_mask(self.grid, est.T_board_to_world, frame.T_camera_to_world[:3, 3],
+                                                   arm, self.p.tool_margin_m)
+            hidden = links if hidden is None else hidden | links
+        if tool_world_m is not None or arm is not None:
             t_mask = time.perf_counter()
             timing["mask"] = (t_mask - t2) * 1e3
             t2 = t_mask

@@ -102,24 +102,39 @@ class ToolTrack:
         self.used = 0
         self.unknown = 0
 
-    def add(self, robot_time_ns: int, q_rad, arrived_s: float) -> None:
+    def add(self, robot_time_ns: int, q_rad, arrived_s: float, dq_rad_s=None) -> None:
         q = np.asarray(q_rad, float)
-        if q.shape != (self._model.nq,) or not np.isfinite(q).all():
+        dq = np.zeros_like(q) if dq_rad_s is None else np.asarray(dq_rad_s, float)
+        if q.shape != (self._model.nq,) or not np.isfinite(q).all() or dq.shape != q.shape \
+                or not np.isfinite(dq).all():
             return  # the decoder checked the message; a wrong arm is not ours to mask
-        self._states.append((int(robot_time_ns), float(arrived_s), q))
+        self._states.append((int(robot_time_ns), float(arrived_s), q, dq))
+
+    def _nearest(self, frame_robot_time_ns: int, now_s: float, count: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """``(q, dq, age_s)`` of the state for the frame (the class docstring), or None; counted (``count``)."""
+        states = self._states
+        got = None
+        if states and frame_robot_time_ns > 0:
+            t, _, q_near, dq = min(states, key=lambda s: abs(s[0] - frame_robot_time_ns))
+            if abs(t - frame_robot_time_ns) * 1e-9 <= self.max_age_s:
+                got = q_near, dq, (frame_robot_time_ns - t) * 1e-9
+        elif states and now_s - states[-1][1] <= self.max_age_s:
+            got = states[-1][2], states[-1][3], now_s - states[-1][1]
+        if count:
+            self.used += got is not None
+            self.unknown += got is None
+        return got
 
     def corners_at(self, frame_robot_time_ns: int, now_s: float) -> np.ndarray | None:
         """World points (8, 3) [m] of the tool box at the frame's time, or None (no state near enough)."""
-        states = self._states
-        q = None
-        if states and frame_robot_time_ns > 0:
-            t, _, q_near = min(states, key=lambda s: abs(s[0] - frame_robot_time_ns))
-            if abs(t - frame_robot_time_ns) * 1e-9 <= self.max_age_s:
-                q = q_near
-        elif states and now_s - states[-1][1] <= self.max_age_s:
-            q = states[-1][2]
-        if q is None:
-            self.unknown += 1
-            return None
-        self.used += 1
-        return tool_corners(*self._model.tcp_pose(q))
+        got = self._nearest(frame_robot_time_ns, now_s)
+        return None if got is None else tool_corners(*self._model.tcp_pose(got[0]))
+
+    def arm_at(self, frame_robot_time_ns: int, now_s: float):
+        """The :class:`~perception.arm_mask.ArmState` for the frame (joint positions and speeds, and how far the
+        state is from the frame's time), or None (no state near enough)."""
+        from .arm_mask import ArmState
+
+        got = self._nearest(frame_robot_time_ns, now_s, count=False)  # counted once, by corners_at
+        return None if got is None else ArmState(got[0], got[1], float(got[2]))

@@ -95,13 +95,19 @@ class PerceptionService:
         if self.tool is None:
             return None
         for state in self._robot_states.take_all():
-            self.tool.add(state.robot_time_ns, state.q_rad, now)
+            self.tool.add(state.robot_time_ns, state.q_rad, now, state.dq_rad_s)
         return self.tool.corners_at(frame.robot_time_ns, now)
+
+    def _arm_at(self, frame, now: float):
+        """With ``arm_mask``: the joint state for the frame (:meth:`ToolTrack.arm_at`), or None."""
+        if self.tool is None or not self.p.arm_mask:
+            return None
+        return self.tool.arm_at(frame.robot_time_ns, now)
 
     def _handle(self, frame, now: float) -> None:
         t0 = time.perf_counter()
         try:
-            result = self.perception.process(frame, self._tool_at(frame, now))
+            result = self.perception.process(frame, self._tool_at(frame, now), self._arm_at(frame, now))
         except Exception as exc:  # never the loop's end: count, log, go on with the next frame
             self.counters[f"frames_failed: {type(exc).__name__}"] += 1
             log.exception("processing frame %d failed", frame.seq)

@@ -46,6 +46,14 @@ CYLINDER_SIDES = 24
 _SHIFT = 4
 #: Where the arm goes while the board's image is rendered: far outside the camera's view and the light's.
 _AWAY_M = (0.0, 0.0, -1000.0)
+#: How the arm looks: its description's colours, or a real iiwa's (:func:`iiwa_shapes`).
+LOOKS = ("description", "iiwa")
+#: A real iiwa's links (light grey), and its joints, wrist and cable (dark), RGBA 0-1.
+IIWA_LINK_RGB, IIWA_DARK_RGB = (0.86, 0.87, 0.88, 1.0), (0.17, 0.17, 0.19, 1.0)
+#: The last arm link (PyBullet index of iiwa_link_7): the wrist and flange, dark.
+IIWA_WRIST_LINK = 6
+#: Length of a joint's dark ring [m], and the radius of the cable along the links [m].
+IIWA_RING_M, CABLE_RADIUS_M = 0.03, 0.012
 
 
 def cylinder_mesh(radius_m: float, length_m: float, sides: int = CYLINDER_SIDES) -> tuple[np.ndarray, list]:
@@ -115,13 +123,39 @@ class ArmMesh:
     links: tuple[int, ...]
 
 
-def arm_mesh(client: int, robot: int) -> ArmMesh:
-    """The visual shapes of ``robot`` in PyBullet client ``client`` (their frames relative to the link frames)."""
+def iiwa_shapes(link: int, geometry: int, dims: tuple, rgba: tuple, pos: tuple, orn: tuple) -> list[tuple]:
+    """A visual shape of the description as a real iiwa looks (:data:`LOOKS` ``"iiwa"``): each arm link's
+    cylinder light grey (:data:`IIWA_LINK_RGB`), a dark joint ring (:data:`IIWA_DARK_RGB`) over its base end, a
+    dark cable (:data:`CABLE_RADIUS_M`) along its side, the wrist (the last link) dark; other shapes (the
+    eraser) as described. Items ``(geometry, dims, rgba, pos, orn)``, frames relative to the link."""
+    if geometry != pb.GEOM_CYLINDER or link > IIWA_WRIST_LINK:
+        return [(geometry, dims, rgba, pos, orn)]
+    length, radius = dims[0], dims[1]
+    if link == IIWA_WRIST_LINK:
+        return [(geometry, dims, IIWA_DARK_RGB, pos, orn)]
+    R = matrix_from_xyzw(orn)
+    p = np.asarray(pos, float)
+    ring_len = min(IIWA_RING_M, length / 3)
+    ring_at = p + R @ np.array([0.0, 0.0, -length / 2 + ring_len / 2])
+    cable_at = p + R @ np.array([radius + CABLE_RADIUS_M, 0.0, 0.0])
+    return [(geometry, dims, IIWA_LINK_RGB, pos, orn),
+            (geometry, (ring_len, radius * 1.04), IIWA_DARK_RGB, tuple(ring_at), orn),
+            (geometry, (length, CABLE_RADIUS_M), IIWA_DARK_RGB, tuple(cable_at), orn)]
+
+
+def arm_mesh(client: int, robot: int, look: str = "description") -> ArmMesh:
+    """The visual shapes of ``robot`` in PyBullet client ``client`` (their frames relative to the link frames),
+    coloured as the description says or, ``look="iiwa"``, as a real iiwa (:func:`iiwa_shapes`)."""
+    if look not in LOOKS:
+        raise ValueError(f"look must be one of {LOOKS}, got {look!r}")
     links = sorted({v[1] for v in pb.getVisualShapeData(robot, physicsClientId=client)})
     verts, vlink, slices, faces, centres, normals, flink, rgb = [], [], [], [], [], [], [], []
     n = 0
+    shapes = []
     for shape in pb.getVisualShapeData(robot, physicsClientId=client):
-        link, geometry, dims, pos, orn, rgba = shape[1], shape[2], shape[3], shape[5], shape[6], shape[7]
+        item = (shape[1], shape[2], shape[3], shape[7], shape[5], shape[6])
+        shapes += [(item[0], *s) for s in iiwa_shapes(*item)] if look == "iiwa" else [item]
+    for link, geometry, dims, rgba, pos, orn in shapes:
         v, f = shape_mesh(geometry, dims)
         c, nrm = face_frames(v, f)
         R, p = matrix_from_xyzw(orn), np.asarray(pos, float)
@@ -161,14 +195,14 @@ class AnalyticCamera:
     """
 
     def __init__(self, world: World, cam: CameraParams, k, T_camera_to_world: np.ndarray, light: np.ndarray,
-                 board_origin_m: np.ndarray, board_normal: np.ndarray) -> None:
+                 board_origin_m: np.ndarray, board_normal: np.ndarray, look: str = "description") -> None:
         self.world, self.cam = world, cam
         self.fx, self.fy, self.cx, self.cy = k.fx, k.fy, k.cx, k.cy
         self.R_cam, self.o_cam = T_camera_to_world[:3, :3].copy(), T_camera_to_world[:3, 3].copy()
         self.light = np.asarray(light, float) / np.linalg.norm(light)
         self.board_origin, self.board_normal = np.asarray(board_origin_m, float), np.asarray(board_normal, float)
         c = world.client
-        self.mesh = arm_mesh(c, world.robot)
+        self.mesh = arm_mesh(c, world.robot, look)
         base_pos, base_orn = pb.getBasePositionAndOrientation(world.robot, physicsClientId=c)
         inertial_pos, inertial_orn = pb.getDynamicsInfo(world.robot, -1, physicsClientId=c)[3:5]
         frame_pos, frame_orn = pb.multiplyTransforms(base_pos, base_orn,
