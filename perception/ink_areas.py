@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy.ndimage import find_objects
 
 from .classify import InkMap
 from .cluster import cluster_pixels, disc
@@ -67,9 +68,9 @@ def drawing_inks(ink: InkMap, link_px: float) -> np.ndarray:
     counts = np.bincount((labels * k + strokes).ravel()[ink.stain.ravel()], minlength=(n + 1) * k).reshape(n + 1, k)
     main = counts.argmax(axis=1)
     minor = (counts > 0) & (counts < MINOR_INK_SHARE * counts.sum(axis=1, keepdims=True))
+    boxes = find_objects(labels)  # each drawing's box (one pass): the work is done there
     for c in np.flatnonzero(minor[1:].any(axis=1)) + 1:
-        x, y, w, h = cv2.boundingRect((labels == c).view(np.uint8))  # the drawing's box: the work is done there
-        lab, st = labels[y:y + h, x:x + w], strokes[y:y + h, x:x + w]
+        lab, st = labels[boxes[c - 1]], strokes[boxes[c - 1]]
         drawing = lab == c
         inside = hull(drawing & (st == main[c]))
         move = drawing & inside & minor[c][st]
