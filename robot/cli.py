@@ -7,6 +7,13 @@ and commands only once armed (``--arm``, ``[lbr] arm``, or an ArmRequest on
 ``robot/arm``). ``--backend mock`` serves :class:`~robot.mock.MockArm`
 (no physics engine) for trying a controller or the protocol.
 
+``--backend lbr --watchdog`` runs, instead of the adapter, the watchdog
+that sends the stack the release when the adapter's messages stop
+(:mod:`robot.lbr.watchdog`; run it on the robot PC beside the stack).
+``--backend lbr --preflight`` runs the checks that move nothing
+(:mod:`robot.lbr.preflight`), prints each PASS or FAIL with the fix and
+exits 0 only if all pass.
+
 Configuration: ``--config FILE`` (``[zenoh]``, ``[lbr]``, ``[robot]``
 tables), then ``LAMPS_*`` environment variables, then the options. A bad
 configuration is one line and exit 1; Ctrl-C or SIGTERM disarms (one last
@@ -44,6 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--arm", action="store_true", default=None,
                    help="lbr: arm as soon as the robot's session allows commanding (else: an ArmRequest on robot/arm)")
     add_zenoh_options(p)
+    p.add_argument("--watchdog", action="store_true",
+                   help="lbr: run the watchdog beside the stack: the release when the adapter's messages stop")
+    p.add_argument("--preflight", action="store_true",
+                   help="lbr: check the stack, the robot and the bridge without moving anything; exit 0 if all pass")
     p.add_argument("--check", action="store_true", help="validate the configuration, then exit")
     p.add_argument("-v", "--verbose", action="store_true", help="log what happens")
     return p
@@ -99,8 +110,13 @@ def main(argv: list[str] | None = None) -> int:
             print("note: [lbr] open_loop = true (the stack's default): arming will be refused until the stack runs "
                   "with open_loop: false and [lbr] open_loop = false (docs/real-robot.md)")
         return 0
+    if (a.watchdog or a.preflight) and a.backend != "lbr":
+        print("lamps robot: error: --watchdog and --preflight need --backend lbr", file=sys.stderr)
+        return 1
     from interfaces.session import ServiceNode
 
+    if a.watchdog or a.preflight:
+        return _watchdog(zenoh_settings, lbr_params) if a.watchdog else _preflight(zenoh_settings, lbr_params)
     from .server import RobotServer
 
     set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
@@ -120,6 +136,46 @@ def main(argv: list[str] | None = None) -> int:
     reason = getattr(port, "disarm_reason", "")
     logging.getLogger("robot").warning("stopped after %d cycles%s", server.steps, f" ({reason})" if reason else "")
     return 0
+
+
+def _watchdog(zenoh_settings, lbr_params) -> int:
+    import threading
+
+    from interfaces.session import ServiceNode
+
+    from .lbr.watchdog import Watchdog
+
+    try:
+        node = ServiceNode("lbr-watchdog", zenoh_settings).__enter__()
+    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
+        print(f"lamps robot: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return 1
+    stop = threading.Event()
+    on_stop_signals(stop)
+    dog = Watchdog(lbr_params, node.session, lbr_params.watchdog_after_s)
+    try:
+        dog.run(stop)
+    finally:
+        dog.close()
+        node.close()
+    logging.getLogger("robot").warning("watchdog stopped: %s", dict(dog.watch.counts))
+    return 0
+
+
+def _preflight(zenoh_settings, lbr_params) -> int:
+    from interfaces.session import ServiceNode
+
+    from .lbr.preflight import run_preflight
+
+    try:
+        node = ServiceNode("lbr-preflight", zenoh_settings).__enter__()
+    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
+        print(f"lamps robot: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
+        return 1
+    try:
+        return run_preflight(lbr_params, node)
+    finally:
+        node.close()
 
 
 def _port(backend: str, lbr_params, node):

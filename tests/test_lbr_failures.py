@@ -43,6 +43,7 @@ from interfaces.messages import RobotState, ServiceStatus, SimTruth, TorqueComma
 from interfaces.robot_model import RobotModel
 from interfaces.session import ServiceNode
 from robot.lbr import msgs
+from robot.lbr.release import RELEASE_JOINT_POSITION, RELEASE_TORQUE, is_release
 from sim.board import board_from_params
 from sim.params import BoardParams
 
@@ -114,14 +115,16 @@ class Tap:
     commands: list[tuple[int, np.ndarray, np.ndarray]] = field(default_factory=list)
     truths: list[SimTruth] = field(default_factory=list)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    fri_major: int = 1
 
     def on_state(self, sample) -> None:
-        st = msgs.decode_state(sample.payload.to_bytes())
+        st = msgs.decode_state(sample.payload.to_bytes(), self.fri_major)
         with self.lock:
             self.states.append((time.monotonic_ns(), st))
 
     def on_command(self, sample) -> None:
-        jp, tau = msgs.decode_torque_command(sample.payload.to_bytes())
+        raw = sample.payload.to_bytes()
+        jp, tau = (RELEASE_JOINT_POSITION, RELEASE_TORQUE) if is_release(raw) else msgs.decode_torque_command(raw)
         with self.lock:
             self.commands.append((time.monotonic_ns(), jp, tau))
 
@@ -147,7 +150,7 @@ class Cell:
         self.peer = PeerProcess(tmp_path, cfg, ("--mode", "realtime"))
         self.lbr = {"LAMPS__LBR__OPEN_LOOP": "false", **(lbr or {})}
         self.tmp = tmp_path
-        self.tap = Tap()
+        self.tap = Tap(fri_major=int(peer.get("fri_major", 1)))
         self.adapter = self.ctl = self.observer = None
         self._subs = []
 
@@ -204,12 +207,12 @@ class Cell:
         while (t := self.truth.get(0.0)) is not None:
             self.tap.truths.append(t)
 
-    def pressing(self) -> None:
+    def pressing(self, by_s: float = T_FAIL_S) -> None:
         """Wait until the pad has pressed for 2 s of robot time (8-12 N on average, never under 4 N), before the
-        failure."""
+        failure (robot time ``by_s``)."""
         def steady() -> bool:
             self.collect_truth()
-            if not self.tap.truths or self.tap.truths[-1].robot_time_ns > (T_FAIL_S - 0.5) * 1e9:
+            if not self.tap.truths or self.tap.truths[-1].robot_time_ns > (by_s - 0.5) * 1e9:
                 return True  # too late: said below
             recent = [t.contact_force_n for t in self.tap.truths
                       if t.robot_time_ns >= self.tap.truths[-1].robot_time_ns - 2 * 10**9]
@@ -219,7 +222,7 @@ class Cell:
         except AssertionError:
             raise AssertionError(self.output()) from None
         t_s = self.tap.truths[-1].robot_time_ns * 1e-9
-        assert t_s < T_FAIL_S - 0.5, f"not pressing steadily by {t_s:.1f} s of robot time\n{self.output()}"
+        assert t_s < by_s - 0.5, f"not pressing steadily by {t_s:.1f} s of robot time\n{self.output()}"
 
     def disarmed(self, timeout_s: float = 30.0) -> ServiceStatus:
         try:
@@ -231,7 +234,8 @@ class Cell:
     def first_hold_after(self, t_ns: int) -> tuple[int, np.ndarray]:
         """(arrival [ns], joint_position) of the first zero-overlay command to the stack after ``t_ns``."""
         with self.tap.lock:
-            holds = [(t, jp) for t, jp, tau in self.tap.commands if t >= t_ns and not np.any(tau)]
+            holds = [(t, jp) for t, jp, tau in self.tap.commands if t >= t_ns and not np.any(tau)
+                     and not np.isnan(jp).any()]
         assert holds, "no hold reached the stack's key"
         return holds[0]
 

@@ -67,11 +67,11 @@ from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.port import Reading, RobotPort
 
-from .arming import REST_SPEED_RAD_S, arming_refusal
+from .arming import REST_SPEED_RAD_S, arming_refusal, left_commanding
 from .compensation import AppliedWatch, FreezeWatch, JointSpring, TorqueUnfilter
 from .guards import GuardLimits, VelocityFilter, guard_trip
-from .msgs import (ConnectionQuality, DriveState, LbrState, LbrWireError, SafetyState, SessionState, decode_joint_names,
-                   decode_state, decode_wrench, encode_torque_command, enum_name)
+from .msgs import (ConnectionQuality, LbrState, LbrWireError, SessionState, decode_joint_names, decode_state,
+                   decode_wrench, encode_torque_command, enum_name)
 from .params import LbrParams
 from .release import RELEASE_BYTES
 from .rest_checks import load_note, pad_wrench
@@ -124,6 +124,7 @@ class LbrPort(RobotPort):
         self._reading = Reading(np.zeros(7), np.zeros(7), np.zeros(7), np.zeros(6), 0, dq_estimated=True)
         self._stack_wrench: np.ndarray | None = None
         self._ext_wrench = np.zeros(6)  # the pad wrench the external torque explains (world axes)
+        self._rest = (np.zeros(6), None)  # that wrench in the newest state at rest, and its robot time [ns]
         self.load_note = ""  # the tool mass the external torque at rest implied at arming, when off
         self._names_ok: bool | None = None
         self._tau_prev: np.ndarray | None = None  # the controller's last torque sent
@@ -378,8 +379,9 @@ class LbrPort(RobotPort):
         self._sent.reset()  # what the robot ran on before arming is not judged
         self.counts["arms"] += 1
         log.warning("lbr: ARMED (%s): commanding torques", reason or "request")
-        self.load_note = load_note(self._ext_wrench, self.p.tool_mass_kg, self.p.tool_mass_tolerance_kg) or "" \
-            if float(np.max(np.abs(self._reading.dq_rad_s))) <= REST_SPEED_RAD_S else ""
+        w, rest_ns = self._rest  # the newest state at rest, up to 0.5 s before arming
+        self.load_note = load_note(w, self.p.tool_mass_kg, self.p.tool_mass_tolerance_kg) or "" \
+            if rest_ns is not None and st.stamp_ns - rest_ns <= 500_000_000 else ""
         if self.load_note:
             self.counts["load_mismatches"] += 1
             log.warning("lbr: %s", self.load_note)
@@ -418,13 +420,9 @@ class LbrPort(RobotPort):
                             f"COMMANDING_ACTIVE: launch it again; or the bridge is gone){self._quality.note()}")
 
     def _check_session(self) -> None:
-        st = self._state
-        if self.armed and (st.session_state != SessionState.COMMANDING_ACTIVE
-                           or st.safety_state != SafetyState.NORMAL_OPERATION
-                           or st.drive_state != DriveState.ACTIVE):
-            self.disarm(f"robot left commanding (session {enum_name(SessionState, st.session_state)}, safety "
-                        f"{enum_name(SafetyState, st.safety_state)}, drives {enum_name(DriveState, st.drive_state)})"
-                        f"{self._quality.note()}")
+        why = left_commanding(self._state) if self.armed else None
+        if why is not None:
+            self.disarm(why + self._quality.note())
 
     # -- pieces ------------------------------------------------------------------------------------
     def _take(self, st: LbrState) -> None:
@@ -445,6 +443,8 @@ class LbrPort(RobotPort):
             r.wrench_world = np.zeros(6) if w is None else stack_wrench_to_tcp(
                 self.model, st.q_rad, w, self.p.wrench_force_threshold_n, self.p.wrench_torque_threshold_nm)
         self._ext_wrench = pad_wrench(self.model, st.q_rad, tau_ext)
+        if float(np.max(np.abs(r.dq_rad_s))) <= REST_SPEED_RAD_S:
+            self._rest = (self._ext_wrench, st.stamp_ns)
         if self.p.wrench_source != "stack":
             r.wrench_world = self._ext_wrench
 
@@ -473,25 +473,23 @@ class LbrPort(RobotPort):
             self.counts["stop_holds_sent"] += 1
 
     def counters(self) -> dict[str, int]:
-        counts = dict(self.counts)
-        counts["torques_passed_filtered"] = self._tau_external.passed_filtered
+        counts = dict(self.counts, torques_passed_filtered=self._tau_external.passed_filtered,
+                      connection_quality_warnings=self._quality.warnings,
+                      applied_tolerance_unm=round(self._resolution.tolerance_nm() * 1e6))
         if self._quality.quality is not None:
             counts["connection_quality"] = self._quality.quality
-        counts["connection_quality_warnings"] = self._quality.warnings
-        counts["applied_tolerance_unm"] = round(self._resolution.tolerance_nm() * 1e6)
         return counts
 
     def detail(self) -> str:
-        st = self._state
-        session = enum_name(SessionState, st.session_state) if st is not None else "none"
-        quality = quality_name(self._quality.quality)
-        return (f"armed={self.armed} session={session} quality={quality} fri={self.p.fri_major} "
+        session = enum_name(SessionState, self._state.session_state) if self._state is not None else "none"
+        return (f"armed={self.armed} session={session} quality={quality_name(self._quality.quality)} "
+                f"fri={self.p.fri_major} "
                 f"why={self.disarm_reason[:240]!r}" + (f" load={self.load_note[:160]!r}" if self.load_note else ""))
 
     def close(self) -> None:
         if self._has_sent:  # the last message: the release, not a hold the stack's PID would integrate towards
-            self._command_pub.put(RELEASE_BYTES)
-            log.warning("lbr: sent the release (the stack re-initialises its command at the measured pose)")
+            self._command_pub.put(RELEASE_BYTES)  # (the stack re-initialises its command at the measured pose)
+            log.warning("lbr: sent the release")
         for sub in self._subs:
             sub.undeclare()
         self._subs = []

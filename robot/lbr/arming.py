@@ -79,3 +79,13 @@ def arming_refusal(st: LbrState | None, p: LbrParams, *, layout_error: str, name
     if wrench is not None and at_rest:
         return preload_refusal(wrench, p.arm_preload_max_n, p.tool_mass_kg)
     return None
+
+
+def left_commanding(st: LbrState) -> str | None:
+    """Why an armed adapter must stop on the state ``st``: the session, the safety or the drives say the robot left
+    commanding; or None."""
+    if st.session_state == SessionState.COMMANDING_ACTIVE and st.safety_state == SafetyState.NORMAL_OPERATION and \
+            st.drive_state == DriveState.ACTIVE:
+        return None
+    return (f"robot left commanding (session {enum_name(SessionState, st.session_state)}, safety "
+            f"{enum_name(SafetyState, st.safety_state)}, drives {enum_name(DriveState, st.drive_state)})")

@@ -57,12 +57,11 @@ def preload_refusal(wrench: np.ndarray, max_n: float, tool_mass_kg: float) -> st
     n = float(np.linalg.norm(f))
     if n <= max_n:
         return None
-    return (f"the pad presses {n:.1f} N at rest (external torque: force [{f[0]:+.1f}, {f[1]:+.1f}, {f[2]:+.1f}] N, "
-            f"over [lbr] arm_preload_max_n = {max_n:g}): the stack holds a command away from the arm (an old hold "
-            "against the board after a restart?) and arming would step the torque by its spring; stop and start "
-            "the LBRServer app and relaunch the stack (its command starts at the measured pose), or move the arm "
-            "off by hand; if the pad touches nothing, the tool's load data is off (the force implies a tool of "
-            f"{implied_tool_mass_kg(wrench, tool_mass_kg):.2f} kg, [lbr] tool_mass_kg = {tool_mass_kg:g})")
+    return (f"the pad presses {n:.1f} N at rest (force [{f[0]:+.1f}, {f[1]:+.1f}, {f[2]:+.1f}] N): restart the "
+            "LBRServer app and relaunch the stack (its command starts at the measured pose) or move the arm off; "
+            "the stack holds a command away from the arm (an old hold in the board?), arming would step its spring; "
+            f"if the pad touches nothing, the load data is off (implies a tool of "
+            f"{implied_tool_mass_kg(wrench, tool_mass_kg):.2f} kg; [lbr] arm_preload_max_n = {max_n:g})")
 
 
 def load_note(wrench: np.ndarray, tool_mass_kg: float, tolerance_kg: float) -> str | None:
