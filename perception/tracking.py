@@ -153,7 +153,20 @@ class StainTracker:
         if not new.any():
             return
         tr.core[r0:r1, c0:c1] |= new
-        self._set_region(tr)
+        if _box_of(tr.core, self._pad) != tr.box:
+            self._set_region(tr)
+            return
+        # the box holds: region, reach and near grow by the new pixels' own dilations (a dilation of a union is the
+        # union of the dilations), worked out on the new pixels' box grown by the kernels' reach
+        x, y, w, h = cv2.boundingRect(new.view(np.uint8))
+        pad = self._margin.shape[0] // 2 + self._link.shape[0] // 2 + 1
+        i0, i1, j0, j1 = max(y - pad, 0), min(y + h + pad, r1 - r0), max(x - pad, 0), min(x + w + pad, c1 - c0)
+        sub = new[i0:i1, j0:j1].view(np.uint8)
+        grown = cv2.dilate(sub, self._margin)
+        tr.region[r0 + i0:r0 + i1, c0 + j0:c0 + j1] |= grown.view(bool)
+        tr.reach[i0:i1, j0:j1] |= cv2.dilate(sub, self._link).view(bool)
+        tr.near[i0:i1, j0:j1] |= cv2.dilate(grown, self._link).view(bool)
+        tr.shape_stale = True
 
     def _merge_touching(self) -> None:
         """Stains of one ink whose cores have come within ``link_m`` of each other are one stain (the clustering's

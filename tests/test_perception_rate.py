@@ -141,3 +141,36 @@ def test_markers_looked_for_where_they_were_are_where_the_whole_image_finds_them
     moved = tracker._detect(shifted)
     assert sorted(moved) == sorted(whole)
     assert max(np.abs(moved[i] - whole[i] - [0, 70]).max() for i in whole) < 0.01
+
+
+def test_a_stains_region_grown_piece_by_piece_is_the_one_made_at_once():
+    """Cores grow by a few pixels a frame (noise at a stroke's edge): region, reach and near, grown by the new
+    pixels only, equal those made from the whole core."""
+    import copy
+
+    from perception.classify import InkMap
+    from perception.params import KappaParams, StainParams
+    from perception.rectify import BoardGrid
+    from perception.tracking import StainTracker
+
+    rng = np.random.default_rng(5)
+    grid = BoardGrid((0.4, 0.3), 0.002)
+    rows, cols = grid.shape
+    tracker = StainTracker(grid, StainParams(confirm_s=0.1), KappaParams(), 0.3, 0.05)
+    base = np.zeros((rows, cols), np.float32)
+    base[40:60, 40:90] = 0.8
+    base[90:110, 120:150] = 0.7
+    checked = 0
+    for n in range(12):
+        grow = cv2.dilate((base > 0).view(np.uint8), np.ones((3, 3), np.uint8), iterations=1 + n // 3).view(bool)
+        d = np.where(grow & (rng.random((rows, cols)) < 0.35 + 0.05 * n), 0.6, base).astype(np.float32)
+        looked = np.ones((rows, cols), bool)
+        tracker.update(InkMap(d, np.zeros((rows, cols), bool), d >= 0.3, looked), 0.1 * n)
+        for tr in tracker.tracks:
+            fresh = copy.deepcopy(tr)
+            tracker._set_region(fresh)
+            assert fresh.box == tr.box
+            assert np.array_equal(fresh.region, tr.region)
+            assert np.array_equal(fresh.reach, tr.reach) and np.array_equal(fresh.near, tr.near)
+            checked += 1
+    assert checked >= 10 and len(tracker.tracks) == 2
