@@ -2,7 +2,7 @@
 
 The robot reports the external torque as the measured joint torque less its
 own model of the arm and of the load data set on the smartPAD (the stack
-copies it: state.cpp:15-18, rolling 218d723; FRI SDK friLBRState.h
+copies it: state.cpp:18, rolling 218d723; FRI SDK friLBRState.h
 ``getExternalTorque``). At rest, in the air, with the tool's load data
 right, it is near zero. Two things make it not:
 
