@@ -256,7 +256,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--seeds", default="0-9", help="seeds, e.g. 0-49 or 1,3,5-7 (default 0-9)")
     ap.add_argument("--stains", default="1-6", help="stain counts, cycled over the seeds (default 1-6)")
     ap.add_argument("--boards", default="wall,table",
-                    help="boards, cycled over the seeds: wall, table or a board TOML file (lamps up --board), "
+                    help="boards, cycled over the seeds: wall, table, random (seed s: the reachable board lamps up "
+                         "--board random:s draws) or a board TOML file (lamps up --board), "
                          "comma-separated (default wall,table)")
     ap.add_argument("--wiping", default="fixed",
                     help="wiping modes, each seed runs once per mode: fixed, adaptive or fixed,adaptive (default "
@@ -301,8 +302,8 @@ def main(argv: list[str] | None = None) -> int:
             raise CampaignError(f"--stains {a.stains!r}: a cell needs at least one stain")
         boards = [b.strip() for b in a.boards.split(",") if b.strip()]
         for b in boards:
-            if b not in BOARD_NAMES and not Path(b).is_file():
-                raise CampaignError(f"--boards: {b!r} is not one of {BOARD_NAMES} and no such file")
+            if b not in BOARD_NAMES and b != "random" and not Path(b).is_file():
+                raise CampaignError(f"--boards: {b!r} is not one of {(*BOARD_NAMES, 'random')} and no such file")
         if a.jobs < 1:
             raise CampaignError(f"--jobs must be >= 1, got {a.jobs}")
         if not a.max_duration > 0:

@@ -30,7 +30,8 @@ class Cell:
     @property
     def name(self) -> str:
         suffix = "-adaptive" if self.wiping == "adaptive" else ""
-        return f"{Path(self.board).stem}-s{self.seed}-n{self.stains}{suffix}"
+        board = "random" if self.board.startswith("random:") else Path(self.board).stem
+        return f"{board}-s{self.seed}-n{self.stains}{suffix}"
 
 
 def parse_range(text: str, what: str) -> list[int]:
@@ -52,10 +53,15 @@ def parse_range(text: str, what: str) -> list[int]:
 def cells_of(seeds: list[int], stains: list[int], boards: list[str], wipings: tuple[str, ...] = ("fixed",),
              plots: bool = False) -> list[Cell]:
     """The campaign's cells: seed s gets ``stains[s mod len]`` stains on ``boards[s mod len]``, once per wiping
-    mode; ``plots``: each run draws its report's plots."""
+    mode (board ``random``: seed s's own random board, ``random:s``); ``plots``: each run draws its report's
+    plots."""
     if not seeds or not stains or not boards or not wipings:
         raise CampaignError("a campaign needs at least one seed, one stain count, one board and one wiping mode")
     bad = [w for w in wipings if w not in WIPINGS]
     if bad:
         raise CampaignError(f"--wiping: {bad[0]!r} is not one of {WIPINGS}")
-    return [Cell(s, stains[s % len(stains)], boards[s % len(boards)], w, plots) for s in seeds for w in wipings]
+    def board(s: int) -> str:
+        b = boards[s % len(boards)]
+        return f"random:{s}" if b == "random" else b
+
+    return [Cell(s, stains[s % len(stains)], board(s), w, plots) for s in seeds for w in wipings]

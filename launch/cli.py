@@ -50,9 +50,10 @@ def build_up_parser() -> argparse.ArgumentParser:
         "cleans it; the run folder gets report.json, plots and an MCAP recording."))
     p.add_argument("--seed", type=int, default=0, help="stains: count, places, shapes (default 0)")
     p.add_argument("--stains", type=int, default=3, help="number of random stains (default 3)")
-    p.add_argument("--board", default="vertical", metavar="vertical|horizontal|FILE.toml",
-                   help="board preset, or a TOML file with a [board] table (preset = \"custom\", origin_m, "
-                        "quat_wxyz, size_m; see config/example.toml [sim.board])")
+    p.add_argument("--board", default="vertical", metavar="vertical|horizontal|random:N|FILE.toml",
+                   help="board preset, random:N (the reachable board drawn from seed N), or a TOML file with a "
+                        "[board] table (preset = \"custom\", origin_m, quat_wxyz, size_m; see config/example.toml "
+                        "[sim.board])")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' (default: learn the bundled demo)")
     src.add_argument("--demo", metavar="FILE", help="learn this demonstration first (CSV, NPZ, TSV, MAT#i)")
@@ -94,6 +95,12 @@ def board_env(board: str) -> dict[str, str]:
     """Compose variables and service environment for ``--board``."""
     if board in BOARDS:
         return {"LAMPS_BOARD": BOARDS[board]}
+    if board.startswith("random:"):  # sim/board_sampler.py: the board of seed N over the reachable workspace
+        from sim.board_sampler import random_board_table
+        try:
+            return {f"LAMPS__SIM__BOARD__{k.upper()}": json.dumps(v) for k, v in random_board_table(board).items()}
+        except ValueError as exc:
+            raise UpError(f"--board {board}: {exc}") from None
     path = Path(board)
     if not path.is_file():
         raise UpError(f"--board {board!r}: not one of {sorted(set(BOARDS))} and no such file")

@@ -1,0 +1,92 @@
+"""Random boards (sim/board_sampler.py): seeded and reproducible, spread over the workspace, each one a board the
+simulator really starts on (real PyBullet), reachable by name from lamps up and lamps campaign."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from interfaces.errors import ConfigError
+from interfaces.robot_model import RobotModel
+from interfaces.transforms import matrix_from_quat_wxyz
+from launch.campaign_cells import cells_of
+from launch.cli import UpError, board_env
+from sim.board_sampler import (MAX_STAINS, board_refusal, random_board_table, random_seed_of, rotation_from_angles,
+                               sample_board)
+from sim.core import SimCore
+from sim.params import SimParams
+
+SEEDS = range(12)
+
+
+@pytest.fixture(scope="module")
+def draws():
+    model = RobotModel()
+    return {s: sample_board(s, model) for s in SEEDS}
+
+
+def test_a_seed_gives_the_same_board_every_time_and_seeds_differ(draws):
+    again = sample_board(3)
+    assert again.table == draws[3].table and again.refused == draws[3].refused
+    origins = {tuple(d.table["origin_m"]) for d in draws.values()}
+    assert len(origins) == len(draws), "two seeds drew the same board"
+
+
+def test_the_angles_name_the_rotation_the_presets_are_its_corners():
+    wall = np.array([[0, 0, -1], [-1, 0, 0], [0, 1, 0]], float)  # sim/board.py's wall preset
+    table = np.array([[0, 1, 0], [-1, 0, 0], [0, 0, 1]], float)
+    assert np.allclose(rotation_from_angles(90.0, 0.0, 0.0), wall, atol=1e-12)
+    assert np.allclose(rotation_from_angles(0.0, 0.0, 0.0), table, atol=1e-12)
+    R = rotation_from_angles(37.0, 20.0, -30.0)
+    assert np.allclose(R.T @ R, np.eye(3), atol=1e-12) and np.linalg.det(R) == pytest.approx(1.0)
+    # tilt is the normal's angle from vertical; the roll leaves the normal where it is
+    assert np.degrees(np.arccos(R[2, 2])) == pytest.approx(37.0)
+    assert np.allclose(rotation_from_angles(37.0, 20.0, 10.0)[:, 2], R[:, 2])
+
+
+def test_every_drawn_board_is_within_the_stated_ranges_and_faces_the_robot(draws):
+    for s, d in draws.items():
+        assert 0.0 <= d.tilt_deg <= 90.0 and abs(d.turn_deg) <= 45.0 and abs(d.roll_deg) <= 45.0, s
+        R = matrix_from_quat_wxyz(np.array(d.table["quat_wxyz"]))
+        centre = np.array(d.table["origin_m"]) + R @ np.array([*d.table["size_m"], 0.0]) / 2
+        assert centre[:2] @ R[:2, 2] <= 1e-9, f"seed {s}: the board looks away from the robot"
+        assert np.degrees(np.arccos(np.clip(R[2, 2], -1, 1))) == pytest.approx(d.tilt_deg, abs=1e-4)
+
+
+@pytest.mark.slow
+def test_the_simulator_starts_on_every_drawn_board_with_the_most_stains(draws):
+    for s, d in draws.items():
+        sim = SimCore(SimParams.from_table({"board": d.table, "seed": s, "dirt": {"stains": MAX_STAINS},
+                                            "camera": {"enabled": True}}))
+        try:
+            assert len(sim.dirt.stains) == MAX_STAINS
+        finally:
+            sim.close()
+
+
+def test_a_refused_draw_says_why_and_an_unreachable_board_is_refused():
+    far = {"preset": "custom", "origin_m": [1.6, 0.3, 0.3], "quat_wxyz": [0.5, 0.5, -0.5, -0.5], "size_m": [0.6, 0.5]}
+    why = board_refusal(far, RobotModel())
+    assert why is not None and "impossible board pose" in why
+    low = {"preset": "custom", "origin_m": [0.4, 0.3, -0.2], "quat_wxyz": [0.5, 0.5, -0.5, -0.5],
+           "size_m": [0.6, 0.5]}
+    assert "mounting plane" in board_refusal(low, RobotModel())
+    assert all(isinstance(r, str) and r for d in (sample_board(s) for s in (0, 1)) for r in d.refused)
+
+
+def test_random_boards_by_name_for_lamps_up_and_the_campaign():
+    env = board_env("random:5")
+    table = {k.removeprefix("LAMPS__SIM__BOARD__").lower(): json.loads(v) for k, v in env.items()}
+    assert table == random_board_table("random:5") == sample_board(5).table
+    for bad in ("random:", "random:-1", "random:x"):
+        with pytest.raises(UpError, match="random"):
+            board_env(bad)
+    assert random_seed_of("wall") is None
+    with pytest.raises(ConfigError):
+        sample_board(-1)
+    cells = cells_of([4, 7], [2], ["random", "wall"])
+    assert [c.board for c in cells] == ["random:4", "wall"]  # seed s takes boards[s mod 2]
+    cells = cells_of([4, 7], [2], ["random"])
+    assert [c.board for c in cells] == ["random:4", "random:7"] and cells[0].name == "random-s4-n2"
