@@ -13,12 +13,23 @@
    the stain was back in view, and when perception published kappa (sim
    time), plus the wall-clock age of each published stains message.
 
-Run: ``.venv/bin/python bench/bench_perception.py [--json OUT]`` (about 2 minutes); prints markdown tables.
+3. Against a named baseline revision (``--baseline REV``, checked out into
+   a temporary git worktree), the same frames in one run: each tree's
+   perception package in its own Python process on one OpenCV thread,
+   trees alternating for ``--rounds``; per frame set the frame-to-message
+   latency (wall clock from the frame message's decoding to the stains
+   message, p50 and p99) and the frames/s on one core (1000 / the p50 of
+   the thread's CPU time per frame [ms]).
+
+Run: ``.venv/bin/python bench/bench_perception.py [--baseline REV] [--json OUT]`` (about 3 minutes); prints
+markdown tables.
 """
 
 from __future__ import annotations
 
 import json
+import pickle
+import subprocess
 import sys
 import tempfile
 import time
@@ -115,6 +126,76 @@ def bench_frames(frames: list[CameraFrame], repeat: int = 3, states: list | None
     }
 
 
+# What each tree runs on the pickled frame sets: per set, (wall ms, CPU ms) per frame after the first quarter.
+WORKER = r"""
+import pickle, sys, time
+import numpy as np, cv2
+cv2.setNumThreads(1)
+sys.path.insert(0, sys.argv[1])
+from interfaces.robot_model import RobotModel
+from perception.frames import frame_from_message
+from perception.params import PerceptionParams
+from perception.pipeline import Perception
+from perception.self_filter import tool_corners
+sets = pickle.load(open(sys.argv[2], "rb"))
+model = RobotModel()
+out = {}
+for name, (frames, states) in sets.items():
+    t_states = np.array([s[0] for s in states]) if states else None
+    p = Perception(PerceptionParams())
+    wall, cpu = [], []
+    for msg in frames:
+        t0, c0 = time.perf_counter(), time.thread_time()
+        f = frame_from_message(msg)
+        tool = None
+        if states:
+            tool = tool_corners(*model.tcp_pose(states[int(np.argmin(np.abs(t_states - f.robot_time_ns)))][1]))
+        p.process(f, tool)
+        wall.append((time.perf_counter() - t0) * 1e3)
+        cpu.append((time.thread_time() - c0) * 1e3)
+    out[name] = dict(wall=wall[len(frames) // 4:], cpu=cpu[len(frames) // 4:])
+pickle.dump(out, open(sys.argv[3], "wb"))
+"""
+
+
+def against_baseline(sets: dict, baseline: str, rounds: int) -> dict:
+    """Per frame set ``name -> (frames, states or None)``: latency p50/p99 and frames/s of the baseline revision
+    and of this tree, and the median ratio of their CPU times over the rounds (trees alternating)."""
+    import tempfile as _tempfile
+
+    out: dict = {}
+    with _tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        base = tmp / "baseline"
+        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(base), baseline], check=True,
+                       capture_output=True)
+        try:
+            (tmp / "sets.pkl").write_bytes(pickle.dumps(sets))
+            runs: dict = {"baseline": {k: dict(wall=[], cpu=[]) for k in sets},
+                          "this": {k: dict(wall=[], cpu=[]) for k in sets}}
+            ratios: dict = {k: [] for k in sets}
+            for _ in range(rounds):
+                got = {}
+                for which, tree in (("baseline", base), ("this", REPO)):
+                    subprocess.run([sys.executable, "-c", WORKER, str(tree), str(tmp / "sets.pkl"),
+                                    str(tmp / "out.pkl")], check=True, cwd=tree)
+                    got[which] = pickle.loads((tmp / "out.pkl").read_bytes())
+                    for k in sets:
+                        runs[which][k]["wall"] += got[which][k]["wall"]
+                        runs[which][k]["cpu"] += got[which][k]["cpu"]
+                for k in sets:
+                    ratios[k].append(np.median(got["this"][k]["cpu"]) / np.median(got["baseline"][k]["cpu"]))
+        finally:
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(base)], check=False)
+    for k in sets:
+        out[k] = {which: {"latency_p50_ms": float(np.percentile(runs[which][k]["wall"], 50)),
+                          "latency_p99_ms": float(np.percentile(runs[which][k]["wall"], 99)),
+                          "fps_one_core": 1e3 / float(np.median(runs[which][k]["cpu"]))} for which in runs}
+        out[k]["cpu_ratio_median"] = float(np.median(ratios[k]))
+        out[k]["cpu_ratio_range"] = [float(np.min(ratios[k])), float(np.max(ratios[k]))]
+    return out
+
+
 def grid_stains(n_x: int, n_y: int, board_m=(0.8, 0.6), margin_m: float = 0.13, size_m: float = 0.045) -> list[dict]:
     """``n_x * n_y`` stains on a grid over the wall board (board frame), as ``[sim.dirt] stain`` tables."""
     xs = np.linspace(margin_m, board_m[0] - margin_m, n_x)
@@ -163,6 +244,16 @@ def markdown(result: dict) -> str:
     out += ["", "| clustering of the stain pixels | p50 [ms] | baseline, same frames |", "|---|---:|---|",
             f"| ours (dilation + connected components) | {r['clustering_p50_ms']:.2f} | scikit-learn DBSCAN "
             f"(min_samples 1, same link): {r['dbscan_p50_ms']:.1f} ms, {r['dbscan_over_ours']:.0f}x slower |"]
+    if "baseline" in result:
+        b, n = result["baseline_rev"], result["rev"]
+        out += ["", f"| same frames, one core | {b} latency p50 / p99 [ms] | {b} frames/s | {n} latency p50 / p99 "
+                f"[ms] | {n} frames/s | CPU time ratio (rounds' median, range) |", "|---|---:|---:|---:|---:|---|"]
+        for k, r in result["baseline"].items():
+            lo, hi = r["cpu_ratio_range"]
+            out.append(f"| {k} | {r['baseline']['latency_p50_ms']:.1f} / {r['baseline']['latency_p99_ms']:.1f} | "
+                       f"{r['baseline']['fps_one_core']:.0f} | {r['this']['latency_p50_ms']:.1f} / "
+                       f"{r['this']['latency_p99_ms']:.1f} | {r['this']['fps_one_core']:.0f} | "
+                       f"{r['cpu_ratio_median']:.2f}x ({lo:.2f}-{hi:.2f}) |")
     cl = result["closed_loop"]
     out += ["", "| closed loop (sim time), per stain | truth <= 3 % | back in view | kappa published | "
             "kappa after truth | kappa after in view |", "|---|---:|---:|---:|---:|---:|"]
@@ -180,6 +271,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="accepted for lamps bench; the run is the same")
     ap.add_argument("--json", type=Path, help="also write the figures here")
+    ap.add_argument("--baseline", help="git revision to compare with on the same frames (e.g. e95f293)")
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of baseline then this tree")
     a = ap.parse_args()
     model = RobotModel()
     with tempfile.TemporaryDirectory() as tmp:
@@ -193,6 +286,13 @@ def main() -> int:
                   "frames_arm_over_board_masked": bench_frames(arm, states=states),
                   "frames_3_stains": bench_frames(three), "frames_20_stains": bench_frames(twenty),
                   "closed_loop": bench_closed_loop(tmp)}
+        if a.baseline:
+            result["baseline_rev"] = a.baseline
+            result["rev"] = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
+                                           capture_output=True, text=True).stdout.strip()
+            result["baseline"] = against_baseline({"arm parked": (parked, None), "arm over the board": (arm, None),
+                                                   "arm over the board, the eraser masked": (arm, states),
+                                                   "20 stains": (twenty, None)}, a.baseline, a.rounds)
     print(markdown(result))
     if a.json:
         a.json.write_text(json.dumps(result, indent=1))

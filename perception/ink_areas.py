@@ -65,7 +65,8 @@ def drawing_inks(ink: InkMap, link_px: float) -> np.ndarray:
     if n == 0:
         return strokes
     k = len(ink.names)
-    counts = np.bincount((labels * k + strokes).ravel()[ink.stain.ravel()], minlength=(n + 1) * k).reshape(n + 1, k)
+    on = ink.stain
+    counts = np.bincount(labels[on] * k + strokes[on], minlength=(n + 1) * k).reshape(n + 1, k)
     main = counts.argmax(axis=1)
     minor = (counts > 0) & (counts < MINOR_INK_SHARE * counts.sum(axis=1, keepdims=True))
     boxes = find_objects(labels)  # each drawing's box (one pass): the work is done there
