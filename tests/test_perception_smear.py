@@ -1,0 +1,89 @@
+"""A smear is a state (perception/smear.py): passes that no longer lower a stain's remaining ink make it smeared,
+on the logic's own series and on a wipe made from a real photograph with a heavy ghost."""
+
+from __future__ import annotations
+
+import tomllib
+
+import cv2
+import numpy as np
+import pytest
+
+from interfaces.errors import ConfigError
+from perception.frames import Frame
+from perception.params import PerceptionParams
+from perception.pipeline import Perception
+from perception.smear import SmearParams, SmearWatch
+from perception.sources import camera_model
+
+from .test_perception_inks import LABELS, PHOTOS
+from .whiteboard_sequence import Eraser, camera_frames
+
+#: The eraser over a drawing, as the camera sees it: a saturated orange (clipped: occluded, never ink).
+ERASER_BGR = (0, 140, 255)
+
+
+def passes(watch: SmearWatch, remaining_after: list[float], kappa: bool = False):
+    """Feed one pass per value: hidden, then back in view with that remaining; the last answer."""
+    out = None
+    for r in remaining_after:
+        watch.update(1, r, 0.1, False)
+        out = watch.update(1, r, 1.0, kappa)
+    return out
+
+
+def test_passes_without_progress_make_a_smear_and_progress_or_kappa_end_it():
+    watch = SmearWatch(SmearParams(passes=3, min_progress=0.05))
+    watch.update(1, 1.0, 1.0, False)
+    assert passes(watch, [0.6, 0.3]) is None  # progress
+    assert passes(watch, [0.29, 0.28]) is None  # two passes without
+    smear = passes(watch, [0.28])
+    assert smear is not None and smear.passes == 5 and smear.remaining == pytest.approx(0.28)
+    assert watch.smeared() == [smear]
+    assert passes(watch, [0.1]) is None  # progress again
+    assert passes(watch, [0.1, 0.1, 0.1], kappa=True) is None  # clean is not smeared
+    # hidden without coming back, or back only half in view, is no pass
+    w = SmearWatch(SmearParams(passes=1))
+    w.update(2, 0.5, 1.0, False)
+    w.update(2, 0.5, 0.2, False)
+    assert w.update(2, 0.5, 0.7, False) is None and w.update(2, 0.5, 0.95, False) is not None
+    with pytest.raises(ConfigError, match="passes"):
+        SmearParams(passes=0)
+
+
+@pytest.fixture(scope="module")
+def params():
+    return PerceptionParams.from_table(tomllib.loads((PHOTOS / "board.toml").read_text())["perception"])
+
+
+def test_a_heavy_ghost_wiped_again_and_again_is_a_smear_an_untouched_drawing_never(params):
+    bgr = cv2.imread(str(PHOTOS / "straight.jpg"))
+    eraser = Eraser(bgr, params, LABELS["straight"]["stains"])
+    label = "Email LaTeX"
+    smeared = eraser.erased([label], ghost=0.35)
+    over = smeared.copy()
+    over[eraser._mask(label) > 0] = ERASER_BGR  # the eraser on the drawing
+    scenes = [(bgr, 6)] + [(over, 3), (smeared, 5)] * 5
+    rng = np.random.default_rng(3)
+    K, T = camera_model(params.model, bgr.shape[1], bgr.shape[0])
+    p = Perception(params)
+    watch = SmearWatch(SmearParams(passes=3))
+    centre = np.mean(eraser.stains[label], axis=0)
+    seq, first_smear, last = 0, None, None
+    for scene, n in scenes:
+        for img in camera_frames(scene, n, rng):
+            r = p.process(Frame(cv2.cvtColor(img, cv2.COLOR_BGR2RGB), K, T, 0.1 * seq, seq))
+            seq += 1
+            if r.stains is None:
+                continue
+            last = r.stains.stains
+            for s in last:
+                got = watch.update(s.id, s.remaining, s.visible, s.kappa)
+                if got is not None and first_smear is None:
+                    first_smear = (seq, s)
+    target = next(s for s in last if np.hypot(*(np.array(s.centre_board_m) - centre)) < 0.05)
+    smears = watch.smeared()
+    assert [m.stain_id for m in smears] == [target.id]  # only the wiped drawing, none of the untouched five
+    m = smears[0]
+    assert 0.1 < m.remaining < 0.6 and not target.kappa  # ink left, never judged clean
+    assert m.passes == 5 and first_smear is not None
