@@ -38,6 +38,7 @@ from .control.demand_kernels import joint_demand_into, largest_share
 from .control.kernels import reference_into, tool_in_board, trace_row
 from .control.limit_kernels import limit_torque
 from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
+from .arm_model import ArmModel
 from .reach import arm_reach
 from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
@@ -128,6 +129,7 @@ class ControllerCore:
         self._last_applied = np.zeros(self.model.nq)  # the newest torques the robot said it applied [Nm], as sent
         self._applied_known = False
         self.contact_watch = ContactWatch(f.contact_threshold_n, f.contact_loss_s)
+        self.arm = ArmModel(params.model, self.model, f.contact_threshold_n)  # the load and model error learned
         self._compile_law()
 
     def _compile_law(self) -> None:
@@ -160,6 +162,7 @@ class ControllerCore:
             row[:] = 0.0
         self.ref.p_m[:] = 0.0
         self.ref.R[:] = np.eye(3)
+        self.arm.compile(kin)
 
     def restart(self) -> None:
         """The robot came back after a loss: hold where it is, ramp the gains in again, re-approach."""
@@ -213,6 +216,7 @@ class ControllerCore:
         if tau_max_nm is not None:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
+        self.arm.correction.apply(kin, gravity_compensated)  # the model's static torque, corrected
         self._watch_disturbance(kin, dq, wrench, gravity_compensated, dt_s, applied_nm)
         known = applied_nm if applied_nm is not None else running_nm
         if known is not None:
@@ -222,8 +226,11 @@ class ControllerCore:
             self.contact_watch.lost_s = 0.0
             self._rate_from_applied(kin, gravity_compensated)
         board = self.executor.board
-        if board is None:
+        if board is None or self.arm.identifying():
             self._hold_reference(kin)
+            if self.arm.identifying():  # the pad rolls about its normal, for the load estimate
+                ref = self.ref
+                self.arm.identify_reference(self._hold[1], dt_s, ref.R, ref.twist, ref.accel)
             sp = None
         else:
             n = board.normal
@@ -240,6 +247,8 @@ class ControllerCore:
                 step = self._skill_step(dt_s) * scale
             self.override_used = scale
             sp = self.executor.step(step, tool)
+            if sp.contact:
+                self.arm.first_contact()
             self._sp_v_xy[:] = sp.v_xy
             self._reference_from_setpoint(board, n, sp, tool, scale)
             self._regulate_force(n, sp, 0.0 if robot_held else dt_s)
@@ -265,7 +274,9 @@ class ControllerCore:
         applied[:] = applied_nm
         if gravity_compensated:
             applied += kin.g
-        if watch.update(kin.M, kin.nle, kin.J, dq, applied, wrench, dt_s):
+        tripped = watch.update(kin.M, kin.nle, kin.J, dq, applied, wrench, dt_s)
+        self.arm.after_watch(watch.tau_d, kin, dq, wrench, dt_s, self.executor.phase)
+        if tripped:
             j = watch.worst_joint()
             self.executor.fault(f"unexplained joint torque: A{j + 1} {watch.tau_d[j]:+.1f} Nm (limit "
                                 f"{watch.limit[j]:.0f} Nm for {watch.persist_s * 1000:.0f} ms): the arm is not "
@@ -398,6 +409,8 @@ class ControllerCore:
         self.last_terms = terms
         tau = self._tau
         tau[:] = terms.tau_nm
+        if gravity_compensated:  # the robot adds its own gravity and load data; the correction is ours to send
+            tau += self.arm.correction.c
         # the robot steps from one command to the next within one of its cycles, however long the controller
         # took: the rate limit is per answer (at most one nominal period's worth), not per elapsed time
         shaper = self.shaper

@@ -12,6 +12,7 @@ Layout (every key optional)::
     [controller.limits]     torque_rate_nm_per_ms, joint_margin_rad, max_speed_m_s, max_position_error_m, ...
     [controller.executor]   standoff_m, approach_speed_m_s, wipe_timeout_s, kappa_remaining, air, ...
     [controller.planner]    amplitude_fraction, min_amplitude_m, max_amplitude_m, order, ...
+    [controller.model]      enabled, integral_s, bound_share, warn_s (the arm's model correction, tool estimate)
     [controller.teach]      damping_n_s_m, damping_nm_s_rad, joint_damping_nm_s_rad, force_cap_n (lamps teach)
 
 Every value is checked when built; an unknown key or a value out of range
@@ -24,6 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
+from controller.control.model_correction import CorrectionParams
 from controller.control.params import ControlConfigError, ImpedanceParams
 from lampskit.errors import PlanningError
 from lampskit.core.planner_types import PlannerParams
@@ -284,6 +286,7 @@ class ControllerParams:
     executor: ExecutorParams = field(default_factory=ExecutorParams)
     planner: PlannerParams = field(default_factory=PlannerParams)
     teach: TeachParams = field(default_factory=TeachParams)
+    model: CorrectionParams = field(default_factory=CorrectionParams)
 
     def __post_init__(self) -> None:
         s = "controller"
@@ -325,7 +328,8 @@ class ControllerParams:
             raise ConfigError(f"[controller] must be a table, got {type(table).__name__}")
         table = dict(table)
         subs = {"impedance": ImpedanceParams, "force": ForceParams, "limits": LimitParams,
-                "executor": ExecutorParams, "planner": PlannerParams, "teach": TeachParams}
+                "executor": ExecutorParams, "planner": PlannerParams, "teach": TeachParams,
+                "model": CorrectionParams}
         parts = {}
         for name, kind in subs.items():
             try:
