@@ -8,10 +8,10 @@ surface it wipes on. :func:`split_at_lifts` cuts a periodic run ``(cluster, star
 
 1. the tool stands higher than the *contact band* above the run's own surface: a plane fitted to the run's
    samples (refitted to the samples within :data:`PLANE_KEEP` times the median distance from it, so a hop's
-   samples do not tilt it), with the band :data:`BAND_FACTOR` times that median distance (at least
-   :data:`BAND_MIN_M`) plus :data:`LIFT_MARGIN_M`, on the side the tool comes from (the side most of the whole
+   samples do not tilt it), with the band :data:`~.contact.BAND_FACTOR` times that median distance (at least
+   :data:`~.contact.BAND_MIN_M`) plus :data:`~.contact.LIFT_MARGIN_M`, on the side the tool comes from (the side most of the whole
    demo lies on: approaches and retracts);
-2. for at least :data:`LIFT_MIN_S`, with at least :data:`SIDE_MIN_S` of the run in contact on each side (a
+2. for at least :data:`~.contact.LIFT_MIN_S`, with at least :data:`SIDE_MIN_S` of the run in contact on each side (a
    lift at a run's end is its approach or retract, which step 6 trims);
 3. and the motion there does not recur: its median recurrence (step 6's, at the period of the strokes just
    before it, or just after) is at least :data:`~.time_runs.REC_GAMMA` times the median of the strokes around
@@ -28,21 +28,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import median_filter
 
+from lampskit.learn.contact import LIFT_MARGIN_M, LIFT_MIN_S, contact_band
 from lampskit.learn.reachability import smooth_positions
 from lampskit.learn.time_runs import REC_GAMMA, REST_SPEED_SHARE, Run, period_samples, recurrence, runs_from_labels
 
-#: The contact band: this many times the :data:`BAND_QUANTILE` of the run's distances from their plane [-]
-#: (the lower quartile: a hop's samples, up to three in four, leave it alone) ...
-BAND_FACTOR = 8.0
-BAND_QUANTILE = 0.25
-#: ... at least this [m] (a foam pad's give; sensor noise on a flat stroke) ...
-BAND_MIN_M = 0.005
-#: ... plus this margin [m]: a lift is higher than the band by more than this.
-LIFT_MARGIN_M = 0.005
 #: The surface is first placed through this lower share of a run's samples.
 PLANE_KEEP = 0.5
-#: A lift lasts at least this [s] (a hop of 1 s with a 2 cm lift stays above 1 cm for about 0.7 s).
-LIFT_MIN_S = 0.3
 #: A lift this long [s] is a hop whatever the strokes around it do (the recordings' flange rises with a
 #: stroke for 0.5 s at most; a 1 s hop of 2 cm stays above 1 cm for 0.7 s).
 LIFT_SURE_S = 0.6
@@ -70,13 +61,8 @@ def heights(points: np.ndarray, velocity: np.ndarray, all_points: np.ndarray) ->
     return h - float(np.mean(h[np.abs(h) <= contact_band(h)]))
 
 
-def contact_band(h: np.ndarray) -> float:
-    """The contact band [m] of heights ``h`` (K,) [m] (module docstring)."""
-    return max(BAND_MIN_M, BAND_FACTOR * float(np.quantile(np.abs(h), BAND_QUANTILE)))
-
-
 def lifted_stretches(h: np.ndarray, rate_hz: float) -> list[tuple[int, int]]:
-    """Stretches ``(start, end)`` of ``h`` (K,) [m] above the contact band for at least :data:`LIFT_MIN_S`."""
+    """Stretches ``(start, end)`` of ``h`` (K,) [m] above the contact band for at least :data:`~.contact.LIFT_MIN_S`."""
     up = (h > contact_band(h) + LIFT_MARGIN_M).astype(int)
     return [(a, b) for v, a, b in runs_from_labels(up) if v == 1 and b - a >= LIFT_MIN_S * rate_hz] if len(h) else []
 

@@ -68,11 +68,13 @@ primitives are *time intervals*. :func:`segment` with ``method="optics"``:
    (hysteresis: a person's first strokes are ragged and recur less exactly), and on over the touch-down and
    press before the first stroke while the tool stays on the strokes' fitted plane, inside their footprint
    and slower than half their median speed (``time_runs.settle_start``). A sample slower than
-   ``REST_SPEED_SHARE`` (0.1) of the run's median speed does not recur (a resting tool repeats itself
-   trivially; a pause is no stroke), and recurring stretches apart by more than ``max(SPLIT_GAP_S,
-   SPLIT_GAP_PERIODS P)`` (1 s, 1.5 periods) of motion that does not recur are separate wiping phases of
-   one cluster (a lift-off and return, a pause beside the spot), while a shorter gap (a grip shift, a
-   ragged stroke) stays inside the wipe. Velocity makes the test
+   ``REST_SPEED_SHARE`` (0.1) of the run's median speed is at rest: it is taken out before the recurrence
+   is computed (the stroke after a pause is compared with the strokes before it) and counts as not
+   recurring. Two recurring stretches with motion between them that does not recur (a slow stroke, a
+   pause, a grip shift; or a lift-off, a hop, a slide to another patch) are one wiping phase unless the
+   evidence of :mod:`.phase_continuity` cuts: a lift off the surface both sides' strokes span, a jump of
+   the stroke centre beyond their reach and drift, a change of stroke period, a long rest; each cut has
+   a margin (docs/method.md). Velocity makes the test
    sensitive early: a smooth (C2) departure from a cycle shows in position
    only as ``t^3`` but in velocity as ``t^2``.
 7. **Periodicity check.** A periodic MP covers its area again and again: it

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import median_filter
 
+from lampskit.learn.phase_continuity import gap_evidence
 from lampskit.learn.reachability import smooth_positions
 
 Run = tuple[int, int, int]  # (cluster or -1, start, end)
@@ -34,11 +35,6 @@ MIN_EXTENT_M = 0.005
 #: A sample slower than this share of its run's median speed is at rest: a resting tool repeats itself
 #: trivially, but a pause is no stroke.
 REST_SPEED_SHARE = 0.1
-#: Two recurring stretches of one run are two wiping phases when the motion between them does not recur for
-#: longer than this [s] and than :data:`SPLIT_GAP_PERIODS` periods (a lift-off and return, a pause, a walk
-#: to the spot again); a shorter gap (a grip shift, a ragged stroke) stays inside the wipe.
-SPLIT_GAP_S = 1.0
-SPLIT_GAP_PERIODS = 1.5
 #: A wipe starts where the tool settles onto the wiped surface, before its strokes recur: the start moves back
 #: while the tool stays within the band of heights above the plane fitted to the recurring strokes and within
 #: their footprint on it (both the :data:`SURFACE_QUANTILE` of the strokes' own spread, times
@@ -222,6 +218,17 @@ def recurrence(state: np.ndarray, period: int) -> np.ndarray:
     return rec
 
 
+def recurrence_across_rests(state: np.ndarray, rest: np.ndarray, period: int) -> np.ndarray:
+    """:func:`recurrence` of the states (K, d) with the samples at rest (``rest``, (K,) bool) taken out, so a
+    stroke after a pause is compared with the strokes before it (the stroke phase goes on where it stopped);
+    inf on the rest samples, shape (K,)."""
+    rec = np.full(len(state), np.inf)
+    moving = np.flatnonzero(~rest)
+    if len(moving) > 1:
+        rec[moving] = recurrence(state[moving], period)
+    return rec
+
+
 def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> list[Run]:
     """Move each periodic run's ends to where the motion stops recurring (step 6 of the module docstring)."""
     n = len(smooth)
@@ -236,22 +243,27 @@ def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> li
         lo = max(per[j - 1][2] if j > 0 else 0, a - period)
         hi = min(per[j + 1][1] if j + 1 < len(per) else n, b + period)
         omega = 2 * np.pi * rate_hz / period
-        rec = recurrence(np.hstack([smooth[lo:hi], velocity[lo:hi] / omega]), period)
+        speed = np.linalg.norm(velocity[lo:hi], axis=1)
+        rest = speed < REST_SPEED_SHARE * float(np.median(speed[a - lo:b - lo]))
+        rec = recurrence_across_rests(np.hstack([smooth[lo:hi], velocity[lo:hi] / omega]), rest, period)
         finite = np.isfinite(rec)
         if not finite[a - lo : b - lo].any():
             continue
         rec[~finite] = np.max(rec[finite])
-        speed = np.linalg.norm(velocity[lo:hi], axis=1)
-        rec[speed < REST_SPEED_SHARE * float(np.median(speed[a - lo:b - lo]))] = np.max(rec)
+        rec[rest] = np.max(rec)
         rec = median_filter(rec, size=max(1, period // 2) | 1, mode="nearest")
         level = REC_GAMMA * float(np.median(rec[a - lo : b - lo]))
         stretches = [(s0, s1) for v, s0, s1 in runs_from_labels((rec < level).astype(int)) if v == 1 and s1 - s0 >= period]
         if stretches:
             labels[a:b] = -1
             loose = rec < REC_GAMMA_LOOSE / REC_GAMMA * level
-            split = max(SPLIT_GAP_S * rate_hz, SPLIT_GAP_PERIODS * period)
             floor = 0
-            for s0, s1 in _wiping_phases(stretches, split):
+
+            def same_phase(before: tuple[int, int], after: tuple[int, int]) -> bool:
+                sides = tuple(period_samples(velocity[lo + x0:lo + x1], rate_hz) for x0, x1 in (before, after))
+                return not gap_evidence(smooth[lo:hi], rest, before, after, period, rate_hz, sides).cuts
+
+            for s0, s1 in _wiping_phases(stretches, same_phase):
                 # hysteresis at the start: back from the first recurring stretch while below the looser level (a
                 # person's first strokes are ragged: they recur, less exactly; the end needs none)
                 while s0 > floor and loose[s0 - 1]:
@@ -302,12 +314,13 @@ def settle_start(points: np.ndarray, speed: np.ndarray, s0: int, s1: int, floor:
     return floor + (int(off[-1]) + 1 if off.size else 0)
 
 
-def _wiping_phases(stretches: list[tuple[int, int]], split: float) -> list[tuple[int, int]]:
-    """Recurring stretches ``(start, end)`` in time order grouped into wiping phases: a gap longer than ``split``
-    [samples] separates two."""
+def _wiping_phases(stretches: list[tuple[int, int]], same_phase) -> list[tuple[int, int]]:
+    """Recurring stretches ``(start, end)`` in time order grouped into wiping phases: the motion between two that
+    does not recur separates them unless ``same_phase(before, after)`` (:mod:`.phase_continuity`: the tool stays
+    on the strokes' surface and patch, at their frequency, without a long rest)."""
     phases = [stretches[0]]
     for s0, s1 in stretches[1:]:
-        if s0 - phases[-1][1] > split:
+        if not same_phase(phases[-1], (s0, s1)):
             phases.append((s0, s1))
         else:
             phases[-1] = (phases[-1][0], s1)
