@@ -19,7 +19,6 @@ ink, never clean (:mod:`perception.classify`).
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -28,22 +27,14 @@ import numpy as np
 from interfaces.description import URDF_PATH
 
 from .rectify import BoardGrid
-from .self_filter import board_shadow
+from .self_filter import ArmState, board_shadow
+
+__all__ = ["ArmSilhouette", "ArmState", "link_solids", "solid_vertices"]
 
 #: Sides of the polygon standing for a cylinder's circle (its hull then lies within 1.5 % of the circle).
 SIDES = 16
 #: Step of the finite difference that gives the arm's point speeds [s].
 SPEED_DT_S = 0.01
-
-
-@dataclass(frozen=True)
-class ArmState:
-    """The arm as the joint state nearest a frame says: ``q_rad`` (7,), ``dq_rad_s`` (7,), and ``age_s``, how
-    far that state's time is from the frame's [s] (either way)."""
-
-    q_rad: np.ndarray
-    dq_rad_s: np.ndarray
-    age_s: float
 
 
 def _rotation_rpy(r: float, p: float, y: float) -> np.ndarray:

@@ -20,13 +20,13 @@ import numpy as np
 from interfaces.messages import StainObservation, Stains
 from interfaces.transforms import pose_from_transform
 
-from .arm_mask import ArmSilhouette, ArmState
+from .arm_mask import ArmSilhouette
 from .board import BoardEstimate, BoardTracker
 from .classify import InkClassifier, InkMap
 from .frames import Frame
 from .params import PerceptionParams
 from .rectify import BoardGrid
-from .self_filter import board_shadow, shadow_mask
+from .self_filter import ArmState, board_shadow, shadow_mask
 from .tracking import StainTracker
 
 #: The frame clock going back by more than this means a restarted source [s].

@@ -20,6 +20,7 @@ the shared description.
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -74,6 +75,16 @@ def shadow_mask(grid: BoardGrid, shadow_xy_m: np.ndarray, margin_m: float) -> np
     if k > 0:
         mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1)))
     return mask.view(bool)
+
+
+@dataclass(frozen=True)
+class ArmState:
+    """The arm as the joint state nearest a frame says: ``q_rad`` (7,), ``dq_rad_s`` (7,), and ``age_s``, how
+    far that state's time is from the frame's [s] (either way); masked by :mod:`perception.arm_mask`."""
+
+    q_rad: np.ndarray
+    dq_rad_s: np.ndarray
+    age_s: float
 
 
 class ToolTrack:
@@ -131,10 +142,8 @@ class ToolTrack:
         got = self._nearest(frame_robot_time_ns, now_s)
         return None if got is None else tool_corners(*self._model.tcp_pose(got[0]))
 
-    def arm_at(self, frame_robot_time_ns: int, now_s: float):
-        """The :class:`~perception.arm_mask.ArmState` for the frame (joint positions and speeds, and how far the
-        state is from the frame's time), or None (no state near enough)."""
-        from .arm_mask import ArmState
-
+    def arm_at(self, frame_robot_time_ns: int, now_s: float) -> ArmState | None:
+        """The :class:`ArmState` for the frame (joint positions and speeds, and how far the state is from the
+        frame's time), or None (no state near enough)."""
         got = self._nearest(frame_robot_time_ns, now_s, count=False)  # counted once, by corners_at
         return None if got is None else ArmState(got[0], got[1], float(got[2]))
