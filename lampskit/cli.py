@@ -214,6 +214,9 @@ def learn_main(argv: list[str]) -> int:
     p.add_argument("-o", "--output", type=Path, required=True, help="skill file to write (JSON)")
     p.add_argument("--method", choices=("optics", "kmeans", "affinity", "sklearn-optics"), default="optics")
     p.add_argument("--plots", type=Path, default=None, help="folder for the paper's Figs. 4-7 as PNG (first demo)")
+    p.add_argument("--segments", type=Path, default=None, metavar="FILE",
+                   help="learn from these segments (the JSON of 'lamps segment --json', edited: merge, split at a "
+                        "time, relabel) instead of segmenting; one demo only")
     _recording_options(p)
 
     def body(a: argparse.Namespace) -> int:
@@ -222,7 +225,16 @@ def learn_main(argv: list[str]) -> int:
 
         _check_out_parent(a.output)
         demos = _read_demos(a)
-        skill, segs = learn_skill_from_demos(demos, method=a.method, progress=Progress())
+        if a.segments is not None:
+            from lampskit.learn.learn import learn_skill
+            from lampskit.learn.segments_file import read_segments
+
+            if len(demos) != 1:
+                raise LampsError(f"--segments applies to one demonstration, got {len(demos)}")
+            skill, seg = learn_skill(demos[0], read_segments(a.segments, demos[0]), progress=Progress())
+            segs = [seg]
+        else:
+            skill, segs = learn_skill_from_demos(demos, method=a.method, progress=Progress())
         save_skill(a.output, skill)
         print(_skill_summary(skill))
         print(f"wrote {a.output}")

@@ -106,6 +106,7 @@ import numpy as np
 
 from lampskit.errors import SegmentationError
 from lampskit.learn.cluster_baselines import FIXED_THRESHOLD_M, affinity_labels, kmeans_labels, sklearn_optics_labels
+from lampskit.learn.cut_margins import cut_margins
 from lampskit.learn.demo import Demonstration
 from lampskit.learn.lifts import split_at_lifts
 from lampskit.learn.optics import OpticsResult, ProgressCallback, optics
@@ -234,6 +235,9 @@ class Segmentation:
         ``ordering`` indexes ``point_samples``.
     params : SegmentationParams
         The settings asked for.
+    cuts : tuple of dict
+        How sure each boundary is (:func:`~.cut_margins.cut_margins`): ``margin`` > 0 the cut is made by that
+        much, near 0 check it.
     """
 
     segments: tuple[Segment, ...]
@@ -245,6 +249,7 @@ class Segmentation:
     point_samples: np.ndarray
     optics: OpticsResult | None
     params: SegmentationParams = field(default_factory=SegmentationParams)
+    cuts: tuple = ()
 
     def __post_init__(self) -> None:
         self.labels.setflags(write=False)
@@ -287,7 +292,7 @@ class Segmentation:
 
         Unless ``summary``, also ``ordering`` (sample index of each OPTICS
         point, in OPTICS order), ``reachability`` [m] in that order (the
-        first, infinite, value as None) and the ``params``.
+        first, infinite, value as None), the ``params`` and the ``cuts``.
         """
         d = {
             "method": self.method,
@@ -301,6 +306,7 @@ class Segmentation:
             d["ordering"] = self.ordering_samples.tolist()
             d["reachability"] = [float(r) if np.isfinite(r) else None for r in self.reachability_plot]
             d["params"] = asdict(self.params)
+            d["cuts"] = list(self.cuts)
         return d
 
 
@@ -413,9 +419,11 @@ def _segment_impl(
     labels = np.empty(len(t), dtype=int)
     for c, a, b in runs:
         labels[a:b] = c
+    cuts = cut_margins(smooth, demo.rate_hz, t, [(s.kind, s.start, s.end) for s in segments], keep,
+                       None if result is None else result.reachability, eps)
     if progress is not None:
         progress(PROGRESS_TOTAL, PROGRESS_TOTAL)
-    return Segmentation(segments, labels, method, eps, ms, step, keep, result, params)
+    return Segmentation(segments, labels, method, eps, ms, step, keep, result, params, tuple(cuts))
 
 
 def _on_thinned(step, runs: list, smooth: np.ndarray, rate_hz: float, n: int) -> list:
