@@ -9,6 +9,9 @@ Usage: .venv/bin/python bench/eval_segmentation_accuracy.py [--seeds N] [--quick
 - real: the four hand-labelled demonstrations in
   ``../shared/data/wiping-demos/circular_wiping_dataset.mat`` (skipped when
   absent; read from there, never copied);
+- messy generated takes: ``draw_messy_take(seed)`` for ``--messy`` seeds (:mod:`lampskit.learn.synth_messy`:
+  wandering, drifting strokes with pauses and slow strokes, hops leaving mid-stroke along a tilted normal,
+  lift-offs, slides, noise and dropped samples at 100-1000 Hz), OPTICS only, per take;
 - real long takes: :data:`lampskit.learn.takes.REAL_TAKES`, several wipes
   chained from those recordings (lift-offs and returns, spots 6-30 cm apart,
   pauses, a shift inside a wipe), per take: true and found wiping phases,
@@ -58,6 +61,7 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--quick", action="store_true", help="one seed (lamps bench --quick)")
+    ap.add_argument("--messy", type=int, default=20, help="messy generated takes scored (seeds 0..N-1)")
     a = ap.parse_args()
     if a.quick:
         a.seeds = 1
@@ -89,6 +93,7 @@ def main() -> int:
         real_exact = f"{sum(r[m][1] == r[m][2] for r in real_rows)}/{len(real_rows)}" if real_rows else "-"
         print(f"| {m} | " + " | ".join(cells) + f" | {real} | {real_exact} |")
         out[m]["real"] = [r[m] for r in real_rows]
+    out["messy"] = _messy_table(a.messy)
     if REAL.is_file():
         out["takes"] = _takes_table()
     if a.json:
@@ -104,6 +109,25 @@ def _boundary_error_s(seg, take) -> float:
         return float("inf")
     true = [t[i] for i0, i1 in take.wipes for i in (i0, i1 - 1)]
     return max(min(abs(x - f) for f in found) for x in true)
+
+
+def _messy_table(n: int) -> dict:
+    from lampskit.learn.synth_messy import draw_messy_take
+
+    print("\nmessy generated takes (lampskit/learn/synth_messy.py, draw_messy_take(seed)), optics\n")
+    print("| seed | rate [Hz] | samples | true wiping phases | found | frame accuracy |")
+    print("|---:|---:|---:|---:|---:|---:|")
+    out = {}
+    for seed in range(n):
+        take = draw_messy_take(seed)
+        acc, found, true = _score(take.demo, take.true_periodic, "optics")
+        out[seed] = {"rate_hz": take.demo.rate_hz, "true": true, "found": found, "accuracy": acc}
+        print(f"| {seed} | {take.demo.rate_hz:.0f} | {take.demo.n_samples} | {true} | {found} | {acc:.3f} |")
+    exact = sum(r["found"] == r["true"] for r in out.values())
+    accs = [r["accuracy"] for r in out.values()]
+    if accs:
+        print(f"\nexact count {exact}/{n}; frame accuracy mean {np.mean(accs):.3f}, min {np.min(accs):.3f}")
+    return out
 
 
 def _takes_table() -> dict:
