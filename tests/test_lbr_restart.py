@@ -56,10 +56,12 @@ def _stop(proc: subprocess.Popen) -> None:
 
 @pytest.mark.slow
 @pytest.mark.alone
-@pytest.mark.parametrize("law, watchdog", [("relative", True), ("absolute", True), ("relative", False)])
-def test_the_adapter_killed_while_the_pad_presses_the_watchdog_releases_it(tmp_path, law, watchdog):
-    """Without the watchdog the stack re-applies the adapter's last message and the pad goes on pressing."""
-    with Cell(tmp_path, {"joint_damping_law": law}) as cell:
+@pytest.mark.parametrize("law, watchdog, fri", [("relative", True, 1), ("absolute", True, 1), ("relative", False, 1),
+                                               ("absolute", True, 2)])
+def test_the_adapter_killed_while_the_pad_presses_the_watchdog_releases_it(tmp_path, law, watchdog, fri):
+    """Without the watchdog the stack re-applies the adapter's last message and the pad goes on pressing. FRI 2:
+    the adapter presses through its mirror of the stack's PID (tests/test_lbr_fri2.py)."""
+    with Cell(tmp_path, {"joint_damping_law": law, "fri_major": fri}, {"LAMPS__LBR__FRI_MAJOR": str(fri)}) as cell:
         dog = _robot_process(cell, "--watchdog", log_name="watchdog.log") if watchdog else None
         try:
             cell.pressing(by_s=30.0)
@@ -75,7 +77,7 @@ def test_the_adapter_killed_while_the_pad_presses_the_watchdog_releases_it(tmp_p
                 _stop(dog)
         dog_log = (tmp_path / "watchdog.log").read_text() if watchdog else ""
     silence = re.search(r"no command for (\d+) ms while the robot's states arrive: sending the release", dog_log)
-    print(f"\n{law} damping, watchdog {watchdog}: pad {force_before:.1f} N before the kill, {force_after:.2f} N "
+    print(f"\n{law} damping, watchdog {watchdog}, FRI {fri}: pad {force_before:.1f} N before the kill, {force_after:.2f} N "
           f"from 1 s after; release after {silence[1] if silence else '-'} ms of silence, "
           f"{peer.counters.get('releases_received', 0)} received")
     assert force_before >= 8.0, force_before

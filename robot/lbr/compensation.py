@@ -36,6 +36,7 @@ cited by file and line (lbr_fri_ros2_stack ``rolling`` 218d723):
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -96,25 +97,28 @@ class JointSpring:
         self.share = share
         self.speed = speed_rad_s
         self.c: np.ndarray | None = None  # the stack's joint position command, as last known or mirrored
-        self._target: np.ndarray | None = None
+        self._targets: deque[np.ndarray] = deque(maxlen=2)  # the last two targets sent, oldest first
         self._t_ns: int | None = None
 
     def reset(self, c: np.ndarray, t_ns: int) -> None:
         """Start from a known stack command ``c`` (7,) [rad] (arming)."""
         self.c = np.array(c, float)
-        self._target = None
+        self._targets.clear()
         self._t_ns = t_ns
 
     def observe(self, q: np.ndarray, t_ns: int, sample_time_s: float, c_reported: np.ndarray | None) -> None:
-        """A new state: the reported command (FRI 1), or the PID run over the FRI cycles since the last state."""
+        """A new state: the reported command (FRI 1), or the PID run over the FRI cycles since the last state (FRI 2)
+        with the target those cycles had: the one sent before our newest, since a message reaches the stack at
+        the manager's next cycle and the robot at the FRI cycle after it (taking the newest ran ``c`` ahead by
+        ``p`` times the target's travel: 13 mrad, 2.6 Nm of spring, after 0.13 rad of A2)."""
         if c_reported is not None:
             self.c = np.array(c_reported, float)
         elif self.c is None:
             self.c = np.array(q, float)
-        elif self._target is not None and self._t_ns is not None:
+        elif len(self._targets) == 2 and self._t_ns is not None:
             cycles = max(round((t_ns - self._t_ns) * 1e-9 / sample_time_s), 0)
             for _ in range(min(cycles, 50)):
-                self.c += self.p * (self._target - q)
+                self.c += self.p * (self._targets[0] - q)
         self._t_ns = t_ns
 
     def command(self, q: np.ndarray, tau_nm: np.ndarray, dq: np.ndarray | None = None,
@@ -138,12 +142,12 @@ class JointSpring:
             room = self.speed * sample_time_s * n
             step = np.clip(step, drift - room, drift + room)
         target = q + step / (self.p * n) if self.p > 0 else np.array(q, float)
-        self._target = target
+        self._targets.append(target)
         return target, tau_nm - self.K * (c + step * (n + 1) / (2 * n) - q)
 
     def hold(self, target: np.ndarray) -> None:
         """A hold (``target``, zero overlay) went out: the mirror follows it."""
-        self._target = np.array(target, float)
+        self._targets.append(np.array(target, float))
 
 
 class AppliedWatch:
