@@ -141,8 +141,9 @@ class StainTracker:
         elif strokes is None:
             self._detect(free, ink, visible, t_s, 0)
         else:
+            present = np.bincount(strokes[free], minlength=len(ink.names))  # free pixels per ink
             for k in range(len(ink.names)):
-                self._detect(free & (strokes == k), ink, visible, t_s, k)
+                self._detect(free & (strokes == k) if present[k] else None, ink, visible, t_s, k)
 
     def _grow(self, tr: Track, ink: InkMap, owned: np.ndarray, strokes: np.ndarray | None) -> None:
         """Stain pixels of the stain's ink within ``link_m`` of the core (and nobody's) join the stain."""
@@ -225,12 +226,13 @@ class StainTracker:
             rows, cols = np.nonzero(reg & (d_last >= self.ink_level))
             tr.ink = shape_of(self.grid.xy_of(rows + r0, cols + c0), self.grid.resolution_m) if rows.size else None
 
-    def _detect(self, free: np.ndarray, ink: InkMap, visible: np.ndarray, t_s: float, colour: int) -> None:
-        """New clusters of ink ``colour`` (palette index): candidates until seen for ``confirm_s``, then stains."""
-        n, labels = cluster_pixels(free, self.link_px)
+    def _detect(self, free: np.ndarray | None, ink: InkMap, visible: np.ndarray, t_s: float, colour: int) -> None:
+        """New clusters of ink ``colour`` (palette index) in ``free`` (None: none): candidates until seen for
+        ``confirm_s``, then stains."""
+        n, labels = cluster_pixels(free, self.link_px) if free is not None else (0, None)
         seen_now: list[tuple[np.ndarray, np.ndarray]] = []
         if n:
-            counts = np.bincount(labels.ravel(), minlength=n + 1)
+            counts = np.bincount(labels[free], minlength=n + 1)  # labels are 0 off the free pixels
             for k in np.flatnonzero(counts >= self.min_px):
                 if k == 0:
                     continue

@@ -80,6 +80,7 @@ def unmix_into(rgb: np.ndarray, white_coef: np.ndarray, local: np.ndarray, follo
                 x0[j] = np.float32(rgb[i, j, 0]) / v0
                 x1[j] = np.float32(rgb[i, j, 1]) / v1
                 x2[j] = np.float32(rgb[i, j, 2]) / v2
+        best[:] = np.float32(np.inf)
         for k in range(n_ink):
             a0, a1, a2, a3 = to_st[k, 0, 0], to_st[k, 0, 1], to_st[k, 0, 2], to_st[k, 0, 3]
             b0, b1, b2, b3 = to_st[k, 1, 0], to_st[k, 1, 1], to_st[k, 1, 2], to_st[k, 1, 3]
@@ -87,7 +88,6 @@ def unmix_into(rgb: np.ndarray, white_coef: np.ndarray, local: np.ndarray, follo
             q0, q1, q2, q3 = to_res[k, 1, 0], to_res[k, 1, 1], to_res[k, 1, 2], to_res[k, 1, 3]
             r0, r1, r2, r3 = to_res[k, 2, 0], to_res[k, 2, 1], to_res[k, 2, 2], to_res[k, 2, 3]
             kk = np.uint8(k)
-            first = k == 0
             for j in range(cols):
                 u0, u1, u2 = x0[j], x1[j], x2[j]
                 e0 = p0 * u0 + p1 * u1 + p2 * u2 + p3
@@ -96,8 +96,9 @@ def unmix_into(rgb: np.ndarray, white_coef: np.ndarray, local: np.ndarray, follo
                 res2 = e0 * e0 + e1 * e1 + e2 * e2
                 s = a0 * u0 + a1 * u1 + a2 * u2 + a3
                 t = b0 * u0 + b1 * u1 + b2 * u2 + b3
-                take = first or res2 < best[j]  # the first ink on a tie
-                best[j] = res2 if take else best[j]
+                b = best[j]
+                take = res2 < b  # the first ink on a tie
+                best[j] = res2 if take else b
                 s_best[j] = s if take else s_best[j]
                 t_best[j] = t if take else t_best[j]
                 k_best[j] = kk if take else k_best[j]
