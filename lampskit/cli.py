@@ -154,16 +154,28 @@ def _segment_table(demo, seg) -> str:
 def segment_main(argv: list[str]) -> int:
     p = _parser("segment", "Segment a demonstration into periodic and transitional movement primitives.")
     _add_segment_options(p)
-    p.add_argument("--json", type=Path, default=None, help="write segments, threshold and reachability as JSON")
+    p.add_argument("--json", type=Path, default=None, help="write segments, threshold, reachability and each "
+                                                             "cut's margin as JSON")
+    p.add_argument("--plot", type=Path, default=None, metavar="STEM",
+                   help="write STEM.png (reachability, speed, height above the stroke surface, segments coloured) "
+                        "and STEM.mcap (the take with a /take/segments channel)")
 
     def body(a: argparse.Namespace) -> int:
-        if a.json:
-            _check_out_parent(a.json)
+        for out in (a.json, a.plot):
+            if out:
+                _check_out_parent(out)
         demo, seg = _segment(a)
         print(_segment_table(demo, seg))
         if a.json:
             write_text_atomic(a.json, json.dumps(seg.to_dict()) + "\n")
             print(f"wrote {a.json}")
+        if a.plot:
+            from lampskit.learn.segment_plot import write_segment_mcap, write_segment_png
+
+            stem = a.plot.with_suffix("") if a.plot.suffix in (".png", ".mcap") else a.plot
+            for path in (write_segment_png(demo, seg, stem.with_name(stem.name + ".png")),
+                         write_segment_mcap(demo, seg, stem.with_name(stem.name + ".mcap"))):
+                print(f"wrote {path}")
         return 0
 
     return _run("segment", p, argv, body)

@@ -105,3 +105,22 @@ def test_segments_apply_to_one_demo_only(segmented, tmp_path, capsys):
     path.write_text(json.dumps(data))
     code = main(["learn", str(demo), str(demo), "--segments", str(path), "-o", str(tmp_path / "k.json")])
     assert code != 0 and "one demonstration" in capsys.readouterr().err
+
+
+def test_plot_writes_the_figure_and_an_mcap_with_the_segments(segmented, tmp_path, capsys):
+    from mcap.reader import make_reader
+
+    from lampskit.learn.segment_plot import SEGMENTS_TOPIC, TAKE_TOPIC
+
+    from .mcap_check import check_recording
+
+    demo, data = segmented
+    assert main(["segment", str(demo), "--plot", str(tmp_path / "seg")]) == 0
+    png, mcap = tmp_path / "seg.png", tmp_path / "seg.mcap"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+    topics = check_recording(mcap, every=1)
+    assert topics[SEGMENTS_TOPIC] == ("lamps.Segment", len(data["segments"]))
+    assert topics[TAKE_TOPIC][1] > 1000
+    with open(mcap, "rb") as f:
+        kinds = [json.loads(m.data)["kind"] for _, c, m in make_reader(f).iter_messages(topics=[SEGMENTS_TOPIC])]
+    assert kinds == [s["kind"] for s in data["segments"]]
