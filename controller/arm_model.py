@@ -10,7 +10,8 @@ out to -A, back: the joints' friction acts both ways about as long). The
 approach alone keeps the pad facing the board, and a load's offset along
 gravity then turns no joint at any of its poses.
 
-Timeline: identification (``identify_s``) -> approach (samples of slow free
+Timeline: identification (``identify_s``, begun only while the controller
+waits for its first board, so a board known at once skips it) -> approach (samples of slow free
 motion) -> the first contact: the fit is handed to the correction (its
 gravity torque then follows the pose).
 """
@@ -21,6 +22,7 @@ import math
 
 import numpy as np
 
+from interfaces.arm_estimate import ArmEstimate
 from interfaces.messages import Phase
 
 from .control.model_correction import ModelCorrection
@@ -58,7 +60,7 @@ class ArmModel:
     def compile(self, kin) -> None:
         """Compile the kernels for the arrays the tick passes (no state left behind)."""
         c = self.correction
-        c.apply(kin, False)
+        c.apply(kin)
         c.update(np.zeros(len(c.z)), 0.0)
         accumulate_into(self.tool.Y, c.c, np.zeros((4, 4)), np.zeros(4))
         self.tool.add(kin.J, kin.R, c.c)
@@ -68,7 +70,9 @@ class ArmModel:
                     phase: str) -> None:
         """An evaluated cycle of the disturbance watch (its residual ``tau_d`` (n,) [Nm]): integrate, and before the
         first contact take a sample of slow free motion every :data:`TOOL_SAMPLE_EVERY_TICKS` ticks."""
-        self.correction.update(tau_d, dt_s)
+        # DONE: the arm rests where the skill left it; the correction stands (a report then reads the same figures
+        # from whichever status was the last)
+        self.correction.update(tau_d, 0.0 if phase == Phase.DONE else dt_s)
         if self.fitted:
             return
         self._every += 1
@@ -94,9 +98,11 @@ class ArmModel:
         if self.tool.solve():
             self.correction.use_load(self.tool.theta)
 
-    def identifying(self) -> bool:
-        """True while the identification motion runs (its time is counted by :meth:`identify_reference`)."""
-        return self.identify_t_s < self.p.identify_s
+    def identifying(self, board_known: bool) -> bool:
+        """True while the identification motion runs: it starts only while no board is known (the controller
+        waits for perception anyway) and, once started, runs to its end (time counted by :meth:`identify_reference`)."""
+        t = self.identify_t_s
+        return t < self.p.identify_s and (t > 0.0 or not board_known)
 
     def identify_reference(self, R_hold: np.ndarray, dt_s: float, R_ref: np.ndarray, twist: np.ndarray,
                            accel: np.ndarray) -> None:
@@ -117,14 +123,11 @@ class ArmModel:
         twist[3:] = axis * da
         accel[3:] = axis * dda
 
-    def summary(self) -> dict:
-        """What was estimated, for the status and the report (SI units; the load's centre of mass in the flange
-        frame)."""
+    def estimate(self) -> ArmEstimate:
+        """What was estimated, for the status (and from it the report)."""
         t, c = self.tool, self.correction
-        return {"tool_mass_kg": round(t.mass_kg, 4) if t.valid else None,
-                "tool_com_m": [round(float(x), 4) for x in t.com_flange_m] if t.valid else None,
-                "tool_fit_residual_nm": round(t.residual_rms_nm, 3) if t.valid else None,
-                "tool_samples": t.n,
-                "correction_nm": [round(float(x), 3) for x in c.c],
-                "residual_nm": [round(float(x), 3) for x in c.z],
-                "warning": c.warning}
+        return ArmEstimate(tool_fitted=t.valid, tool_mass_kg=t.mass_kg if t.valid else 0.0,
+                           tool_com_m=[float(x) for x in t.com_flange_m] if t.valid else [],
+                           tool_fit_residual_nm=t.residual_rms_nm if t.valid else 0.0,
+                           correction_nm=[float(x) for x in c.c], residual_nm=[float(x) for x in c.z],
+                           warning=c.warning)

@@ -216,7 +216,7 @@ class ControllerCore:
         if tau_max_nm is not None:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
-        self.arm.correction.apply(kin, gravity_compensated)  # the model's static torque, corrected
+        self.arm.correction.apply(kin)  # the model's static torque, corrected
         self._watch_disturbance(kin, dq, wrench, gravity_compensated, dt_s, applied_nm)
         known = applied_nm if applied_nm is not None else running_nm
         if known is not None:
@@ -226,9 +226,10 @@ class ControllerCore:
             self.contact_watch.lost_s = 0.0
             self._rate_from_applied(kin, gravity_compensated)
         board = self.executor.board
-        if board is None or self.arm.identifying():
+        identifying = self.arm.identifying(board is not None)
+        if board is None or identifying:
             self._hold_reference(kin)
-            if self.arm.identifying():  # the pad rolls about its normal, for the load estimate
+            if identifying:  # the pad rolls about its normal, for the load estimate
                 ref = self.ref
                 self.arm.identify_reference(self._hold[1], dt_s, ref.R, ref.twist, ref.accel)
             sp = None
@@ -272,8 +273,9 @@ class ControllerCore:
             return
         applied = self._applied
         applied[:] = applied_nm
-        if gravity_compensated:
+        if gravity_compensated:  # the robot adds its own gravity, not the model correction (which is in kin.g)
             applied += kin.g
+            applied -= self.arm.correction.c
         tripped = watch.update(kin.M, kin.nle, kin.J, dq, applied, wrench, dt_s)
         self.arm.after_watch(watch.tau_d, kin, dq, wrench, dt_s, self.executor.phase)
         if tripped:

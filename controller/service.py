@@ -472,7 +472,7 @@ class ControllerService:
                                 current_mp=ex.current_mp, stain_id=ex.stain_id,
                                 normal_force_n=float(core.normal_force_n), timing=self.stats.summary(),
                                 counters=counters, wall_ns=time.time_ns(),
-                                robot_time_ns=int(core.time_s * 1e9))
+                                robot_time_ns=int(core.time_s * 1e9), arm=core.arm.estimate())
 
     def _publish_status(self, force: bool = False) -> None:
         self._auth.housekeeping()  # introductions: a try_recv and a clock read unless one is due

@@ -24,9 +24,9 @@ from typing import Annotated
 import msgspec
 from msgspec.structs import force_setattr
 
+from interfaces.arm_estimate import ArmEstimate
 from interfaces.message_checks import (DETAIL_MAX, NAME_MAX, TEXT_MAX, Certificate, Counters, Detail, Mac, Name, Nonce,
-                                       Signature, Text, _clip, _finite,
-                                       _same_length, bounded_counters)
+                                       Signature, Text, _clip, _finite, _same_length, bounded_counters)
 
 #: Bump when a change could make an old reader misread a new message.
 SCHEMA_VERSION = 2
@@ -334,13 +334,12 @@ class LoopTiming(msgspec.Struct, frozen=True, array_like=True):
 
 
 class ControllerStatus(Message, frozen=True):
-    """Controller -> anyone: phase, what runs, force, timing and counters.
+    """Controller -> anyone: phase, what runs, force, timing, counters and what it estimated of the arm.
 
-    phase : a :class:`Phase` name; reason : why (always set in PAUSED, FAULT,
-    ESTOP); current_mp : e.g. ``"periodic 3"``; normal_force_n : measured
-    contact force along the board normal [N]; counters : e.g. dropped samples
-    per key; robot_time_ns : the controller's time on the robot's clock (the
-    sum of its ticks' steps since it started) [ns], 0 before the first state.
+    phase : a :class:`Phase` name; reason : why (always set in PAUSED, FAULT, ESTOP); current_mp : e.g.
+    ``"periodic 3"``; normal_force_n : measured contact force along the board normal [N]; counters : e.g. dropped
+    samples per key; robot_time_ns : the controller's time on the robot's clock (the sum of its ticks' steps since
+    it started) [ns], 0 before the first state; arm : the flange load and model error (:class:`ArmEstimate`).
     """
 
     seq: int
@@ -356,6 +355,7 @@ class ControllerStatus(Message, frozen=True):
     robot_time_ns: int = 0
     #: how the controller joined (``mtls+acl as controller``, or ``INSECURE: ...``), set by its node on publishing
     security: Name = ""
+    arm: ArmEstimate = msgspec.field(default_factory=ArmEstimate)
 
     def __post_init__(self) -> None:
         _clip(self, reason=TEXT_MAX, current_mp=TEXT_MAX)

@@ -121,6 +121,8 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report["faults"] = sorted(faults, key=lambda f: f["wall_ns"])
     final_ns, final_status = _final_status(run)
     report["final_phase"] = final_status["phase"] if final_status else "none"
+    # what the controller estimated of the arm (its flange load, model error, a model_mismatch warning)
+    report["arm_model"] = (final_status or {}).get("arm", {})
     report["outcome"] = _outcome(report["final_phase"], report["dirt_removed_fraction"], run.launcher.get("outcome"))
     report["services"] = run.launcher.get("services", {})
     report["recording"], recorder_counts = recording_section(run)

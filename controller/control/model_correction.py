@@ -7,8 +7,8 @@ they weigh and its tool what the user mounted. The torque the model misses,
 
     tau_d = M (dq_k - dq_{k-1}) / dt + nle + c - tau_applied - J^T w
 
-when the correction ``c`` is counted as part of the model (``nle + c``; and
-``g + c`` where the controller adds gravity). Since the robot applied ``c``
+when the correction ``c`` is counted as part of the model (``nle + c``,
+``g + c``; where the robot adds gravity itself it adds its own, not ``c``). Since the robot applied ``c``
 too, ``tau_d = c - delta`` whatever ``c`` is: the observer
 
     c = Y(q) theta + z,     dz/dt = -tau_d / T_i,   |z_i| <= z_max_i
@@ -119,18 +119,18 @@ class ModelCorrection:
         self.at_bound_s = 0.0
         self.warning = ""
 
-    def apply(self, kin, gravity_compensated: bool) -> np.ndarray:
+    def apply(self, kin) -> np.ndarray:
         """Count the correction as part of the model of ``kin`` (its :class:`~.impedance.Kinematics`, updated
-        this tick): ``nle += c`` and, where the controller adds gravity, ``g += c``. Returns ``c`` (n,) [Nm],
-        which the caller adds to its command itself when the robot compensates gravity."""
+        this tick): ``nle += c``, ``g += c``. Returns ``c`` (n,) [Nm]. When the robot compensates gravity the law
+        adds no ``g``: the caller adds ``c`` to its command itself, and the robot's own gravity, which the watch
+        adds to the applied torque, is ``g - c``."""
         tool_regressor_into(kin.J, kin.R, GRAVITY_M_S2, self.Y)
         if not self.p.enabled:
             self.c[:] = 0.0
             return self.c
         correction_into(self.Y, self.theta, self.z, self.c)
-        kin.nle += self.c
-        if not gravity_compensated:
-            kin.g += self.c
+        kin.nle += self.c  # the law's C dq is nle - g: unchanged
+        kin.g += self.c
         return self.c
 
     def update(self, tau_d: np.ndarray, dt_s: float) -> None:
