@@ -50,8 +50,11 @@ def stroke_inks(ink: InkMap) -> np.ndarray:
     n, labels = cv2.connectedComponents(ink.stain.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
     k = len(ink.names)
     on = ink.stain
-    weights = np.bincount(labels[on] * k + ink.ink[on], weights=ink.d[on], minlength=n * k).reshape(n, k)
-    return weights.argmax(axis=1).astype(np.uint8)[labels]  # (off the stain pixels: 0)
+    lab = labels[on]
+    weights = np.bincount(lab * k + ink.ink[on], weights=ink.d[on], minlength=n * k).reshape(n, k)
+    out = np.zeros(on.shape, np.uint8)  # (off the stain pixels: 0)
+    out[on] = weights.argmax(axis=1).astype(np.uint8)[lab]
+    return out
 
 
 def drawing_inks(ink: InkMap, link_px: float) -> np.ndarray:
@@ -69,8 +72,9 @@ def drawing_inks(ink: InkMap, link_px: float) -> np.ndarray:
     counts = np.bincount(labels[on] * k + strokes[on], minlength=(n + 1) * k).reshape(n + 1, k)
     main = counts.argmax(axis=1)
     minor = (counts > 0) & (counts < MINOR_INK_SHARE * counts.sum(axis=1, keepdims=True))
-    boxes = find_objects(labels)  # each drawing's box (one pass): the work is done there
-    for c in np.flatnonzero(minor[1:].any(axis=1)) + 1:
+    with_minor = np.flatnonzero(minor[1:].any(axis=1)) + 1
+    boxes = find_objects(labels) if with_minor.size else []  # each drawing's box (one pass): the work is done there
+    for c in with_minor:
         lab, st = labels[boxes[c - 1]], strokes[boxes[c - 1]]
         drawing = lab == c
         inside = hull(drawing & (st == main[c]))
