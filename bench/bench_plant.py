@@ -1,6 +1,7 @@
-"""Today's controller on simulated arms that are not its model: the baseline for issue 49's controller work.
+"""The controller on simulated arms that are not its model, with and without what it learns of the arm (issue 49).
 
-Usage: .venv/bin/python bench/bench_plant.py [--seed 0] [--modes off,on] [--plants main|extra|all] [--json OUT]
+Usage: .venv/bin/python bench/bench_plant.py [--seed 0] [--modes off,on] [--plants main|extra|all]
+       [--controllers plain,learning] [--json OUT]
 
 Each plant is one network-free lock-step cell (``lamps up --no-network``, :mod:`launch.local_cell`: the
 compose file's sim, controller, perception and recorder in one process), the default wall board with the
@@ -22,7 +23,13 @@ Each in both robot modes unless ``--modes`` says otherwise: ``off`` (``gravity_c
 default cell: the controller compensates gravity with its nominal model) and ``on`` (the simulated robot
 compensates its own true weight and the tool by its load data, left at the described eraser, so an added
 tool is not compensated). Per cell, from its ``report.json``: outcome, dirt removed, normal force while
-wiping mean +- std, its maximum, tracking RMS in contact (in-plane reference vs measured pad while wiping).
+wiping mean +- std, its maximum, tracking RMS in contact (in-plane reference vs measured pad while wiping),
+and the flange load the controller estimated before its first wipe (``arm_model`` of the report).
+
+Each cell with both controllers unless ``--controllers`` says otherwise (same seeds, same run): ``plain``, the
+controller with ``[controller.model] enabled = false, identify_s = 0`` (the nominal model only, as before the
+correction existed: the baseline), and ``learning``, the defaults (the model correction and the flange load
+estimate of :mod:`controller.arm_model`).
 """
 
 from __future__ import annotations
@@ -53,13 +60,18 @@ EXTRA: dict[str, dict[str, str]] = {
         "RANDOM_MASS_ERROR": "0.3", "RANDOM_COM_ERROR_M": "0.02", "TOOL_MASS_KG": "1.5", "SEED": "1"},
 }
 MODES = {"off": "false", "on": "true"}
+#: controller label -> [controller.model] overrides (environment values).
+CONTROLLERS = {"plain": {"ENABLED": "false", "IDENTIFY_S": "0"}, "learning": {}}
 
 
-def run_cell(out: Path, seed: int, plant: dict[str, str], mode: str, skill: Path | None) -> dict:
+def run_cell(out: Path, seed: int, plant: dict[str, str], mode: str, skill: Path | None,
+             controller: str = "learning") -> dict:
     """One network-free cell in ``out``; its report's figures (and the wall time it took)."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("LAMPS__SIM__PLANT__")}
     env.update({f"LAMPS__SIM__PLANT__{k}": v for k, v in plant.items()})
     env["LAMPS__SIM__GRAVITY_COMPENSATED"] = MODES[mode]
+    env = {k: v for k, v in env.items() if not k.startswith("LAMPS__CONTROLLER__MODEL__")}
+    env.update({f"LAMPS__CONTROLLER__MODEL__{k}": v for k, v in CONTROLLERS[controller].items()})
     env["PYTHONPATH"] = str(REPO)
     argv = [sys.executable, "-m", "interfaces.cli", "up", "--no-network", "--seed", str(seed), "--out", str(out),
             "-q", "--max-duration", "900"] + (["--skill", str(skill)] if skill is not None else [])
@@ -72,7 +84,16 @@ def run_cell(out: Path, seed: int, plant: dict[str, str], mode: str, skill: Path
     rep = json.loads(report.read_text())
     return {"outcome": rep["outcome"], "final_phase": rep["final_phase"], "removed": rep["dirt_removed_fraction"],
             "force_mean_n": rep["normal_force_mean_n"], "force_std_n": rep["normal_force_std_n"],
-            "force_max_n": rep["max_normal_force_n"], "tracking_rms_m": rep["tracking_rms_m"], "wall_s": wall}
+            "force_max_n": rep["max_normal_force_n"], "tracking_rms_m": rep["tracking_rms_m"], "wall_s": wall,
+            "arm_model": rep.get("arm_model", {})}
+
+
+def _load(arm: dict) -> str:
+    """The estimated flange load as a table cell: mass and centre of mass (flange frame), or a dash."""
+    if not arm.get("tool_fitted"):
+        return "-"
+    c = arm["tool_com_m"]
+    return f"{arm['tool_mass_kg']:.2f} kg at ({c[0] * 100:.1f}, {c[1] * 100:.1f}, {c[2] * 100:.1f}) cm"
 
 
 def main() -> int:
@@ -80,36 +101,43 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--modes", default="off,on", help="robot gravity compensation: off, on or off,on")
     ap.add_argument("--plants", choices=("main", "extra", "all"), default="main")
+    ap.add_argument("--controllers", default="plain,learning", help="plain, learning or plain,learning")
     ap.add_argument("--json", type=Path, help="also write the figures as JSON")
     a = ap.parse_args()
     plants = {"main": PLANTS, "extra": EXTRA, "all": {**PLANTS, **EXTRA}}[a.plants]
     modes = [m.strip() for m in a.modes.split(",") if m.strip()]
     if not modes or any(m not in MODES for m in modes):
         ap.error(f"--modes takes {', '.join(MODES)} (comma separated), got {a.modes!r}")
+    ctrls = [c.strip() for c in a.controllers.split(",") if c.strip()]
+    if not ctrls or any(c not in CONTROLLERS for c in ctrls):
+        ap.error(f"--controllers takes {', '.join(CONTROLLERS)} (comma separated), got {a.controllers!r}")
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-plant-") as tmp:
         skill = None
         for mode in modes:
             for i, (label, plant) in enumerate(plants.items()):
-                out = Path(tmp) / f"{mode}-{i}"
-                res = run_cell(out, a.seed, plant, mode, skill)
-                if skill is None:
-                    skill = out / "learn" / "skill.json"
-                rows.append({"plant": label, "gravity_compensated": mode == "on", **res})
-                print(f"{label}, robot compensates {mode}: {res['outcome']} {res['removed']:.1%} "
-                      f"{res['tracking_rms_m'] * 1e3:.1f} mm ({res['wall_s']:.0f} s)", file=sys.stderr)
-    print(f"Today's controller on simulated arms that are not its model (wall board, seed {a.seed}, lock-step, "
+                for ctrl in ctrls:
+                    out = Path(tmp) / f"{mode}-{i}-{ctrl}"
+                    res = run_cell(out, a.seed, plant, mode, skill, ctrl)
+                    if skill is None:
+                        skill = out / "learn" / "skill.json"
+                    rows.append({"plant": label, "gravity_compensated": mode == "on", "controller": ctrl, **res})
+                    print(f"{label}, robot compensates {mode}, {ctrl}: {res['outcome']} {res['removed']:.1%} "
+                          f"{res['tracking_rms_m'] * 1e3:.1f} mm ({res['wall_s']:.0f} s)", file=sys.stderr)
+    print(f"The controller on simulated arms that are not its model (wall board, seed {a.seed}, lock-step, "
           f"network-free cell)\n")
-    print("| simulated arm | robot compensates gravity | outcome | removed | force while wiping (mean +- std) "
-          "| max force | tracking RMS in contact |\n|---|---|---|---|---|---|---|")
+    print("| simulated arm | robot compensates gravity | controller | outcome | removed | force while wiping "
+          "(mean +- std) | max force | tracking RMS in contact | flange load estimated |\n"
+          "|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['plant']} | {'yes' if r['gravity_compensated'] else 'no'} | {r['outcome']} | "
+        print(f"| {r['plant']} | {'yes' if r['gravity_compensated'] else 'no'} | {r['controller']} | {r['outcome']} | "
               f"{r['removed']:.1%} | {r['force_mean_n']:.1f} +- {r['force_std_n']:.1f} N | {r['force_max_n']:.1f} N | "
-              f"{r['tracking_rms_m'] * 1e3:.1f} mm |")
+              f"{r['tracking_rms_m'] * 1e3:.1f} mm | {_load(r['arm_model']) if r['controller'] != 'plain' else '-'} |")
     print(f"\n{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}")
     cmd = ".venv/bin/python bench/bench_plant.py" + (f" --seed {a.seed}" if a.seed else "") \
         + ("" if a.modes == "off,on" else f" --modes {a.modes}") \
-        + ("" if a.plants == "main" else f" --plants {a.plants}")
+        + ("" if a.plants == "main" else f" --plants {a.plants}") \
+        + ("" if a.controllers == "plain,learning" else f" --controllers {a.controllers}")
     print(f"reproduce: {cmd}")
     if a.json:
         from lampskit.atomic import write_text_atomic
