@@ -13,6 +13,7 @@ import tomllib
 
 import pytest
 
+from controller.control.model_correction import CorrectionParams
 from controller.params import ControllerParams, ExecutorParams, ForceParams, LimitParams, TeachParams
 from interfaces.config import declared_bounds
 from interfaces.errors import ConfigError
@@ -24,9 +25,9 @@ from sim.params import BoardParams as SBoard, CameraParams, ContactParams, DirtP
 
 from .conftest import REPO
 
-CLASSES = [ForceParams, LimitParams, ExecutorParams, TeachParams, ControllerParams, PBoard, InkParams, StainParams,
-           KappaParams, CameraModelParams, PerceptionParams, SBoard, ContactParams, DirtParams, CameraParams,
-           HandParams, SimParams, LbrParams, LbrPeerParams]
+CLASSES = [ForceParams, LimitParams, ExecutorParams, TeachParams, CorrectionParams, ControllerParams, PBoard,
+           InkParams, StainParams, KappaParams, CameraModelParams, PerceptionParams, SBoard, ContactParams, DirtParams,
+           CameraParams, HandParams, SimParams, LbrParams, LbrPeerParams]
 CASES = [(cls, name, kind, lo, hi) for cls in CLASSES for name, kind, lo, hi in declared_bounds(cls)]
 
 
