@@ -143,10 +143,10 @@ def _watchdog(zenoh_settings, lbr_params) -> int:
 
     from interfaces.session import ServiceNode
 
-    from .lbr.watchdog import Watchdog
+    from .lbr.watchdog import WATCHDOG_SERVICE, Watchdog
 
     try:
-        node = ServiceNode("lbr-watchdog", zenoh_settings).__enter__()
+        node = ServiceNode(WATCHDOG_SERVICE, zenoh_settings).__enter__()
     except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
         print(f"lamps robot: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
         return 1

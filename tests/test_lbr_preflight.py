@@ -4,6 +4,7 @@ up as docs/real-robot.md says, each wrong setting named with its fix on a wrong 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 
@@ -16,13 +17,15 @@ from robot.lbr.preflight import Heard, judge
 
 from .conftest import REPO
 from .test_lbr_peer import TORQUE_SETUP, PeerProcess
+from .zenoh_helpers import free_port, wait_alive
 
 MS = 1_000_000
 
 
-def _preflight(peer: PeerProcess, env: dict) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "robot.cli", "--backend", "lbr", "--preflight",
-                           "--connect", f"tcp/127.0.0.1:{peer.port}", "--robot-id", peer.robot_id],
+def _preflight(peer: PeerProcess, env: dict, *connect: int) -> subprocess.CompletedProcess:
+    ends = [a for port in (peer.port, *connect) for a in ("--connect", f"tcp/127.0.0.1:{port}")]
+    return subprocess.run([sys.executable, "-m", "robot.cli", "--backend", "lbr", "--preflight", *ends,
+                           "--robot-id", peer.robot_id],
                           cwd=REPO, env=dict(os.environ, **env), capture_output=True, text=True, timeout=120)
 
 
@@ -34,13 +37,23 @@ def _lines(out: str) -> dict[str, str]:
 def test_the_preflight_passes_on_a_stand_in_set_up_for_torque_commands(tmp_path):
     peer_cfg = {**TORQUE_SETUP, "sample_time_s": 0.002, "mode": "realtime"}
     with PeerProcess(tmp_path, peer_cfg, ("--mode", "realtime")) as peer:
-        peer.tap.next(lambda st: st.session_state == SessionState.COMMANDING_ACTIVE, 30.0, "commanding")
-        r = _preflight(peer, {"LAMPS__LBR__OPEN_LOOP": "false"})
-        status = peer.status(None, "a peer status")
+        listen = free_port()  # the watchdog beside the stack (peers do not route for each other: we reach it too)
+        dog = subprocess.Popen([sys.executable, "-m", "robot.cli", "--backend", "lbr", "--watchdog", "--connect",
+                                f"tcp/127.0.0.1:{peer.port}", "--listen", f"tcp/127.0.0.1:{listen}",
+                                "--robot-id", peer.robot_id], cwd=REPO, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+        try:
+            peer.tap.next(lambda st: st.session_state == SessionState.COMMANDING_ACTIVE, 30.0, "commanding")
+            wait_alive(peer.node, "lbr-watchdog", 60.0)
+            r = _preflight(peer, {"LAMPS__LBR__OPEN_LOOP": "false"}, listen)
+            status = peer.status(None, "a peer status")
+        finally:
+            dog.send_signal(signal.SIGINT)
+            dog.wait(20.0)
     print("\n" + r.stdout)
     lines = _lines(r.stdout)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert all(line.startswith("PASS") for line in lines.values()) and len(lines) == 11, lines
+    assert all(line.startswith("PASS") for line in lines.values()) and len(lines) == 12, lines
     assert status.counters.get("commands_received", 0) == 0, "the preflight sent something"
 
 
@@ -58,8 +71,8 @@ def test_the_preflight_names_each_wrong_setting_with_its_fix(tmp_path):
     lines = _lines(r.stdout)
     assert r.returncode == 1, r.stdout + r.stderr
     failed = {name.split(" ", 1)[1] for name, line in lines.items() if line.startswith("FAIL")}
-    assert failed == {"modes", "T1", "open_loop", "torque filter", "connection quality", "joint names",
-                      "load data"}, r.stdout
+    assert failed == {"watchdog", "modes", "T1", "open_loop", "torque filter", "connection quality",
+                      "joint names", "load data"}, r.stdout
     assert "control mode POSITION_CONTROL_MODE" in lines["FAIL modes"] and "JOINT_IMPEDANCE" in lines["FAIL modes"]
     assert "[lbr] open_loop = true" in lines["FAIL open_loop"] and "open_loop: false" in lines["FAIL open_loop"]
     assert "external_torque_cutoff_hz 1000 Hz" in lines["FAIL torque filter"]
@@ -85,8 +98,8 @@ def test_judge_names_a_frozen_clock_a_spring_preload_and_no_states():
     checks = {c.name: c for c in judge(p, frozen)}
     assert not checks["robot clock"].ok and "advanced 0 times" in checks["robot clock"].seen
     assert not checks["spring preload"].ok and "joint spring 4.00 Nm" in checks["spring preload"].seen
-    ok = Heard([(i * MS, _st(i, q_commanded_rad=np.zeros(7) + 0.001)) for i in range(50)], "", names, True)
+    ok = Heard([(i * MS, _st(i, q_commanded_rad=np.zeros(7) + 0.001)) for i in range(50)], "", names, True, True)
     assert all(c.ok for c in judge(p, ok)), [c.line() for c in judge(p, ok) if not c.ok]
     none = judge(p, Heard([], "", None, False))
-    assert [(c.name, c.ok) for c in none] == [("bridge", False), ("states", False)]
-    assert "lbr_torque_command_controller" in none[1].fix
+    assert [(c.name, c.ok) for c in none] == [("bridge", False), ("watchdog", False), ("states", False)]
+    assert "lbr_torque_command_controller" in none[2].fix

@@ -6,7 +6,8 @@ the preflight listens to the stack's keys through the bridge for
 (:func:`~robot.lbr.arming.arming_refusal` has the stack's lines behind each;
 docs/real-robot.md the bring-up checklist): the bridge reachable, states
 in the configured FRI layout, the robot's clock advancing at a steady
-sample time, the session, modes and drives, T1, ``open_loop``, the torque
+sample time, a watchdog beside the stack (:mod:`robot.lbr.watchdog`), the
+session, modes and drives, T1, ``open_loop``, the torque
 filters, the connection quality, the joint names, the tool's load data and
 the spring's preload at rest (:mod:`robot.lbr.rest_checks`). It sends
 nothing. Exit 0 only if every check passes.
@@ -28,6 +29,7 @@ from .msgs import (ClientCommandMode, ConnectionQuality, ControlMode, DriveState
                    OperationMode, SafetyState, SessionState, decode_joint_names, decode_state, enum_name)
 from .params import LbrParams
 from .rest_checks import load_note, pad_wrench, preload_refusal, spring_preload_nm
+from .watchdog import WATCHDOG_SERVICE
 
 #: How long the preflight listens to the states [s], and how long it waits for the first [s].
 LISTEN_S = 1.0
@@ -52,12 +54,14 @@ class Check:
 @dataclass
 class Heard:
     """What the preflight heard: decoded states (arrival [monotonic ns], state), the first layout error, the
-    joint names seen, and whether the session reached a router or peer."""
+    joint names seen, whether the session reached a router or peer, and whether a watchdog's liveliness token
+    (``alive/lbr-watchdog``) is there."""
 
     states: list[tuple[int, LbrState]]
     layout_error: str
     names: list[str] | None
     connected: bool
+    watchdog: bool = False
 
 
 def listen(p: LbrParams, session, listen_s: float = LISTEN_S, first_s: float = FIRST_STATE_S) -> Heard:
@@ -108,7 +112,10 @@ def judge(p: LbrParams, heard: Heard, model: RobotModel | None = None) -> list[C
     out = [Check("bridge", heard.connected, "a Zenoh router or peer reached" if heard.connected else
                  "no Zenoh router or peer reached",
                  "run zenoh-bridge-ros2dds on the robot PC with its identity (secrets/bridge) and give this "
-                 "--connect tls/<robot-pc>:7447 and LAMPS_ZENOH_IDENTITY=secrets/robot")]
+                 "--connect tls/<robot-pc>:7447 and LAMPS_ZENOH_IDENTITY=secrets/robot"),
+           Check("watchdog", heard.watchdog, "lbr-watchdog is alive" if heard.watchdog else
+                 "no lbr-watchdog liveliness token", "run lamps robot --backend lbr --watchdog on the robot PC "
+                 "beside the bridge, with this robot id: it releases the arm if the adapter dies")]
     if heard.layout_error and not heard.states:
         out.append(Check("FRI layout", False, heard.layout_error, "set [lbr] fri_major to the stack's FRI SDK major"))
         return out
@@ -201,7 +208,9 @@ def _rest_checks(p: LbrParams, heard: Heard, model: RobotModel) -> list[Check]:
 
 def run_preflight(p: LbrParams, node) -> int:
     """Listen, judge, print each check; 0 if all pass, else 1."""
-    checks = judge(p, listen(p, node.session))
+    heard = listen(p, node.session)
+    heard.watchdog = WATCHDOG_SERVICE in node.alive_services(0.5)
+    checks = judge(p, heard)
     for c in checks:
         print(c.line(), flush=True)
     failed = [c.name for c in checks if not c.ok]

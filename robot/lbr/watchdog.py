@@ -30,6 +30,8 @@ from .release import RELEASE_BYTES, is_release
 
 log = logging.getLogger(__name__)
 
+#: The watchdog's service name (its liveliness token ``alive/lbr-watchdog``).
+WATCHDOG_SERVICE = "lbr-watchdog"
 #: States answered with the release at once when a silence begins, then one every this long [s].
 RELEASE_BURST = 5
 RELEASE_REPEAT_S = 0.1
