@@ -307,6 +307,7 @@ def test_the_arm_parameter_arms_as_soon_as_the_session_allows():
         cell.answer(cell.step(Q0, session=READY), np.ones(7), sent=False)
         st = cell.wait_status(lambda m: "session=MONITORING_READY" in m.detail, "a status in MONITORING_READY")
         assert "armed=False" in st.detail and st.counters.get("arm_refused", 0) == 0, st
+        assert "why='waiting to arm (--arm): session state MONITORING_READY: start the LBRServer" in st.detail, st
         _, jp, tau = cell.answer(cell.step(Q0 + 1e-6), np.full(7, 0.5))  # the first commanding state
         assert jp.tolist() == (Q0 + 1e-6).tolist() and tau.tolist() == [0.5] * 7
         st = cell.wait_status(lambda m: "armed=True" in m.detail, "a status saying armed")

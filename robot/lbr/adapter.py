@@ -283,8 +283,10 @@ class LbrPort(RobotPort):
         return self._reading
 
     def write(self, tau_nm: np.ndarray) -> None:
-        if not self.armed and not (self.arm_pending and self._cannot_arm() is None
+        why = self._cannot_arm() if not self.armed and self.arm_pending else None
+        if not self.armed and not (self.arm_pending and why is None
                                    and self.arm("--arm at start-up, and the controller answers")):
+            self.disarm_reason = f"waiting to arm (--arm): {why}" if why else self.disarm_reason
             self.counts["commands_while_disarmed"] += 1
             self._send_hold_if_stopped()
             return
