@@ -27,8 +27,8 @@ wiping mean +- std, its maximum, tracking RMS in contact (in-plane reference vs 
 and the flange load the controller estimated before its first wipe (``arm_model`` of the report).
 
 Each cell with both controllers unless ``--controllers`` says otherwise (same seeds, same run): ``plain``, the
-controller with ``[controller.model] enabled = false, identify_s = 0`` (the nominal model only, as before the
-correction existed: the baseline), and ``learning``, the defaults (the model correction and the flange load
+controller with ``[controller.model] enabled = false, identify_s = 0`` (the nominal model only: the baseline),
+and ``learning``, the defaults (the model correction and the flange load
 estimate of :mod:`controller.arm_model`).
 """
 

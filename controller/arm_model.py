@@ -56,6 +56,7 @@ class ArmModel:
         self._fc = np.asarray(j.coulomb_nm, float)
         self._v_eps = float(j.coulomb_velocity_rad_s)
         self._sample = np.zeros(model.nq)
+        self._tmp = np.zeros(model.nq)
 
     def compile(self, kin) -> None:
         """Compile the kernels for the arrays the tick passes (no state left behind)."""
@@ -80,13 +81,16 @@ class ArmModel:
             return
         self._every = 0
         touching = wrench[0] ** 2 + wrench[1] ** 2 + wrench[2] ** 2 > self._touch2
-        if touching or np.max(np.abs(dq)) > TOOL_SAMPLE_MAX_SPEED_RAD_S or phase in _HALTED:
+        x = self._sample
+        np.abs(dq, out=x)
+        if touching or x.max() > TOOL_SAMPLE_MAX_SPEED_RAD_S or phase in _HALTED:
             return
-        x = self._sample  # missing torque less the nominal friction tau_f = Fv dq + Fc tanh(dq / v_eps)
+        # the missing torque less the nominal friction tau_f = Fv dq + Fc tanh(dq / v_eps)
         np.divide(dq, self._v_eps, out=x)
         np.tanh(x, out=x)
         x *= self._fc
-        x += self._fv * dq
+        np.multiply(self._fv, dq, out=self._tmp)
+        x += self._tmp
         np.subtract(self.correction.missing, x, out=x)
         self.tool.add(kin.J, kin.R, x)
 
