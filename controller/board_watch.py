@@ -58,8 +58,9 @@ class BoardWatch:
             if self.phase not in _HALTED and self.phase != Phase.PAUSED:
                 self._set_phase(Phase.PAUSED, self.board_note)
             return True
-        self.motion.adopt_board(self.board, self._jump)
-        self.board, self._jump, self.board_note = self._jump, None, ""
+        new = self.surface.forget(self._jump)  # another board, or this one moved: its surface is touched anew
+        self.motion.adopt_board(self.board, new)
+        self.board, self._jump, self.board_note = new, None, ""
         self.counters["board_jumps_adopted"] += 1
         self._surveyed = False  # the new pose is surveyed before any approach
         log.warning("the board's new pose held still for %.1f s: adopted; surveying it", self.p.board_confirm_s)

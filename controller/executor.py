@@ -63,6 +63,7 @@ from .executor_types import BoardPose, Setpoint, StainState, ToolState
 from .free_motion import FreeMotion
 from .params import ExecutorParams, ForceParams
 from .stain_book import StainBook
+from .surface_touch import SurfaceTouch
 
 log = logging.getLogger(__name__)
 
@@ -110,6 +111,7 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         self.book = StainBook(self.p.recheck_s, self.p.max_passes)
         self.stains_fresh = False
         self.motion = FreeMotion(self.p, self.f)
+        self.surface = SurfaceTouch(self.p.first_creep_height_m + self.p.contact_search_m)  # touches place it
         self.chain = MpChain(skill, self.planner, self.p.wipe_timeout_s, self.counters, pass_cycles=self.p.pass_cycles)
         self._sp = self.motion.setpoint
         self._stage = Stage.HOLD
@@ -142,6 +144,7 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         A board out of the arm's reach is refused; one that jumps from the adopted pose (beyond
         ``board_jump_m`` / ``board_jump_rad``) is not adopted and its stains are not taken (:meth:`_board_jumped`).
         """
+        board = self.surface.shifted(board)  # where the touches put the seen board's surface
         why = self._out_of_reach(board)
         if why is not None:
             self.counters["boards_out_of_reach"] += 1
@@ -281,7 +284,7 @@ class SkillExecutor(BoardWatch, ExecutorStops):
     # ------------------------------------------------------------------ one handler per stage
     def _on_fly(self, dt: float, tool: ToolState) -> None:
         if self.motion.move(dt) and not self.motion.turning:
-            self.motion.descend()
+            self.motion.descend(first_touch=self.surface.untouched)
             self.current_mp, self._stage = "descend", Stage.DESCEND
 
     def _on_descend(self, dt: float, tool: ToolState) -> None:
@@ -411,8 +414,15 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         self._stage = Stage.FLY
 
     def _begin_press(self, tool: ToolState) -> None:
+        """Contact found on the way down: press, and learn where the surface is (:mod:`controller.surface_touch`)."""
         self.motion.press(tool)
         self.current_mp, self._stage = "press", Stage.PRESS
+        board = self.board
+        if board is not None and (touched := self.surface.touched(board, tool.h)) is not board:
+            self.motion.adopt_board(board, touched)
+            self.board = touched
+            self.counters["surface_touches"] += 1
+            self.counters["surface_offset_um"] = round(self.surface.offset_m * 1e6)
 
     def _begin_chain(self) -> None:
         """First transition of the chain, from rest at the hover point, into the plan's first wipe. The last stroke

@@ -101,16 +101,17 @@ class FreeMotion:
         self._turn = OrientationBlend(sp.R, R_goal, T_turn)
         sp.contact = False
 
-    def descend(self) -> None:
-        """Down to ``creep_height_m``, arriving at the creep speed (``descend_speed_m_s`` downwards, no
-        acceleration), at the approach speed's mean (air mode: to rest at ``air_height_m``)."""
+    def descend(self, first_touch: bool = False) -> None:
+        """Down to ``creep_height_m`` (``first_touch``: the board's surface not touched yet, so only as far as
+        perception's error allows: ``first_creep_height_m``), arriving at the creep speed (``descend_speed_m_s``
+        downwards, no acceleration), at the approach speed's mean (air mode: to rest at ``air_height_m``)."""
         sp = self.setpoint
         if self.p.air:
             bottom = self.p.air_height_m
             T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.3)
             self._mover = vertical_move(sp.xy, sp.h, bottom, T)
             return
-        bottom = min(self.p.creep_height_m, sp.h)
+        bottom = min(self.p.first_creep_height_m if first_touch else self.p.creep_height_m, sp.h)
         T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.2)
         self._mover = vertical_move(sp.xy, sp.h, bottom, T, sp.v_h, -self.p.descend_speed_m_s)
 

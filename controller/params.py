@@ -174,7 +174,10 @@ class ExecutorParams:
     descent has slowed to ``descend_speed_m_s`` and goes on at that speed
     until contact [m] (cover the board pose's uncertainty: on the tilted
     board the pad met the surface up to 11 mm above the expected height, at
-    the end of a fast descent to 8 mm, 46-50 N); survey_s : before
+    the end of a fast descent to 8 mm, 46-50 N); first_creep_height_m : the
+    same for the first touch of a board, before its surface has been found
+    (:mod:`controller.surface_touch`: perception's board lay up to 20 mm
+    behind the surface on random boards) [m]; survey_s : before
     the first approach the pad flies to the look point of the whole board
     (``look_clearance_m`` beyond its edge on the robot base's side, where the
     arm hides none of it from the camera) and waits this long for perception
@@ -192,6 +195,7 @@ class ExecutorParams:
     approach_speed_m_s: Annotated[float, In(0.01, 1.0)] = 0.15
     descend_speed_m_s: Annotated[float, In(0.005, 0.3)] = 0.02
     creep_height_m: float = 0.016
+    first_creep_height_m: float = 0.035
     turn_rate_rad_s: Annotated[float, In(0.05, 3.0)] = 0.6
     wipe_timeout_s: Annotated[float, In(0.5, 3600.0)] = 2.5
     pass_cycles: Annotated[float, In(0.5, 1e6)] = 2.0
@@ -216,6 +220,7 @@ class ExecutorParams:
         if not isinstance(self.air, bool):
             raise ConfigError(f"[{s}] air must be true or false, got {self.air!r}")
         _range(s, "creep_height_m", self.creep_height_m, 0.001, self.standoff_m)
+        _range(s, "first_creep_height_m", self.first_creep_height_m, self.creep_height_m, self.standoff_m)
 
 
 @dataclass(frozen=True)

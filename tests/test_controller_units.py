@@ -299,7 +299,7 @@ def test_a_vanished_stain_is_not_visited_and_new_stains_after_done_are(learned_s
     ex = SkillExecutor(learned_skill, ExecutorParams(wipe_timeout_s=1.0, max_passes=1))
     arm = IdealArm()
     ex.set_stains(BOARD, stains()[:1])
-    log = run(ex, arm, 12.0)
+    log = run(ex, arm, 14.0)  # the first touch of the board creeps from first_creep_height_m
     assert ex.phase == "DONE" and {e[1] for e in log if e[0] == "WIPE"} == {0}
     assert ex.counters["wipe_timeouts"] == 1
     ex.set_stains(BOARD, stains()[:1] + [StainState(7, np.array([0.6, 0.2]), 0.05, False)])
@@ -443,7 +443,9 @@ def test_the_pad_touches_down_at_the_creep_speed_wherever_the_board_is_within_th
 
 
 def test_a_pause_while_descending_fast_never_drives_the_pad_into_the_board(learned_skill):
-    ex = SkillExecutor(learned_skill, ExecutorParams())
+    # the fast descent of a board whose surface is known (the first touch of one creeps from higher up: as low
+    # as the later ones here)
+    ex = SkillExecutor(learned_skill, ExecutorParams(first_creep_height_m=ExecutorParams().creep_height_m))
     arm = IdealArm()
     ex.set_stains(BOARD, stains())
     # run until the fast part of the descent is at full speed

@@ -22,6 +22,12 @@ from controller.params import ExecutorParams
 from .test_controller_units import BOARD, WALL, IdealArm, RaisedBoardArm, phases, run, stains
 
 
+def _at(board: BoardPose | None, seen: BoardPose) -> bool:
+    """``board`` is the pose ``seen`` (within the millimetre a touch of the board moves it along its normal:
+    controller/surface_touch.py)."""
+    return board is not None and board.close_to(seen, tol_m=1e-3, tol_rad=1e-9)
+
+
 def _shifted(dx_m: float) -> BoardPose:
     return BoardPose(WALL, BOARD.origin_m + np.array([0.0, dx_m, 0.0]), BOARD.size_m)
 
@@ -49,12 +55,12 @@ def test_a_jump_while_wiping_lifts_off_and_is_not_adopted_until_it_held_still(le
     assert ex.phase in ("WIPE", "TRANSITION") and ex.motion.setpoint.contact, ex.phase
     jumped = _shifted(0.3)
     ex.set_stains(jumped, stains())
-    assert ex.phase == "PAUSED" and "jumped 0.30 m" in ex.reason and ex.board is BOARD
+    assert ex.phase == "PAUSED" and "jumped 0.30 m" in ex.reason and _at(ex.board, BOARD)
     log = run(ex, arm, 3.0, on_tick=lambda k, e: e.set_stains(jumped, stains()) if k % 50 == 0 else None)
     assert not log[-1][5] and arm.tool.force_n == 0.0 and arm.tool.h >= p.standoff_m - 1e-6, "lifted off"
-    assert ex.board is BOARD and ex.phase == "PAUSED", "not adopted within board_confirm_s"
+    assert _at(ex.board, BOARD) and ex.phase == "PAUSED", "not adopted within board_confirm_s"
     log = run(ex, arm, 2.0, on_tick=lambda k, e: e.set_stains(jumped, stains()) if k % 50 == 0 else None)
-    assert ex.board is jumped and ex.counters["board_jumps_adopted"] == 1
+    assert _at(ex.board, jumped) and ex.counters["board_jumps_adopted"] == 1
     assert ex.counters["surveys"] == 2 and ex.current_mp == "survey", "the new pose surveyed before any approach"
 
 
@@ -66,7 +72,7 @@ def test_a_jump_that_goes_away_is_never_adopted_and_the_job_goes_on(learned_skil
     ex.set_stains(_shifted(0.5), stains())  # one spoofed report
     assert ex.phase == "PAUSED"
     log = run(ex, arm, 3.0, on_tick=lambda k, e: e.set_stains(BOARD, stains()) if k % 50 == 0 else None)
-    assert ex.board is BOARD and ex.counters["board_jumps_back"] >= 1
+    assert _at(ex.board, BOARD) and ex.counters["board_jumps_back"] >= 1
     assert "WIPE" in phases(log) or "APPROACH" in phases(log), phases(log)
 
 
@@ -84,7 +90,7 @@ def test_a_jump_while_done_is_held_not_approached(learned_skill):
     log = run(ex, arm, 3.0, on_tick=lambda k, e: e.set_stains(jumped, stains()) if k % 50 == 0 else None)
     assert set(phases(log)) <= {"DONE", "PAUSED"}, phases(log)
     assert max(e[7] for e in log) >= 0 and min(e[7] for e in log) > 0.0, "the pad never went down"
-    assert ex.board is BOARD
+    assert _at(ex.board, BOARD)
 
 
 @pytest.mark.attack('3', 'a pad that presses while the board model says it is held in the air',
