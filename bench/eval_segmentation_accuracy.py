@@ -12,6 +12,10 @@ Usage: .venv/bin/python bench/eval_segmentation_accuracy.py [--seeds N] [--quick
 - messy generated takes: ``draw_messy_take(seed)`` for ``--messy`` seeds (:mod:`lampskit.learn.synth_messy`:
   wandering, drifting strokes with pauses and slow strokes, hops leaving mid-stroke along a tilted normal,
   lift-offs, slides, noise and dropped samples at 100-1000 Hz), OPTICS only, per take;
+- public carrot grating (``--grating FILE``, optics only, per demo): ``test-data/Grating/CarrotGrating_robot.mat``
+  of the public repository nbfigueroa/ICSC-HMM (12 kinesthetic demonstrations of grating a carrot, 7-D pose,
+  hand labels 1 reach / 2 grating / 3 retract; no rate stated, read as 100 Hz). Fetch it yourself and keep it
+  out of the repository: the repository's licence (SimPL-2.0) is a code licence and says nothing of the data;
 - real long takes: :data:`lampskit.learn.takes.REAL_TAKES`, several wipes
   chained from those recordings (lift-offs and returns, spots 6-30 cm apart,
   pauses, a shift inside a wipe), per take: true and found wiping phases,
@@ -62,6 +66,7 @@ def main() -> int:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--quick", action="store_true", help="one seed (lamps bench --quick)")
     ap.add_argument("--messy", type=int, default=20, help="messy generated takes scored (seeds 0..N-1)")
+    ap.add_argument("--grating", type=Path, default=None, help="CarrotGrating_robot.mat of nbfigueroa/ICSC-HMM")
     a = ap.parse_args()
     if a.quick:
         a.seeds = 1
@@ -94,6 +99,8 @@ def main() -> int:
         print(f"| {m} | " + " | ".join(cells) + f" | {real} | {real_exact} |")
         out[m]["real"] = [r[m] for r in real_rows]
     out["messy"] = _messy_table(a.messy)
+    if a.grating is not None:
+        out["grating"] = _grating_table(a.grating)
     if REAL.is_file():
         out["takes"] = _takes_table()
     if a.json:
@@ -127,6 +134,35 @@ def _messy_table(n: int) -> dict:
     accs = [r["accuracy"] for r in out.values()]
     if accs:
         print(f"\nexact count {exact}/{n}; frame accuracy mean {np.mean(accs):.3f}, min {np.min(accs):.3f}")
+    return out
+
+
+def _grating_table(path: Path) -> dict:
+    from scipy.io import loadmat
+
+    from lampskit.learn.demo import Demonstration
+
+    data = loadmat(str(path), squeeze_me=True)
+    print(f"\npublic carrot grating demonstrations ({path.name}, read as 100 Hz; label 2 periodic), optics\n")
+    print("| demo | samples | labelled periodic | found | frame accuracy | smallest cut margin |")
+    print("|---:|---:|---:|---:|---:|---:|")
+    out = {}
+    for i, (x, labels) in enumerate(zip(data["Data"], data["True_states"])):
+        x = np.asarray(x, dtype=float)
+        truth = np.asarray(labels).astype(int) == 2
+        demo = Demonstration(np.arange(len(x)) / 100.0, x[:, :3], None, f"{path.name}#{i}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            seg = segment(demo)
+        found = sum(s.kind == "periodic" for s in seg.segments)
+        acc = frame_accuracy(seg, truth)
+        margin = min((c["margin"] for c in seg.cuts if c["margin"] is not None and c["left"] != c["right"]
+                      and "continuity" in c), default=None)
+        out[i] = {"true": true_segment_count(truth), "found": found, "accuracy": acc, "margin": margin}
+        shown = "-" if margin is None else f"{margin:+.2f}"
+        print(f"| {i} | {len(x)} | {true_segment_count(truth)} | {found} | {acc:.3f} | {shown} |")
+    exact = sum(r["found"] == r["true"] for r in out.values())
+    print(f"\nexact count {exact}/{len(out)}")
     return out
 
 

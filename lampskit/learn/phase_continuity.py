@@ -9,10 +9,9 @@ stroke lasts as long as a quick hop), so :func:`gap_evidence` measures what surv
 ratio to the level at which it alone makes the cut (a ratio above 1 cuts):
 
 ``lift``
-    the highest the tool stands in the gap above the surface the strokes on both sides span (a plane through
+    the highest the tool stays for :data:`~lampskit.learn.contact.LIFT_MIN_S` in the gap above the surface the strokes on both sides span (a plane through
     their samples), over that surface's contact band (:func:`~lampskit.learn.contact.contact_band` of the strokes'
-    own heights plus :data:`~lampskit.learn.contact.LIFT_MARGIN_M`), for at least
-    :data:`~lampskit.learn.contact.LIFT_MIN_S`: a hop leaves the surface, a slow stroke does not;
+    own heights plus :data:`~lampskit.learn.contact.LIFT_MARGIN_M`, at least :data:`MIN_LIFT_M`): a hop leaves the surface, a slow stroke does not;
 ``jump``
     the in-plane distance between the centres of the strokes before and after (the middle of the box they span
     over :data:`CONTEXT_PERIODS` periods, wherever in a stroke the gap starts), over :data:`JUMP_SHARE` of the
@@ -38,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import minimum_filter1d
 
 from lampskit.learn.contact import LIFT_MARGIN_M, LIFT_MIN_S, contact_band
 
@@ -53,6 +53,9 @@ PERIOD_RATIO = 3.0
 PERIOD_SIDE_PERIODS = 3.0
 #: A rest longer than this [s] inside the gap cuts.
 PAUSE_MAX_S = 1.5
+#: A lift is at least this high [m] whatever the contact band (a hop lifts 2-8 cm; a grater's or a line
+#: stroke's plane is poorly defined across the line, and a hand wanders a centimetre off it).
+MIN_LIFT_M = 0.015
 #: The strokes either side are read over this many periods.
 CONTEXT_PERIODS = 2.0
 
@@ -109,12 +112,11 @@ def gap_evidence(points: np.ndarray, rest: np.ndarray, before: tuple[int, int],
     normal = vt[2]
     h_strokes = (strokes - centre) @ normal
     h_gap = (gap - centre) @ normal
-    band = contact_band(h_strokes) + LIFT_MARGIN_M
-    above = np.abs(h_gap) > band
+    band = max(contact_band(h_strokes) + LIFT_MARGIN_M, MIN_LIFT_M)
     n_min = max(1, int(LIFT_MIN_S * rate_hz))
-    lift = 0.0
-    if _longest_run(above) >= n_min:
-        lift = float(np.max(np.abs(h_gap))) / band
+    # the height the pad holds for LIFT_MIN_S at least (a spike or a wobble off a line stroke's plane is no lift)
+    held = minimum_filter1d(np.abs(h_gap), n_min, mode="nearest") if len(h_gap) >= n_min else np.zeros(1)
+    lift = float(np.max(held)) / band
     ca, cb = _midrange(sa, vt[:2]), _midrange(sb, vt[:2])
     reach = max(float(np.percentile(np.linalg.norm((sa - ca) @ vt[:2].T, axis=1), 95)),
                 float(np.percentile(np.linalg.norm((sb - cb) @ vt[:2].T, axis=1), 95)), 1e-6)
