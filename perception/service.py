@@ -37,6 +37,8 @@ log = logging.getLogger(__name__)
 SERVICE = "perception"
 #: Idle wait of the loop when no frame is there [s].
 IDLE_S = 0.002
+#: A frame stamp older than this (or in the future) is not on this host's monotonic clock: no latency from it [ns].
+LATENCY_SANE_NS = 10_000_000_000
 
 
 class PerceptionService:
@@ -64,6 +66,7 @@ class PerceptionService:
         self.detail = "waiting for frames"
         self._process_us: deque[float] = deque(maxlen=500)
         self._interval_us: deque[float] = deque(maxlen=500)
+        self._latency_us: deque[float] = deque(maxlen=500)  # frame's stamp to its stains message, this host's clock
         self._last_frame_wall: float | None = None
         self._last_publish = -float("inf")
         self._next_status = 0.0
@@ -122,6 +125,9 @@ class PerceptionService:
         self.detail = self._describe(result)
         if result.stains is not None:
             self._publish(result.stains, now)
+            age_ns = time.monotonic_ns() - frame.stamp_ns
+            if frame.stamp_ns > 0 and 0 <= age_ns < LATENCY_SANE_NS:  # a stamp of this host's monotonic clock
+                self._latency_us.append(age_ns * 1e-3)
         if self.p.debug_images and result.rect is not None and self.debug_dir is not None:
             self._write_debug(result, frame)
         if self.p.debug_images and result.rect is not None and now >= self._next_debug and self.node is not None:
@@ -190,6 +196,9 @@ class PerceptionService:
                             period_max_us=float(gap.max()), update_p99_us=float(np.percentile(proc, 99)),
                             ticks=self.counters["frames_processed"])
         counters["process_p50_us"] = int(np.percentile(proc, 50))
+        if self._latency_us:
+            counters["frame_to_stains_p50_us"] = int(np.percentile(self._latency_us, 50))
+            counters["frame_to_stains_p99_us"] = int(np.percentile(self._latency_us, 99))
         self._status_seq += 1
         return ServiceStatus(service=SERVICE, seq=self._status_seq, stamp_ns=time.monotonic_ns(), counters=counters,
                              detail=self.detail, timing=timing)

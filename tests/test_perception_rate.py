@@ -174,3 +174,23 @@ def test_a_stains_region_grown_piece_by_piece_is_the_one_made_at_once():
             assert np.array_equal(fresh.reach, tr.reach) and np.array_equal(fresh.near, tr.near)
             checked += 1
     assert checked >= 10 and len(tracker.tracks) == 2
+
+
+def test_the_status_says_the_frame_to_stains_latency(tmp_path):
+    """An offline source stamps each frame when it reads it: the status carries the p50 and p99 from there to
+    the stains message (the real camera's path: read, decode, process, publish)."""
+    import shutil
+
+    from perception.service import PerceptionService
+    from perception.sources import OpenCVSource
+
+    for i in range(8):
+        shutil.copy(PHOTOS / "straight.jpg", tmp_path / f"{i:02d}.jpg")
+    params = PerceptionParams.from_table({**REAL, "source": f"folder:{tmp_path}"})
+    sent = []
+    service = PerceptionService(params, None, OpenCVSource(params.source, params), sink=sent.append)
+    assert service.run() == 8 and len(sent) >= 4
+    counters = service.status().counters
+    p50, p99 = counters["frame_to_stains_p50_us"], counters["frame_to_stains_p99_us"]
+    assert 0 < p50 <= p99 < 5_000_000
+    assert p50 >= counters["process_p50_us"] * 0.5  # it holds the processing
