@@ -85,7 +85,8 @@ def test_the_adapter_killed_while_the_pad_presses_the_watchdog_releases_it(tmp_p
     if not watchdog:
         assert force_after >= 5.0 and peer.counters.get("releases_received", 0) == 0, force_after
         return
-    assert silence and 200 <= int(silence[1]) <= 300, dog_log[-2000:]
+    # watchdog_after_s (200 ms), judged on a state's arrival: up to 200 ms more on a host starved of CPU
+    assert silence and 200 <= int(silence[1]) <= 400, dog_log[-2000:]
     assert peer.counters["releases_received"] >= 1, peer.counters
     assert force_after < 2.0, (force_after, dog_log[-2000:])
     assert "release_episodes': 1" in dog_log, dog_log[-2000:]
