@@ -295,8 +295,8 @@ def main() -> int:
     rows = []
     b, n = args.baseline, rev
     print(f"| frames (one core) | {b} latency p50 / p99 [ms] | {b} frames/s | {n} latency p50 / p99 [ms] | "
-          f"{n} frames/s | CPU time ratio (rounds' median, range) | {b} worst IoU / largest false area | {n} mean IoU per "
-          "ink (worst) / largest false area (least seen) | largest IoU / false area change |")
+          f"{n} frames/s | CPU time ratio (rounds' median, range) | {b} worst IoU / largest false area | "
+          f"{n} mean IoU per ink (worst) / largest false area (least seen) | largest IoU / false area change |")
     print("|---|---:|---:|---:|---:|---|---|---|---|")
     for k in sets:
         kind, t, config = truths[k]

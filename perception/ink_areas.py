@@ -42,9 +42,9 @@ class InkArea:
 
 
 def stroke_inks(ink: InkMap) -> np.ndarray:
-    """(rows, cols) uint8 (meaningful on stain pixels): each stain pixel's ink made that of its stroke (8-connected stain pixels), the ink
-    with the largest summed ink fraction over it; a stroke is one marker, its faint or mixed edge pixels are
-    not another ink."""
+    """(rows, cols) uint8, 0 off the stain pixels: each stain pixel's ink made that of its stroke (8-connected
+    stain pixels), the ink with the largest summed ink fraction over it; a stroke is one marker, its faint or
+    mixed edge pixels are not another ink."""
     if ink.ink is None or len(ink.names) == 1:
         return np.zeros(ink.stain.shape, np.uint8)
     n, labels = cv2.connectedComponents(ink.stain.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
