@@ -119,7 +119,7 @@ def _run(skill, plant: dict, compensated: bool, until_first_wipe: bool, ticks: i
 @pytest.mark.parametrize("compensated", [False, True], ids=["controller-gravity", "robot-gravity"])
 def test_an_unknown_tool_is_estimated_before_the_first_wipe(learned_skill, compensated):
     """0.8 kg the description does not carry, 5 cm out and 2 cm off the flange axis: within 10 % and 1 cm when
-    the first wipe starts (measured: 0.799 kg, (1.04, -1.91, 5.06) cm with the controller adding gravity)."""
+    the first wipe starts (measured: 0.798 kg, (1.04, -1.68, 5.08) cm with the controller adding gravity)."""
     core, at_wipe, _ = _run(learned_skill, TOOL, compensated, until_first_wipe=True)
     assert at_wipe is not None, f"no wipe began: {core.executor.phase} {core.executor.reason}"
     fitted, mass, com = at_wipe

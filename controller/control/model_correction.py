@@ -68,7 +68,7 @@ class CorrectionParams:
     integral_s: Annotated[float, In(0.01, 10.0)] = 0.2
     bound_share: Annotated[float, In(0.0, 0.5)] = 0.15
     warn_s: Annotated[float, In(0.0, 60.0)] = 0.5
-    identify_s: Annotated[float, In(0.0, 30.0)] = 4.0
+    identify_s: Annotated[float, In(0.0, 30.0)] = 2.0
     identify_roll_rad: Annotated[float, In(0.0, 1.5)] = 0.5
 
     def __post_init__(self) -> None:
