@@ -59,13 +59,19 @@ def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: s
             "success": removed >= CLEAN_SHARE and not faults, "why": why}
 
 
+def board_group(board: str) -> str:
+    """The table's group of a cell's board: a preset's name, a TOML file's stem, ``random`` for every
+    ``random:N``."""
+    return "random" if board.startswith("random:") else Path(board).stem
+
+
 def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per board (its name) and ``all``: runs, success rate, dirt removed (median, min), robot time and its ratio
     to the lower bound (median), peak force and jerk (max), faults (sum), cells without a report."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in rows:
         wiping = r.get("wiping", "fixed")
-        groups.setdefault(f"{Path(r['board']).stem} {wiping}", []).append(r)
+        groups.setdefault(f"{board_group(r['board'])} {wiping}", []).append(r)
         groups.setdefault(f"all {wiping}", []).append(r)
     out = {}
     for name, rs in groups.items():
@@ -140,8 +146,8 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     bound = [r.get("cell_bound_s", float("nan")) for r in ran]
     key = "cell_bound_s" if ran and np.isfinite(bound).all() else "lower_bound_s"
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for group in sorted({f"{Path(r['board']).stem} {r.get('wiping', 'fixed')}" for r in ran}):
-        rs = [r for r in ran if f"{Path(r['board']).stem} {r.get('wiping', 'fixed')}" == group]
+    for group in sorted({f"{board_group(r['board'])} {r.get('wiping', 'fixed')}" for r in ran}):
+        rs = [r for r in ran if f"{board_group(r['board'])} {r.get('wiping', 'fixed')}" == group]
         ax1.scatter([r[key] for r in rs], [r["robot_time_s"] for r in rs], label=group, s=16,
                     marker="o" if group.endswith("fixed") else "^")
     top = max([r[key] for r in ran] + [1.0])
