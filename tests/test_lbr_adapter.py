@@ -552,8 +552,8 @@ class ControllerThread:
 @pytest.mark.alone
 def test_realtime_holds_a_silent_controller_then_disarms_and_keeps_sending_the_hold():
     """The stack re-applies its last message forever (lbr_torque_command_controller.cpp:42-55): a silent controller
-    gets the hold (the measured pose, zero overlay) after the stale limit, a disarm after the hold timeout, and
-    the hold in answer to every state from then on, not silence."""
+    gets the brake (robot/lbr/brake.py) after the stale limit, a disarm after the hold timeout, and the hold (the
+    measured pose, zero overlay) in answer to every state from then on, not silence."""
     hold_timeout_s = 0.3
     v = np.full(7, 0.05)  # rad/s: the arm drifts on; each hold is the pose measured
     with Cell({"arm": True, "hold_timeout_s": hold_timeout_s},
@@ -574,11 +574,13 @@ def test_realtime_holds_a_silent_controller_then_disarms_and_keeps_sending_the_h
     commands = cell.stack.commands
     last_torque = max(i for i, c in enumerate(commands) if c[2][0] == 1.0)  # the last answer (or its repeat)
     holds = commands[last_torque + 1:]
-    assert all(not np.any(tau) for _, _, tau in holds), "zero overlay in every hold"
-    before_disarm = [c for c in holds if c[0] <= commands[n - 1][0]]
+    before_disarm = [c for c in holds if c[0] <= commands[n - 1][0]]  # the brake (robot/lbr/brake.py)
     span_s = (before_disarm[-1][0] - before_disarm[0][0]) * 1e-9
     assert 0.8 * hold_timeout_s <= span_s <= hold_timeout_s + 0.3, span_s
-    assert all(tuple(stack.sent.get(float(jp[0]))) == tuple(jp) for _, jp, _ in holds), "measured poses"
+    assert all(np.all(np.isfinite(tau)) for _, _, tau in before_disarm), "a finite brake"
+    stops = commands[n:]
+    assert all(not np.any(tau) for _, _, tau in stops), "zero overlay in every hold after the disarm"
+    assert all(tuple(stack.sent.get(float(jp[0]))) == tuple(jp) for _, jp, _ in stops), "measured poses"
     c = final.counters
     assert c["holds_sent"] >= 150 and c["disarms"] == 1 and c["stop_holds_sent"] >= 100, c
 

@@ -37,8 +37,8 @@ message is the *release* (:mod:`robot.lbr.release`: the stack re-initialises its
 safe under either damping law); if it dies without one, the watchdog (:mod:`robot.lbr.watchdog`) sends it.
 
 Hold (a late or missing controller answer, ``hold``): the last command again while it is younger than
-``stale_limit_s`` (one late answer must not step the torque), then the hold; after ``hold_timeout_s`` of
-holding the adapter disarms (the hold stays). A state whose commanded torque is no recent overlay of ours
+``stale_limit_s`` (one late answer must not step the torque), then the brake (:mod:`robot.lbr.brake`: the pad
+stopped in the board's plane, its press kept and ramped out); after ``hold_timeout_s`` the adapter disarms. A state whose commanded torque is no recent overlay of ours
 says the robot ran on an old message (ours do not reach the stack): the server reports no command applied
 for it (:meth:`LbrPort.applying`, ``check_applied``), so the controller stands still instead of winding
 up. Speed brake: the adapter declares the guard's joint speeds; the server holds above
@@ -68,6 +68,7 @@ from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.port import Reading, RobotPort
 
 from .arming import REST_SPEED_RAD_S, arming_refusal, left_commanding
+from .brake import ContactBrake
 from .compensation import AppliedWatch, FreezeWatch, JointSpring, TorqueUnfilter
 from .guards import GuardLimits, VelocityFilter, guard_trip
 from .msgs import (ConnectionQuality, LbrState, LbrWireError, SessionState, decode_joint_names, decode_state,
@@ -116,6 +117,7 @@ class LbrPort(RobotPort):
         self.spring = JointSpring(np.array(params.joint_stiffness_nm_rad), params.pid_p, params.steer_share,
                                   params.steer_speed_rad_s)
         self._freeze = FreezeWatch(params.frozen_after_s)
+        self._brake = ContactBrake(self.model, params.hold_timeout_s)
         self._cond = threading.Condition()
         self._wake: threading.Event | None = None
         self._inbox: tuple[LbrState, int] | None = None  # the newest state and its arrival [monotonic ns]
@@ -309,27 +311,22 @@ class LbrPort(RobotPort):
 
     def hold(self) -> None:
         """Hold this cycle: the last command again while it is younger than ``stale_limit_s`` (a late answer must
-        not step the torque), then the hold (frozen position, zero overlay); disarm after ``hold_timeout_s``."""
+        not step the torque), then the brake (:mod:`robot.lbr.brake`); disarm after ``hold_timeout_s``."""
         if not self.armed:
             self._send_hold_if_stopped()
             return
-        if self._tau_prev is not None and \
-                (self._reading.robot_time_ns - self._tau_prev_ns) * 1e-9 <= self.p.stale_limit_s:
-            r = self._reading
-            target, overlay = self.spring.command(r.q_rad, self._tau_prev, r.dq_rad_s, self._state.sample_time_s,
-                                                  self._cycles_per_state)
-            self._send(target, overlay)
-            self.counts["commands_repeated"] += 1
-            return
-        now = time.monotonic_ns()
-        if self._holding_since_ns is None:
+        r, now = self._reading, time.monotonic_ns()
+        repeat = self._tau_prev is not None and (r.robot_time_ns - self._tau_prev_ns) * 1e-9 <= self.p.stale_limit_s
+        if not repeat and self._holding_since_ns is None:
             self._holding_since_ns = now
-        elif (now - self._holding_since_ns) * 1e-9 > self.p.hold_timeout_s:
+            self._brake.start(r.q_rad, r.wrench_world, r.robot_time_ns)
+        elif not repeat and (now - self._holding_since_ns) * 1e-9 > self.p.hold_timeout_s:
             self.disarm(f"no controller command for {(now - self._holding_since_ns) / 1e6:.0f} ms: holding the "
                         "measured pose on the robot's joint impedance")
             return
-        self._send_hold()
-        self.counts["holds_sent"] += 1
+        tau = self._tau_prev if repeat else self._brake.torque(r.dq_rad_s, r.robot_time_ns)
+        self._send(*self.spring.command(r.q_rad, tau, r.dq_rad_s, self._state.sample_time_s, self._cycles_per_state))
+        self.counts["commands_repeated" if repeat else "holds_sent"] += 1
 
     def speed_hold(self) -> None:
         """A joint too fast (the server's speed brake): the hold at once, no repeat of the last command; past a
