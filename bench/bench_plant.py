@@ -60,6 +60,8 @@ EXTRA: dict[str, dict[str, str]] = {
         "RANDOM_MASS_ERROR": "0.3", "RANDOM_COM_ERROR_M": "0.02", "TOOL_MASS_KG": "1.5", "SEED": "1"},
 }
 MODES = {"off": "false", "on": "true"}
+#: A fitted load lighter than this [kg] is shown without its centre of mass.
+NO_LOAD_KG = 0.05
 #: controller label -> [controller.model] overrides (environment values).
 CONTROLLERS = {"plain": {"ENABLED": "false", "IDENTIFY_S": "0"}, "learning": {}}
 
@@ -92,8 +94,10 @@ def _load(arm: dict) -> str:
     """The estimated flange load as a table cell: mass and centre of mass (flange frame), or a dash."""
     if not arm.get("tool_fitted"):
         return "-"
-    c = arm["tool_com_m"]
-    return f"{arm['tool_mass_kg']:.2f} kg at ({c[0] * 100:.1f}, {c[1] * 100:.1f}, {c[2] * 100:.1f}) cm"
+    c, m = arm["tool_com_m"], arm["tool_mass_kg"]
+    if abs(m) < NO_LOAD_KG:  # a centre of mass of nothing is noise
+        return f"{m:.2f} kg"
+    return f"{m:.2f} kg at ({c[0] * 100:.1f}, {c[1] * 100:.1f}, {c[2] * 100:.1f}) cm"
 
 
 def main() -> int:
