@@ -53,7 +53,7 @@ def _hold_while_wiping(skill, brake: bool, after: int = 300) -> dict:
                         lim.q_min, lim.q_max, lim.dq_max)
     K = np.array(lbr.joint_stiffness_nm_rad)
     spring = JointSpring(K, lbr.pid_p, lbr.steer_share, lbr.steer_speed_rad_s)
-    contact_brake = ContactBrake(model, lbr.hold_timeout_s)
+    contact_brake = ContactBrake(model, lbr.hold_timeout_s, lbr.arm_preload_max_n)
     forces: list[float] = []
     out = {"speed": 0.0}
     pending = robot_cmd = snap = k0 = tau = None

@@ -117,7 +117,7 @@ class LbrPort(RobotPort):
         self.spring = JointSpring(np.array(params.joint_stiffness_nm_rad), params.pid_p, params.steer_share,
                                   params.steer_speed_rad_s)
         self._freeze = FreezeWatch(params.frozen_after_s)
-        self._brake = ContactBrake(self.model, params.hold_timeout_s)
+        self._brake = ContactBrake(self.model, params.hold_timeout_s, params.arm_preload_max_n)
         self._cond = threading.Condition()
         self._wake: threading.Event | None = None
         self._inbox: tuple[LbrState, int] | None = None  # the newest state and its arrival [monotonic ns]

@@ -9,12 +9,14 @@ the hold strike it (5 -> 30 N in 10 ms).
 
 :class:`ContactBrake` instead asks the joints for ``tau = J^T (Lambda a + f_press) - b N^T dq``: ``a`` (6,) the
 pad's acceleration that decays its in-plane velocity over ``tau_lin_s`` and its angular velocity over
-``tau_rot_s``, nothing along the pad's axis; ``Lambda = (J M^-1 J^T)^-1`` the pad's operational-space inertia, so
-the joints' braking makes no pad acceleration into the board for the contact to take; ``f_press`` the normal
-contact force measured when the hold began, ramped to zero over ``ramp_s`` (the disarm's zero overlay then
-finds it gone); ``N^T = I - J^T Lambda J M^-1`` the dynamically consistent null space, damped by ``b``
-[Nm s/rad]. The adapter hands ``tau`` to :meth:`~robot.lbr.compensation.JointSpring.command`, which takes the
-stack's spring off it. J: the pad's (6, 7) Jacobian, world axes, linear rows first; M: the joint inertia (7, 7).
+``tau_rot_s``, nothing along the pad's axis while it presses; ``Lambda = (J M^-1 J^T)^-1`` the pad's
+operational-space inertia, so the joints' braking makes no pad acceleration into the board for the contact to
+take; ``f_press`` the normal contact force measured when the hold began (kept over ``press_min_n``: below, the
+pad is taken for free and its motion along its axis braked too), ramped to zero over ``ramp_s`` (the disarm's
+zero overlay then finds it gone); ``N^T = I - J^T Lambda J M^-1`` the dynamically consistent null space, damped
+by ``b`` [Nm s/rad]; the torque clipped to the joints' limits. The adapter hands ``tau`` to
+:meth:`~robot.lbr.compensation.JointSpring.command`, which takes the stack's spring off it. J: the pad's (6, 7)
+Jacobian, world axes, linear rows first; M: the joint inertia (7, 7).
 """
 
 from __future__ import annotations
@@ -28,10 +30,11 @@ from interfaces.robot_model import RobotModel
 class ContactBrake:
     """The braking torque (7,) [Nm] of a hold (module docstring); :meth:`start` at the hold's first cycle."""
 
-    def __init__(self, model: RobotModel, ramp_s: float, tau_lin_s: float = 0.1, tau_rot_s: float = 0.05,
-                 null_damping: float = 2.0) -> None:
+    def __init__(self, model: RobotModel, ramp_s: float, press_min_n: float, tau_lin_s: float = 0.1,
+                 tau_rot_s: float = 0.05, null_damping: float = 2.0) -> None:
         self.model = model
         self.ramp_s = ramp_s
+        self.press_min_n = press_min_n
         self.tau_lin_s = tau_lin_s
         self.tau_rot_s = tau_rot_s
         self.null_damping = null_damping
@@ -55,7 +58,8 @@ class ContactBrake:
         JMinv = np.linalg.solve(M, self._J.T).T  # J M^-1 (6, 7)
         self._lam = np.linalg.inv(JMinv @ self._J.T)
         self._null_t = np.eye(len(q)) - self._J.T @ self._lam @ JMinv
-        self._press_n = float(np.asarray(wrench_world[:3], float) @ self._n)
+        press = -float(np.asarray(wrench_world[:3], float) @ self._n)  # the pad's axis points into the board
+        self._press_n = press if press > self.press_min_n else 0.0  # a press, never a pull nor the model's error
         self._t0_ns = t_ns
 
     def torque(self, dq: np.ndarray, t_ns: int) -> np.ndarray:
@@ -64,8 +68,11 @@ class ContactBrake:
         v = J @ dq
         a = np.empty(6)
         a[:3] = -(v[:3] - (v[:3] @ n) * n) / self.tau_lin_s
+        if self._press_n == 0.0:  # no press kept: the pad free, its motion along its axis braked too
+            a[:3] -= (v[:3] @ n) * n / self.tau_lin_s
         a[3:] = -v[3:] / self.tau_rot_s
         f = self._lam @ a
         share = max(0.0, 1.0 - (t_ns - self._t0_ns) * 1e-9 / self.ramp_s) if self.ramp_s > 0 else 0.0
-        f[:3] -= self._press_n * share * n
-        return J.T @ f - self.null_damping * (self._null_t @ dq)
+        f[:3] += self._press_n * share * n
+        tau_max = self.model.limits.tau_max
+        return np.clip(J.T @ f - self.null_damping * (self._null_t @ dq), -tau_max, tau_max)
