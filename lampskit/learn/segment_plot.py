@@ -49,7 +49,10 @@ def speed_and_height(demo: Demonstration, seg: Segmentation) -> tuple[np.ndarray
 
 def write_segment_png(demo: Demonstration, seg: Segmentation, path: Path) -> Path:
     """Three panels, coloured by segment (periodic by cluster, transitional grey), written atomically."""
-    from lampskit.figures.canvas import plt, save_figure
+    import matplotlib
+
+    matplotlib.use("Agg")  # headless, as lampskit.figures draws (learn/ may not import figures/)
+    import matplotlib.pyplot as plt
 
     t = demo.t_s - demo.t_s[0]
     speed, h = speed_and_height(demo, seg)
@@ -80,7 +83,10 @@ def write_segment_png(demo: Demonstration, seg: Segmentation, path: Path) -> Pat
             axes[2].text(cut["t_s"] - demo.t_s[0], 0.02, f"{cut['margin']:+.1f}", fontsize=6, rotation=90,
                          transform=axes[2].get_xaxis_transform())
     fig.tight_layout()
-    return save_figure(fig, path)
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return write_atomic(path, lambda f: f.write(png.getvalue()))
 
 
 def write_segment_mcap(demo: Demonstration, seg: Segmentation, path: Path) -> Path:
