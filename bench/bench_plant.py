@@ -28,7 +28,7 @@ and the flange load the controller estimated before its first wipe (``arm_model`
 
 Each cell with both controllers unless ``--controllers`` says otherwise (same seeds, same run): ``plain``, the
 controller with ``[controller.model] enabled = false, identify_s = 0`` (the nominal model only: the baseline),
-and ``learning``, the defaults (the model correction and the flange load
+and ``learning`` (``enabled = true, identify_s = 2``: the model correction and the flange load
 estimate of :mod:`controller.arm_model`).
 """
 
@@ -63,7 +63,7 @@ MODES = {"off": "false", "on": "true"}
 #: A fitted load lighter than this [kg] is shown without its centre of mass.
 NO_LOAD_KG = 0.05
 #: controller label -> [controller.model] overrides (environment values).
-CONTROLLERS = {"plain": {"ENABLED": "false", "IDENTIFY_S": "0"}, "learning": {}}
+CONTROLLERS = {"plain": {"ENABLED": "false", "IDENTIFY_S": "0"}, "learning": {"ENABLED": "true", "IDENTIFY_S": "2"}}
 
 
 def run_cell(out: Path, seed: int, plant: dict[str, str], mode: str, skill: Path | None,

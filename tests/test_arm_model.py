@@ -13,6 +13,9 @@ from controller.control.model_correction import MODEL_MISMATCH, CorrectionParams
 from controller.core import ControllerCore
 from controller.executor_types import BoardPose, StainState
 from controller.params import ControllerParams
+
+#: The learning controller (opt-in: [controller.model] enabled, with the identification roll).
+LEARNING = {"enabled": True, "identify_s": 2.0}
 from controller.tool_estimate import GRAVITY_M_S2, ToolEstimate, tool_regressor_into
 from controller.trace import PHASE_CODES, TRACE_COLUMNS
 from interfaces.description import ERASER_LINK
@@ -55,7 +58,7 @@ def test_the_load_regressor_is_the_gravity_torque_pinocchio_gives_a_model_with_t
 
 def test_the_correction_follows_the_missing_torque_stays_within_its_bound_and_warns_there():
     tau_max = np.full(7, 100.0)
-    corr = ModelCorrection(CorrectionParams(integral_s=0.1, bound_share=0.1, warn_s=0.2), tau_max)
+    corr = ModelCorrection(CorrectionParams(enabled=True, integral_s=0.1, bound_share=0.1, warn_s=0.2), tau_max)
     delta = np.array([3.0, -5.0, 0.0, 1.0, 0.0, 0.0, -0.5])  # what the model misses [Nm]
     for _ in range(2000):  # 2 s = 20 time constants
         corr.update(corr.c - delta, DT)  # the watch's residual once c counts as model: c - delta
@@ -89,7 +92,7 @@ def _run(skill, plant: dict, compensated: bool, until_first_wipe: bool, ticks: i
     from sim.core import SimCore
     from sim.params import SimParams
 
-    core = ControllerCore(ControllerParams.from_table({"trace_ticks": ticks}), skill)
+    core = ControllerCore(ControllerParams.from_table({"trace_ticks": ticks, "model": LEARNING}), skill)
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": compensated,
                                         "plant": plant}))
     applied, at_wipe = None, None
