@@ -275,8 +275,10 @@ def _released_after_a_hold(skill, held: int, override_drops: bool = True) -> tup
     """Wiping at speed on the board, the robot brakes for ``held`` cycles (flagged, as the robot server does for
     a stale answer), then applies the answers again for 0.2 s. Returns (the largest contact force [N] before the
     hold, while held, after the release) over every physics step. ``override_drops`` False: the speed override
-    kept its scale over the hold (the released reference at full speed at once)."""
-    core = ControllerCore(ControllerParams.from_table({}), skill)
+    kept its scale over the hold (the released reference at full speed at once). The board is where the sim
+    says, so the first touch descends as later ones do (``first_creep_height_m`` at ``creep_height_m``): the hold
+    falls at the point of the stroke its bounds were measured at."""
+    core = ControllerCore(ControllerParams.from_table({"executor": {"first_creep_height_m": 0.016}}), skill)
     if not override_drops:
         core.override.held = lambda pace: None
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
