@@ -259,7 +259,7 @@ def test_no_kernel_compiles_inside_a_tick():
                               bundled_skill())
         before = signatures()
         phases = set()
-        for n in range(4000):
+        for n in range(8000):  # the first touch creeps from 35 mm: WIPE comes after 4 s
             if n % 100 == 0:
                 board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
                 core.executor.set_stains(board, [StainState(s.id, np.array(s.centre_m), s.size_m, False)
