@@ -1,4 +1,4 @@
-"""The controller on simulated arms that are not its model, with and without what it learns of the arm (issue 49).
+"""The controller on simulated arms that are not its model, with and without what it learns of the arm.
 
 Usage: .venv/bin/python bench/bench_plant.py [--seed 0] [--modes off,on] [--plants main|extra|all]
        [--controllers plain,learning] [--json OUT]
@@ -16,7 +16,7 @@ the sim only); the controller loads the description as always. Plants:
 * ``stuerz2017``: the identified link masses (:data:`sim.plant_params.STUERZ_2017_LINK_MASS_KG`).
 
 ``--plants extra`` (or ``all``): the measured state 3 periods late on the nominal arm, and one seeded plant of
-issue 49's campaign bounds (link masses and inertias within +-30 %, centres of mass within 2 cm, 1.5 kg more
+the campaign bounds (link masses and inertias within +-30 %, centres of mass within 2 cm, 1.5 kg more
 on the flange; plant seed 1).
 
 Each in both robot modes unless ``--modes`` says otherwise: ``off`` (``gravity_compensated = false``, the

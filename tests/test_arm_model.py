@@ -1,4 +1,4 @@
-"""The controller learns the arm it drives (issue 49): the flange load's regressor against Pinocchio, the bounded
+"""The controller learns the arm it drives: the flange load's regressor against Pinocchio, the bounded
 correction observer, the settings' checks, then the whole skill in process (PyBullet plant that is not the
 controller's model, Pinocchio controller): an unknown tool estimated before the first wipe, tracking in contact on
 the +15 % links / +0.5 kg tool plant in both robot gravity modes."""
