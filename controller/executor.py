@@ -161,8 +161,13 @@ class SkillExecutor(BoardWatch, ExecutorStops):
             self.counters["board_jumps_back"] += 1  # the adopted pose is reported again: the jump is over
             self._jump, self.board_note = None, ""
         self.stains_fresh = True
+        smeared_before = len(self.book.smeared)
         if self.book.update(stains, self.clock_s) and self.phase in _ACTIVE:
             self.counters["stain_set_changes"] += 1
+        for s in list(self.book.smeared.values())[smeared_before:]:
+            self.counters["stains_smeared"] += 1
+            log.warning("stain %d: smeared (%.0f %% left after %d passes without progress): moving on", s.id,
+                        100.0 * s.remaining, s.passes)
         moved = self.chain.adapt(self.book, self.clock_s) if self.phase == Phase.WIPE else None
         if moved is not None:
             self.counters["anchor_moves"] += 1

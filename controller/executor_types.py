@@ -58,7 +58,8 @@ class BoardPose:
 class StainState:
     """One stain as the executor knows it: id, centre (2,) in the board plane [m], size [m] (along its main axis),
     kappa (done); width [m] across the main axis (0: not known), main axis [rad] from board x; ``ink``: the shape
-    of the ink that remains of it (centre, size, width, axis; None: not reported)."""
+    of the ink that remains of it (centre, size, width, axis; None: not reported); ``smeared``: perception says
+    passes no longer clean it, with ``remaining`` (fraction of its first sighting) after ``passes`` passes."""
 
     id: int
     centre_m: np.ndarray
@@ -67,6 +68,9 @@ class StainState:
     width_m: float = 0.0
     axis_rad: float = 0.0
     ink: Stain | None = None
+    smeared: bool = False
+    remaining: float = 1.0
+    passes: int = 0
 
 
 @dataclass

@@ -7,6 +7,13 @@ is open only while no stain with fewer passes is: kappa often comes
 seconds after the pad has left, once the arm no longer hides the stain,
 and a stain wiped clean but not yet confirmed should not be wiped again
 while others wait), at most ``max_passes`` times; then it is given up.
+
+A stain perception reports smeared (:mod:`perception.smear`: the camera's
+passes over it no longer lower its remaining ink) is closed as smeared once
+the executor has made a pass of its own over it: it is not wiped again,
+and :attr:`StainBook.smeared` keeps it, with its remaining and passes, for
+the status and the report. Without a pass of the executor's (the arm only
+passed over it on the way to another) the report is not taken.
 """
 
 from __future__ import annotations
@@ -33,6 +40,8 @@ class StainBook:
     ----------
     stains : dict of int to StainState
         The last view, by stain id.
+    smeared : dict of int to StainState
+        The stains closed as smeared, as they were when closed, by id.
     """
 
     def __init__(self, recheck_s: float, max_passes: int) -> None:
@@ -42,17 +51,21 @@ class StainBook:
         self._given_up: set[int] = set()
         self._passes: Counter[int] = Counter()
         self._left_at: dict[int, float] = {}  # stain id -> clock [s] at the end of a pass without kappa
+        self.smeared: dict[int, StainState] = {}
 
     def update(self, stains: list[StainState], clock_s: float) -> bool:
         """A fresh view of the stains (kappa per stain): True if it changes which are open at ``clock_s`` [s]."""
         old_open = self.open_ids(clock_s)
         self.stains = {s.id: s for s in stains}
+        for s in stains:
+            if s.smeared and not s.kappa and s.id not in self.smeared and self._passes[s.id] >= 1:
+                self.smeared[s.id] = s
         return self.open_ids(clock_s) != old_open
 
     def is_done(self, stain_id: int) -> bool:
-        """The stain has kappa or is no longer seen."""
+        """The stain has kappa, is no longer seen, or was closed as smeared."""
         s = self.stains.get(stain_id)
-        return s is None or s.kappa
+        return s is None or s.kappa or stain_id in self.smeared
 
     def end_pass(self, stain_id: int, clock_s: float) -> bool:
         """A pass over the stain ended without kappa at ``clock_s`` [s]: True if that was its last.
@@ -79,7 +92,7 @@ class StainBook:
         width, axis), not the whole stain's (adaptive wiping: a stain wiped before is planned for what is left).
         """
         ready = [s for s in self.stains.values()
-                 if not s.kappa and s.id not in self._given_up and s.id != exclude
+                 if not s.kappa and s.id not in self._given_up and s.id not in self.smeared and s.id != exclude
                  and clock_s - self._left_at.get(s.id, -math.inf) >= self.recheck_s]
         fewest = min((self._passes[s.id] for s in ready), default=0)
         return [(s.ink if by_ink and s.ink is not None else Stain(s.id, s.centre_m, s.size_m, s.width_m, s.axis_rad))
@@ -90,7 +103,8 @@ class StainBook:
 
     def pending(self) -> list[StainState]:
         """Stains passed over without kappa, waiting to be looked at (not given up)."""
-        return [s for i, s in self.stains.items() if not s.kappa and i in self._left_at and i not in self._given_up]
+        return [s for i, s in self.stains.items()
+                if not s.kappa and i in self._left_at and i not in self._given_up and i not in self.smeared]
 
     def looked_at(self, clock_s: float) -> None:
         """The camera has a clear view of the pending stains from ``clock_s`` [s] on: their recheck starts again."""

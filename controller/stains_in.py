@@ -56,4 +56,5 @@ def stain_state(s: StainObservation) -> StainState:
     ink = None
     if len(s.ink_centre_board_m) == 2 and s.ink_size_m > 0:
         ink = Stain(s.id, np.asarray(s.ink_centre_board_m, float), s.ink_size_m, s.ink_width_m, s.ink_axis_board_rad)
-    return StainState(s.id, np.asarray(s.centre_board_m, float), s.size_m, s.kappa, s.width_m, s.axis_board_rad, ink)
+    return StainState(s.id, np.asarray(s.centre_board_m, float), s.size_m, s.kappa, s.width_m, s.axis_board_rad, ink,
+                      s.smeared, s.remaining, s.passes)

@@ -248,7 +248,10 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
     ink_centre_board_m (2,) (empty: none left or not known), ink_size_m,
     ink_width_m [m], ink_axis_board_rad [rad]; colour: the name of the
     stain's ink in perception's palette (``[perception.ink] inks``; empty:
-    not known).
+    not known); smeared: perception saw ``passes`` passes over the stain
+    (hidden, then back in view) and the last ``[perception.smear] passes``
+    of them lowered its remaining by less than ``min_progress``: wiping no
+    longer cleans it (:mod:`perception.smear`).
     """
 
     id: int
@@ -266,16 +269,16 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
     ink_width_m: float = 0.0
     ink_axis_board_rad: float = 0.0
     colour: str = ""
+    smeared: bool = False
+    passes: int = 0
 
     def __post_init__(self) -> None:
-        _finite("centre_board_m", self.centre_board_m, 2)
+        _finite("centre_board_m", self.centre_board_m, 2), _finite("centre_world_m", self.centre_world_m, 3)
+        _finite("extent_board_m", self.extent_board_m, 2), _finite("size_m", (self.size_m,))
         if not isinstance(self.colour, str) or len(self.colour) > 16:
             raise ValueError(f"colour must be an ink name of at most 16 characters, got {self.colour!r}")
-        _finite("centre_world_m", self.centre_world_m, 3)
-        _finite("extent_board_m", self.extent_board_m, 2)
-        _finite("size_m", (self.size_m,))
-        if self.size_m <= 0:
-            raise ValueError(f"size_m must be positive, got {self.size_m}")
+        if self.size_m <= 0 or self.passes < 0:
+            raise ValueError(f"size_m must be positive and passes >= 0, got {self.size_m}, {self.passes}")
         _finite("width_m, axis_board_rad, ink_size_m, ink_width_m, ink_axis_board_rad",
                 (self.width_m, self.axis_board_rad, self.ink_size_m, self.ink_width_m, self.ink_axis_board_rad))
         if self.width_m < 0 or self.ink_width_m < 0 or self.ink_size_m < 0:
@@ -452,17 +455,12 @@ class Introduction(Message, frozen=True):
 
 
 class SimTruth(Message, frozen=True):
-    """Sim -> tests and reports: the true dirt per stain and the contact force.
-
-    stain_ids and remaining: (k,) stain ids and remaining dirt fraction in
-    [0, 1]; total_dirt: sum of the dirt grid [cell units]; contact_force_n:
-    normal force of the eraser on the board [N] at this step; peak_force_n: the
-    largest such force over every physics step since the last truth [N] (a
-    truth every 100 ms would miss a 20 ms impact). centres_board_m and
-    sizes_m: (k, 2) true stain centres in the board frame and (k,) their
-    larger extents [m]; T_board_to_world: the board pose (tests compare
-    perception against these).
-    """
+    """Sim -> tests and reports: the true dirt per stain and the contact force. stain_ids and remaining: (k,) stain
+    ids and remaining dirt fraction in [0, 1]; total_dirt: sum of the dirt grid [cell units]; contact_force_n:
+    normal force of the eraser on the board [N] at this step; peak_force_n: the largest such force over every
+    physics step since the last truth [N] (a truth every 100 ms would miss a 20 ms impact). centres_board_m and
+    sizes_m: (k, 2) true stain centres in the board frame and (k,) their larger extents [m]; T_board_to_world: the
+    board pose (tests compare perception against these)."""
 
     seq: int
     stamp_ns: int

@@ -11,7 +11,9 @@
   (1 - final / first total dirt of ``sim/truth``).
 * ``stains``: per true stain ``id``, ``centre_board_m``, ``size_m``,
   ``initial_remaining``, ``final_remaining``, ``truth_below_level_s`` and
-  ``kappa_s`` (robot time; null if never), ``kappa_latency_s``.
+  ``kappa_s`` (robot time; null if never), ``kappa_latency_s``, ``smeared``
+  (perception's first report of it smeared: ``at_s`` robot time,
+  ``remaining`` and ``passes``; null if never).
 * ``max_normal_force_n``, ``normal_force_mean_n`` and ``normal_force_std_n``
   while wiping, ``time_above_cap_s`` (the measured force, low-passed as the
   controller's cap watch low-passes it (``ForceParams.filter_s``), above
@@ -152,12 +154,21 @@ def _stains_section(truth: list[dict], stains_msgs: list[dict]) -> list[dict[str
     for k, sid in enumerate(last["stain_ids"]):
         below = next((t["robot_time_ns"] * 1e-9 for t in truth if t["remaining"][k] <= TRUTH_LEVEL), None)
         kappa = _first_kappa_s(stains_msgs, centres, k)
+        smeared = _first_smear(stains_msgs, centres, k)
         stains.append({"id": sid, "centre_board_m": last["centres_board_m"][k] if len(centres) else None,
                        "size_m": last["sizes_m"][k] if last["sizes_m"] else None,
                        "initial_remaining": first["remaining"][k], "final_remaining": last["remaining"][k],
                        "truth_below_level_s": below, "kappa_s": kappa,
-                       "kappa_latency_s": (kappa - below) if kappa is not None and below is not None else None})
+                       "kappa_latency_s": (kappa - below) if kappa is not None and below is not None else None,
+                       "smeared": smeared})
     return stains
+
+
+def _nearest(centres_board_m: np.ndarray, s: dict) -> int:
+    """Index of the true stain nearest to perceived stain ``s`` (-1 without true stains)."""
+    if not len(centres_board_m):
+        return -1
+    return int(np.argmin(np.linalg.norm(centres_board_m - np.array(s["centre_board_m"]), axis=1)))
 
 
 def _first_kappa_s(stains_msgs: list[dict], centres_board_m: np.ndarray, k: int) -> float | None:
@@ -167,9 +178,18 @@ def _first_kappa_s(stains_msgs: list[dict], centres_board_m: np.ndarray, k: int)
     """
     for m in stains_msgs:
         for s in m["stains"]:
-            if s["kappa"] and len(centres_board_m) and int(np.argmin(np.linalg.norm(
-                    centres_board_m - np.array(s["centre_board_m"]), axis=1))) == k:
+            if s["kappa"] and _nearest(centres_board_m, s) == k:
                 return m["robot_time_ns"] * 1e-9
+    return None
+
+
+def _first_smear(stains_msgs: list[dict], centres_board_m: np.ndarray, k: int) -> dict[str, float] | None:
+    """Perception's first report of a smear on true stain ``k``: robot time [s], remaining fraction and passes
+    (None if never; a recording from a perception without smears has no ``smeared`` field)."""
+    for m in stains_msgs:
+        for s in m["stains"]:
+            if s.get("smeared") and _nearest(centres_board_m, s) == k:
+                return {"at_s": m["robot_time_ns"] * 1e-9, "remaining": s["remaining"], "passes": s["passes"]}
     return None
 
 
@@ -272,6 +292,9 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
               f"({report['junction_step_ratio_max']:.2f}x an ordinary tick)")]
     for s in report["stains"]:
         k = "no kappa" if s["kappa_s"] is None else f"kappa at {s['kappa_s']:.1f} s"
+        if s.get("smeared"):
+            m = s["smeared"]
+            k += f", smeared at {m['at_s']:.1f} s ({m['remaining']:.0%} left after {m['passes']} passes)"
         lines.append(f"  stain {s['id']}: {s['initial_remaining']:.0%} -> {s['final_remaining']:.1%}, {k}")
     peaks = report.get("motion_peaks", {})
     moving = [(name, m) for name, m in peaks.items() if name in ("APPROACH", "TRANSITION", "WIPE", "RETREAT")]

@@ -14,6 +14,7 @@ Layout (every key optional)::
     [perception.ink]     inks, board_rgb, stain_level, clean_level, illumination_range, white_fill_m, ...
     [perception.stains]  link_m, min_area_m2, confirm_s, region_margin_m
     [perception.kappa]   level, debounce_s, min_seen, memory_s, reappear_margin
+    [perception.smear]   passes, min_progress, hidden_below, seen_above (perception/smear.py)
     [perception.camera_model]  fx, fy, cx, cy, position_m, look_at_m, up_m (sources without one)
 
 Every value is checked when built; an unknown key or a value out of range
@@ -33,6 +34,8 @@ from interfaces.config import check_vector, dataclass_from_table
 from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
 from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
+
+from .smear import SmearParams
 
 
 @dataclass(frozen=True)
@@ -297,6 +300,7 @@ class PerceptionParams:
     stains: StainParams = field(default_factory=StainParams)
     kappa: KappaParams = field(default_factory=KappaParams)
     model: CameraModelParams = field(default_factory=CameraModelParams)
+    smear: SmearParams = field(default_factory=SmearParams)
 
     def __post_init__(self) -> None:
         s = "perception"
@@ -318,7 +322,7 @@ class PerceptionParams:
             raise ConfigError(f"[perception] must be a table, got {type(table).__name__}")
         table = dict(table)
         subs = {"board": BoardParams, "ink": InkParams, "stains": StainParams, "kappa": KappaParams,
-                "camera_model": CameraModelParams}
+                "camera_model": CameraModelParams, "smear": SmearParams}
         parts = {}
         for name, kind in subs.items():
             key = "model" if name == "camera_model" else name

@@ -27,6 +27,7 @@ from .frames import Frame
 from .params import PerceptionParams
 from .rectify import BoardGrid
 from .self_filter import ArmState, board_shadow, shadow_mask
+from .smear import SmearWatch
 from .tracking import StainTracker
 
 #: The frame clock going back by more than this means a restarted source [s].
@@ -61,6 +62,7 @@ class Perception:
         self.grid: BoardGrid | None = None
         self.classifier: InkClassifier | None = None
         self.tracker: StainTracker | None = None
+        self.smear = SmearWatch(params.smear)
         self._first_fix_t: float | None = None
         self._last_t: float | None = None
         self._seq = 0
@@ -71,6 +73,7 @@ class Perception:
         """Forget the board and its stains (a restarted source, another board)."""
         self.board.reset()
         self.grid = self.classifier = self.tracker = None
+        self.smear = SmearWatch(self.p.smear)
         self._first_fix_t = None
         self.resets += 1
 
@@ -144,17 +147,18 @@ class Perception:
             c = tr.shape.centre_m
             world = T[:3, :3] @ np.array([c[0], c[1], 0.0]) + T[:3, 3]
             ink = tr.ink
+            visible, kappa = (0.0, False) if lost else (float(tr.visible), bool(tr.kappa))
+            smeared = not lost and self.smear.update(tr.id, float(tr.remaining), visible, kappa) is not None
             out.append(StainObservation(
                 id=tr.id, centre_board_m=[float(c[0]), float(c[1])], centre_world_m=world.tolist(),
                 size_m=float(tr.shape.size_m), extent_board_m=[float(v) for v in tr.shape.extent_m],
-                remaining=float(tr.remaining), visible=0.0 if lost else float(tr.visible),
-                kappa=False if lost else bool(tr.kappa), width_m=float(tr.shape.width_m),
+                remaining=float(tr.remaining), visible=visible, kappa=kappa, width_m=float(tr.shape.width_m),
                 axis_board_rad=float(tr.shape.axis_rad),
                 ink_centre_board_m=[] if ink is None else [float(ink.centre_m[0]), float(ink.centre_m[1])],
                 ink_size_m=0.0 if ink is None else float(ink.size_m),
                 ink_width_m=0.0 if ink is None else float(ink.width_m),
                 ink_axis_board_rad=0.0 if ink is None else float(ink.axis_rad),
-                colour=self.p.ink.ink_names[tr.colour]))
+                colour=self.p.ink.ink_names[tr.colour], smeared=smeared, passes=self.smear.passes(tr.id)))
         self._seq += 1
         return Stains(seq=self._seq, stamp_ns=time.monotonic_ns(), T_board_to_world=pose_from_transform(T),
                       board_size_m=[float(v) for v in est.size_m], stains=out, board=est.state,

@@ -91,6 +91,11 @@ class SmearWatch:
             return None
         return Smear(stain_id, s.remaining, s.passes)
 
+    def passes(self, stain_id: int) -> int:
+        """Passes the camera saw over the stain (0 for a stain never seen)."""
+        s = self._stains.get(stain_id)
+        return 0 if s is None else s.passes
+
     def smeared(self) -> list[Smear]:
         """Every smeared stain, by id."""
         return [m for i in sorted(self._stains) if (m := self.smear(i)) is not None]

@@ -16,6 +16,11 @@ with v the pad's sliding velocity in the board plane, omega its spin about
 the normal and r the cell's offset from the pad centre: the rate grows with
 force and with the distance slid over the cell; a pad pressed without
 sliding removes nothing.
+
+A stain may carry a ghost (``ghost`` g of a stain table: dried-in marker a
+dry eraser smears but cannot lift): its cells keep ``g`` of their first
+dirt, ``d <- g d0 + (d - g d0) exp(-k (F - F0) ds)``, however often they
+are wiped (perception calls such a stain smeared, :mod:`perception.smear`).
 """
 
 from __future__ import annotations
@@ -33,7 +38,8 @@ from interfaces.stain_shape import Shape, shape_of
 
 @dataclass(frozen=True)
 class StainShape:
-    """One stain: ``centre_m`` (2,) board frame, ``size_m`` larger extent, ``aspect`` >= 1, ``angle_rad`` of its long axis."""
+    """One stain: ``centre_m`` (2,) board frame, ``size_m`` larger extent, ``aspect`` >= 1, ``angle_rad`` of its long
+    axis; ``ghost``: the fraction of its dirt the eraser cannot lift."""
 
     id: int
     centre_m: tuple[float, float]
@@ -41,6 +47,7 @@ class StainShape:
     aspect: float = 1.3
     angle_rad: float = 0.0
     wobble_seed: int = 0
+    ghost: float = 0.0
 
 
 def random_stains(rng: np.random.Generator, count: int, size_range_m: tuple[float, float],
@@ -67,26 +74,31 @@ def random_stains(rng: np.random.Generator, count: int, size_range_m: tuple[floa
 
 
 def stains_from_specs(specs: Sequence[Mapping[str, Any]], lo: np.ndarray, hi: np.ndarray) -> list[StainShape]:
-    """Stains from config tables ``{centre_m = [x, y], size_m = s, aspect = a, angle_deg = t}``."""
+    """Stains from config tables ``{centre_m = [x, y], size_m = s, aspect = a, angle_deg = t, ghost = g}``."""
     out = []
     for i, spec in enumerate(specs):
-        unknown = sorted(set(spec) - {"centre_m", "size_m", "aspect", "angle_deg"})
+        unknown = sorted(set(spec) - {"centre_m", "size_m", "aspect", "angle_deg", "ghost"})
         if unknown:
-            raise ConfigError(f"[sim.dirt] stain {i}: unknown key(s) {unknown}; valid: centre_m, size_m, aspect, angle_deg")
+            raise ConfigError(f"[sim.dirt] stain {i}: unknown key(s) {unknown}; valid: centre_m, size_m, aspect, "
+                              "angle_deg, ghost")
         try:
             centre = np.array(spec["centre_m"], float).reshape(2)
             size = float(spec["size_m"])
             aspect = float(spec.get("aspect", 1.3))
             angle = math.radians(float(spec.get("angle_deg", 0.0)))
+            ghost = float(spec.get("ghost", 0.0))
         except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise ConfigError(f"[sim.dirt] stain {i} needs centre_m = [x, y] and size_m (numbers): {exc}") from None
         if not (0.01 <= size <= 0.3 and 1.0 <= aspect <= 4.0 and np.all(np.isfinite(centre)) and math.isfinite(angle)):
             raise ConfigError(f"[sim.dirt] stain {i}: size_m must be in [0.01, 0.3], aspect in [1, 4], "
                               "centre_m and angle_deg finite")
+        if not 0.0 <= ghost <= 0.95:
+            raise ConfigError(f"[sim.dirt] stain {i}: ghost must be in [0, 0.95] (the fraction the eraser cannot "
+                              f"lift), got {spec.get('ghost')!r}")
         if np.any(centre < lo) or np.any(centre > hi):
             raise ConfigError(f"[sim.dirt] stain {i}: centre {centre.tolist()} m is outside the stain region "
                               f"{np.round(lo, 3).tolist()}-{np.round(hi, 3).tolist()} m")
-        out.append(StainShape(i, (float(centre[0]), float(centre[1])), size, aspect, angle, 1000 + i))
+        out.append(StainShape(i, (float(centre[0]), float(centre[1])), size, aspect, angle, 1000 + i, ghost))
     return out
 
 
@@ -128,6 +140,13 @@ class DirtGrid:
             mask = _stain_mask(shape, xs, ys)
             self.labels[mask] = shape.id
             self.dirt[mask] = rng.uniform(0.75, 1.0, int(mask.sum())).astype(np.float32)
+        #: what the eraser cannot lift (None: nothing, the common case, and the cheaper wipe)
+        self._floor: np.ndarray | None = None
+        if any(s.ghost > 0.0 for s in self.stains):
+            ghost = np.zeros(max(s.id for s in self.stains) + 2, np.float32)  # index -1 (no stain) reads 0
+            for s in self.stains:
+                ghost[s.id] = s.ghost
+            self._floor = self.dirt * ghost[self.labels]
         self._index = [np.flatnonzero(self.labels.ravel() == s.id) for s in self.stains]
         self._initial = np.array([self.dirt.ravel()[i].sum() for i in self._index], float)
         self.version = 0
@@ -188,6 +207,11 @@ class DirtGrid:
         vy = velocity_m_s[1] + spin_rad_s * rx[None, :]
         ds = np.hypot(vx, vy) * dt_s
         window = self.dirt[iy0:iy1, ix0:ix1]
-        window[inside] *= np.exp(-rate_per_n_m * excess * ds[inside]).astype(np.float32)
+        lift = np.exp(-rate_per_n_m * excess * ds[inside]).astype(np.float32)
+        if self._floor is None:
+            window[inside] *= lift
+        else:
+            floor = self._floor[iy0:iy1, ix0:ix1][inside]
+            window[inside] = floor + (window[inside] - floor) * lift
         self.version += 1
         return n
