@@ -32,7 +32,9 @@ class Frame:
     z forward) in the world (robot base) frame. t_s : the time shown [s]
     (the robot's clock for simulated frames, so debounce times mean the same
     in lock-step). seq : the source's frame counter. stamp_ns : the source's
-    monotonic stamp; robot_time_ns : the robot's clock (0 when unknown).
+    monotonic stamp; robot_time_ns : the robot's clock (0 when unknown);
+    wall_ns : when the camera took it, on the wall clock [ns since the epoch]
+    (a ROS header's stamp; 0 when unknown).
     """
 
     rgb: np.ndarray
@@ -42,6 +44,7 @@ class Frame:
     seq: int
     stamp_ns: int = 0
     robot_time_ns: int = 0
+    wall_ns: int = 0
 
 
 def camera_matrix(k: CameraIntrinsics) -> np.ndarray:

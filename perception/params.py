@@ -9,6 +9,9 @@ Layout (every key optional)::
     tool_mask = true            # the robot's tool (from robot/state) is not board: masked out of the image
     tool_margin_m = 0.01        # ... its shadow from the camera on the board grown by this [m]
     tool_max_age_s = 0.1        # ... from the joint state nearest the frame's time, if this near [s]
+    device_size_px = [1280, 720]  # device:N asks the camera for this size, rate and pixel format
+    device_fps = 30.0
+    device_fourcc = "MJPG"
     arm_mask = false            # every link of the arm masked too, grown by the state's age times its speed
     [perception.board]   size_m, resolution_m, min_markers, hold_s, max_reprojection_px, ...
     [perception.ink]     inks, board_rgb, stain_level, clean_level, illumination_range, white_fill_m, ...
@@ -271,11 +274,12 @@ def parse_source(spec: str) -> tuple[str, str]:
         return kind, ""
     if kind in ("folder", "video") and arg:
         return kind, arg
-    if kind == "device" and re.fullmatch(r"\d{1,3}", arg):
+    if kind == "device" and re.fullmatch(r"\d{1,3}|/dev/[A-Za-z0-9_./-]{1,100}", arg):
         return kind, arg
     if kind == "ros" and re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", arg):
         return kind, arg
-    raise ConfigError(f"[perception] source must be 'zenoh', 'folder:DIR', 'video:FILE', 'device:N' or 'ros:TOPIC' "
+    raise ConfigError(f"[perception] source must be 'zenoh', 'folder:DIR', 'video:FILE', 'device:N' (or "
+                      f"'device:/dev/videoN') or 'ros:TOPIC' "
                       f"(a ROS 2 image topic through zenoh-bridge-ros2dds), got {spec!r}")
 
 
@@ -291,6 +295,9 @@ class PerceptionParams:
     debug_rate_hz: Annotated[float, In(0.1, 30.0)] = 2.0
     frame_timeout_s: Annotated[float, In(0.1, 60.0)] = 2.0
     source_rate_hz: Annotated[float, In(0.1, 120.0)] = 10.0
+    device_size_px: tuple[int, int] = (1280, 720)
+    device_fps: Annotated[float, In(1.0, 240.0)] = 30.0
+    device_fourcc: str = "MJPG"
     tool_mask: bool = True
     tool_margin_m: Annotated[float, In(0.0, 0.1)] = 0.01
     tool_max_age_s: Annotated[float, In(0.001, 5.0)] = 0.1
@@ -308,6 +315,14 @@ class PerceptionParams:
         if not isinstance(self.camera, str) or not re.fullmatch(r"[A-Za-z0-9_\-.]+", self.camera):
             raise ConfigError(f"[{s}] camera must be letters, digits, '_', '-' or '.', got {self.camera!r}")
         parse_source(self.source)
+        size = check_vector(s, "device_size_px", self.device_size_px, 2)
+        if not all(float(v).is_integer() and 16 <= v <= 8192 for v in size):
+            raise ConfigError(f"[{s}] device_size_px must be [width, height] in whole pixels, 16-8192, "
+                              f"got {self.device_size_px!r}")
+        object.__setattr__(self, "device_size_px", (int(size[0]), int(size[1])))
+        if not isinstance(self.device_fourcc, str) or not re.fullmatch(r"([A-Za-z0-9 ]{4})?", self.device_fourcc):
+            raise ConfigError(f"[{s}] device_fourcc must be four letters or digits (MJPG, YUYV) or \"\" for the "
+                              f"driver's own, got {self.device_fourcc!r}")
         if not isinstance(self.debug_images, bool):
             raise ConfigError(f"[{s}] debug_images must be true or false, got {self.debug_images!r}")
         if not isinstance(self.tool_mask, bool):

@@ -163,6 +163,7 @@ class RosImageSource:
         sample = self._images.try_recv()
         if sample is None:
             return None
+        arrived_ns = time.monotonic_ns()  # before decoding: the frame's age counts the decoding too
         if len(sample.payload) > MAX_IMAGE_BYTES:
             self.counters["frames_bad: image over the size bound"] += 1
             return None
@@ -185,7 +186,8 @@ class RosImageSource:
             self.counters["frames_repeated"] += 1
         self._last_stamp = stamp
         self._seq += 1
-        return Frame(rgb, K, T, stamp / 1e9 if stamp else time.monotonic(), self._seq - 1, time.monotonic_ns())
+        return Frame(rgb, K, T, stamp / 1e9 if stamp else time.monotonic(), self._seq - 1, arrived_ns,
+                     wall_ns=stamp)
 
     def close(self) -> None:
         for sub in (self._images, self._infos):

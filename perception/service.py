@@ -67,6 +67,7 @@ class PerceptionService:
         self._process_us: deque[float] = deque(maxlen=500)
         self._interval_us: deque[float] = deque(maxlen=500)
         self._latency_us: deque[float] = deque(maxlen=500)  # frame's stamp to its stains message, this host's clock
+        self._capture_us: deque[float] = deque(maxlen=500)  # the camera's wall-clock stamp to the stains message
         self._last_frame_wall: float | None = None
         self._last_publish = -float("inf")
         self._next_status = 0.0
@@ -128,6 +129,9 @@ class PerceptionService:
             age_ns = time.monotonic_ns() - frame.stamp_ns
             if frame.stamp_ns > 0 and 0 <= age_ns < LATENCY_SANE_NS:  # a stamp of this host's monotonic clock
                 self._latency_us.append(age_ns * 1e-3)
+            age_ns = time.time_ns() - frame.wall_ns
+            if frame.wall_ns > 0 and 0 <= age_ns < LATENCY_SANE_NS:  # the camera's clock is this host's (or PTP's)
+                self._capture_us.append(age_ns * 1e-3)
         if self.p.debug_images and result.rect is not None and self.debug_dir is not None:
             self._write_debug(result, frame)
         if self.p.debug_images and result.rect is not None and now >= self._next_debug and self.node is not None:
@@ -199,6 +203,9 @@ class PerceptionService:
         if self._latency_us:
             counters["frame_to_stains_p50_us"] = int(np.percentile(self._latency_us, 50))
             counters["frame_to_stains_p99_us"] = int(np.percentile(self._latency_us, 99))
+        if self._capture_us:
+            counters["capture_to_stains_p50_us"] = int(np.percentile(self._capture_us, 50))
+            counters["capture_to_stains_p99_us"] = int(np.percentile(self._capture_us, 99))
         self._status_seq += 1
         return ServiceStatus(service=SERVICE, seq=self._status_seq, stamp_ns=time.monotonic_ns(), counters=counters,
                              detail=self.detail, timing=timing)

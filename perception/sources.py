@@ -22,6 +22,7 @@ from interfaces.messages import CameraFrame
 
 from .calibration import Calibration, CalibrationError, Undistorter, read_calibration
 from .frames import Frame, FrameError, frame_from_message
+from .live_capture import LiveCapture, open_device
 from .params import CameraModelParams, PerceptionParams, parse_source
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -96,7 +97,10 @@ class OpenCVSource:
 
     Folder frames are stamped ``index / rate_hz`` and video frames by their
     position in the file, so debounce times mean the same as live; device
-    frames by the monotonic clock.
+    frames by the monotonic clock at their arrival, read on a thread of
+    their own that keeps only the newest (:mod:`perception.live_capture`:
+    the device asked for ``device_size_px`` at ``device_fps`` in
+    ``device_fourcc``).
     """
 
     def __init__(self, spec: str, params: PerceptionParams) -> None:
@@ -110,6 +114,7 @@ class OpenCVSource:
         self._seq = 0
         self._files: list[Path] = []
         self._cap = None
+        self._live: LiveCapture | None = None
         if self.kind == "folder":
             folder = Path(arg)
             if not folder.is_dir():
@@ -117,14 +122,19 @@ class OpenCVSource:
             self._files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
             if not self._files:
                 raise FileNotFoundError(f"image folder {arg!r} has no {'/'.join(IMAGE_SUFFIXES)} files")
-        elif self.kind in ("video", "device"):
-            self._cap = cv2.VideoCapture(arg if self.kind == "video" else int(arg))
+        elif self.kind == "video":
+            self._cap = cv2.VideoCapture(arg)
             if not self._cap.isOpened():
-                raise FileNotFoundError(f"cannot open {self.kind} {arg!r}")
+                raise FileNotFoundError(f"cannot open video {arg!r}")
+        elif self.kind == "device":
+            self._live = LiveCapture(open_device(arg, params.device_size_px, params.device_fps, params.device_fourcc))
+            self.counters = self._live.counters
         else:
             raise ValueError(f"OpenCVSource cannot read {spec!r}")
 
     def read(self) -> Frame | None:
+        if self._live is not None:
+            return self._read_live()
         if self.ended:
             return None
         t = self._seq / self.rate_hz
@@ -141,13 +151,23 @@ class OpenCVSource:
         else:
             ok, bgr = self._cap.read()
             if not ok:
-                if self.kind == "video":
-                    self.ended = True
-                else:
-                    self.counters["frames_bad: capture failed"] += 1
+                self.ended = True
                 return None
             self._seq += 1
-            t = (self._cap.get(cv2.CAP_PROP_POS_MSEC) / 1e3 if self.kind == "video" else time.monotonic())
+            t = self._cap.get(cv2.CAP_PROP_POS_MSEC) / 1e3
+        return self._frame(bgr, t, time.monotonic_ns())
+
+    def _read_live(self) -> Frame | None:
+        self.ended = self._live.ended
+        got = self._live.newest()
+        if got is None:
+            return None
+        bgr, arrived_ns, wall_ns = got
+        self._seq += 1
+        return self._frame(bgr, arrived_ns * 1e-9, arrived_ns, wall_ns)
+
+    def _frame(self, bgr: np.ndarray, t_s: float, stamp_ns: int, wall_ns: int = 0) -> Frame | None:
+        """The frame of a BGR image shown at ``t_s`` [s], with the camera model (and undistortion) configured."""
         h, w = bgr.shape[:2]
         try:
             K, T = camera_model(self.model, w, h)
@@ -156,8 +176,10 @@ class OpenCVSource:
         except (FrameError, CalibrationError) as exc:
             self.counters[f"frames_bad: {str(exc).split(':')[0]}"] += 1
             return None
-        return Frame(np.ascontiguousarray(bgr[..., ::-1]), K, T, float(t), self._seq - 1, time.monotonic_ns())
+        return Frame(np.ascontiguousarray(bgr[..., ::-1]), K, T, float(t_s), self._seq - 1, stamp_ns, wall_ns=wall_ns)
 
     def close(self) -> None:
         if self._cap is not None:
             self._cap.release()
+        if self._live is not None:
+            self._live.close()
