@@ -57,13 +57,7 @@ def _stop(proc: subprocess.Popen) -> None:
 @pytest.mark.slow
 @pytest.mark.alone
 @pytest.mark.parametrize("law, watchdog, fri", [("relative", True, 1), ("absolute", True, 1), ("relative", False, 1),
-                                               pytest.param("absolute", True, 2, marks=pytest.mark.xfail(
-                                                   strict=False, reason=(
-                                                       "FRI 2 under absolute damping: since the first touch of a "
-                                                       "board creeps from 35 mm (ddd50ca) the pad settles at 6.8 N "
-                                                       "true force instead of 10 N and never presses steadily "
-                                                       "(passes with first_creep_height_m = 0.016); open, issue "
-                                                       "47/48 note")))])
+                                               ("absolute", True, 2)])
 def test_the_adapter_killed_while_the_pad_presses_the_watchdog_releases_it(tmp_path, law, watchdog, fri):
     """Without the watchdog the stack re-applies the adapter's last message and the pad goes on pressing. FRI 2:
     the adapter presses through its mirror of the stack's PID (tests/test_lbr_fri2.py)."""

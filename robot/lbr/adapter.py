@@ -436,7 +436,8 @@ class LbrPort(RobotPort):
         r.tau_nm = self._tau_measured.update(st.tau_measured_nm, st.stamp_ns, st.sample_time_s).copy()
         tau_ext = self._tau_external.update(st.tau_external_nm, st.stamp_ns, st.sample_time_s)
         r.robot_time_ns = st.stamp_ns
-        self.spring.observe(st.q_rad, st.stamp_ns, st.sample_time_s, st.q_commanded_rad)
+        self.spring.observe(st.q_rad, st.stamp_ns, st.sample_time_s, st.q_commanded_rad, st.tau_commanded_nm,
+                            self._resolution.tolerance_nm())
         if self.p.wrench_source == "stack":  # the stack's estimate; the rest checks use the external torque's
             w = self._stack_wrench
             r.wrench_world = np.zeros(6) if w is None else stack_wrench_to_tcp(

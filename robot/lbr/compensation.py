@@ -18,7 +18,17 @@ cited by file and line (lbr_fri_ros2_stack ``rolling`` 218d723):
   the rest of the spring, ``K (c_next - q)``, off the overlay, so the
   controller's torque is what reaches the joints. ``c`` is the state's
   ``commanded_joint_position`` (FRI 1) or, where the state lacks it (FRI 2),
-  the same PID run on the states the adapter sees.
+  the same PID run on the states the adapter sees, with the targets the
+  robot ran on: a state's ``commanded_torque`` is the overlay of the FRI
+  cycle before it (the stand-in's ``reported_commanded_torque``), and it
+  names the message, hence the target, the PID had in that cycle. Only the
+  newest state's own cycle is guessed (the message sent before our newest)
+  and settled at the next state, so a guess never accumulates: with a fixed
+  guess for every cycle, an answer that reached a free-running manager in
+  time for the next FRI cycle (or one cycle later than guessed) was
+  integrated as the wrong target, and the mirror walked away from the
+  stack's command (1.5 mrad on A4 in a real-time FRI 2 cell under load, the
+  spring's error taking 1.8 N off a 10 N press).
 * :class:`AppliedWatch`: the overlays sent, and whether the torque a state
   says the robot applied (``commanded_torque``) is a recent one of them,
   within a tolerance the robot's own resolution may widen
@@ -91,6 +101,9 @@ class JointSpring:
     [rad/s] (0: no bound).
     """
 
+    #: FRI 2: the messages kept for the robot's echo to name (a message older than this is not named)
+    RING = 32
+
     def __init__(self, stiffness: np.ndarray, pid_p: float, share: float, speed_rad_s: float = 0.0) -> None:
         self.K = np.asarray(stiffness, float)
         self.p = pid_p
@@ -99,27 +112,100 @@ class JointSpring:
         self.c: np.ndarray | None = None  # the stack's joint position command, as last known or mirrored
         self._targets: deque[np.ndarray] = deque(maxlen=2)  # the last two targets sent, oldest first
         self._t_ns: int | None = None
+        # FRI 2: a ring of the last RING messages sent, message number i in row i % RING: the robot time of the
+        # state it answered [ns], its target and overlay; _count sent since the reset; the mirror settled up to
+        # the FRI cycle of robot time _settled_ns; the newest state's joint position
+        self._sent_ns = [0] * self.RING
+        self._sent_target = np.zeros((self.RING, 7))
+        self._sent_overlay = np.zeros((self.RING, 7))
+        self._count = 0
+        self._settled: np.ndarray | None = None
+        self._settled_ns = 0
+        self._q: np.ndarray | None = None
+        self._named_at = -1  # the number of the message the last echo named (-1: none)
+        self.lag_ns: int | None = None  # from a state to the FRI cycle that applies its answer, as the echoes say
+        self.echoes_named = 0  # FRI 2 states whose commanded torque named a message kept (its target settled)
+        self.echoes_missed = 0  # ... named none within the tolerance (the guess settled instead)
 
     def reset(self, c: np.ndarray, t_ns: int) -> None:
-        """Start from a known stack command ``c`` (7,) [rad] (arming)."""
+        """Start from a known stack command ``c`` (7,) [rad] at robot time ``t_ns`` (arming)."""
         self.c = np.array(c, float)
         self._targets.clear()
+        self._count = 0
+        self._named_at = -1
         self._t_ns = t_ns
+        self._settled, self._settled_ns = self.c.copy(), t_ns
 
-    def observe(self, q: np.ndarray, t_ns: int, sample_time_s: float, c_reported: np.ndarray | None) -> None:
-        """A new state: the reported command (FRI 1), or the PID run over the FRI cycles since the last state (FRI 2)
-        with the target those cycles had: the one sent before our newest, since a message reaches the stack at
-        the manager's next cycle and the robot at the FRI cycle after it (taking the newest ran ``c`` ahead by
-        ``p`` times the target's travel: 13 mrad, 2.6 Nm of spring, after 0.13 rad of A2)."""
+    def observe(self, q: np.ndarray, t_ns: int, sample_time_s: float, c_reported: np.ndarray | None,
+                tau_commanded: np.ndarray | None = None, tol_nm: float = 1e-3) -> None:
+        """A new state: the reported command (FRI 1), or the PID run over the FRI cycles since the last state (FRI 2).
+
+        FRI 2: the state's commanded torque ``tau_commanded`` (7,) [Nm] is the robot's overlay in the FRI cycle
+        before it; the message sent with that overlay (within ``tol_nm``, the closest, the newest of equals) had
+        its target in that cycle, and the robot time from the state it answered to that cycle is the lag
+        (:attr:`lag_ns`). The cycles up to that one are settled, skipped states' joint positions interpolated and
+        their targets those the lag gives (never older than the last named, never newer than this one); this
+        state's own cycle runs the target the lag gives, settled at the next state, so a wrong guess never
+        accumulates. Before any echo names one of ours the lag is two FRI cycles: a message reaches the stack at
+        the manager's next cycle and the robot at the FRI cycle after it (taking the newest instead ran ``c`` ahead
+        by ``p`` times the target's travel: 13 mrad, 2.6 Nm of spring, after 0.13 rad of A2). Without an echo that
+        names one of ours (none given, a robot that does not echo, a message older than the ring) that guess
+        settles every cycle."""
+        q = np.asarray(q, float)
         if c_reported is not None:
             self.c = np.array(c_reported, float)
         elif self.c is None:
-            self.c = np.array(q, float)
+            self.c = q.copy()
         elif len(self._targets) == 2 and self._t_ns is not None:
-            cycles = max(round((t_ns - self._t_ns) * 1e-9 / sample_time_s), 0)
+            self._mirror(q, t_ns, round(sample_time_s * 1e9), tau_commanded, tol_nm)
+        self._t_ns = t_ns
+        self._q = q.copy()
+
+    def _mirror(self, q: np.ndarray, t_ns: int, period_ns: int, tau_commanded: np.ndarray | None,
+                tol_nm: float) -> None:
+        named = self._named(tau_commanded, tol_nm) if self._settled is not None else None
+        if named is None:  # the guess for every cycle since the last state
+            if tau_commanded is not None:
+                self.echoes_missed += 1
+            cycles = max(round((t_ns - self._t_ns) / period_ns), 0)
             for _ in range(min(cycles, 50)):
                 self.c += self.p * (self._targets[0] - q)
-        self._t_ns = t_ns
+            self._settled, self._settled_ns, self._named_at = self.c.copy(), t_ns, -1
+            return
+        self.echoes_named += 1
+        last = t_ns - period_ns  # the cycle the echo names
+        self.lag_ns = last - self._sent_ns[named % self.RING]
+        lo = max(self._named_at, self._count - self.RING, 0)
+        span = max(round((t_ns - self._t_ns) / period_ns), 1)  # cycles from the last state to this one
+        q_prev = self._q if self._q is not None else q
+        t_cycle = self._settled_ns + period_ns
+        for _ in range(min(round((last - self._settled_ns) / period_ns), 50)):
+            i = round((t_cycle - self._t_ns) / period_ns)  # from the last state's cycle
+            target = self._sent_target[named % self.RING] if t_cycle >= last else self._lagged(t_cycle, lo, named)
+            self._settled += self.p * (target - (q_prev + (q - q_prev) * (min(max(i, 0), span) / span)))
+            t_cycle += period_ns
+        self._settled_ns, self._named_at = last, named
+        self.c = self._settled + self.p * (self._lagged(t_ns, named, self._count - 1) - q)
+
+    def _lagged(self, t_cycle_ns: int, lo: int, hi: int) -> np.ndarray:
+        """The target the robot ran on in the FRI cycle of robot time ``t_cycle_ns``, as the lag says: the newest of
+        the messages number ``lo..hi`` that answered a state at least :attr:`lag_ns` before (message ``lo`` if
+        none)."""
+        lag = self.lag_ns if self.lag_ns is not None else 0
+        for i in range(hi, lo, -1):
+            if self._sent_ns[i % self.RING] <= t_cycle_ns - lag:
+                return self._sent_target[i % self.RING]
+        return self._sent_target[lo % self.RING]
+
+    def _named(self, tau_commanded: np.ndarray | None, tol_nm: float) -> int | None:
+        """The number of the message kept whose overlay is closest to ``tau_commanded`` (the newest of equals),
+        within ``tol_nm``; None otherwise."""
+        if tau_commanded is None or self._count == 0:
+            return None
+        numbers = np.arange(self._count - 1, max(self._count - self.RING, 0) - 1, -1)  # newest first
+        d = np.max(np.abs(self._sent_overlay[numbers % self.RING] - tau_commanded), axis=1)
+        best = int(np.argmin(d))
+        return int(numbers[best]) if d[best] <= tol_nm else None
 
     def command(self, q: np.ndarray, tau_nm: np.ndarray, dq: np.ndarray | None = None,
                 sample_time_s: float = 0.0, cycles: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -142,12 +228,23 @@ class JointSpring:
             room = self.speed * sample_time_s * n
             step = np.clip(step, drift - room, drift + room)
         target = q + step / (self.p * n) if self.p > 0 else np.array(q, float)
+        overlay = tau_nm - self.K * (c + step * (n + 1) / (2 * n) - q)
         self._targets.append(target)
-        return target, tau_nm - self.K * (c + step * (n + 1) / (2 * n) - q)
+        self._sent_one(target, overlay)
+        return target, overlay
 
     def hold(self, target: np.ndarray) -> None:
         """A hold (``target``, zero overlay) went out: the mirror follows it."""
         self._targets.append(np.array(target, float))
+        self._sent_one(self._targets[-1], np.zeros_like(self._targets[-1]))
+
+    def _sent_one(self, target: np.ndarray, overlay: np.ndarray) -> None:
+        """A message went out answering the newest state (its robot time the message's)."""
+        row = self._count % self.RING
+        self._sent_ns[row] = self._t_ns if self._t_ns is not None else 0
+        self._sent_target[row] = target
+        self._sent_overlay[row] = overlay
+        self._count += 1
 
 
 class AppliedWatch:
