@@ -40,13 +40,14 @@ def free_port() -> int:
 class Proc:
     """A service subprocess with its output in a temporary file; ``stop()`` is SIGINT, then kill after 20 s."""
 
-    def __init__(self, name: str, cmd: list[str], log_dir: Path, env: dict[str, str] | None = None) -> None:
+    def __init__(self, name: str, cmd: list[str], log_dir: Path, env: dict[str, str] | None = None,
+                 cwd: Path = REPO) -> None:
         self.name = name
         self.log_path = log_dir / f"{name}.log"
         self._log = open(self.log_path, "w+")  # noqa: SIM115 (open for the process's life)
         # a bench's services run plain TCP on loopback on purpose unless given identities (interfaces/service_security)
         env = dict(os.environ, PYTHONUNBUFFERED="1", **{"LAMPS_ZENOH_INSECURE": "true", **(env or {})})
-        self.proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT, text=True)
+        self.proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=self._log, stderr=subprocess.STDOUT, text=True)
 
     def output(self) -> str:
         if not self._log.closed:
