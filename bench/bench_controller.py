@@ -57,18 +57,26 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from lampskit.learn.learn import bundled_skill  # noqa: E402
-from controller.control.impedance import (Kinematics, Reference, TaskShaping, impedance_torque,  # noqa: E402
-                                          new_terms, task_modes, task_stiffness)
+from service_procs import BenchError, Proc, free_port, sim_and_controller  # noqa: E402
+
+from controller.control.impedance import (  # noqa: E402
+    Kinematics,
+    Reference,
+    TaskShaping,
+    impedance_torque,
+    new_terms,
+    task_modes,
+    task_stiffness,
+)
 from controller.core import ControllerCore  # noqa: E402
 from controller.executor_types import BoardPose, StainState  # noqa: E402
 from controller.params import ControllerParams  # noqa: E402
 from interfaces.config import ZenohSettings  # noqa: E402
 from interfaces.messages import ControllerStatus, ServiceStatus, SimTruth  # noqa: E402
 from interfaces.session import ServiceNode  # noqa: E402
+from lampskit.learn.learn import bundled_skill  # noqa: E402
 from sim.core import SimCore  # noqa: E402
 from sim.params import SimParams  # noqa: E402
-from service_procs import BenchError, Proc, free_port, sim_and_controller  # noqa: E402
 
 MAX_TICKS = 20_000
 #: Every this many ticks the in-process run keeps the state for the law-alone comparison.

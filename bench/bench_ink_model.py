@@ -51,8 +51,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from perception.ink_areas import compare, ink_areas  # noqa: E402
-from perception.photo_score import OUTLINE_TOLERANCE_M, truth_masks  # noqa: E402
 from perception.params import PerceptionParams  # noqa: E402
+from perception.photo_score import OUTLINE_TOLERANCE_M, truth_masks  # noqa: E402
 from perception.rectify import BoardGrid  # noqa: E402
 
 PHOTOS = REPO / "tests" / "fixtures" / "whiteboards"
@@ -119,8 +119,17 @@ def sim_frames(seeds: int) -> tuple[list, list, dict]:
     import pybullet as pb
 
     from perception.frames import camera_matrix
-    from sim.camera import (board_cell_index, board_texture, camera_pose, composite_dirt, intrinsics_of,
-                            light_towards, marker_layer, projection_matrix, view_matrix)
+    from sim.camera import (
+        board_cell_index,
+        board_texture,
+        camera_pose,
+        composite_dirt,
+        intrinsics_of,
+        light_towards,
+        marker_layer,
+        projection_matrix,
+        view_matrix,
+    )
     from sim.core import SimCore
     from sim.params import SimParams
     from sim.world import build_world

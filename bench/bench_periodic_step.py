@@ -32,8 +32,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from lampskit.core.periodic import forcing, periodic_state  # noqa: E402
-from lampskit.learn.periodic_fit import learn_periodic  # noqa: E402
 from lampskit.core.periodic_runner import PeriodicRunner  # noqa: E402
+from lampskit.learn.periodic_fit import learn_periodic  # noqa: E402
 
 DT_S = 1e-3
 

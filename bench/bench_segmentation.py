@@ -147,8 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = parser.parse_args(argv)
     rows = run(args.quick)
-    import sklearn
     import scipy
+    import sklearn
 
     versions = f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, sklearn {sklearn.__version__}"
     print(f"segmentation cost: {N_STAINS}-stain synthetic demo (the 100k row: human, with lift-offs and a revisit; seed {SEED}), OPTICS min_samples = {MIN_SAMPLES}; {versions}")

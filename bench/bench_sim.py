@@ -94,8 +94,17 @@ def bench_render(frames: int) -> list[dict]:
     import pybullet as pb
 
     from sim.analytic_camera import AnalyticCamera
-    from sim.camera import (DirtCompositor, board_cell_index, board_texture, camera_pose, intrinsics_of,
-                            light_towards, marker_layer, projection_matrix, view_matrix)
+    from sim.camera import (
+        DirtCompositor,
+        board_cell_index,
+        board_texture,
+        camera_pose,
+        intrinsics_of,
+        light_towards,
+        marker_layer,
+        projection_matrix,
+        view_matrix,
+    )
     from sim.world import build_world
 
     rows = []

@@ -27,11 +27,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from lampskit.learn.baselines import limits_from_states  # noqa: E402
 from lampskit.core.transitional import TransitionStatus
 from lampskit.core.transitional_plan import similarity_transform
-from lampskit.learn.transitional_fit import learn_transitional  # noqa: E402
 from lampskit.core.transitional_runner import TransitionalRunner  # noqa: E402
+from lampskit.learn.baselines import limits_from_states  # noqa: E402
+from lampskit.learn.transitional_fit import learn_transitional  # noqa: E402
 
 DT_S = 0.001
 

@@ -15,10 +15,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from lampskit.core.skill import save_skill
-from lampskit.learn.learn import bundled_skill
 from interfaces.config import ZenohSettings
 from interfaces.session import ServiceNode
+from lampskit.core.skill import save_skill
+from lampskit.learn.learn import bundled_skill
 
 REPO = Path(__file__).resolve().parent.parent
 #: The controller's start-up refusal of a rate its tick timing check says it cannot hold; retried this often.

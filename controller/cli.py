@@ -18,12 +18,12 @@ import time
 
 import numpy as np
 
-from lampskit.errors import LampsError, SkillFileError
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
 from interfaces.stop_signals import on_stop_signals
+from lampskit.errors import LampsError, SkillFileError
 
 SERVICE = "controller"
 #: A real-time rate is refused when the control law's median tick takes more than this share of the period.

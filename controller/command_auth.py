@@ -22,8 +22,15 @@ from collections import Counter
 
 import msgspec
 
-from interfaces.arm_auth import (AuthAccount, AuthError, CommandMac, LocalIdentity, command_key, load_identity,
-                                 peer_public_key)
+from interfaces.arm_auth import (
+    AuthAccount,
+    AuthError,
+    CommandMac,
+    LocalIdentity,
+    command_key,
+    load_identity,
+    peer_public_key,
+)
 from interfaces.messages import Estop, Introduction, TorqueCommand
 from interfaces.service_security import IN_PROCESS
 

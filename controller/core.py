@@ -27,24 +27,32 @@ from __future__ import annotations
 
 import numpy as np
 
-from lampskit.core.skill import Skill
 from interfaces.messages import Phase
 from interfaces.robot_model import RobotModel
+from lampskit.core.skill import Skill
 
-from .control.force import NormalForceRegulator
-from .control.impedance import (Kinematics, Reference, TaskModes, TaskShaping, impedance_torque, new_terms,
-                                task_modes, task_stiffness)
+from .arm_model import ArmModel
 from .control.demand_kernels import joint_demand_into, largest_share
+from .control.force import NormalForceRegulator
+from .control.impedance import (
+    Kinematics,
+    Reference,
+    TaskModes,
+    TaskShaping,
+    impedance_torque,
+    new_terms,
+    task_modes,
+    task_stiffness,
+)
 from .control.kernels import reference_into, tool_in_board, trace_row
 from .control.limit_kernels import limit_torque
 from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
-from .arm_model import ArmModel
-from .reach import arm_reach
 from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
 from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
 from .params import ControllerParams
+from .reach import arm_reach
 from .trace import PHASE_CODES, TRACE_COLUMNS, Trace  # noqa: F401 (the trace's names, exported here too)
 
 #: The skill's clock advances at most this many robot periods in one tick (a longer gap between states: our own

@@ -49,13 +49,13 @@ from collections import Counter
 
 import numpy as np
 
-from lampskit.errors import PlanningError
+from interfaces.messages import Phase
+from lampskit.core.chain import ChainResult, MpChain
 from lampskit.core.planner import plan
 from lampskit.core.planner_types import Plan, PlannerParams
 from lampskit.core.skill import Skill
-from interfaces.messages import Phase
+from lampskit.errors import PlanningError
 
-from lampskit.core.chain import ChainResult, MpChain
 from .board_watch import BoardWatch
 from .executor_stage import _ACTIVE, _HALTED, LIFTED_M, RELEASED_N, Stage
 from .executor_stops import ExecutorStops

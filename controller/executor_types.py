@@ -32,7 +32,7 @@ class BoardPose:
     size_m: np.ndarray
 
     @classmethod
-    def from_transform(cls, T: np.ndarray, size_m) -> "BoardPose":
+    def from_transform(cls, T: np.ndarray, size_m) -> BoardPose:
         T = np.asarray(T, float)
         return cls(T[:3, :3].copy(), T[:3, 3].copy(), np.asarray(size_m, float).reshape(2))
 
@@ -48,7 +48,7 @@ class BoardPose:
         """(3,) world point of board coordinates (x, y, h)."""
         return self.origin_m + self.R @ np.asarray(xyh, float)
 
-    def close_to(self, other: "BoardPose", tol_m: float = 0.005, tol_rad: float = 0.02) -> bool:
+    def close_to(self, other: BoardPose, tol_m: float = 0.005, tol_rad: float = 0.02) -> bool:
         moved = np.linalg.norm(self.origin_m - other.origin_m)
         turned = np.linalg.norm(self.R - other.R)  # ~ angle for small turns
         return bool(moved <= tol_m and turned <= tol_rad)

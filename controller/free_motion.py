@@ -17,8 +17,17 @@ import numpy as np
 from interfaces.transforms import tool_rotation_on_board
 
 from .executor_types import BoardPose, Setpoint, StainState, ToolState, look_point
-from .motion import (OrientationBlend, Quintic, SmoothRamp, bounded_brake_to_rest, brake_above, brake_to_rest,
-                     orientation_duration, rest_to_rest, vertical_move)
+from .motion import (
+    OrientationBlend,
+    Quintic,
+    SmoothRamp,
+    bounded_brake_to_rest,
+    brake_above,
+    brake_to_rest,
+    orientation_duration,
+    rest_to_rest,
+    vertical_move,
+)
 from .params import ExecutorParams, ForceParams
 from .reach import ArmReach
 

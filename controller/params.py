@@ -27,13 +27,11 @@ from typing import Annotated, Any
 
 from controller.control.model_correction import CorrectionParams
 from controller.control.params import ControlConfigError, ImpedanceParams
-from lampskit.errors import PlanningError
-from lampskit.core.planner_types import PlannerParams
-from interfaces.config import check_int
+from interfaces.config import In, check_declared, dataclass_from_table
 from interfaces.config import check_range as _range
-from interfaces.config import dataclass_from_table
-from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
+from lampskit.core.planner_types import PlannerParams
+from lampskit.errors import PlanningError
 
 MODES = ("lockstep", "realtime")
 #: No robot state this long [s, wall] is a lost robot, per mode (``robot_lost_s = 0``).
@@ -327,7 +325,7 @@ class ControllerParams:
         return 1.0 / self.rate_hz
 
     @classmethod
-    def from_table(cls, table: Mapping[str, Any]) -> "ControllerParams":
+    def from_table(cls, table: Mapping[str, Any]) -> ControllerParams:
         """The ``[controller]`` table (with its sub-tables) as parameters."""
         if not isinstance(table, Mapping):
             raise ConfigError(f"[controller] must be a table, got {type(table).__name__}")

@@ -91,7 +91,7 @@ class ToolEstimate:
         self.valid = False
 
     @classmethod
-    def for_model(cls, model) -> "ToolEstimate":
+    def for_model(cls, model) -> ToolEstimate:
         """For a :class:`~interfaces.robot_model.RobotModel` (the pad frame's place on the flange from its model)."""
         m = model.model
         flange = m.frames[m.getFrameId(ERASER_LINK)].placement

@@ -107,7 +107,7 @@ def peer_public_key(certificate_pem: bytes, identity: LocalIdentity, role: str, 
         ca.public_key().verify(cert.signature, cert.tbs_certificate_bytes, ec.ECDSA(cert.signature_hash_algorithm))
     except InvalidSignature:
         raise AuthError("certificate not signed by the cell's CA") from None
-    now = now or dt.datetime.now(dt.timezone.utc)
+    now = now or dt.datetime.now(dt.UTC)
     if not cert.not_valid_before_utc <= now <= cert.not_valid_after_utc:
         raise AuthError(f"certificate not valid now (valid {cert.not_valid_before_utc:%Y-%m-%d %H:%M} to "
                         f"{cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC)")
@@ -182,7 +182,7 @@ def check_release(identity: LocalIdentity, prefix: str, certificate_pem: bytes, 
         key.verify(signature, _release_payload(prefix, wall_ns, reason, source), ec.ECDSA(hashes.SHA256()))
     except InvalidSignature:
         raise AuthError("signature does not match the operator's certificate") from None
-    now_ns = dt.datetime.now(dt.timezone.utc).timestamp() * 1e9 if now_ns is None else now_ns
+    now_ns = dt.datetime.now(dt.UTC).timestamp() * 1e9 if now_ns is None else now_ns
     if abs(now_ns - wall_ns) > RELEASE_MAX_AGE_S * 1e9:
         raise AuthError(f"stamped {abs(now_ns - wall_ns) / 1e9:.0f} s from now (a replay, or clocks apart)")
     if wall_ns <= last_wall_ns:

@@ -102,7 +102,7 @@ def _san(hosts: tuple[str, ...]):
 def _validity(days: float):
     """(not valid before, not valid after) of a certificate made now and valid ``days`` (fractions: 1/24 is an
     hour)."""
-    now = dt.datetime.now(dt.timezone.utc)
+    now = dt.datetime.now(dt.UTC)
     return now - dt.timedelta(minutes=BACKDATE_MIN), now + dt.timedelta(days=days)
 
 

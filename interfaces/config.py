@@ -189,7 +189,7 @@ class ZenohSettings:
         return Keys(self.key_prefix) if self.key_prefix else Keys.for_robot(self.robot_id)
 
     @classmethod
-    def from_table(cls, table: Mapping[str, Any]) -> "ZenohSettings":
+    def from_table(cls, table: Mapping[str, Any]) -> ZenohSettings:
         known = set(cls.__dataclass_fields__)
         unknown = sorted(set(table) - known)
         if unknown:

@@ -58,7 +58,17 @@ from pathlib import Path
 
 from lampskit.atomic import write_atomic, write_text_atomic
 
-from .access import DEFAULT_ROS_NAMESPACES, IDENTITIES, RELAY, ROLES, SITE_VIEWER, cell_acl, check_cells, identity_name, role_and_cell
+from .access import (
+    DEFAULT_ROS_NAMESPACES,
+    IDENTITIES,
+    RELAY,
+    ROLES,
+    SITE_VIEWER,
+    cell_acl,
+    check_cells,
+    identity_name,
+    role_and_cell,
+)
 from .certificates import DEFAULT_DAYS, DEFAULT_HOSTS, MAX_DAYS, issue, new_ca, write_key_and_cert
 from .keys import Keys
 
@@ -173,7 +183,7 @@ def check_not_expired(directory: Path, certificates: list[Path], now=None) -> No
 
     from cryptography import x509
 
-    now = now or dt.datetime.now(dt.timezone.utc)
+    now = now or dt.datetime.now(dt.UTC)
     for path in certificates:
         end = x509.load_pem_x509_certificate(path.read_bytes()).not_valid_after_utc
         if end < now:

@@ -110,7 +110,7 @@ class JointDynamics:
         return not any(self.armature_kg_m2) and not self.has_friction
 
     @classmethod
-    def from_table(cls, table: Mapping[str, Any]) -> "JointDynamics":
+    def from_table(cls, table: Mapping[str, Any]) -> JointDynamics:
         """The ``[joints]`` table (every key optional) as parameters."""
         return dataclass_from_table(cls, "joints", table)
 

@@ -35,7 +35,7 @@ class Keys:
         _check_chunks(self.prefix, "key prefix")
 
     @classmethod
-    def for_robot(cls, robot_id: str = DEFAULT_ROBOT_ID) -> "Keys":
+    def for_robot(cls, robot_id: str = DEFAULT_ROBOT_ID) -> Keys:
         """Keys under the default prefix ``lamps/<robot_id>``."""
         return cls(f"lamps/{_check_chunks(robot_id, 'robot id')}")
 

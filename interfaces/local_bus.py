@@ -21,7 +21,7 @@ from __future__ import annotations
 import itertools
 import threading
 from collections import deque
-from typing import Callable
+from collections.abc import Callable
 
 import zenoh
 
@@ -29,6 +29,7 @@ from .codec import encode
 from .config import ZenohSettings
 from .messages import SCHEMA_VERSION, Message
 from .session import Latest, ServiceNode
+
 
 class _Payload:
     """What a subscriber reads of a sample's payload (``len``, ``to_bytes``), as Zenoh's ``ZBytes``; and
@@ -78,7 +79,7 @@ class _Sample:
 class _Subscriber:
     """A callback subscriber, or (``depth``) a ring of the newest samples read with :meth:`try_recv`."""
 
-    def __init__(self, bus: "LocalBus", expr: str, callback: Callable | None, depth: int) -> None:
+    def __init__(self, bus: LocalBus, expr: str, callback: Callable | None, depth: int) -> None:
         self.bus, self.expr, self.callback = bus, zenoh.KeyExpr(expr), callback
         self._ring: deque[_Sample] | None = None if callback is not None else deque(maxlen=max(depth, 1))
 
@@ -101,7 +102,7 @@ class _Subscriber:
 class _Publisher:
     __slots__ = ("bus", "key")
 
-    def __init__(self, bus: "LocalBus", key: str) -> None:
+    def __init__(self, bus: LocalBus, key: str) -> None:
         self.bus, self.key = bus, key
 
     def put(self, data: bytes) -> None:
@@ -215,7 +216,7 @@ class LocalSession:
     def liveliness(self) -> _Liveliness:
         return _Liveliness(self.bus)
 
-    def with_ring(self, depth: int) -> "LocalSession":
+    def with_ring(self, depth: int) -> LocalSession:
         """A view of the same bus and id whose ring subscribers keep ``depth`` samples (how :class:`Latest` gets
         its depth)."""
         view = LocalSession.__new__(LocalSession)
@@ -233,7 +234,7 @@ class LocalNode(ServiceNode):
         super().__init__(service, settings or ZenohSettings())
         self.bus = bus
 
-    def __enter__(self) -> "LocalNode":
+    def __enter__(self) -> LocalNode:
         from .service_security import IN_PROCESS
 
         self.security = IN_PROCESS

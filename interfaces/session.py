@@ -91,7 +91,8 @@ def zenoh_config(settings: ZenohSettings, max_message_bytes: int | None = None) 
     reassembled, :mod:`interfaces.message_limits`); default the cell's largest message bound, unless the
     ``config_file`` sets one.
     """
-    from .message_limits import MAX_MESSAGE_SIZE_PATH, max_message_bytes as cell_max
+    from .message_limits import MAX_MESSAGE_SIZE_PATH
+    from .message_limits import max_message_bytes as cell_max
 
     cfg = _base_config(settings.config_file)
     if max_message_bytes is not None or cfg.get_json(MAX_MESSAGE_SIZE_PATH) == zenoh.Config().get_json(
@@ -321,7 +322,7 @@ class ServiceNode:
         #: how this node joined, carried by every status it publishes (:mod:`interfaces.service_security`)
         self.security = ""
 
-    def __enter__(self) -> "ServiceNode":
+    def __enter__(self) -> ServiceNode:
         from .service_security import security_summary
 
         zenoh.try_init_log_from_env()  # RUST_LOG (e.g. zenoh=info) shows Zenoh's own log on stderr; unset: quiet

@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 
 from lampskit.atomic import write_text_atomic
-
 from lampskit.errors import LampsError
 
 log = logging.getLogger("lamps")
@@ -232,8 +231,8 @@ def learn_main(argv: list[str]) -> int:
     _recording_options(p)
 
     def body(a: argparse.Namespace) -> int:
-        from lampskit.learn.learn import learn_skill_from_demos
         from lampskit.core.skill import save_skill
+        from lampskit.learn.learn import learn_skill_from_demos
 
         _check_out_parent(a.output)
         demos = _read_demos(a)
@@ -403,11 +402,11 @@ def demo_main(argv: list[str]) -> int:
     p.add_argument("--out", type=Path, default=None, help="output folder (default runs/demo-<time>)")
 
     def body(a: argparse.Namespace) -> int:
+        from lampskit.core.skill import save_skill
+        from lampskit.figures.demo import write_figures, write_generalisation_figure
         from lampskit.learn.demo_io import write_demo_csv, write_labels_csv
         from lampskit.learn.learn import learn_skill
-        from lampskit.figures.demo import write_figures, write_generalisation_figure
         from lampskit.learn.segmentation_scores import frame_accuracy
-        from lampskit.core.skill import save_skill
         from lampskit.learn.synth import synthesize_demo
 
         out = a.out or Path("runs") / time.strftime("demo-%Y%m%d-%H%M%S")

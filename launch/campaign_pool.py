@@ -134,7 +134,7 @@ class WorkerPool:
         for w in workers:
             w.stop()
 
-    def __enter__(self) -> "WorkerPool":
+    def __enter__(self) -> WorkerPool:
         return self
 
     def __exit__(self, *exc) -> None:

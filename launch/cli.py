@@ -242,7 +242,6 @@ class _Cell:
 def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, out: Path) -> _Cell:
     """The compose file read with the run's variables, its active services localised on their ports."""
     from .compose import compose_model, localize, run_locally
-
     from .site import cell_credentials
 
     credentials = cell_credentials(a, out)

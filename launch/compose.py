@@ -29,9 +29,10 @@ import shutil
 import socket
 import subprocess
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import yaml
 
@@ -70,7 +71,7 @@ class ComposeModel:
     profiles: tuple[str, ...]
     reader: str  # "docker compose <version>" or "builtin"
 
-    def active(self) -> list["ComposeService"]:
+    def active(self) -> list[ComposeService]:
         """The services compose starts with :attr:`profiles`, dependencies first."""
         return active(self.services, self.profiles)
 

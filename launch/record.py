@@ -54,6 +54,7 @@ from interfaces.keys import Keys
 
 from .record_budget import SHUT, THIN_FROM, Account, Budget
 from .record_json import message_type_of
+
 # the file itself; re-exported here, where the recording's readers and the tests have always found them
 from .record_sink import CHUNK_BYTES, FLUSH_S, RECORDER_ACCOUNT, McapSink, iter_records, recover_recording
 

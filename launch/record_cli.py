@@ -20,7 +20,6 @@ import threading
 from pathlib import Path
 
 
-
 def record_main(argv: list[str] | None = None) -> int:
     from interfaces.config import add_zenoh_options
 

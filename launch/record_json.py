@@ -13,9 +13,21 @@ import msgspec
 import numpy as np
 
 from interfaces.keys import Keys
+from interfaces.messages import (
+    ArmRequest,
+    CameraFrame,
+    ControllerStatus,
+    ControllerTrace,
+    Estop,
+    Introduction,
+    Message,
+    RobotState,
+    ServiceStatus,
+    SimTruth,
+    Stains,
+    TorqueCommand,
+)
 from launch.schemas import json_schema_of
-from interfaces.messages import (ArmRequest, CameraFrame, ControllerStatus, ControllerTrace, Estop, Introduction,
-                                 Message, RobotState, ServiceStatus, SimTruth, Stains, TorqueCommand)
 
 _COMPRESSED_IMAGE_SCHEMA = {
     "type": "object",

@@ -80,13 +80,28 @@ from interfaces.keys import Keys
 from interfaces.messages import Phase
 from lampskit.atomic import write_text_atomic
 
-from .report_faults import (_cell_faults, _faults_section, _recorder_faults, _recorder_stalls, _robot_events,
-                            _service_faults)
-from .report_maths import (_WIPING, _dirt_removed, _junction_steps, _motion_peaks, cap_watch_force, final_retreat,
-                           job_end, phase_times, skill_start)
+from .report_faults import (
+    _cell_faults,
+    _faults_section,
+    _recorder_faults,
+    _recorder_stalls,
+    _robot_events,
+    _service_faults,
+)
+from .report_maths import (
+    _WIPING,
+    _dirt_removed,
+    _junction_steps,
+    _motion_peaks,
+    cap_watch_force,
+    final_retreat,
+    job_end,
+    phase_times,
+    skill_start,
+)
 from .report_options import plots_from_env
 from .report_plots import write_plots
-from .report_run import _Run, _read_run, _topic, cell_series
+from .report_run import _read_run, _Run, _topic, cell_series
 from .report_sources import recording_section, sources_section
 
 SCHEMA = "lamps-run-report/1"

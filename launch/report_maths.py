@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller.core import PHASE_CODES
 from controller.control.force import NormalForceRegulator
+from controller.core import PHASE_CODES
 from interfaces.messages import Phase
 
 _WIPING = (PHASE_CODES[Phase.WIPE], PHASE_CODES[Phase.TRANSITION])

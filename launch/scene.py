@@ -80,7 +80,7 @@ def cells_of(keys) -> list[Keys]:
     return cells
 
 
-def scenes_of(cells: list[Keys]) -> dict[str, "SceneBuilder"]:
+def scenes_of(cells: list[Keys]) -> dict[str, SceneBuilder]:
     """A :class:`SceneBuilder` per cell by key prefix; with several cells each in its own frame tree."""
     site = len(cells) > 1
     return {k.prefix: SceneBuilder(k, frames=cell_frames(k) if site else "") for k in cells}

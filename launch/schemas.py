@@ -13,7 +13,7 @@ validator of the contract).
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from typing import Any
 
 import msgspec
@@ -68,7 +68,7 @@ def _struct(cls: type) -> dict[str, Any]:
     return out
 
 
-@lru_cache(maxsize=None)
+@cache
 def _cached(cls: type) -> str:
     return msgspec.json.encode(_struct(cls)).decode()
 

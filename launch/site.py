@@ -75,8 +75,7 @@ def cell_credentials(a, out: Path) -> Path:
 def run_cells(a, skill: Path, out: Path, stop_requested) -> int:
     """Run ``a.cells`` cells through one router (see the module docstring); the exit code."""
     from interfaces.access import RELAY, SITE_VIEWER
-    from interfaces.credentials import identity_folder
-    from interfaces.credentials import make_credentials
+    from interfaces.credentials import identity_folder, make_credentials
     from interfaces.keys import DEFAULT_ROBOT_ID
 
     from .procs import Child, wait_port
@@ -161,7 +160,7 @@ def _cell_argv(a, k: int, cell: str, skill: Path, out: Path, endpoint: str) -> t
     return tuple(argv)
 
 
-def _follow(cells: list, view: "SiteView", router, stop_requested) -> None:
+def _follow(cells: list, view: SiteView, router, stop_requested) -> None:
     """Print the site's progress every 2 s until every cell's ``lamps up`` has ended (or Ctrl-C)."""
     t0, next_print = time.monotonic(), 0.0
     while any(c.returncode is None for c in cells):
@@ -204,7 +203,7 @@ class SiteView:
         self._first_dirt: dict = {}
         self._session = None
 
-    def __enter__(self) -> "SiteView":
+    def __enter__(self) -> SiteView:
         import zenoh
 
         from interfaces.access import SITE_VIEWER

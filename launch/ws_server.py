@@ -94,7 +94,7 @@ def _digest(text: str) -> bytes:
 class _Client:
     ws: object
     subs: dict[int, int] = field(default_factory=dict)  # channel id -> the client's subscription id
-    queue: "asyncio.Queue[bytes | str]" = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
+    queue: asyncio.Queue[bytes | str] = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
 
 
 class FoxgloveWsServer:

@@ -45,7 +45,7 @@ class Calibration:
     width: int = 0
     height: int = 0
 
-    def at(self, width: int, height: int) -> "Calibration":
+    def at(self, width: int, height: int) -> Calibration:
         """The calibration for frames of ``width`` x ``height`` (scaled; CalibrationError if the aspect differs)."""
         if not self.width or (self.width, self.height) == (width, height):
             return Calibration(self.K, self.dist, width, height)

@@ -21,10 +21,10 @@ import sys
 import msgspec
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
-from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
 from interfaces.priority import BACKGROUND, set_service_priority, wanted_nice
 from interfaces.stop_signals import on_stop_signals
+from lampskit.errors import LampsError
 
 from .params import PerceptionParams, parse_source
 

@@ -15,8 +15,8 @@ import cv2
 import numpy as np
 
 from interfaces.messages import CameraFrame, CameraIntrinsics
-from lampskit.errors import LampsError
 from interfaces.transforms import transform_from_pose
+from lampskit.errors import LampsError
 
 
 class FrameError(LampsError, ValueError):

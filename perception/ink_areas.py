@@ -27,7 +27,6 @@ from .classify import InkMap
 from .cluster import cluster_pixels, disc
 from .rectify import BoardGrid
 
-
 #: An ink with less than this share of a drawing's stain pixels is taken for the drawing's main ink.
 MINOR_INK_SHARE = 0.15
 

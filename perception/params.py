@@ -31,11 +31,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
-from interfaces.config import check_int
-from interfaces.config import check_range as _range
-from interfaces.config import check_vector, dataclass_from_table
 from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
-from interfaces.config import In, check_declared
+from interfaces.config import In, check_declared, check_vector, dataclass_from_table
 from interfaces.errors import ConfigError
 
 from .smear import SmearParams
@@ -331,7 +328,7 @@ class PerceptionParams:
             raise ConfigError(f"[{s}] arm_mask must be true or false, got {self.arm_mask!r}")
 
     @classmethod
-    def from_table(cls, table: Mapping[str, Any]) -> "PerceptionParams":
+    def from_table(cls, table: Mapping[str, Any]) -> PerceptionParams:
         """The ``[perception]`` table (with its sub-tables) as parameters."""
         if not isinstance(table, Mapping):
             raise ConfigError(f"[perception] must be a table, got {type(table).__name__}")

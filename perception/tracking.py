@@ -40,8 +40,8 @@ import numpy as np
 from interfaces.stain_shape import Shape, shape_of
 
 from .classify import InkMap
-from .ink_areas import drawing_inks
 from .cluster import cluster_pixels, disc
+from .ink_areas import drawing_inks
 from .kappa import KappaLatch
 from .params import KappaParams, StainParams
 from .rectify import BoardGrid

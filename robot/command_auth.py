@@ -20,8 +20,16 @@ import logging
 import time
 from collections import Counter, OrderedDict
 
-from interfaces.arm_auth import (AuthAccount, AuthError, CommandMac, LocalIdentity, command_key, load_identity,
-                                 new_nonce, peer_public_key)
+from interfaces.arm_auth import (
+    AuthAccount,
+    AuthError,
+    CommandMac,
+    LocalIdentity,
+    command_key,
+    load_identity,
+    new_nonce,
+    peer_public_key,
+)
 from interfaces.messages import Estop, Introduction, TorqueCommand
 from interfaces.service_security import IN_PROCESS
 

@@ -15,11 +15,11 @@ import logging
 import sys
 
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
-from lampskit.errors import LampsError
 from interfaces.errors import InterfaceError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
 from interfaces.stop_signals import on_stop_signals
+from lampskit.errors import LampsError
 
 SERVICE = "sim"
 

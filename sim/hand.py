@@ -55,7 +55,7 @@ class HandScript:
         self._k = 0
 
     @classmethod
-    def read(cls, path: str | Path) -> "HandScript":
+    def read(cls, path: str | Path) -> HandScript:
         path = Path(path)
         try:
             with open(path, newline="", encoding="utf-8") as f:

@@ -27,11 +27,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
-from interfaces.config import check_int
+from interfaces.config import In, check_declared, check_int
 from interfaces.config import check_range as _range
 from interfaces.config import check_vector as _vector
 from interfaces.config import dataclass_from_table as _from_table
-from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
 from .plant_params import PlantParams
@@ -288,7 +287,7 @@ class SimParams:
         return 1.0 / self.rate_hz
 
     @classmethod
-    def from_table(cls, table: Mapping[str, Any]) -> "SimParams":
+    def from_table(cls, table: Mapping[str, Any]) -> SimParams:
         """The ``[sim]`` table (with its sub-tables) as parameters."""
         table = dict(table)
         if "joint_damping_nm_s_rad" in table:

@@ -29,9 +29,9 @@ import pickle
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing import shared_memory
-from typing import Callable
 
 import cv2
 import numpy as np
@@ -39,12 +39,21 @@ import numpy as np
 from interfaces.messages import CameraFrame
 from interfaces.priority import BACKGROUND, set_service_priority
 from interfaces.transforms import pose_from_transform
+from lampskit.errors import LampsError
 
 from .board import Board
-from .camera import (DirtCompositor, board_cell_index, board_texture, camera_pose, intrinsics_of, light_towards,
-                     marker_layer, projection_matrix, view_matrix)
+from .camera import (
+    DirtCompositor,
+    board_cell_index,
+    board_texture,
+    camera_pose,
+    intrinsics_of,
+    light_towards,
+    marker_layer,
+    projection_matrix,
+    view_matrix,
+)
 from .params import SimParams
-from lampskit.errors import LampsError
 
 log = logging.getLogger(__name__)
 
@@ -61,11 +70,11 @@ class _Setup:
 
 
 def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
+    import signal
+
     import pybullet as pb
 
     from .world import build_world
-
-    import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the sim, which then stops us in order
     try:  # the renderer is background work: the 1 kHz loops go first (interfaces.priority)

@@ -171,7 +171,7 @@ class Cell:
         return path
 
     # -- life ------------------------------------------------------------------------------------------
-    def __enter__(self) -> "Cell":
+    def __enter__(self) -> Cell:
         try:
             if self.router_endpoint:
                 self._start_router()

@@ -16,10 +16,10 @@ import pytest
 import zenoh
 
 from interfaces.access import IDENTITIES, RELAY, ROLE_SERVICES, ROLES, cell_acl, may_put, writers
-from interfaces.certificates import issue, new_ca, write_key_and_cert
+from interfaces.certificates import issue, write_key_and_cert
 from interfaces.config import ZenohSettings
-from interfaces.credentials import (BRIDGE_CONFIG, CA_FOLDER, identity_files, identity_folder,
-                                    main as credentials_main, make_credentials)
+from interfaces.credentials import BRIDGE_CONFIG, CA_FOLDER, identity_files, identity_folder, make_credentials
+from interfaces.credentials import main as credentials_main
 from interfaces.errors import ConfigError
 from interfaces.keys import Keys
 from interfaces.session import ServiceNode, zenoh_config
@@ -219,8 +219,8 @@ def test_a_peer_that_is_no_role_may_do_nothing(creds, tmp_path):
     rid = f"acl{free_port()}"
     keys = Keys.for_robot(rid)
     # a certificate signed by the cell's own CA (whoever holds ca/ca.key) for a name that is not a role
-    from cryptography.hazmat.primitives import serialization
     from cryptography import x509
+    from cryptography.hazmat.primitives import serialization
 
     ca_key = serialization.load_pem_private_key((creds / CA_FOLDER / "ca.key").read_bytes(), password=None)
     ca_cert = x509.load_pem_x509_certificate((creds / CA_FOLDER / "ca.pem").read_bytes())

@@ -14,9 +14,9 @@ import pytest
 from interfaces.messages import StainObservation
 from interfaces.stain_shape import shape_of
 from lampskit.core.chain import ChainResult, ChainStep, MpChain
+from lampskit.core.kinematic_bounds import cycle_peaks
 from lampskit.core.periodic import check_stroke, cycle_shape, periodic_state, stroke_matrix
 from lampskit.core.periodic_runner import PeriodicRunner, PeriodicStatus
-from lampskit.core.kinematic_bounds import cycle_peaks
 from lampskit.core.planner import MAX_ADAPT_STEP, adapted_wipe, plan, wipe_shape
 from lampskit.core.planner_types import PlannerParams, Stain
 from lampskit.core.skill import PeriodicEntry, Skill

@@ -15,10 +15,29 @@ from perception.board import detect_markers, make_detector
 from perception.frames import Frame, camera_matrix
 from perception.params import PerceptionParams
 from perception.pipeline import Perception
-from sim.analytic_camera import (AMBIENT, LIGHT_DISTANCE_M, SHADOW_KEEP, AnalyticCamera, box_mesh, cylinder_mesh,
-                                 face_frames, shadow_on_plane)
-from sim.camera import (BOARD_RGB, DirtCompositor, board_cell_index, board_texture, camera_pose, composite_dirt,
-                        intrinsics_of, light_towards, marker_layer, projection_matrix, view_matrix)
+from sim.analytic_camera import (
+    AMBIENT,
+    LIGHT_DISTANCE_M,
+    SHADOW_KEEP,
+    AnalyticCamera,
+    box_mesh,
+    cylinder_mesh,
+    face_frames,
+    shadow_on_plane,
+)
+from sim.camera import (
+    BOARD_RGB,
+    DirtCompositor,
+    board_cell_index,
+    board_texture,
+    camera_pose,
+    composite_dirt,
+    intrinsics_of,
+    light_towards,
+    marker_layer,
+    projection_matrix,
+    view_matrix,
+)
 from sim.core import SimCore
 from sim.params import SimParams
 from sim.world import build_world

@@ -8,8 +8,17 @@ import time
 
 import pytest
 
-from interfaces.arm_auth import (AuthError, CommandMac, check_release, command_key, load_identity, new_nonce,
-                                 peer_public_key, release_estop, sign_release)
+from interfaces.arm_auth import (
+    AuthError,
+    CommandMac,
+    check_release,
+    command_key,
+    load_identity,
+    new_nonce,
+    peer_public_key,
+    release_estop,
+    sign_release,
+)
 from interfaces.config import ZenohSettings
 from interfaces.credentials import identity_files, identity_folder, make_credentials
 
@@ -71,7 +80,7 @@ def test_a_certificate_proves_only_its_own_role_of_its_own_cell(cells):
         peer_public_key(b"garbage", robot, "controller")
     with pytest.raises(AuthError, match="not valid now"):
         peer_public_key(_pem(identity_folder(cells / "a", "controller")), robot, "controller",
-                        now=dt.datetime.now(dt.timezone.utc) + dt.timedelta(days=4000))
+                        now=dt.datetime.now(dt.UTC) + dt.timedelta(days=4000))
     # a site: cell iiwa-1's robot side takes iiwa-1's controller, not iiwa-2's
     site_robot = _identity(identity_folder(cells / "site", "robot", "iiwa-1"))
     peer_public_key(_pem(identity_folder(cells / "site", "controller", "iiwa-1")), site_robot, "controller")

@@ -5,6 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lampskit.core.transitional import TrajectorySamples
+from lampskit.core.transitional_plan import rollout, similarity_transform
+from lampskit.errors import PlanningError
 from lampskit.learn.baselines import (
     KinematicLimits,
     learn_target_crossing_dmp,
@@ -12,9 +15,6 @@ from lampskit.learn.baselines import (
     rollout_target_crossing_dmp,
     ruckig_transition,
 )
-from lampskit.errors import PlanningError
-from lampskit.core.transitional import TrajectorySamples
-from lampskit.core.transitional_plan import rollout, similarity_transform
 from lampskit.learn.transitional_fit import learn_transitional
 
 from .test_transitional import human_demo, random_case

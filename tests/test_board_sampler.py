@@ -13,8 +13,14 @@ from interfaces.robot_model import RobotModel
 from interfaces.transforms import matrix_from_quat_wxyz
 from launch.campaign_cells import cells_of
 from launch.cli import UpError, board_env
-from sim.board_sampler import (MAX_STAINS, board_refusal, random_board_table, random_seed_of, rotation_from_angles,
-                               sample_board)
+from sim.board_sampler import (
+    MAX_STAINS,
+    board_refusal,
+    random_board_table,
+    random_seed_of,
+    rotation_from_angles,
+    sample_board,
+)
 from sim.core import SimCore
 from sim.params import SimParams
 

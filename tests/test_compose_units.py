@@ -20,7 +20,6 @@ from launch.run_end import RunEnd
 
 from .conftest import REPO
 
-
 # -------------------------------------------------------------------------------------------------- health
 
 def test_probe_targets_parse_endpoints_and_probe_wildcards_on_loopback():

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-
 import scipy.linalg
 
 from controller.control.impedance import Kinematics, Reference, impedance_torque, pose_error, task_modes

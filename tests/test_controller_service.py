@@ -18,14 +18,22 @@ import numpy as np
 import pytest
 
 from controller.core import TRACE_COLUMNS, ControllerCore
-from lampskit.learn.periodic_fit import learn_periodic
-from lampskit.core.skill import PeriodicEntry
 from controller.params import ControllerParams
 from controller.service import ControllerService
 from interfaces.config import ZenohSettings
-from interfaces.messages import (Capabilities, ControllerStatus, ControllerTrace, Estop, Pose, RobotState,
-                                 ServiceStatus, SimTruth)
+from interfaces.messages import (
+    Capabilities,
+    ControllerStatus,
+    ControllerTrace,
+    Estop,
+    Pose,
+    RobotState,
+    ServiceStatus,
+    SimTruth,
+)
 from interfaces.session import ServiceNode
+from lampskit.core.skill import PeriodicEntry
+from lampskit.learn.periodic_fit import learn_periodic
 
 from .zenoh_helpers import REPO, SimProcess, free_port, latest_status, wait_for, wait_sample, wait_subscribed
 
@@ -46,7 +54,7 @@ class ControllerThread:
         self.sim_port = sim.port
         self.error: BaseException | None = None
 
-    def __enter__(self) -> "ControllerThread":
+    def __enter__(self) -> ControllerThread:
         self.node = ServiceNode("controller", self.settings).__enter__()
         self.service = ControllerService(self.params, self.node, self.core)
         self.thread = threading.Thread(target=self._run, daemon=True)

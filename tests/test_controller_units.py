@@ -9,18 +9,24 @@ import numpy as np
 import pytest
 
 from controller.control.force import NormalForceRegulator
-from controller.control.limits import (SpeedOverride, TorqueShaper, jerk_limited_scale, joint_margin_torque,
-                                       joint_speed_brake_torque, speed_excess_force)
-from lampskit.core.chain import ChainStep
+from controller.control.limits import (
+    SpeedOverride,
+    TorqueShaper,
+    jerk_limited_scale,
+    joint_margin_torque,
+    joint_speed_brake_torque,
+    speed_excess_force,
+)
 from controller.executor import SkillExecutor
 from controller.executor_stage import Stage
 from controller.executor_types import BoardPose, StainState, ToolState, look_point
-from controller.stain_book import StainBook
 from controller.motion import OrientationBlend, Quintic, bounded_brake_to_rest, brake_peaks, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
+from controller.stain_book import StainBook
 from interfaces.errors import ConfigError
-from lampskit.errors import PlanningError
 from interfaces.transforms import tool_rotation_on_board
+from lampskit.core.chain import ChainStep
+from lampskit.errors import PlanningError
 
 
 def test_quintic_meets_position_velocity_acceleration_at_both_ends():
@@ -798,8 +804,8 @@ def test_the_controller_caps_its_task_modes_for_the_robot_state_rate(learned_ski
     and an undeclared rate keep the configured one."""
     import scipy.linalg
 
-    from controller.core import ControllerCore
     from controller.control.impedance import Kinematics
+    from controller.core import ControllerCore
 
     core = ControllerCore(ControllerParams(), learned_skill)
     kin = Kinematics(core.model).update(np.array([0.2, 0.5, -0.3, -1.3, 0.4, 0.8, -0.2]), np.zeros(7))

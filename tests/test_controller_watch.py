@@ -13,8 +13,8 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from controller.control.watch import ContactWatch, DisturbanceWatch
 import controller.core
+from controller.control.watch import ContactWatch, DisturbanceWatch
 from controller.core import ControllerCore
 from controller.executor_types import BoardPose, StainState
 from controller.params import ControllerParams

@@ -28,14 +28,24 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from interfaces.certificates import CA_CERT, DEFAULT_DAYS, cert_paths, main as certificates_main
+from interfaces.certificates import CA_CERT, DEFAULT_DAYS, cert_paths
+from interfaces.certificates import main as certificates_main
 from interfaces.codec import encode
-from interfaces.credentials import (CA_FILE, CA_FOLDER, RUN_DAYS, CredentialsExpired, check_not_expired,
-                                    identity_files, identity_folder, main as credentials_main, make_credentials)
+from interfaces.credentials import (
+    CA_FILE,
+    CA_FOLDER,
+    RUN_DAYS,
+    CredentialsExpired,
+    check_not_expired,
+    identity_files,
+    identity_folder,
+    make_credentials,
+)
+from interfaces.credentials import main as credentials_main
 from interfaces.keys import Keys
 from interfaces.messages import Estop
 
-from .zenoh_helpers import free_port, wait_for
+from .zenoh_helpers import free_port
 
 #: How long a peer that must not get in is given to try [s].
 REFUSED_FOR_S = 3.0
@@ -48,7 +58,7 @@ def _cert(path: Path) -> x509.Certificate:
 
 
 def _lifetime_s(cert: x509.Certificate) -> float:
-    return (cert.not_valid_after_utc - dt.datetime.now(dt.timezone.utc)).total_seconds()
+    return (cert.not_valid_after_utc - dt.datetime.now(dt.UTC)).total_seconds()
 
 
 def _all_certificates(directory: Path) -> list[Path]:
@@ -82,7 +92,7 @@ def test_a_complete_set_that_expired_is_refused_by_if_missing_naming_the_date(tm
     d = tmp_path / "secrets"
     make_credentials(d)
     assert make_credentials(d, if_missing=True)  # still valid: kept
-    later = dt.datetime.now(dt.timezone.utc) + dt.timedelta(days=2)
+    later = dt.datetime.now(dt.UTC) + dt.timedelta(days=2)
     with pytest.raises(CredentialsExpired, match=r"expired on \d{4}-\d\d-\d\d .*delete .* and make new ones"):
         check_not_expired(d, _all_certificates(d), now=later)
 
@@ -111,7 +121,7 @@ def test_the_ca_certifies_end_entities_only_and_each_leaf_is_a_tls_client_and_se
 # ----------------------------------------------------------------------------------- an intermediate CA over TLS
 def _sign(subject: str, key, issuer_name: x509.Name, issuer_key, ca: bool, path_length: int | None = None,
           hosts: tuple[str, ...] = ()) -> x509.Certificate:
-    now = dt.datetime.now(dt.timezone.utc)
+    now = dt.datetime.now(dt.UTC)
     b = (x509.CertificateBuilder().subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, subject)]))
          .issuer_name(issuer_name).public_key(key.public_key()).serial_number(x509.random_serial_number())
          .not_valid_before(now - dt.timedelta(minutes=5)).not_valid_after(now + dt.timedelta(days=1))
@@ -197,7 +207,7 @@ def test_a_verifier_that_reads_the_cas_path_length_refuses_a_leaf_of_an_intermed
     inter = _sign("intermediate", inter_key, ca.subject, ca_key, ca=True)
     leaf = _sign("controller", leaf_key, inter.subject, inter_key, ca=False)
     verifier = (verification.PolicyBuilder().store(verification.Store([ca]))
-                .time(dt.datetime.now(dt.timezone.utc)).build_client_verifier())
+                .time(dt.datetime.now(dt.UTC)).build_client_verifier())
     verifier.verify(_cert(identity_files(identity_folder(cell, "controller"))[1]), [])
     with pytest.raises(verification.VerificationError, match="path length constraint violated"):
         verifier.verify(leaf, [inter])

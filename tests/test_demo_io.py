@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from lampskit.errors import DemoError
 from lampskit.learn import demo_io
 from lampskit.learn.demo import Demonstration
-from lampskit.errors import DemoError
 from lampskit.learn.synth import synthesize_demo
-from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 
 from .conftest import REAL_DEMOS
 

@@ -10,9 +10,8 @@ force, so a controller that exits waits for it.
 
 from __future__ import annotations
 
-import pytest
-
 import numpy as np
+import pytest
 
 from controller.executor import SkillExecutor
 from controller.executor_stage import RELEASED_N

@@ -15,6 +15,7 @@ from interfaces.keys import Keys
 from interfaces.messages import (
     MAX_PAYLOAD_BYTES,
     MESSAGE_TYPES,
+    PHASES,
     SCHEMA_VERSION,
     ArmRequest,
     CameraFrame,
@@ -24,7 +25,6 @@ from interfaces.messages import (
     ControllerTrace,
     Estop,
     Introduction,
-    PHASES,
     LoopTiming,
     Phase,
     Pose,

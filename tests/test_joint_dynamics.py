@@ -7,8 +7,13 @@ import pinocchio as pin
 import pytest
 
 from interfaces.errors import ConfigError
-from interfaces.joint_dynamics import (COULOMB_NM, FR3_REFLECTED_INERTIA_KG_M2, JointDynamics, friction_torque,
-                                       joint_dynamics_from_config)
+from interfaces.joint_dynamics import (
+    COULOMB_NM,
+    FR3_REFLECTED_INERTIA_KG_M2,
+    JointDynamics,
+    friction_torque,
+    joint_dynamics_from_config,
+)
 from interfaces.robot_model import RobotModel
 from sim.core import SimCore
 from sim.drive import drive_torque

@@ -18,15 +18,20 @@ import pinocchio as pin
 import pytest
 
 from controller.control import demand_kernels, kernels, limit_kernels
-from controller.control.impedance import (Kinematics, Reference, TaskShaping, impedance_torque, task_modes,
-                                          task_stiffness)
+from controller.control.impedance import (
+    Kinematics,
+    Reference,
+    TaskShaping,
+    impedance_torque,
+    task_modes,
+    task_stiffness,
+)
 from controller.control.limits import TorqueShaper
 from controller.control.params import ImpedanceParams
 from controller.control.watch import DisturbanceWatch
 from interfaces.robot_model import RobotModel
 
 from .numpy_law import numpy_kinematics, numpy_law, numpy_modes
-
 
 
 @pytest.fixture

@@ -27,11 +27,11 @@ from interfaces.cli import COMMANDS
 from interfaces.errors import ConfigError
 from interfaces.keys import Keys
 from interfaces.messages import Phase
+from lampskit.core.planner_types import PlannerParams
 from launch.compose import active, free_port, load_compose, localize, run_locally
 from launch.compose_interp import substitute
 from launch.record import read_recording, trace_array
 from launch.report import SCHEMA, build_report
-from lampskit.core.planner_types import PlannerParams
 
 from .conftest import REPO
 

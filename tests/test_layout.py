@@ -88,8 +88,7 @@ def test_every_error_the_project_raises_on_purpose_shares_one_root():
     from controller.control.params import ControlConfigError
     from interfaces.errors import ConfigError, InterfaceError, MessageDecodeError
     from interfaces.robot_model import IkError
-    from lampskit.errors import (DemoError, LampsError, LearningError, PlanningError, SegmentationError,
-                                 SkillFileError)
+    from lampskit.errors import DemoError, LampsError, LearningError, PlanningError, SegmentationError, SkillFileError
     from launch.cli import UpError
     from perception.frames import FrameError
 

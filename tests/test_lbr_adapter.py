@@ -111,7 +111,7 @@ class Cell:
         self.t_ns = 1_700_000_000_999_000_000  # the robot's clock: seconds and nanoseconds both non-zero
         self.stack_session = None
 
-    def __enter__(self) -> "Cell":
+    def __enter__(self) -> Cell:
         srv = self.srv.__enter__()
         try:
             self.port: LbrPort = srv.port
@@ -515,7 +515,7 @@ class StackThread:
             next_t += self.period_s
             time.sleep(max(next_t - time.monotonic(), 0.0))  # the robot's clock
 
-    def __enter__(self) -> "StackThread":
+    def __enter__(self) -> StackThread:
         self.thread.start()
         return self
 
@@ -539,7 +539,7 @@ class ControllerThread:
                 self.cell.ctl.publish(self.cell.keys.robot_command,
                                       TorqueCommand(seq=s.seq, stamp_ns=time.monotonic_ns(), tau_nm=self.tau))
 
-    def __enter__(self) -> "ControllerThread":
+    def __enter__(self) -> ControllerThread:
         self.thread.start()
         return self
 

@@ -154,7 +154,7 @@ class Cell:
         self.adapter = self.ctl = self.observer = None
         self._subs = []
 
-    def __enter__(self) -> "Cell":
+    def __enter__(self) -> Cell:
         self.peer.__enter__()
         try:
             listen = free_port()

@@ -28,8 +28,8 @@ from interfaces.robot_model import RobotModel
 from interfaces.session import ServiceNode
 from robot.lbr import msgs
 from robot.lbr.msgs import SessionState
-from sim.lbr_stack.params import LbrPeerParams
 from sim.lbr_stack.commands import TORQUE_COMMAND_BYTES, CommandBox, drop_reason
+from sim.lbr_stack.params import LbrPeerParams
 from sim.lbr_stack.peer import external_torque_nm, sim_params_for_peer, substeps_for_peer
 
 from .conftest import REPO

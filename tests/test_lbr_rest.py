@@ -8,8 +8,14 @@ from interfaces.robot_model import RobotModel
 from robot.lbr.arming import arming_refusal
 from robot.lbr.msgs import LbrState, SessionState
 from robot.lbr.params import LbrParams
-from robot.lbr.rest_checks import (GRAVITY_M_S2, implied_tool_mass_kg, load_note, pad_wrench, preload_refusal,
-                                   spring_preload_nm)
+from robot.lbr.rest_checks import (
+    GRAVITY_M_S2,
+    implied_tool_mass_kg,
+    load_note,
+    pad_wrench,
+    preload_refusal,
+    spring_preload_nm,
+)
 from robot.lbr.watches import ClockWatch
 
 Q = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.9, 0.0])

@@ -17,8 +17,18 @@ from robot.lbr.compensation import filter_alpha
 from robot.lbr.msgs import ClientCommandMode, SessionState
 from robot.lbr.tip import tip_jacobian, tip_pose
 from sim.lbr_stack.params import LbrPeerParams
-from sim.lbr_stack.stack import (ExponentialFilter, FriCommand, JointPid, RobotSession, StackClient, StackError,
-                                 estimated_wrench, impedance_damping, joint_impedance_torque, soft_threshold)
+from sim.lbr_stack.stack import (
+    ExponentialFilter,
+    FriCommand,
+    JointPid,
+    RobotSession,
+    StackClient,
+    StackError,
+    estimated_wrench,
+    impedance_damping,
+    joint_impedance_torque,
+    soft_threshold,
+)
 
 READY, WAIT, ACTIVE = SessionState.MONITORING_READY, SessionState.COMMANDING_WAIT, SessionState.COMMANDING_ACTIVE
 TORQUE = int(ClientCommandMode.TORQUE)

@@ -28,7 +28,7 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from interfaces.config import ZenohSettings
-from interfaces.messages import (CameraFrame, CameraIntrinsics, Capabilities, ControllerStatus, RobotState)
+from interfaces.messages import CameraFrame, CameraIntrinsics, Capabilities, ControllerStatus, RobotState
 from interfaces.session import ServiceNode
 from launch.live import LiveView, live_token
 from launch.ws_server import FoxgloveWsServer, TokenRequired, check_token, is_loopback
@@ -36,7 +36,6 @@ from launch.ws_server import FoxgloveWsServer, TokenRequired, check_token, is_lo
 from .mcap_check import _protobuf_class
 from .test_scene import _camera, _stains
 from .zenoh_helpers import free_port, wait_for, wait_subscribed
-
 
 
 def _state(i: int) -> RobotState:
@@ -90,7 +89,7 @@ class _Client:
         self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
 
 
-def follow_live(port: int, topics: list[str], what: str) -> "_Client":
+def follow_live(port: int, topics: list[str], what: str) -> _Client:
     """A ``foxglove.websocket.v1`` client of the live view on ``port`` once it serves (2 min), subscribed to
     ``topics`` once advertised, after a message on each, every message checked against its channel's schema."""
     def connected():

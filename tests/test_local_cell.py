@@ -20,8 +20,8 @@ import msgspec
 import numpy as np
 import pytest
 
-from interfaces.config import ZenohSettings
 from interfaces.codec import encode
+from interfaces.config import ZenohSettings
 from interfaces.local_bus import LocalBus, LocalNode
 from interfaces.messages import SCHEMA_VERSION, Capabilities, Estop, RobotState, TorqueCommand
 

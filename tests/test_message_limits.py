@@ -15,8 +15,12 @@ import time
 import pytest
 import zenoh
 
-from interfaces.message_limits import (MAX_MESSAGE_SIZE_PATH, MESSAGE_OVERHEAD_BYTES, ROS_IMAGE_MAX_BYTES,
-                                       max_message_bytes)
+from interfaces.message_limits import (
+    MAX_MESSAGE_SIZE_PATH,
+    MESSAGE_OVERHEAD_BYTES,
+    ROS_IMAGE_MAX_BYTES,
+    max_message_bytes,
+)
 from interfaces.messages import MAX_PAYLOAD_BYTES, MESSAGE_TYPES, CameraFrame, RobotState, TorqueCommand
 
 from .zenoh_helpers import REPO, free_port, wait_for

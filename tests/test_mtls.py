@@ -16,7 +16,8 @@ import zenoh
 from cryptography import x509
 from cryptography.hazmat.primitives.asymmetric import ec
 
-from interfaces.certificates import CA_CERT, CA_KEY, add_certificate, cert_paths, main as certificates_main
+from interfaces.certificates import CA_CERT, CA_KEY, add_certificate, cert_paths
+from interfaces.certificates import main as certificates_main
 from interfaces.codec import encode
 from interfaces.config import ZenohSettings
 from interfaces.errors import ConfigError

@@ -12,11 +12,18 @@ import numpy as np
 import pytest
 import yaml
 
-from perception.calibration import (Calibration, CalibrationError, Undistorter, calibrate, parse_pattern,
-                                    read_calibration, write_camera_info)
+from interfaces.errors import ConfigError
+from perception.calibration import (
+    Calibration,
+    CalibrationError,
+    Undistorter,
+    calibrate,
+    parse_pattern,
+    read_calibration,
+    write_camera_info,
+)
 from perception.cli import main as perception_main
 from perception.params import CameraModelParams
-from interfaces.errors import ConfigError
 
 K_TRUE = np.array([[600.0, 0.0, 322.0], [0.0, 600.0, 238.0], [0.0, 0.0, 1.0]])
 DIST_TRUE = np.array([-0.28, 0.09, 0.0, 0.0, 0.0])

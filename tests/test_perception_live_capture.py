@@ -15,9 +15,9 @@ import cv2
 import numpy as np
 import pytest
 
+from interfaces.errors import ConfigError
 from perception.live_capture import LiveCapture, open_device
 from perception.params import PerceptionParams, parse_source
-from interfaces.errors import ConfigError
 
 from .conftest import REPO
 

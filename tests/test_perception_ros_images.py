@@ -18,8 +18,7 @@ from interfaces.credentials import identity_folder, make_credentials
 from interfaces.session import ServiceNode
 from perception.frames import FrameError
 from perception.params import PerceptionParams
-from perception.ros_images import (RosImageSource, decode_camera_info, decode_compressed, decode_image, info_topic,
-                                   store)
+from perception.ros_images import RosImageSource, decode_camera_info, decode_compressed, decode_image, info_topic, store
 
 from .conftest import REPO
 from .zenoh_helpers import free_port, wait_for, wait_subscribed

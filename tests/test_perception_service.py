@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from interfaces.config import ZenohSettings
-from interfaces.robot_model import RobotModel
 from interfaces.messages import CameraFrame, CameraIntrinsics, Pose, ServiceStatus, SimTruth, Stains
+from interfaces.robot_model import RobotModel
 from interfaces.session import ServiceNode
 from perception.evaluate import kappa_timings
 from perception.params import PerceptionParams
@@ -43,7 +43,7 @@ class PerceptionThread:
         self.sent: list[tuple[float, Stains]] = []
         self.error: BaseException | None = None
 
-    def __enter__(self) -> "PerceptionThread":
+    def __enter__(self) -> PerceptionThread:
         self.node = ServiceNode("perception", self.settings).__enter__()
         self.service = PerceptionService(self.params, self.node, ZenohSource(self.node, self.params.camera),
                                          sink=lambda m: self.sent.append((time.monotonic(), m)))

@@ -17,7 +17,6 @@ from perception.frames import FrameError, rgb_from_message
 from perception.kappa import KappaLatch
 from perception.params import InkParams, KappaParams, PerceptionParams, parse_source
 
-
 # -- clustering ------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

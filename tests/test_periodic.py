@@ -10,11 +10,11 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from lampskit.errors import LearningError, PlanningError, SkillFileError
 from lampskit.core.periodic import PeriodicMP, forcing, periodic_state
+from lampskit.core.periodic_runner import PeriodicRunner, PeriodicStatus, rollout, step_matrix
+from lampskit.errors import LearningError, PlanningError, SkillFileError
 from lampskit.learn.periodic_fit import forcing_target, learn_periodic, significant_harmonics
 from lampskit.learn.periodic_phase import assign_phase, estimate_frequency
-from lampskit.core.periodic_runner import PeriodicRunner, PeriodicStatus, rollout, step_matrix
 
 from .conftest import REAL_DEMOS
 

@@ -7,13 +7,13 @@ import itertools
 import numpy as np
 import pytest
 
-from lampskit.errors import PlanningError
-from lampskit.learn.learn import learn_skill
 from lampskit.core.periodic import periodic_state
 from lampskit.core.planner import entry_phase, exit_phase_delay, plan
 from lampskit.core.planner_types import Plan, PlannerParams, Stain
-from lampskit.core.stain_order import order_stains
 from lampskit.core.rollout import junction_step_ratios, rollout
+from lampskit.core.stain_order import order_stains
+from lampskit.errors import PlanningError
+from lampskit.learn.learn import learn_skill
 from lampskit.learn.synth import synthesize_demo
 
 

@@ -23,10 +23,17 @@ from interfaces.config import ZenohSettings
 from interfaces.keys import Keys
 from interfaces.messages import MAX_PAYLOAD_BYTES, CameraFrame, RobotState, ServiceStatus
 from interfaces.session import ServiceNode
-from launch.record import (CHUNK_BYTES, REJECTED_NOTES_PER_KEY, SELF_REPORTS_TOPIC, STATUS_TOPIC, McapSink,
-                           Recorder, budget_from_env, read_recording)
-from launch.record_budget import (FULL, MAX_KEYS, QUEUE_BYTES, SHARES, SHUT, THIN, THIN_FROM, THIN_PERIOD_S,
-                                  Budget)
+from launch.record import (
+    CHUNK_BYTES,
+    REJECTED_NOTES_PER_KEY,
+    SELF_REPORTS_TOPIC,
+    STATUS_TOPIC,
+    McapSink,
+    Recorder,
+    budget_from_env,
+    read_recording,
+)
+from launch.record_budget import FULL, MAX_KEYS, QUEUE_BYTES, SHARES, SHUT, THIN, THIN_FROM, THIN_PERIOD_S, Budget
 from launch.record_json import message_type_of
 
 from .zenoh_helpers import free_port, wait_for, wait_subscribed

@@ -32,8 +32,19 @@ from interfaces.codec import encode
 from interfaces.config import ZenohSettings
 from interfaces.credentials import identity_folder, make_credentials
 from interfaces.message_limits import MAX_MESSAGE_SIZE_PATH, max_message_bytes
-from interfaces.messages import (CameraFrame, CameraIntrinsics, Capabilities, ControllerStatus, ControllerTrace, Pose,
-                                 RobotState, ServiceStatus, SimTruth, Stains, TorqueCommand)
+from interfaces.messages import (
+    CameraFrame,
+    CameraIntrinsics,
+    Capabilities,
+    ControllerStatus,
+    ControllerTrace,
+    Pose,
+    RobotState,
+    ServiceStatus,
+    SimTruth,
+    Stains,
+    TorqueCommand,
+)
 from interfaces.session import ServiceNode
 from launch.record import read_recording
 

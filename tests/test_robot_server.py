@@ -41,7 +41,7 @@ class ServerThread:
         self.error: BaseException | None = None
         self.steps_run: int | None = None
 
-    def __enter__(self) -> "ServerThread":
+    def __enter__(self) -> ServerThread:
         try:
             self.node = ServiceNode(self.service, self.settings).__enter__()
             self.port = self.make_port(self.node)

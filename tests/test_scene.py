@@ -7,8 +7,7 @@ import pinocchio as pin
 import pytest
 
 from interfaces.keys import Keys
-from interfaces.messages import (CameraFrame, CameraIntrinsics, Capabilities, Pose, RobotState, StainObservation,
-                                 Stains)
+from interfaces.messages import CameraFrame, CameraIntrinsics, Capabilities, Pose, RobotState, StainObservation, Stains
 from interfaces.robot_model import RobotModel
 from launch.record import McapSink
 from launch.scene import TF_PERIOD_S, SceneBuilder, ellipse_on_board, project, urdf_visuals

@@ -8,8 +8,18 @@ import jsonschema
 import numpy as np
 import pytest
 
-from interfaces.messages import (ArmRequest, Capabilities, ControllerStatus, ControllerTrace, Estop, RobotState,
-                                 ServiceStatus, SimTruth, Stains, TorqueCommand)
+from interfaces.messages import (
+    ArmRequest,
+    Capabilities,
+    ControllerStatus,
+    ControllerTrace,
+    Estop,
+    RobotState,
+    ServiceStatus,
+    SimTruth,
+    Stains,
+    TorqueCommand,
+)
 from launch.record import McapSink, read_recording
 from launch.record_json import to_builtins
 from launch.schemas import json_schema_of

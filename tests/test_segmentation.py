@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from sklearn.cluster import cluster_optics_dbscan
 
-from lampskit.learn.demo import Demonstration
 from lampskit.errors import SegmentationError
+from lampskit.learn.demo import Demonstration
 from lampskit.learn.reachability import dbscan_labels, otsu_threshold
 from lampskit.learn.segmentation import PROGRESS_TOTAL, Segment, Segmentation, segment
 from lampskit.learn.segmentation_scores import frame_accuracy, segment_counts, true_segment_count

@@ -12,14 +12,13 @@ import pytest
 from matplotlib.path import Path as MplPath
 
 from interfaces.errors import ConfigError
-from interfaces.messages import TorqueCommand
+from interfaces.messages import HOLD, TorqueCommand
 from interfaces.robot_model import RobotModel
 from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from robot.gate import CommandGate
 from sim import cli
 from sim.board import board_from_params, check_board, start_configuration
 from sim.camera import camera_pose, intrinsics_of, look_at, project
-from interfaces.messages import HOLD
-from robot.gate import CommandGate
 from sim.dirt import DirtGrid, StainShape, random_stains, stains_from_specs
 from sim.params import BoardParams, CameraParams, SimParams
 from sim.world import build_world

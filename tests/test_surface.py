@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lampskit.errors import LearningError
 from lampskit.core.surface import fit_surface_frame
+from lampskit.errors import LearningError
 from lampskit.learn.synth import synthesize_demo
 
 

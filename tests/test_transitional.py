@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from lampskit.errors import LearningError, PlanningError, SkillFileError
 from lampskit.core.transitional import TransitionalMP, TransitionStatus
 from lampskit.core.transitional_maths import (
     N_TABLE,
@@ -21,8 +20,9 @@ from lampskit.core.transitional_maths import (
     phase,
 )
 from lampskit.core.transitional_plan import evaluate, plan_transition, rollout, similarity_transform
-from lampskit.learn.transitional_fit import learn_transitional
 from lampskit.core.transitional_runner import TransitionalRunner
+from lampskit.errors import LearningError, PlanningError, SkillFileError
+from lampskit.learn.transitional_fit import learn_transitional
 
 DT = 0.001
 

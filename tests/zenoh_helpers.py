@@ -124,7 +124,7 @@ class SimProcess:
         self.proc: subprocess.Popen | None = None
         self.node: ServiceNode | None = None
 
-    def __enter__(self) -> "SimProcess":
+    def __enter__(self) -> SimProcess:
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "--config", str(self.config)], cwd=REPO,
                                      env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -84,7 +84,7 @@ class Kinematics:
         self._A = np.zeros((6, 6))
         self._L = np.zeros((6, 6))
 
-    def update(self, q: np.ndarray, dq: np.ndarray) -> "Kinematics":
+    def update(self, q: np.ndarray, dq: np.ndarray) -> Kinematics:
         m, d, f = self.model.model, self.model.data, self.model.tcp_id
         # M, nle, g, joint Jacobians, placements, and the joint accelerations at zero joint acceleration
         pin.computeAllTerms(m, d, q, dq)

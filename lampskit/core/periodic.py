@@ -147,7 +147,7 @@ def limit_cycle_coefficients(
 
 
 def periodic_state(
-    mp: "PeriodicMP",
+    mp: PeriodicMP,
     phase_rad: np.ndarray | float,
     anchor_m: np.ndarray | None = None,
     amplitude_m: float | None = None,
@@ -238,7 +238,7 @@ def stroke_matrix(cycle_axis_rad: float, target_axis_rad: float, across: float) 
     return rotation_2d(target_axis_rad) @ np.diag([1.0, across]) @ rotation_2d(cycle_axis_rad).T
 
 
-def cycle_shape(mp: "PeriodicMP", samples: int = 360) -> tuple[float, float]:
+def cycle_shape(mp: PeriodicMP, samples: int = 360) -> tuple[float, float]:
     """(main axis [rad] in (-pi/2, pi/2], aspect in (0, 1]) of ``mp``'s limit cycle (2-D): the direction of
     largest spread of its positions and the ratio of its extents across and along that direction."""
     if mp.n_dims != 2:
@@ -419,7 +419,7 @@ class PeriodicMP:
         return out
 
     @classmethod
-    def from_dict(cls, data: dict) -> "PeriodicMP":
+    def from_dict(cls, data: dict) -> PeriodicMP:
         """Inverse of :meth:`to_dict`; raises SkillFileError naming the bad field."""
         if not isinstance(data, dict):
             raise SkillFileError(f"periodic MP must be a JSON object, got {type(data).__name__}")

@@ -23,9 +23,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from lampskit.core.periodic import TWO_PI, PeriodicMP, check_execution_params, check_stroke, periodic_state_unchecked
 from lampskit.errors import PlanningError
-from lampskit.core.periodic import (TWO_PI, PeriodicMP, check_execution_params, check_stroke,
-                                    periodic_state_unchecked)
 
 #: Default time constant tau of the critically damped parameter filters [s]: a step
 #: in a target is 90 % done after 3.9 tau (0.78 s), with no overshoot.

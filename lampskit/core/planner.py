@@ -43,13 +43,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from lampskit.errors import PlanningError
 from lampskit.core.kinematic_bounds import PERIODIC_MARGIN, bounded_duration, bounded_omega
 from lampskit.core.periodic import cycle_shape, periodic_state, stroke_matrix
 from lampskit.core.planner_types import Plan, PlannerParams, Stain, TransitionSpec, Wipe
 from lampskit.core.skill import Skill
 from lampskit.core.stain_order import order_stains
 from lampskit.core.transitional_plan import similarity_transform
+from lampskit.errors import PlanningError
 
 #: Demonstrated transitions shorter than this [m] carry no usable direction.
 MIN_DEMO_DISPLACEMENT_M = 0.02

@@ -29,11 +29,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lampskit.atomic import write_text_atomic
-
-from lampskit.errors import LampsError, SkillFileError
 from lampskit.core.periodic import PeriodicMP
 from lampskit.core.surface import SurfaceFrame
 from lampskit.core.transitional import TransitionalMP
+from lampskit.errors import LampsError, SkillFileError
 
 FORMAT = "lamps-skill"
 VERSION = 1
@@ -88,7 +87,7 @@ class Skill:
         }
 
     @classmethod
-    def from_dict(cls, d: object) -> "Skill":
+    def from_dict(cls, d: object) -> Skill:
         if not isinstance(d, dict):
             raise SkillFileError(f"a skill file holds a JSON object, got {type(d).__name__}")
         if d.get("format") != FORMAT:

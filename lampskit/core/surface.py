@@ -63,7 +63,7 @@ class SurfaceFrame:
         return {"T_surface_to_world": self.T_surface_to_world.tolist(), "rms_off_plane_m": self.rms_off_plane_m}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "SurfaceFrame":
+    def from_dict(cls, d: dict) -> SurfaceFrame:
         return cls(np.asarray(d["T_surface_to_world"], dtype=float), float(d.get("rms_off_plane_m", 0.0)))
 
 

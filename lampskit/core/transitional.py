@@ -227,7 +227,7 @@ class TransitionalMP:
         }
 
     @classmethod
-    def from_dict(cls, d: object) -> "TransitionalMP":
+    def from_dict(cls, d: object) -> TransitionalMP:
         """Inverse of :meth:`to_dict`; raises :class:`SkillFileError` naming the bad field."""
         if not isinstance(d, dict):
             raise SkillFileError(f"transitional MP: expected an object, got {type(d).__name__}")

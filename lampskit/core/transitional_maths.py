@@ -14,8 +14,6 @@ import math
 
 import numpy as np
 
-
-
 #: Steps of the tabulated fundamental solutions over the normalised duration.
 N_TABLE = 2048
 #: Basis width relative to the spacing of neighbouring centres.

@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
+from lampskit.core.skill import Skill
 from lampskit.figures.canvas import plt, save_figure
 from lampskit.figures.primitives import figure_transition_comparison, figure_transition_phases
 from lampskit.learn.demo import Demonstration
 from lampskit.learn.segmentation import Segmentation, segment
-from lampskit.core.skill import Skill
 
 TRANSITIONAL_COLOUR = "0.6"
 log = logging.getLogger(__name__)

@@ -15,19 +15,19 @@ from pathlib import Path
 
 import numpy as np
 
-from lampskit.learn.baselines import learn_target_crossing_dmp, rollout_target_crossing_dmp, ruckig_transition
-from lampskit.learn.demo import Demonstration
-from lampskit.errors import PlanningError
 from lampskit.core.periodic import periodic_state
 from lampskit.core.periodic_runner import rollout as periodic_rollout
 from lampskit.core.planner import transition_duration
 from lampskit.core.planner_types import PlannerParams
-from lampskit.figures.canvas import plt, save_figure
-from lampskit.learn.segmentation import Segmentation
 from lampskit.core.skill import PeriodicEntry, Skill, TransitionalEntry
 from lampskit.core.transitional import TrajectorySamples
-from lampskit.core.transitional_plan import similarity_transform
 from lampskit.core.transitional_plan import rollout as transitional_rollout
+from lampskit.core.transitional_plan import similarity_transform
+from lampskit.errors import PlanningError
+from lampskit.figures.canvas import plt, save_figure
+from lampskit.learn.baselines import learn_target_crossing_dmp, rollout_target_crossing_dmp, ruckig_transition
+from lampskit.learn.demo import Demonstration
+from lampskit.learn.segmentation import Segmentation
 
 DT_S = 0.001
 #: Periodic motion shown before and after each transition [s].

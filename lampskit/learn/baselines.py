@@ -28,8 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lampskit.learn.derivatives import resample_uniform
-from lampskit.errors import LearningError, PlanningError
 from lampskit.core.transitional import (
     DEFAULT_LAMBDA,
     DEFAULT_N_BASIS,
@@ -45,6 +43,8 @@ from lampskit.core.transitional_maths import (
     forcing_term,
     phase,
 )
+from lampskit.errors import LearningError, PlanningError
+from lampskit.learn.derivatives import resample_uniform
 from lampskit.learn.transitional_fit import smooth_kinematics
 
 #: Pole of the second-order baseline (per duration), as the third-order MP's ``p``.

@@ -97,7 +97,7 @@ class Demonstration:
         """Mean sample rate [Hz]."""
         return (self.n_samples - 1) / self.duration_s
 
-    def slice(self, start: int, end: int) -> "Demonstration":
+    def slice(self, start: int, end: int) -> Demonstration:
         """Samples ``[start, end)`` as a new demonstration (validated again)."""
         q = None if self.orientation_wxyz is None else self.orientation_wxyz[start:end]
         return Demonstration(self.t_s[start:end], self.position_m[start:end], q, f"{self.source}[{start}:{end}]")

@@ -31,9 +31,8 @@ import numpy as np
 
 from lampskit.atomic import write_atomic, write_text_atomic
 from lampskit.core.rotations import quat_wxyz_from_matrix
-
-from lampskit.learn.demo import Demonstration
 from lampskit.errors import DemoError
+from lampskit.learn.demo import Demonstration
 
 #: Longest marker gap [s] that is bridged by interpolation in a QTM export.
 MAX_MARKER_GAP_S = 0.1

@@ -11,12 +11,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from lampskit.learn.demo import Demonstration
-from lampskit.errors import LearningError, SegmentationError
-from lampskit.learn.periodic_fit import learn_periodic
-from lampskit.learn.segmentation import Segmentation, segment
 from lampskit.core.skill import PeriodicEntry, Skill, TransitionalEntry
 from lampskit.core.surface import fit_surface_frame
+from lampskit.errors import LearningError, SegmentationError
+from lampskit.learn.demo import Demonstration
+from lampskit.learn.periodic_fit import learn_periodic
+from lampskit.learn.segmentation import Segmentation, segment
 from lampskit.learn.transitional_fit import learn_transitional
 
 log = logging.getLogger(__name__)

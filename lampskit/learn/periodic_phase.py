@@ -18,7 +18,6 @@ from lampskit.core.periodic import TWO_PI
 from lampskit.errors import LearningError
 from lampskit.learn.derivatives import resample_uniform
 
-
 #: Minimum RMS oscillation after detrending [m]; below this there is nothing to learn.
 MIN_OSCILLATION_M = 1e-4
 #: A periodic segment must hold at least this many cycles.

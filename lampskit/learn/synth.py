@@ -47,11 +47,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from lampskit.core.rotations import quat_wxyz_from_matrix
-
+from lampskit.errors import DemoError
 from lampskit.learn.demo import Demonstration
 from lampskit.learn.synth_human import _HumanPlan, _lift_off, _pause_on_board
 from lampskit.learn.synth_pieces import StrokeSpec, _Rest, _Stroke, _Transition
-from lampskit.errors import DemoError
 
 #: Board area in which stains are placed, board frame [m] (x range, y range).
 BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))

@@ -36,7 +36,7 @@ class _HumanPlan:
     rng: np.random.Generator
 
     @classmethod
-    def draw(cls, order: list[int], rng: np.random.Generator) -> "_HumanPlan":
+    def draw(cls, order: list[int], rng: np.random.Generator) -> _HumanPlan:
         r = int(rng.integers(0, len(order)))
         order = order[: r + 1] + [order[r]] + order[r + 1:]  # the spot again, after a lift-off
         lift = [bool(rng.random() < LIFT_SHARE) or i == r for i in range(len(order) - 1)]
@@ -47,7 +47,7 @@ class _HumanPlan:
                    float(rng.uniform(0.35, 0.5)), rng)
 
 
-def _lift_off(run: "_Stroke", nxt: "_Stroke", pause_s: float, rng: np.random.Generator) -> list:
+def _lift_off(run: _Stroke, nxt: _Stroke, pause_s: float, rng: np.random.Generator) -> list:
     """Retract off the board from ``run``, hover (and pause ``pause_s``), approach ``nxt``: rest-to-rest at the top."""
     height = rng.uniform(*LIFT_HEIGHT_M)
     a, b = run.end_centre3, nxt.centre3
@@ -66,7 +66,7 @@ def _lift_off(run: "_Stroke", nxt: "_Stroke", pause_s: float, rng: np.random.Gen
     return pieces
 
 
-def _pause_on_board(run: "_Stroke", nxt: "_Stroke", pause_s: float, rng: np.random.Generator) -> list:
+def _pause_on_board(run: _Stroke, nxt: _Stroke, pause_s: float, rng: np.random.Generator) -> list:
     """Out of ``run`` to rest on the board beside it for ``pause_s``, then on into ``nxt``."""
     a, b = run.end_centre3, nxt.centre3
     side = rng.uniform(-1, 1, 2)

@@ -176,8 +176,8 @@ class _Transition:
     end_m: np.ndarray  # (3,) centre (or rest point) at t = T
     duration_s: float
     bulge_m: np.ndarray  # (3,) peak sideways / lift offset
-    prev: "_Stroke | None" = None
-    next: "_Stroke | None" = None
+    prev: _Stroke | None = None
+    next: _Stroke | None = None
     fade: float = 0.4
     stain: int = -1
     profile: str = "smooth"  # "retract": off the board as a person does; "approach": back onto it; "hop": see below

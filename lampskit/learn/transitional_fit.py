@@ -2,13 +2,9 @@
 
 from __future__ import annotations
 
-
 import numpy as np
-
 from scipy.interpolate import make_lsq_spline
 
-from lampskit.learn.derivatives import resample_uniform, smooth_derivatives
-from lampskit.errors import LampsError, LearningError
 from lampskit.core.transitional import (
     DEFAULT_LAMBDA,
     DEFAULT_N_BASIS,
@@ -29,6 +25,8 @@ from lampskit.core.transitional_maths import (
     phase,
 )
 from lampskit.core.transitional_plan import evaluate, plan_transition
+from lampskit.errors import LampsError, LearningError
+from lampskit.learn.derivatives import resample_uniform, smooth_derivatives
 
 
 def learn_transitional(

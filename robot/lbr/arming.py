@@ -20,8 +20,16 @@ from __future__ import annotations
 import numpy as np
 
 from .compensation import filter_alpha
-from .msgs import (ClientCommandMode, ConnectionQuality, ControlMode, DriveState, LbrState, SafetyState, SessionState,
-                   enum_name)
+from .msgs import (
+    ClientCommandMode,
+    ConnectionQuality,
+    ControlMode,
+    DriveState,
+    LbrState,
+    SafetyState,
+    SessionState,
+    enum_name,
+)
 from .params import LbrParams
 from .rest_checks import preload_refusal
 from .watches import ClockWatch

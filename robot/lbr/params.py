@@ -44,12 +44,11 @@
 
 from __future__ import annotations
 
-from typing import Annotated
 from dataclasses import dataclass, field
+from typing import Annotated
 
+from interfaces.config import In, check_declared, dataclass_from_table
 from interfaces.config import check_range as _range
-from interfaces.config import dataclass_from_table
-from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
 from .msgs import FRI_MAJORS, N_JOINTS, LbrTopics, stack_joint_names
@@ -143,7 +142,7 @@ class LbrParams:
         object.__setattr__(self, "joint_stiffness_nm_rad", tuple(float(v) for v in k))
 
     @classmethod
-    def from_table(cls, table) -> "LbrParams":
+    def from_table(cls, table) -> LbrParams:
         return dataclass_from_table(cls, "lbr", table)
 
     @property

@@ -25,8 +25,20 @@ from interfaces.robot_model import RobotModel
 
 from .arming import REST_SPEED_RAD_S
 from .compensation import filter_alpha
-from .msgs import (ClientCommandMode, ConnectionQuality, ControlMode, DriveState, LbrState, LbrWireError,
-                   OperationMode, SafetyState, SessionState, decode_joint_names, decode_state, enum_name)
+from .msgs import (
+    ClientCommandMode,
+    ConnectionQuality,
+    ControlMode,
+    DriveState,
+    LbrState,
+    LbrWireError,
+    OperationMode,
+    SafetyState,
+    SessionState,
+    decode_joint_names,
+    decode_state,
+    enum_name,
+)
 from .params import LbrParams
 from .rest_checks import load_note, pad_wrench, preload_refusal, spring_preload_nm
 from .watchdog import WATCHDOG_SERVICE

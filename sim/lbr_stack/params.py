@@ -54,11 +54,17 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from interfaces.config import check_range, dataclass_from_table
-from interfaces.config import In, check_declared
+from interfaces.config import In, check_declared, check_range, dataclass_from_table
 from interfaces.errors import ConfigError
-from robot.lbr.msgs import (FRI_MAJORS, N_JOINTS, ClientCommandMode, ControlMode, LbrTopics, OperationMode,
-                            stack_joint_names)
+from robot.lbr.msgs import (
+    FRI_MAJORS,
+    N_JOINTS,
+    ClientCommandMode,
+    ControlMode,
+    LbrTopics,
+    OperationMode,
+    stack_joint_names,
+)
 
 MODES = ("lockstep", "realtime")
 MANAGER_CLOCKS = ("own", "fri")

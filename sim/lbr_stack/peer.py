@@ -99,8 +99,16 @@ from interfaces.loop_stats import LoopStats
 from interfaces.messages import HOLD, ServiceStatus
 from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
-from robot.lbr.msgs import (N_JOINTS, DriveState, LbrState, SafetyState, SessionState, encode_joint_state,
-                            encode_state, encode_wrench)
+from robot.lbr.msgs import (
+    N_JOINTS,
+    DriveState,
+    LbrState,
+    SafetyState,
+    SessionState,
+    encode_joint_state,
+    encode_state,
+    encode_wrench,
+)
 from robot.lbr.tip import tip_jacobian, tip_pose
 from sim.core import SimCore
 from sim.params import SimParams
@@ -108,8 +116,17 @@ from sim.service import SimPort
 
 from .commands import CommandBox
 from .params import COMMAND_MODES, CONTROL_MODES, OPERATION_MODES, LbrPeerParams
-from .stack import (FriCommand, FriLink, RobotSession, StackClient, StackError, estimated_wrench, impedance_damping,
-                    joint_impedance_torque, reported_commanded_torque)
+from .stack import (
+    FriCommand,
+    FriLink,
+    RobotSession,
+    StackClient,
+    StackError,
+    estimated_wrench,
+    impedance_damping,
+    joint_impedance_torque,
+    reported_commanded_torque,
+)
 
 log = logging.getLogger(__name__)
 

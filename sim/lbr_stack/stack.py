@@ -22,7 +22,6 @@ file and line are in its docstring and in docs/real-robot.md.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
