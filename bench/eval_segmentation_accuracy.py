@@ -43,8 +43,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from lampskit.learn.demo_io import read_demo, read_labels  # noqa: E402
-from lampskit.learn.segmentation import segment
-from lampskit.learn.segmentation_scores import frame_accuracy, true_segment_count
+from lampskit.learn.segmentation import segment  # noqa: E402
+from lampskit.learn.segmentation_scores import frame_accuracy, true_segment_count  # noqa: E402
 from lampskit.learn.synth import synthesize_demo  # noqa: E402
 from lampskit.learn.takes import build_real_takes  # noqa: E402
 

@@ -182,7 +182,7 @@ class ZenohSettings:
         for name in ("multicast_scouting", "gossip"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"[zenoh] {name} must be true or false, got {getattr(self, name)!r}")
-        self.keys  # validates robot_id and key_prefix
+        _ = self.keys  # validates robot_id and key_prefix
 
     @property
     def keys(self) -> Keys:

@@ -29,10 +29,11 @@ from pathlib import Path
 
 from lampskit.errors import LampsError
 
+from .run_end import RunEnd
+
 #: ``--robot``: the compose profile of the robot side (``real`` needs a robot and is compose's alone).
 ROBOTS = ("sim", "lbr-sim")
 BOARDS = {"vertical": "wall", "wall": "wall", "horizontal": "table", "table": "table"}
-from .run_end import RunEnd
 
 
 class UpError(LampsError):

@@ -137,7 +137,7 @@ def site_layout(cells: list[Keys], camera: str = "board") -> dict[str, Any]:
 
         def renamed(node):
             if isinstance(node, str):
-                return ids[node]
+                return ids[node]  # noqa: B023 (called within this iteration)
             return {k: renamed(v) if k in ("first", "second") else v for k, v in node.items()}
         tabs.append({"title": robot, "layout": renamed(one["layout"])})
     config["Tab!cells"] = {"activeTabIdx": 0, "tabs": tabs}

@@ -185,7 +185,8 @@ class LiveView:
         if self._thin(key, t_ns):
             return
         for topic, name, schema, payload, t in json_records(key, msg, t_ns):
-            cid = self._channel(topic, lambda: ("json", name, json.dumps(schema()), "jsonschema"))
+            cid = self._channel(topic,
+                                lambda name=name, schema=schema: ("json", name, json.dumps(schema()), "jsonschema"))
             self.server.send(cid, t, msgspec.json.encode(payload))
         self.counters[key[after_prefix:]] += 1
 

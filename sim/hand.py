@@ -65,7 +65,7 @@ class HandScript:
         if len(rows) < 3:
             raise ConfigError(f"[sim.hand] script {path}: a header and at least two rows needed")
         header = [c.strip().lower() for c in rows[0]]
-        for cols, is_force in ((PATH_COLUMNS, False), (FORCE_COLUMNS, True)):
+        for cols, is_force in ((PATH_COLUMNS, False), (FORCE_COLUMNS, True)):  # noqa: B007 (read after the loop)
             if all(c in header for c in cols):
                 break
         else:

@@ -32,7 +32,7 @@ def _inertia_matrix(el: ET.Element) -> np.ndarray:
     return np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]])
 
 
-def _set_inertia(el: ET.Element, I: np.ndarray) -> None:
+def _set_inertia(el: ET.Element, I: np.ndarray) -> None:  # noqa: E741 (I: the inertia tensor, as in the maths)
     for k, (i, j) in zip(_INERTIA_KEYS, ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
         el.set(k, repr(float(I[i, j])))
 

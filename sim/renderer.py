@@ -180,9 +180,10 @@ class CameraProcess:
             if not self._conn.poll(timeout_s):
                 raise RuntimeError(f"camera renderer did not start within {timeout_s} s")
             self._conn.recv()
-        except (EOFError, OSError):
+        except (EOFError, OSError) as exc:
             self.close()
-            raise RuntimeError(f"camera renderer failed while building its scene (exit code {self._proc.exitcode})")
+            raise RuntimeError(
+                f"camera renderer failed while building its scene (exit code {self._proc.exitcode})") from exc
         except RuntimeError:
             self.close()
             raise

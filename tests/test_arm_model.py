@@ -13,15 +13,15 @@ from controller.control.model_correction import MODEL_MISMATCH, CorrectionParams
 from controller.core import ControllerCore
 from controller.executor_types import BoardPose, StainState
 from controller.params import ControllerParams
-
-#: The learning controller (opt-in: [controller.model] enabled, with the identification roll).
-LEARNING = {"enabled": True, "identify_s": 2.0}
 from controller.tool_estimate import GRAVITY_M_S2, ToolEstimate, tool_regressor_into
 from controller.trace import PHASE_CODES, TRACE_COLUMNS
 from interfaces.description import ERASER_LINK
 from interfaces.errors import ConfigError
 from interfaces.messages import ControllerStatus, Phase
 from interfaces.robot_model import RobotModel
+
+#: The learning controller (opt-in: [controller.model] enabled, with the identification roll).
+LEARNING = {"enabled": True, "identify_s": 2.0}
 
 DT = 0.001
 #: The plant's unknown tool: 0.8 kg at (1, -2, 5) cm of the flange frame (with the description's eraser).

@@ -100,7 +100,7 @@ def test_the_law_holds_a_pose_with_three_periods_of_loop_delay_on_a_gravity_comp
         p0, R0 = model.tcp_pose(q0)
         ref = Reference(p0 + np.array([0.02, -0.02, 0.01]), R0 @ pin.exp3(np.array([0.0, 0.0, 0.15])))
         pending = [np.zeros(7)] * 3
-        for k in range(2500):
+        for _k in range(2500):
             terms = impedance_torque(model, core.out.q, core.out.dq, ref, ImpedanceParams(), q0, False)
             pending.append(np.clip(terms.tau_nm, -core.tau_max, core.tau_max))
             core.step(pending.pop(0))

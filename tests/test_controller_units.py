@@ -883,7 +883,9 @@ def test_the_real_time_chain_re_plans_on_the_planner_thread_and_wipes_on_meanwhi
     seq = [p for p in phases(log_threaded) if p != "WAIT_PEERS"]
     assert seq == ["APPROACH", "TRANSITION", "WIPE", "TRANSITION", "WIPE", "TRANSITION", "WIPE", "RETREAT", "DONE"]
     # the same stains in the same order as the re-plans in the tick; each waited for ~25 ticks, wiping
-    visits = lambda log: [s for i, (p, s, *_) in enumerate(log) if p == "TRANSITION" and log[i - 1][0] != p]
+    def visits(log):
+        return [s for i, (p, s, *_) in enumerate(log) if p == "TRANSITION" and log[i - 1][0] != p]
+
     assert visits(log_threaded) == visits(log_inline)
     assert pool.plans and counters["replans"] == len(pool.plans) == inline.counters["replans"]
     assert counters["ticks_waiting_for_a_plan"] >= 24 * len(pool.plans) and waited >= 24 * len(pool.plans)

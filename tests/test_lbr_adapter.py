@@ -257,7 +257,7 @@ def test_a_robot_with_a_10ms_fri_period_gets_each_prompt_answer_and_no_hold():
     with Cell(server={"stale_limit_s": LbrParams().stale_limit_s}) as cell:
         cell.armed(dt_s=0.010)
         next_t = time.monotonic()
-        for k in range(20):
+        for _k in range(20):
             next_t += 0.010
             time.sleep(max(next_t - time.monotonic(), 0.0))  # the robot's pace, not a wait for Zenoh
             n = len(cell.stack.commands)
@@ -713,7 +713,7 @@ def test_an_fri2_state_to_an_fri1_adapter_is_named_and_refused_then_fri2_arms():
         assert st.counters.get("states_received", 0) == 0
     with Cell({"fri_major": 2}) as cell:
         t = cell.t_ns
-        for k in range(3):
+        for _k in range(3):
             t += 1_000_000
             s2 = lbr_state(Q0, t)
             s2.q_commanded_rad = None

@@ -10,6 +10,7 @@ import sys
 import time
 
 import pytest
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from interfaces.config import ZenohSettings
@@ -38,7 +39,7 @@ def test_an_unfinished_recording_is_recovered_up_to_its_last_whole_chunk(tmp_pat
     sink.flush()  # what the recorder does every second; then it is killed: no summary, no footer
     size = partial.stat().st_size
     assert size > 2 * CHUNK_BYTES  # compressed chunks of 256 KiB of JSON each: dozens of them
-    with pytest.raises(Exception):  # the standard (indexed) reader cannot read an unfinished file
+    with pytest.raises(McapError):  # the standard (indexed) reader cannot read an unfinished file
         _messages(partial)
     recovered = recover_recording(partial, tmp_path / "recording.mcap")
     assert _messages(tmp_path / "recording.mcap") == recovered

@@ -202,7 +202,7 @@ def _cross_cell_attack(site, role: str, key_of, legit_role: str, victim_role: st
                 recorder.declare_subscriber(f"{Keys.for_robot(b).prefix}/**", keep("recorder")),
                 eavesdropper.declare_subscriber(f"{Keys.for_robot(b).prefix}/**", keep("thief"))]
         wait_subscribed(legit, key)
-        for i in range(20):
+        for _i in range(20):
             thief.put(key, f"forged by {role}@{a}".encode())
             legit.put(key, f"from {legit_role}@{b}".encode())
             time.sleep(0.02)

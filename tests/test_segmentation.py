@@ -38,7 +38,7 @@ def test_synthetic_demos_are_segmented(n_stains, seed):
     assert segment_counts(seg)["periodic"] == n_stains == true_segment_count(s.true_periodic)
     assert frame_accuracy(seg, s.true_periodic) >= 0.95
     # each periodic segment lies on its own stain
-    for found, (a, b, kind, stain) in zip(seg.periodic_segments, [x for x in s.segments if x[2] == "periodic"]):
+    for found, (a, b, _kind, _stain) in zip(seg.periodic_segments, [x for x in s.segments if x[2] == "periodic"]):
         assert found.start < b and a < found.end
     assert len({x.cluster for x in seg.periodic_segments}) == n_stains
 

@@ -45,7 +45,7 @@ def test_a_hop_lifts_moves_and_lasts_as_asked():
     hop = HopSpec(0.05, 1.0, 2.0)
     s = synthesize_demo(3, 0, noise_m=0.0, hop=hop)
     z, t = _board_z(s), s.demo.t_s
-    for (a, b, kind, _), nxt in zip(s.segments[1:-1], s.segments[2:]):
+    for (a, b, kind, _), _nxt in zip(s.segments[1:-1], s.segments[2:]):
         if kind == "transitional":
             assert t[b - 1] - t[a] == pytest.approx(hop.duration_s, abs=0.02)
             assert z[a:b].max() == pytest.approx(hop.lift_m, abs=0.002)

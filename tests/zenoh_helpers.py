@@ -167,7 +167,7 @@ class SimProcess:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait()
-            raise AssertionError("lamps sim did not stop on SIGINT")
+            raise AssertionError("lamps sim did not stop on SIGINT") from None
 
     def output(self) -> str:
         return self.proc.stdout.read() if self.proc and self.proc.poll() is not None else ""

@@ -159,7 +159,7 @@ def _fit_impl(phase, y, n_comp, seed, max_iter, tol, reg_covar) -> PeriodicGMM:
     ll_old = -np.inf
     converged = False
     eye = np.eye(1 + n_dims)
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count of iterations is read after the loop)
         # M-step (from responsibilities): shift each phase mean by the weighted mean offset.
         nk = resp.sum(axis=1) + 10.0 * np.finfo(float).eps  # (K,)
         shift = (resp * dphi).sum(axis=1) / nk

@@ -210,7 +210,7 @@ def synthesize_demo(
 
 def _draw_strokes(n: int, rng: np.random.Generator) -> list[StrokeSpec]:
     strokes: list[StrokeSpec] = []
-    for k in range(n):
+    for _k in range(n):
         kind = "circle" if rng.random() < 0.6 else "zigzag"
         amplitude = float(rng.uniform(0.025, 0.05))
         for _ in range(2000):
@@ -239,7 +239,7 @@ def _hops_and_drift(strokes: list[StrokeSpec], hop: HopSpec | None, drift_m: flo
     direction that keeps it on the board and at least a move from every earlier stain), and given their drift."""
     out: list[StrokeSpec] = []
     lo, hi = np.array(BOARD_AREA_M).T
-    for k, s in enumerate(strokes):
+    for s in strokes:
         angle = rng.uniform(0, 2 * np.pi)
         drift = drift_m * np.array([np.cos(angle), np.sin(angle)])
         centre = s.centre_m

@@ -93,7 +93,7 @@ def unite_alternating(runs: list[Run], t_s: np.ndarray, min_duration_s: float) -
 
     def close_chain() -> None:
         last_seen: dict[int, int] = {}
-        for i, (c, a, b) in enumerate(chain):
+        for i, (c, _a, _b) in enumerate(chain):
             j = last_seen.get(find(c))
             if j is not None and all(t_s[min(bb, len(t_s) - 1)] - t_s[aa] <= ALTERNATION_MAX_S
                                      for _, aa, bb in chain[j + 1:i]):
@@ -260,8 +260,9 @@ def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> li
             floor = 0
 
             def same_phase(before: tuple[int, int], after: tuple[int, int]) -> bool:
-                sides = tuple(period_samples(velocity[lo + x0:lo + x1], rate_hz) for x0, x1 in (before, after))
-                return not gap_evidence(smooth[lo:hi], rest, before, after, period, rate_hz, sides).cuts
+                # same_phase is called within this iteration only (by _wiping_phases below)
+                sides = tuple(period_samples(velocity[lo + x0:lo + x1], rate_hz) for x0, x1 in (before, after))  # noqa: B023
+                return not gap_evidence(smooth[lo:hi], rest, before, after, period, rate_hz, sides).cuts  # noqa: B023
 
             for s0, s1 in _wiping_phases(stretches, same_phase):
                 # hysteresis at the start: back from the first recurring stretch while below the looser level (a
