@@ -110,8 +110,8 @@ def stream(frames: list[bytearray], K: np.ndarray, size: tuple[int, int], second
     log_dir = log_dir or Path(tempfile.mkdtemp(prefix="camera-path-"))
     env = {"PYTHONPATH": str(tree), "LAMPS__PERCEPTION__STATUS_RATE_HZ": "4"}
     proc = Proc(f"perception-{tree.name}", _cores() + [
-        sys.executable, "-m", "perception.cli", "--config", str(tree / BOARD.relative_to(REPO)), "--source", f"ros:{TOPIC}", "--listen", ep,
-        "--robot-id", rid], log_dir, env, cwd=tree)
+        sys.executable, "-m", "perception.cli", "--config", str(tree / BOARD.relative_to(REPO)),
+        "--source", f"ros:{TOPIC}", "--listen", ep, "--robot-id", rid], log_dir, env, cwd=tree)
     node = ServiceNode("bridge", ZenohSettings(connect=(ep,), robot_id=rid, insecure=True))
     node.__enter__()
     try:

@@ -94,7 +94,8 @@ def main() -> int:
         same = "-" if r["same"] is None else ("yes" if r["same"] else "NO")
         gap = "-" if r["max_dirt_gap"] is None else f"{100 * r['max_dirt_gap']:.2f}"
         print(f"| {r['name']} | {r['cells']} | {', '.join(r['outcomes'])} | {r['wall_s']:.0f} | "
-              f"{'-' if r['cpu_per_cell_s'] is None else format(r['cpu_per_cell_s'], '.0f')} | {r['per_hour']:.0f} | {r['per_hour'] / base:.2f}x | {same} | {gap} |")
+              f"{'-' if r['cpu_per_cell_s'] is None else format(r['cpu_per_cell_s'], '.0f')} | "
+              f"{r['per_hour']:.0f} | {r['per_hour'] / base:.2f}x | {same} | {gap} |")
     if a.json:
         a.json.write_text(json.dumps(rows, indent=1))
     return 0

@@ -65,7 +65,8 @@ def table(rows: list[dict], modes: list[str]) -> str:
         if "error" in r:
             lines.append(f"| {r['mode']} | {r['robot']} | {r['seed']} | error: {r['error'][:80]!r} |||||||")
             continue
-        lines.append(f"| {r['mode']} | {r['robot']} | {r['seed']} | {r['outcome']} | {_fmt(100 * r['removed'], '.1f')} % | "
+        lines.append(f"| {r['mode']} | {r['robot']} | {r['seed']} | {r['outcome']} | "
+                     f"{_fmt(100 * r['removed'], '.1f')} % | "
                      f"{_fmt(r['robot_time_s'], '.1f')} | {_fmt(r['tracking_rms_mm'])} | "
                      f"{_fmt(r['force_mean_n'], '.1f')} +- {_fmt(r['force_std_n'], '.1f')} | "
                      f"{_fmt(r['force_max_n'], '.1f')} | {_fmt(r['spring_max_nm'])} |")

@@ -4,8 +4,8 @@
    the arm parked and the arm over the board) are processed by
    :class:`perception.pipeline.Perception` with OpenCV on one thread; per
    stage and total; the arm-over-board frames again with the eraser masked
-   out (the self-filter, from the joint states of the same run). Baseline in the same run: the same stain pixels clustered
-   with scikit-learn's DBSCAN (``min_samples = 1``, same link distance), the
+   out (the self-filter, from the joint states of the same run). Baseline in the same run: the same stain
+   pixels clustered with scikit-learn's DBSCAN (``min_samples = 1``, same link distance), the
    paper's pixel clustering done directly.
 2. The closed loop over real Zenoh (``lamps sim`` with its camera, the
    controller taking stains from perception, perception on the sim's

@@ -150,8 +150,10 @@ def main(argv: list[str] | None = None) -> int:
     import scipy
     import sklearn
 
-    versions = f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, sklearn {sklearn.__version__}"
-    print(f"segmentation cost: {N_STAINS}-stain synthetic demo (the 100k row: human, with lift-offs and a revisit; seed {SEED}), OPTICS min_samples = {MIN_SAMPLES}; {versions}")
+    versions = (f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
+                f"sklearn {sklearn.__version__}")
+    print(f"segmentation cost: {N_STAINS}-stain synthetic demo (the 100k row: human, with lift-offs and a revisit; "
+          f"seed {SEED}), OPTICS min_samples = {MIN_SAMPLES}; {versions}")
     print()
     print_table(rows, args.quick)
     if args.json:

@@ -39,7 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mode", choices=("lockstep", "realtime"),
                    help="lockstep: answer each robot state (deterministic); realtime: own fixed-rate clock")
     p.add_argument("--rate", type=float, metavar="HZ", help="control rate (default 1000)")
-    p.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' or 'lamps demo' (required here or as [controller] skill)")
+    p.add_argument("--skill", metavar="FILE",
+                   help="skill file from 'lamps learn' or 'lamps demo' (required here or as [controller] skill)")
     p.add_argument("--stains-from", choices=("perception", "truth"),
                    help="where stains come from: perception/stains, or sim/truth (tests, no perception)")
     p.add_argument("--air", action="store_true", default=None, help="dry run: wipe in the air above the board")

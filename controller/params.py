@@ -264,9 +264,9 @@ class ControllerParams:
     measured pose when states come back; 0 = the mode's default,
     :data:`ROBOT_LOST_DEFAULT_S` (real time 0.5 s; lock-step 2 s: the sim
     waits for each answer, so a silence moves nothing and only a dead peer
-    matters, not one starved for half a second on a loaded machine). stains_timeout_s : no stains update this long -> PAUSED.
-    status_rate_hz : ControllerStatus rate. max_ticks : stop after this many
-    ticks (0 = run until stopped). trace_ticks : keep this many ticks of
+    matters, not one starved for half a second on a loaded machine).
+    stains_timeout_s : no stains update this long -> PAUSED. status_rate_hz : ControllerStatus rate.
+    max_ticks : stop after this many ticks (0 = run until stopped). trace_ticks : keep this many ticks of
     reference/measurement trace in memory (0 = none). publish_trace : publish
     every tick's trace row on ``controller/trace`` in batches with each
     status (what ``lamps up`` records and reports from).
@@ -309,8 +309,9 @@ class ControllerParams:
         peak = QUINTIC_PEAK_SPEED * self.executor.approach_speed_m_s
         if peak > self.limits.max_speed_m_s:
             raise ConfigError(
-                f"[controller.executor] approach_speed_m_s = {self.executor.approach_speed_m_s} peaks at {peak:.2f} m/s, "
-                f"above [controller.limits] max_speed_m_s = {self.limits.max_speed_m_s}: the speed brake would fight it")
+                f"[controller.executor] approach_speed_m_s = {self.executor.approach_speed_m_s} peaks at "
+                f"{peak:.2f} m/s, above [controller.limits] max_speed_m_s = {self.limits.max_speed_m_s}: the speed "
+                "brake would fight it")
 
     @property
     def state_timeout_or_default_s(self) -> float:

@@ -405,7 +405,8 @@ class ControllerService:
                     return
                 self._stains_clock = clock_s
                 return
-        if self._stains_clock is not None and ex.stains_fresh and clock_s - self._stains_clock > self.p.stains_timeout_s:
+        if (self._stains_clock is not None and ex.stains_fresh
+                and clock_s - self._stains_clock > self.p.stains_timeout_s):
             self.counters["stains_stale"] += 1
             ex.stains_stale(f"no stains update for {clock_s - self._stains_clock:.1f} s")
 

@@ -155,7 +155,8 @@ class ZenohSettings:
                               "user-password authentication names the side that connects, so a peer cannot tell who "
                               "it connected to (and would deny it everything); give the service an identity folder "
                               "(mutual TLS: 'lamps credentials DIR')")
-        if not isinstance(self.ros_namespaces, (list, tuple)) or not all(isinstance(n, str) for n in self.ros_namespaces):
+        if (not isinstance(self.ros_namespaces, (list, tuple))
+                or not all(isinstance(n, str) for n in self.ros_namespaces)):
             raise ConfigError(f"[zenoh] ros_namespaces must be a list of ROS namespaces, got {self.ros_namespaces!r}")
         for ns in self.ros_namespaces:
             _check_ros_namespace(ns)
@@ -168,7 +169,8 @@ class ZenohSettings:
         for name in ("listen", "connect"):
             value = getattr(self, name)
             if not isinstance(value, (list, tuple)) or not all(isinstance(e, str) and "/" in e for e in value):
-                raise ConfigError(f"[zenoh] {name} must be a list of endpoints like 'tcp/127.0.0.1:7447', got {value!r}")
+                raise ConfigError(f"[zenoh] {name} must be a list of endpoints like 'tcp/127.0.0.1:7447', "
+                                  f"got {value!r}")
             object.__setattr__(self, name, tuple(value))
         tls = (self.tls_ca, self.tls_certificate, self.tls_private_key)
         if any(tls) and not all(tls):
@@ -356,7 +358,8 @@ def dataclass_from_table(cls, section: str, table: Mapping[str, Any], **extra):
 def add_zenoh_options(parser) -> None:
     """``--listen``, ``--connect`` (repeatable endpoints), ``--robot-id`` and ``--zenoh-config`` on an argparse
     parser."""
-    parser.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (repeatable)")
+    parser.add_argument("--listen", metavar="ENDPOINT", action="append",
+                        help="Zenoh endpoint to listen on (repeatable)")
     parser.add_argument("--connect", metavar="ENDPOINT", action="append",
                         help="Zenoh endpoint to connect to (repeatable)")
     parser.add_argument("--robot-id", help="key prefix becomes lamps/<robot-id>")

@@ -68,7 +68,7 @@ def check_service_security(settings: ZenohSettings) -> str:
                           "role's folder (LAMPS_ZENOH_IDENTITY, made by 'lamps credentials DIR'), or run it "
                           "with --insecure (LAMPS_ZENOH_INSECURE=true) on purpose, on a machine of your own")
     if role is not None and not settings.access_control and not settings.insecure:
-        raise ConfigError(f"[zenoh] access_control is off for the {role or 'given'} role: every peer of the cell could put "
-                          "anything here. Remove the setting (an identity brings its access list), or run with "
-                          "--insecure on purpose")
+        raise ConfigError(f"[zenoh] access_control is off for the {role or 'given'} role: every peer of the cell "
+                          "could put anything here. Remove the setting (an identity brings its access list), or run "
+                          "with --insecure on purpose")
     return security_summary(settings)  # the node warns when it opens (after the rest of the configuration)

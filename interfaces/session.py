@@ -289,7 +289,8 @@ class Inbox(Generic[M]):
 
 
 #: Zenoh publisher options of the 1 kHz control path: at once, first, never queued behind a congested link.
-CONTROL_QOS = {"express": True, "priority": zenoh.Priority.REAL_TIME, "congestion_control": zenoh.CongestionControl.DROP}
+CONTROL_QOS = {"express": True, "priority": zenoh.Priority.REAL_TIME,
+               "congestion_control": zenoh.CongestionControl.DROP}
 
 
 def publisher_qos(keys: Keys, key: str) -> dict:

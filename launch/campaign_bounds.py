@@ -56,8 +56,8 @@ def felt_path_m(area_m2: float, pad_area_m2: float, rate_per_n_m: float, force_o
 
 def cell_bound_s(fixed_moves_s: float, areas_m2: list[float], centres_m: np.ndarray, felt: dict[str, float],
                  speed_m_s: float) -> float:
-    """The cell bound [s]: the run's fixed moves (before the skill's start + the final RETREAT, as executed) + each stain's
-    :func:`felt_path_m` + the stains' minimum spanning tree, both at ``speed_m_s``. ``felt``: ``pad_area_m2``,
+    """The cell bound [s]: the run's fixed moves (before the skill's start + the final RETREAT, as executed) + each
+    stain's :func:`felt_path_m` + the stains' minimum spanning tree, both at ``speed_m_s``. ``felt``: ``pad_area_m2``,
     ``rate_per_n_m``, ``force_over_threshold_n``, ``level``."""
     wipe = sum(felt_path_m(a, **felt) for a in areas_m2)
     return fixed_moves_s + (wipe + mst_length_m(np.asarray(centres_m, float))) / speed_m_s

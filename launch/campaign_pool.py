@@ -63,8 +63,8 @@ class Worker:
     def run(self, cell: Cell, skill: Path, run_dir: Path, max_duration_s: float) -> tuple[int | None, str]:
         """(``lamps up``'s exit code, its last stderr line) of ``cell``; (None, why) when the worker died under it
         or did not answer in time (then it is stopped)."""
-        job = {"seed": cell.seed, "stains": cell.stains, "board": cell.board, "wiping": cell.wiping, "plots": cell.plots,
-               "skill": str(skill), "run_dir": str(run_dir), "max_duration_s": max_duration_s}
+        job = {"seed": cell.seed, "stains": cell.stains, "board": cell.board, "wiping": cell.wiping,
+               "plots": cell.plots, "skill": str(skill), "run_dir": str(run_dir), "max_duration_s": max_duration_s}
         try:
             self._proc.stdin.write(json.dumps(job) + "\n")
             self._proc.stdin.flush()

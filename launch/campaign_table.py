@@ -93,7 +93,8 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
                      "cell_time_over_cell_bound_median": med("cell_time_over_cell_bound"),
                      "time_per_stain_median_s": med("time_per_stain_s"),
                      "peak_speed_max_m_s": top("peak_speed_m_s"), "peak_accel_max_m_s2": top("peak_accel_m_s2"),
-                     "time_over_bound_max": top("time_over_bound"), "peak_contact_force_max_n": top("peak_contact_force_n"),
+                     "time_over_bound_max": top("time_over_bound"),
+                     "peak_contact_force_max_n": top("peak_contact_force_n"),
                      "peak_jerk_max_m_s3": top("peak_jerk_m_s3"), "faults": sum(r["faults"] for r in ran),
                      "no_report": len(rs) - len(ran)}
     return out
@@ -114,7 +115,8 @@ def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], com
                      f"{s.get('time_per_stain_median_s', float('nan')):.1f} | "
                      f"{s.get('time_over_cell_bound_median', float('nan')):.2f} "
                      f"({s.get('time_over_cell_bound_max', float('nan')):.2f}); "
-                     f"{s.get('cell_time_over_cell_bound_median', float('nan')):.2f} | {s['time_over_bound_median']:.1f} | "
+                     f"{s.get('cell_time_over_cell_bound_median', float('nan')):.2f} | "
+                     f"{s['time_over_bound_median']:.1f} | "
                      f"{s.get('peak_speed_max_m_s', float('nan')):.2f} / "
                      f"{s.get('peak_accel_max_m_s2', float('nan')):.2f} / "
                      f"{s['peak_jerk_max_m_s3']:.0f} | {s['peak_contact_force_max_n']:.1f} | {s['faults']} | "
@@ -159,8 +161,8 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     ax2.bar(range(len(ran)), [100 * r["dirt_removed"] for r in ran],
             color=["tab:green" if r["success"] else "tab:red" for r in ran])
     ax2.axhline(100 * CLEAN_SHARE, color="k", lw=0.8)
-    ax2.set(xlabel="cell", ylabel="dirt removed [%]", ylim=(min([90.0] + [100 * r["dirt_removed"] for r in ran]), 100.5),
-            title="dirt removed (red: not a success)")
+    ax2.set(xlabel="cell", ylabel="dirt removed [%]", title="dirt removed (red: not a success)",
+            ylim=(min([90.0] + [100 * r["dirt_removed"] for r in ran]), 100.5))
     fig.tight_layout()
     write_atomic(path, lambda f: fig.savefig(f, format="png", dpi=100))
     plt.close(fig)

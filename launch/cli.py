@@ -52,9 +52,8 @@ def build_up_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="stains: count, places, shapes (default 0)")
     p.add_argument("--stains", type=int, default=3, help="number of random stains (default 3)")
     p.add_argument("--board", default="vertical", metavar="vertical|horizontal|random:N|FILE.toml",
-                   help="board preset, random:N (the reachable board drawn from seed N), or a TOML file with a "
-                        "[board] table (preset = \"custom\", origin_m, quat_wxyz, size_m; see config/example.toml "
-                        "[sim.board])")
+                   help="board preset, random:N (the reachable board drawn from seed N), or a TOML file with a [board] "
+                        "table (preset = \"custom\", origin_m, quat_wxyz, size_m; see config/example.toml [sim.board])")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--skill", metavar="FILE", help="skill file from 'lamps learn' (default: learn the bundled demo)")
     src.add_argument("--demo", metavar="FILE", help="learn this demonstration first (CSV, NPZ, TSV, MAT#i)")
@@ -67,13 +66,14 @@ def build_up_parser() -> argparse.ArgumentParser:
                         "compose profile foxglove)")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: deterministic, as fast as the machine goes (default); realtime: 1 kHz wall clock")
-    p.add_argument("--max-duration", type=float, default=600.0, metavar="S", help="give up after S s wall (default 600)")
+    p.add_argument("--max-duration", type=float, default=600.0, metavar="S",
+                   help="give up after S s wall (default 600)")
     p.add_argument("--out", metavar="DIR", help="run folder (default runs/<time>)")
     p.add_argument("--compose", metavar="FILE", help="compose file (default: docker-compose.yml of this checkout)")
     p.add_argument("--port-base", type=int, metavar="N",
                    help="listen on N, N+1, ... (default: free ports); a busy port is refused before anything starts")
-    p.add_argument("--robot-id", default=None, help="key prefix lamps/<robot-id> (default iiwa; with --cells the "
-                                                    "cells are <robot-id>-1 ... -N)")
+    p.add_argument("--robot-id", default=None,
+                   help="key prefix lamps/<robot-id> (default iiwa; with --cells the cells are <robot-id>-1 ... -N)")
     p.add_argument("--cells", type=int, metavar="N", default=None,
                    help="N cells side by side through one lamps router, each with its own identities (one CA), "
                         "seed (SEED, SEED+1, ...) and run folder OUT/<robot id>/; --port-base: the router's port")

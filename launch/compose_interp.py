@@ -113,7 +113,8 @@ def _braced(text: str, start: int, variables: Mapping[str, str], where: str) -> 
     elif op.endswith("?"):
         if missing:
             reason = _interp(arg_text, 0, variables, where)
-            raise ConfigError(f"{where}: required variable {name} is missing a value" + (f": {reason}" if reason else ""))
+            raise ConfigError(f"{where}: required variable {name} is missing a value"
+                              + (f": {reason}" if reason else ""))
         result = value
     else:  # "+"
         result = (value or "") if missing else _interp(arg_text, 0, variables, where)

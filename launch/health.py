@@ -43,7 +43,8 @@ def probe_targets(endpoints: str) -> list[tuple[str, int]]:
             continue
         m = _ENDPOINT.match(ep.split("#", 1)[0])
         if not m:
-            raise ValueError(f"cannot probe endpoint {ep!r}: only tcp/ and tls/<host>:<port> are probed (a TCP connect)")
+            raise ValueError(
+                f"cannot probe endpoint {ep!r}: only tcp/ and tls/<host>:<port> are probed (a TCP connect)")
         host = m.group(1).strip("[]")
         host = {"0.0.0.0": "127.0.0.1", "::": "::1", "": "127.0.0.1"}.get(host, host)
         out.append((host, int(m.group(2))))

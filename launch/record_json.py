@@ -112,7 +112,8 @@ def json_records(key: str, msg: Message, t_ns: int):
         stamp = t_ns  # the receipt time, the clock of the scene's transforms and overlays (the robot's is in /info)
         if jpeg is not None:
             yield (key, "foxglove.CompressedImage", lambda: _COMPRESSED_IMAGE_SCHEMA,
-                   {"timestamp": {"sec": stamp // 10**9, "nsec": stamp % 10**9}, "frame_id": camera_frame_id(msg.camera),
+                   {"timestamp": {"sec": stamp // 10**9, "nsec": stamp % 10**9},
+                    "frame_id": camera_frame_id(msg.camera),
                     "data": base64.b64encode(jpeg).decode("ascii"), "format": "jpeg"}, t_ns)
         info = {f: v if type(v) in _PLAIN else to_builtins(v)  # all but the pixels (never base64-encoded to be dropped)
                 for f, v in zip(msg.__struct_fields__, msgspec.structs.astuple(msg)) if f != "data"}

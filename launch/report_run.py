@@ -56,7 +56,7 @@ def _read_run(run_dir: Path, keys: Keys | None = None, cap_n: float | None = Non
     cap_n = cap_n if cap_n is not None else launcher.get("force_cap_n", ForceParams().cap_n)
     cols, tr = trace_array(_topic(rec, keys.controller_trace))
     filter_s = float(launcher.get("force_filter_s", ForceParams().filter_s))
-    return _Run(rec=rec, launcher=launcher, keys=keys, cap_n=cap_n, filter_s=filter_s, truth=_topic(rec, keys.sim_truth),
-                status=_topic(rec, keys.controller_status),
+    return _Run(rec=rec, launcher=launcher, keys=keys, cap_n=cap_n, filter_s=filter_s,
+                truth=_topic(rec, keys.sim_truth), status=_topic(rec, keys.controller_status),
                 stains_msgs=[m for m in _topic(rec, keys.perception_stains) if m.get("board") != "lost"],
                 tr=tr, col={c: i for i, c in enumerate(cols)})

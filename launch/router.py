@@ -55,10 +55,12 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(prog="lamps router", description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", help="TOML configuration ([zenoh]: identity, access_control, robot_id, ...)")
-    ap.add_argument("--status-s", type=float, default=10.0, help="with -v: log the sessions routed this often (0: never)")
+    ap.add_argument("--status-s", type=float, default=10.0,
+                    help="with -v: log the sessions routed this often (0: never)")
     ap.add_argument("--cells", metavar="ID,ID,...",
                     help="route several cells (robot ids) with the site's access list ([zenoh] cells)")
-    ap.add_argument("-v", "--verbose", action="store_true", help="log what the router does (its sessions, its settings)")
+    ap.add_argument("-v", "--verbose", action="store_true",
+                    help="log what the router does (its sessions, its settings)")
     add_zenoh_options(ap)
     a = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,

@@ -186,7 +186,8 @@ class BoardTracker:
         self._window_params = self._windows.getDetectorParameters()
         self.why = ""  # why the last frame gave no fresh pose
 
-    def update(self, grey: np.ndarray, K: np.ndarray, T_camera_to_world: np.ndarray, t_s: float) -> BoardEstimate | None:
+    def update(self, grey: np.ndarray, K: np.ndarray, T_camera_to_world: np.ndarray,
+               t_s: float) -> BoardEstimate | None:
         """The board in this frame (``grey`` (H, W) uint8); None until it has been found once."""
         markers = self._detect(grey)
         reason = self._why_not(markers)

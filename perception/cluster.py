@@ -7,8 +7,8 @@ pixel grid this is cheap: grow every pixel by a disc of radius
 ``eps / 2`` (two discs touch when their centres are at most ``eps`` apart),
 label the connected components of the grown mask, and give each pixel its
 component. On the grid the link is eps up to eps + 1.5 px (digital discs
-touch a little early), which the tests check against scikit-learn's DBSCAN. Each cluster then yields the anchor ``y_m`` (its centre) and the
-amplitude scale ``r`` (its extent) the planner needs
+touch a little early), which the tests check against scikit-learn's DBSCAN. Each cluster then yields the anchor
+``y_m`` (its centre) and the amplitude scale ``r`` (its extent) the planner needs
 (:func:`interfaces.stain_shape.shape_of`).
 """
 

@@ -65,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
                             text=True).stdout.strip() or "unknown"
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "attacks.json"
-        cmd = [sys.executable, "-m", "pytest", "-m", "attack", "-q", "-p", "no:cacheprovider", *(["-k", a.k] if a.k else [])]
+        cmd = [sys.executable, "-m", "pytest", "-m", "attack", "-q", "-p", "no:cacheprovider",
+               *(["-k", a.k] if a.k else [])]
         t0 = time.monotonic()
         rc = subprocess.run(cmd, cwd=REPO, env={**os.environ, "LAMPS_ATTACK_RESULTS": str(out)}).returncode
         seconds = time.monotonic() - t0

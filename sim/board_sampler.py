@@ -15,8 +15,8 @@ along; board x runs along the width, horizontal before the roll (``(sin b, -cos 
 psi: the wall preset's for alpha = psi = 0), board y = n x x. A draw is kept only if the simulator
 would start on it with up to ``MAX_STAINS`` stains (:func:`board_refusal`: every corner above the
 robot's mounting plane, then :func:`sim.board.check_board`, :func:`sim.board.start_configuration`,
-the camera's pose and the stains' placement, as :class:`sim.core.SimCore` does); otherwise the next draw of the same generator is tried, up to
-``MAX_TRIES``. The draws refused and why are returned, so a campaign can count them.
+the camera's pose and the stains' placement, as :class:`sim.core.SimCore` does); otherwise the next draw of the
+same generator is tried, up to ``MAX_TRIES``. The draws refused and why are returned, so a campaign can count them.
 """
 
 from __future__ import annotations

@@ -132,7 +132,8 @@ class DirtParams:
         check_int(s, "stains", self.stains, 0, 12, what="an integer count")
         lo, hi = _vector(s, "stain_size_m", self.stain_size_m, 2)
         if not 0.01 <= lo <= hi <= 0.3:
-            raise ConfigError(f"[{s}] stain_size_m must be (min, max) with 0.01 <= min <= max <= 0.3, got {self.stain_size_m!r}")
+            raise ConfigError(f"[{s}] stain_size_m must be (min, max) with 0.01 <= min <= max <= 0.3, "
+                              f"got {self.stain_size_m!r}")
         object.__setattr__(self, "stain_size_m", (lo, hi))
         if not isinstance(self.stain, (list, tuple)) or not all(isinstance(t, Mapping) for t in self.stain):
             raise ConfigError(f"[{s}] stain must be a list of tables, got {self.stain!r}")

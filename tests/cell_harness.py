@@ -124,10 +124,10 @@ class Cell:
     mode : ``lockstep`` or ``realtime``; proxy : route the controller's link to the sim through a
     :class:`TcpProxy` (:attr:`proxy`); router : run ``lamps router`` (the router identity, the cell's access
     list; ``router_acl=False``: its list off, ``--insecure``) and every service as its client; robot : ``sim``
-    or ``lbr-sim`` (the arm behind the simulated lbr stack, as ``lamps up --robot``) (no listen endpoint, no link between services); thin : service name -> {key suffix (``robot/state``): samples per
-    second}: Zenoh's own downsampling on that service's egress drops the samples of that key that come
-    sooner than 1 / rate after the last one let through (given to the service as a Zenoh configuration
-    file, ``LAMPS_ZENOH_CONFIG_FILE``).
+    or ``lbr-sim`` (the arm behind the simulated lbr stack, as ``lamps up --robot``) (no listen endpoint, no link
+    between services); thin : service name -> {key suffix (``robot/state``): samples per second}: Zenoh's own
+    downsampling on that service's egress drops the samples of that key that come sooner than 1 / rate after the last
+    one let through (given to the service as a Zenoh configuration file, ``LAMPS_ZENOH_CONFIG_FILE``).
     """
 
     def __init__(self, out: Path, skill: Path, mode: str = "lockstep", proxy: bool = False,

@@ -32,10 +32,10 @@ def _thief(cell: Cell) -> ServiceNode:
     return ServiceNode("perception-thief", settings)
 
 
-@pytest.mark.attack("2, 3, 7", "with perception's stolen identity, one lock-step cell: a listening peer linked by gossip "
-                               "replays the controller's captured commands, forges 100 Nm torques with its session id "
-                               "and releases the e-stop for 3 s of wiping; once DONE, a Stains stream places the "
-                               "board 10 m away (3 s at 20 Hz); the recording is checked for any of it",
+@pytest.mark.attack("2, 3, 7", "with perception's stolen identity, one lock-step cell: a listening peer linked by "
+                               "gossip replays the controller's captured commands, forges 100 Nm torques with its "
+                               "session id and releases the e-stop for 3 s of wiping; once DONE, a Stains stream "
+                               "places the board 10 m away (3 s at 20 Hz); the recording is checked for any of it",
                    "no forged command or release applied or recorded; the board cleaned, force and joint speeds "
                    "within limits; the jump not adopted: DONE held, no contact")
 def test_a_thief_with_perceptions_identity_moves_nothing_is_not_recorded_and_cannot_move_the_board(

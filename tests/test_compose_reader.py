@@ -88,8 +88,8 @@ def test_dotenv_values_quotes_comments_and_interpolation(tmp_path):
 
 def test_profiles_come_from_the_environment_then_env_file(tmp_path):
     f = tmp_path / "docker-compose.yml"
-    f.write_text("services:\n  a: {image: x, command: [lamps, sim], profiles: [one]}\n  b: {image: x, command: [lamps, sim], "
-                 "profiles: [two]}\n  c: {image: x, command: [lamps, sim]}\n")
+    f.write_text("services:\n  a: {image: x, command: [lamps, sim], profiles: [one]}\n"
+                 "  b: {image: x, command: [lamps, sim], profiles: [two]}\n  c: {image: x, command: [lamps, sim]}\n")
     (tmp_path / ".env").write_text("COMPOSE_PROFILES=two\n")
     m = compose_model(f, {}, reader="builtin")
     assert m.profiles == ("two",) and [s.name for s in m.active()] == ["b", "c"]
@@ -186,7 +186,8 @@ def test_env_file_reaches_interpolation_in_both_readers_and_the_environment_wins
 def test_lamps_up_reports_which_reader_read_the_file(tmp_path):
     ensure_docker()
     bad = tmp_path / "compose.yml"
-    bad.write_text("services:\n  s:\n    image: x\n    command: [lamps, sim]\n    environment: {K: '${NEED:?set NEED first}'}\n")
+    bad.write_text("services:\n  s:\n    image: x\n    command: [lamps, sim]\n"
+                   "    environment: {K: '${NEED:?set NEED first}'}\n")
     r = subprocess.run([str(REPO / "lamps"), "up", "--compose", str(bad), "--out", str(tmp_path / "run")],
                        capture_output=True, text=True, timeout=120, cwd=REPO)
     assert r.returncode != 0 and "NEED" in r.stderr and "set NEED first" in r.stderr, r.stderr

@@ -479,7 +479,8 @@ def test_a_moved_board_is_adopted_while_holding_without_moving_the_held_pose(lea
     held = BOARD.to_world(np.array([*ex.motion.setpoint.xy, ex.motion.setpoint.h]))
     moved = BoardPose(WALL, BOARD.origin_m + np.array([0.0, 0.01, 0.0]), BOARD.size_m)
     ex.set_stains(moved, [])
-    np.testing.assert_allclose(moved.to_world(np.array([*ex.motion.setpoint.xy, ex.motion.setpoint.h])), held, atol=1e-12)
+    np.testing.assert_allclose(moved.to_world(np.array([*ex.motion.setpoint.xy, ex.motion.setpoint.h])), held,
+                               atol=1e-12)
     assert ex.board is moved
 
 

@@ -2,9 +2,10 @@
 
 Each test starts the compose cell's sim profile (:mod:`tests.cell_harness`), lets it wipe, hurts it in
 several ways one after another (SIGKILL, SIGSTOP/SIGCONT and restarts of each service, a stalled and a cut
-link between controller and robot, rogue peers, samples dropped on single keys by Zenoh's downsampling), and then asserts from the run's own ``report.json`` that
-the arm stayed safe throughout (contact force never above the cap, no joint above its speed limit) and that
-the run recorded every fault with a time and a reason. The README's fault table lists the same cases.
+link between controller and robot, rogue peers, samples dropped on single keys by Zenoh's downsampling), and then
+asserts from the run's own ``report.json`` that the arm stayed safe throughout (contact force never above the cap, no
+joint above its speed limit) and that the run recorded every fault with a time and a reason. The README's fault table
+lists the same cases.
 """
 
 from __future__ import annotations
@@ -93,7 +94,8 @@ def test_lockstep_survives_perception_and_sim_freezes_kills_and_restarts(tmp_pat
     assert any("no robot state" in r for r in _reasons(report, "FAULT")), report["faults"]
 
 
-@pytest.mark.attack('faults', "controller frozen 2 s, killed and restarted; a peer without a certificate and one with perception's identity command 30 Nm; recorder frozen and restarted",
+@pytest.mark.attack('faults', "controller frozen 2 s, killed and restarted; a peer without a certificate and one with "
+                              "perception's identity command 30 Nm; recorder frozen and restarted",
                     'nothing of the rogues reaches the sim; wiping again; recording whole')
 def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recorder(tmp_path, learned_skill_file):
     with Cell(tmp_path / "run", learned_skill_file, "lockstep") as cell:
@@ -142,7 +144,8 @@ def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recor
     assert sim.get("controller_changes", 0) >= 1, sim
 
 
-@pytest.mark.attack('faults', 'real time: the controller-robot link stalled 300 ms and cut, sim frozen 3 s, controller and recorder killed',
+@pytest.mark.attack('faults', 'real time: the controller-robot link stalled 300 ms and cut, sim frozen 3 s, controller '
+                              'and recorder killed',
                     'the robot side brakes; wiping on; force and speeds within limits')
 def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_controller_and_recorder(
         tmp_path, learned_skill_file):

@@ -51,7 +51,8 @@ def samples():
     cam_int = CameraIntrinsics(615.0, 615.0, 319.5, 239.5, 4, 2)
     return [
         RobotState(seq=7, stamp_ns=123, q_rad=_floats(7), dq_rad_s=_floats(7), tau_nm=_floats(7),
-                   wrench_world=_floats(6), capabilities=Capabilities(True, [320.0, 320, 176, 176, 110, 40, 40], "real"),
+                   wrench_world=_floats(6),
+                   capabilities=Capabilities(True, [320.0, 320, 176, 176, 110, 40, 40], "real"),
                    wall_ns=1_700_000_000_000_000_000),
         TorqueCommand(seq=7, stamp_ns=124, tau_nm=_floats(7), mode="torque"),
         CameraFrame(seq=1, stamp_ns=2, camera="board", encoding="rgb8", data=bytes(range(24)), intrinsics=cam_int,

@@ -344,8 +344,8 @@ def test_a_robot_that_does_not_echo_the_overlay_is_named_within_a_second_not_sta
         cell.after(t_disarm_s + 1.5)
         force_after = cell.tap.force_between(t_disarm_s + 1.0, t_disarm_s + 1.5)
     stall_s = t_disarm_s - t_first_s
-    print(f"\nno echo: disarmed {stall_s:.3f} s of robot time after the first command ({(hold_ns - first_ns) * 1e-9:.2f} "
-          f"s of ours); pad {force_after:.2f} N 1 s later")
+    print(f"\nno echo: disarmed {stall_s:.3f} s of robot time after the first command "
+          f"({(hold_ns - first_ns) * 1e-9:.2f} s of ours); pad {force_after:.2f} N 1 s later")
     closest = re.search(r"matched none of our overlays in 1\.0 s since arming \(closest ([0-9.]+) Nm off", st.detail)
     assert closest and 0.28 <= float(closest[1]) <= 0.3, st.detail  # the overlays of 2 ms apart differ a little
     assert "does not echo the overlay; set [lbr] check_applied = false or applied_tolerance_nm" in st.detail, \

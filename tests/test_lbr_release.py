@@ -22,10 +22,10 @@ MS = 1_000_000
 
 
 def _last_message(law: str, kind: str, seconds: float = 3.0, offset_rad: float = 0.02) -> dict:
-    """The stack re-applying one message from the start: ``kind`` ``"hold"`` (a pose ``offset_rad`` off the arm's
-    on A2 and A4, as for a pad pushed off a held pose; zero overlay) or ``"release"``; the robot's joint impedance (200 Nm/rad,
-    ratio 0.7) under the damping ``law``. Returns the largest joint speed [rad/s] over the first and the last
-    0.5 s, and the stack's exit (its guard), if any."""
+    """The stack re-applying one message from the start: ``kind`` ``"hold"`` (a pose ``offset_rad`` off the arm's on
+    A2 and A4, as for a pad pushed off a held pose; zero overlay) or ``"release"``; the robot's joint impedance
+    (200 Nm/rad, ratio 0.7) under the damping ``law``. Returns the largest joint speed [rad/s] over the first and the
+    last 0.5 s, and the stack's exit (its guard), if any."""
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
     model = RobotModel(joints=sim.joints)
     lim = model.limits
@@ -49,7 +49,8 @@ def _last_message(law: str, kind: str, seconds: float = 3.0, offset_rad: float =
             cmd = stack.fri_cycle(SessionState.COMMANDING_ACTIVE, o.q, o.q if prev is None else prev.joint_position,
                                   o.tau, np.zeros(7), ClientCommandMode.TORQUE, T, stamp_ns=k * MS)
             stack.cm_cycle()
-            dq_cmd = np.zeros(7) if prev is None or law == "absolute" else (cmd.joint_position - prev.joint_position) / T
+            dq_cmd = (np.zeros(7) if prev is None or law == "absolute"
+                      else (cmd.joint_position - prev.joint_position) / T)
             prev = cmd
             D = impedance_damping(K, 0.7, np.diag(pin.crba(model.model, model.data, o.q)).copy())
             sim.step(joint_impedance_torque(cmd.torque, cmd.joint_position, dq_cmd, o.q, o.dq, K, D))

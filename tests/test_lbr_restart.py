@@ -77,8 +77,8 @@ def test_the_adapter_killed_while_the_pad_presses_the_watchdog_releases_it(tmp_p
                 _stop(dog)
         dog_log = (tmp_path / "watchdog.log").read_text() if watchdog else ""
     silence = re.search(r"no command for (\d+) ms while the robot's states arrive: sending the release", dog_log)
-    print(f"\n{law} damping, watchdog {watchdog}, FRI {fri}: pad {force_before:.1f} N before the kill, {force_after:.2f} N "
-          f"from 1 s after; release after {silence[1] if silence else '-'} ms of silence, "
+    print(f"\n{law} damping, watchdog {watchdog}, FRI {fri}: pad {force_before:.1f} N before the kill, "
+          f"{force_after:.2f} N from 1 s after; release after {silence[1] if silence else '-'} ms of silence, "
           f"{peer.counters.get('releases_received', 0)} received")
     assert force_before >= 8.0, force_before
     assert peer.counters["stack_up"] == 1, peer.detail
@@ -114,8 +114,8 @@ def _old_hold_against_the_board(peer: PeerProcess, model: RobotModel, depth_m: f
 @pytest.mark.alone
 def test_an_adapter_restarted_in_contact_refuses_to_arm_and_names_the_press(tmp_path):
     """FRI 2 (no commanded position in the state): the stack re-applies an old hold whose target lies 0.2 mm in the
-    board; its PID integrates towards it and the robot's spring presses the pad (16 N: 8e4 N/m of felt). An adapter started now and asked
-    to arm refuses, naming the force, and sends nothing."""
+    board; its PID integrates towards it and the robot's spring presses the pad (16 N: 8e4 N/m of felt). An adapter
+    started now and asked to arm refuses, naming the force, and sends nothing."""
     cfg = {**TORQUE_SETUP, "sample_time_s": 0.002, "fri_major": 2, "status_rate_hz": 20.0}
     with PeerProcess(tmp_path, cfg, ("--mode", "realtime")) as peer:
         truth = peer.node.inbox(peer.node.keys.sim_truth, SimTruth, maxlen=100_000)

@@ -113,7 +113,8 @@ def test_a_ros_image_topic_through_the_bridge_is_a_frame_with_the_cameras_own_in
     K = np.array([[900.0, 0, 579.5], [0, 900.0, 434.5], [0, 0, 1]])
     with ServiceNode("bridge", settings("bridge", listen=(ep,))) as bridge, \
             ServiceNode("perception", settings("perception", connect=(ep,))) as perception:
-        source = RosImageSource(perception, "/camera/color/image_raw", PerceptionParams(source="ros:/camera/color/image_raw"))
+        source = RosImageSource(perception, "/camera/color/image_raw",
+                                PerceptionParams(source="ros:/camera/color/image_raw"))
         try:
             wait_subscribed(bridge.session, "camera/color/image_raw")
             wait_subscribed(bridge.session, "camera/color/camera_info")

@@ -26,7 +26,8 @@ def test_pixel_clustering_is_single_linkage_like_dbscan_with_one_sample(seed, ep
     mask = np.zeros((80, 100), bool)
     for _ in range(6):
         r, c = rng.integers(5, 75), rng.integers(5, 95)
-        mask[max(r - rng.integers(1, 5), 0):r + rng.integers(1, 5), max(c - rng.integers(1, 5), 0):c + rng.integers(1, 5)] = True
+        mask[max(r - rng.integers(1, 5), 0):r + rng.integers(1, 5),
+             max(c - rng.integers(1, 5), 0):c + rng.integers(1, 5)] = True
     mask |= rng.random(mask.shape) < 0.01
     n, labels = cluster_pixels(mask, eps)
     pts = np.argwhere(mask)

@@ -176,7 +176,8 @@ def site(tmp_path):
 def _cross_cell_attack(site, role: str, key_of, legit_role: str, victim_role: str) -> tuple[dict, int]:
     """Cell A's ``role`` (not applying its own list) and cell B's ``legit_role`` each put 20 times on cell B's key
     ``key_of(keys)``, heard by cell B's ``victim_role`` and recorder (all of cell B); a second session of the
-    thief's subscribes to all of cell B. Returns (payloads per listener, the router's refusals of the thief's puts logged)."""
+    thief's subscribes to all of cell B. Returns (payloads per listener, the router's refusals of the thief's puts
+    logged)."""
     from interfaces.keys import Keys
 
     router, creds = site
@@ -355,7 +356,8 @@ def test_site_credentials_name_each_cells_roles_and_a_service_refuses_another_ce
     creds = tmp_path / "c"
     folders = make_credentials(creds, cells=CELLS)
     assert set(folders) == {RELAY, SITE_VIEWER, *(f"{r}@{c}" for r in ROLES for c in CELLS)}
-    assert cell_of(identity_folder(creds, "controller", CELLS[1])) == CELLS[1] and cell_of(identity_folder(creds, RELAY)) is None
+    assert cell_of(identity_folder(creds, "controller", CELLS[1])) == CELLS[1]
+    assert cell_of(identity_folder(creds, RELAY)) is None
     assert (identity_folder(creds, "bridge", CELLS[0]) / "zenoh-bridge.json5").is_file()
     with pytest.raises(ConfigError, match="cell cell-b"):
         zenoh_config(ZenohSettings(robot_id=CELLS[0], access_control=True,

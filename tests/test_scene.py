@@ -111,7 +111,8 @@ def test_stain_outlines_are_projected_into_the_camera_image():
     tf = out[f"{KEYS.prefix}/scene/tf"].transforms[0]
     assert tf.child_frame_id == "camera_board" != "board"  # a camera named like the board is not the board
     cal = out[f"{CAMERA_KEY}/calibration"]
-    assert (cal.width, cal.height, cal.frame_id) == (640, 480, "camera_board") and list(cal.K)[:3] == [500.0, 0.0, 320.0]
+    assert (cal.width, cal.height, cal.frame_id) == (640, 480, "camera_board")
+    assert list(cal.K)[:3] == [500.0, 0.0, 320.0]
     ann = _out(b.on_message(KEYS.perception_stains, _stains(), 0))[f"{CAMERA_KEY}/annotations"]
     assert len(ann.points) == 2 and len(ann.texts) == 2
     # stain centre (0.3, 0.2) on the board -> world (1.0, 0.0, 0.5): the principal point; extents 0.1 x 0.05 m at

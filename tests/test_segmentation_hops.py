@@ -87,7 +87,8 @@ def test_a_drift_in_contact_is_never_cut_but_a_hop_is():
         runs = split_at_lifts([(-1, 0, a), (0, a, b), (-1, b, n)], smooth, s.demo.rate_hz)
         assert sum(c == -1 for c, _, _ in runs) - 2 == cuts
         h = heights(smooth[a:b], smooth_positions(smooth, s.demo.rate_hz, deriv=1)[a:b], smooth)
-        assert np.percentile(np.abs(h - _board_z(s)[a:b]), 99) < 0.004  # the surface found is the board (within the 5 mm band floor)
+        # the surface found is the board (within the 5 mm band floor)
+        assert np.percentile(np.abs(h - _board_z(s)[a:b]), 99) < 0.004
 
 
 @pytest.fixture(scope="module")

@@ -74,7 +74,8 @@ def test_board_presets_are_wipeable_and_frames_round_trip(preset, model):
 
 
 @pytest.mark.parametrize("origin, quat, match", [
-    ((-0.5, 0.4, 0.25), (0.5, -0.5, -0.5, 0.5), "the robot.s shoulder is .* in front of the board"),  # board behind the robot
+    # board behind the robot
+    ((-0.5, 0.4, 0.25), (0.5, -0.5, -0.5, 0.5), "the robot.s shoulder is .* in front of the board"),
     ((1.6, 0.4, 0.25), (0.5, 0.5, -0.5, -0.5), "the eraser cannot reach"),  # a wall board 1.6 m away
 ])
 def test_impossible_board_poses_are_refused_with_a_reason(origin, quat, match, model):

@@ -93,7 +93,8 @@ def run(runner, dt=DT):
     while runner.update(dt) == TransitionStatus.WORKING:
         t.append(runner.time_s)
         states.append(np.stack([runner.position_m, runner.velocity_m_s, runner.acceleration_m_s2]).copy())
-    return np.array(t), np.array(states), np.stack([runner.position_m, runner.velocity_m_s, runner.acceleration_m_s2]).copy()
+    final = np.stack([runner.position_m, runner.velocity_m_s, runner.acceleration_m_s2]).copy()
+    return np.array(t), np.array(states), final
 
 
 def mapped(mp, start, goal):

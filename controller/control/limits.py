@@ -89,8 +89,8 @@ def joint_margin_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max:
     the depth so it is continuous too).
     """
     out = np.empty(len(q))
-    margin_torque_into(np.asarray(q, float), np.asarray(dq, float), np.asarray(q_min, float),
-                       np.asarray(q_max, float), float(margin_rad), float(stiffness_nm_rad), float(damping_nm_s_rad), out)
+    margin_torque_into(np.asarray(q, float), np.asarray(dq, float), np.asarray(q_min, float), np.asarray(q_max, float),
+                       float(margin_rad), float(stiffness_nm_rad), float(damping_nm_s_rad), out)
     return out
 
 

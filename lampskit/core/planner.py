@@ -175,7 +175,8 @@ def entry_phase(skill: Skill, wipe: Wipe, from_m: np.ndarray, n_candidates: int 
     return float(phases[int(np.argmax(score))])
 
 
-def exit_phase_delay(skill: Skill, wipe: Wipe, phase_rad: float, towards_m: np.ndarray, n_candidates: int = 72) -> float:
+def exit_phase_delay(skill: Skill, wipe: Wipe, phase_rad: float, towards_m: np.ndarray,
+                     n_candidates: int = 72) -> float:
     """Extra phase [rad], in [0, 2 pi), to keep wiping so that the tool leaves towards ``towards_m``.
 
     Once a stain is clean (kappa = 1) a person finishes the stroke that

@@ -130,7 +130,8 @@ class PlannerParams:
         if not 0.05 <= self.min_transition_s <= 10:
             raise PlanningError(f"min_transition_s must be in [0.05, 10] s, got {self.min_transition_s}")
         if not 0.01 <= self.max_transition_speed_m_s <= 2.0:
-            raise PlanningError(f"max_transition_speed_m_s must be in [0.01, 2] m/s, got {self.max_transition_speed_m_s}")
+            raise PlanningError(
+                f"max_transition_speed_m_s must be in [0.01, 2] m/s, got {self.max_transition_speed_m_s}")
         if self.order not in ("shortest", "given"):
             raise PlanningError(f"order must be 'shortest' or 'given', got {self.order!r}")
 

@@ -9,8 +9,8 @@ surface it wipes on. :func:`split_at_lifts` cuts a periodic run ``(cluster, star
 1. the tool stands higher than the *contact band* above the run's own surface: a plane fitted to the run's
    samples (refitted to the samples within :data:`PLANE_KEEP` times the median distance from it, so a hop's
    samples do not tilt it), with the band :data:`~.contact.BAND_FACTOR` times that median distance (at least
-   :data:`~.contact.BAND_MIN_M`) plus :data:`~.contact.LIFT_MARGIN_M`, on the side the tool comes from (the side most of the whole
-   demo lies on: approaches and retracts);
+   :data:`~.contact.BAND_MIN_M`) plus :data:`~.contact.LIFT_MARGIN_M`, on the side the tool comes from (the side
+   most of the whole demo lies on: approaches and retracts);
 2. for at least :data:`~.contact.LIFT_MIN_S`, with at least :data:`SIDE_MIN_S` of the run in contact on each side (a
    lift at a run's end is its approach or retract, which step 6 trims);
 3. and the motion there does not recur: its median recurrence (step 6's, at the period of the strokes just

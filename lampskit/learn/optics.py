@@ -153,7 +153,8 @@ def _round(values: np.ndarray) -> np.ndarray:
     return out
 
 
-def _offers(dists: np.ndarray, ids: np.ndarray, core: np.ndarray, complete: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _offers(dists: np.ndarray, ids: np.ndarray, core: np.ndarray,
+            complete: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Offers of k-NN query rows, each row sorted by ``(offer, id)``.
 
     Parameters

@@ -9,9 +9,11 @@ stroke lasts as long as a quick hop), so :func:`gap_evidence` measures what surv
 ratio to the level at which it alone makes the cut (a ratio above 1 cuts):
 
 ``lift``
-    the highest the tool stays for :data:`~lampskit.learn.contact.LIFT_MIN_S` in the gap above the surface the strokes on both sides span (a plane through
-    their samples), over that surface's contact band (:func:`~lampskit.learn.contact.contact_band` of the strokes'
-    own heights plus :data:`~lampskit.learn.contact.LIFT_MARGIN_M`, at least :data:`MIN_LIFT_M`): a hop leaves the surface, a slow stroke does not;
+    the highest the tool stays for :data:`~lampskit.learn.contact.LIFT_MIN_S` in the gap above the surface the
+    strokes on both sides span (a plane through their samples), over that surface's contact band
+    (:func:`~lampskit.learn.contact.contact_band` of the strokes' own heights plus
+    :data:`~lampskit.learn.contact.LIFT_MARGIN_M`, at least :data:`MIN_LIFT_M`): a hop leaves the surface, a slow
+    stroke does not;
 ``jump``
     the in-plane distance between the centres of the strokes before and after (the middle of the box they span
     over :data:`CONTEXT_PERIODS` periods, wherever in a stroke the gap starts), over :data:`JUMP_SHARE` of the

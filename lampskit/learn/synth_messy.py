@@ -233,8 +233,8 @@ SLIDE_M = (0.18, 0.30)
 
 def draw_messy_take(seed: int, n_phases: int | None = None, rate_hz: float | None = None) -> MessyTake:
     """A random messy take: 1-4 wiping phases (unless ``n_phases``) of 8-16 strokes, each wandering, drifting,
-    with up to two slow strokes or pauses (at most one slow stroke), joined by hops (the most), lift-offs or slides, at one of
-    :data:`RATES_HZ` (unless ``rate_hz``) with 0.1-0.5 mm noise and up to 3 % of the samples dropped."""
+    with up to two slow strokes or pauses (at most one slow stroke), joined by hops (the most), lift-offs or slides,
+    at one of :data:`RATES_HZ` (unless ``rate_hz``) with 0.1-0.5 mm noise and up to 3 % of the samples dropped."""
     from lampskit.learn.synth import PAD_LENGTH_M
 
     rng = np.random.default_rng([seed, 50])

@@ -253,7 +253,8 @@ def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> li
         rec[rest] = np.max(rec)
         rec = median_filter(rec, size=max(1, period // 2) | 1, mode="nearest")
         level = REC_GAMMA * float(np.median(rec[a - lo : b - lo]))
-        stretches = [(s0, s1) for v, s0, s1 in runs_from_labels((rec < level).astype(int)) if v == 1 and s1 - s0 >= period]
+        stretches = [(s0, s1) for v, s0, s1 in runs_from_labels((rec < level).astype(int))
+                     if v == 1 and s1 - s0 >= period]
         if stretches:
             labels[a:b] = -1
             loose = rec < REC_GAMMA_LOOSE / REC_GAMMA * level
@@ -340,7 +341,8 @@ def extent_and_ratio(points: np.ndarray) -> tuple[float, float]:
     return extent, (path / extent if extent > 0 else 0.0)
 
 
-def check_periodic(runs: list[Run], smooth: np.ndarray, min_ratio: float) -> tuple[list[Run], list[tuple[int, int, str]]]:
+def check_periodic(runs: list[Run], smooth: np.ndarray,
+                   min_ratio: float) -> tuple[list[Run], list[tuple[int, int, str]]]:
     out: list[Run] = []
     rejected: list[tuple[int, int, str]] = []
     for c, a, b in runs:

@@ -38,11 +38,11 @@ safe under either damping law); if it dies without one, the watchdog (:mod:`robo
 
 Hold (a late or missing controller answer, ``hold``): the last command again while it is younger than
 ``stale_limit_s`` (one late answer must not step the torque), then the brake (:mod:`robot.lbr.brake`: the pad
-stopped in the board's plane, its press kept and ramped out); after ``hold_timeout_s`` the adapter disarms. A state whose commanded torque is no recent overlay of ours
-says the robot ran on an old message (ours do not reach the stack): the server reports no command applied
-for it (:meth:`LbrPort.applying`, ``check_applied``), so the controller stands still instead of winding
-up. Speed brake: the adapter declares the guard's joint speeds; the server holds above
-``speed_brake_share`` of them.
+stopped in the board's plane, its press kept and ramped out); after ``hold_timeout_s`` the adapter disarms. A
+state whose commanded torque is no recent overlay of ours says the robot ran on an old message (ours do not reach
+the stack): the server reports no command applied for it (:meth:`LbrPort.applying`, ``check_applied``), so the
+controller stands still instead of winding up. Speed brake: the adapter declares the guard's joint speeds; the
+server holds above ``speed_brake_share`` of them.
 
 The link (:mod:`robot.lbr.watches` cites the stack): liveness from the robot's clock (a lost FRI link leaves
 the stack re-publishing its last state): a stamp still for ``frozen_stamp_periods`` after our answer, a changed

@@ -37,9 +37,9 @@ class ExponentialFilter:
 
     alpha is the stack's (filters.cpp:23-28, :func:`robot.lbr.compensation.filter_alpha`): 0, so the output never
     moves, at a cutoff of 0 and of exactly the sample rate (filters.cpp:13-17 clamps the stored cutoff to 1 / T but
-    computes alpha from the argument). As the stack does (state.cpp:18,26 then 36-39): the first sample is filtered with the default filter
-    (alpha 0, so the output stays at the zero it was built with), then alpha is set from the cutoff and the
-    state's sample time.
+    computes alpha from the argument). As the stack does (state.cpp:18,26 then 36-39): the first sample is filtered
+    with the default filter (alpha 0, so the output stays at the zero it was built with), then alpha is set from the
+    cutoff and the state's sample time.
     """
 
     def __init__(self, cutoff_hz: float, n: int = N_JOINTS) -> None:
