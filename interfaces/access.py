@@ -194,8 +194,8 @@ def _token_rules(name: str, keys: Keys, role: str | None) -> tuple[list[dict[str
     """(rules, their ids) for liveliness tokens: everyone's are delivered (egress) under the cell's prefix; a role
     declares (ingress) only its services' ``alive/<service>`` (:data:`ROLE_SERVICES`); ``role`` None: every token
     (a relay)."""
-    rules = [{"id": f"tokens-out-{name}", "permission": "allow", "flows": ["egress"], "messages": ["liveliness_token"],
-              "key_exprs": [f"{keys.prefix}/**"]}]
+    rules: list[dict[str, Any]] = [{"id": f"tokens-out-{name}", "permission": "allow", "flows": ["egress"],
+                                    "messages": ["liveliness_token"], "key_exprs": [f"{keys.prefix}/**"]}]
     own = [f"{keys.prefix}/**"] if role is None else [keys.alive(s) for s in ROLE_SERVICES[role]]
     if own:  # Zenoh refuses a rule without keys
         rules.append({"id": f"tokens-in-{name}", "permission": "allow", "flows": ["ingress"],

@@ -38,9 +38,14 @@ import struct
 from array import array
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .access import role_and_cell
 from .errors import InterfaceError
+
+if TYPE_CHECKING:
+    from cryptography import x509
+    from cryptography.hazmat.primitives.asymmetric import ec
 
 #: Bytes of a command's MAC (HMAC-SHA256 truncated: 128 bits).
 MAC_BYTES = 16
@@ -63,9 +68,9 @@ class LocalIdentity:
 
     role: str
     cell: str | None
-    private_key: object
+    private_key: ec.EllipticCurvePrivateKey
     certificate_pem: bytes
-    ca_certificate: object
+    ca_certificate: x509.Certificate
 
 
 def load_identity(tls_ca: str, tls_certificate: str, tls_private_key: str) -> LocalIdentity | None:
@@ -74,6 +79,7 @@ def load_identity(tls_ca: str, tls_certificate: str, tls_private_key: str) -> Lo
         return None
     from cryptography import x509
     from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
     from cryptography.x509.oid import NameOID
 
     try:
@@ -83,6 +89,8 @@ def load_identity(tls_ca: str, tls_certificate: str, tls_private_key: str) -> Lo
         ca = x509.load_pem_x509_certificate(Path(tls_ca).read_bytes())
     except (OSError, ValueError) as exc:
         raise AuthError(f"identity files cannot be read: {exc}") from None
+    if not isinstance(key, ec.EllipticCurvePrivateKey):
+        raise AuthError(f"identity key {tls_private_key} is not an elliptic-curve key")
     cn = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
     role, cell = role_and_cell(str(cn[0].value) if cn else "")
     return LocalIdentity(role, cell, key, pem, ca)
@@ -103,8 +111,11 @@ def peer_public_key(certificate_pem: bytes, identity: LocalIdentity, role: str, 
     ca = identity.ca_certificate
     if cert.issuer != ca.subject:
         raise AuthError(f"certificate issued by {cert.issuer.rfc4514_string()}, not the cell's CA")
+    ca_key, algorithm = ca.public_key(), cert.signature_hash_algorithm
+    if not isinstance(ca_key, ec.EllipticCurvePublicKey) or algorithm is None:
+        raise AuthError("the cell's CA key is not an elliptic-curve key, or the certificate names no hash")
     try:
-        ca.public_key().verify(cert.signature, cert.tbs_certificate_bytes, ec.ECDSA(cert.signature_hash_algorithm))
+        ca_key.verify(cert.signature, cert.tbs_certificate_bytes, ec.ECDSA(algorithm))
     except InvalidSignature:
         raise AuthError("certificate not signed by the cell's CA") from None
     now = now or dt.datetime.now(dt.UTC)
@@ -182,9 +193,9 @@ def check_release(identity: LocalIdentity, prefix: str, certificate_pem: bytes, 
         key.verify(signature, _release_payload(prefix, wall_ns, reason, source), ec.ECDSA(hashes.SHA256()))
     except InvalidSignature:
         raise AuthError("signature does not match the operator's certificate") from None
-    now_ns = dt.datetime.now(dt.UTC).timestamp() * 1e9 if now_ns is None else now_ns
-    if abs(now_ns - wall_ns) > RELEASE_MAX_AGE_S * 1e9:
-        raise AuthError(f"stamped {abs(now_ns - wall_ns) / 1e9:.0f} s from now (a replay, or clocks apart)")
+    now = dt.datetime.now(dt.UTC).timestamp() * 1e9 if now_ns is None else now_ns
+    if abs(now - wall_ns) > RELEASE_MAX_AGE_S * 1e9:
+        raise AuthError(f"stamped {abs(now - wall_ns) / 1e9:.0f} s from now (a replay, or clocks apart)")
     if wall_ns <= last_wall_ns:
         raise AuthError("not newer than the last release taken (a replay)")
 

@@ -292,7 +292,7 @@ def declared_bounds(cls: type) -> list[tuple[str, type, float, float]]:
     """(field, int or float, lo, hi) of every field of dataclass ``cls`` declared with :func:`In`."""
     if cls not in _DECLARED:
         hints = typing.get_type_hints(cls, include_extras=True)
-        out = []
+        out: list[tuple[str, type, float, float]] = []
         for f in fields(cls):
             hint = hints.get(f.name)
             if typing.get_origin(hint) is not Annotated:

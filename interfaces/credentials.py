@@ -202,7 +202,7 @@ def _load_ca(folder: Path):
 
 
 def _issue_all(directory: Path, plan: dict[str, tuple[Path, str]], ca_key, ca_cert, hosts: tuple[str, ...],
-               days: int) -> None:
+               days: float) -> None:
     """Issue each common name of ``plan`` (name -> (folder, role)) into its folder, with the CA's certificate."""
     ca_pem = (directory / CA_FOLDER / CA_FILE).read_bytes()
     for name, (folder, role) in plan.items():

@@ -273,8 +273,10 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
     passes: int = 0
 
     def __post_init__(self) -> None:
-        _finite("centre_board_m", self.centre_board_m, 2), _finite("centre_world_m", self.centre_world_m, 3)
-        _finite("extent_board_m", self.extent_board_m, 2), _finite("size_m", (self.size_m,))
+        _finite("centre_board_m", self.centre_board_m, 2)
+        _finite("centre_world_m", self.centre_world_m, 3)
+        _finite("extent_board_m", self.extent_board_m, 2)
+        _finite("size_m", (self.size_m,))
         if not isinstance(self.colour, str) or len(self.colour) > 16:
             raise ValueError(f"colour must be an ink name of at most 16 characters, got {self.colour!r}")
         if self.size_m <= 0 or self.passes < 0:

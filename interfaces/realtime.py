@@ -165,7 +165,8 @@ def apply_realtime(request: RealtimeRequest | None = None) -> RealtimeResult:
         parts.append(_affinity(request.cpus))
     report = "; ".join(parts)
     log.info("loop thread: %s", report)
-    return RealtimeResult(request.priority if fifo.startswith("SCHED_FIFO") else 0, mlock == "memory locked",
+    fifo_priority = request.priority if request.priority is not None and fifo.startswith("SCHED_FIFO") else 0
+    return RealtimeResult(fifo_priority, mlock == "memory locked",
                           report, raised)
 
 

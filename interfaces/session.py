@@ -171,20 +171,21 @@ class Latest(Generic[M]):
         self._decode = Decoder(msg_type)
         # Zenoh keeps the newest ``depth`` samples itself: no Python runs per sample (a 1 kHz stream read at
         # 10 Hz costs a decode per sample only when taken)
-        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(depth))
+        self._sub: zenoh.Subscriber | None = session.declare_subscriber(key, zenoh.handlers.RingChannel(depth))
         self.received = 0
         self._bad = _BadSamples(key)
         self.bad = self._bad.bad
 
     def take(self) -> M | None:
-        """The newest valid message not yet taken, or None; never blocks, never raises on bad data."""
-        sample = self._sub.try_recv()
+        """The newest valid message not yet taken, or None (also once closed); never blocks, never raises on bad
+        data."""
+        sample = None if self._sub is None else self._sub.try_recv()
         return None if sample is None else self._decoded(sample)
 
     def take_all(self) -> list[M]:
         """Every valid sample held (at most ``depth``, the newest), oldest first; never blocks."""
-        out = []
-        while (sample := self._sub.try_recv()) is not None:
+        out: list[M] = []
+        while self._sub is not None and (sample := self._sub.try_recv()) is not None:
             if (msg := self._decoded(sample)) is not None:
                 out.append(msg)
         return out
@@ -254,7 +255,7 @@ class Inbox(Generic[M]):
         self.bad = self._bad.bad
         self.received = 0
         self.replaced = 0  #: samples pushed out unread by newer ones (the reader did not keep up)
-        self._sub = session.declare_subscriber(key, self._on_sample)
+        self._sub: zenoh.Subscriber | None = session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
@@ -317,7 +318,7 @@ class ServiceNode:
         self.max_message_bytes = max_message_bytes  # None: the cell's (interfaces.message_limits)
         self.keys: Keys = settings.keys
         self._session: zenoh.Session | None = None
-        self._token = None
+        self._token: zenoh.LivelinessToken | None = None
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._readers: list[Latest | Inbox] = []
         #: how this node joined, carried by every status it publishes (:mod:`interfaces.service_security`)
@@ -353,7 +354,7 @@ class ServiceNode:
         pub.put(encode(msg))
 
     def _with_security(self, msg: Message) -> Message:
-        if type(msg) in (ServiceStatus, ControllerStatus) and not msg.security:
+        if isinstance(msg, (ServiceStatus, ControllerStatus)) and not msg.security:
             return msgspec.structs.replace(msg, security=self.security)
         return msg
 

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 
-def write_atomic(path: str | os.PathLike, write: Callable[[BinaryIO], None], mode: int | None = None) -> Path:
+def write_atomic(path: str | os.PathLike, write: Callable[[BinaryIO], object], mode: int | None = None) -> Path:
     """Write ``path`` through ``write(fileobj)`` into a temporary file in the same folder, then rename.
 
     The folder must exist. On any exception the temporary file is removed

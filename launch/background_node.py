@@ -10,12 +10,17 @@ from __future__ import annotations
 import sys
 import threading
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 from lampskit.errors import LampsError
 
+if TYPE_CHECKING:
+    from interfaces.config import ZenohSettings
+    from interfaces.session import ServiceNode
+
 
 def open_background_node(prog: str, service: str, args, cells: tuple[str, ...] = ()
-                         ) -> tuple[object, object, threading.Event] | None:
+                         ) -> tuple[ServiceNode, ZenohSettings, threading.Event] | None:
     """(node, settings, stop event) for ``service``, or None after printing ``<prog>: error: ...``.
 
     args : parsed options with ``config`` and the options of ``interfaces.config.add_zenoh_options``.

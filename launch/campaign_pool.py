@@ -38,6 +38,9 @@ class Worker:
         self._proc = subprocess.Popen([sys.executable, "-m", "launch.campaign_worker"], stdin=subprocess.PIPE,
                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1,
                                       env={**os.environ, "MPLBACKEND": "Agg"})
+        stdin, stdout, stderr = self._proc.stdin, self._proc.stdout, self._proc.stderr
+        assert stdin is not None and stdout is not None and stderr is not None  # all three piped above
+        self._stdin, self._stdout, self._stderr = stdin, stdout, stderr
         self._last_words: deque[str] = deque(maxlen=20)
         self._answers: queue.Queue[dict | None] = queue.Queue()
         threading.Thread(target=self._read_answers, daemon=True, name="campaign-worker-answers").start()
@@ -48,7 +51,7 @@ class Worker:
         return self._proc.poll() is None
 
     def _read_answers(self) -> None:
-        for line in self._proc.stdout:
+        for line in self._stdout:
             try:
                 self._answers.put(json.loads(line))
             except ValueError:
@@ -56,7 +59,7 @@ class Worker:
         self._answers.put(None)  # end of output: the worker is gone
 
     def _read_stderr(self) -> None:
-        for line in self._proc.stderr:
+        for line in self._stderr:
             if line.strip():
                 self._last_words.append(line.rstrip())
 
@@ -66,8 +69,8 @@ class Worker:
         job = {"seed": cell.seed, "stains": cell.stains, "board": cell.board, "wiping": cell.wiping,
                "plots": cell.plots, "skill": str(skill), "run_dir": str(run_dir), "max_duration_s": max_duration_s}
         try:
-            self._proc.stdin.write(json.dumps(job) + "\n")
-            self._proc.stdin.flush()
+            self._stdin.write(json.dumps(job) + "\n")
+            self._stdin.flush()
             answer = self._answers.get(timeout=max_duration_s + ANSWER_GRACE_S)
         except (OSError, ValueError):  # its stdin closed: it died before the cell
             answer = None
@@ -83,7 +86,7 @@ class Worker:
     def stop(self, timeout_s: float = 10.0) -> int | None:
         """End the worker (end of its input, then a kill); its exit code."""
         try:
-            self._proc.stdin.close()
+            self._stdin.close()
         except OSError:
             pass
         try:

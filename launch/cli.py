@@ -129,7 +129,7 @@ def _learn(a, out: Path, echo, stop_requested: threading.Event) -> Path:
     if a.demo:
         if not Path(a.demo.split("#")[0]).is_file():
             raise UpError(f"--demo {a.demo}: no such file")
-        argv = (*lamps, "learn", a.demo, "-o", str(learn / "skill.json"), "--plots", str(learn))
+        argv: tuple[str, ...] = (*lamps, "learn", a.demo, "-o", str(learn / "skill.json"), "--plots", str(learn))
     else:  # the controller's own default: the bundled synthetic demonstration, 3 stains, seed 0
         argv = (*lamps, "demo", "--stains", "3", "--seed", "0", "--out", str(learn))
     child = Child("learn", argv, {"MPLBACKEND": "Agg"}, out / "logs", echo)
@@ -261,8 +261,7 @@ def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, o
         from .site import clients_of_router
 
         local = clients_of_router(local, router)
-    robot_id = next((s.environment.get("LAMPS_ROBOT_ID") for s in local if s.environment.get("LAMPS_ROBOT_ID")),
-                    "iiwa")
+    robot_id = next((rid for s in local if (rid := s.environment.get("LAMPS_ROBOT_ID"))), "iiwa")
     access = any(s.environment.get("LAMPS_ZENOH_ACCESS_CONTROL", "false").lower() == "true" for s in local)
     return _Cell(services=local, env={k: v for k, v in board_vars.items() if k.startswith("LAMPS__")},
                  robot_id=robot_id, skill=skill, out=out, credentials=credentials, access_control=access, router=router)

@@ -109,13 +109,13 @@ def _braced(text: str, start: int, variables: Mapping[str, str], where: str) -> 
     value = variables.get(name)
     missing = value is None or (op.startswith(":") and value == "")
     if op.endswith("-"):
-        result = _interp(arg_text, 0, variables, where) if missing else value
+        result = _interp(arg_text, 0, variables, where) if missing else (value or "")
     elif op.endswith("?"):
         if missing:
             reason = _interp(arg_text, 0, variables, where)
             raise ConfigError(f"{where}: required variable {name} is missing a value"
                               + (f": {reason}" if reason else ""))
-        result = value
+        result = value or ""
     else:  # "+"
         result = (value or "") if missing else _interp(arg_text, 0, variables, where)
     return result, end + 1

@@ -165,8 +165,8 @@ class LiveView:
         if key not in self._decoders:
             cell = cell_of_key(self.cells, key)
             t = message_type_of(cell, key) if cell is not None else None
-            self._decoders[key] = (Decoder(t), self.scenes[cell.prefix], len(cell.prefix) + 1) if t is not None \
-                else None
+            self._decoders[key] = (Decoder(t), self.scenes[cell.prefix], len(cell.prefix) + 1) \
+                if cell is not None and t is not None else None
         entry = self._decoders[key]
         if entry is None:
             self.counters["unknown_key"] += 1
@@ -221,13 +221,13 @@ def main(argv: list[str] | None = None) -> int:
                    help="address to serve on (default 127.0.0.1: this machine only; any other, e.g. 0.0.0.0 in a "
                         "container, needs a token)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"WebSocket port (default {DEFAULT_PORT})")
-    token = p.add_mutually_exclusive_group()
-    token.add_argument("--token-file", metavar="FILE",
-                       help=f"the token clients from other machines present (ws://HOST:PORT/?token=...): the "
-                            f"file's first line (default: ${TOKEN_ENV})")
-    token.add_argument("--token-from-identity", action="store_true",
-                       help="the token derived from the private key of the view's Zenoh identity (the same at every "
-                            "start with it; --print-token shows it)")
+    token_source = p.add_mutually_exclusive_group()
+    token_source.add_argument("--token-file", metavar="FILE",
+                              help=f"the token clients from other machines present (ws://HOST:PORT/?token=...): the "
+                                   f"file's first line (default: ${TOKEN_ENV})")
+    token_source.add_argument("--token-from-identity", action="store_true",
+                              help="the token derived from the private key of the view's Zenoh identity (the same at "
+                                   "every start with it; --print-token shows it)")
     p.add_argument("--print-token", action="store_true", help="print the token and the URL clients open, then exit")
     p.add_argument("--max-rate", type=float, default=100.0, metavar="HZ",
                    help="at most this many messages per second per topic (default 100)")
@@ -309,7 +309,7 @@ def _checked_token(a) -> str | None:
     return token
 
 
-def _print_token(a, token: str) -> int:
+def _print_token(a, token: str | None) -> int:
     host = "HOST" if a.host in ("0.0.0.0", "::", "") else a.host
     print(token)
     print(f"clients from other machines open ws://{host}:{a.port}/?token={token}", file=sys.stderr)

@@ -119,6 +119,8 @@ class Budget:
         for cell in cells:
             for suffix, (fraction, always) in SHARES.items():
                 t = message_type_of(cell, f"{cell.prefix}/{suffix.replace('*', 'x')}")
+                if t is None:
+                    raise ValueError(f"the recorder's share {suffix!r} is no message key of the cell")
                 name = f"{cell.prefix}/{suffix}"
                 self.accounts[name] = Account(
                     name, int(budget_bytes * fraction / len(cells)), max(int(queue_bytes * fraction / len(cells)),

@@ -43,7 +43,8 @@ _COMPRESSED_IMAGE_SCHEMA = {
 
 def message_type_of(keys: Keys, key: str) -> type[Message] | None:
     """The message type published on ``key`` (None for keys the contract does not define)."""
-    table = {keys.robot_state: RobotState, keys.robot_command: TorqueCommand, keys.perception_stains: Stains,
+    table: dict[str, type[Message]] = {
+             keys.robot_state: RobotState, keys.robot_command: TorqueCommand, keys.perception_stains: Stains,
              keys.perception_status: ServiceStatus, keys.perception_debug: CameraFrame,
              keys.controller_status: ControllerStatus, keys.controller_trace: ControllerTrace,
              keys.controller_estop: Estop, keys.controller_estop_release: Estop, keys.sim_truth: SimTruth,
@@ -143,7 +144,7 @@ def _trace_rows(key: str, msg: ControllerTrace, t_ns: int):
     for k in range(start, msg.n_rows, TRACE_PLOT_EVERY):
         # a value that is not finite is left out (a gap in the plot): JSON has no NaN, and a plain "number" type
         # is what Foxglove / Lichtblick build a plottable field from (a ["number", "null"] union is not)
-        row = {"tick": msg.first_tick + k}
+        row: dict[str, float] = {"tick": msg.first_tick + k}
         row.update((c, float(v)) for c, v in zip(cols, rows[k]) if np.isfinite(v))
         # each row at its own time: the batch's receipt less how much earlier the tick was (controller clock)
         back_ns = int((t[-1] - t[k]) * 1e9) if t is not None and np.isfinite(t[-1] - t[k]) else 0

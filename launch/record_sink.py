@@ -21,7 +21,7 @@ import time
 import zlib
 from collections import Counter
 from pathlib import Path
-from typing import Any
+from typing import IO, Any, cast
 
 import msgspec
 import zstandard as zstd
@@ -75,8 +75,12 @@ class McapSink:
         """A new MCAP file at ``path``, or into the open binary ``stream`` (not closed by :meth:`finish`)."""
         self.path = path
         self._own = stream is None
-        self._f = _Counted(open(path, "wb") if stream is None else stream)
-        self._w = Writer(self._f, chunk_size=CHUNK_BYTES)
+        if stream is None:
+            if path is None:
+                raise ValueError("McapSink needs a path or a stream")
+            stream = open(path, "wb")  # closed by finish()
+        self._f = _Counted(stream)
+        self._w = Writer(cast(IO[bytes], self._f), chunk_size=CHUNK_BYTES)  # _Counted: a binary stream that counts
         self._last_flush = time.monotonic()
         self._w.start(profile="", library=library)
         self._schemas: dict[str, int] = {}

@@ -100,8 +100,8 @@ def sources_section(run: _Run, recording: dict[str, Any], counts: dict[str, dict
         missing = {s: sum(counts[s]["dropped"].get(r, 0) for r in LOST)
                    for s in suffixes if s in recording["incomplete"]}
         copied = figure in FINAL_FIGURES and any(newest_is_a_copy(s) for s in suffixes)
-        entry = {"from": "self-reports" if copied else "recording",
-                 "complete": None if recording["account"] != "final" else not missing}
+        entry: dict[str, Any] = {"from": "self-reports" if copied else "recording",
+                                 "complete": None if recording["account"] != "final" else not missing}
         if missing:
             entry["missing"] = missing
         out[figure] = entry

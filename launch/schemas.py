@@ -60,6 +60,8 @@ def _schema(t: mi.Type) -> dict[str, Any]:
 
 def _struct(cls: type) -> dict[str, Any]:
     info = mi.type_info(cls)
+    if not isinstance(info, mi.StructType):
+        raise TypeError(f"no JSON schema for {cls!r}: not a message (a msgspec Struct)")
     props = {f.name: _schema(f.type) for f in info.fields}
     required = [f.name for f in info.fields if f.required]
     out: dict[str, Any] = {"type": "object", "title": f"lamps.{cls.__name__}", "properties": props}

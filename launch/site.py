@@ -23,8 +23,12 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from lampskit.errors import LampsError
+
+if TYPE_CHECKING:
+    import zenoh
 
 #: The command every child runs: this interpreter and the console script's module.
 LAMPS = (sys.executable, "-m", "interfaces.cli")
@@ -201,7 +205,7 @@ class SiteView:
         self._status: dict = {}
         self._truth: dict = {}
         self._first_dirt: dict = {}
-        self._session = None
+        self._session: zenoh.Session | None = None
 
     def __enter__(self) -> SiteView:
         import zenoh
@@ -215,13 +219,13 @@ class SiteView:
         settings = ZenohSettings(mode="client", connect=(self.endpoint,), cells=self.cells, access_control=True,
                                  identity=str(self.creds / SITE_VIEWER))
         try:
-            self._session = zenoh.open(zenoh_config(settings))
+            session = self._session = zenoh.open(zenoh_config(settings))
         except zenoh.ZError as exc:
             raise SiteError(f"cannot join the router at {self.endpoint} as {SITE_VIEWER}: {exc}") from None
         for cell in self.cells:
             keys = Keys.for_robot(cell)
-            self._readers[cell] = (Latest(self._session, keys.controller_status, ControllerStatus),
-                                   Latest(self._session, keys.sim_truth, SimTruth))
+            self._readers[cell] = (Latest(session, keys.controller_status, ControllerStatus),
+                                   Latest(session, keys.sim_truth, SimTruth))
         return self
 
     def __exit__(self, *exc) -> None:

@@ -42,7 +42,11 @@ import threading
 import time
 from dataclasses import dataclass, field
 from http import HTTPStatus
+from typing import TYPE_CHECKING
 from urllib.parse import parse_qs, urlsplit
+
+if TYPE_CHECKING:
+    from websockets.asyncio.server import ServerConnection
 
 log = logging.getLogger(__name__)
 
@@ -92,7 +96,7 @@ def _digest(text: str) -> bytes:
 
 @dataclass(eq=False)  # hashed by identity: one per connection
 class _Client:
-    ws: object
+    ws: ServerConnection
     subs: dict[int, int] = field(default_factory=dict)  # channel id -> the client's subscription id
     queue: asyncio.Queue[bytes | str] = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
 
@@ -163,9 +167,10 @@ class FoxgloveWsServer:
 
     async def _serve(self, host: str, port: int) -> None:
         from websockets.asyncio.server import serve
+        from websockets.typing import Subprotocol
 
         self._stop_event = asyncio.Event()
-        async with serve(self._handler, host, port, subprotocols=list(SUBPROTOCOLS), max_size=2**20,
+        async with serve(self._handler, host, port, subprotocols=[Subprotocol(s) for s in SUBPROTOCOLS], max_size=2**20,
                          compression=None, process_request=self._admit) as server:
             self.port = server.sockets[0].getsockname()[1]
             self._ready.set()
