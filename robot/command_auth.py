@@ -68,26 +68,27 @@ class CommandAuth:
     def housekeeping(self) -> None:
         """Introduce the robot side when due and take the controllers' introductions (off the 1 kHz path's
         critical part: at most a few per second, each an ECDH)."""
-        if self.identity is None:
+        identity, intros = self.identity, self._intros
+        if identity is None or intros is None:
             return
         now = time.monotonic()
         if now >= self._next_intro:
             self._next_intro = now + INTRODUCE_EVERY_S
             self.node.publish(self.node.keys.robot_introduction, Introduction(
-                stamp_ns=time.monotonic_ns(), role="robot", certificate=self.identity.certificate_pem,
+                stamp_ns=time.monotonic_ns(), role="robot", certificate=identity.certificate_pem,
                 nonce=self.nonce))
-        while (intro := self._intros.get(0.0)) is not None:
-            self._take_introduction(intro)
+        while (intro := intros.get(0.0)) is not None:
+            self._take_introduction(intro, identity)
 
-    def _take_introduction(self, intro: Introduction) -> None:
+    def _take_introduction(self, intro: Introduction, identity: LocalIdentity) -> None:
         if intro.session in self._keys:
             return
         try:
-            key = peer_public_key(intro.certificate, self.identity, "controller")
+            key = peer_public_key(intro.certificate, identity, "controller")
         except AuthError as exc:
             self._refuse("controller_introductions_refused", str(exc))
             return
-        self._keys[intro.session] = CommandMac(command_key(self.identity, key, intro.session, self.nonce))
+        self._keys[intro.session] = CommandMac(command_key(identity, key, intro.session, self.nonce))
         while len(self._keys) > MAX_SESSIONS:
             self._keys.popitem(last=False)
         log.info("controller session %s introduced and proven", intro.session[:40] or "?")

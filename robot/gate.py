@@ -77,8 +77,10 @@ class CommandGate:
     def _limit_rate(self, elapsed_s: float | None) -> None:
         self.rated = self._have_prev
         rate = self._rates[self.touching]
-        late = elapsed_s is not None and not self._held  # the cycles in between ran on the last command
-        max_step = rate * max(self._dt_s, elapsed_s) if late else rate * self._dt_s
+        if elapsed_s is not None and not self._held:  # late: the cycles in between ran on the last command
+            max_step = rate * max(self._dt_s, elapsed_s)
+        else:
+            max_step = rate * self._dt_s
         step = self._step
         np.subtract(self.tau, self._prev, out=step)
         if self._have_prev and np.abs(step, out=step).max() > max_step:

@@ -165,9 +165,9 @@ class RobotGuard:
                 self._last["press_speed"] = press
             entered += self._pad_bands(self._ahead("tool_speed", v), self._ahead("press_speed", press), v, press)
         if lim.force_cap_n > 0:
-            ahead = self._ahead("contact_force", self.force_n)
-            if b["contact_force"].update(ahead / lim.force_cap_n, self.force_n / lim.force_cap_n):
-                self.entry_value["contact_force"] = ahead
+            force_ahead = self._ahead("contact_force", self.force_n)
+            if b["contact_force"].update(force_ahead / lim.force_cap_n, self.force_n / lim.force_cap_n):
+                self.entry_value["contact_force"] = force_ahead
                 entered += ("contact_force",)
         return self._count(entered, t_s)
 
@@ -178,7 +178,8 @@ class RobotGuard:
         instead. Returns what it engaged, as :meth:`observe` does (nothing without a model)."""
         if self.tool is None or not self._predicts:
             return ()
-        tool, entered = self.tool, ()
+        tool = self.tool
+        entered: tuple[str, ...] = ()
         dq_next = tool.predict(q, dq, tau_nm, dt_s)
         if self.joint_cap is not None:
             np.abs(dq_next, out=self._speed)
@@ -201,11 +202,14 @@ class RobotGuard:
         """The press speed [m/s] of a pad (at its last update's pose) moving at ``v``, ``w`` (3,): its fastest corner
         into the surface while near it, else 0 (and 0 for a pad moving away: only a press is a risk)."""
         tool = self.tool
-        return max(self.plane.approach(v, w, tool.R, self.limits.pad_half_m), 0.0) if self._near else 0.0
+        if tool is None or not self._near:
+            return 0.0
+        return max(self.plane.approach(v, w, tool.R, self.limits.pad_half_m), 0.0)
 
     def _pad_bands(self, tool_ahead: float, press_ahead: float, tool_now: float, press_now: float) -> tuple[str, ...]:
         """Move the tool- and press-speed bands (speeds [m/s] ahead and now); the names of those engaged."""
-        lim, entered = self.limits, ()
+        lim = self.limits
+        entered: tuple[str, ...] = ()
         for name, limit, ahead, now in (("tool_speed", lim.tool_speed_m_s, tool_ahead, tool_now),
                                         ("press_speed", lim.press_speed_m_s, press_ahead, press_now)):
             if limit > 0 and self.bands[name].update(ahead / limit, now / limit):

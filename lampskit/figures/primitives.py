@@ -98,13 +98,13 @@ def _with_context(before: PeriodicEntry | None, after: PeriodicEntry | None, ent
     t_a = T + np.arange(1, k + 1) * DT_S
     if before is not None:
         mp_b = before.mp
-        pre = periodic_state(mp_b, mp_b.phase_end_rad + mp_b.omega_rad_s * t_b)
+        pre: tuple[np.ndarray, ...] = periodic_state(mp_b, mp_b.phase_end_rad + mp_b.omega_rad_s * t_b)
     else:
         pre = tuple(np.repeat(x[:1], k, axis=0) * (1 if i == 0 else 0) for i, x in
                     enumerate((tr.position_m, tr.velocity_m_s, tr.acceleration_m_s2)))
     if after is not None:
         mp_a = after.mp
-        post = periodic_state(mp_a, entry_phase + mp_a.omega_rad_s * (t_a - T))
+        post: tuple[np.ndarray, ...] = periodic_state(mp_a, entry_phase + mp_a.omega_rad_s * (t_a - T))
     else:
         post = tuple(np.repeat(x[-1:], k, axis=0) * (1 if i == 0 else 0) for i, x in
                      enumerate((tr.position_m, tr.velocity_m_s, tr.acceleration_m_s2)))
