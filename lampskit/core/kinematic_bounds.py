@@ -75,7 +75,7 @@ def bounded_duration(mp, start, goal, duration_s: float, transform: np.ndarray, 
     boundary states do not scale, so each step re-evaluates (a few closed-form samplings, ~1 ms each).
     """
     T, longest = duration_s, duration_s * params.max_transition_stretch
-    best = None
+    best: tuple[float, tuple[float, float, float], float] | None = None
     for _ in range(12):
         peaks = trajectory_peaks(plan_transition_mp(mp, start, goal, T, transform))
         excess = max(peaks[0] / params.max_speed_m_s, np.sqrt(peaks[1] / params.max_accel_m_s2),
@@ -85,5 +85,6 @@ def bounded_duration(mp, start, goal, duration_s: float, transform: np.ndarray, 
         if excess <= BOUND_SHARE or T >= longest - 1e-9:
             break
         T = min(longest, T * float(np.clip(excess / BOUND_SHARE, 1.05, 2.0)))
+    assert best is not None  # the loop ran at least once
     T, peaks, excess = best
     return T, peaks, bool(excess <= 1.0)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -434,7 +435,8 @@ class PeriodicMP:
         unknown = sorted(set(data) - names - {"kind", "version"})
         if unknown:
             raise SkillFileError(f"periodic MP has unknown field(s) {unknown}")
-        kwargs = {name: _as_float(data[name], name, positive=name in _SCALARS_POSITIVE) for name in _SCALARS_POSITIVE}
+        kwargs: dict[str, Any] = {name: _as_float(data[name], name, positive=name in _SCALARS_POSITIVE)
+                                  for name in _SCALARS_POSITIVE}
         kwargs.update({name: _as_float(data[name], name, positive=False) for name in _SCALARS_ANY})
         kwargs.update({name: _as_array(data[name], name, ndim) for name, ndim in _ARRAYS})
         return cls(**kwargs)

@@ -54,7 +54,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -191,10 +191,10 @@ class TransitionalMP:
         start = _array_field("demo_start", self.demo_start, 2, (3, n))
         goal = _array_field("demo_goal", self.demo_goal, 2, (3, n))
         disp = _array_field("demo_displacement_m", self.demo_displacement_m, 1, (n,))
-        for name, value in (("weights", w), ("centres", c), ("widths", h), ("demo_start", start),
+        for name, array in (("weights", w), ("centres", c), ("widths", h), ("demo_start", start),
                             ("demo_goal", goal), ("demo_displacement_m", disp)):
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
         phi, forced = fundamental_tables(self.p, self.lambda_, w, c, h)
         end, hermite = hermite_table(np.concatenate([phi, forced, CORRECTION_TABLE], axis=2))
         object.__setattr__(self, "table_end", end)
@@ -259,7 +259,7 @@ class TransitionalMP:
         return cls(**values)
 
 
-def _scalar_field(name: str, value: object) -> float:
+def _scalar_field(name: str, value: Any) -> float:
     try:
         return float(value)
     except (TypeError, ValueError):

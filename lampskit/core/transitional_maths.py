@@ -122,8 +122,8 @@ def crossing_target_coefficients(u_s: np.ndarray, sigma_s: float) -> np.ndarray:
         with ``(g_0, g_1, g_2) = (g1, g2, g3)``.
     """
     u = np.asarray(u_s, dtype=float).reshape(-1)
-    a = 0.0 if math.isinf(sigma_s) else -1.0 / sigma_s**2
-    a = np.where(u > 0.0, 0.0, a)
+    a_neg = 0.0 if math.isinf(sigma_s) else -1.0 / sigma_s**2
+    a = np.where(u > 0.0, 0.0, a_neg)
     w0 = np.exp(0.5 * a * u * u)
     w1 = a * u * w0
     w2 = (a + a * a * u * u) * w0
@@ -153,7 +153,7 @@ def gate_and_gains(s: np.ndarray, p: float, lambda_: float) -> tuple[np.ndarray,
     gains : array, shape (3,)
         ``(p^3, 3 p^2, 3 p)``.
     """
-    return 1.0 - phase(s, lambda_), np.array([p**3, 3.0 * p**2, 3.0 * p])
+    return np.asarray(1.0 - phase(s, lambda_)), np.array([p**3, 3.0 * p**2, 3.0 * p])
 
 
 def fundamental_tables(
@@ -176,7 +176,7 @@ def fundamental_tables(
     h = 1.0 / n_steps
     s_half = np.arange(2 * n_steps + 1) * (0.5 * h)
     gate, gains = gate_and_gains(s_half, p, lambda_)
-    f_half = forcing_term(phase(s_half, lambda_), weights, centres, widths)  # (2K+1, n)
+    f_half = forcing_term(np.asarray(phase(s_half, lambda_)), weights, centres, widths)  # (2K+1, n)
     A = np.zeros((2 * n_steps + 1, 3, 3))
     A[:, 0, 1] = A[:, 1, 2] = 1.0
     A[:, 2, :] = -gate[:, None] * gains

@@ -53,17 +53,17 @@ def similarity_transform(from_vector: np.ndarray, to_vector: np.ndarray) -> np.n
     if len(a) == 2:
         c, s = a @ b, a[0] * b[1] - a[1] * b[0]
         return scale * np.array([[c, -s], [s, c]])
-    axis, c = np.cross(a, b), float(a @ b)
+    axis, cos = np.cross(a, b), float(a @ b)
     sin = float(np.linalg.norm(axis))
     if sin < 1e-12:
-        if c > 0:
+        if cos > 0:
             return scale * np.eye(3)
         perp = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
         perp /= np.linalg.norm(perp)
         return scale * (2.0 * np.outer(perp, perp) - np.eye(3))
     k = axis / sin
     kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return scale * (np.eye(3) + sin * kx + (1.0 - c) * kx @ kx)
+    return scale * (np.eye(3) + sin * kx + (1.0 - cos) * kx @ kx)
 
 
 @dataclass(frozen=True, eq=False)
