@@ -206,9 +206,8 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
         results = ray_cells(todo, cells, skill, out, max_duration_s, port_base, ray, jobs, network)
     else:
         results = _local_cells(todo, cells, skill, out, max_duration_s, port_base, jobs, network)
-    for k, report, run_dir, why in results:
-        rows[k] = row_of(cells[k], report, bounds[cells[k]], run_dir, why, stains[cells[k]], felt, v_plan)
-        r = rows[k]
+    for k, report, cell_dir, why in results:
+        rows[k] = r = row_of(cells[k], report, bounds[cells[k]], cell_dir, why, stains[cells[k]], felt, v_plan)
         finished += 1
         failed += not r["success"]
         _write_outputs(out, [x for x in rows if x is not None], command, extra)

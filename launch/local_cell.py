@@ -182,7 +182,8 @@ def run(services, extra_env: dict[str, str], out: Path, robot_id: str, skill: Pa
 def _step(cell: _Cell, status, truth, stains, max_duration_s: float, stop_requested: threading.Event,
           progress, t_start: float) -> tuple[str, str]:
     """Step the cell until it ends: (outcome for run.json, why)."""
-    ctrl, server, port, perception = cell.controller, cell.server, cell.port, cell.perception
+    ctrl, server, port, perception, sim = cell.controller, cell.server, cell.port, cell.perception, cell.sim
+    assert sim is not None  # built with the cell
     states = ctrl.lockstep_states()
     commands = server.start_lockstep()
     end = RunEnd()
@@ -192,7 +193,7 @@ def _step(cell: _Cell, status, truth, stains, max_duration_s: float, stop_reques
     seen_requests = 0
     next_look = 0.0
     ending: tuple[str, str] | None = None
-    lift_until = None
+    lift_until = float("inf")  # set with ``ending``
     while True:
         state = states.get(0.0)
         if state is not None:
@@ -202,7 +203,7 @@ def _step(cell: _Cell, status, truth, stains, max_duration_s: float, stop_reques
             raise LocalCellError(f"the controller gave no answer to state {server.steps} "
                                  f"(phase {ctrl.core.executor.phase}: {ctrl.core.executor.reason})")
         server.lockstep_cycle(cmd)
-        robot_s = cell.sim.time_ns * 1e-9
+        robot_s = sim.time_ns * 1e-9
         camera = port.camera
         if camera is not None and camera.requested > seen_requests:
             seen_requests = camera.requested

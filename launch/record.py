@@ -265,8 +265,10 @@ class Recorder:
             from .scene import cell_of_key
 
             cell = cell_of_key(self.cells, key)
-            entry = self._decoders[key] = (Decoder(message_type_of(cell, key)), self.scenes[cell.prefix],
-                                           len(cell.prefix) + 1)
+            t = message_type_of(cell, key) if cell is not None else None
+            if cell is None or t is None:
+                raise KeyError(f"{key} is no message key of the cells recorded")
+            entry = self._decoders[key] = (Decoder(t), self.scenes[cell.prefix], len(cell.prefix) + 1)
         return entry
 
     # -- the writer's thread ---------------------------------------------------------------------------------
@@ -365,7 +367,9 @@ class Recorder:
                     msg = payload.decoded(dec) if hasattr(payload, "decoded") else dec(payload.to_bytes())
                 except MessageDecodeError:
                     continue
-                self.sink.account = self.budget.account_of(key).name
+                acc = self.budget.account_of(key)
+                assert acc is not None  # a key kept by _keep_newest had its account then, and keeps it
+                self.sink.account = acc.name
                 self.sink.write(key, msg, t_ns)
                 added.append({"key": key, "log_time_ns": t_ns})
         self.sink.account = RECORDER_ACCOUNT

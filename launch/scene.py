@@ -37,6 +37,7 @@ import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -109,8 +110,24 @@ def _pose(p, R) -> fm.Pose:
     return fm.Pose(position=fm.Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])), orientation=_quat_xyzw(R))
 
 
-def _rpy(rpy: list[float]) -> np.ndarray:
+def _rpy(rpy: list[str]) -> np.ndarray:
     return pin.rpy.rpyToMatrix(*[float(v) for v in rpy])
+
+
+def _attr(el: ET.Element, name: str) -> str:
+    """Attribute ``name`` of the description's element ``el``; ValueError naming what is missing."""
+    value = el.get(name)
+    if value is None:
+        raise ValueError(f"the robot description's <{el.tag}> has no {name!r}")
+    return value
+
+
+def _rgba(col: ET.Element | None) -> tuple[float, float, float, float]:
+    """The colour of a ``<color>`` element (grey without one)."""
+    if col is None:
+        return (0.6, 0.6, 0.6, 1.0)
+    r, g, b, a = (float(v) for v in _attr(col, "rgba").split())
+    return r, g, b, a
 
 
 def _pose_matrix(pose) -> tuple[np.ndarray, np.ndarray]:
@@ -146,17 +163,19 @@ def urdf_visuals(urdf_path: str | Path = URDF_PATH) -> list[Visual]:
             mat = vis.find("material")
             col = mat.find("color") if mat is not None and mat.find("color") is not None else \
                 colours.get(mat.get("name")) if mat is not None else None
-            rgba = tuple(float(v) for v in col.get("rgba").split()) if col is not None else (0.6, 0.6, 0.6, 1.0)
+            rgba, name = _rgba(col), _attr(link, "name")
+            if geom is None:
+                raise ValueError(f"the robot description's link {name!r} has a <visual> without <geometry>")
             for shape in geom:
                 if shape.tag == "cylinder":
-                    r, h = float(shape.get("radius")), float(shape.get("length"))
-                    out.append(Visual(link.get("name"), p, R, "cylinder", (2 * r, 2 * r, h), rgba))
+                    r, h = float(_attr(shape, "radius")), float(_attr(shape, "length"))
+                    out.append(Visual(name, p, R, "cylinder", (2 * r, 2 * r, h), rgba))
                 elif shape.tag == "box":
-                    sx, sy, sz = (float(v) for v in shape.get("size").split())
-                    out.append(Visual(link.get("name"), p, R, "cube", (sx, sy, sz), rgba))
+                    sx, sy, sz = (float(v) for v in _attr(shape, "size").split())
+                    out.append(Visual(name, p, R, "cube", (sx, sy, sz), rgba))
                 elif shape.tag == "sphere":
-                    d = 2 * float(shape.get("radius"))
-                    out.append(Visual(link.get("name"), p, R, "sphere", (d, d, d), rgba))
+                    d = 2 * float(_attr(shape, "radius"))
+                    out.append(Visual(name, p, R, "sphere", (d, d, d), rgba))
     return out
 
 
@@ -230,7 +249,7 @@ class SceneBuilder:
         if self._last_tf_ns is not None and 0 <= robot_ns - self._last_tf_ns < TF_PERIOD_S * 1e9:
             return []
         self._last_tf_ns = robot_ns
-        out = [(self.topic_tf, self.arm_transforms(np.asarray(st.q_rad, float), t_ns))]
+        out: list[tuple[str, Any]] = [(self.topic_tf, self.arm_transforms(np.asarray(st.q_rad, float), t_ns))]
         if self._due("robot", t_ns):
             out.append((self.topic_robot, self.arm_geometry(t_ns)))
         return out
@@ -264,7 +283,7 @@ class SceneBuilder:
             else:
                 prims["spheres"].append(fm.SpherePrimitive(pose=_pose(v.p, v.R), size=size, color=col))
         entities = [fm.SceneEntity(timestamp=stamp, frame_id=self.frames + link, id=f"robot/{link}", frame_locked=True,
-                                   **prims)
+                                   cylinders=prims["cylinders"], cubes=prims["cubes"], spheres=prims["spheres"])
                     for link, prims in by_link.items()]
         return fm.SceneUpdate(entities=entities)
 
@@ -322,7 +341,7 @@ class SceneBuilder:
     def _on_frame(self, key: str, f: CameraFrame, t_ns: int) -> list:
         self._cameras[key] = f
         p, R = _pose_matrix(f.T_camera_to_world)
-        out = [(self.topic_tf, fm.FrameTransforms(transforms=[fm.FrameTransform(
+        out: list[tuple[str, Any]] = [(self.topic_tf, fm.FrameTransforms(transforms=[fm.FrameTransform(
             timestamp=_stamp(t_ns), parent_frame_id=self.world, child_frame_id=self.frames + camera_frame_id(f.camera),
             translation=fm.Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])), rotation=_quat_xyzw(R))]))]
         out.append((f"{key}/calibration", self.calibration(f, t_ns)))
