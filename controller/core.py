@@ -45,7 +45,7 @@ from .control.impedance import (
     task_stiffness,
 )
 from .control.kernels import reference_into, tool_in_board, trace_row
-from .control.limit_kernels import limit_torque
+from .control.limit_kernels import clearance_into, limit_torque
 from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
 from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
@@ -90,6 +90,12 @@ class ControllerCore:
         self.shaping = TaskShaping(normal_damping_1_s=f.normal_damping_1_s,
                                    max_position_error_m=params.limits.max_position_error_m,
                                    max_rotation_error_rad=params.limits.max_rotation_error_rad)
+        # the clearance posture (controller.control.limits.clearance_torque), into the shaping's nullspace torques
+        self._singular = np.zeros(self.model.nq)
+        self._singular[[j - 1 for j in params.limits.singular_joints if j <= self.model.nq]] = 1.0
+        self._clearance = np.zeros(self.model.nq)
+        if params.limits.clearance_stiffness_nm_rad > 0.0:
+            self.shaping.posture_nm = self._clearance
         self.q_rest: np.ndarray | None = None
         self._hold: tuple[np.ndarray, np.ndarray] | None = None
         self._since_start_s = 0.0
@@ -150,7 +156,8 @@ class ControllerCore:
         imp = self.p.impedance
         modes = task_modes(kin.Lambda, task_stiffness(imp), imp.damping_factor, self.mode_cap_rad_s,
                            self._modes_out)
-        shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3))
+        shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3), posture_nm=self._clearance)
+        clearance_into(q, self._dq, lim.q_min, lim.q_max, 0.5, self._singular, 0.3, 0.0, 0.0, self._clearance)
         impedance_torque(self.model, q, self._dq, Reference(), imp, q, True, shaping, kin, modes, self._terms)
         limit_torque(self._tau, q, self._dq, lim.q_min, lim.q_max, 0.1, 0.0, 0.0, self._speed_onset, 0.0, kin.M,
                      self._tau.copy(), self.shaper.tau_max, 1.0, kin.g, True, self._limit_work)
@@ -414,6 +421,10 @@ class ControllerCore:
         """Impedance torque plus the joint-limit repulsion and the joint-speed brake, then the rate and absolute
         limits (gravity outside the rate limit): two compiled calls, no allocation."""
         model, lim = self.model, self.p.limits
+        if self.shaping.posture_nm is not None:
+            clearance_into(q, dq, model.limits.q_min, model.limits.q_max, lim.clearance_zone_rad, self._singular,
+                           lim.singular_clearance_rad, lim.clearance_stiffness_nm_rad, lim.clearance_damping_nm_s_rad,
+                           self._clearance)
         terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.q_rest, not gravity_compensated,
                                  self.shaping, kin, self._task_modes(kin), self._terms)
         self.last_terms = terms

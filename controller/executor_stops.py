@@ -40,7 +40,8 @@ class ExecutorStops:
         jerk = self.planner.max_jerk_m_s3
         room = 2.0 * OVERRIDE_DOWN_RATE_1_S * float(np.linalg.norm(self._sp.a_xy))
         bounds = (self.planner.max_accel_m_s2, max(jerk - room, RETREAT_MIN_JERK_SHARE * jerk))
-        self._stage = Stage.UNPRESS if self.motion.brake(self.p.stop_s, self.f.ramp_s, bounds) else Stage.BRAKE
+        self._stage = (Stage.UNPRESS if self.motion.brake(self.p.stop_s, self.f.ramp_s, bounds, self.board)
+                       else Stage.BRAKE)
 
     def _stop(self, phase: Phase, reason: str, fast: bool = False) -> None:
         """Brake the in-plane motion, ramp the force out, lift off, hold (PAUSED, FAULT, ESTOP)."""
@@ -71,7 +72,8 @@ class ExecutorStops:
         self._stage = Stage.LIFT
 
     def _begin_lift(self, tool: ToolState) -> None:
-        self.motion.lift(tool)
+        if not self.motion.lift(tool, board=self.board):
+            self.counters["lifts_short_of_a_stretched_arm"] += 1
         if self.phase == Phase.RETREAT:
             self.current_mp = "retreat"
         self._stage = Stage.LIFT

@@ -33,6 +33,12 @@ from .reach import ArmReach
 
 #: An in-the-air stop takes at most this long [s] (its dip below the start height is <= 0.2 v T).
 AIR_BRAKE_S = 0.1
+#: A lift ends where the elbow stays at least this far from stretched straight [rad]: at A4 = 0 the arm's reach
+#: ends and its Jacobian loses a rank, and a lift along a board's normal that points away from the robot runs
+#: into it near the board's far edge (the arm then swings through the singular pose while the pad stands still).
+STRETCH_ROOM_RAD = 0.3
+#: ... but at least this far off the board [m], wherever that is.
+MIN_LIFT_M = 0.015
 
 
 class FreeMotion:
@@ -152,11 +158,14 @@ class FreeMotion:
         if self._turn is not None:
             self._turn.stop(duration_s)
 
-    def brake(self, duration_s: float, force_ramp_s: float, bounds: tuple[float, float] | None = None) -> bool:
+    def brake(self, duration_s: float, force_ramp_s: float, bounds: tuple[float, float] | None = None,
+              board: BoardPose | None = None) -> bool:
         """Bring the reference to rest C2-continuously: True in contact (in-plane, force to 0), False in the air.
 
         ``bounds`` (max acceleration [m/s^2], max jerk [m/s^3]): in contact, take longer than ``duration_s`` if
-        the in-plane stop needs it to stay within them (a retreat; a stop for safety keeps its duration).
+        the in-plane stop needs it to stay within them (a retreat; a stop for safety keeps its duration); with
+        ``board`` and :attr:`arm`, never so long that the pad coasts off the board or to where the elbow is
+        stretched (:meth:`roomy`).
 
         In the air, x, y and h stop within :data:`AIR_BRAKE_S`, never below
         the current height (a brake while descending must not carry the pad
@@ -164,26 +173,57 @@ class FreeMotion:
         """
         sp = self.setpoint
         if sp.contact:
+            reachable = None
+            if board is not None and self.arm is not None:
+                def reachable(xy: np.ndarray) -> bool:
+                    return bool(np.all(xy >= 0.0) and np.all(xy <= board.size_m)) and self.roomy(board, xy, sp.h)
             self._xy_brake = (brake_to_rest(sp.xy, sp.v_xy, sp.a_xy, duration_s) if bounds is None else
-                              bounded_brake_to_rest(sp.xy, sp.v_xy, sp.a_xy, duration_s, *bounds))
+                              bounded_brake_to_rest(sp.xy, sp.v_xy, sp.a_xy, duration_s, *bounds,
+                                                    reachable=reachable))
             self._force.restart(sp.force_n, 0.0, force_ramp_s)
             return True
         self._mover = brake_above(sp.xyh(), np.array([*sp.v_xy, sp.v_h]), np.array([*sp.a_xy, sp.a_h]),
                                   min(duration_s, AIR_BRAKE_S))
         return False
 
-    def lift(self, tool: ToolState, from_measured: bool = False) -> None:
+    def lift(self, tool: ToolState, from_measured: bool = False, board: BoardPose | None = None) -> bool:
         """Out of contact (from the measured height) or on from the air, up to ``standoff_m``; ``from_measured``:
         ``standoff_m`` above the measured height (a pad found pressing while the board model says it is in the
-        air: the model is off, so the lift goes by what is measured)."""
+        air: the model is off, so the lift goes by what is measured). With ``board`` and :attr:`arm`, only as
+        high as the elbow keeps :data:`STRETCH_ROOM_RAD` from stretched straight (at least :data:`MIN_LIFT_M`):
+        returns False when the lift was cut short so."""
         sp = self.setpoint
         h0 = tool.h if sp.contact or from_measured else sp.h
         v0 = 0.0 if sp.contact or from_measured else sp.v_h
         sp.contact, sp.force_n = False, 0.0
         goal_h = h0 + self.p.standoff_m if from_measured else max(self.p.standoff_m, h0)
+        reach_h = self._reachable_height(board, sp.xy, goal_h, min(h0 + MIN_LIFT_M, goal_h))
+        full = reach_h >= goal_h
+        goal_h = reach_h
         T = max(abs(goal_h - h0) / self.p.descend_speed_m_s, 0.3)
         self._mover = vertical_move(sp.xy, h0, goal_h, T, v0)
         sp.h, sp.v_h, sp.a_h = h0, v0, 0.0
+        return full
+
+    def roomy(self, board: BoardPose, xy: np.ndarray, h: float) -> bool:
+        """The pad at ``(xy, h)`` on ``board`` (2,) [m], turned as the setpoint is, leaves the elbow
+        :data:`STRETCH_ROOM_RAD` from stretched straight and within its limit (True without :attr:`arm`)."""
+        if self.arm is None:
+            return True
+        p, R = board.to_world(np.array([xy[0], xy[1], h])), self.setpoint.R
+        return self.arm.elbow_rad(p, R) >= STRETCH_ROOM_RAD and self.arm.elbow_room_rad(p, R) >= 0.0
+
+    def _reachable_height(self, board: BoardPose | None, xy: np.ndarray, goal_h: float, lowest_h: float) -> float:
+        """The highest height [m] up to ``goal_h`` above ``xy`` (2,) [m] that is :meth:`roomy`, scanned down in
+        5 mm steps to ``lowest_h``; ``goal_h`` without the arm or the board."""
+        if self.arm is None or board is None:
+            return goal_h
+        h = goal_h
+        while h > lowest_h:
+            if self.roomy(board, xy, h):
+                return h
+            h -= 0.005
+        return lowest_h
 
     def fly_to_survey(self, board: BoardPose) -> None:
         """To ``standoff_m`` above the look point of the whole board (:func:`look_point` of its corners), turning the

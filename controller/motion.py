@@ -12,6 +12,8 @@ from one orientation to another along the geodesic with a quintic time law;
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import math
 
 import numba as nb
@@ -124,9 +126,14 @@ def brake_peaks(v0: np.ndarray, a0: np.ndarray, durations_s: np.ndarray) -> tupl
 
 
 def bounded_brake_to_rest(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, duration_s: float, max_accel_m_s2: float,
-                          max_jerk_m_s3: float, stretch: float = 1.2, tries: int = 20) -> Quintic:
+                          max_jerk_m_s3: float, stretch: float = 1.2, tries: int = 20,
+                          reachable: Callable[[np.ndarray], bool] | None = None) -> Quintic:
     """:func:`brake_to_rest` over ``duration_s`` [s], or longer (``stretch`` times per try) until its acceleration
     and jerk stay within the bounds (the acceleration it starts with excepted); the last try if none does.
+
+    ``reachable(stop) -> bool``: where a brake may end (the arm's reach, the board); a longer brake coasts
+    further (``v0 T / 2``), so the first try within the bounds that ends where it may, else the first that ends
+    where it may even beyond the bounds (reach before smoothness), else ``duration_s``.
 
     All tries are checked at once in closed form (:func:`brake_peaks`), then one quintic is built: it runs in the
     tick the retreat starts, where building and sampling a quintic per try took 4x longer (p50 about 400 us
@@ -134,8 +141,17 @@ def bounded_brake_to_rest(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, durati
     start = float(np.linalg.norm(a0))
     durations = float(duration_s) * float(stretch) ** np.arange(tries)
     acc, jerk = brake_peaks(v0, a0, durations)
-    ok = np.flatnonzero((jerk <= max_jerk_m_s3) & (acc <= max(max_accel_m_s2, start)))
-    return brake_to_rest(p0, v0, a0, float(durations[ok[0]] if ok.size else durations[-1]))
+    within = (jerk <= max_jerk_m_s3) & (acc <= max(max_accel_m_s2, start))
+    if reachable is None:
+        ok = np.flatnonzero(within)
+        return brake_to_rest(p0, v0, a0, float(durations[ok[0]] if ok.size else durations[-1]))
+    p0, v0 = np.asarray(p0, float), np.asarray(v0, float)
+    ends = np.array([reachable(p0 + 0.5 * v0 * T) for T in durations])
+    for pick in (within & ends, ends):
+        ok = np.flatnonzero(pick)
+        if ok.size:
+            return brake_to_rest(p0, v0, a0, float(durations[ok[0]]))
+    return brake_to_rest(p0, v0, a0, float(durations[0]))
 
 
 def vertical_move(xy_m: np.ndarray, h0_m: float, h1_m: float, duration_s: float, v0_m_s: float = 0.0,

@@ -84,6 +84,11 @@ class LimitParams:
     torque_rate_nm_per_ms : largest change of a joint torque per ms [Nm/ms];
     joint_margin_rad : repulsion starts this close to a position limit
     [rad], with joint_margin_stiffness_nm_rad and joint_margin_damping_nm_s_rad;
+    clearance_zone_rad, singular_joints (1-based), singular_clearance_rad :
+    the nullspace posture keeps joints this far from their limits and the
+    listed joints this far from zero (the arm stretched at them), with
+    clearance_stiffness_nm_rad and clearance_damping_nm_s_rad (0 stiffness:
+    off; :func:`controller.control.limits.clearance_torque`);
     max_speed_m_s : the pad is braked above this Cartesian speed [m/s];
     reference_joint_speed_share : the skill is slowed down (time scaling)
     where its reference would ask a joint for more than this share of its
@@ -114,6 +119,11 @@ class LimitParams:
     joint_margin_rad: Annotated[float, In(0.01, 0.5)] = 0.12
     joint_margin_stiffness_nm_rad: Annotated[float, In(0.0, 5000.0)] = 300.0
     joint_margin_damping_nm_s_rad: Annotated[float, In(0.0, 500.0)] = 10.0
+    clearance_zone_rad: Annotated[float, In(0.01, 1.5)] = 0.5
+    singular_joints: tuple[int, ...] = (2, 4, 6)
+    singular_clearance_rad: Annotated[float, In(0.0, 1.0)] = 0.3
+    clearance_stiffness_nm_rad: Annotated[float, In(0.0, 500.0)] = 20.0
+    clearance_damping_nm_s_rad: Annotated[float, In(0.0, 100.0)] = 2.0
     max_speed_m_s: Annotated[float, In(0.05, 2.0)] = 0.6
     speed_brake_gain_n_s_m: Annotated[float, In(0.0, 5000.0)] = 200.0
     reference_joint_speed_share: Annotated[float, In(0.05, 10.0)] = 0.6
@@ -135,6 +145,13 @@ class LimitParams:
     def __post_init__(self) -> None:
         s = "controller.limits"
         check_declared(self, s)
+        joints = self.singular_joints
+        if not isinstance(joints, (list, tuple)) or not all(isinstance(j, int) and not isinstance(j, bool)
+                                                            and 1 <= j <= 7 for j in joints) \
+                or len(set(joints)) != len(joints):
+            raise ControlConfigError(f"{s}.singular_joints must be distinct joint numbers 1-7 (the iiwa: [2, 4, 6]), "
+                                     f"got {joints!r}")
+        object.__setattr__(self, "singular_joints", tuple(joints))
         if self.overload_slow_share >= self.overload_share:
             raise ControlConfigError(f"{s}.overload_slow_share must be below overload_share ({self.overload_share:g}), "
                               f"got {self.overload_slow_share:g}: the motion slows before the overload ends the run")

@@ -58,6 +58,8 @@ def numpy_law(k, q, dq, ref, params, q_rest, add_gravity, shaping, modes):
         F[:3] += shaping.extra_force_n
     kn = params.nullspace_stiffness_nm_rad
     tau0 = k["M"] @ (kn * (q_rest - q) - 2.0 * np.sqrt(kn) * dq)
+    if shaping.posture_nm is not None:
+        tau0 = tau0 + shaping.posture_nm
     projected = k["J"].T @ (Lam @ (k["J"] @ (k["M_inv"] @ tau0)))
     tau_null = tau0 - projected
     task = k["J"].T @ F

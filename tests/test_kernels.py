@@ -103,7 +103,8 @@ def test_the_impedance_law_equals_the_numpy_formulation(model, axis, extra, grav
         n = rng.normal(size=3)
         shaping = TaskShaping(force_axis=n / np.linalg.norm(n) if axis else None, press_n=8.0,
                               normal_damping_1_s=20.0, stiffness_scale=0.7, max_position_error_m=0.02,
-                              max_rotation_error_rad=0.2, extra_force_n=rng.normal(0, 5, 3) if extra else None)
+                              max_rotation_error_rad=0.2, extra_force_n=rng.normal(0, 5, 3) if extra else None,
+                              posture_nm=rng.normal(0, 3, model.nq) if extra else None)
         modes = task_modes(kin.Lambda, task_stiffness(params, 0.7), params.damping_factor, 80.0)
         q_rest = q + rng.normal(0, 0.2, model.nq)
         terms = impedance_torque(model, q, dq, ref, params, q_rest, gravity, shaping, kin, modes)

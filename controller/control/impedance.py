@@ -10,7 +10,8 @@ dynamically consistent generalised inverse Jbar = M^-1 J^T Lambda::
     D      = 2 zeta per mode of Lambda on K        (see :func:`task_modes`)
     tau    = J^T F + N^T tau_0 + C(q, dq) dq [+ g(q)]
     N^T    = I - J^T Jbar^T                        consistent nullspace projector
-    tau_0  = M (K_n (q_rest - q) - 2 sqrt(K_n) dq) posture
+    tau_0  = M (K_n (q_rest - q) - 2 sqrt(K_n) dq)  posture
+             + tau_c                               clearance (TaskShaping.posture_nm)
 
 The damping is designed on the modes of the task-space mass on the
 stiffness (double diagonalisation): each mode is damped with ratio zeta.
@@ -25,7 +26,10 @@ tracked motion (dJ dq is the pad's acceleration at zero joint acceleration,
 the velocity-product part); without it a 1 Hz circle of 5 cm radius is
 tracked 3-4x worse at the same stiffness. The projector keeps
 the posture term from pushing the pad (a plain pseudo-inverse projector
-does). Gravity is added only when the robot does not compensate it itself.
+does). The clearance tau_c (:func:`~.limit_kernels.clearance_into`: joints
+kept from their limits and from the arm's singular poses) is a posture
+term too, so it moves the arm only where the pad does not have to move.
+Gravity is added only when the robot does not compensate it itself.
 Orientation errors use the rotation matrix logarithm, which takes the
 shorter way and has no quaternion sign ambiguity.
 """
@@ -118,6 +122,7 @@ class ImpedanceTerms:
     _work: np.ndarray = field(default=None, repr=False)  # the kernel's scratch, (7, max(n, 6))
     _axis: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)  # shaping's vectors, copied
     _extra: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
+    _posture: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
 
 
 def pose_error(p_ref: np.ndarray, R_ref: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -137,7 +142,8 @@ class TaskShaping:
     along it. stiffness_scale : factor on K (and D by sqrt) for gain ramps.
     max_position_error_m, max_rotation_error_rad : the pose error is
     clipped to these lengths. extra_force_n : (3,) more force on the pad
-    [N] (world; e.g. a speed-limit brake).
+    [N] (world; e.g. a speed-limit brake). posture_nm : (n,) joint torques
+    [Nm] added to the posture, projected into the task's nullspace with it.
     """
 
     force_axis: np.ndarray | None = None
@@ -147,6 +153,7 @@ class TaskShaping:
     max_position_error_m: float = np.inf
     max_rotation_error_rad: float = np.inf
     extra_force_n: np.ndarray | None = None
+    posture_nm: np.ndarray | None = None
 
 
 _PLAIN = TaskShaping()
@@ -235,11 +242,15 @@ def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Refe
         out._axis[:] = axis
     if extra is not None:
         out._extra[:] = extra
+    posture = shaping.posture_nm
+    if posture is not None:
+        out._posture[:] = posture
     impedance_into(kin.M, kin.M_inv, kin.J, kin.Lambda, kin.twist, kin.drift, kin.nle, kin.g, kin.p, kin.R,
                    ref.p_m, ref.R, ref.twist, ref.accel,
                    out._axis, axis is not None, float(shaping.press_n),
                    float(shaping.normal_damping_1_s), float(shaping.max_position_error_m),
-                   float(shaping.max_rotation_error_rad), out._extra, extra is not None,
+                   float(shaping.max_rotation_error_rad), out._extra, extra is not None, out._posture,
+                   posture is not None,
                    modes.B, modes.k, modes.d, float(params.nullspace_stiffness_nm_rad), q_rest, q, dq,
                    bool(add_gravity),
                    out.tau_nm, out.wrench_task, out.pose_error, out.twist_error, out.tau_nullspace, out._work)
@@ -250,4 +261,4 @@ def new_terms(kin: Kinematics) -> ImpedanceTerms:
     """Preallocated :class:`ImpedanceTerms` for :func:`impedance_torque`'s ``out`` (pose arrays: ``kin``'s)."""
     n = kin.model.nq
     return ImpedanceTerms(np.zeros(n), np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(n), kin.p, kin.R,
-                          kin.twist, kin.Lambda, kin.J, np.zeros((7, max(n, 6))))
+                          kin.twist, kin.Lambda, kin.J, np.zeros((7, max(n, 6))), _posture=np.zeros(n))

@@ -205,7 +205,7 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
                    p_ref: np.ndarray, R_ref: np.ndarray, twist_ref: np.ndarray, accel_ref: np.ndarray,
                    force_axis: np.ndarray, use_axis: bool, press_n: float, normal_damping_1_s: float,
                    max_position_error_m: float, max_rotation_error_rad: float,
-                   extra_force_n: np.ndarray, use_extra: bool,
+                   extra_force_n: np.ndarray, use_extra: bool, posture_nm: np.ndarray, use_posture: bool,
                    B: np.ndarray, k: np.ndarray, d: np.ndarray, kn: float, q_rest: np.ndarray, q: np.ndarray,
                    dq: np.ndarray, add_gravity: bool,
                    tau: np.ndarray, F: np.ndarray, e: np.ndarray, de: np.ndarray, tau_null: np.ndarray,
@@ -214,7 +214,8 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
 
     Inputs as :func:`~.impedance.impedance_torque` takes them, unpacked: the arm's terms (M, M_inv (n, n);
     J (6, n); Lam (6, 6); twist, drift (6,); nle, g (n,); p (3,) [m]; R (3, 3)), the reference, the
-    task shaping (``use_axis`` / ``use_extra`` say whether ``force_axis`` / ``extra_force_n`` apply), the
+    task shaping (``use_axis`` / ``use_extra`` / ``use_posture`` say whether ``force_axis`` / ``extra_force_n`` /
+    ``posture_nm``, joint torques (n,) [Nm] added to the posture before its projection, apply), the
     modes (B (6, 6), k, d (6,)), the posture stiffness ``kn`` [Nm/rad] and rest pose, the state.
     Out: tau (n,) [Nm], F (6,) task wrench, e (6,) pose error, de (6,) twist error, tau_null (n,).
     work : (7, max(n, 6)) scratch.
@@ -272,7 +273,7 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
     if use_extra:
         for i in range(3):
             F[i] += extra_force_n[i]
-    # posture tau0 = M (kn (q_rest - q) - 2 sqrt(kn) dq); N^T tau0 = tau0 - J^T Lam J M^-1 tau0
+    # posture tau0 = M (kn (q_rest - q) - 2 sqrt(kn) dq) [+ posture_nm]; N^T tau0 = tau0 - J^T Lam J M^-1 tau0
     c = 2.0 * math.sqrt(kn)
     for i in range(n):
         t1[i] = kn * (q_rest[i] - q[i]) - c * dq[i]
@@ -280,7 +281,7 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
         s = 0.0
         for j in range(n):
             s += M[i, j] * t1[j]
-        tau_null[i] = s  # tau0, for now
+        tau_null[i] = s + posture_nm[i] if use_posture else s  # tau0, for now
     for i in range(n):
         s = 0.0
         for j in range(n):

@@ -25,6 +25,30 @@ def margin_torque_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: 
 
 
 @_jit
+def clearance_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, zone_rad: float,
+                   singular: np.ndarray, singular_rad: float, stiffness_nm_rad: float, damping_nm_s_rad: float,
+                   out: np.ndarray) -> None:
+    """``out`` (n,) [Nm]: the clearance posture of :func:`~.limits.clearance_torque`: a spring of
+    ``stiffness_nm_rad`` on each joint's depth into the ``zone_rad`` before a position limit, and on a joint with
+    ``singular[i]`` (1.0; else 0.0) on its depth into ``singular_rad`` around zero (the arm stretched at that
+    joint), pushed out the way it is (positive at exactly zero); damped by ``damping_nm_s_rad`` on motion
+    deeper in, scaled by the depth's share of its zone (zero at the zone's edge: continuous)."""
+    for i in range(q.shape[0]):
+        lo = max(q_min[i] + zone_rad - q[i], 0.0)
+        hi = max(q[i] - (q_max[i] - zone_rad), 0.0)
+        t = stiffness_nm_rad * (lo - hi)
+        t -= damping_nm_s_rad * (min(lo / zone_rad, 1.0) * min(dq[i], 0.0) +
+                                 min(hi / zone_rad, 1.0) * max(dq[i], 0.0))
+        if singular[i] > 0.0 and singular_rad > 0.0:
+            depth = max(singular_rad - abs(q[i]), 0.0)
+            if depth > 0.0:
+                side = 1.0 if q[i] >= 0.0 else -1.0
+                t += side * (stiffness_nm_rad * depth - damping_nm_s_rad * depth / singular_rad * min(side * dq[i],
+                                                                                                    0.0))
+        out[i] = t
+
+
+@_jit
 def speed_brake_into(dq: np.ndarray, onset_rad_s: np.ndarray, rate_1_s: float, inertia_kg_m2: np.ndarray,
                      out: np.ndarray) -> None:
     """``out`` (n,) = the joint-speed brake of :func:`~.limits.joint_speed_brake_torque`."""

@@ -8,6 +8,8 @@ compiled, :mod:`.kernels`, and the 1 kHz tick runs them fused in :func:`~.kernel
 * :func:`joint_margin_torque`: a spring-damper pushing a joint back when it
   comes within ``margin`` of a position limit (zero elsewhere, continuous at
   the margin's edge).
+* :func:`clearance_torque`: the nullspace posture that keeps joints out of a
+  wider zone before their limits and away from the arm's stretched poses.
 * :func:`saturate_norm`: clip a vector's length (the translational pose
   error, so a far reference cannot command a violent pull).
 * :func:`speed_excess_force`: a braking force along the pad's velocity
@@ -26,7 +28,7 @@ import math
 import numpy as np
 
 from .demand_kernels import largest_share
-from .limit_kernels import margin_torque_into, shape_into, speed_brake_into
+from .limit_kernels import clearance_into, margin_torque_into, shape_into, speed_brake_into
 
 
 class TorqueShaper:
@@ -91,6 +93,26 @@ def joint_margin_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max:
     out = np.empty(len(q))
     margin_torque_into(np.asarray(q, float), np.asarray(dq, float), np.asarray(q_min, float), np.asarray(q_max, float),
                        float(margin_rad), float(stiffness_nm_rad), float(damping_nm_s_rad), out)
+    return out
+
+
+def clearance_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, zone_rad: float,
+                     singular: np.ndarray, singular_rad: float, stiffness_nm_rad: float,
+                     damping_nm_s_rad: float, out: np.ndarray | None = None) -> np.ndarray:
+    """(n,) clearance posture [Nm]: what keeps each joint out of the ``zone_rad`` before its position limits and
+    each joint flagged in ``singular`` (n,) out of ``singular_rad`` around zero, where the arm is stretched
+    straight at it (the iiwa's A2, A4, A6: two axes in line, one direction of the pad's motion lost).
+
+    Unlike :func:`joint_margin_torque` (the last line, on the full torque, inside a narrower margin) it is
+    meant for the task's nullspace (:class:`~.impedance.TaskShaping` ``posture_nm``): the arm moves away from
+    the limit or the singular pose by its redundancy only, never by moving the pad. Inside a zone a joint gets
+    ``k * depth`` pushing it out plus ``d * speed`` against motion deeper in, scaled by the depth's share of
+    the zone (continuous at the zone's edge); into ``out`` when given (the 1 kHz path)."""
+    if out is None:
+        out = np.empty(len(q))
+    clearance_into(np.asarray(q, float), np.asarray(dq, float), np.asarray(q_min, float), np.asarray(q_max, float),
+                   float(zone_rad), np.asarray(singular, float), float(singular_rad), float(stiffness_nm_rad),
+                   float(damping_nm_s_rad), out)
     return out
 
 

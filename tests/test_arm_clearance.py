@@ -1,0 +1,138 @@
+"""No joint runs away: the clearance posture in the task's nullspace, and stops and lifts that stay within the arm's
+reach with the elbow off its stretched pose (controller/control/limits.py, controller/free_motion.py).
+
+The cell: random board 27 (``lamps up --board random:27``), where the retreat's in-plane stop coasted 7 cm up the
+tilted board to the arm's full reach, the arm swung through its stretched pose (A4 at 0) and the robot side's
+FAULT-hold ended the run.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from controller.control.impedance import Kinematics, Reference, TaskShaping, impedance_torque
+from controller.control.limits import clearance_torque
+from controller.control.params import ImpedanceParams
+from controller.executor_types import BoardPose, ToolState
+from controller.free_motion import MIN_LIFT_M, STRETCH_ROOM_RAD, FreeMotion
+from controller.motion import bounded_brake_to_rest
+from controller.params import ExecutorParams, ForceParams, LimitParams
+from controller.reach import arm_reach
+from interfaces.errors import ConfigError
+from interfaces.robot_model import RobotModel
+
+from .conftest import REPO
+
+LO, HI = -np.full(7, 2.0), np.full(7, 2.0)
+SINGULAR = np.array([0, 1, 0, 1, 0, 1, 0], float)
+
+
+def test_the_clearance_pushes_out_of_its_zones_only_and_is_continuous_at_their_edges():
+    still = np.zeros(7)
+    q = np.array([0.0, 1.0, 1.7, 0.1, -1.9, -0.05, 1.49])
+    tau = clearance_torque(q, still, LO, HI, 0.5, SINGULAR, 0.3, 20.0, 2.0)
+    # joint 1 free; 2 free; 3 0.2 deep before its upper limit; 4 0.2 deep around zero, pushed up; 5 0.4 deep
+    # before its lower limit; 6 0.25 deep around zero on the negative side; 7 just outside its zone
+    np.testing.assert_allclose(tau, [0.0, 0.0, -4.0, 4.0, 8.0, -5.0, 0.0], atol=1e-12)
+    for i, edge in ((2, 1.5), (3, 0.3)):  # continuous at each zone's edge, in position and with speed
+        for dq in (-1.0, 1.0):
+            q_in, q_out = q.copy(), q.copy()
+            q_in[i], q_out[i] = edge + (1e-9 if i == 2 else -1e-9), edge + (-1e-9 if i == 2 else 1e-9)
+            v = np.full(7, dq)
+            a = clearance_torque(q_in, v, LO, HI, 0.5, SINGULAR, 0.3, 20.0, 2.0)[i]
+            b = clearance_torque(q_out, v, LO, HI, 0.5, SINGULAR, 0.3, 20.0, 2.0)[i]
+            assert abs(a - b) < 1e-6, (i, dq, a, b)
+    # damping only against motion deeper in
+    deeper = clearance_torque(q, np.array([0, 0, 1.0, -1.0, -1.0, 1.0, 0]), LO, HI, 0.5, SINGULAR, 0.3, 20.0, 2.0)
+    out = clearance_torque(q, np.array([0, 0, -1.0, 1.0, 1.0, -1.0, 0]), LO, HI, 0.5, SINGULAR, 0.3, 20.0, 2.0)
+    assert np.all(np.abs(deeper[2:6]) > np.abs(tau[2:6])) and np.allclose(out, tau)
+
+
+def test_the_clearance_acts_in_the_nullspace_only():
+    """Through the law's posture, the clearance changes the joint torques but not what they do to the pad."""
+    model = RobotModel()
+    kin = Kinematics(model)
+    rng = np.random.default_rng(7)
+    for _ in range(10):
+        q = rng.uniform(model.limits.q_min * 0.8, model.limits.q_max * 0.8)
+        kin.update(q, np.zeros(7))
+        ref = Reference(kin.p.copy(), kin.R.copy())
+        plain = impedance_torque(model, q, np.zeros(7), ref, ImpedanceParams(), q, False, TaskShaping(), kin)
+        push = rng.normal(0, 10, 7)
+        cleared = impedance_torque(model, q, np.zeros(7), ref, ImpedanceParams(), q, False,
+                                   TaskShaping(posture_nm=push), kin)
+        diff = cleared.tau_nm - plain.tau_nm
+        assert np.linalg.norm(diff) > 1e-3 * np.linalg.norm(push)  # one direction of 7 is the nullspace
+        # the pad's acceleration from the difference: J M^-1 diff = 0 (dynamically consistent projection)
+        # (to the task inertia's regularisation, LAMBDA_EPS: a few parts per million near a singular pose)
+        assert np.linalg.norm(kin.J @ kin.M_inv @ diff) < 1e-4 * np.linalg.norm(kin.M_inv @ diff), q
+
+
+def test_singular_joints_are_checked():
+    assert LimitParams(singular_joints=[4, 6]).singular_joints == (4, 6)
+    for bad in ([0], [8], [4, 4], ["4"], 4):
+        with pytest.raises(ConfigError, match="singular_joints"):
+            LimitParams(singular_joints=bad)
+
+
+def test_a_bounded_stop_that_would_coast_out_of_reach_ends_in_reach():
+    """Within tight bounds the stop takes long and coasts far; where that end is out of reach, the first try that
+    ends in reach is taken, even beyond the bounds (reach before smoothness)."""
+    p0, v0, a0 = np.zeros(2), np.array([0.1, 0.0]), np.array([0.5, 0.0])
+    long = bounded_brake_to_rest(p0, v0, a0, 0.2, 0.05, 0.5)
+    short = bounded_brake_to_rest(p0, v0, a0, 0.2, 0.05, 0.5, reachable=lambda xy: xy[0] <= 0.02)
+    assert long.goal[0][0] > 0.02 and short.goal[0][0] <= 0.02, (long.goal[0], short.goal[0])
+    assert short.T < long.T
+    never = bounded_brake_to_rest(p0, v0, a0, 0.2, 0.05, 0.5, reachable=lambda xy: False)
+    assert never.T == pytest.approx(0.2)  # nowhere in reach: the shortest stop
+
+
+def _board_27() -> BoardPose:
+    """Random board 27 as the sampler draws it (tilted, its far part near the arm's reach)."""
+    from interfaces.transforms import transform_from_pose
+    from interfaces.messages import Pose
+    from sim.board_sampler import sample_board
+
+    t = sample_board(27).table
+    return BoardPose.from_transform(transform_from_pose(Pose(t["origin_m"], t["quat_wxyz"])), t["size_m"])
+
+
+def test_a_lift_ends_where_the_elbow_has_room():
+    motion = FreeMotion(ExecutorParams(), ForceParams())
+    motion.arm = arm_reach(RobotModel())
+    board = _board_27()
+    from interfaces.transforms import tool_rotation_on_board
+
+    motion.setpoint.R[:] = tool_rotation_on_board(board.R)
+    standoff = ExecutorParams().standoff_m
+    grid = [np.array([x, y]) for x in np.linspace(0.0, board.size_m[0], 30) for y in np.linspace(0.0, board.size_m[1], 30)]
+    edge = [xy for xy in grid if motion.roomy(board, xy, MIN_LIFT_M) and not motion.roomy(board, xy, standoff)]
+    assert edge, "board 27 has points reachable on the board but stretched at the standoff"
+    tool = ToolState(edge[0], 0.0, np.zeros(2), 0.0, motion.setpoint.R.copy(), 10.0)
+    motion.setpoint.xy[:] = tool.xy
+    motion.setpoint.contact = True
+    assert not motion.lift(tool, board=board)
+    h = float(motion._mover.goal[0][2])
+    assert MIN_LIFT_M <= h < ExecutorParams().standoff_m
+    p = board.to_world(np.array([*edge[0], h]))
+    assert motion.arm.elbow_rad(p, motion.setpoint.R) >= STRETCH_ROOM_RAD
+    assert motion.lift(tool)  # without the board: the full standoff, as before
+
+
+@pytest.mark.slow
+def test_random_board_27_cleans_without_the_robot_side_braking(tmp_path):
+    out = tmp_path / "run"
+    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--no-network", "--board", "random:27",
+                        "--stains", "4", "--seed", "27", "--out", str(out), "-q"], cwd=REPO, capture_output=True,
+                       text=True, timeout=900)
+    report = json.loads((out / "report.json").read_text())
+    sim = report["counters"]["sim"]
+    print(r.stdout[-2000:])
+    assert report["outcome"] == "cleaned", (report["outcome"], report["faults"], r.stdout[-3000:])
+    assert not {k: v for k, v in sim.items() if ("brake" in k or "yield" in k or "fault" in k) and v}, sim
+    assert report["max_joint_speed_ratio"] < 0.8
