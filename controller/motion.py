@@ -12,9 +12,8 @@ from one orientation to another along the geodesic with a quintic time law;
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import math
+from collections.abc import Callable
 
 import numba as nb
 import numpy as np

@@ -94,8 +94,8 @@ def test_a_bounded_stop_that_would_coast_out_of_reach_ends_in_reach():
 
 def _board_27() -> BoardPose:
     """Random board 27 as the sampler draws it (tilted, its far part near the arm's reach)."""
-    from interfaces.transforms import transform_from_pose
     from interfaces.messages import Pose
+    from interfaces.transforms import transform_from_pose
     from sim.board_sampler import sample_board
 
     t = sample_board(27).table
@@ -110,7 +110,8 @@ def test_a_lift_ends_where_the_elbow_has_room():
 
     motion.setpoint.R[:] = tool_rotation_on_board(board.R)
     standoff = ExecutorParams().standoff_m
-    grid = [np.array([x, y]) for x in np.linspace(0.0, board.size_m[0], 30) for y in np.linspace(0.0, board.size_m[1], 30)]
+    grid = [np.array([x, y]) for x in np.linspace(0.0, board.size_m[0], 30)
+            for y in np.linspace(0.0, board.size_m[1], 30)]
     edge = [xy for xy in grid if motion.roomy(board, xy, MIN_LIFT_M) and not motion.roomy(board, xy, standoff)]
     assert edge, "board 27 has points reachable on the board but stretched at the standoff"
     tool = ToolState(edge[0], 0.0, np.zeros(2), 0.0, motion.setpoint.R.copy(), 10.0)
