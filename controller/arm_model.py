@@ -113,10 +113,14 @@ class ArmModel:
         """The reference's orientation ``R_ref`` (3, 3), angular twist and acceleration (``twist[3:]``,
         ``accel[3:]``) at this tick of the roll about the pad normal ``R_hold[:, 2]`` (the position is held)."""
         self.identify_t_s += dt_s
+        # out and back once, a = A (1 - cos(w t))^2 / 4: at rest and without acceleration at both ends (a sine
+        # starts at full speed, a step of A w in the reference's angular velocity), at most 0.65 A w fast
+        # (1.0 rad/s over 2 s for 0.5 rad)
         T, A = self.p.identify_s, self.p.identify_roll_rad
         w = 2.0 * math.pi / T
         t = min(self.identify_t_s, T)
-        a, da, dda = A * math.sin(w * t), A * w * math.cos(w * t), -A * w * w * math.sin(w * t)
+        c, s = math.cos(w * t), math.sin(w * t)
+        a, da, dda = 0.25 * A * (1.0 - c) ** 2, 0.5 * A * w * (1.0 - c) * s, 0.5 * A * w * w * (s * s + (1.0 - c) * c)
         if t >= T:
             a = da = dda = 0.0
         c, s = math.cos(a), math.sin(a)

@@ -397,7 +397,9 @@ class ControllerCore:
             shaping.press_n = self.press_n
             if self.contact_watch.update(sp.force_n, self.normal_force_n, dt_s):
                 self.contact_watch.lost_s = 0.0
-                self.executor.fault(f"contact lost: {self.normal_force_n:.1f} N measured for "
+                ex = self.executor
+                where = f" in {ex.current_mp}" + (f" at stain {ex.stain_id}" if ex.stain_id >= 0 else "")
+                self.executor.fault(f"contact lost{where}: {self.normal_force_n:.1f} N measured for "
                                     f"{self.contact_watch.persist_s * 1000:.0f} ms while pressing "
                                     f"{sp.force_n:.1f} N (board gone? pad off? force sensor?)")
         else:

@@ -109,6 +109,8 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         self.clock_s = 0.0
         self.board: BoardPose | None = None
         self.book = StainBook(self.p.recheck_s, self.p.max_passes)
+        self._reach_board: BoardPose | None = None  # the board the stains' reach was checked on, and which were
+        self._reach_checked: set[int] = set()
         self.stains_fresh = False
         self.motion = FreeMotion(self.p, self.f)
         self.surface = SurfaceTouch(self.p.first_creep_height_m + self.p.contact_search_m)  # touches place it
@@ -168,11 +170,28 @@ class SkillExecutor(BoardWatch, ExecutorStops):
             self.counters["stains_smeared"] += 1
             log.warning("stain %d: smeared (%.0f %% left after %d passes without progress): moving on", s.id,
                         100.0 * s.remaining, s.passes)
+        self._skip_out_of_reach(stains)
         moved = self.chain.adapt(self.book, self.clock_s) if self.phase == Phase.WIPE else None
         if moved is not None:
             self.counters["anchor_moves"] += 1
             if moved == ChainResult.ERROR:
                 self._chain_failed()
+
+    def _skip_out_of_reach(self, stains: list[StainState]) -> None:
+        """Close every new stain the arm cannot reach (:meth:`FreeMotion.reach_problem`), named and counted: it is
+        skipped, never attempted. Each stain is looked at once per adopted board."""
+        if self._reach_board is not self.board:
+            self._reach_board, self._reach_checked = self.board, set()
+        for s in stains:
+            if s.id in self._reach_checked or s.kappa:
+                continue
+            self._reach_checked.add(s.id)
+            why = self.motion.reach_problem(self.board, s.centre_m)
+            if why is not None:
+                self.book.close_out_of_reach(s.id, why)
+                self.counters["stains_out_of_reach"] += 1
+                log.warning("stain %d at (%.2f, %.2f) m on the board is out of the arm's reach, skipped: %s", s.id,
+                            *s.centre_m, why)
 
     def stains_stale(self, reason: str) -> None:
         """No stains update for too long: pause off the board (resumes on the next :meth:`set_stains`)."""

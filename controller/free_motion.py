@@ -39,6 +39,9 @@ AIR_BRAKE_S = 0.1
 STRETCH_ROOM_RAD = 0.3
 #: ... but at least this far off the board [m], wherever that is.
 MIN_LIFT_M = 0.015
+#: A stain whose centre puts the elbow closer than this to stretched straight [rad] is out of reach: the pad
+#: would wipe at the edge of the arm's workspace, through its singular pose.
+UNREACHABLE_STRETCH_RAD = 0.1
 
 
 class FreeMotion:
@@ -212,6 +215,23 @@ class FreeMotion:
             return True
         p, R = board.to_world(np.array([xy[0], xy[1], h])), self.setpoint.R
         return self.arm.elbow_rad(p, R) >= STRETCH_ROOM_RAD and self.arm.elbow_room_rad(p, R) >= 0.0
+
+    def reach_problem(self, board: BoardPose, xy: np.ndarray) -> str | None:
+        """Why the pad, flat on ``board`` at ``xy`` (2,) [m], is beyond the arm (None: it is not, or no :attr:`arm`):
+        beyond the stretched arm, the elbow folded past its limit, or the arm stretched straight (within
+        :data:`UNREACHABLE_STRETCH_RAD` of A4 = 0)."""
+        if self.arm is None:
+            return None
+        p, R = board.to_world(np.array([xy[0], xy[1], 0.0])), tool_rotation_on_board(board.R)
+        d = float(np.linalg.norm(p))
+        elbow = self.arm.elbow_rad(p, R)
+        if not np.isfinite(elbow):
+            return f"beyond the stretched arm ({d:.2f} m from the base)"
+        if self.arm.elbow_room_rad(p, R) < 0.0:
+            return f"too close to the shoulder: the elbow would fold past its limit ({d:.2f} m from the base)"
+        if elbow < UNREACHABLE_STRETCH_RAD:
+            return f"at the edge of the arm's reach: the elbow stretched to {elbow:.2f} rad ({d:.2f} m from the base)"
+        return None
 
     def _reachable_height(self, board: BoardPose | None, xy: np.ndarray, goal_h: float, lowest_h: float) -> float:
         """The highest height [m] up to ``goal_h`` above ``xy`` (2,) [m] that is :meth:`roomy`, scanned down in

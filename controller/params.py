@@ -121,9 +121,9 @@ class LimitParams:
     joint_margin_damping_nm_s_rad: Annotated[float, In(0.0, 500.0)] = 10.0
     clearance_zone_rad: Annotated[float, In(0.01, 1.5)] = 0.5
     singular_joints: tuple[int, ...] = (2, 4, 6)
-    singular_clearance_rad: Annotated[float, In(0.0, 1.0)] = 0.3
-    clearance_stiffness_nm_rad: Annotated[float, In(0.0, 500.0)] = 20.0
-    clearance_damping_nm_s_rad: Annotated[float, In(0.0, 100.0)] = 2.0
+    singular_clearance_rad: Annotated[float, In(0.0, 1.0)] = 0.6
+    clearance_stiffness_nm_rad: Annotated[float, In(0.0, 500.0)] = 40.0
+    clearance_damping_nm_s_rad: Annotated[float, In(0.0, 100.0)] = 6.0
     max_speed_m_s: Annotated[float, In(0.05, 2.0)] = 0.6
     speed_brake_gain_n_s_m: Annotated[float, In(0.0, 5000.0)] = 200.0
     reference_joint_speed_share: Annotated[float, In(0.05, 10.0)] = 0.6

@@ -13,7 +13,9 @@ passes over it no longer lower its remaining ink) is closed as smeared once
 the executor has made a pass of its own over it: it is not wiped again,
 and :attr:`StainBook.smeared` keeps it, with its remaining and passes, for
 the status and the report. Without a pass of the executor's (the arm only
-passed over it on the way to another) the report is not taken.
+passed over it on the way to another) the report is not taken. A stain the
+arm cannot reach is closed the same way before any pass
+(:meth:`StainBook.close_out_of_reach`, with the reason).
 """
 
 from __future__ import annotations
@@ -42,6 +44,8 @@ class StainBook:
         The last view, by stain id.
     smeared : dict of int to StainState
         The stains closed as smeared, as they were when closed, by id.
+    out_of_reach : dict of int to str
+        The stains closed as out of the arm's reach, with why, by id.
     """
 
     def __init__(self, recheck_s: float, max_passes: int) -> None:
@@ -52,6 +56,7 @@ class StainBook:
         self._passes: Counter[int] = Counter()
         self._left_at: dict[int, float] = {}  # stain id -> clock [s] at the end of a pass without kappa
         self.smeared: dict[int, StainState] = {}
+        self.out_of_reach: dict[int, str] = {}
 
     def update(self, stains: list[StainState], clock_s: float) -> bool:
         """A fresh view of the stains (kappa per stain): True if it changes which are open at ``clock_s`` [s]."""
@@ -63,9 +68,16 @@ class StainBook:
         return self.open_ids(clock_s) != old_open
 
     def is_done(self, stain_id: int) -> bool:
-        """The stain has kappa, is no longer seen, or was closed as smeared."""
+        """The stain has kappa, is no longer seen, or was closed (smeared, out of reach)."""
         s = self.stains.get(stain_id)
-        return s is None or s.kappa or stain_id in self.smeared
+        return s is None or s.kappa or stain_id in self.smeared or stain_id in self.out_of_reach
+
+    def close_out_of_reach(self, stain_id: int, why: str) -> None:
+        """The arm cannot reach the stain (``why``): it is never wiped."""
+        self.out_of_reach[stain_id] = why
+
+    def _closed(self, stain_id: int) -> bool:
+        return stain_id in self._given_up or stain_id in self.smeared or stain_id in self.out_of_reach
 
     def end_pass(self, stain_id: int, clock_s: float) -> bool:
         """A pass over the stain ended without kappa at ``clock_s`` [s]: True if that was its last.
@@ -92,7 +104,7 @@ class StainBook:
         width, axis), not the whole stain's (adaptive wiping: a stain wiped before is planned for what is left).
         """
         ready = [s for s in self.stains.values()
-                 if not s.kappa and s.id not in self._given_up and s.id not in self.smeared and s.id != exclude
+                 if not s.kappa and not self._closed(s.id) and s.id != exclude
                  and clock_s - self._left_at.get(s.id, -math.inf) >= self.recheck_s]
         fewest = min((self._passes[s.id] for s in ready), default=0)
         return [(s.ink if by_ink and s.ink is not None else Stain(s.id, s.centre_m, s.size_m, s.width_m, s.axis_rad))
@@ -103,8 +115,7 @@ class StainBook:
 
     def pending(self) -> list[StainState]:
         """Stains passed over without kappa, waiting to be looked at (not given up)."""
-        return [s for i, s in self.stains.items()
-                if not s.kappa and i in self._left_at and i not in self._given_up and i not in self.smeared]
+        return [s for i, s in self.stains.items() if not s.kappa and i in self._left_at and not self._closed(i)]
 
     def looked_at(self, clock_s: float) -> None:
         """The camera has a clear view of the pending stains from ``clock_s`` [s] on: their recheck starts again."""

@@ -137,3 +137,23 @@ def test_random_board_27_cleans_without_the_robot_side_braking(tmp_path):
     assert report["outcome"] == "cleaned", (report["outcome"], report["faults"], r.stdout[-3000:])
     assert not {k: v for k, v in sim.items() if ("brake" in k or "yield" in k or "fault" in k) and v}, sim
     assert report["max_joint_speed_ratio"] < 0.8
+
+
+def test_a_stain_beyond_the_arm_is_skipped_with_the_reason_never_attempted(learned_skill):
+    """A wall board 1.6 m wide: its far end is beyond the stretched arm. That stain is closed as out of reach,
+    named and counted; the others are planned as before."""
+    from controller.executor import SkillExecutor
+    from controller.executor_types import StainState
+
+    from .test_controller_units import BOARD
+
+    ex = SkillExecutor(learned_skill, ExecutorParams(survey_s=0.0))
+    ex.motion.arm = arm_reach(RobotModel())
+    big = BoardPose(BOARD.R, BOARD.origin_m, np.array([1.6, 0.6]))
+    near, far = StainState(0, np.array([0.3, 0.3]), 0.06, False), StainState(1, np.array([1.4, 0.3]), 0.06, False)
+    ex.set_stains(big, [near, far])
+    assert set(ex.book.out_of_reach) == {1} and "beyond the stretched arm" in ex.book.out_of_reach[1]
+    assert ex.counters["stains_out_of_reach"] == 1 and ex.book.is_done(1)
+    assert [s.id for s in ex.book.open_stains(0.0)] == [0]
+    ex.set_stains(big, [near, far])  # looked at once per board
+    assert ex.counters["stains_out_of_reach"] == 1

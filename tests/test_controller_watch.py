@@ -131,7 +131,8 @@ def test_a_board_taken_away_under_the_pressing_pad_is_a_contact_loss_fault(learn
     mid_wipe = lambda c: c.executor.phase == Phase.WIPE and c.executor.clock_s > 4.0  # noqa: E731
     core, _, fault = _run(learned_skill, {}, mid_wipe, remove_board)
     assert fault is not None and fault < 400, fault
-    assert core.executor.reason.startswith("contact lost"), core.executor.reason
+    assert core.executor.reason.startswith("contact lost in periodic"), core.executor.reason  # the MP ...
+    assert f"at stain {core.executor.stain_id}" in core.executor.reason  # ... and the stain it was wiping
 
 
 def test_contact_lost_while_the_robot_braked_is_the_brakes_doing_not_a_fault(learned_skill):

@@ -33,19 +33,15 @@ def clearance_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.n
     ``singular[i]`` (1.0; else 0.0) on its depth into ``singular_rad`` around zero (the arm stretched at that
     joint), pushed out the way it is (positive at exactly zero); damped by ``damping_nm_s_rad`` on motion
     deeper in, scaled by the depth's share of its zone (zero at the zone's edge: continuous)."""
+    margin_torque_into(q, dq, q_min, q_max, zone_rad, stiffness_nm_rad, damping_nm_s_rad, out)  # the limits' part
+    if singular_rad <= 0.0:
+        return
     for i in range(q.shape[0]):
-        lo = max(q_min[i] + zone_rad - q[i], 0.0)
-        hi = max(q[i] - (q_max[i] - zone_rad), 0.0)
-        t = stiffness_nm_rad * (lo - hi)
-        t -= damping_nm_s_rad * (min(lo / zone_rad, 1.0) * min(dq[i], 0.0) +
-                                 min(hi / zone_rad, 1.0) * max(dq[i], 0.0))
-        if singular[i] > 0.0 and singular_rad > 0.0:
-            depth = max(singular_rad - abs(q[i]), 0.0)
-            if depth > 0.0:
-                side = 1.0 if q[i] >= 0.0 else -1.0
-                t += side * (stiffness_nm_rad * depth - damping_nm_s_rad * depth / singular_rad * min(side * dq[i],
-                                                                                                    0.0))
-        out[i] = t
+        depth = max(singular_rad - abs(q[i]), 0.0)
+        if singular[i] > 0.0 and depth > 0.0:
+            side = 1.0 if q[i] >= 0.0 else -1.0
+            out[i] += side * (stiffness_nm_rad * depth - damping_nm_s_rad * depth / singular_rad * min(side * dq[i],
+                                                                                                      0.0))
 
 
 @_jit
