@@ -51,6 +51,7 @@ def described_arm() -> ArmKinematics:
             p[k], R[k] = model.data.oMf[flange].translation, model.data.oMf[flange].rotation
         return p, R
 
+    tool_offset_m = (float(offset[0]), float(offset[1]), float(offset[2]))
     return ArmKinematics(n_joints=model.nq, joint_index=iiwa_joint_index, joint_names=JOINT_NAMES_TEXT,
-                         flange_poses=flange_poses, tool_offset_m=tuple(float(v) for v in offset),
+                         flange_poses=flange_poses, tool_offset_m=tool_offset_m,
                          msg_layouts={LBR_STATE: (LBR_STATE_MSG, LBR_STATE_MSG_FRI2)})
