@@ -73,16 +73,21 @@ class Reference(Protocol):
 class StainView(Protocol):
     """One stain as the chain reads it: centre (2,) [m] and, for adaptive wiping, the ink left (or None)."""
 
-    centre_m: np.ndarray
-    ink: Stain | None
+    @property
+    def centre_m(self) -> np.ndarray: ...
+
+    @property
+    def ink(self) -> Stain | None: ...
 
 
 class Book(Protocol):
     """What the chain asks about the stains (the executor's :class:`controller.stain_book.StainBook`, or the
     rollout's plan with a stand-in for kappa)."""
 
-    stains: Mapping[int, StainView]
     max_passes: int
+
+    @property
+    def stains(self) -> Mapping[int, StainView]: ...
 
     def is_done(self, stain_id: int) -> bool: ...
 
@@ -190,14 +195,47 @@ class MpChain:
         """Cycles of the periodic MP run on the current stain since its transition ended (0 before)."""
         if self.step == ChainStep.TRANSIT:
             return 0.0
-        return (self._runner.phase_unwrapped_rad - self._wipe_phase0) / (2 * np.pi)
+        return (self._periodic().phase_unwrapped_rad - self._wipe_phase0) / (2 * np.pi)
 
     @property
     def current_mp(self) -> str:
         """``"transitional k"`` or ``"periodic k"``: the MP running."""
         if self.step == ChainStep.TRANSIT:
-            return f"transitional {self._entry.transitional_index}"
-        return f"periodic {self.wipe.periodic_index}"
+            return f"transitional {self._spec().transitional_index}"
+        return f"periodic {self._wiping().periodic_index}"
+
+    # ------------------------------------------------------------------ what each step has (set by start)
+    def _periodic(self) -> PeriodicRunner:
+        """The stain's periodic MP runner (steps WIPE, LEAVE, REPLAN)."""
+        runner = self._runner
+        if not isinstance(runner, PeriodicRunner):
+            raise RuntimeError(f"MpChain: no periodic MP runs in step {self.step.name}")
+        return runner
+
+    def _transitional(self) -> TransitionalRunner:
+        """The transition's runner (step TRANSIT)."""
+        runner = self._runner
+        if not isinstance(runner, TransitionalRunner):
+            raise RuntimeError(f"MpChain: no transitional MP runs in step {self.step.name}")
+        return runner
+
+    def _wiping(self) -> Wipe:
+        """:attr:`wipe`, once started."""
+        if self.wipe is None:
+            raise RuntimeError("MpChain: not started")
+        return self.wipe
+
+    def _spec(self) -> TransitionSpec:
+        """The spec of the last transition started."""
+        if self._entry is None:
+            raise RuntimeError("MpChain: not started")
+        return self._entry
+
+    def _current_plan(self) -> Plan:
+        """The plan the chain follows, once started."""
+        if self._plan is None:
+            raise RuntimeError("MpChain: not started")
+        return self._plan
 
     def start(self, plan_: Plan, reference: Reference) -> ChainResult:
         """Into the plan's first wipe from the reference's in-plane state: TRANSITION or ERROR."""
@@ -214,7 +252,7 @@ class MpChain:
         result = self._on_step[self.step](dt_s, reference, book, clock_s)
         if result == ChainResult.ERROR or result == ChainResult.FINISHED:
             return result
-        r = self._runner
+        r = self._transitional() if self.step == ChainStep.TRANSIT else self._periodic()
         reference.xy[:], reference.v_xy[:], reference.a_xy[:] = r.position_m, r.velocity_m_s, r.acceleration_m_s2
         return result
 
@@ -224,16 +262,19 @@ class MpChain:
         centre if that moved over 2 mm. None if nothing changed."""
         if self.step != ChainStep.WIPE:
             return None
-        s = book.stains.get(self.wipe.stain.id)
+        old, runner, planned = self._wiping(), self._periodic(), self._planned
+        if planned is None:
+            raise RuntimeError("MpChain: wiping without the wipe as planned")
+        s = book.stains.get(old.stain.id)
         if s is None:
             return None
         if not self.planner.adaptive:
-            if not np.linalg.norm(s.centre_m - self._runner.anchor_m) > 0.002:
+            if not np.linalg.norm(s.centre_m - runner.anchor_m) > 0.002:
                 return None
-            return self._checked(self._runner.set_targets(anchor_m=s.centre_m))
+            return self._checked(runner.set_targets(anchor_m=s.centre_m))
         if s.ink is None or clock_s - self._adapted_at < ADAPT_EVERY_S:
             return None
-        new, old = adapted_wipe(self.skill, self._planned, self.wipe, s.ink, self.planner), self.wipe
+        new = adapted_wipe(self.skill, planned, old, s.ink, self.planner)
         eye = np.eye(2)
         stroke_change = np.linalg.norm((eye if new.stroke is None else new.stroke)
                                        - (eye if old.stroke is None else old.stroke))
@@ -246,12 +287,12 @@ class MpChain:
         self.counters["adaptations"] += 1
         self.wipe = new
         stroke = new.stroke if new.stroke is not None else (eye if old.stroke is not None else None)
-        return self._checked(self._runner.set_targets(anchor_m=new.anchor_m, amplitude_m=new.amplitude_m,
-                                                      omega_rad_s=new.omega_rad_s, stroke=stroke))
+        return self._checked(runner.set_targets(anchor_m=new.anchor_m, amplitude_m=new.amplitude_m,
+                                                omega_rad_s=new.omega_rad_s, stroke=stroke))
 
     # ------------------------------------------------------------------ one handler per step
     def _on_transit(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
-        runner = self._runner
+        runner = self._transitional()
         status = runner.update(dt_s)
         if status < 0:
             return self._checked(status)
@@ -261,14 +302,14 @@ class MpChain:
 
     def _wipe_on(self, dt_s: float) -> ChainResult | None:
         """The stain's periodic MP ``dt_s`` [s] further (WIPE and REPLAN); ERROR on a runner error, else None."""
-        status = self._runner.update(dt_s)
+        status = self._periodic().update(dt_s)
         if status < 0:
             return self._checked(status)
         self._wipe_t += dt_s
         return None
 
     def _on_wipe(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
-        runner = self._runner
+        runner = self._periodic()
         if (failed := self._wipe_on(dt_s)) is not None:
             return failed
         if not self._pass_over(book, clock_s):
@@ -280,10 +321,11 @@ class MpChain:
         return self._leave_when_due(runner, reference)
 
     def _on_leave(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
-        status = self._runner.update(dt_s)
+        runner = self._periodic()
+        status = runner.update(dt_s)
         if status < 0:
             return self._checked(status)
-        return self._leave_when_due(self._runner, reference)
+        return self._leave_when_due(runner, reference)
 
     # ------------------------------------------------------------------ hand-overs
     def _start_transition(self, wipe: Wipe, reference: Reference) -> ChainResult:
@@ -296,8 +338,8 @@ class MpChain:
                 self.counters["transitions_searched_in_tick"] += 1
             duration = None
         try:
-            spec = plan_transition(self.skill, self._plan, wipe, (r.xy.copy(), r.v_xy.copy(), r.a_xy.copy()),
-                                   duration)
+            spec = plan_transition(self.skill, self._current_plan(), wipe,
+                                   (r.xy.copy(), r.v_xy.copy(), r.a_xy.copy()), duration)
             runner = TransitionalRunner(self.skill.transitional[spec.transitional_index].mp, spec.start, spec.goal,
                                         spec.duration_s, forcing_transform=spec.forcing_transform)
         except PlanningError as exc:
@@ -308,7 +350,7 @@ class MpChain:
 
     def _start_wipe(self, overrun_s: float) -> ChainResult:
         """The stain's periodic MP from where the transition ended, ``overrun_s`` [s] into its motion."""
-        wipe, entry = self.wipe, self._entry
+        wipe, entry = self._wiping(), self._spec()
         try:
             runner = PeriodicRunner(self.skill.periodic[wipe.periodic_index].mp, wipe.anchor_m, wipe.amplitude_m,
                                     wipe.omega_rad_s, entry.entry_phase_rad, start_position_m=entry.goal[0],
@@ -331,7 +373,7 @@ class MpChain:
     def _pass_over(self, book: Book, clock_s: float) -> bool:
         """The stain has kappa, has vanished, or this pass is over (``wipe_timeout_s`` or ``pass_cycles``; then it
         waits for a recheck)."""
-        sid = self.wipe.stain.id
+        sid = self._wiping().stain.id
         if book.is_done(sid):
             return True
         cycles = self.cycles_wiped
@@ -349,16 +391,17 @@ class MpChain:
     def _choose_next(self, runner: PeriodicRunner, book: Book, clock_s: float) -> ChainResult:
         """Re-plan over the stains open now (in the tick, or handed to :attr:`background`); keep wiping until
         the phase heads for the next one."""
-        current = self.wipe.stain.id
+        current = self._wiping().stain.id
         open_stains = book.open_stains(clock_s, by_ink=self.planner.adaptive, exclude=current)
         self._next = None
         if not open_stains:
             return self._leave_towards(runner, None)
         if self.follow_plan:  # the plan's next open stains, in its order
-            ids, wipes = {s.id for s in open_stains}, self._plan.wipes
+            followed = self._current_plan()
+            ids, wipes = {s.id for s in open_stains}, followed.wipes
             k = next((i for i, w in enumerate(wipes) if w.stain.id == current), -1)
             rest = tuple(w for w in wipes[k + 1:] + wipes[:max(k, 0)] if w.stain.id in ids)
-            return self._leave_towards(runner, Plan(rest, self._plan.params) if rest else None)
+            return self._leave_towards(runner, Plan(rest, followed.params) if rest else None)
         start = runner.position_m.copy()
         if self.background is not None:
             self._pending = self.background.submit(plan, self.skill, open_stains, start, self.planner)
@@ -372,7 +415,7 @@ class MpChain:
 
     def _on_replan(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
         """Wipe on while the planner thread works; take its plan at the first tick it is done."""
-        runner = self._runner
+        runner = self._periodic()
         if (failed := self._wipe_on(dt_s)) is not None:
             return failed
         pending = self._pending
@@ -400,16 +443,17 @@ class MpChain:
             towards = self._next.anchor_m
         elif self.finish_heading is not None:
             towards = runner.anchor_m + FINISH_LOOKOUT_M * self.finish_heading
-        delay = 0.0 if towards is None else exit_phase_delay(self.skill, self.wipe, runner.phase_rad, towards)
+        wipe = self._wiping()
+        delay = 0.0 if towards is None else exit_phase_delay(self.skill, wipe, runner.phase_rad, towards)
         self._leave_at = runner.phase_unwrapped_rad + delay
         self.step = ChainStep.LEAVE
         self._duration = None
         if self.background is not None and self._next is not None:
             # the state at the exit phase, on the limit cycle the runner follows: what the transition starts from
-            mp = self.skill.periodic[self.wipe.periodic_index].mp
+            mp = self.skill.periodic[wipe.periodic_index].mp
             exit_state = periodic_state(mp, runner.phase_rad + delay, runner.anchor_m.copy(), runner.amplitude_m,
-                                        runner.omega_rad_s, None if self.wipe.stroke is None else runner.stroke)
-            self._duration = self.background.submit(_bounded_duration_of, self.skill, self._plan, self._next,
+                                        runner.omega_rad_s, None if wipe.stroke is None else runner.stroke)
+            self._duration = self.background.submit(_bounded_duration_of, self.skill, self._current_plan(), self._next,
                                                     tuple(np.array(x) for x in exit_state))
         return ChainResult.WORKING
 

@@ -83,6 +83,7 @@ def rollout(
     rec.record(0.0, ref, "transitional", plan_.wipes[0].stain.id)
     if chain.start(plan_, ref) == ChainResult.ERROR:
         raise PlanningError(chain.error)
+    assert chain.entry is not None and chain.wipe is not None  # set by a start that did not fail
     specs, clock = [chain.entry], 0.0
     for k in range(1, MAX_SAMPLES):
         result = chain.update(dt_s, ref, book, clock)
