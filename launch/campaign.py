@@ -230,8 +230,8 @@ def summarize_campaigns(dirs: list[Path], out: Path, command: str) -> dict[str, 
         path = d / "campaign.json"
         try:
             data = json.loads(path.read_text())
-            cells = [(Cell(int(c["seed"]), int(c["stains"]), str(c["board"]), str(c.get("wiping", "fixed"))),
-                      str(c["run_dir"])) for c in data["cells"]]
+            cells = [(Cell(int(c["seed"]), int(c["stains"]), str(c["board"]), str(c.get("wiping", "fixed")),
+                           plant=str(c.get("plant", "nominal"))), str(c["run_dir"])) for c in data["cells"]]
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise CampaignError(f"--summarize {d}: cannot read {path.name}: {exc}") from None
         entries += cells
@@ -261,6 +261,11 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--wiping", default="fixed",
                     help="wiping modes, each seed runs once per mode: fixed, adaptive or fixed,adaptive (default "
                          "fixed, the controller's default)")
+    ap.add_argument("--plants", default="nominal",
+                    help="simulated arms, each seed runs once per plant: nominal (the description), stuerz2017 (the "
+                         "link masses identified on a real iiwa 14), random (links +-30 %% in mass and inertia, "
+                         "centres of mass up to 2 cm off, seeded), tool (an unknown 0.2-1.5 kg tool, seeded); "
+                         "comma-separated (default nominal; the controller always keeps the description)")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="cells at once (default: the CPUs)")
     ap.add_argument("--skill", default=None, help="skill file (default: learn the bundled demo once)")
     ap.add_argument("--max-duration", type=float, default=600.0, help="give a cell up after S s wall (default 600)")
@@ -314,7 +319,8 @@ def main(argv: list[str] | None = None) -> int:
                 raise CampaignError(f"--skill {a.skill}: no such file")
         out = Path(a.out or f"runs/campaign-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
         wipings = tuple(w.strip() for w in a.wiping.split(",") if w.strip())
-        cells = cells_of(seeds, stains, boards, wipings, plots=a.cell_plots)
+        plants = tuple(p.strip() for p in a.plants.split(",") if p.strip())
+        cells = cells_of(seeds, stains, boards, wipings, plots=a.cell_plots, plants=plants)
         command = "lamps campaign " + " ".join(argv if argv is not None else sys.argv[1:])
         if a.resume and not (a.out and Path(a.out).is_dir()):
             raise CampaignError("--resume needs --out, the folder of the campaign to go on with")

@@ -17,19 +17,22 @@ class CampaignError(LampsError):
 
 @dataclass(frozen=True)
 class Cell:
-    """One seeded board: ``seed``, ``stains`` (count), ``board`` (preset name or TOML file), ``wiping`` mode;
-    ``plots``: whether its run draws the report's plots (not part of what the cell is: ``lamps report`` draws
-    them later from its recording)."""
+    """One seeded board: ``seed``, ``stains`` (count), ``board`` (preset name or TOML file), ``wiping`` mode,
+    ``plant`` (the simulated arm, :mod:`launch.campaign_plants`); ``plots``: whether its run draws the report's
+    plots (not part of what the cell is: ``lamps report`` draws them later from its recording)."""
 
     seed: int
     stains: int
     board: str
     wiping: str = "fixed"
     plots: bool = field(default=False, compare=False)
+    plant: str = "nominal"
 
     @property
     def name(self) -> str:
         suffix = "-adaptive" if self.wiping == "adaptive" else ""
+        if self.plant != "nominal":
+            suffix += f"-{self.plant}"
         board = "random" if self.board.startswith("random:") else Path(self.board).stem
         return f"{board}-s{self.seed}-n{self.stains}{suffix}"
 
@@ -51,17 +54,23 @@ def parse_range(text: str, what: str) -> list[int]:
 
 
 def cells_of(seeds: list[int], stains: list[int], boards: list[str], wipings: tuple[str, ...] = ("fixed",),
-             plots: bool = False) -> list[Cell]:
+             plots: bool = False, plants: tuple[str, ...] = ("nominal",)) -> list[Cell]:
     """The campaign's cells: seed s gets ``stains[s mod len]`` stains on ``boards[s mod len]``, once per wiping
-    mode (board ``random``: seed s's own random board, ``random:s``); ``plots``: each run draws its report's
-    plots."""
-    if not seeds or not stains or not boards or not wipings:
-        raise CampaignError("a campaign needs at least one seed, one stain count, one board and one wiping mode")
+    mode and plant (board ``random``: seed s's own random board, ``random:s``); ``plots``: each run draws its
+    report's plots."""
+    from .campaign_plants import PLANTS
+
+    if not seeds or not stains or not boards or not wipings or not plants:
+        raise CampaignError("a campaign needs at least one seed, one stain count, one board, one wiping mode and "
+                            "one plant")
     bad = [w for w in wipings if w not in WIPINGS]
     if bad:
         raise CampaignError(f"--wiping: {bad[0]!r} is not one of {WIPINGS}")
+    bad = [p for p in plants if p not in PLANTS]
+    if bad:
+        raise CampaignError(f"--plants: {bad[0]!r} is not one of {PLANTS}")
     def board(s: int) -> str:
         b = boards[s % len(boards)]
         return f"random:{s}" if b == "random" else b
 
-    return [Cell(s, stains[s % len(stains)], board(s), w, plots) for s in seeds for w in wipings]
+    return [Cell(s, stains[s % len(stains)], board(s), w, plots, p) for s in seeds for w in wipings for p in plants]

@@ -67,7 +67,8 @@ class Worker:
         """(``lamps up``'s exit code, its last stderr line) of ``cell``; (None, why) when the worker died under it
         or did not answer in time (then it is stopped)."""
         job = {"seed": cell.seed, "stains": cell.stains, "board": cell.board, "wiping": cell.wiping,
-               "plots": cell.plots, "skill": str(skill), "run_dir": str(run_dir), "max_duration_s": max_duration_s}
+               "plots": cell.plots, "plant": cell.plant, "skill": str(skill), "run_dir": str(run_dir),
+               "max_duration_s": max_duration_s}
         try:
             self._stdin.write(json.dumps(job) + "\n")
             self._stdin.flush()

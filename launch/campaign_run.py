@@ -31,12 +31,15 @@ def up_argv(cell: Cell, skill: Path, run_dir: Path, max_duration_s: float, port_
 
 
 def cell_env(cell: Cell) -> dict[str, str]:
-    """What the cell adds to the campaign's environment: its wiping mode, whether its report draws plots
+    """What the cell adds to the campaign's environment: its wiping mode, its plant (the simulator's
+    ``[sim.plant]``, :func:`launch.campaign_plants.plant_env`), whether its report draws plots
     (:data:`launch.report_options.PLOTS_ENV`), plots without a display."""
+    from .campaign_plants import plant_env
     from .report_options import PLOTS_ENV
 
     return {"MPLBACKEND": "Agg", PLOTS_ENV: "1" if cell.plots else "0",
-            "LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true" if cell.wiping == "adaptive" else "false"}
+            "LAMPS__CONTROLLER__PLANNER__ADAPTIVE": "true" if cell.wiping == "adaptive" else "false",
+            **plant_env(cell.plant, cell.seed)}
 
 
 def why_of(stderr: str, code: int) -> str:

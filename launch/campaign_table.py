@@ -56,6 +56,9 @@ def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: s
             "peak_speed_m_s": float(peaks.get("speed_m_s", float("nan"))),
             "faults": len(faults), "fault_reasons": [f.get("reason", "") for f in faults],
             "robot_events": sum(1 for f in report.get("faults", []) if f.get("phase") == "ROBOT"),
+            "tracking_rms_m": float(report.get("tracking_rms_m", float("nan"))),
+            "force_std_n": float(report.get("normal_force_std_n", float("nan"))),
+            "max_joint_speed_ratio": float(report.get("max_joint_speed_ratio", float("nan"))),
             "success": removed >= CLEAN_SHARE and not faults, "why": why}
 
 
@@ -65,13 +68,20 @@ def board_group(board: str) -> str:
     return "random" if board.startswith("random:") else Path(board).stem
 
 
+def group_of(row: dict[str, Any]) -> str:
+    """A row's group in the table: board and wiping mode, and its plant when not the nominal arm."""
+    plant = row.get("plant", "nominal")
+    return f"{board_group(row['board'])} {row.get('wiping', 'fixed')}" + ("" if plant == "nominal" else f" {plant}")
+
+
 def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """Per board (its name) and ``all``: runs, success rate, dirt removed (median, min), robot time and its ratio
-    to the lower bound (median), peak force and jerk (max), faults (sum), cells without a report."""
+    """Per board (its name), wiping mode and plant, and ``all``: runs, success rate, dirt removed (median, min),
+    robot time and its ratio to the lower bound (median), peak force and jerk (max), tracking and force spread
+    (median, max), joint speed (max), faults (sum), cells without a report."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in rows:
         wiping = r.get("wiping", "fixed")
-        groups.setdefault(f"{board_group(r['board'])} {wiping}", []).append(r)
+        groups.setdefault(group_of(r), []).append(r)
         groups.setdefault(f"all {wiping}", []).append(r)
     out = {}
     for name, rs in groups.items():
@@ -96,6 +106,9 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
                      "time_over_bound_max": top("time_over_bound"),
                      "peak_contact_force_max_n": top("peak_contact_force_n"),
                      "peak_jerk_max_m_s3": top("peak_jerk_m_s3"), "faults": sum(r["faults"] for r in ran),
+                     "tracking_rms_median_m": med("tracking_rms_m"), "tracking_rms_max_m": top("tracking_rms_m"),
+                     "force_std_median_n": med("force_std_n"), "force_std_max_n": top("force_std_n"),
+                     "joint_speed_ratio_max": top("max_joint_speed_ratio"),
                      "no_report": len(rs) - len(ran)}
     return out
 
@@ -105,8 +118,9 @@ def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], com
     head = ("| board, wiping | runs | success (>= 98 % removed, no fault) | dirt removed median / min "
             "| robot time median [s] | time per stain median [s] | time / cell bound median (max); cell time "
             "| time / lower bound median | peak speed / accel. / jerk max [m/s, m/s^2, m/s^3] "
-            "| peak contact force max [N] | faults | no report |\n"
-            "|---|---:|---:|---|---:|---:|---|---:|---|---:|---:|---:|")
+            "| peak contact force max [N] | force std median (max) [N] | tracking RMS median (max) [mm] "
+            "| joint speed max [share of limit] | faults | no report |\n"
+            "|---|---:|---:|---|---:|---:|---|---:|---|---:|---|---|---:|---:|---:|")
     lines = [head]
     for name in sorted(summary, key=lambda n: (n.startswith("all "), n.split()[-1], n)):
         s = summary[name]
@@ -119,8 +133,11 @@ def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], com
                      f"{s['time_over_bound_median']:.1f} | "
                      f"{s.get('peak_speed_max_m_s', float('nan')):.2f} / "
                      f"{s.get('peak_accel_max_m_s2', float('nan')):.2f} / "
-                     f"{s['peak_jerk_max_m_s3']:.0f} | {s['peak_contact_force_max_n']:.1f} | {s['faults']} | "
-                     f"{s['no_report']} |")
+                     f"{s['peak_jerk_max_m_s3']:.0f} | {s['peak_contact_force_max_n']:.1f} | "
+                     f"{s.get('force_std_median_n', float('nan')):.2f} ({s.get('force_std_max_n', float('nan')):.2f})"
+                     f" | {1e3 * s.get('tracking_rms_median_m', float('nan')):.2f} "
+                     f"({1e3 * s.get('tracking_rms_max_m', float('nan')):.2f}) | "
+                     f"{s.get('joint_speed_ratio_max', float('nan')):.2f} | {s['faults']} | {s['no_report']} |")
     lines += ["", "| cell | outcome | removed | robot time [s] | cell bound [s] | lower bound [s] | peak force [N] "
               "| peak jerk [m/s^3] | faults |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
@@ -147,11 +164,13 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     ran = [r for r in rows if r["outcome"] != "no report"]
     bound = [r.get("cell_bound_s", float("nan")) for r in ran]
     key = "cell_bound_s" if ran and np.isfinite(bound).all() else "lower_bound_s"
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for group in sorted({f"{board_group(r['board'])} {r.get('wiping', 'fixed')}" for r in ran}):
-        rs = [r for r in ran if f"{board_group(r['board'])} {r.get('wiping', 'fixed')}" == group]
+    plants = any(r.get("plant", "nominal") != "nominal" for r in ran)
+    fig, axes = plt.subplots(1, 3 if plants else 2, figsize=(16 if plants else 11, 4.2))
+    ax1, ax2 = axes[0], axes[1]
+    for group in sorted({group_of(r) for r in ran}):
+        rs = [r for r in ran if group_of(r) == group]
         ax1.scatter([r[key] for r in rs], [r["robot_time_s"] for r in rs], label=group, s=16,
-                    marker="o" if group.endswith("fixed") else "^")
+                    marker="o" if "fixed" in group.split() else "^")
     top = max([r[key] for r in ran] + [1.0])
     for f, style in ((1.0, "k-"), (2.0, "k--")):
         ax1.plot([0, top], [0, f * top], style, lw=0.8, label=f"{f:g}x the bound")
@@ -163,6 +182,17 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     ax2.axhline(100 * CLEAN_SHARE, color="k", lw=0.8)
     ax2.set(xlabel="cell", ylabel="dirt removed [%]", title="dirt removed (red: not a success)",
             ylim=(min([90.0] + [100 * r["dirt_removed"] for r in ran]), 100.5))
+    if plants:
+        from .campaign_plants import plant_error
+
+        ax3 = axes[2]
+        for plant in sorted({r.get("plant", "nominal") for r in ran}):
+            rs = [r for r in ran if r.get("plant", "nominal") == plant]
+            ax3.scatter([100 * plant_error(plant, int(r["seed"])) for r in rs],
+                        [1e3 * r.get("tracking_rms_m", float("nan")) for r in rs], label=plant, s=16)
+        ax3.set(xlabel="mass the model has wrong [% of the arm's]", ylabel="tracking RMS while wiping [mm]",
+                title="tracking against the plant's model error")
+        ax3.legend(fontsize=7)
     fig.tight_layout()
     write_atomic(path, lambda f: fig.savefig(f, format="png", dpi=100))
     plt.close(fig)

@@ -50,11 +50,17 @@ class _StderrNow(logging.StreamHandler):
         pass
 
 
+#: The worker's environment as it started (a cell's variables are set on top of it, never on a cell's before).
+_WORKER_ENV = dict(os.environ)
+
+
 def run_here(cell: Cell, skill: Path, run_dir: Path, max_duration_s: float) -> tuple[int, str, bool]:
     """``lamps up --no-network`` for ``cell`` in this process: (exit code, its last stderr line, whether it
     crashed: raised what would have ended a ``lamps up`` process)."""
     from .cli import up_main
 
+    os.environ.clear()  # the worker's own environment and this cell's: nothing left from the cell before
+    os.environ.update(_WORKER_ENV)
     os.environ.update(cell_env(cell))
     err = io.StringIO()
     crashed = False
@@ -78,7 +84,7 @@ def main() -> int:
         for line in sys.stdin:
             job = json.loads(line)
             cell = Cell(int(job["seed"]), int(job["stains"]), str(job["board"]), str(job["wiping"]),
-                        bool(job.get("plots", False)))
+                        bool(job.get("plots", False)), str(job.get("plant", "nominal")))
             code, why, crashed = run_here(cell, Path(job["skill"]), Path(job["run_dir"]), float(job["max_duration_s"]))
             answers.write(json.dumps({"code": code, "why": why}) + "\n")
             if crashed:

@@ -19,7 +19,7 @@ import pytest
 from launch.campaign import cell_stains, felt_model
 from launch.campaign_bounds import cell_bound_s, felt_path_m, lower_bound_s, mst_length_m
 from launch.campaign_cells import CampaignError, Cell, cells_of, parse_range
-from launch.campaign_table import row_of, summarize
+from launch.campaign_table import markdown, row_of, summarize
 
 from .zenoh_helpers import free_port
 
@@ -161,6 +161,56 @@ def test_each_seed_runs_once_per_wiping_mode_under_its_own_name():
         cells_of([0], [1], ["wall"], ("sloppy",))
 
 
+def test_each_seed_runs_once_per_plant_and_the_plant_reaches_the_simulator_only():
+    """A plant is the simulator's [sim.plant] table, through the cell's environment, the same for a seed in any
+    campaign; the controller's parameters never see it."""
+    import json
+
+    from controller.params import ControllerParams
+    from interfaces.config import load_config
+    from launch.campaign_plants import PLANTS, plant_error, plant_table
+    from launch.campaign_run import cell_env
+    from sim.params import SimParams
+
+    cells = cells_of([3], [2], ["wall"], ("fixed",), plants=PLANTS)
+    assert [c.name for c in cells] == ["wall-s3-n2", "wall-s3-n2-stuerz2017", "wall-s3-n2-random", "wall-s3-n2-tool"]
+    with pytest.raises(CampaignError, match="--plants: 'heavy' is not one of"):
+        cells_of([0], [1], ["wall"], plants=("heavy",))
+    for cell in cells:
+        env = cell_env(cell)
+        table = {k.removeprefix("LAMPS__SIM__PLANT__").lower(): json.loads(v) for k, v in env.items()
+                 if k.startswith("LAMPS__SIM__PLANT__")}
+        assert table == plant_table(cell.plant, 3) and not any(k.startswith("LAMPS__CONTROLLER__PLANT")
+                                                               for k in env)
+        old = dict(os.environ)
+        try:
+            os.environ.update(env)
+            cfg = load_config(None)
+            sim = SimParams.from_table(cfg.table("sim"))
+            assert ControllerParams.from_table(cfg.table("controller")) == ControllerParams.from_table({}), cell.name
+        finally:
+            os.environ.clear()
+            os.environ.update(old)
+        assert sim.plant.body_is_described == (cell.plant == "nominal"), cell.name
+    tool = plant_table("tool", 3)
+    assert 0.2 <= tool["tool_mass_kg"] <= 1.5 and plant_table("tool", 3) == tool != plant_table("tool", 4)
+    assert plant_error("nominal", 0) == 0.0 < plant_error("tool", 3) and 0.0 < plant_error("random", 3) < 0.3
+
+
+def test_the_table_groups_plants_and_reports_tracking_force_spread_and_joint_speed():
+    rows = [row_of(Cell(0, 1, "wall"), {**_report(1.0, 20.0), "tracking_rms_m": 0.002, "normal_force_std_n": 0.6,
+                                       "max_joint_speed_ratio": 0.5}, 10.0, "a"),
+            row_of(Cell(0, 1, "wall", plant="random"), {**_report(1.0, 21.0), "tracking_rms_m": 0.004,
+                                                        "normal_force_std_n": 1.2, "max_joint_speed_ratio": 0.7},
+                   10.0, "b")]
+    s = summarize(rows)
+    assert set(s) == {"wall fixed", "wall fixed random", "all fixed"}
+    assert s["wall fixed random"]["tracking_rms_median_m"] == 0.004 and s["all fixed"]["force_std_max_n"] == 1.2
+    assert s["all fixed"]["joint_speed_ratio_max"] == 0.7
+    table = markdown(s, rows, "cmd")
+    assert "| wall fixed random | 1 |" in table and "1.20 (1.20) | 4.00 (4.00) | 0.70 |" in table, table
+
+
 def _campaign(*args: str, timeout: float = 900.0, env: dict | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "interfaces.cli", "campaign", *args], cwd=REPO,
                           capture_output=True, text=True, timeout=timeout,
@@ -284,3 +334,26 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     assert (c["outcome"], c["faults"]) == (want["outcome"], want["faults"]), (c, want)
     assert abs(c["dirt_removed"] - want["dirt_removed"]) < 0.005, (c, want)
     assert abs(c["robot_time_s"] - want["robot_time_s"]) < 0.4 * want["robot_time_s"], (c, want)
+
+
+def test_a_pool_worker_runs_each_cell_in_its_own_environment_not_the_one_before(monkeypatch, tmp_path):
+    """The network-free pool runs cells one after another in one process: a cell's plant variables must not
+    stay for the next cell (a nominal cell after a tool cell ran with the tool)."""
+    import launch.cli
+    from launch import campaign_worker
+
+    seen = []
+    monkeypatch.setattr(launch.cli, "up_main", lambda argv: seen.append(
+        {k: v for k, v in os.environ.items() if k.startswith("LAMPS__SIM__PLANT__")}) or 0)
+    before = dict(os.environ)
+    try:
+        for plant in ("tool", "nominal", "random"):
+            code, _, crashed = campaign_worker.run_here(Cell(5, 1, "wall", plant=plant), tmp_path / "s.json",
+                                                        tmp_path / plant, 60.0)
+            assert code == 0 and not crashed
+    finally:  # run_here sets the process's environment, as a worker's: this test's process gets its own back
+        os.environ.clear()
+        os.environ.update(before)
+    assert "LAMPS__SIM__PLANT__TOOL_MASS_KG" in seen[0] and seen[1] == {}, seen
+    assert set(seen[2]) == {"LAMPS__SIM__PLANT__RANDOM_MASS_ERROR", "LAMPS__SIM__PLANT__RANDOM_COM_ERROR_M",
+                            "LAMPS__SIM__PLANT__SEED"}, seen
