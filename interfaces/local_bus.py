@@ -22,6 +22,7 @@ import itertools
 import threading
 from collections import deque
 from collections.abc import Callable
+from typing import cast
 
 import zenoh
 
@@ -84,15 +85,17 @@ class _Subscriber:
         self._ring: deque[_Sample] | None = None if callback is not None else deque(maxlen=max(depth, 1))
 
     def deliver(self, sample: _Sample) -> None:
-        if self._ring is None:
-            self.callback(sample)
-        else:
+        if self._ring is not None:
             self._ring.append(sample)
+        elif self.callback is not None:
+            self.callback(sample)
 
     def try_recv(self) -> _Sample | None:
+        if self._ring is None:
+            return None
         try:
             return self._ring.popleft()
-        except (IndexError, AttributeError):
+        except IndexError:
             return None
 
     def undeclare(self) -> None:
@@ -238,19 +241,24 @@ class LocalNode(ServiceNode):
         from .service_security import IN_PROCESS
 
         self.security = IN_PROCESS
-        self._session = LocalSession(self.bus)
-        self._token = self._session.liveliness().declare_token(self.keys.alive(self.service))
+        session = LocalSession(self.bus)
+        # a stand-in for zenoh.Session and its token: the part ServiceNode's readers and liveliness use
+        self._session = cast(zenoh.Session, session)
+        self._token = cast(zenoh.LivelinessToken, session.liveliness().declare_token(self.keys.alive(self.service)))
         return self
+
+    def _local(self) -> LocalSession:
+        return cast(LocalSession, self.session)
 
     def publish(self, key: str, msg: Message) -> None:
         """Put ``msg`` on ``key`` as itself (see the module's notes)."""
         msg = self._with_security(msg)
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._publishers[key] = self.session.declare_publisher(key)
-        pub.put_message(msg)
+            pub = self._publishers[key] = cast(zenoh.Publisher, self._local().declare_publisher(key))
+        cast(_Publisher, pub).put_message(msg)
 
     def latest(self, key: str, msg_type, depth: int = 1) -> Latest:
-        reader = Latest(self.session.with_ring(depth), key, msg_type, depth)
+        reader = Latest(cast(zenoh.Session, self._local().with_ring(depth)), key, msg_type, depth)
         self._readers.append(reader)
         return reader
