@@ -228,7 +228,7 @@ def plan_transition(
     move = goal[0] - y0
     index, transform = _pick_transitional(skill, move)
     duration = transition_duration(skill, index, move, plan_.params)
-    goal = tuple(np.asarray(g, float) for g in goal)
+    goal = (np.asarray(goal[0], float), np.asarray(goal[1], float), np.asarray(goal[2], float))
     if duration_s is not None:
         if not (np.isfinite(duration_s) and duration_s > 0):
             raise PlanningError(f"duration_s must be a positive number of seconds, got {duration_s!r}")
