@@ -297,11 +297,11 @@ def _read_demos(a: argparse.Namespace) -> list:
     if given and not recordings:
         raise LampsError(f"{', '.join(given)}: only for robot recordings (a rosbag2 folder, .mcap, .db3), "
                          f"and {', '.join(a.demo)} holds none")
-    arm = None
-    if recordings:
-        from lampskit.arm import described_arm
+    if not recordings:
+        return [read_demo(spec) for spec in a.demo]
+    from lampskit.arm import described_arm
 
-        arm = described_arm()
+    arm = described_arm()
     return [read_recording_demo(spec, arm, options) if is_recording(spec) else read_demo(spec) for spec in a.demo]
 
 
