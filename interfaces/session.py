@@ -30,7 +30,7 @@ import threading
 import time
 from collections import Counter, deque
 from pathlib import Path
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import msgspec
 import zenoh
@@ -290,7 +290,7 @@ class Inbox(Generic[M]):
 
 
 #: Zenoh publisher options of the 1 kHz control path: at once, first, never queued behind a congested link.
-CONTROL_QOS = {"express": True, "priority": zenoh.Priority.REAL_TIME,
+CONTROL_QOS: dict[str, Any] = {"express": True, "priority": zenoh.Priority.REAL_TIME,
                "congestion_control": zenoh.CongestionControl.DROP}
 
 

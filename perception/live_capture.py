@@ -48,7 +48,7 @@ def open_device(device: str, size_px: tuple[int, int], fps: float, fourcc: str) 
     if not cap.isOpened():
         raise FileNotFoundError(f"cannot open capture device {device!r} (no such device, or in use)")
     if fourcc:
-        cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*fourcc))
+        cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter.fourcc(*fourcc))
     cap.set(cv2.CAP_PROP_FRAME_WIDTH, size_px[0])
     cap.set(cv2.CAP_PROP_FRAME_HEIGHT, size_px[1])
     cap.set(cv2.CAP_PROP_FPS, fps)

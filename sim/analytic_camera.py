@@ -151,7 +151,7 @@ def arm_mesh(client: int, robot: int, look: str = "description") -> ArmMesh:
     links = sorted({v[1] for v in pb.getVisualShapeData(robot, physicsClientId=client)})
     verts, vlink, slices, faces, centres, normals, flink, rgb = [], [], [], [], [], [], [], []
     n = 0
-    shapes = []
+    shapes: list[tuple] = []
     for shape in pb.getVisualShapeData(robot, physicsClientId=client):
         item = (shape[1], shape[2], shape[3], shape[7], shape[5], shape[6])
         shapes += [(item[0], *s) for s in iiwa_shapes(*item)] if look == "iiwa" else [item]

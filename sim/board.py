@@ -7,6 +7,7 @@ height, z the outward normal; the board's front face is z = 0.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +24,7 @@ MIN_SHOULDER_CLEARANCE_M = 0.1
 #: Seed posture for inverse kinematics (elbow up, wrist bent).
 SEED_Q_RAD = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0])
 
-_PRESETS = {
+_PRESETS: dict[str, dict[str, Any]] = {
     # vertical board 0.68 m in front of the robot, x_board = -y_world, y_board = +z_world, z_board = -x_world
     "wall": dict(size_m=(0.8, 0.6), origin_m=(0.68, 0.4, 0.25),
                  R=np.column_stack([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])),

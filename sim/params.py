@@ -193,9 +193,10 @@ class CameraParams:
         if (self.position_m is None) != (self.look_at_m is None):
             raise ConfigError(f"[{s}] give both position_m and look_at_m, or neither (automatic pose)")
         if self.position_m is not None:
-            object.__setattr__(self, "position_m", _vector(s, "position_m", self.position_m, 3))
-            object.__setattr__(self, "look_at_m", _vector(s, "look_at_m", self.look_at_m, 3))
-            if math.dist(self.position_m, self.look_at_m) < 0.1:
+            position, look_at = _vector(s, "position_m", self.position_m, 3), _vector(s, "look_at_m", self.look_at_m, 3)
+            object.__setattr__(self, "position_m", position)
+            object.__setattr__(self, "look_at_m", look_at)
+            if math.dist(position, look_at) < 0.1:
                 raise ConfigError(f"[{s}] position_m and look_at_m must be at least 0.1 m apart")
         if self.light_direction is not None:
             object.__setattr__(self, "light_direction", _vector(s, "light_direction", self.light_direction, 3))

@@ -239,6 +239,7 @@ class CameraProcess:
             if stop is None or not stop.is_set():
                 self._mark_dead()
             return None
+        assert self._pending is not None  # set by the request this answers
         _state_seq, stamp_ns, robot_time_ns = self._pending
         data = self.image.tobytes()
         self._idle.set()

@@ -203,7 +203,7 @@ class FriLink:
         down = 0
         if self._drop_ns is not None and t_ns >= self._drop_ns:
             down = 1 + (t_ns - self._drop_ns) // self._step_ns
-        if not self.up(t_ns):
+        if not self.up(t_ns) and self._lost_ns is not None:  # not up: the link is lost
             down = max(down, (t_ns - self._lost_ns) // self._step_ns)
         return ConnectionQuality(max(int(ConnectionQuality.EXCELLENT) - int(down), int(ConnectionQuality.POOR)))
 
