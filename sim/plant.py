@@ -69,24 +69,40 @@ def plant_urdf(p: PlantParams, source: str | None = None) -> str:
     """The description (``source`` text, default the file) with ``p``'s links and tool, as URDF text."""
     root = ET.fromstring(source if source is not None else URDF_PATH.read_text())
     links = {el.get("name"): el for el in root.iter("link")}
-    described = np.array([float(links[n].find("inertial/mass").get("value")) for n in LINK_NAMES])
+    described = np.array([float(_attr(_child(links[n], "inertial/mass"), "value")) for n in LINK_NAMES])
     mass, inertia, offset = link_changes(p, described)
     for i, name in enumerate(LINK_NAMES):
-        inertial = links[name].find("inertial")
-        m_el, o_el, i_el = inertial.find("mass"), inertial.find("origin"), inertial.find("inertia")
+        inertial = _child(links[name], "inertial")
+        m_el, o_el, i_el = _child(inertial, "mass"), _child(inertial, "origin"), _child(inertial, "inertia")
         m_el.set("value", repr(float(described[i] * mass[i])))
-        xyz = np.array([float(v) for v in o_el.get("xyz").split()]) + offset[i]
+        xyz = np.array([float(v) for v in _attr(o_el, "xyz").split()]) + offset[i]
         o_el.set("xyz", " ".join(repr(float(v)) for v in xyz))
         _set_inertia(i_el, _inertia_matrix(i_el) * inertia[i])
     if p.tool_mass_kg > 0.0:
-        _merge_tool(links[ERASER_LINK].find("inertial"), p.tool_mass_kg, np.array(p.tool_com_m))
+        _merge_tool(_child(links[ERASER_LINK], "inertial"), p.tool_mass_kg, np.array(p.tool_com_m))
     return ET.tostring(root, encoding="unicode")
+
+
+def _child(el: ET.Element, path: str) -> ET.Element:
+    """``el``'s element at ``path``; ValueError naming what the description lacks."""
+    found = el.find(path)
+    if found is None:
+        raise ValueError(f"the robot description's <{el.tag} name={el.get('name')!r}> has no <{path}>")
+    return found
+
+
+def _attr(el: ET.Element, name: str) -> str:
+    """Attribute ``name`` of ``el``; ValueError naming what the description lacks."""
+    value = el.get(name)
+    if value is None:
+        raise ValueError(f"the robot description's <{el.tag}> has no {name!r}")
+    return value
 
 
 def _merge_tool(inertial: ET.Element, mt: float, ct: np.ndarray) -> None:
     """The eraser's inertial with a point mass ``mt`` [kg] at ``ct`` (3,) [m] (eraser = flange frame) merged in."""
-    m_el, o_el, i_el = inertial.find("mass"), inertial.find("origin"), inertial.find("inertia")
-    m0, c0 = float(m_el.get("value")), np.array([float(v) for v in o_el.get("xyz").split()])
+    m_el, o_el, i_el = _child(inertial, "mass"), _child(inertial, "origin"), _child(inertial, "inertia")
+    m0, c0 = float(_attr(m_el, "value")), np.array([float(v) for v in _attr(o_el, "xyz").split()])
     m = m0 + mt
     c = (m0 * c0 + mt * ct) / m
 
