@@ -43,7 +43,7 @@ import numpy as np
 import pinocchio as pin
 from foxglove import messages as fm
 
-from interfaces.description import TCP_FRAME, URDF_PATH
+from interfaces.description import TCP_FRAME, URDF_PATH, urdf_attr
 from interfaces.keys import Keys
 from interfaces.messages import CameraFrame, RobotState, Stains
 
@@ -114,19 +114,11 @@ def _rpy(rpy: list[str]) -> np.ndarray:
     return pin.rpy.rpyToMatrix(*[float(v) for v in rpy])
 
 
-def _attr(el: ET.Element, name: str) -> str:
-    """Attribute ``name`` of the description's element ``el``; ValueError naming what is missing."""
-    value = el.get(name)
-    if value is None:
-        raise ValueError(f"the robot description's <{el.tag}> has no {name!r}")
-    return value
-
-
 def _rgba(col: ET.Element | None) -> tuple[float, float, float, float]:
     """The colour of a ``<color>`` element (grey without one)."""
     if col is None:
         return (0.6, 0.6, 0.6, 1.0)
-    r, g, b, a = (float(v) for v in _attr(col, "rgba").split())
+    r, g, b, a = (float(v) for v in urdf_attr(col, "rgba").split())
     return r, g, b, a
 
 
@@ -163,18 +155,18 @@ def urdf_visuals(urdf_path: str | Path = URDF_PATH) -> list[Visual]:
             mat = vis.find("material")
             col = mat.find("color") if mat is not None and mat.find("color") is not None else \
                 colours.get(mat.get("name")) if mat is not None else None
-            rgba, name = _rgba(col), _attr(link, "name")
+            rgba, name = _rgba(col), urdf_attr(link, "name")
             if geom is None:
                 raise ValueError(f"the robot description's link {name!r} has a <visual> without <geometry>")
             for shape in geom:
                 if shape.tag == "cylinder":
-                    r, h = float(_attr(shape, "radius")), float(_attr(shape, "length"))
+                    r, h = float(urdf_attr(shape, "radius")), float(urdf_attr(shape, "length"))
                     out.append(Visual(name, p, R, "cylinder", (2 * r, 2 * r, h), rgba))
                 elif shape.tag == "box":
-                    sx, sy, sz = (float(v) for v in _attr(shape, "size").split())
+                    sx, sy, sz = (float(v) for v in urdf_attr(shape, "size").split())
                     out.append(Visual(name, p, R, "cube", (sx, sy, sz), rgba))
                 elif shape.tag == "sphere":
-                    d = 2 * float(_attr(shape, "radius"))
+                    d = 2 * float(urdf_attr(shape, "radius"))
                     out.append(Visual(name, p, R, "sphere", (d, d, d), rgba))
     return out
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from interfaces.description import URDF_PATH
+from interfaces.description import URDF_PATH, urdf_attr, urdf_child
 
 from .rectify import BoardGrid
 from .self_filter import ArmState, board_shadow
@@ -50,12 +50,12 @@ def solid_vertices(geometry: ET.Element) -> np.ndarray | None:
     shape without a convex polygon here (a mesh, a sphere)."""
     cyl, box = geometry.find("cylinder"), geometry.find("box")
     if cyl is not None:
-        r, length = float(cyl.get("radius")), float(cyl.get("length"))
+        r, length = float(urdf_attr(cyl, "radius")), float(urdf_attr(cyl, "length"))
         a = 2.0 * np.pi * np.arange(SIDES) / SIDES
         ring = np.column_stack([r * np.cos(a), r * np.sin(a)])
         return np.vstack([np.column_stack([ring, np.full(SIDES, z)]) for z in (-length / 2, length / 2)])
     if box is not None:
-        sx, sy, sz = (float(v) / 2 for v in box.get("size").split())
+        sx, sy, sz = (float(v) / 2 for v in urdf_attr(box, "size").split())
         return np.array([[x, y, z] for x in (-sx, sx) for y in (-sy, sy) for z in (-sz, sz)])
     return None
 
@@ -65,13 +65,13 @@ def link_solids(urdf_path: Path = URDF_PATH) -> list[tuple[str, np.ndarray]]:
     out = []
     for link in ET.parse(urdf_path).getroot().iter("link"):
         for visual in link.findall("visual"):
-            v = solid_vertices(visual.find("geometry"))
+            v = solid_vertices(urdf_child(visual, "geometry"))
             if v is None:
                 continue
             origin = visual.find("origin")
             xyz = np.array([float(x) for x in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()])
             rpy = [float(x) for x in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()]
-            out.append((link.get("name"), v @ _rotation_rpy(*rpy).T + xyz))
+            out.append((urdf_attr(link, "name"), v @ _rotation_rpy(*rpy).T + xyz))
     return out
 
 
@@ -112,7 +112,7 @@ class ArmSilhouette:
         """(rows, cols) bool of the rectified board: every solid's shadow from ``camera_world_m`` (3,) [m]
         filled, grown by :meth:`margin_m`."""
         rows, cols = grid.shape
-        mask = np.zeros((rows, cols), np.uint8)
+        mask: np.ndarray = np.zeros((rows, cols), np.uint8)
         r = grid.resolution_m
         lim = 4.0 * max(rows, cols)
         for pts in self.points_world(arm.q_rad):

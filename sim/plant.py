@@ -18,7 +18,7 @@ from dataclasses import replace
 import numpy as np
 import pybullet as pb
 
-from interfaces.description import ERASER_DEPTH_M, ERASER_LINK, URDF_PATH
+from interfaces.description import ERASER_DEPTH_M, ERASER_LINK, URDF_PATH, urdf_attr, urdf_child
 from interfaces.joint_dynamics import JointDynamics
 
 from .plant_params import N_LINKS, PROFILES, PlantParams
@@ -69,40 +69,24 @@ def plant_urdf(p: PlantParams, source: str | None = None) -> str:
     """The description (``source`` text, default the file) with ``p``'s links and tool, as URDF text."""
     root = ET.fromstring(source if source is not None else URDF_PATH.read_text())
     links = {el.get("name"): el for el in root.iter("link")}
-    described = np.array([float(_attr(_child(links[n], "inertial/mass"), "value")) for n in LINK_NAMES])
+    described = np.array([float(urdf_attr(urdf_child(links[n], "inertial/mass"), "value")) for n in LINK_NAMES])
     mass, inertia, offset = link_changes(p, described)
     for i, name in enumerate(LINK_NAMES):
-        inertial = _child(links[name], "inertial")
-        m_el, o_el, i_el = _child(inertial, "mass"), _child(inertial, "origin"), _child(inertial, "inertia")
+        inertial = urdf_child(links[name], "inertial")
+        m_el, o_el, i_el = urdf_child(inertial, "mass"), urdf_child(inertial, "origin"), urdf_child(inertial, "inertia")
         m_el.set("value", repr(float(described[i] * mass[i])))
-        xyz = np.array([float(v) for v in _attr(o_el, "xyz").split()]) + offset[i]
+        xyz = np.array([float(v) for v in urdf_attr(o_el, "xyz").split()]) + offset[i]
         o_el.set("xyz", " ".join(repr(float(v)) for v in xyz))
         _set_inertia(i_el, _inertia_matrix(i_el) * inertia[i])
     if p.tool_mass_kg > 0.0:
-        _merge_tool(_child(links[ERASER_LINK], "inertial"), p.tool_mass_kg, np.array(p.tool_com_m))
+        _merge_tool(urdf_child(links[ERASER_LINK], "inertial"), p.tool_mass_kg, np.array(p.tool_com_m))
     return ET.tostring(root, encoding="unicode")
-
-
-def _child(el: ET.Element, path: str) -> ET.Element:
-    """``el``'s element at ``path``; ValueError naming what the description lacks."""
-    found = el.find(path)
-    if found is None:
-        raise ValueError(f"the robot description's <{el.tag} name={el.get('name')!r}> has no <{path}>")
-    return found
-
-
-def _attr(el: ET.Element, name: str) -> str:
-    """Attribute ``name`` of ``el``; ValueError naming what the description lacks."""
-    value = el.get(name)
-    if value is None:
-        raise ValueError(f"the robot description's <{el.tag}> has no {name!r}")
-    return value
 
 
 def _merge_tool(inertial: ET.Element, mt: float, ct: np.ndarray) -> None:
     """The eraser's inertial with a point mass ``mt`` [kg] at ``ct`` (3,) [m] (eraser = flange frame) merged in."""
-    m_el, o_el, i_el = _child(inertial, "mass"), _child(inertial, "origin"), _child(inertial, "inertia")
-    m0, c0 = float(_attr(m_el, "value")), np.array([float(v) for v in _attr(o_el, "xyz").split()])
+    m_el, o_el, i_el = urdf_child(inertial, "mass"), urdf_child(inertial, "origin"), urdf_child(inertial, "inertia")
+    m0, c0 = float(urdf_attr(m_el, "value")), np.array([float(v) for v in urdf_attr(o_el, "xyz").split()])
     m = m0 + mt
     c = (m0 * c0 + mt * ct) / m
 

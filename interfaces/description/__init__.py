@@ -9,6 +9,7 @@ are not in the file: :mod:`interfaces.joint_dynamics` gives both sides them.
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 #: The KUKA LBR iiwa 14 R820 with the eraser on its flange.
@@ -24,3 +25,19 @@ TCP_FRAME = "eraser_tcp"
 PAD_SIZE_M: tuple[float, float] = (0.12, 0.05)
 #: The eraser's depth behind the pad face (holder 0.030 m + felt 0.005 m) [m].
 ERASER_DEPTH_M: float = 0.035
+
+
+def urdf_child(el: ET.Element, path: str) -> ET.Element:
+    """The element at ``path`` under ``el`` of a robot description; ValueError naming what it lacks."""
+    found = el.find(path)
+    if found is None:
+        raise ValueError(f"the robot description's <{el.tag} name={el.get('name')!r}> has no <{path}>")
+    return found
+
+
+def urdf_attr(el: ET.Element, name: str) -> str:
+    """Attribute ``name`` of a robot description's element ``el``; ValueError naming what it lacks."""
+    value = el.get(name)
+    if value is None:
+        raise ValueError(f"the robot description's <{el.tag}> has no {name!r}")
+    return value
