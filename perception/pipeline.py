@@ -99,30 +99,32 @@ class Perception:
             self.board.size_m = est.size_m
         if self.grid is None:
             self._setup(est)
+        grid, classifier, tracker = self.grid, self.classifier, self.tracker
+        assert grid is not None and classifier is not None and tracker is not None  # made together by _setup
         if self._first_fix_t is None:
             self._first_fix_t = frame.t_s
         if est.state == "lost":
             return Result(self._message(est, frame, lost=True), est, est.reason, timing)
-        rect = self.grid.warp(frame.rgb, self.grid.image_from_grid(frame.K, est.T_board_to_camera))
+        rect = grid.warp(frame.rgb, grid.image_from_grid(frame.K, est.T_board_to_camera))
         t2 = time.perf_counter()
         hidden = None
         if tool_world_m is not None:
             camera = frame.T_camera_to_world[:3, 3]
-            hidden = shadow_mask(self.grid, board_shadow(tool_world_m, est.T_board_to_world, camera),
+            hidden = shadow_mask(grid, board_shadow(tool_world_m, est.T_board_to_world, camera),
                                  self.p.tool_margin_m)
         if arm is not None:
             if self.arm_silhouette is None:
                 self.arm_silhouette = ArmSilhouette()
-            links = self.arm_silhouette.board_mask(self.grid, est.T_board_to_world, frame.T_camera_to_world[:3, 3],
+            links = self.arm_silhouette.board_mask(grid, est.T_board_to_world, frame.T_camera_to_world[:3, 3],
                                                    arm, self.p.tool_margin_m)
             hidden = links if hidden is None else hidden | links
         if tool_world_m is not None or arm is not None:
             t_mask = time.perf_counter()
             timing["mask"] = (t_mask - t2) * 1e3
             t2 = t_mask
-        ink = self.classifier.classify(rect, hidden)
+        ink = classifier.classify(rect, hidden)
         t3 = time.perf_counter()
-        self.tracker.update(ink, frame.t_s)
+        tracker.update(ink, frame.t_s)
         t4 = time.perf_counter()
         timing.update(rectify=(t2 - t1) * 1e3 - timing.get("mask", 0.0), classify=(t3 - t2) * 1e3,
                       track=(t4 - t3) * 1e3)
@@ -141,6 +143,7 @@ class Perception:
     def _message(self, est: BoardEstimate, frame: Frame, lost: bool) -> Stains:
         T = est.T_board_to_world
         out = []
+        assert self.tracker is not None  # made with the grid, before any message
         for tr in self.tracker.tracks:
             if tr.shape is None:
                 continue

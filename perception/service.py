@@ -21,6 +21,7 @@ import threading
 import time
 from collections import Counter, deque
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
@@ -32,6 +33,9 @@ from .debug import debug_jpeg
 from .params import PerceptionParams
 from .pipeline import Perception, Result
 from .self_filter import ToolTrack
+
+if TYPE_CHECKING:
+    from interfaces.session import Latest
 
 log = logging.getLogger(__name__)
 SERVICE = "perception"
@@ -55,11 +59,11 @@ class PerceptionService:
         self.perception = Perception(params)
         # the robot's joint states, to mask its tool out of the image (perception.self_filter)
         self.tool: ToolTrack | None = None
-        self._robot_states = None
+        self._robot_states: Latest[RobotState] | None = None
         if node is not None and params.tool_mask:
             self.tool = ToolTrack(params.tool_max_age_s)
             # the newest 512 states (0.5 s at 1 kHz) held by Zenoh, decoded only at each frame: no Python per state
-            self._robot_states = node.latest(self.keys.robot_state, RobotState, depth=512)
+            self._robot_states = node.latest(node.keys.robot_state, RobotState, depth=512)
         self.stop = threading.Event()
         self.counters: Counter[str] = Counter()
         self.last: Stains | None = None
@@ -96,7 +100,7 @@ class PerceptionService:
 
     def _tool_at(self, frame, now: float) -> np.ndarray | None:
         """The tool box (8, 3) [m] at the frame's time from the joint states received so far, or None."""
-        if self.tool is None:
+        if self.tool is None or self._robot_states is None:
             return None
         for state in self._robot_states.take_all():
             self.tool.add(state.robot_time_ns, state.q_rad, now, state.dq_rad_s)
@@ -151,7 +155,7 @@ class PerceptionService:
         self._last_publish = now
         self.counters[f"stains_published_{msg.board}"] += 1
         if self.node is not None:
-            self.node.publish(self.keys.perception_stains, msg)
+            self.node.publish(self.node.keys.perception_stains, msg)
         if self.sink is not None:
             self.sink(msg)
 
@@ -180,7 +184,8 @@ class PerceptionService:
         data, (h, w) = debug_jpeg(result, self.perception)
         res = self.p.board.resolution_m
         intr = CameraIntrinsics(1.0 / res, 1.0 / res, 0.0, 0.0, w, h)  # pixels per metre on the board
-        self.node.publish(self.keys.perception_debug, CameraFrame(
+        assert result.board is not None  # a rectified image has its board
+        self.node.publish(self.node.keys.perception_debug, CameraFrame(
             seq=frame.seq, stamp_ns=time.monotonic_ns(), camera="rectified-board", encoding="jpeg", data=data,
             intrinsics=intr, T_camera_to_world=pose_from_transform(result.board.T_board_to_world),
             robot_time_ns=frame.robot_time_ns))
@@ -192,7 +197,7 @@ class PerceptionService:
         if self.tool is not None:
             counters["frames_tool_masked"] = self.tool.used
             counters["frames_tool_pose_unknown"] = self.tool.unknown
-            for reason, n in self._robot_states.bad.items():
+            for reason, n in (self._robot_states.bad if self._robot_states is not None else {}).items():
                 counters[f"robot_states_bad: {reason}"] = n
         proc = np.array(self._process_us) if self._process_us else np.zeros(1)
         gap = np.array(self._interval_us) if self._interval_us else np.zeros(1)
@@ -214,4 +219,4 @@ class PerceptionService:
         if self.node is None or (not force and now < self._next_status):
             return
         self._next_status = now + 1.0 / self.p.status_rate_hz
-        self.node.publish(self.keys.perception_status, self.status())
+        self.node.publish(self.node.keys.perception_status, self.status())

@@ -134,7 +134,7 @@ class OpenCVSource:
 
     def read(self) -> Frame | None:
         if self._live is not None:
-            return self._read_live()
+            return self._read_live(self._live)
         if self.ended:
             return None
         t = self._seq / self.rate_hz
@@ -149,17 +149,19 @@ class OpenCVSource:
                 self.counters["frames_bad: corrupt image file"] += 1
                 return None
         else:
-            ok, bgr = self._cap.read()
+            cap = self._cap
+            assert cap is not None  # a video file, opened with the source
+            ok, bgr = cap.read()
             if not ok:
                 self.ended = True
                 return None
             self._seq += 1
-            t = self._cap.get(cv2.CAP_PROP_POS_MSEC) / 1e3
+            t = cap.get(cv2.CAP_PROP_POS_MSEC) / 1e3
         return self._frame(bgr, t, time.monotonic_ns())
 
-    def _read_live(self) -> Frame | None:
-        self.ended = self._live.ended
-        got = self._live.newest()
+    def _read_live(self, live: LiveCapture) -> Frame | None:
+        self.ended = live.ended
+        got = live.newest()
         if got is None:
             return None
         bgr, arrived_ns, wall_ns = got
