@@ -109,7 +109,8 @@ def measure_board(markers: dict[int, np.ndarray], K: np.ndarray,
         ok, rvec, tvec = cv2.solvePnP(square, c, K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if ok:
             T = _transform(rvec, tvec)
-            centres[i], _ = T[:3, 3], axes.append(T[:3, :3])
+            centres[i] = T[:3, 3]
+            axes.append(T[:3, :3])
     # the average marker orientation: board x and y in the camera frame
     u, _, vt = np.linalg.svd(sum(axes))
     R = u @ vt
@@ -208,6 +209,7 @@ class BoardTracker:
         self.why = reason
         if reason:
             return self._hold(markers, t_s, reason)
+        assert T_bc is not None and size is not None  # a pose, since there is no reason against it
         T_bw = T_camera_to_world @ T_bc
         moved = False
         if self.last is not None:

@@ -165,13 +165,13 @@ class InkClassifier:
                                         np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None], (rows, cols))])
         # per ink, [s, t] = M x + m and the model's residual e = x - A [s, t] = (I - A M) x - A m: both affine in
         # x, so each is one cv2.transform with a (k, 4) matrix (fused, float32, no temporaries per channel)
-        self._to_st, self._to_residual = [], []
+        to_st, to_residual = [], []
         for a in ink_absorptions(params):
             M, m = unmixing_matrix(a, params.prior_weight)
             A = np.column_stack([np.ones(3), -a])
-            self._to_st.append(np.hstack([M, m[:, None]]).astype(np.float32))
-            self._to_residual.append(np.hstack([np.eye(3) - A @ M, -(A @ m)[:, None]]).astype(np.float32))
-        self._to_st, self._to_residual = np.array(self._to_st), np.array(self._to_residual)  # (k, 2, 4), (k, 3, 4)
+            to_st.append(np.hstack([M, m[:, None]]).astype(np.float32))
+            to_residual.append(np.hstack([np.eye(3) - A @ M, -(A @ m)[:, None]]).astype(np.float32))
+        self._to_st, self._to_residual = np.array(to_st), np.array(to_residual)  # (k, 2, 4), (k, 3, 4)
         self._limits = np.array([*params.illumination_range, *D_RANGE, params.max_residual, params.chroma_tolerance],
                                 np.float32)
         self._no_local, self._no_edges = np.zeros((0, 0, 3), np.float32), np.zeros((0, 0), bool)

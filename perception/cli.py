@@ -201,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
         source.close()
         if node is not None:
             node.close()
-        if out is not None:
+        if out is not None and partial is not None:
             out.close()
             os.replace(partial, a.jsonl)
     status = service.status()

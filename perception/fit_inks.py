@@ -37,7 +37,7 @@ def stroke_absorptions(bgr: np.ndarray, params: PerceptionParams,
     """Ink name -> (n, 3) ``1 - x`` of the stroke pixels of its drawings in one photograph (x relative to the
     local white). Raises ValueError when the board is not found."""
     check = check_board(bgr, params)
-    if not check.found:
+    if not check.found or check.size_m is None or check.T_board_to_camera is None:
         raise ValueError(f"board not found: {check.why}")
     grid = BoardGrid(check.size_m, params.board.resolution_m)
     rect = grid.warp(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), grid.image_from_grid(check.K, check.T_board_to_camera))
@@ -74,7 +74,8 @@ def fit_palette(samples: Sequence[dict[str, np.ndarray]], board_rgb: tuple[float
         direction /= max(float(np.linalg.norm(direction)), 1e-9)
         length = float(np.quantile(ys @ direction, 0.99))
         a = np.clip(direction * length, 0.0, 1.0)
-        out[name] = tuple(float(round(v, 1)) for v in np.clip(np.array(board_rgb) * (1.0 - a), 0.0, 255.0))
+        r, g, b = (float(round(v, 1)) for v in np.clip(np.array(board_rgb) * (1.0 - a), 0.0, 255.0))
+        out[name] = (r, g, b)
     return out
 
 

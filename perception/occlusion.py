@@ -68,9 +68,11 @@ class BorderClosing:
         if box is None:
             return out
         r0, r1, c0, c1 = box
-        grown = cv2.dilate(mask[r0:r1, c0:c1], self.kernel) | self._dilated_border[r0:r1, c0:c1]
+        dilated: np.ndarray = cv2.dilate(mask[r0:r1, c0:c1], self.kernel)
+        grown = dilated | self._dilated_border[r0:r1, c0:c1]
         closed = cv2.erode(grown, self.kernel)
         inner = _grown_box(mask, 2 * self.r)
+        assert inner is not None  # the mask has set pixels (box above)
         i0, i1, j0, j1 = inner
         out[i0:i1, j0:j1] = closed[i0 - r0:i1 - r0, j0 - c0:j1 - c0]
         return out

@@ -29,7 +29,7 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Annotated, Any
+from typing import Annotated, Any, cast
 
 from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
 from interfaces.config import In, check_declared, check_vector, dataclass_from_table
@@ -84,7 +84,8 @@ class BoardParams:
             raise ConfigError(f"[{s}] size_m must be [0, 0] (measure) or two lengths in [0.2, 5.0] m, got {list(size)}")
         ids = tuple(self.marker_ids) if isinstance(self.marker_ids, (list, tuple)) else self.marker_ids
         try:
-            layout = MarkerLayout(self.dictionary, ids, float(self.marker_side_m), float(self.marker_inset_m))
+            layout = MarkerLayout(self.dictionary, cast(tuple[int, int, int, int], ids), float(self.marker_side_m),
+                                  float(self.marker_inset_m))  # MarkerLayout checks the ids
         except (ValueError, TypeError) as exc:
             raise ConfigError(f"[{s}] {exc}") from None
         object.__setattr__(self, "marker_ids", layout.ids)

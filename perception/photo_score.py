@@ -60,7 +60,7 @@ def score_photo(bgr: np.ndarray, params: PerceptionParams, stains: Sequence[Mapp
 
     Raises ValueError when the board is not found (the photograph says why)."""
     check = check_board(bgr, params)
-    if not check.found:
+    if not check.found or check.size_m is None or check.T_board_to_camera is None:
         raise ValueError(f"board not found: {check.why}")
     grid = BoardGrid(check.size_m, params.board.resolution_m)
     rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)

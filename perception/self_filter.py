@@ -62,7 +62,7 @@ def shadow_mask(grid: BoardGrid, shadow_xy_m: np.ndarray, margin_m: float) -> np
     """(rows, cols) bool of the rectified board: the convex hull of ``shadow_xy_m`` (k, 2) [m] grown by
     ``margin_m`` [m]; all False for fewer than three points."""
     rows, cols = grid.shape
-    mask = np.zeros((rows, cols), np.uint8)
+    mask: np.ndarray = np.zeros((rows, cols), np.uint8)
     if len(shadow_xy_m) < 3:
         return mask.view(bool)
     r = grid.resolution_m
@@ -108,7 +108,7 @@ class ToolTrack:
         from interfaces.robot_model import RobotModel
 
         self.max_age_s = float(max_age_s)
-        self._states: deque[tuple[int, float, np.ndarray]] = deque(maxlen=history)
+        self._states: deque[tuple[int, float, np.ndarray, np.ndarray]] = deque(maxlen=history)
         self._model = RobotModel()
         self.used = 0
         self.unknown = 0

@@ -164,6 +164,7 @@ class StainTracker:
         i0, i1, j0, j1 = max(y - pad, 0), min(y + h + pad, r1 - r0), max(x - pad, 0), min(x + w + pad, c1 - c0)
         sub = new[i0:i1, j0:j1].view(np.uint8)
         grown = cv2.dilate(sub, self._margin)
+        assert tr.reach is not None and tr.near is not None  # set with the box (_set_region)
         tr.region[r0 + i0:r0 + i1, c0 + j0:c0 + j1] |= grown.view(bool)
         tr.reach[i0:i1, j0:j1] |= cv2.dilate(sub, self._link).view(bool)
         tr.near[i0:i1, j0:j1] |= cv2.dilate(grown, self._link).view(bool)
@@ -231,7 +232,7 @@ class StainTracker:
         ``confirm_s``, then stains."""
         n, labels = cluster_pixels(free, self.link_px) if free is not None else (0, None)
         seen_now: list[tuple[np.ndarray, np.ndarray]] = []
-        if n:
+        if n and labels is not None:
             counts = np.bincount(labels[free], minlength=n + 1)  # labels are 0 off the free pixels
             for k in np.flatnonzero(counts >= self.min_px):
                 if k == 0:
