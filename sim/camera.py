@@ -36,7 +36,9 @@ NEAR_M, FAR_M = 0.05, 5.0
 
 
 def intrinsics_of(params: CameraParams) -> CameraIntrinsics:
-    return CameraIntrinsics(params.fx, params.fy, params.cx, params.cy, params.width, params.height)
+    fx, fy, cx, cy = params.fx, params.fy, params.cx, params.cy
+    assert fx is not None and fy is not None and cx is not None and cy is not None  # CameraParams fills them in
+    return CameraIntrinsics(fx, fy, cx, cy, params.width, params.height)
 
 
 def look_at(position_m: np.ndarray, target_m: np.ndarray, up_hint: np.ndarray) -> np.ndarray:
@@ -123,7 +125,7 @@ def marker_layer(board_size_m: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
     side -= side % MARKER_CELLS
     dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ARUCO_DICTIONARY))
     patches = []
-    for mid, (x0, y0) in marker_origins_board(board_size_m).items():
+    for mid, (x0, y0) in marker_origins_board((float(board_size_m[0]), float(board_size_m[1]))).items():
         ink = cv2.aruco.generateImageMarker(dictionary, mid, side) < 128
         rgb = np.where(ink[..., None], np.uint8(15), BOARD_RGB.astype(np.uint8)).astype(np.uint8)
         patches.append((H - int(round(y0 * TEXELS_PER_M)) - side, int(round(x0 * TEXELS_PER_M)), rgb))
