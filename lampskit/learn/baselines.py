@@ -137,7 +137,7 @@ def learn_target_crossing_dmp(
     e1, e2, de2 = pos - g[:, 0], T * (vel - g[:, 1]), T * T * (acc - g[:, 2])
     f_target = de2 + q * q * e1 + 2.0 * q * e2
     centres, widths = basis_centres_widths(n_basis, lambda_)
-    x = phase(s, lambda_)
+    x = np.asarray(phase(s, lambda_))
     psi = np.exp(-widths * (x[:, None] - centres) ** 2)
     design = psi / psi.sum(axis=1, keepdims=True) * x[:, None]
     gram = design.T @ design
@@ -189,7 +189,7 @@ def rollout_target_crossing_dmp(
     t = np.arange(k + 1) * dt_s
     h = dt_s / T
     s_half = np.arange(2 * k + 1) * (0.5 * h)
-    f = forcing_term(phase(s_half, mp.lambda_), mp.weights, mp.centres, mp.widths) @ M.T  # (2k+1, n)
+    f = forcing_term(np.asarray(phase(s_half, mp.lambda_)), mp.weights, mp.centres, mp.widths) @ M.T  # (2k+1, n)
     sigma = crossing_window_s(np.vstack([gl, 0.0 * gl[:1]]), T, mp.crossing_reach_m)
     g = crossing_target_coefficients(s_half * T - T, sigma)[:, :3, :2] @ gl  # (2k+1, 3, n)
     q = mp.q

@@ -26,6 +26,7 @@ from __future__ import annotations
 import csv
 import io
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -116,7 +117,7 @@ def write_demo_csv(path: str | Path, demo: Demonstration) -> Path:
 
 def write_demo_npz(path: str | Path, demo: Demonstration) -> Path:
     """Write ``demo`` as NPZ, atomically."""
-    arrays = {"t": demo.t_s, "position": demo.position_m}
+    arrays: dict[str, Any] = {"t": demo.t_s, "position": demo.position_m}
     if demo.orientation_wxyz is not None:
         arrays["orientation_wxyz"] = demo.orientation_wxyz
     return write_atomic(path, lambda f: np.savez(f, **arrays))

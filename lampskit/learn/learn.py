@@ -148,11 +148,11 @@ def learn_skill_from_demos(
         parts = [(d.t_s[s.start:s.end], y[s.start:s.end]) for d, tr, y in zip(demos, trans, in_plane)
                  for _, s in [tr[j]]]
         try:
-            mp, sp = fuse_transitional(parts)
+            t_mp, sp = fuse_transitional(parts)
         except LearningError as exc:
             log.warning("transition %d not learned: %s", j, exc)
             continue
-        transitional.append(TransitionalEntry(trans[0][j][0], mp))
+        transitional.append(TransitionalEntry(trans[0][j][0], t_mp))
         spread["transitional"].append(sp)
     if progress is not None:
         progress("fusing", total, total)

@@ -104,9 +104,9 @@ def write_segment_mcap(demo: Demonstration, seg: Segmentation, path: Path) -> Pa
     w = Writer(buf)
     w.start(profile="", library="lamps")
     tool = w.register_channel(TAKE_TOPIC, "json", w.register_schema(
-        _TOOL_SCHEMA["title"], "jsonschema", json.dumps(_TOOL_SCHEMA).encode()))
+        str(_TOOL_SCHEMA["title"]), "jsonschema", json.dumps(_TOOL_SCHEMA).encode()))
     segs = w.register_channel(SEGMENTS_TOPIC, "json", w.register_schema(
-        _SEGMENT_SCHEMA["title"], "jsonschema", json.dumps(_SEGMENT_SCHEMA).encode()))
+        str(_SEGMENT_SCHEMA["title"]), "jsonschema", json.dumps(_SEGMENT_SCHEMA).encode()))
     events = [(int(round(t[s.start] * 1e9)), 0, k) for k, s in enumerate(seg.segments)]
     events += [(int(round(t[i] * 1e9)), 1, i) for i in range(demo.n_samples)]
     for log_time, what, i in sorted(events):

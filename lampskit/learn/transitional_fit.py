@@ -183,7 +183,7 @@ def fit_forcing_lwr(
     """
     grid = np.linspace(0.0, 1.0, max(1001, 10 * len(centres)))
     f = np.column_stack([np.interp(grid, s, f_target[:, d]) for d in range(f_target.shape[1])])
-    x = phase(grid, lambda_)
+    x = np.asarray(phase(grid, lambda_))
     psi = np.exp(-widths * (x[:, None] - centres) ** 2)
     return (psi * x[:, None]).T @ f / (psi * (x * x)[:, None]).sum(axis=0)[:, None]
 
