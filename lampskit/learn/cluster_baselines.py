@@ -55,6 +55,8 @@ def kmeans_labels(points: np.ndarray, n_clusters: int | None, progress: Progress
             best = (score, km.labels_)
         if progress is not None:
             progress(j + 1, len(ks))
+    if best is None:
+        raise SegmentationError(f"k-means needs at least {lo + 1} resampled points, got {len(points)}")
     return best[1]
 
 

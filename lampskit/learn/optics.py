@@ -230,6 +230,7 @@ class _Streams:
             self._query(group, k_wanted)
 
     def _query(self, ps: list[int], k_wanted: int) -> None:
+        assert self.tree is not None  # built by refill
         size = len(self.tree_ids)
         k = min(k_wanted, size)
         rows = np.asarray(ps)

@@ -175,7 +175,7 @@ def synthesize_demo(
     pos_board = np.empty((n, 3))
     periodic = np.zeros(n, dtype=bool)
     stain = np.full(n, -1, dtype=int)
-    segments = []
+    segments: list[tuple[int, int, str, int]] = []
     t0 = 0.0
     for piece in pieces:
         t1 = t0 + piece.duration_s
