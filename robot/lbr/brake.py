@@ -42,7 +42,7 @@ class ContactBrake:
         self._t0_ns = 0
         self._J = np.zeros((6, 7))  # the pad's Jacobian, its axis (world), Lambda, N^T at the hold's start
         self._n = np.zeros(3)
-        self._lam = np.zeros((6, 6))
+        self._lam: np.ndarray = np.zeros((6, 6))
         self._null_t = np.zeros((7, 7))
 
     def start(self, q: np.ndarray, wrench_world: np.ndarray, t_ns: int) -> None:

@@ -76,7 +76,7 @@ class ClockWatch:
         """One state: its time stamp [robot ns], sample time [s], arrival [ns, our monotonic clock]; ``answered_ns``:
         when [ns, our clock] we first answered the newest stamp (None: not yet). :attr:`reason` says why for the
         last FROZEN, RESAMPLED or WENT_BACK."""
-        if self.stamp_ns is not None and stamp_ns == self.stamp_ns:
+        if self.stamp_ns is not None and self.sample_time_s is not None and stamp_ns == self.stamp_ns:
             self.frozen_ns = arrival_ns - self._since_ns
             limit_ns = self.periods * self.sample_time_s * 1e9
             if self.frozen or answered_ns is None or arrival_ns - max(answered_ns, self._since_ns) < limit_ns:
