@@ -157,7 +157,8 @@ class ControllerCore:
         modes = task_modes(kin.Lambda, task_stiffness(imp), imp.damping_factor, self.mode_cap_rad_s,
                            self._modes_out)
         shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3), posture_nm=self._clearance)
-        clearance_into(q, self._dq, lim.q_min, lim.q_max, 0.5, self._singular, 0.3, 0.0, 0.0, self._clearance)
+        clearance_into(q, self._dq, lim.q_min, lim.q_max, 0.5, self._singular, 0.3, 0.0, 0.0, lim.dq_max, 0.6,
+                       self._clearance)
         impedance_torque(self.model, q, self._dq, Reference(), imp, q, True, shaping, kin, modes, self._terms)
         limit_torque(self._tau, q, self._dq, lim.q_min, lim.q_max, 0.1, 0.0, 0.0, self._speed_onset, 0.0, kin.M,
                      self._tau.copy(), self.shaper.tau_max, 1.0, kin.g, True, self._limit_work)
@@ -426,7 +427,7 @@ class ControllerCore:
         if self.shaping.posture_nm is not None:
             clearance_into(q, dq, model.limits.q_min, model.limits.q_max, lim.clearance_zone_rad, self._singular,
                            lim.singular_clearance_rad, lim.clearance_stiffness_nm_rad, lim.clearance_damping_nm_s_rad,
-                           self._clearance)
+                           model.limits.dq_max, lim.clearance_speed_share, self._clearance)
         terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.q_rest, not gravity_compensated,
                                  self.shaping, kin, self._task_modes(kin), self._terms)
         self.last_terms = terms

@@ -88,7 +88,9 @@ class LimitParams:
     the nullspace posture keeps joints this far from their limits and the
     listed joints this far from zero (the arm stretched at them), with
     clearance_stiffness_nm_rad and clearance_damping_nm_s_rad (0 stiffness:
-    off; :func:`controller.control.limits.clearance_torque`);
+    off; :func:`controller.control.limits.clearance_torque`), faded out
+    while the fastest joint runs at 0.2 below clearance_speed_share to
+    clearance_speed_share of its speed limit;
     max_speed_m_s : the pad is braked above this Cartesian speed [m/s];
     reference_joint_speed_share : the skill is slowed down (time scaling)
     where its reference would ask a joint for more than this share of its
@@ -124,6 +126,7 @@ class LimitParams:
     singular_clearance_rad: Annotated[float, In(0.0, 1.0)] = 0.6
     clearance_stiffness_nm_rad: Annotated[float, In(0.0, 500.0)] = 40.0
     clearance_damping_nm_s_rad: Annotated[float, In(0.0, 100.0)] = 6.0
+    clearance_speed_share: Annotated[float, In(0.2, 1.0)] = 0.6
     max_speed_m_s: Annotated[float, In(0.05, 2.0)] = 0.6
     speed_brake_gain_n_s_m: Annotated[float, In(0.0, 5000.0)] = 200.0
     reference_joint_speed_share: Annotated[float, In(0.05, 10.0)] = 0.6

@@ -157,3 +157,16 @@ def test_a_stain_beyond_the_arm_is_skipped_with_the_reason_never_attempted(learn
     assert [s.id for s in ex.book.open_stains(0.0)] == [0]
     ex.set_stains(big, [near, far])  # looked at once per board
     assert ex.counters["stains_out_of_reach"] == 1
+
+
+def test_the_clearance_fades_out_while_a_joint_runs_fast():
+    """Near a singular pose a small push spins the wrist: the clearance never drives a joint past 0.6 of its
+    speed limit (full below 0.4, none at 0.6)."""
+    q = np.array([0.0, 1.0, 1.7, 0.1, -1.9, -0.05, 1.49])
+    limit = np.full(7, 2.0)
+    full = clearance_torque(q, np.zeros(7), LO, HI, 0.5, SINGULAR, 0.3, 20.0, 0.0, limit, 0.6)
+    for share, gain in ((0.3, 1.0), (0.4, 1.0), (0.5, 0.5), (0.6, 0.0), (0.9, 0.0)):
+        dq = np.zeros(7)
+        dq[0] = share * 2.0  # joint 1, outside every zone: only the speed matters
+        got = clearance_torque(q, dq, LO, HI, 0.5, SINGULAR, 0.3, 20.0, 0.0, limit, 0.6)
+        np.testing.assert_allclose(got, gain * full, atol=1e-12, err_msg=str(share))

@@ -9,6 +9,8 @@ import numba as nb
 import numpy as np
 
 _jit = nb.njit(cache=True)  # keeps the GIL: see the docstring of controller.control.kernels
+#: The clearance fades out over this much of a joint's speed limit, below its ``speed_share``.
+CLEARANCE_FADE_SHARE = 0.2
 
 
 @_jit
@@ -27,21 +29,30 @@ def margin_torque_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: 
 @_jit
 def clearance_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, zone_rad: float,
                    singular: np.ndarray, singular_rad: float, stiffness_nm_rad: float, damping_nm_s_rad: float,
-                   out: np.ndarray) -> None:
+                   dq_max: np.ndarray, speed_share: float, out: np.ndarray) -> None:
     """``out`` (n,) [Nm]: the clearance posture of :func:`~.limits.clearance_torque`: a spring of
     ``stiffness_nm_rad`` on each joint's depth into the ``zone_rad`` before a position limit, and on a joint with
     ``singular[i]`` (1.0; else 0.0) on its depth into ``singular_rad`` around zero (the arm stretched at that
     joint), pushed out the way it is (positive at exactly zero); damped by ``damping_nm_s_rad`` on motion
-    deeper in, scaled by the depth's share of its zone (zero at the zone's edge: continuous)."""
+    deeper in, scaled by the depth's share of its zone (zero at the zone's edge: continuous); all of it faded out
+    while the fastest joint moves at ``speed_share`` - 0.2 to ``speed_share`` of its limit ``dq_max`` (n,)
+    [rad/s] (near a singular pose a small push moves the joints fast: the clearance never drives one)."""
     margin_torque_into(q, dq, q_min, q_max, zone_rad, stiffness_nm_rad, damping_nm_s_rad, out)  # the limits' part
-    if singular_rad <= 0.0:
-        return
-    for i in range(q.shape[0]):
-        depth = max(singular_rad - abs(q[i]), 0.0)
-        if singular[i] > 0.0 and depth > 0.0:
-            side = 1.0 if q[i] >= 0.0 else -1.0
-            out[i] += side * (stiffness_nm_rad * depth - damping_nm_s_rad * depth / singular_rad * min(side * dq[i],
-                                                                                                      0.0))
+    n = q.shape[0]
+    if singular_rad > 0.0:
+        for i in range(n):
+            depth = max(singular_rad - abs(q[i]), 0.0)
+            if singular[i] > 0.0 and depth > 0.0:
+                side = 1.0 if q[i] >= 0.0 else -1.0
+                out[i] += side * (stiffness_nm_rad * depth - damping_nm_s_rad * depth / singular_rad
+                                  * min(side * dq[i], 0.0))
+    share = 0.0
+    for i in range(n):
+        share = max(share, abs(dq[i]) / dq_max[i])
+    gain = min(max((speed_share - share) / CLEARANCE_FADE_SHARE, 0.0), 1.0)
+    if gain < 1.0:
+        for i in range(n):
+            out[i] *= gain
 
 
 @_jit

@@ -98,7 +98,8 @@ def joint_margin_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max:
 
 def clearance_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, zone_rad: float,
                      singular: np.ndarray, singular_rad: float, stiffness_nm_rad: float,
-                     damping_nm_s_rad: float, out: np.ndarray | None = None) -> np.ndarray:
+                     damping_nm_s_rad: float, dq_max: np.ndarray | None = None, speed_share: float = 10.0,
+                     out: np.ndarray | None = None) -> np.ndarray:
     """(n,) clearance posture [Nm]: what keeps each joint out of the ``zone_rad`` before its position limits and
     each joint flagged in ``singular`` (n,) out of ``singular_rad`` around zero, where the arm is stretched
     straight at it (the iiwa's A2, A4, A6: two axes in line, one direction of the pad's motion lost).
@@ -107,12 +108,15 @@ def clearance_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np
     meant for the task's nullspace (:class:`~.impedance.TaskShaping` ``posture_nm``): the arm moves away from
     the limit or the singular pose by its redundancy only, never by moving the pad. Inside a zone a joint gets
     ``k * depth`` pushing it out plus ``d * speed`` against motion deeper in, scaled by the depth's share of
-    the zone (continuous at the zone's edge); into ``out`` when given (the 1 kHz path)."""
+    the zone (continuous at the zone's edge); faded out while the fastest joint runs at ``speed_share`` - 0.2 to
+    ``speed_share`` of its limit ``dq_max`` (n,) [rad/s] (default: never); into ``out`` when given (the 1 kHz
+    path)."""
     if out is None:
         out = np.empty(len(q))
+    limit = np.ones(len(q)) if dq_max is None else np.asarray(dq_max, float)
     clearance_into(np.asarray(q, float), np.asarray(dq, float), np.asarray(q_min, float), np.asarray(q_max, float),
                    float(zone_rad), np.asarray(singular, float), float(singular_rad), float(stiffness_nm_rad),
-                   float(damping_nm_s_rad), out)
+                   float(damping_nm_s_rad), limit, float(speed_share), out)
     return out
 
 
