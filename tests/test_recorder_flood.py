@@ -55,7 +55,7 @@ from .zenoh_helpers import REPO, free_port, wait_for
 #: conversion, the JPEG, its base64 and JSON text: about four copies of 12 MB), Zenoh's reassembly of a message
 #: on each link (at most about twice :func:`~interfaces.message_limits.max_message_bytes`) and what the
 #: allocators keep of it. Measured: +117 to +258 MB at the peak, while the first frames are written, then 60 to
-#: 70 MB above the start and flat; the recorder before issue 46 grew by 1.9 GB within 4 s of this flood.
+#: 70 MB above the start and flat; a recorder that queues before it checks grew by 1.9 GB within 4 s of this flood.
 FLOOD_MEMORY_BOUND_MB = 300
 #: Once the debug frames are past their share the recorder's memory stays flat: its growth over the flood's second
 #: half may be at most this [MB] (measured: none).
