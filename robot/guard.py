@@ -39,7 +39,13 @@ back. A brake would not do there: it holds the pose, and a pad held where it
 was pressed into a board presses on at the force it had. ``fault_episodes``
 entries into any band within ``fault_window_s`` of robot time latch a FAULT:
 the e-stop hold, whatever is commanded (a yield while the force is over),
-until the operator's e-stop release (:meth:`RobotGuard.release`).
+until the operator's e-stop release (:meth:`RobotGuard.release`). Only an
+entry while the arm runs on the controller's torques counts towards it: one
+that begins while the robot side already holds the arm (a brake on a stale
+command, another band's brake or yield, the controller's own hold) is what the
+hold does to the arm, not a command's offence (a wiping pad braked at once
+rocks on its edge, and its press speed flickers over the band for a few
+cycles), and is counted apart (``episodes_in_hold``).
 """
 
 from __future__ import annotations
@@ -119,6 +125,7 @@ class RobotGuard:
         self.force_n = self.tool_speed_m_s = self.press_speed_m_s = 0.0
         self.entry_value = dict.fromkeys(self.bands, 0.0)
         self.worst_joint = 0
+        self.episodes_in_hold = 0  # entries while the arm was already held: not the FAULT latch's
 
     @property
     def action(self) -> Action:
@@ -135,9 +142,12 @@ class RobotGuard:
             return Action.BRAKE
         return Action.APPLY
 
-    def observe(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, t_s: float) -> tuple[str, ...]:
+    def observe(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, t_s: float,
+                held: bool = False) -> tuple[str, ...]:
         """Take one reading: ``q``, ``dq`` (n,) [rad, rad/s], ``wrench`` (6,) contact force then torque [N, Nm],
-        robot time ``t_s`` [s]. Returns the bands it engaged (usually none), ``"fault"`` last if that latched."""
+        robot time ``t_s`` [s]; ``held``: the cycle that led to it held the arm (no command of the controller's
+        applied), so what it engages does not count towards the FAULT latch. Returns the bands it engaged (usually
+        none), ``"fault"`` last if that latched."""
         lim, b = self.limits, self.bands
         entered: tuple[str, ...] = ()
         f = wrench[:3]
@@ -169,7 +179,7 @@ class RobotGuard:
             if b["contact_force"].update(force_ahead / lim.force_cap_n, self.force_n / lim.force_cap_n):
                 self.entry_value["contact_force"] = force_ahead
                 entered += ("contact_force",)
-        return self._count(entered, t_s)
+        return self._count(entered, t_s, held)
 
     def check_command(self, q: np.ndarray, dq: np.ndarray, tau_nm: np.ndarray, dt_s: float,
                       t_s: float) -> tuple[str, ...]:
@@ -217,8 +227,11 @@ class RobotGuard:
                 entered += (name,)
         return entered
 
-    def _count(self, entered: tuple[str, ...], t_s: float) -> tuple[str, ...]:
+    def _count(self, entered: tuple[str, ...], t_s: float, held: bool = False) -> tuple[str, ...]:
         lim = self.limits
+        if entered and held:
+            self.episodes_in_hold += len(entered)
+            return entered
         if entered and lim.fault_episodes > 0 and self.latch.note(t_s):
             self.fault_reason = (f"{lim.fault_episodes} limit episodes within {lim.fault_window_s:g} s, the last "
                                  f"{', '.join(entered)}")

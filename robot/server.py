@@ -435,7 +435,7 @@ class RobotServer:
     def publish_state(self, seq: int | None = None) -> None:
         """Publish the port's reading as state ``seq`` (default: the cycles written so far)."""
         r = self._reading = self.port.read()
-        entered = self.guard.observe(r.q_rad, r.dq_rad_s, r.wrench_world, r.robot_time_ns * 1e-9)
+        entered = self.guard.observe(r.q_rad, r.dq_rad_s, r.wrench_world, r.robot_time_ns * 1e-9, held=self.braked)
         if entered:
             self._log_guard(entered, r)
         self.gate.touching = self.guard.touching
@@ -468,6 +468,7 @@ class RobotServer:
             counters.update(answer_latency_p50_us=int(p50), answer_latency_p99_us=int(p99))
         counters["estop_engaged"] = int(self.estop_reason is not None)
         counters["guard_fault_latched"] = int(self.guard.latch.latched)
+        counters["guard_episodes_in_hold"] = self.guard.episodes_in_hold
         for name, source in (("estop", self._estops), ("estop_release", self._releases)):
             for reason, n in list(source.bad.items()):
                 counters[f"{name}_dropped: {reason}"] = n

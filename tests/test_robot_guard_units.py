@@ -194,6 +194,24 @@ def test_five_episodes_within_a_second_latch_the_fault_which_yields_while_pressi
     assert guard.release() and guard.action == Action.APPLY and guard.fault_reason is None
 
 
+def test_episodes_that_begin_while_the_arm_is_already_held_do_not_latch_the_fault_but_are_counted():
+    """A wiping pad braked on a stale command rocks on its edge: its bands flicker while nothing of the controller's
+    runs. Those entries are the hold's doing; the same entries on the controller's torques latch."""
+    guard = RobotGuard(limits(), None)
+    f, t = np.zeros(6), 0.0
+    for _ in range(8):
+        for fx in (10.0, 50.0):
+            f[0], t = fx, t + 0.01
+            guard.observe(Q0, np.zeros(7), f, t, held=True)
+    assert not guard.latch.latched and guard.episodes_in_hold == 8 and guard.fault_reason is None
+    for k in range(5):
+        for fx in (10.0, 50.0):
+            f[0], t = fx, t + 0.01
+            entered = guard.observe(Q0, np.zeros(7), f, t, held=False)
+        assert guard.latch.latched == (k == 4), k
+    assert entered == ("contact_force", "fault") and guard.episodes_in_hold == 8
+
+
 def test_a_pad_pressing_into_the_surface_it_touched_too_fast_yields_and_one_near_it_brakes(model):
     guard = RobotGuard(limits(joint_speed_rad_s=model.limits.dq_max), model)
     p, R = model.tcp_pose(Q0)
