@@ -100,6 +100,7 @@ class SimCore:
         self.measured = self._measure(self.robot.out)
         self.steps = 0
         self.peak_force_n = 0.0  # the largest normal force since the last take_peak_force_n() [N]
+        self.arm_contact_steps = 0  # steps in which a link other than the eraser touched the board
         try:
             self.hand = hand_from_params(params.hand, self.robot.out.tcp_R)  # holds the tool as it starts
         except ConfigError:
@@ -144,6 +145,8 @@ class SimCore:
         self.measured = self._measure(out)
         if out.normal_force_n > self.peak_force_n:
             self.peak_force_n = out.normal_force_n
+        if out.arm_contact:
+            self.arm_contact_steps += 1
         if self.steps % self._wipe_every == 0:
             self._wipe(out)
         return out

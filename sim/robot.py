@@ -6,6 +6,23 @@ eraser's contact with the board. The written torques drive joints with
 rotor inertia and friction (:mod:`.drive`, figures in
 :mod:`interfaces.joint_dynamics`). Readouts land in one preallocated
 :class:`Readout`, so a step allocates little.
+
+The contact wrench is what the arm felt, from its own motion: PyBullet
+steps ``M (dq' - dq) / dt = tau_pb - h + J^T f`` (semi-implicit Euler), so
+
+    J^T f = M (dq' - dq) / dt + h - tau_pb
+
+with ``M``, ``h`` at the step's start (the drive computes them anyway) and
+``tau_pb`` the torques it was given, ``f`` (6,) at the pad centre by least
+squares (``J`` is 6 x 7). The contact points' own friction cannot be taken
+for it: with a heavy tool merged into the eraser link (``[sim.plant]
+tool_mass_kg``) PyBullet reports each point's lateral friction against
+the pad's sliding (a 1.4 kg tool: -3.3 N along a pad moving at -0.023 m/s,
+where the arm's motion says +3.4 N), and a force sensor that reads the
+friction backwards is a torque the controller cannot explain. The points
+still say whether the pad touches (and whether an arm link does); a
+braked step (PyBullet's velocity motors, torques unknown) takes their
+wrench as reported.
 """
 
 from __future__ import annotations
@@ -100,6 +117,13 @@ class SimRobot:
         self._fc = np.array(self.joints.coulomb_nm)
         self._L = np.zeros((n, n))
         self._a = np.zeros(n)
+        # the step's start, for the contact wrench from the motion: M (n, n), h = C dq + g (n,), dq, tau_pb known
+        self._M = np.zeros((n, n))
+        self._h = np.zeros(n)
+        self._dq0 = np.zeros(n)
+        self._q0: list[float] = self._zeros
+        self._J: np.ndarray | None = None  # (6, n) the pad's Jacobian at the step's start, when it was needed
+        self._torques_known = False
         self.read()
         if not self._rigid:
             self._drive_torque()  # compiles (or loads) the kernel now, not in the first step
@@ -114,29 +138,60 @@ class SimRobot:
         if self.gravity_compensated:
             tau = tau + self.compensation()
         np.maximum(np.minimum(tau, self.tau_max, out=self._tau_cmd), self._tau_min, out=self._tau_cmd)  # np.clip's cost
-        applied = self._tau_cmd if self._rigid else self._drive_torque()
+        if self._rigid:
+            self._start_dynamics()
+            self._tau_pb[:] = self._tau_cmd
+            applied = self._tau_pb
+        else:
+            applied = self._drive_torque()
+        self._torques_known = True
         pb.setJointMotorControlArray(self.w.robot, self._joints, pb.TORQUE_CONTROL, forces=applied.tolist(),
                                      physicsClientId=self.c)
 
+    def _start_dynamics(self) -> None:
+        """PyBullet's ``M`` and ``h = C dq + g`` at the step's start (and the pad's Jacobian while it is loaded)."""
+        o, robot, c = self.out, self.w.robot, self.c
+        self._q0 = q = o.q.tolist()
+        self._dq0[:] = o.dq
+        self._M[:] = pb.calculateMassMatrix(robot, q, physicsClientId=c)
+        self._h[:] = pb.calculateInverseDynamics(robot, q, o.dq.tolist(), self._zeros, physicsClientId=c)
+        self._J = self._jacobian(q) if o.wrench.any() or self.external_wrench.any() else None
+
+    def _jacobian(self, q: list[float]) -> np.ndarray:
+        """(6, n) the pad centre's Jacobian at ``q``, world axes (the TCP link's inertial frame is its link frame,
+        about which the wrench is taken)."""
+        lin, ang = pb.calculateJacobian(self.w.robot, self.w.tcp_link, [0.0, 0.0, 0.0], q, self._zeros, self._zeros,
+                                        physicsClientId=self.c)
+        return np.array(lin + ang)
+
     def _drive_torque(self) -> np.ndarray:
         """The torques PyBullet must apply so the arm moves as one with armature and friction (:mod:`.drive`)."""
-        o, robot, c = self.out, self.w.robot, self.c
-        q, dq = o.q.tolist(), o.dq.tolist()
-        M = np.array(pb.calculateMassMatrix(robot, q, physicsClientId=c))
-        h_hat = np.array(pb.calculateInverseDynamics(robot, q, dq, self._zeros, physicsClientId=c))
-        if o.wrench.any() or self.external_wrench.any():
-            # the contact of the last step stands for this one's, the hand's is this step's: h_hat = C dq + g - J^T f;
-            # the TCP link's inertial frame is its link frame, about which the wrench is taken
-            lin, ang = pb.calculateJacobian(robot, self.w.tcp_link, [0.0, 0.0, 0.0], q, self._zeros, self._zeros,
-                                            physicsClientId=c)
-            h_hat -= np.array(lin + ang).T @ (o.wrench + self.external_wrench)
+        o = self.out
+        self._start_dynamics()
+        M = self._M
+        h_hat = self._h.copy()
+        if self._J is not None:  # the contact of the last step stands for this one's, the hand's is this step's
+            h_hat -= self._J.T @ (o.wrench + self.external_wrench)
         ok = drive_torque_into(self._tau_cmd, o.dq, self._fv, self._fc, self.joints.coulomb_velocity_rad_s, M, h_hat,
                                self._armature, self.dt_s, self._tau_pb, self._L, self._a)
         return self._tau_pb if ok else self._tau_cmd  # (M + Ia is positive definite for any arm PyBullet loads)
 
+    def _wrench_from_motion(self, o: Readout) -> None:
+        """Replace ``o.wrench`` by the wrench the step's motion says the pad felt (the module docstring), less the
+        hand's; kept as the contact points report it after a braked step or before any torques."""
+        if not self._torques_known:
+            return
+        J = self._J if self._J is not None else self._jacobian(self._q0)
+        y = self._M @ ((o.dq - self._dq0) / self.dt_s)
+        y += self._h
+        y -= self._tau_pb
+        o.wrench[:] = np.linalg.solve(J @ J.T + 1e-9 * np.eye(6), J @ y)
+        o.wrench -= self.external_wrench
+
     def brake(self) -> None:
         """Engage the brakes for the next step: every joint's speed ramped from what it was when they engaged to
         zero over :data:`BRAKE_STOP_S`, all together, then held at zero, with up to its torque limit."""
+        self._torques_known = False  # PyBullet's velocity motors: what they apply is not known here
         if not self.braked:
             self.braked = True
             self._stop_dq[:] = self.out.dq
@@ -210,4 +265,6 @@ class SimRobot:
             fx, fy, fz = fx + cx, fy + cy, fz + cz
             mx, my, mz = mx + ry * cz - rz * cy, my + rz * cx - rx * cz, mz + rx * cy - ry * cx
         o.wrench[:] = (fx, fy, fz, mx, my, mz)
+        if fx or fy or fz:
+            self._wrench_from_motion(o)
         o.normal_force_n = float(fx * self.normal[0] + fy * self.normal[1] + fz * self.normal[2])

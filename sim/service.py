@@ -135,6 +135,8 @@ class SimPort(RobotPort):
         counters = dict(self._extra)
         if self.core.out.arm_contact:
             counters["arm_touching_board"] = 1
+        if self.core.arm_contact_steps:  # steps an arm link leaned on the board (no force sensor sees it)
+            counters["arm_touching_board_steps"] = self.core.arm_contact_steps
         if self.camera is not None:
             counters.update(camera_frames=self.camera.rendered, camera_ticks_skipped=self.camera.skipped)
         return counters
