@@ -138,4 +138,4 @@ class ArmModel:
                            tool_com_m=[float(x) for x in t.com_flange_m] if t.valid else [],
                            tool_fit_residual_nm=t.residual_rms_nm if t.valid else 0.0,
                            correction_nm=[float(x) for x in c.c], residual_nm=[float(x) for x in c.z],
-                           warning=c.warning)
+                           warning=c.warning, tool_com_unobserved=t.unobserved if t.valid else 0)

@@ -22,7 +22,9 @@ class ArmEstimate(msgspec.Struct, frozen=True, array_like=True):
     tool_fit_residual_nm : the joint torque the fitted load leaves unexplained, RMS over its samples [Nm];
     correction_nm (n,) : the static torque the controller adds to its model now [Nm]; residual_nm (n,) : its
     part the fitted load does not explain (link masses, centres of mass) [Nm]; warning : ``model_mismatch: ...``
-    when the correction stays at its bound (the arm differs from its model beyond what it absorbs), else "".
+    when the correction stays at its bound (the arm differs from its model beyond what it absorbs), else "";
+    tool_com_unobserved : how many directions of the load's (mass, mass x centre of mass) its samples did not
+    tell (kept at the pad centre: an offset along gravity at every sample turns no joint).
     """
 
     tool_fitted: bool = False
@@ -32,6 +34,7 @@ class ArmEstimate(msgspec.Struct, frozen=True, array_like=True):
     correction_nm: _Vec = msgspec.field(default_factory=list)
     residual_nm: _Vec = msgspec.field(default_factory=list)
     warning: Text = ""
+    tool_com_unobserved: Annotated[int, msgspec.Meta(ge=0, le=4)] = 0
 
     def __post_init__(self) -> None:
         _finite("tool_mass_kg/tool_fit_residual_nm", (self.tool_mass_kg, self.tool_fit_residual_nm))

@@ -56,6 +56,33 @@ def test_the_load_regressor_is_the_gravity_torque_pinocchio_gives_a_model_with_t
     np.testing.assert_allclose(est.com_flange_m, com_flange, atol=1e-9)
 
 
+
+def test_a_centre_of_mass_along_gravity_at_every_sample_is_not_made_up_the_rest_is_fitted():
+    """A wall board's approach without the roll: the pad's y axis stays along gravity, the pad turns about the
+    vertical only (tipped by a degree at most). The load's offset along y hardly moves a joint at any sample; with
+    0.2 Nm of noise a plain least-squares fit puts it anywhere. The estimate keeps it at the pad centre and says so."""
+    rm = RobotModel()
+    m, d = rm.model, rm.data
+    est = ToolEstimate.for_model(rm)
+    mass, com_flange = 1.4, np.array([0.0, 0.03, 0.03])
+    theta = np.r_[mass, mass * (com_flange - est.pad_in_flange_m)]
+    rng = np.random.default_rng(5)
+    Y = np.zeros((7, 4))
+    for _ in range(400):
+        q = rng.uniform(m.lowerPositionLimit, m.upperPositionLimit)
+        pin.computeJointJacobians(m, d, q)
+        J = pin.getFrameJacobian(m, d, rm.tcp_id, pin.LOCAL_WORLD_ALIGNED)
+        yaw, tilt = rng.uniform(-0.6, 0.6), rng.uniform(-0.02, 0.02)  # turned about the vertical, tipped 1 degree
+        x = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+        y = np.array([0.0, 0.0, -1.0]) * np.cos(tilt) + np.cross(x, [0.0, 0.0, -1.0]) * np.sin(tilt)
+        R = np.column_stack([x, y, np.cross(x, y)])
+        tool_regressor_into(J, R, GRAVITY_M_S2, Y)
+        est.add(J, R, Y @ theta + rng.normal(0.0, 0.2, 7))
+    assert est.solve() and est.unobserved == 1
+    assert est.mass_kg == pytest.approx(mass, rel=0.02)
+    assert abs(est.com_flange_m[0] - com_flange[0]) < 0.005 and abs(est.com_flange_m[2] - com_flange[2]) < 0.005
+    assert abs(est.com_flange_m[1] - est.pad_in_flange_m[1]) < 0.002, (est.com_flange_m, "along gravity: the prior")
+
 def test_the_correction_follows_the_missing_torque_stays_within_its_bound_and_warns_there():
     tau_max = np.full(7, 100.0)
     corr = ModelCorrection(CorrectionParams(enabled=True, integral_s=0.1, bound_share=0.1, warn_s=0.2), tau_max)
