@@ -264,7 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--plants", default="nominal",
                     help="simulated arms, each seed runs once per plant: nominal (the description), stuerz2017 (the "
                          "link masses identified on a real iiwa 14), random (links +-30 %% in mass and inertia, "
-                         "centres of mass up to 2 cm off, seeded), tool (an unknown 0.2-1.5 kg tool, seeded); "
+                         "centres of mass up to 2 cm off, seeded), tool (an unknown 0.2-1.5 kg tool, seeded), "
+                         "arm (random and tool at once); "
                          "comma-separated (default nominal; the controller always keeps the description)")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="cells at once (default: the CPUs)")
     ap.add_argument("--skill", default=None, help="skill file (default: learn the bundled demo once)")

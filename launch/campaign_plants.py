@@ -9,7 +9,9 @@ is not its model, as on a real robot. Seeded by the cell's seed, so a plant is t
 * ``random``: every link's mass and inertia off by up to :data:`RANDOM_MASS_ERROR` (uniform per link) and its
   centre of mass moved by up to :data:`RANDOM_COM_ERROR_M`;
 * ``tool``: an unknown tool on the flange, :data:`TOOL_MASS_RANGE_KG` (uniform) at a centre of mass up to
-  :data:`TOOL_COM_REACH_M` off the flange along its axis; the robot's load data stay the described eraser.
+  :data:`TOOL_COM_REACH_M` off the flange along its axis; the robot's load data stay the described eraser;
+* ``arm``: both at once, ``random``'s links with ``tool``'s tool (the same draws for a seed): an arm whose links
+  and tool are all off.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import json
 
 import numpy as np
 
-PLANTS = ("nominal", "stuerz2017", "random", "tool")
+PLANTS = ("nominal", "stuerz2017", "random", "tool", "arm")
 #: The ``random`` plant's bounds: per link mass and inertia factor in [1 - e, 1 + e], centre-of-mass offset [m].
 RANDOM_MASS_ERROR, RANDOM_COM_ERROR_M = 0.3, 0.02
 #: The ``tool`` plant's mass range [kg] and how far along the flange axis its centre of mass may sit [m].
@@ -35,6 +37,8 @@ def plant_table(plant: str, seed: int) -> dict[str, object]:
         return {"profile": "stuerz2017"}
     if plant == "random":
         return {"random_mass_error": RANDOM_MASS_ERROR, "random_com_error_m": RANDOM_COM_ERROR_M, "seed": seed}
+    if plant == "arm":
+        return {**plant_table("random", seed), **plant_table("tool", seed)}
     if plant == "tool":
         rng = np.random.default_rng([seed, 4711])
         lo, hi = TOOL_MASS_RANGE_KG

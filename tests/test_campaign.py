@@ -173,7 +173,8 @@ def test_each_seed_runs_once_per_plant_and_the_plant_reaches_the_simulator_only(
     from sim.params import SimParams
 
     cells = cells_of([3], [2], ["wall"], ("fixed",), plants=PLANTS)
-    assert [c.name for c in cells] == ["wall-s3-n2", "wall-s3-n2-stuerz2017", "wall-s3-n2-random", "wall-s3-n2-tool"]
+    assert [c.name for c in cells] == ["wall-s3-n2", "wall-s3-n2-stuerz2017", "wall-s3-n2-random", "wall-s3-n2-tool",
+                                       "wall-s3-n2-arm"]
     with pytest.raises(CampaignError, match="--plants: 'heavy' is not one of"):
         cells_of([0], [1], ["wall"], plants=("heavy",))
     for cell in cells:
@@ -195,6 +196,8 @@ def test_each_seed_runs_once_per_plant_and_the_plant_reaches_the_simulator_only(
     tool = plant_table("tool", 3)
     assert 0.2 <= tool["tool_mass_kg"] <= 1.5 and plant_table("tool", 3) == tool != plant_table("tool", 4)
     assert plant_error("nominal", 0) == 0.0 < plant_error("tool", 3) and 0.0 < plant_error("random", 3) < 0.3
+    assert plant_table("arm", 3) == {**plant_table("random", 3), **tool}
+    assert plant_error("arm", 3) == pytest.approx(plant_error("random", 3) + plant_error("tool", 3))
 
 
 def test_the_table_groups_plants_and_reports_tracking_force_spread_and_joint_speed():
