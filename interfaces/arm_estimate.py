@@ -6,7 +6,7 @@ from typing import Annotated
 
 import msgspec
 
-from interfaces.message_checks import Text, _finite
+from interfaces.message_checks import Text, check_finite
 
 #: The longest joint vector a status carries.
 MAX_JOINTS = 16
@@ -37,7 +37,7 @@ class ArmEstimate(msgspec.Struct, frozen=True, array_like=True):
     tool_com_unobserved: Annotated[int, msgspec.Meta(ge=0, le=4)] = 0
 
     def __post_init__(self) -> None:
-        _finite("tool_mass_kg/tool_fit_residual_nm", (self.tool_mass_kg, self.tool_fit_residual_nm))
-        _finite("tool_com_m", self.tool_com_m)
-        _finite("correction_nm", self.correction_nm)
-        _finite("residual_nm", self.residual_nm)
+        check_finite("tool_mass_kg/tool_fit_residual_nm", (self.tool_mass_kg, self.tool_fit_residual_nm))
+        check_finite("tool_com_m", self.tool_com_m)
+        check_finite("correction_nm", self.correction_nm)
+        check_finite("residual_nm", self.residual_nm)

@@ -45,7 +45,7 @@ def bounded_counters(counters: dict[str, int]) -> dict[str, int]:
     return out
 
 
-def _clip(msg, **limits: int) -> None:
+def clip_strings(msg, **limits: int) -> None:
     """Clip the named string fields of a just-built (frozen) message to their limits."""
     for name, limit in limits.items():
         value = getattr(msg, name)
@@ -53,7 +53,8 @@ def _clip(msg, **limits: int) -> None:
             force_setattr(msg, name, value[:limit])
 
 
-def _finite(name: str, values: Sequence[float], length: int | None = None) -> None:
+def check_finite(name: str, values: Sequence[float], length: int | None = None) -> None:
+    """Raise ValueError unless every one of ``values`` is finite (and, given ``length``, there are that many)."""
     if length is not None and len(values) != length:
         raise ValueError(f"{name} must hold {length} numbers, got {len(values)}")
     for v in values:
@@ -61,7 +62,8 @@ def _finite(name: str, values: Sequence[float], length: int | None = None) -> No
             raise ValueError(f"{name} must be finite, got {v!r}")
 
 
-def _same_length(names: Sequence[str], vectors: Sequence[Sequence[float]]) -> None:
+def check_same_length(names: Sequence[str], vectors: Sequence[Sequence[float]]) -> None:
+    """Raise ValueError unless every one of ``vectors`` (named by ``names``, in order) is as long as the first."""
     n = len(vectors[0])
     for name, v in zip(names, vectors):
         if len(v) != n:

@@ -26,7 +26,7 @@ from msgspec.structs import force_setattr
 
 from interfaces.arm_estimate import ArmEstimate
 from interfaces.message_checks import (DETAIL_MAX, NAME_MAX, TEXT_MAX, Certificate, Counters, Detail, Mac, Name, Nonce,
-                                       Signature, Text, _clip, _finite, _same_length, bounded_counters)
+                                       Signature, Text, bounded_counters, check_finite, check_same_length, clip_strings)
 
 #: Bump when a change could make an old reader misread a new message.
 SCHEMA_VERSION = 2
@@ -81,8 +81,8 @@ class Pose(msgspec.Struct, frozen=True, array_like=True):
     quat_wxyz: list[float]
 
     def __post_init__(self) -> None:
-        _finite("position_m", self.position_m, 3)
-        _finite("quat_wxyz", self.quat_wxyz, 4)
+        check_finite("position_m", self.position_m, 3)
+        check_finite("quat_wxyz", self.quat_wxyz, 4)
         norm = math.sqrt(sum(q * q for q in self.quat_wxyz))
         if abs(norm - 1.0) > 1e-6:
             raise ValueError(f"quat_wxyz must have unit norm, got {norm:.9g}")
@@ -106,10 +106,10 @@ class Capabilities(msgspec.Struct, frozen=True, array_like=True):
     state_rate_hz: float = 0.0
 
     def __post_init__(self) -> None:
-        _finite("torque_limits_nm", self.torque_limits_nm)
+        check_finite("torque_limits_nm", self.torque_limits_nm)
         if any(v <= 0 for v in self.torque_limits_nm):
             raise ValueError("torque_limits_nm must be positive")
-        _finite("state_rate_hz", [self.state_rate_hz])
+        check_finite("state_rate_hz", [self.state_rate_hz])
         if self.state_rate_hz < 0:
             raise ValueError("state_rate_hz must be >= 0 (0: not declared)")
 
@@ -152,10 +152,10 @@ class RobotState(Message, frozen=True):
     def __post_init__(self) -> None:
         names = ("q_rad", "dq_rad_s", "tau_nm")
         vectors = (self.q_rad, self.dq_rad_s, self.tau_nm)
-        _same_length(names, vectors)
+        check_same_length(names, vectors)
         for name, v in zip(names, vectors):
-            _finite(name, v)
-        _finite("wrench_world", self.wrench_world, 6)
+            check_finite(name, v)
+        check_finite("wrench_world", self.wrench_world, 6)
         if len(self.capabilities.torque_limits_nm) != len(self.q_rad):
             raise ValueError("capabilities.torque_limits_nm must have one entry per joint")
         if self.seq < 0:
@@ -183,7 +183,7 @@ class TorqueCommand(Message, frozen=True):
     mac: Mac = b""
 
     def __post_init__(self) -> None:
-        _finite("tau_nm", self.tau_nm)
+        check_finite("tau_nm", self.tau_nm)
         if self.mode not in COMMAND_MODES:
             raise ValueError(f"mode must be one of {COMMAND_MODES}, got {self.mode!r}")
 
@@ -199,7 +199,7 @@ class CameraIntrinsics(msgspec.Struct, frozen=True, array_like=True):
     height: int
 
     def __post_init__(self) -> None:
-        _finite("intrinsics", (self.fx, self.fy, self.cx, self.cy))
+        check_finite("intrinsics", (self.fx, self.fy, self.cx, self.cy))
         if self.fx <= 0 or self.fy <= 0 or self.width <= 0 or self.height <= 0:
             raise ValueError("focal lengths and image size must be positive")
 
@@ -273,21 +273,21 @@ class StainObservation(msgspec.Struct, frozen=True, array_like=True):
     passes: int = 0
 
     def __post_init__(self) -> None:
-        _finite("centre_board_m", self.centre_board_m, 2)
-        _finite("centre_world_m", self.centre_world_m, 3)
-        _finite("extent_board_m", self.extent_board_m, 2)
-        _finite("size_m", (self.size_m,))
+        check_finite("centre_board_m", self.centre_board_m, 2)
+        check_finite("centre_world_m", self.centre_world_m, 3)
+        check_finite("extent_board_m", self.extent_board_m, 2)
+        check_finite("size_m", (self.size_m,))
         if not isinstance(self.colour, str) or len(self.colour) > 16:
             raise ValueError(f"colour must be an ink name of at most 16 characters, got {self.colour!r}")
         if self.size_m <= 0 or self.passes < 0:
             raise ValueError(f"size_m must be positive and passes >= 0, got {self.size_m}, {self.passes}")
-        _finite("width_m, axis_board_rad, ink_size_m, ink_width_m, ink_axis_board_rad",
+        check_finite("width_m, axis_board_rad, ink_size_m, ink_width_m, ink_axis_board_rad",
                 (self.width_m, self.axis_board_rad, self.ink_size_m, self.ink_width_m, self.ink_axis_board_rad))
         if self.width_m < 0 or self.ink_width_m < 0 or self.ink_size_m < 0:
             raise ValueError(f"widths and ink_size_m must be >= 0, got {self.width_m}, {self.ink_width_m}, "
                              f"{self.ink_size_m}")
         if self.ink_centre_board_m:
-            _finite("ink_centre_board_m", self.ink_centre_board_m, 2)
+            check_finite("ink_centre_board_m", self.ink_centre_board_m, 2)
             if self.ink_size_m <= 0:
                 raise ValueError("ink_size_m must be positive when ink_centre_board_m is given")
         for name, v in (("remaining", self.remaining), ("visible", self.visible)):
@@ -317,7 +317,7 @@ class Stains(Message, frozen=True):
     robot_time_ns: int = 0
 
     def __post_init__(self) -> None:
-        _finite("board_size_m", self.board_size_m, 2)
+        check_finite("board_size_m", self.board_size_m, 2)
         if self.board not in BOARD_STATES:
             raise ValueError(f"board must be one of {BOARD_STATES}, got {self.board!r}")
         ids = [s.id for s in self.stains]
@@ -363,7 +363,7 @@ class ControllerStatus(Message, frozen=True):
     arm: ArmEstimate = msgspec.field(default_factory=ArmEstimate)
 
     def __post_init__(self) -> None:
-        _clip(self, reason=TEXT_MAX, current_mp=TEXT_MAX)
+        clip_strings(self, reason=TEXT_MAX, current_mp=TEXT_MAX)
         force_setattr(self, "counters", bounded_counters(self.counters))
         if self.phase not in PHASES:
             raise ValueError(f"phase must be one of {', '.join(PHASES)}, got {self.phase!r}")
@@ -407,15 +407,14 @@ class ServiceStatus(Message, frozen=True):
     security: Name = ""
 
     def __post_init__(self) -> None:
-        _clip(self, detail=DETAIL_MAX)
+        clip_strings(self, detail=DETAIL_MAX)
         force_setattr(self, "counters", bounded_counters(self.counters))
 
 
 class Estop(Message, frozen=True):
     """Emergency stop (``engaged=True``) or its release (``engaged=False``), with who and why. A release in a cell
     with identities is the operator's, signed (:mod:`interfaces.arm_auth`): ``wall_ns`` its wall-clock stamp
-    [ns since the epoch], ``certificate`` the operator's (PEM), ``signature`` ECDSA over cell, stamp, reason, source.
-    """
+    [ns since the epoch], ``certificate`` the operator's (PEM), ``signature`` ECDSA over cell, stamp, reason, source."""
 
     stamp_ns: int
     engaged: bool
@@ -426,7 +425,7 @@ class Estop(Message, frozen=True):
     signature: Signature = b""
 
     def __post_init__(self) -> None:
-        _clip(self, reason=TEXT_MAX, source=NAME_MAX)
+        clip_strings(self, reason=TEXT_MAX, source=NAME_MAX)
 
 
 class ArmRequest(Message, frozen=True):
@@ -442,7 +441,7 @@ class ArmRequest(Message, frozen=True):
     source: Name = ""
 
     def __post_init__(self) -> None:
-        _clip(self, reason=TEXT_MAX, source=NAME_MAX)
+        clip_strings(self, reason=TEXT_MAX, source=NAME_MAX)
 
 
 class Introduction(Message, frozen=True):
@@ -479,8 +478,9 @@ class SimTruth(Message, frozen=True):
     def __post_init__(self) -> None:
         if len(self.stain_ids) != len(self.remaining):
             raise ValueError(f"{len(self.stain_ids)} stain_ids but {len(self.remaining)} remaining values")
-        _finite("remaining", self.remaining)
-        _finite("total_dirt/contact_force_n/peak_force_n", (self.total_dirt, self.contact_force_n, self.peak_force_n))
+        check_finite("remaining", self.remaining)
+        check_finite("total_dirt/contact_force_n/peak_force_n",
+                     (self.total_dirt, self.contact_force_n, self.peak_force_n))
 
 
 #: Every message type, for decoders and tests.

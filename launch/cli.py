@@ -178,7 +178,7 @@ def _up(a, stop_requested: threading.Event) -> int:
         from .site import run_cells
 
         return run_cells(a, skill, out, stop_requested)
-    cell = _plan_cell(a, compose_path, board_vars, skill, out)
+    cell = plan_cell(a, compose_path, board_vars, skill, out)
     if a.no_network:
         from .local_cell import run as run_local
 
@@ -187,7 +187,7 @@ def _up(a, stop_requested: threading.Event) -> int:
                         stop_requested, lambda *p: _print(_progress(*p)) if echo else None)
     else:
         why = _run_cell(cell, a, echo, stop_requested, t_start)
-    return _show_report(out, why)
+    return show_report(out, why)
 
 
 def _check_options(a) -> None:
@@ -240,7 +240,7 @@ class _Cell:
     router: str | None = None  # every service a client of this router (--router)
 
 
-def _plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, out: Path) -> _Cell:
+def plan_cell(a, compose_path: Path, board_vars: dict[str, str], skill: Path, out: Path) -> _Cell:
     """The compose file read with the run's variables, its active services localised on their ports."""
     from .compose import compose_model, localize, run_locally
     from .site import cell_credentials
@@ -326,7 +326,7 @@ def _run_cell(cell: _Cell, a, echo, stop_requested: threading.Event, t_start: fl
     finally:
         if node is not None:
             node.close()
-        _stop_services(children, cell, {"outcome": outcome, "why": why}, a, t_start)
+        stop_services(children, cell, {"outcome": outcome, "why": why}, a, t_start)
     return why
 
 
@@ -356,7 +356,7 @@ def _start_services(cell: _Cell, echo, children: list, node=None) -> None:
                               + f": {child.last_words()}")
 
 
-def _stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_start: float) -> None:
+def stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_start: float) -> None:
     """Stop the services (the loops in reverse start order), write ``run.json``, then stop the recorder (its report
     reads it).
 
@@ -389,7 +389,7 @@ def _stop_services(children: list, cell: _Cell, ended: dict[str, str], a, t_star
             c.stop(timeout_s=120.0)
 
 
-def _show_report(out: Path, why: str) -> int:
+def show_report(out: Path, why: str) -> int:
     """Print the summary of the report the recorder wrote, or build it from the recording, recovering a recording
     the recorder left unfinished (it died: ``recording.mcap.partial``); 0 if cleaned."""
     from .record import RECORDING, recover_recording

@@ -38,7 +38,7 @@ import yaml
 
 from interfaces.errors import ConfigError
 
-from .compose_interp import _interpolate_tree, active_profiles, compose_variables
+from .compose_interp import active_profiles, compose_variables, interpolate_tree
 
 #: The compose file next to the packages (a source checkout or the image's /opt/lamps).
 DEFAULT_COMPOSE = Path(__file__).resolve().parent.parent / "docker-compose.yml"
@@ -179,7 +179,7 @@ def load_compose(path: str | os.PathLike = DEFAULT_COMPOSE, variables: Mapping[s
         raise ConfigError(f"{p}: not valid YAML ({exc})") from None
     if not isinstance(data, dict) or not isinstance(data.get("services"), dict) or not data["services"]:
         raise ConfigError(f"{p}: no services")
-    raw = _interpolate_tree(data["services"], variables, f"{p}: services")
+    raw = interpolate_tree(data["services"], variables, f"{p}: services")
     out = {name: _service(name, svc, f"{p}: service {name!r}", variables) for name, svc in raw.items()}
     _check_dependencies(out, raw, p)
     return out

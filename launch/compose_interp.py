@@ -134,14 +134,14 @@ def substitute(text: str, variables: Mapping[str, str]) -> str:
     return interpolate(text, variables)
 
 
-def _interpolate_tree(node: Any, variables: Mapping[str, str], where: str) -> Any:
+def interpolate_tree(node: Any, variables: Mapping[str, str], where: str) -> Any:
     """Every string value of a parsed YAML tree interpolated (keys are not, as compose)."""
     if isinstance(node, str):
         return interpolate(node, variables, where)
     if isinstance(node, dict):
-        return {k: _interpolate_tree(v, variables, f"{where}.{k}") for k, v in node.items()}
+        return {k: interpolate_tree(v, variables, f"{where}.{k}") for k, v in node.items()}
     if isinstance(node, list):
-        return [_interpolate_tree(v, variables, where) for v in node]
+        return [interpolate_tree(v, variables, where) for v in node]
     return node
 
 

@@ -81,27 +81,27 @@ from interfaces.messages import Phase
 from lampskit.atomic import write_text_atomic
 
 from .report_faults import (
-    _cell_faults,
-    _faults_section,
-    _recorder_faults,
-    _recorder_stalls,
-    _robot_events,
-    _service_faults,
+    cell_faults,
+    faults_section,
+    recorder_faults,
+    recorder_stalls,
+    robot_events,
+    service_faults,
 )
 from .report_maths import (
-    _WIPING,
-    _dirt_removed,
-    _junction_steps,
-    _motion_peaks,
+    WIPING,
     cap_watch_force,
+    dirt_removed,
     final_retreat,
     job_end,
+    junction_steps,
+    motion_peaks,
     phase_times,
     skill_start,
 )
 from .report_options import plots_from_env
 from .report_plots import write_plots
-from .report_run import _read_run, _Run, _topic, cell_series
+from .report_run import Run, cell_series, read_run, topic_messages
 from .report_sources import recording_section, sources_section
 
 SCHEMA = "lamps-run-report/1"
@@ -119,12 +119,12 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     run_dir = Path(run_dir)
     if plots is None:
         plots = plots_from_env()
-    run = _read_run(run_dir, keys, cap_n)
+    run = read_run(run_dir, keys, cap_n)
     report: dict[str, Any] = {"schema": SCHEMA, "run_dir": run_dir.name}
     report.update(_progress_section(run))
-    report["stains"] = _stains_section(run.truth, run.stains_msgs)
+    report["stains"] = stains_section(run.truth, run.stains_msgs)
     report.update(_force_section(run.tr, run.col, run.truth, run.cap_n, run.filter_s))
-    report["motion_peaks"] = _motion_peaks(run.tr, run.col)
+    report["motion_peaks"] = motion_peaks(run.tr, run.col)
     report["phase_time_s"] = phase_times(run.tr, run.col)
     report["skill_start_s"] = skill_start(run.tr, run.col)
     report["job_end_s"] = job_end(run.tr, run.col)
@@ -132,9 +132,9 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report["force_cap_n"] = run.cap_n
     report["loop_timing"] = run.status[-1]["timing"] if run.status else {}
     report.update(_safety_section(run))
-    recorder = _recorder_faults(run, run_dir)
-    faults = (_faults_section(run.status) + _service_faults(run, _recorder_stalls(run)) + _robot_events(run)
-              + recorder + _cell_faults(run.launcher))
+    recorder = recorder_faults(run, run_dir)
+    faults = (faults_section(run.status) + service_faults(run, recorder_stalls(run)) + robot_events(run)
+              + recorder + cell_faults(run.launcher))
     report["faults"] = sorted(faults, key=lambda f: f["wall_ns"])
     final_ns, final_status = _final_status(run)
     report["final_phase"] = final_status["phase"] if final_status else "none"
@@ -150,16 +150,16 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     return report
 
 
-def _progress_section(run: _Run) -> dict[str, float]:
+def _progress_section(run: Run) -> dict[str, float]:
     """``duration_s`` (the launcher's, else the recording's span), ``sim_time_s`` and ``dirt_removed_fraction``."""
     times = [t for msgs in cell_series(run.rec) for t, _ in msgs[:1] + msgs[-1:]]
     truth, tr = run.truth, run.tr
     return {"duration_s": run.launcher.get("duration_s", (max(times) - min(times)) * 1e-9 if times else 0.0),
             "sim_time_s": truth[-1]["robot_time_ns"] * 1e-9 if truth else (float(tr[-1, 0]) if len(tr) else 0.0),
-            "dirt_removed_fraction": float(_dirt_removed(truth))}
+            "dirt_removed_fraction": float(dirt_removed(truth))}
 
 
-def _stains_section(truth: list[dict], stains_msgs: list[dict]) -> list[dict[str, Any]]:
+def stains_section(truth: list[dict], stains_msgs: list[dict]) -> list[dict[str, Any]]:
     """Per true stain: where, how big, how much is left, and when the truth and perception saw it wiped."""
     if not truth:
         return []
@@ -220,9 +220,9 @@ def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n
                 "max_junction_accel_jump": 0.0, "junction_step_ratio_max": 0.0, "tracking_rms_m": 0.0,
                 "trace_ticks": 0}
     force = tr[:, col["force_n"]]
-    wiping = np.isin(tr[:, col["phase"]], _WIPING) & (tr[:, col["contact"]] > 0.5)
+    wiping = np.isin(tr[:, col["phase"]], WIPING) & (tr[:, col["contact"]] > 0.5)
     dt = float(np.median(np.diff(tr[:, 0]))) if len(tr) > 1 else 0.0
-    jump, ratio = _junction_steps(tr, col)
+    jump, ratio = junction_steps(tr, col)
     err = tr[wiping][:, [col["ref_x"], col["ref_y"]]] - tr[wiping][:, [col["x"], col["y"]]]
     return {"max_normal_force_n": float(force.max()),
             "normal_force_mean_n": float(force[wiping].mean()) if wiping.any() else 0.0,
@@ -235,7 +235,7 @@ def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n
             "trace_ticks": len(tr)}
 
 
-def _final_status(run: _Run) -> tuple[int | None, dict | None]:
+def _final_status(run: Run) -> tuple[int | None, dict | None]:
     """(its log time [ns], the controller's status) when the launcher began stopping the cell (what the stop itself
     does, e.g. the lift of a pad stopped mid-wipe, is in the faults, not the outcome); the last one without a
     launcher; (None, None) without a status."""
@@ -245,7 +245,7 @@ def _final_status(run: _Run) -> tuple[int | None, dict | None]:
     return before[-1] if before else (msgs[-1] if msgs else (None, None))
 
 
-def _safety_section(run: _Run) -> dict[str, float]:
+def _safety_section(run: Run) -> dict[str, float]:
     """The physical contact force (sim truth) and the joint speeds (every robot state), over the whole run."""
     from interfaces.robot_model import RobotModel
 
@@ -274,12 +274,12 @@ def _outcome(final_phase: str, removed: float, told: str | None) -> str:
     return outcome
 
 
-def _counters_section(run: _Run) -> dict[str, dict]:
+def _counters_section(run: Run) -> dict[str, dict]:
     """The last status counters of the controller, perception, the sim and the robot side (an adapter)."""
     counters = {"controller": run.status[-1]["counters"] if run.status else {}}
     for name, key in (("perception", run.keys.perception_status), ("sim", run.keys.sim_status),
                       ("robot", run.keys.robot_status)):
-        msgs = _topic(run.rec, key)
+        msgs = topic_messages(run.rec, key)
         counters[name] = msgs[-1]["counters"] if msgs else {}
     return counters
 

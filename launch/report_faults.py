@@ -11,7 +11,7 @@ import numpy as np
 from interfaces.messages import Phase
 
 from .record import RECORDING, RESUMED_TOPIC
-from .report_run import _Run, cell_series
+from .report_run import Run, cell_series
 from .report_sources import budget_faults, deaf_from
 
 #: A service whose status is not heard for this long [s], or four of its status periods if that is longer,
@@ -19,7 +19,7 @@ from .report_sources import budget_faults, deaf_from
 SERVICE_SILENCE_S = 1.0
 
 
-def _recorder_stalls(run: _Run) -> list[tuple[int, int]]:
+def recorder_stalls(run: Run) -> list[tuple[int, int]]:
     """(start, end) [wall ns] of every stretch longer than ``SERVICE_SILENCE_S`` in which nothing the cell sent was
     recorded (before the recording reached its whole disk budget: past it nothing is, on purpose)."""
     times = np.sort(np.fromiter((t for msgs in cell_series(run.rec) for t, _ in msgs), dtype=np.int64))
@@ -62,7 +62,7 @@ ROBOT_EVENTS = {
 ROBOT_BURST_S = 5.0
 
 
-def _robot_events(run: _Run) -> list[dict[str, Any]]:
+def robot_events(run: Run) -> list[dict[str, Any]]:
     """Each burst of increases of a :data:`ROBOT_EVENTS` counter in the robot side's statuses (phase ``ROBOT``),
     until the launcher began stopping the cell: increases less than ``ROBOT_BURST_S`` apart make one line, with
     how many and over how long."""
@@ -103,7 +103,7 @@ def _robot_line(name: str, key: str, burst: list) -> dict[str, Any]:
 _NEVER = 2**63 - 1
 
 
-def _service_faults(run: _Run, stalls: list[tuple[int, int]]) -> list[dict[str, Any]]:
+def service_faults(run: Run, stalls: list[tuple[int, int]]) -> list[dict[str, Any]]:
     """Each silence of a service's status longer than ``SERVICE_SILENCE_S`` (not counting the recorder's own stalls,
     nor its thinning or stopping of a key past its share: :func:`.report_sources.deaf_from`) and each restart (its
     status seq going back), until the launcher began stopping the cell (services then stop one by one) or the
@@ -138,12 +138,12 @@ def _service_faults(run: _Run, stalls: list[tuple[int, int]]) -> list[dict[str, 
     return out
 
 
-def _recorder_faults(run: _Run, run_dir: Path) -> list[dict[str, Any]]:
+def recorder_faults(run: Run, run_dir: Path) -> list[dict[str, Any]]:
     """The recorder stalled (nothing recorded on any key for ``SERVICE_SILENCE_S``), thinned or stopped a key past
     its share of the disk budget or reached the whole budget, or died (recovered recording)."""
     out: list[dict[str, Any]] = [{"wall_ns": a, "phase": "RECORDER",
                                   "reason": f"nothing recorded for {(b - a) * 1e-9:.1f} s (the recorder stalled)"}
-                                 for a, b in _recorder_stalls(run)]
+                                 for a, b in recorder_stalls(run)]
     out += budget_faults(run)
     for t_ns, m in run.rec.get(RESUMED_TOPIC, []):
         how = "had finished" if m.get("earlier_finished") else "had died"
@@ -159,7 +159,7 @@ def _recorder_faults(run: _Run, run_dir: Path) -> list[dict[str, Any]]:
     return out
 
 
-def _cell_faults(launcher: dict) -> list[dict[str, Any]]:
+def cell_faults(launcher: dict) -> list[dict[str, Any]]:
     """The launcher's ending as a fault when it was one (a service died or failed, the run timed out)."""
     if launcher.get("outcome") not in ("failed", "timeout"):
         return []
@@ -167,7 +167,7 @@ def _cell_faults(launcher: dict) -> list[dict[str, Any]]:
              "reason": str(launcher.get("why", launcher["outcome"]))[:500]}]
 
 
-def _faults_section(status: list[dict]) -> list[dict[str, Any]]:
+def faults_section(status: list[dict]) -> list[dict[str, Any]]:
     """Every entry into PAUSED, FAULT or ESTOP in the controller's status."""
     faults, prev = [], None
     for s in status:

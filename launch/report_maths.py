@@ -9,7 +9,8 @@ from controller.control.force import NormalForceRegulator
 from controller.core import PHASE_CODES
 from interfaces.messages import Phase
 
-_WIPING = (PHASE_CODES[Phase.WIPE], PHASE_CODES[Phase.TRANSITION])
+#: The phase codes (the controller trace's ``phase`` column) of the skill itself: wiping and the moves between strokes.
+WIPING = (PHASE_CODES[Phase.WIPE], PHASE_CODES[Phase.TRANSITION])
 
 
 #: A tick whose time scale departs this far from the mean of its neighbours' was one the robot held (the override
@@ -17,7 +18,7 @@ _WIPING = (PHASE_CODES[Phase.WIPE], PHASE_CODES[Phase.TRANSITION])
 HELD_SCALE_DIP = 0.01
 
 
-def _junction_steps(tr: np.ndarray, col: dict[str, int], window: int = 5) -> tuple[float, float]:
+def junction_steps(tr: np.ndarray, col: dict[str, int], window: int = 5) -> tuple[float, float]:
     """(largest one-tick reference-acceleration change at an MP junction [m/s^2], its ratio to the ticks around).
 
     The trace's accelerations are executed (time-scaled, x scale^2); a junction with a tick the robot held within
@@ -31,7 +32,7 @@ def _junction_steps(tr: np.ndarray, col: dict[str, int], window: int = 5) -> tup
     scale = tr[:, col["speed_scale"]]
     held = np.zeros(len(tr), bool)
     held[1:-1] = np.abs(scale[1:-1] - 0.5 * (scale[:-2] + scale[2:])) > HELD_SCALE_DIP
-    chain = set(_WIPING)
+    chain = set(WIPING)
     js = [k for k in range(1, len(tr)) if phase[k] != phase[k - 1] and phase[k - 1] in chain
           and (phase[k] in chain or phase[k] == PHASE_CODES[Phase.RETREAT])
           and not held[max(k - 2 - window, 0): k + 2 + window].any()]
@@ -45,7 +46,7 @@ def _junction_steps(tr: np.ndarray, col: dict[str, int], window: int = 5) -> tup
     return worst, ratio
 
 
-def _dirt_removed(truth: list[dict]) -> float:
+def dirt_removed(truth: list[dict]) -> float:
     """1 - last / first total dirt of ``sim/truth`` (0 without truth or dirt)."""
     return (1.0 - truth[-1]["total_dirt"] / truth[0]["total_dirt"]) if truth and truth[0]["total_dirt"] > 0 else 0.0
 
@@ -69,7 +70,7 @@ def cap_watch_force(t_s: np.ndarray, force_n: np.ndarray, filter_s: float) -> np
     return out
 
 
-def _motion_peaks(tr: np.ndarray, col: dict[str, int]) -> dict[str, dict[str, float]]:
+def motion_peaks(tr: np.ndarray, col: dict[str, int]) -> dict[str, dict[str, float]]:
     """Peak speed, acceleration and jerk of the executed in-plane reference per phase name and over ``all``."""
     if len(tr) < 2:
         return {}
@@ -111,7 +112,7 @@ def skill_start(tr: np.ndarray, col: dict[str, int]) -> float | None:
     """Robot time [s] of the first recorded TRANSITION or WIPE tick (None if there is none)."""
     if not len(tr):
         return None
-    hit = np.flatnonzero(np.isin(tr[:, col["phase"]].astype(int), _WIPING))
+    hit = np.flatnonzero(np.isin(tr[:, col["phase"]].astype(int), WIPING))
     return float(tr[hit[0], col["t_s"]]) if hit.size else None
 
 

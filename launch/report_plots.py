@@ -12,7 +12,7 @@ from controller.core import PHASE_CODES
 from interfaces.keys import Keys
 from interfaces.messages import Phase
 
-from .report_maths import _WIPING, _dirt_removed
+from .report_maths import WIPING, dirt_removed
 
 
 def _frames(rec: dict, keys: Keys) -> list[np.ndarray]:
@@ -62,7 +62,7 @@ def _board_before_after_figure(frames: list[np.ndarray], truth: list[dict]):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
-    for a, img, title in zip(ax, frames, ("before", f"after ({_dirt_removed(truth):.1%} of the dirt removed)")):
+    for a, img, title in zip(ax, frames, ("before", f"after ({dirt_removed(truth):.1%} of the dirt removed)")):
         a.imshow(img)
         a.set_title(title)
         a.axis("off")
@@ -77,7 +77,7 @@ def _eraser_path_figure(tr: np.ndarray, col: dict[str, int], truth: list[dict], 
     fig, ax = plt.subplots(figsize=(8, 6))
     kinds = (("periodic MP (WIPE)", PHASE_CODES[Phase.WIPE], "tab:blue"),
              ("transitional MP", PHASE_CODES[Phase.TRANSITION], "tab:orange"))
-    free = ~np.isin(phase, _WIPING)
+    free = ~np.isin(phase, WIPING)
     ax.plot(tr[free, col["x"]], tr[free, col["y"]], ",", color="0.6", label="free moves (approach, retreat)")
     for label, code, colour in kinds:
         sel = phase == code

@@ -14,7 +14,8 @@ from interfaces.keys import Keys
 from .record import RECORDING, read_recording, trace_array
 
 
-def _topic(rec: dict, key: str) -> list[dict]:
+def topic_messages(rec: dict, key: str) -> list[dict]:
+    """The recorded messages of topic ``key`` (JSON objects in log order, without their log times)."""
     return [m for _, m in rec.get(key, [])]
 
 
@@ -25,7 +26,7 @@ def cell_series(rec: dict) -> list[list[tuple[int, dict]]]:
 
 
 @dataclass(frozen=True)
-class _Run:
+class Run:
     """What a report is built from: a run folder's recording, split by topic, and the launcher's ``run.json``.
 
     rec : every recorded message by topic, [(log_time_ns, JSON object)]
@@ -48,15 +49,15 @@ class _Run:
     col: dict[str, int]
 
 
-def _read_run(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None) -> _Run:
+def read_run(run_dir: Path, keys: Keys | None = None, cap_n: float | None = None) -> Run:
     """The recording of ``run_dir`` and its ``run.json``; ``keys`` and ``cap_n`` default to what the launcher ran."""
     rec = read_recording(run_dir / RECORDING)
     launcher = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").is_file() else {}
     keys = keys or Keys(launcher.get("key_prefix", Keys().prefix))
     cap_n = cap_n if cap_n is not None else launcher.get("force_cap_n", ForceParams().cap_n)
-    cols, tr = trace_array(_topic(rec, keys.controller_trace))
+    cols, tr = trace_array(topic_messages(rec, keys.controller_trace))
     filter_s = float(launcher.get("force_filter_s", ForceParams().filter_s))
-    return _Run(rec=rec, launcher=launcher, keys=keys, cap_n=cap_n, filter_s=filter_s,
-                truth=_topic(rec, keys.sim_truth), status=_topic(rec, keys.controller_status),
-                stains_msgs=[m for m in _topic(rec, keys.perception_stains) if m.get("board") != "lost"],
+    return Run(rec=rec, launcher=launcher, keys=keys, cap_n=cap_n, filter_s=filter_s,
+                truth=topic_messages(rec, keys.sim_truth), status=topic_messages(rec, keys.controller_status),
+                stains_msgs=[m for m in topic_messages(rec, keys.perception_stains) if m.get("board") != "lost"],
                 tr=tr, col={c: i for i, c in enumerate(cols)})

@@ -26,7 +26,7 @@ from collections import Counter
 from typing import Any
 
 from .record import RESUMED_TOPIC, SELF_REPORTS_TOPIC, STATUS_TOPIC
-from .report_run import _Run
+from .report_run import Run
 
 #: Figures read from the newest message of their keys (the controller's phase: the newest before the cell began
 #: stopping) -> those keys, under the prefix.
@@ -51,7 +51,7 @@ SERIES_FIGURES: dict[str, tuple[str, ...]] = {
 LOST = ("thinned", "over_share", "queue_full", "over_budget")
 
 
-def _lives(run: _Run) -> list[dict]:
+def _lives(run: Run) -> list[dict]:
     """The last account of each recorder that wrote this recording (a restarted one carries its predecessor's
     recording over: :data:`~launch.record.RESUMED_TOPIC` marks where it began)."""
     starts = sorted(t for t, _ in run.rec.get(RESUMED_TOPIC, []))
@@ -61,7 +61,7 @@ def _lives(run: _Run) -> list[dict]:
     return [last[k] for k in sorted(last)]
 
 
-def recording_section(run: _Run) -> tuple[dict[str, Any], dict[str, dict]]:
+def recording_section(run: Run) -> tuple[dict[str, Any], dict[str, dict]]:
     """What the recorder did with the run's cell's keys, and its counts of each (see the module docstring)."""
     lives = _lives(run)
     prefix = run.keys.prefix + "/"
@@ -83,7 +83,7 @@ def recording_section(run: _Run) -> tuple[dict[str, Any], dict[str, dict]]:
     return recording, {k: {**v, "dropped": dict(v["dropped"])} for k, v in sorted(keys.items())}
 
 
-def sources_section(run: _Run, recording: dict[str, Any], counts: dict[str, dict],
+def sources_section(run: Run, recording: dict[str, Any], counts: dict[str, dict],
                     final_status_ns: int | None) -> dict[str, dict]:
     """Per figure: from the recording or from the services' own reports, and whether its keys are whole."""
     prefix = run.keys.prefix + "/"
@@ -108,7 +108,7 @@ def sources_section(run: _Run, recording: dict[str, Any], counts: dict[str, dict
     return out
 
 
-def deaf_from(run: _Run) -> dict[str, int]:
+def deaf_from(run: Run) -> dict[str, int]:
     """Topic -> the wall time [ns] from which the recorder recorded it only in part (thinned, or stopped past its
     share); every topic (``"*"``) from when the recording reached its whole budget. A service's status missing
     after then is the recorder's doing, not a silence of the service."""
@@ -119,7 +119,7 @@ def deaf_from(run: _Run) -> dict[str, int]:
     return out
 
 
-def budget_faults(run: _Run) -> list[dict[str, Any]]:
+def budget_faults(run: Run) -> list[dict[str, Any]]:
     """A ``RECORDER`` line for each key the recorder thinned or stopped, and for the whole budget reached."""
     prefix = run.keys.prefix + "/"
     return [{"wall_ns": t, "phase": "RECORDER", "reason": str(m.get("message", ""))[:500]}

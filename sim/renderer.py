@@ -272,7 +272,7 @@ class CameraProcess:
 
 
 #: Renderers kept idle for the next run of this process (:func:`keep_renderers`): scene key -> renderer.
-_KEPT: dict[bytes, CameraProcess] = {}
+KEPT: dict[bytes, CameraProcess] = {}
 #: At most this many kept at once (one per board and camera a campaign's worker meets; the oldest goes).
 MAX_KEPT = 2
 _keeping = False
@@ -298,14 +298,14 @@ def keep_renderers(on: bool = True) -> None:
 
 
 def _close_kept() -> None:
-    while _KEPT:
-        _KEPT.pop(next(iter(_KEPT))).close()
+    while KEPT:
+        KEPT.pop(next(iter(KEPT))).close()
 
 
 def open_camera(params: SimParams, board: Board, q_start: np.ndarray, dirt_shape: tuple[int, int]) -> CameraProcess:
     """A started renderer for this scene: a kept one (counters back to zero) or a new one (RuntimeError if it does
     not come up)."""
-    kept = _KEPT.pop(scene_key(params, board, q_start, dirt_shape), None)
+    kept = KEPT.pop(scene_key(params, board, q_start, dirt_shape), None)
     if kept is not None and not kept.dead and kept._proc.is_alive():
         kept._reset()
         return kept
@@ -324,9 +324,9 @@ def release_camera(camera: CameraProcess) -> None:
     if not _keeping or camera.dead or not camera.idle or not camera._proc.is_alive():
         camera.close()
         return
-    old = _KEPT.pop(camera.scene_key, None)
+    old = KEPT.pop(camera.scene_key, None)
     if old is not None and old is not camera:
         old.close()
-    _KEPT[camera.scene_key] = camera
-    while len(_KEPT) > MAX_KEPT:
-        _KEPT.pop(next(iter(_KEPT))).close()
+    KEPT[camera.scene_key] = camera
+    while len(KEPT) > MAX_KEPT:
+        KEPT.pop(next(iter(KEPT))).close()

@@ -133,12 +133,12 @@ class Cell:
     def __init__(self, out: Path, skill: Path, mode: str = "lockstep", proxy: bool = False,
                  thin: dict[str, dict[str, float]] | None = None, router: bool = False,
                  router_acl: bool = True, robot: str = "sim") -> None:
-        from launch.cli import _plan_cell
+        from launch.cli import plan_cell
 
         self.out = out
         self.a = SimpleNamespace(robot=robot, foxglove=None, seed=0, stains=3, mode=mode, robot_id=f"f{free_port()}",
                                  port_base=None, skill=str(skill), max_duration=0.0, quiet=True)
-        self.cell = _plan_cell(self.a, COMPOSE, {}, Path(skill), out)
+        self.cell = plan_cell(self.a, COMPOSE, {}, Path(skill), out)
         self.services = {s.name: s for s in self.cell.services}
         self.children: dict = {}
         self.proxy: TcpProxy | None = None
@@ -301,12 +301,12 @@ class Cell:
     def finish(self, outcome: str = "stopped", why: str = "fault-injection test ended") -> dict:
         """Stop the cell as ``lamps up`` does and return ``report.json`` (rebuilt by ``lamps report`` when the
         recorder did not write it)."""
-        from launch.cli import _stop_services
+        from launch.cli import stop_services
         from launch.record_cli import report_main
 
         self._watching.clear()
         self.node.close()
-        _stop_services(list(self.children.values()), self.cell, {"outcome": outcome, "why": why}, self.a,
+        stop_services(list(self.children.values()), self.cell, {"outcome": outcome, "why": why}, self.a,
                        self._t0)
         self.children = {}
         if self.proxy is not None:

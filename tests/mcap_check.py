@@ -12,7 +12,8 @@ import json
 from pathlib import Path
 
 
-def _protobuf_class(name: str, data: bytes):
+def protobuf_class(name: str, data: bytes):
+    """The protobuf message class ``name`` from a serialized FileDescriptorSet ``data`` (a recording's schema)."""
     from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
     fds = descriptor_pb2.FileDescriptorSet.FromString(data)
@@ -47,7 +48,7 @@ def check_recording(path: Path, every: int = 20) -> dict[str, tuple[str, int]]:
                 else:
                     assert channel.message_encoding == schema.encoding == "protobuf", \
                         f"{topic}: encoding {channel.message_encoding} with a {schema.encoding} schema"
-                    cls = _protobuf_class(schema.name, schema.data)
+                    cls = protobuf_class(schema.name, schema.data)
 
                     def parse(data, cls=cls, topic=topic):
                         m = cls.FromString(data)

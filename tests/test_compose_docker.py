@@ -21,7 +21,7 @@ from interfaces.keys import Keys
 
 from .conftest import REPO
 from .docker_helpers import base_image, ensure_docker
-from .test_live_view import _check, _Client
+from .test_live_view import FoxgloveClient, check_payload
 from .zenoh_helpers import free_port, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.docker, pytest.mark.xdist_group("docker")]
@@ -32,7 +32,7 @@ def _compose(project: str, env: dict, *args: str, timeout: float = 600) -> subpr
                           capture_output=True, text=True, env=env, timeout=timeout, cwd=REPO)
 
 
-def _limit(which: int) -> str:
+def hard_limit(which: int) -> str:
     """This host's hard limit as compose wants it (-1 = unlimited): the engine cannot raise it above that."""
     hard = resource.getrlimit(which)[1]
     return "-1" if hard == resource.RLIM_INFINITY else str(hard)
@@ -44,14 +44,14 @@ def _connect(port: int, token: str | None = None):
     from websockets.exceptions import WebSocketException
 
     try:
-        client = _Client(port, "foxglove.sdk.v1", token=token)
+        client = FoxgloveClient(port, "foxglove.sdk.v1", token=token)
         client.pump(2.0)
     except (OSError, EOFError, WebSocketException):
         return None
     return client if client.server_info is not None else None
 
 
-def _started(container: str) -> datetime:
+def started_at(container: str) -> datetime:
     """When the container started (its engine's clock; nanosecond text cut to microseconds)."""
     out = subprocess.run(["docker", "inspect", "-f", "{{.State.StartedAt}}", container], capture_output=True,
                          text=True, check=True).stdout.strip().rstrip("Z")
@@ -68,7 +68,8 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
     env = {**os.environ, "LAMPS_BASE_IMAGE": base_image(), "LAMPS_HOST_DIR": str(host),
            "LAMPS_RECORD_UNTIL": "done", "LAMPS_SEED": "3", "LAMPS_STAINS": "1", "COMPOSE_PROFILES": "sim,foxglove",
            "LAMPS_FOXGLOVE_PORT": str(ws_port),
-           "LAMPS_MEMLOCK_BYTES": _limit(resource.RLIMIT_MEMLOCK), "LAMPS_RTPRIO_MAX": _limit(resource.RLIMIT_RTPRIO)}
+           "LAMPS_MEMLOCK_BYTES": hard_limit(resource.RLIMIT_MEMLOCK),
+           "LAMPS_RTPRIO_MAX": hard_limit(resource.RLIMIT_RTPRIO)}
     env.pop("COMPOSE_FILE", None)
     try:
         built = _compose(project, env, "build", timeout=1800)
@@ -86,7 +87,7 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
         wait_for(lambda: client.pump(0.5) or tf in client.channels, 120.0, f"{tf} advertised")
         client.subscribe([tf])
         wait_for(lambda: client.pump(0.5) or client.got.get(tf), 60.0, f"live {tf}")
-        _check(client.channels[tf], client.got[tf][0])
+        check_payload(client.channels[tf], client.got[tf][0])
         client.ws.close()
         waited = _compose(project, env, "wait", "recorder", timeout=900)
         logs = _compose(project, env, "logs", "--no-color", "--tail", "40").stdout
@@ -115,7 +116,7 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
 
         # Docker's start order is lamps up's: each after the one it needs was healthy
         names = {s: f"{project}-{s}-1" for s in ("sim", "controller", "perception", "recorder", "foxglove")}
-        started = {s: _started(c) for s, c in names.items()}
+        started = {s: started_at(c) for s, c in names.items()}
         assert started["sim"] < started["controller"] < started["perception"], started
         assert started["recorder"] < started["controller"], started  # recording before the robot can move
         assert started["perception"] < started["foxglove"], started

@@ -17,7 +17,7 @@ import pytest
 
 from .conftest import REPO
 from .docker_helpers import base_image, ensure_docker
-from .test_compose_docker import _limit, _started
+from .test_compose_docker import hard_limit, started_at
 from .zenoh_helpers import free_port
 
 FILES = ("-f", str(REPO / "docker-compose.yml"), "-f", str(REPO / "docker-compose.router.yml"))
@@ -64,7 +64,8 @@ def test_docker_compose_through_the_router_cleans_a_board_and_perception_cannot_
     env = {**os.environ, "LAMPS_BASE_IMAGE": base_image(), "LAMPS_HOST_DIR": str(host),
            "LAMPS_RECORD_UNTIL": "done", "LAMPS_SEED": "3", "LAMPS_STAINS": "1", "COMPOSE_PROFILES": "sim",
            "LAMPS_ROUTER_PORT": str(free_port()),
-           "LAMPS_MEMLOCK_BYTES": _limit(resource.RLIMIT_MEMLOCK), "LAMPS_RTPRIO_MAX": _limit(resource.RLIMIT_RTPRIO)}
+           "LAMPS_MEMLOCK_BYTES": hard_limit(resource.RLIMIT_MEMLOCK),
+           "LAMPS_RTPRIO_MAX": hard_limit(resource.RLIMIT_RTPRIO)}
     env.pop("COMPOSE_FILE", None)
     try:
         built = _compose(project, env, "build", timeout=1800)  # the compose test's image: cached when it ran first
@@ -97,7 +98,7 @@ def test_docker_compose_through_the_router_cleans_a_board_and_perception_cannot_
         assert report["outcome"] == "cleaned" and report["dirt_removed_fraction"] >= 0.98, report
         assert "listening on tls/0.0.0.0:7447" in _compose(project, env, "logs", "router").stdout
         # the liveliness healthchecks gave the start order
-        started = {s: _started(f"{project}-{s}-1") for s in ("router", "sim", "controller", "perception", "recorder")}
+        started = {s: started_at(f"{project}-{s}-1") for s in ("router", "sim", "controller", "perception", "recorder")}
         assert started["router"] < started["sim"] < started["controller"] < started["perception"], started
         assert started["router"] < started["recorder"] < started["controller"], started  # recording before motion
     finally:

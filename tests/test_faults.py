@@ -29,11 +29,13 @@ WIPING = ("WIPE", "TRANSITION")
 GOING = ("APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE")
 
 
-def _reasons(report: dict, phase: str) -> list[str]:
+def fault_reasons(report: dict, phase: str) -> list[str]:
+    """The reasons of the run report's faults in ``phase``."""
     return [f["reason"] for f in report["faults"] if f["phase"] == phase]
 
 
-def _assert_safe(report: dict) -> None:
+def assert_safe(report: dict) -> None:
+    """The run stayed safe: contact force within the cap, joint speeds under their limits, every fault explained."""
     # the true contact force over every physics step (not only its 10 Hz samples): a brake's stop or a release
     # lasts a few ms and the samples miss it
     assert report["peak_contact_force_n"] <= report["force_cap_n"], report["peak_contact_force_n"]
@@ -42,7 +44,7 @@ def _assert_safe(report: dict) -> None:
     assert all(f["wall_ns"] > 0 and f["reason"] for f in report["faults"]), report["faults"]
 
 
-def _wait_done_for_good(cell: Cell, timeout_s: float, settle_s: float = 4.0) -> None:
+def wait_done_for_good(cell: Cell, timeout_s: float, settle_s: float = 4.0) -> None:
     """Until the controller is DONE and stays DONE for ``settle_s`` (a stain the arm hid from the camera shows up
     once it has retreated, and the controller goes back for it)."""
     end = time.monotonic() + timeout_s
@@ -84,14 +86,14 @@ def test_lockstep_survives_perception_and_sim_freezes_kills_and_restarts(tmp_pat
         cell.wait_phase(GOING, 60.0, since=time.monotonic())
         cell.wait_phase(WIPING, 60.0, since=time.monotonic())
         report = cell.finish()
-    _assert_safe(report)
-    service = _reasons(report, "SERVICE")
+    assert_safe(report)
+    service = fault_reasons(report, "SERVICE")
     assert any(r.startswith("perception: no status for") for r in service), service
     assert any(r.startswith("perception: restarted") for r in service), service
     assert any(r.startswith("sim: no status for") for r in service), service
     assert any(r.startswith("sim: restarted") for r in service), service
-    assert any("no stains update" in r for r in _reasons(report, "PAUSED")), report["faults"]
-    assert any("no robot state" in r for r in _reasons(report, "FAULT")), report["faults"]
+    assert any("no stains update" in r for r in fault_reasons(report, "PAUSED")), report["faults"]
+    assert any("no robot state" in r for r in fault_reasons(report, "FAULT")), report["faults"]
 
 
 @pytest.mark.attack('faults', "controller frozen 2 s, killed and restarted; a peer without a certificate and one with "
@@ -131,11 +133,11 @@ def test_lockstep_controller_freeze_kill_restart_rogue_peers_and_a_stalled_recor
         cell.restart("recorder", down_s=1.0)  # the new recorder carries the dead one's recording over
         time.sleep(2.0)
         report = cell.finish()
-    _assert_safe(report)
-    service = _reasons(report, "SERVICE")
+    assert_safe(report)
+    service = fault_reasons(report, "SERVICE")
     assert any(r.startswith("controller: no status for") for r in service), service
     assert any(r.startswith("controller: restarted") for r in service), service
-    recorder = _reasons(report, "RECORDER")
+    recorder = fault_reasons(report, "RECORDER")
     assert any("the recorder stalled" in r for r in recorder), report["faults"]
     assert any(r.startswith("the recorder restarted") and "(its predecessor had died)" in r for r in recorder), recorder
     assert report["stains"] and report["dirt_removed_fraction"] > 0.0  # the recording still starts at the start
@@ -167,16 +169,16 @@ def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_contro
         cell.signal("recorder", signal.SIGKILL)  # the recording is rebuilt from its .partial file
         time.sleep(1.0)
         report = cell.finish()
-    _assert_safe(report)
+    assert_safe(report)
     sim = report["counters"]["sim"]
     assert sim.get("stale_command_brakes", 0) >= 1 and sim.get("loop_freezes", 0) >= 1, sim
-    service = _reasons(report, "SERVICE")
+    service = fault_reasons(report, "SERVICE")
     assert any(r.startswith("controller: restarted") for r in service), service
     assert any(r.startswith("sim: no status for") for r in service), service
-    robot = _reasons(report, "ROBOT")
+    robot = fault_reasons(report, "ROBOT")
     for what in ("braked: no fresh command", "its own loop froze", "now serves another controller session"):
         assert any(what in r for r in robot), (what, robot)
-    assert any("recovered from its .partial file" in r for r in _reasons(report, "RECORDER")), report["faults"]
+    assert any("recovered from its .partial file" in r for r in fault_reasons(report, "RECORDER")), report["faults"]
     assert not any("silent for the last" in r for r in service), "the recorder's death is not the controller's"
 
 
@@ -190,9 +192,9 @@ def test_realtime_cleans_the_board_with_samples_dropped_on_the_state_command_and
             "perception": {"perception/stains": 2.0}}
     with Cell(tmp_path / "run", learned_skill_file, "realtime", thin=thin) as cell:
         cell.wait_phase(("WIPE",), 120.0)
-        _wait_done_for_good(cell, 180.0)
+        wait_done_for_good(cell, 180.0)
         report = cell.finish()
-    _assert_safe(report)
+    assert_safe(report)
     assert report["dirt_removed_fraction"] >= 0.98, report["dirt_removed_fraction"]
     sim, steps = report["counters"]["sim"], 1000.0 * report["sim_time_s"]
     assert 0 < sim["commands_received"] < 0.4 * steps, (sim, steps)  # the commands really were thinned

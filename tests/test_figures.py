@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from lampskit.figures.primitives import _shown, figure_transition_comparison, figure_transition_phases
+from lampskit.figures.primitives import figure_transition_comparison, figure_transition_phases, shown_transition
 from lampskit.learn.demo_io import read_demo
 from lampskit.learn.learn import learn_skill
 
@@ -14,7 +14,7 @@ REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "wiping-demos" 
 
 
 def test_a_transition_between_two_stains_is_shown_between_them(learned_skill):
-    shown = _shown(learned_skill)
+    shown = shown_transition(learned_skill)
     assert shown.before is not None and shown.after is not None
     assert shown.tr.segment - 1 == shown.before.segment and shown.tr.segment + 1 == shown.after.segment
 
@@ -25,7 +25,7 @@ def test_a_real_single_wipe_shows_its_demonstrated_approach_at_its_own_duration(
     duration, not squeezed between two phases of the one stroke."""
     demo = read_demo(f"{REAL}#0")
     skill, seg = learn_skill(demo)
-    shown = _shown(skill)
+    shown = shown_transition(skill)
     assert shown.before is None and shown.after is not None and "demonstrated approach" in shown.note
     assert shown.T == pytest.approx(shown.tr.mp.demo_duration_s) and shown.T > 2.0
     s = seg.segments[shown.tr.segment]

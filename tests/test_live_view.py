@@ -33,25 +33,26 @@ from interfaces.session import ServiceNode
 from launch.live import LiveView, live_token
 from launch.ws_server import FoxgloveWsServer, TokenRequired, check_token, is_loopback
 
-from .mcap_check import _protobuf_class
-from .test_scene import _camera, _stains
+from .mcap_check import protobuf_class
+from .test_scene import camera_message, stains_message
 from .zenoh_helpers import free_port, wait_for, wait_subscribed
 
 
-def _state(i: int) -> RobotState:
+def state_message(i: int) -> RobotState:
+    """The ``i``-th RobotState of a slowly moving 7-joint simulated arm (1 ms apart)."""
     return RobotState(seq=i, stamp_ns=i * 10**6, q_rad=[float(0.1 * np.sin(i * 1e-3))] * 7, dq_rad_s=[0.0] * 7,
                       tau_nm=[0.0] * 7, wrench_world=[0.0] * 6,
                       capabilities=Capabilities(True, [100.0] * 7, "sim", 1000.0), robot_time_ns=i * 10**6)
 
 
 def _frame() -> CameraFrame:
-    f = _camera()
+    f = camera_message()
     k = CameraIntrinsics(fx=50.0, fy=50.0, cx=32.0, cy=24.0, width=64, height=48)
     return CameraFrame(seq=1, stamp_ns=1, camera="board", encoding="rgb8", data=bytes(64 * 48 * 3), intrinsics=k,
                        T_camera_to_world=f.T_camera_to_world, robot_time_ns=1)
 
 
-class _Client:
+class FoxgloveClient:
     """A Foxglove WebSocket protocol client: advertised channels by topic, subscriptions, message frames."""
 
     def __init__(self, port: int, subprotocol: str, host: str = "127.0.0.1", token: str | None = None) -> None:
@@ -89,12 +90,12 @@ class _Client:
         self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
 
 
-def follow_live(port: int, topics: list[str], what: str) -> _Client:
+def follow_live(port: int, topics: list[str], what: str) -> FoxgloveClient:
     """A ``foxglove.websocket.v1`` client of the live view on ``port`` once it serves (2 min), subscribed to
     ``topics`` once advertised, after a message on each, every message checked against its channel's schema."""
     def connected():
         try:
-            return _Client(port, "foxglove.websocket.v1")
+            return FoxgloveClient(port, "foxglove.websocket.v1")
         except OSError:
             return None
     client = wait_for(connected, 120.0, what, period_s=0.5)
@@ -102,11 +103,11 @@ def follow_live(port: int, topics: list[str], what: str) -> _Client:
     client.subscribe(topics)
     wait_for(lambda: client.pump(0.5) or all(client.got.get(t) for t in topics), 60.0, f"live messages on {topics}")
     for t in topics:
-        _check(client.channels[t], client.got[t][-1])
+        check_payload(client.channels[t], client.got[t][-1])
     return client
 
 
-def _check(channel: dict, payload: bytes) -> None:
+def check_payload(channel: dict, payload: bytes) -> None:
     """The payload is what the advertised schema says (JSON Schema with properties, or a protobuf type)."""
     if channel["encoding"] == "json":
         schema = json.loads(channel["schema"])
@@ -114,7 +115,7 @@ def _check(channel: dict, payload: bytes) -> None:
         jsonschema.validate(json.loads(payload), schema)
     else:
         assert channel["encoding"] == "protobuf" and channel["schemaEncoding"] == "protobuf"
-        cls = _protobuf_class(channel["schemaName"], base64.b64decode(channel["schema"]))
+        cls = protobuf_class(channel["schemaName"], base64.b64decode(channel["schema"]))
         assert cls.FromString(payload).ListFields(), channel["topic"]
 
 
@@ -139,11 +140,11 @@ def test_the_live_view_serves_the_cell_and_its_scene_to_a_foxglove_client(subpro
             i0 = next(bursts) * 500
             pub.publish(camera_key, _frame())
             for i in range(i0, i0 + 50):
-                pub.publish(keys.robot_state, _state(i))
-            pub.publish(keys.perception_stains, _stains())
+                pub.publish(keys.robot_state, state_message(i))
+            pub.publish(keys.perception_stains, stains_message())
             pub.publish(keys.controller_status, status)
 
-        client = _Client(view.port, subprotocol)
+        client = FoxgloveClient(view.port, subprotocol)
         wanted = [keys.robot_state, keys.controller_status, keys.perception_stains, camera_key,
                   f"{keys.prefix}/scene/tf", f"{keys.prefix}/scene/robot", f"{keys.prefix}/scene/board",
                   f"{camera_key}/calibration", f"{camera_key}/annotations"]
@@ -170,7 +171,7 @@ def test_the_live_view_serves_the_cell_and_its_scene_to_a_foxglove_client(subpro
             raise AssertionError(f"{exc}: got {sorted(client.got)}; view {dict(view.counters)}") from None
         for topic in wanted:
             for payload in client.got[topic][:3]:
-                _check(client.channels[topic], payload)
+                check_payload(client.channels[topic], payload)
         names = {t: client.channels[t]["schemaName"] for t in wanted}
         assert names[f"{keys.prefix}/scene/tf"] == "foxglove.FrameTransforms"
         assert names[camera_key] == "foxglove.CompressedImage"
@@ -202,7 +203,7 @@ def test_one_view_serves_two_cells_each_in_a_frame_tree_of_its_own():
     try:
         for keys in cells:
             wait_subscribed(pub.session, keys.robot_state, what=f"the live view's subscription of {keys.prefix}")
-        client = _Client(view.port, "foxglove.websocket.v1")
+        client = FoxgloveClient(view.port, "foxglove.websocket.v1")
         wanted = [f"{k.prefix}/{what}" for k in cells for what in ("robot/state", "scene/tf")]
         bursts = iter(range(10**6))
 
@@ -210,8 +211,8 @@ def test_one_view_serves_two_cells_each_in_a_frame_tree_of_its_own():
             i0 = next(bursts) * 100
             for k in cells:
                 for i in range(i0, i0 + 30):
-                    pub.publish(k.robot_state, _state(i))
-            pub.publish(Keys.for_robot("iiwa-3").robot_state, _state(i0))  # not a cell of this view
+                    pub.publish(k.robot_state, state_message(i))
+            pub.publish(Keys.for_robot("iiwa-3").robot_state, state_message(i0))  # not a cell of this view
 
         wait_for(lambda: publish() or client.pump() or all(t in client.channels for t in wanted), 15.0,
                  f"advertisements of {wanted}")
@@ -222,7 +223,7 @@ def test_one_view_serves_two_cells_each_in_a_frame_tree_of_its_own():
         assert not any(t.startswith("lamps/iiwa-3/") for t in client.channels), sorted(client.channels)
         for k in cells:
             topic, robot = f"{k.prefix}/scene/tf", k.prefix.rsplit("/", 1)[1]
-            cls = _protobuf_class("foxglove.FrameTransforms", base64.b64decode(client.channels[topic]["schema"]))
+            cls = protobuf_class("foxglove.FrameTransforms", base64.b64decode(client.channels[topic]["schema"]))
             tf = cls.FromString(client.got[topic][-1])
             assert {x.parent_frame_id for x in tf.transforms} == {f"{robot}/world"}
             assert all(x.child_frame_id.startswith(f"{robot}/") for x in tf.transforms)
@@ -357,10 +358,10 @@ def test_a_client_from_another_address_needs_the_token_in_the_url_one_from_loopb
     try:
         for given in (None, "", "correct-horse-battery-stapl", "correct-horse-battery-staplf", token + "x"):
             with pytest.raises(InvalidStatus, match="401"):
-                _Client(server.port, "foxglove.websocket.v1", host=address, token=given)
+                FoxgloveClient(server.port, "foxglove.websocket.v1", host=address, token=given)
         assert server.refused == 5
         for host, given in ((address, token), ("127.0.0.1", None)):
-            client = _Client(server.port, "foxglove.sdk.v1", host=host, token=given)
+            client = FoxgloveClient(server.port, "foxglove.sdk.v1", host=host, token=given)
             client.pump(1.0)
             assert client.server_info is not None and client.server_info["name"] == "LAMPS test", host
             client.ws.close()

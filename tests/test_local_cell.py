@@ -106,7 +106,7 @@ def test_session_ids_count_per_bus_so_a_cell_gets_the_same_ones_whatever_ran_bef
 def test_a_kept_renderer_draws_the_frame_a_new_one_draws_with_its_counters_from_zero():
     from sim.core import SimCore
     from sim.params import SimParams
-    from sim.renderer import _KEPT, keep_renderers, open_camera, release_camera
+    from sim.renderer import KEPT, keep_renderers, open_camera, release_camera
 
     p = SimParams.from_table({"seed": 3, "dirt": {"stains": 2}, "board": {"preset": "wall"}})
     core = SimCore(p)
@@ -131,7 +131,7 @@ def test_a_kept_renderer_draws_the_frame_a_new_one_draws_with_its_counters_from_
     finally:
         keep_renderers(False)
         core.close()
-    assert not _KEPT and kept.dead  # closed once nobody keeps renderers
+    assert not KEPT and kept.dead  # closed once nobody keeps renderers
 
 
 def test_a_worker_that_dies_under_a_cell_makes_a_cell_without_a_report_and_the_next_cell_a_new_worker(

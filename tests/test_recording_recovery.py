@@ -119,7 +119,7 @@ def test_a_recorder_started_again_continues_the_recording_and_loses_nothing(tmp_
                     'report.json written from the recovered recording')
 def test_lamps_up_recovers_the_recording_of_a_dead_recorder_and_writes_the_report(tmp_path, capsys):
     """The recorder killed: lamps up still leaves report.json, from the recording recovered up to the crash."""
-    from launch.cli import _show_report
+    from launch.cli import show_report
 
     out = tmp_path / "run"
     out.mkdir()
@@ -128,6 +128,6 @@ def test_lamps_up_recovers_the_recording_of_a_dead_recorder_and_writes_the_repor
         sink.write("lamps/x/perception/status", _status(i), 1_000_000 + i)
     sink.flush()  # what reached the disk before the crash; no footer
     assert not (out / "recording.mcap").exists()
-    rc = _show_report(out, "the recorder died")
+    rc = show_report(out, "the recorder died")
     assert (out / "report.json").is_file() and (out / "recording.mcap").is_file()
     assert "recovered" in capsys.readouterr().out and rc == 1  # nothing was cleaned in this recording

@@ -51,7 +51,7 @@ def test_a_junction_with_a_held_tick_is_not_the_skills_step():
     progress) on a junction steps the acceleration by itself; the junction is left out, an ordinary one is not."""
     from controller.core import PHASE_CODES
     from interfaces.messages import Phase
-    from launch.report_maths import _junction_steps
+    from launch.report_maths import junction_steps
 
     n, j = 100, 50
     col = {"phase": 0, "ref_ax": 1, "ref_ay": 2, "speed_scale": 3}
@@ -59,14 +59,14 @@ def test_a_junction_with_a_held_tick_is_not_the_skills_step():
     tr[:, 0] = np.where(np.arange(n) < j, PHASE_CODES[Phase.WIPE], PHASE_CODES[Phase.TRANSITION])
     tr[:, 1] = 3.0 + 0.01 * np.arange(n)  # a smooth acceleration through the junction: 0.01 m/s^2 a tick
     tr[:, 3] = 1.0
-    assert _junction_steps(tr, col)[1] < 1.5
+    assert junction_steps(tr, col)[1] < 1.5
     held = tr.copy()
     held[j, 3] = 0.94
     held[j, 1] *= 0.94 ** 2  # the held tick's executed acceleration
-    assert _junction_steps(held, col) == (0.0, 0.0)
+    assert junction_steps(held, col) == (0.0, 0.0)
     stepped = tr.copy()
     stepped[j:, 1] += 0.3  # the skill's own step at the junction, scale untouched
-    assert _junction_steps(stepped, col)[1] > 10.0
+    assert junction_steps(stepped, col)[1] > 10.0
 
 
 def test_reports_draw_plots_unless_the_environment_says_0_and_another_value_is_named(monkeypatch):

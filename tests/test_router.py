@@ -28,7 +28,7 @@ from interfaces.session import zenoh_config
 from launch.health import accepts
 
 from .conftest import REPO
-from .mcap_check import _protobuf_class
+from .mcap_check import protobuf_class
 from .zenoh_helpers import free_port, wait_subscribed
 
 
@@ -294,7 +294,7 @@ def test_one_recording_of_every_cell_through_the_router_as_the_site_viewer(site,
     from interfaces.keys import Keys
     from launch.record import read_recording
 
-    from .test_live_view import _state
+    from .test_live_view import state_message
 
     router, creds = site
     out = tmp_path / "site-recording"
@@ -308,7 +308,7 @@ def test_one_recording_of_every_cell_through_the_router_as_the_site_viewer(site,
             wait_subscribed(robot, Keys.for_robot(c).robot_state, what=f"the site recorder's subscription of {c}")
         for i in range(60):
             for c, robot in zip(CELLS, robots):
-                robot.put(Keys.for_robot(c).robot_state, encode(_state(i)))
+                robot.put(Keys.for_robot(c).robot_state, encode(state_message(i)))
             time.sleep(0.005)
         time.sleep(1.0)
         rec.send_signal(signal.SIGTERM)
@@ -326,7 +326,7 @@ def test_one_recording_of_every_cell_through_the_router_as_the_site_viewer(site,
     frames: dict[str, set[str]] = {}
     with open(out / "recording.mcap", "rb") as f:
         for schema, channel, message in make_reader(f).iter_messages(topics=[f"lamps/{c}/scene/tf" for c in CELLS]):
-            tf = _protobuf_class(schema.name, schema.data).FromString(message.data)
+            tf = protobuf_class(schema.name, schema.data).FromString(message.data)
             frames.setdefault(channel.topic, set()).update(x.parent_frame_id for x in tf.transforms)
     for c in CELLS:
         assert len(msgs[Keys.for_robot(c).robot_state]) >= 10, (c, sorted(msgs))  # the states may drop on the way
@@ -383,7 +383,7 @@ def test_two_lockstep_cells_clean_their_boards_side_by_side_through_one_router(t
         assert "LAMPS site lamps/iiwa-1, lamps/iiwa-2" in client.server_info["name"], client.server_info
         for cell in ("iiwa-1", "iiwa-2"):  # each cell's scene in a frame tree of its own
             topic = f"lamps/{cell}/scene/tf"
-            tf = _protobuf_class("foxglove.FrameTransforms", base64.b64decode(client.channels[topic]["schema"]))
+            tf = protobuf_class("foxglove.FrameTransforms", base64.b64decode(client.channels[topic]["schema"]))
             tf = tf.FromString(client.got[topic][-1])
             assert {x.parent_frame_id for x in tf.transforms} == {f"{cell}/world"}, tf.transforms[0]
         client.ws.close()

@@ -14,7 +14,7 @@ import time
 import pytest
 
 from .cell_harness import Cell
-from .test_faults import GOING, _assert_safe, _reasons, _wait_done_for_good
+from .test_faults import GOING, assert_safe, fault_reasons, wait_done_for_good
 
 pytestmark = pytest.mark.slow
 
@@ -32,13 +32,13 @@ def test_a_cell_through_the_router_wipes_on_after_the_router_died_and_came_back(
         before = truth.take()
         cell.restart("router", down_s=3.0)  # SIGKILL: every service loses every route at once, for 3 s
         cell.wait_phase(GOING, 60.0, since=time.monotonic() - 1.0)
-        _wait_done_for_good(cell, 240.0)
+        wait_done_for_good(cell, 240.0)
         report = cell.finish()
-    _assert_safe(report)
+    assert_safe(report)
     assert report["dirt_removed_fraction"] >= 0.98, report["dirt_removed_fraction"]
     assert before is not None  # the watching client followed the cell until the router went
     reasons = [f["reason"] for f in report["faults"]]
-    assert not any("exited" in r for r in _reasons(report, "SERVICE")), reasons  # no service died of the outage
+    assert not any("exited" in r for r in fault_reasons(report, "SERVICE")), reasons  # no service died of the outage
     # the controller lost the robot (lock-step: the robot side waited for it), and lifted the pad on its return;
     # its status saying so may go unrecorded (the recorder, a client of the same router, may reconnect after the
     # robot side: "nothing recorded for 7.1 s"), its counter does not

@@ -12,7 +12,7 @@ from interfaces.robot_model import RobotModel
 from launch.record import McapSink
 from launch.scene import TF_PERIOD_S, SceneBuilder, ellipse_on_board, project, urdf_visuals
 
-from .mcap_check import _protobuf_class, check_recording
+from .mcap_check import check_recording, protobuf_class
 
 KEYS = Keys()
 CAMERA_KEY = KEYS.camera_frame("board")
@@ -21,7 +21,7 @@ CAMERA_KEY = KEYS.camera_frame("board")
 def _read(msg):
     """A foxglove-sdk message (write-only) as the protobuf message Foxglove decodes, fields readable."""
     schema = type(msg).get_schema()
-    return _protobuf_class(schema.name, bytes(schema.data)).FromString(msg.encode())
+    return protobuf_class(schema.name, bytes(schema.data)).FromString(msg.encode())
 
 
 def _out(pairs) -> dict:
@@ -39,7 +39,8 @@ def _pose(p, R) -> Pose:
     return Pose(position_m=[float(v) for v in p], quat_wxyz=[q.w, q.x, q.y, q.z])
 
 
-def _camera(t_ns: int = 0) -> CameraFrame:
+def camera_message(t_ns: int = 0) -> CameraFrame:
+    """A blank 640x480 mono8 CameraFrame at (0, 0, 0.5) m looking along +x, stamped ``t_ns``."""
     # 1 m in front of a board in the world's y-z plane, looking along +x (optical: x right = -y, y down = -z)
     R = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
     k = CameraIntrinsics(fx=500.0, fy=500.0, cx=320.0, cy=240.0, width=640, height=480)
@@ -47,7 +48,8 @@ def _camera(t_ns: int = 0) -> CameraFrame:
                        T_camera_to_world=_pose((0.0, 0.0, 0.5), R), robot_time_ns=t_ns)
 
 
-def _stains(kappa=(False, True)) -> Stains:
+def stains_message(kappa=(False, True)) -> Stains:
+    """A Stains message with one stain per entry of ``kappa`` (its kappa flag) on a board in the world's y-z plane."""
     # board frame: origin at the corner (1, 0.3, 0.3) in the world, x along -y, y along +z, z towards the camera
     Rb = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     obs = [StainObservation(id=i, centre_board_m=[0.3, 0.2], centre_world_m=[1.0, 0.0, 0.5], size_m=0.1,
@@ -87,7 +89,7 @@ def test_the_arm_geometry_is_every_visual_of_the_urdf_in_its_link_frame():
 
 def test_the_board_and_each_stain_coloured_by_kappa_replacing_what_was_drawn():
     b = SceneBuilder(KEYS)
-    out = _out(b.on_message(KEYS.perception_stains, _stains(), 0))
+    out = _out(b.on_message(KEYS.perception_stains, stains_message(), 0))
     board = out[b.topic_board]
     assert len(board.deletions) == 1 and board.deletions[0].type == 1  # ALL
     ids = [e.id for e in board.entities]
@@ -101,7 +103,7 @@ def test_the_board_and_each_stain_coloured_by_kappa_replacing_what_was_drawn():
 
 
 def test_stain_outlines_are_projected_into_the_camera_image():
-    f = _camera()
+    f = camera_message()
     # a point on the optical axis lands on the principal point, one 0.1 m to the right at 1 m depth 50 px right
     uv, ok = project(np.array([[1.0, 0.0, 0.5], [1.0, -0.1, 0.5], [-1.0, 0.0, 0.5]]), f)
     assert ok.tolist() == [True, True, False]
@@ -113,7 +115,7 @@ def test_stain_outlines_are_projected_into_the_camera_image():
     cal = out[f"{CAMERA_KEY}/calibration"]
     assert (cal.width, cal.height, cal.frame_id) == (640, 480, "camera_board")
     assert list(cal.K)[:3] == [500.0, 0.0, 320.0]
-    ann = _out(b.on_message(KEYS.perception_stains, _stains(), 0))[f"{CAMERA_KEY}/annotations"]
+    ann = _out(b.on_message(KEYS.perception_stains, stains_message(), 0))[f"{CAMERA_KEY}/annotations"]
     assert len(ann.points) == 2 and len(ann.texts) == 2
     # stain centre (0.3, 0.2) on the board -> world (1.0, 0.0, 0.5): the principal point; extents 0.1 x 0.05 m at
     # 1 m -> an ellipse 50 px wide and 25 px tall around it
@@ -128,8 +130,8 @@ def test_the_scene_is_recorded_as_foxglove_typed_messages_that_parse_with_their_
     b = SceneBuilder(KEYS)
     path = tmp_path / "s.mcap"
     sink = McapSink(path)
-    for i, (key, msg) in enumerate([(KEYS.robot_state, _state(np.zeros(7), 0)), (CAMERA_KEY, _camera()),
-                                    (KEYS.perception_stains, _stains())]):
+    for i, (key, msg) in enumerate([(KEYS.robot_state, _state(np.zeros(7), 0)), (CAMERA_KEY, camera_message()),
+                                    (KEYS.perception_stains, stains_message())]):
         for topic, m in b.on_message(key, msg, i):
             sink.write_typed(topic, m, i)
     sink.finish()

@@ -16,7 +16,7 @@ import pytest
 from controller.executor_types import StainState
 from controller.stain_book import StainBook
 from interfaces.errors import ConfigError
-from launch.report import _stains_section, summary_lines
+from launch.report import stains_section, summary_lines
 from perception.params import PerceptionParams
 from sim.board import board_from_params
 from sim.core import make_stains
@@ -79,7 +79,7 @@ def test_the_report_names_a_smeared_stain_with_its_remaining_and_passes():
     seen = [{"robot_time_ns": 5_000_000_000, "stains": [
         {"centre_board_m": [0.1, 0.2], "kappa": True, "smeared": False, "remaining": 0.0, "passes": 1},
         {"centre_board_m": [0.302, 0.2], "kappa": False, "smeared": True, "remaining": 0.43, "passes": 3}]}]
-    stains = _stains_section(truth, seen)
+    stains = stains_section(truth, seen)
     assert stains[0]["smeared"] is None
     assert stains[1]["smeared"] == {"at_s": 5.0, "remaining": 0.43, "passes": 3}
     report = {"outcome": "incomplete", "dirt_removed_fraction": 0.8, "sim_time_s": 9.0, "duration_s": 12.0,
@@ -90,7 +90,7 @@ def test_the_report_names_a_smeared_stain_with_its_remaining_and_passes():
     assert "smeared at 5.0 s (43% left after 3 passes)" in line, line
     # a recording of a perception without smears (no field) names none
     old = [{"robot_time_ns": 1, "stains": [{"centre_board_m": [0.3, 0.2], "kappa": False, "remaining": 0.4}]}]
-    assert all(s["smeared"] is None for s in _stains_section(truth, old))
+    assert all(s["smeared"] is None for s in stains_section(truth, old))
 
 
 def _ghost_specs(ghost_index: int, ghost: float) -> list[dict]:

@@ -12,7 +12,7 @@ import pytest
 from lampskit.learn.segmentation import segment
 from lampskit.learn.segmentation_scores import frame_accuracy, segment_counts, true_segment_count
 from lampskit.learn.synth import synthesize_demo
-from lampskit.learn.synth_human import LIFT_HEIGHT_M, PAUSE_S, _HumanPlan
+from lampskit.learn.synth_human import LIFT_HEIGHT_M, PAUSE_S, HumanPlan
 
 
 def _board(s) -> np.ndarray:
@@ -36,7 +36,7 @@ def test_plain_demos_are_what_they_were():
 @pytest.mark.parametrize("n_stains, seed", [(1, 0), (3, 1), (5, 2), (8, 3)])
 def test_a_human_take_lifts_off_revisits_pauses_and_shifts_its_grip(n_stains, seed):
     s = synthesize_demo(n_stains, seed, rate_hz=1000.0, noise_m=0.0, human=True)
-    plan = _HumanPlan.draw(list(range(n_stains)), np.random.default_rng([seed, 1]))
+    plan = HumanPlan.draw(list(range(n_stains)), np.random.default_rng([seed, 1]))
     p, t, per = _board(s), s.demo.t_s, s.true_periodic
     wipes = [(a, b, st) for a, b, k, st in s.segments if k == "periodic"]
     assert len(wipes) == n_stains + 1 == true_segment_count(per)

@@ -35,7 +35,7 @@ CONTEXT_S = 0.6
 
 
 @dataclass(frozen=True)
-class _Shown:
+class ShownTransition:
     """The transition a figure shows: its MP, the periodic MPs around it (None: that end is the demonstration's own
     state, off any stroke), the start and goal states ((y, v, a), each (2,)), its duration [s] and a caption note."""
 
@@ -48,7 +48,7 @@ class _Shown:
     note: str
 
 
-def _shown(skill: Skill) -> _Shown:
+def shown_transition(skill: Skill) -> ShownTransition:
     """The first learned transition that joins two periodic MPs (timed as the planner would), else the first one
     into a periodic MP (an approach) or out of one (a retract) as it was demonstrated: from the demonstration's
     own start state, or to its own goal, over its demonstrated duration. Never a demonstrated move mapped onto
@@ -60,7 +60,7 @@ def _shown(skill: Skill) -> _Shown:
         before, after = by_segment.get(tr.segment - 1), by_segment.get(tr.segment + 1)
         if before is not None and after is not None:
             start, goal = _leaving_state(before), _entering_state(after)
-            return _Shown(before, tr, after, start, goal, _duration(skill, tr, start[0], goal[0]),
+            return ShownTransition(before, tr, after, start, goal, _duration(skill, tr, start[0], goal[0]),
                           f"demonstrated segment {tr.segment}")
     ranked = sorted(skill.transitional, key=lambda e: (e.segment + 1 not in by_segment, e.segment))
     tr = ranked[0]
@@ -69,7 +69,7 @@ def _shown(skill: Skill) -> _Shown:
     start = _leaving_state(before) if before is not None else tuple(mp.demo_start)
     goal = _entering_state(after) if after is not None else tuple(mp.demo_goal)
     kind = "approach" if after is not None else "retract" if before is not None else "move"
-    return _Shown(before, tr, after, start, goal, float(mp.demo_duration_s),
+    return ShownTransition(before, tr, after, start, goal, float(mp.demo_duration_s),
                   f"demonstrated {kind}, segment {tr.segment}, at its own {mp.demo_duration_s:.2f} s "
                   "(no transition between two stains was demonstrated)")
 
@@ -121,7 +121,7 @@ def figure_transition_comparison(demo: Demonstration, skill: Skill, seg: Segment
     second-order baseline starts from (y0, v0) only, so its acceleration
     jumps at t = 0 and again at t = T; the transitional MP does not.
     """
-    shown = _shown(skill)
+    shown = shown_transition(skill)
     before, tr_entry, after, note = shown.before, shown.tr, shown.after, shown.note
     start, goal, T = shown.start, shown.goal, shown.T
     s = seg.segments[tr_entry.segment]
@@ -170,7 +170,7 @@ def figure_transition_phases(skill: Skill, path: Path, n_phases: int = 4) -> Pat
 
     Top: paths in the surface plane; bottom: acceleration magnitude over time.
     """
-    shown = _shown(skill)
+    shown = shown_transition(skill)
     before, tr_entry, after, note = shown.before, shown.tr, shown.after, shown.note
     if after is None:
         raise PlanningError("no learned transition enters a periodic MP: Fig. 7 has nothing to enter")

@@ -49,8 +49,8 @@ import numpy as np
 from lampskit.core.rotations import quat_wxyz_from_matrix
 from lampskit.errors import DemoError
 from lampskit.learn.demo import Demonstration
-from lampskit.learn.synth_human import _HumanPlan, _lift_off, _pause_on_board
-from lampskit.learn.synth_pieces import StrokeSpec, _Rest, _Stroke, _Transition
+from lampskit.learn.synth_human import HumanPlan, lift_off, pause_on_board
+from lampskit.learn.synth_pieces import Rest, Stroke, StrokeSpec, Transition
 
 #: Board area in which stains are placed, board frame [m] (x range, y range).
 BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))
@@ -158,7 +158,7 @@ def synthesize_demo(
     if hop is not None or drift_m > 0:
         strokes = _hops_and_drift(strokes, hop, drift_m, np.random.default_rng([seed, 2]))
     order = list(range(len(strokes))) + ([0] if revisit_first else [])
-    plan = _HumanPlan.draw(order, np.random.default_rng([seed, 1])) if human else None
+    plan = HumanPlan.draw(order, np.random.default_rng([seed, 1])) if human else None
     if plan is not None:
         order = plan.order
     wiped = [strokes[k] for k in order]
@@ -291,11 +291,11 @@ def _quat_wxyz_tool_on_board(R_board: np.ndarray) -> np.ndarray:
 # the pieces in time order (each maps local time (K,) -> board positions (K, 3), C2 in time: synth_pieces)
 
 
-def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator, plan: _HumanPlan | None = None,
+def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator, plan: HumanPlan | None = None,
                   hop: HopSpec | None = None) -> list:
     zero = np.zeros(3)
     runs = [
-        _Stroke(
+        Stroke(
             s,
             k,  # a revisited stain gets index len(strokes) here; synthesize_demo maps it back
             np.array(
@@ -313,18 +313,18 @@ def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator, plan: _Hu
         for k, s in enumerate(strokes)
     ]
     home = np.array([*runs[0].spec.centre_m + rng.uniform(-0.1, 0.1, 2), rng.uniform(0.08, 0.15)])
-    pieces: list = [_Rest(home, float(rng.uniform(0.2, 0.4)))]
+    pieces: list = [Rest(home, float(rng.uniform(0.2, 0.4)))]
     duration = float(rng.uniform(1.0, 1.6))
-    pieces.append(_Transition(home, runs[0].centre3, duration, zero.copy(), None, runs[0], 0.35 / duration))
+    pieces.append(Transition(home, runs[0].centre3, duration, zero.copy(), None, runs[0], 0.35 / duration))
     for k, run in enumerate(runs):
         pieces.append(run)
         if plan is not None and k + 1 < len(runs) and (plan.lift[k] or plan.pause_at == k):
             pause = plan.pause_s if plan.pause_at == k else 0.0
-            build = _lift_off if plan.lift[k] else _pause_on_board
+            build = lift_off if plan.lift[k] else pause_on_board
             pieces.extend(build(run, runs[k + 1], pause, plan.rng))
         elif hop is not None and k + 1 < len(runs):
             fade = min(0.4, 0.35 / hop.duration_s)
-            pieces.append(_Transition(run.end_centre3, runs[k + 1].centre3, hop.duration_s,
+            pieces.append(Transition(run.end_centre3, runs[k + 1].centre3, hop.duration_s,
                                       np.array([0.0, 0.0, hop.lift_m]), run, runs[k + 1], fade, profile="hop"))
         elif k + 1 < len(runs):
             nxt = runs[k + 1]
@@ -334,10 +334,10 @@ def _build_pieces(strokes: list[StrokeSpec], rng: np.random.Generator, plan: _Hu
             side = np.cross([0.0, 0.0, 1.0], delta) / max(dist, 1e-9)
             bulge = side * rng.uniform(-0.2, 0.2) * dist + np.array([0, 0, rng.uniform(0.0, 0.01)])
             fade = min(0.4, 0.35 / duration)
-            pieces.append(_Transition(run.end_centre3, nxt.centre3, duration, bulge, run, nxt, fade))
+            pieces.append(Transition(run.end_centre3, nxt.centre3, duration, bulge, run, nxt, fade))
         else:
             away = np.array([*run.spec.centre_m + rng.uniform(-0.1, 0.1, 2), rng.uniform(0.08, 0.15)])
             duration = float(rng.uniform(1.0, 1.6))
-            pieces.append(_Transition(run.end_centre3, away, duration, zero.copy(), run, None, 0.35 / duration))
-            pieces.append(_Rest(away, float(rng.uniform(0.2, 0.4))))
+            pieces.append(Transition(run.end_centre3, away, duration, zero.copy(), run, None, 0.35 / duration))
+            pieces.append(Rest(away, float(rng.uniform(0.2, 0.4))))
     return pieces

@@ -56,7 +56,11 @@ class StrokeSpec:
 
 
 @dataclass
-class _Stroke:
+class Stroke:
+    """One stroke of a synthetic demonstration as drawn: its spec, the stain it wipes and the random draws that
+    vary it (frequency and amplitude modulation, phases); :meth:`evaluate` is the pad position (K, 3) [m] in the
+    board frame at times ``t`` (K,) [s]."""
+
     spec: StrokeSpec
     stain: int
     rng_values: np.ndarray  # fm, phase_m, am_freq, phase_a, phase0, fm_depth, am_depth
@@ -160,7 +164,7 @@ class _Stroke:
 
 
 @dataclass
-class _Transition:
+class Transition:
     """A move between strokes: a minimum-jerk path of the stroke centre plus fading stroke offsets.
 
     ``p(t) = c(s) + (1 - w(s/rho)) * o_prev(t) + w((s - 1 + rho)/rho) * o_next(t - T) + bump(s) * bulge``
@@ -176,8 +180,8 @@ class _Transition:
     end_m: np.ndarray  # (3,) centre (or rest point) at t = T
     duration_s: float
     bulge_m: np.ndarray  # (3,) peak sideways / lift offset
-    prev: _Stroke | None = None
-    next: _Stroke | None = None
+    prev: Stroke | None = None
+    next: Stroke | None = None
     fade: float = 0.4
     stain: int = -1
     profile: str = "smooth"  # "retract": off the board as a person does; "approach": back onto it; "hop": see below
@@ -244,7 +248,9 @@ def _retract(s: np.ndarray) -> np.ndarray:
 
 
 @dataclass
-class _Rest:
+class Rest:
+    """The pad held still at ``position_m`` (3,) [m] for ``duration_s`` [s] (on stain ``stain``, or -1 off any)."""
+
     position_m: np.ndarray
     duration_s: float
     stain: int = -1
