@@ -19,7 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "lampskit.cli:evaluate_main",
         "frame accuracy of a segmentation against hand labels",
     ),
-    "learn": ("lampskit.cli:learn_main", "segment and learn a demonstration into a skill file"),
+    "learn": ("launch.learn:learn_main", "segment and learn a demonstration into a skill file"),
     "plan": ("lampskit.cli:plan_main", "plan and roll out a skill over given stains"),
     "sim": ("sim.cli:main", "the simulated robot, board and camera as a Zenoh service"),
     "lbr-peer": ("sim.lbr_stack.cli:main", "a simulated iiwa behind lbr_fri_ros2_stack's keys, to test the adapter"),

@@ -15,11 +15,15 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from lampskit.atomic import write_text_atomic
 from lampskit.errors import LampsError
+
+if TYPE_CHECKING:
+    from lampskit.learn.bags import ArmKinematics
 
 log = logging.getLogger("lamps")
 
@@ -216,7 +220,9 @@ def evaluate_main(argv: list[str]) -> int:
 # lamps learn
 
 
-def learn_main(argv: list[str]) -> int:
+def learn_main(argv: list[str], arm: Callable[[], ArmKinematics] | None = None) -> int:
+    """``lamps learn``; ``arm`` builds the arm that robot recordings are read with (the cell's command passes the
+    described iiwa: :func:`launch.learn.described_arm`), without it only demonstration files are read."""
     p = _parser("learn", "Segment demonstrations, learn their periodic and transitional MPs, save a skill file. "
                          "Several demonstrations of one skill (same board, same phases in the same order) are "
                          "fused MP by MP (GMM-GMR over all of them) and their spread recorded.")
@@ -235,7 +241,7 @@ def learn_main(argv: list[str]) -> int:
         from lampskit.learn.learn import learn_skill_from_demos
 
         _check_out_parent(a.output)
-        demos = _read_demos(a)
+        demos = _read_demos(a, arm)
         if a.segments is not None:
             from lampskit.learn.learn import learn_skill
             from lampskit.learn.segments_file import read_segments
@@ -284,9 +290,9 @@ def _xyz(text: str) -> tuple[float, float, float]:
     return x, y, z
 
 
-def _read_demos(a: argparse.Namespace) -> list:
-    """Every ``a.demo``: robot recordings through :mod:`lampskit.learn.bags` with the described arm, files by
-    :func:`~lampskit.learn.demo_io.read_demo`; the recording options only for recordings."""
+def _read_demos(a: argparse.Namespace, arm: Callable[[], ArmKinematics] | None) -> list:
+    """Every ``a.demo``: robot recordings through :mod:`lampskit.learn.bags` with the arm ``arm()`` builds, files
+    by :func:`~lampskit.learn.demo_io.read_demo`; the recording options only for recordings."""
     from lampskit.learn.bags import BagOptions, is_recording, read_recording_demo
     from lampskit.learn.demo_io import read_demo
 
@@ -299,10 +305,12 @@ def _read_demos(a: argparse.Namespace) -> list:
                          f"and {', '.join(a.demo)} holds none")
     if not recordings:
         return [read_demo(spec) for spec in a.demo]
-    from lampskit.arm import described_arm
-
-    arm = described_arm()
-    return [read_recording_demo(spec, arm, options) if is_recording(spec) else read_demo(spec) for spec in a.demo]
+    if arm is None:
+        raise LampsError(f"{', '.join(recordings)}: a robot recording is read with an arm's description, and none "
+                         "was given (the cell's 'lamps learn' gives its arm)")
+    kinematics = arm()
+    return [read_recording_demo(spec, kinematics, options) if is_recording(spec) else read_demo(spec)
+            for spec in a.demo]
 
 
 def _skill_summary(skill) -> str:

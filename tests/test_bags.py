@@ -20,13 +20,13 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from interfaces.robot_model import RobotModel
 from interfaces.transforms import tool_rotation_on_board
-from lampskit.arm import described_arm
 from lampskit.core.rotations import quat_wxyz_from_matrix
 from lampskit.errors import DemoError
 from lampskit.learn import bag_maths, bags, demo_io
 from lampskit.learn.demo import Demonstration
 from lampskit.learn.learn import learn_skill
 from lampskit.learn.synth import synthesize_demo
+from launch.learn import described_arm
 from robot.lbr.msgs import LBR_STATE_MSG
 
 #: The sim's wall board (sim/board.py "wall"): board axes in the world and its origin [m].
@@ -289,7 +289,7 @@ def test_a_recording_without_a_state_topic_is_refused(tmp_path, known):
 
 
 def test_joint_names_of_the_stack_and_of_the_description_are_the_iiwas():
-    from lampskit.arm import iiwa_joint_index
+    from launch.learn import iiwa_joint_index
 
     assert [iiwa_joint_index(n) for n in ("A1", "lbr_A7", "my_arm_A3", "iiwa_joint_5")] == [0, 6, 2, 4]
     assert [iiwa_joint_index(n) for n in ("panda_joint1", "A8", "A", "joint_a1")] == [None] * 4

@@ -70,6 +70,8 @@ def _imports(path: Path) -> list[tuple[int, str]]:
     ("lampskit/core", ("lampskit.learn", "lampskit.figures", "lampskit.cli", "interfaces", "controller", "sim",
                        "perception", "launch", "scipy", "sklearn", "matplotlib")),
     ("lampskit/learn", ("lampskit.figures", "lampskit.cli", "interfaces", "controller", "sim", "perception", "launch")),
+    # the learning library knows no cell: the cell hands it what it needs (launch.learn: the described arm)
+    ("lampskit", ("interfaces", "controller", "sim", "perception", "launch", "robot")),
     ("controller", ("lampskit.learn", "lampskit.figures", "lampskit.cli", "matplotlib", "sklearn", "sim",
                     "perception", "launch", "robot")),
     # the robot side drives the real arm: the simulated lbr stack (sim.lbr_stack) is a simulator backend, not its own

@@ -1,8 +1,9 @@
-"""The described arm as the recording reader needs it (:class:`~lampskit.learn.bags.ArmKinematics`).
+"""``lamps learn`` on the cell: lampskit's learner (:func:`lampskit.cli.learn_main`) given the described arm.
 
-The learner itself knows no robot (``lampskit.learn`` imports nothing of ``interfaces``); ``lamps learn`` builds
-this from the robot description (:mod:`interfaces.robot_model`: Pinocchio forward kinematics of the KUKA LBR
-iiwa 14 with the eraser) and from the lbr stack's message definitions (:mod:`robot.lbr.msgs`).
+The learner itself knows no robot (``lampskit`` imports nothing of the cell): a robot recording is read with
+the arm it is handed (:class:`~lampskit.learn.bags.ArmKinematics`). This module builds that arm from the robot
+description (:mod:`interfaces.robot_model`: Pinocchio forward kinematics of the KUKA LBR iiwa 14 with the
+eraser) and from the lbr stack's message definitions (:mod:`robot.lbr.msgs`).
 
 Joint names accepted, joint 1 first:
 
@@ -28,6 +29,13 @@ def iiwa_joint_index(name: str) -> int | None:
     """0-based joint number of one of the iiwa's joint names (see the module docstring), else None."""
     m = _NAME.match(name)
     return None if m is None else int(m.group(1) or m.group(2)) - 1
+
+
+def learn_main(argv: list[str]) -> int:
+    """``lamps learn``: :func:`lampskit.cli.learn_main` reading robot recordings with :func:`described_arm`."""
+    from lampskit.cli import learn_main as learn
+
+    return learn(argv, arm=described_arm)
 
 
 def described_arm() -> ArmKinematics:
