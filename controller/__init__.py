@@ -5,3 +5,9 @@ LAMPS runtime core only: the skill executor (phases, MP chaining, safety
 reactions), one control tick (impedance, force regulation, limits in
 :mod:`controller.control`), and the Zenoh loops around them.
 """
+
+__all__ = [
+    "arm_model", "board_watch", "cli", "command_auth", "control", "core", "executor", "executor_stage",
+    "executor_stops", "executor_types", "free_motion", "motion", "params", "planner_thread", "reach", "robot_holds",
+    "service", "stain_book", "stains_in", "surface_touch", "teach", "tool_estimate", "trace"
+]

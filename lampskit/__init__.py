@@ -16,3 +16,5 @@ the ones before it:
 root of every error the project raises on purpose. The ``lamps demo``,
 ``learn``, ``segment``, ``plan`` commands are in :mod:`lampskit.cli`.
 """
+
+__all__ = ["atomic", "cli", "core", "errors", "figures", "learn"]

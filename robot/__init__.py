@@ -7,3 +7,8 @@ reaches hardware. Implementations: the simulator (:mod:`sim.service`), a
 mock arm for tests (:mod:`robot.mock`) and the KUKA LBR iiwa through
 lbr_fri_ros2_stack (:mod:`robot.lbr`).
 """
+
+__all__ = [
+    "cli", "command_auth", "gate", "guard", "guard_bands", "guard_log", "guard_model", "lbr", "mock", "port", "server",
+    "server_params"
+]

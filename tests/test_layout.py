@@ -147,6 +147,37 @@ def test_no_module_imports_another_modules_private_name():
                                                 if (f, name) not in PRIVATE_IMPORTS_LEFT)
 
 
+def _defined_names(tree: ast.Module) -> set[str]:
+    """The names a module's top level defines: assignments, functions, classes."""
+    names = {n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    for n in tree.body:
+        targets = n.targets if isinstance(n, ast.Assign) else [n.target] if isinstance(n, ast.AnnAssign) else []
+        names |= {t.id for t in targets if isinstance(t, ast.Name)}
+    return names
+
+
+def test_every_package_says_what_it_is_and_what_it_exports():
+    """Each package's ``__init__`` has a docstring and an ``__all__``: its modules and subpackages, and the public
+    names it defines itself (an ``__init__`` imports none of its modules: importing a package stays cheap)."""
+    wrong = []
+    for init in (p for p in _source_files() if p.name == "__init__.py"):
+        tree, folder = ast.parse(init.read_text(encoding="utf-8")), init.parent
+        modules = {p.stem for p in folder.glob("*.py")} | {p.name for p in folder.iterdir()
+                                                           if (p / "__init__.py").is_file()}
+        public = {m for m in modules | _defined_names(tree) if not m.startswith("_")}
+        exported = set(next((ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
+                             and any(isinstance(t, ast.Name) and t.id == "__all__" for t in n.targets)), ()))
+        if not ast.get_docstring(tree) or exported != public:
+            wrong.append(f"{init.relative_to(REPO)}: __all__ lacks {sorted(public - exported)}, names no such "
+                         f"{sorted(exported - public)}" + ("" if ast.get_docstring(tree) else ", no docstring"))
+    assert not wrong, wrong
+
+
+def test_importing_every_package_is_cheap():
+    loaded = _loaded_after("import controller, interfaces, lampskit, launch, perception, robot, sim")
+    assert not [m for m in loaded if m.split(".")[0] in ("numpy", "pybullet", "numba", "zenoh", "pinocchio")]
+
+
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(REPO).with_suffix("").parts)
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)

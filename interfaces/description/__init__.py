@@ -12,6 +12,10 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+__all__ = [
+    "URDF_PATH", "JOINT_NAMES", "ERASER_LINK", "TCP_FRAME", "PAD_SIZE_M", "ERASER_DEPTH_M", "urdf_child", "urdf_attr"
+]
+
 #: The KUKA LBR iiwa 14 R820 with the eraser on its flange.
 URDF_PATH: Path = Path(__file__).with_name("iiwa14_eraser.urdf")
 

@@ -10,3 +10,8 @@
 - :mod:`.planner`: stain order, MP choice, entry and exit phases, transitions;
   :mod:`.rollout`: a plan executed offline at a fixed rate.
 """
+
+__all__ = [
+    "chain", "kinematic_bounds", "periodic", "periodic_runner", "planner", "planner_types", "rollout", "rotations",
+    "skill", "stain_order", "surface", "transitional", "transitional_maths", "transitional_plan", "transitional_runner"
+]

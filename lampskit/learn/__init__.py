@@ -9,3 +9,10 @@
   :mod:`.periodic_fit`, :mod:`.transitional_fit`, :mod:`.baselines` (Fig. 6's).
 - :mod:`.learn`: a whole skill from one demonstration.
 """
+
+__all__ = [
+    "bag_maths", "bags", "baselines", "cluster_baselines", "contact", "cut_margins", "demo", "demo_io", "derivatives",
+    "fusion", "gmr", "learn", "lifts", "optics", "periodic_fit", "periodic_phase", "phase_continuity", "reachability",
+    "segment_plot", "segmentation", "segmentation_scores", "segments_file", "synth", "synth_human", "synth_messy",
+    "synth_pieces", "takes", "time_runs", "transitional_fit"
+]

@@ -8,3 +8,5 @@ with :mod:`.commands` its torque-command subscription; :mod:`.cli`
 ``lamps lbr-peer``. ``docs/real-robot.md`` lists each behaviour
 with the stack's file, line and commit.
 """
+
+__all__ = ["cli", "commands", "params", "peer", "stack"]
