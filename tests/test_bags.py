@@ -346,6 +346,15 @@ def test_lamps_learn_refuses_in_one_line_without_output(recordings, tmp_path, ca
     assert re.search(match, err[-1]), err
 
 
+def test_the_learning_library_alone_refuses_a_recording_it_has_no_arm_for(recordings, tmp_path, capsys):
+    """lampskit knows no robot: without the arm the cell's ``lamps learn`` hands it, a recording is refused."""
+    from lampskit.cli import learn_main
+
+    out = tmp_path / "skill.json"
+    assert learn_main([str(recordings["sqlite3"]), "-o", str(out)]) == 1 and not out.exists()
+    assert "a robot recording is read with an arm's description, and none was given" in capsys.readouterr().err
+
+
 def test_recording_options_on_a_csv_are_refused(tmp_path, known, capsys):
     from interfaces.cli import main
 
