@@ -53,8 +53,6 @@ class BoardWatch:
     ----------
     note : str
         Why the last board report was not taken ("" none; status).
-    jump : BoardPose or None
-        A board pose that jumped from the adopted one, not adopted (yet).
     """
 
     def __init__(self, state: ExecutorState, motion: FreeMotion, surface: SurfaceTouch, book: StainBook,
@@ -66,7 +64,7 @@ class BoardWatch:
         self.stops = stops
         self.p = params
         self.note = ""
-        self.jump: BoardPose | None = None
+        self._jump: BoardPose | None = None  # a board pose that jumped from the adopted one, not adopted (yet)
         self._jump_since_s = 0.0  # the skill's clock when the jumped pose was first reported [s]
         self._sp = motion.setpoint
         self._reach_board: BoardPose | None = None  # the board the stains' reach was checked on, and which were
@@ -84,14 +82,14 @@ class BoardWatch:
             return False
         if st.board is None:
             st.board = board
-        elif (jump := self._jump_of(st.board, board)) is not None:
-            self._jumped(board, *jump)
+        elif (off := self._jump_of(st.board, board)) is not None:
+            self._jumped(board, *off)
             return False
         elif not board.close_to(st.board):
             self._moved(st.board, board)
-        if self.jump is not None:
+        if self._jump is not None:
             st.counters["board_jumps_back"] += 1  # the adopted pose is reported again: the jump is over
-            self.jump, self.note = None, ""
+            self._jump, self.note = None, ""
         return True
 
     def skip_out_of_reach(self, stains: list[StainState]) -> None:
@@ -133,9 +131,9 @@ class BoardWatch:
         on the way, lift off first (PAUSED); then hold until the adopted pose is reported again, or the new one has
         held still for ``board_confirm_s`` with the pad in the air (:meth:`confirm_jump`)."""
         st = self.state
-        if self.jump is None or not board.close_to(self.jump, 0.01, 0.02):
+        if self._jump is None or not board.close_to(self._jump, 0.01, 0.02):
             st.counters["board_jumps"] += 1
-            self.jump, self._jump_since_s = board, st.clock_s
+            self._jump, self._jump_since_s = board, st.clock_s
             self.note = f"the board pose jumped {d:.2f} m / {np.degrees(a):.1f} deg: not adopted without a new survey"
             st.log.warning("%s", self.note)
         if st.phase in ACTIVE:
@@ -145,16 +143,16 @@ class BoardWatch:
         """In the air, holding: adopt a jumped board that has held still for ``board_confirm_s`` (its surface
         touched anew); until then PAUSED (unless halted)."""
         st = self.state
-        adopted, jump = st.board, self.jump
-        if jump is None or adopted is None:  # (a jump is held off only from an adopted board)
+        adopted, jumped = st.board, self._jump
+        if jumped is None or adopted is None:  # (a jump is held off only from an adopted board)
             return Jump.NONE
         if st.clock_s - self._jump_since_s < self.p.board_confirm_s or self._sp.contact:
             if st.phase not in HALTED and st.phase != Phase.PAUSED:
                 st.set_phase(Phase.PAUSED, self.note)
             return Jump.PENDING
-        new = self.surface.forget(jump)  # another board, or this one moved: its surface is touched anew
+        new = self.surface.forget(jumped)  # another board, or this one moved: its surface is touched anew
         self.motion.adopt_board(adopted, new)
-        st.board, self.jump, self.note = new, None, ""
+        st.board, self._jump, self.note = new, None, ""
         st.counters["board_jumps_adopted"] += 1
         st.log.warning("the board's new pose held still for %.1f s: adopted; surveying it", self.p.board_confirm_s)
         return Jump.ADOPTED

@@ -383,12 +383,12 @@ class SkillExecutor:
     def _confirm_jump(self) -> bool:
         """Holding in the air: a jumped board pose that has held still long enough is adopted and surveyed (at once
         if PAUSED with fresh stains); True while one waits."""
-        jump = self.watch.confirm_jump()
-        if jump == Jump.ADOPTED:
+        found = self.watch.confirm_jump()
+        if found == Jump.ADOPTED:
             self._surveyed = False  # the new pose is surveyed before any approach
             if self.state.phase == Phase.PAUSED and self.stains_fresh and self._estop is None:
                 self._survey_or_start()
-        return jump == Jump.PENDING
+        return found == Jump.PENDING
 
     # ------------------------------------------------------------------ approach and the MP chain
     def _resume(self) -> None:
