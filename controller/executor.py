@@ -56,8 +56,9 @@ from lampskit.core.planner_types import Plan, PlannerParams
 from lampskit.core.skill import Skill
 from lampskit.errors import PlanningError
 
-from .board_watch import BoardWatch
-from .executor_stage import _ACTIVE, _HALTED, LIFTED_M, RELEASED_N, Stage
+from .board_watch import BoardWatch, Jump
+from .executor_stage import ACTIVE, HALTED, LIFTED_M, RELEASED_N, Stage
+from .executor_state import ExecutorState
 from .executor_stops import ExecutorStops
 from .executor_types import BoardPose, Setpoint, StainState, ToolState
 from .free_motion import FreeMotion
@@ -71,7 +72,7 @@ log = logging.getLogger(__name__)
 RELEASED_LIFTING = "released: lifting off before going on"
 
 
-class SkillExecutor(BoardWatch, ExecutorStops):
+class SkillExecutor:
     """Runs one skill over the stains it is told about. See the module docstring for the phases.
 
     Parameters
@@ -83,13 +84,9 @@ class SkillExecutor(BoardWatch, ExecutorStops):
 
     Attributes
     ----------
-    phase : Phase
-    reason : str
-        Why the phase (set in PAUSED, FAULT, ESTOP).
-    current_mp : str
-        ``"periodic k"``, ``"transitional k"``, ``"approach"``, ``"lift"``, ... for status.
-    stain_id : int
-        Stain being wiped or approached (-1 none).
+    state : ExecutorState
+        The run's state, shared with its parts: ``watch`` (:class:`BoardWatch`, the board reports) and ``stops``
+        (:class:`ExecutorStops`, the retreat, the stops, the look); :attr:`phase` and the rest read it.
     counters : Counter
         Events for status (replans, wipe timeouts, junctions, ...).
     junction_ticks : list of int
@@ -102,112 +99,113 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         self.p = params or ExecutorParams()
         self.f = force or ForceParams()
         self.planner = planner or PlannerParams()
-        self.phase, self.reason, self.current_mp, self.stain_id = Phase.INIT, "", "", -1
         self.counters: Counter[str] = Counter()
         self.junction_ticks: list[int] = []
-        self.ticks = 0
-        self.clock_s = 0.0
-        self.board: BoardPose | None = None
+        self.state = ExecutorState(log, self.counters, self.junction_ticks)
         self.book = StainBook(self.p.recheck_s, self.p.max_passes)
-        self._reach_board: BoardPose | None = None  # the board the stains' reach was checked on, and which were
-        self._reach_checked: set[int] = set()
         self.stains_fresh = False
         self.motion = FreeMotion(self.p, self.f)
         self.surface = SurfaceTouch(self.p.first_creep_height_m + self.p.contact_search_m)  # touches place it
         self.chain = MpChain(skill, self.planner, self.p.wipe_timeout_s, self.counters, pass_cycles=self.p.pass_cycles)
+        self.stops = ExecutorStops(self.state, self.motion, self.book, self.p, self.f, self.planner)
+        self.watch = BoardWatch(self.state, self.motion, self.surface, self.book, self.stops, self.p)
         self._sp = self.motion.setpoint
-        self._stage = Stage.HOLD
         self._plan: Plan | None = None
-        self._resume_after_lift = False
         self._last_h = float("inf")  # the pad above the board at the last step [m]
-        self._last_force_n = 0.0  # the measured push of the board on the pad at the last step [N]
-        self._last_tool: ToolState | None = None
-        self._forced_lifts = 0  # lifts from the measured height in a row (a pad pressing while held in the air)
         self._initialised = False
         self._estop: str | None = None
         self._restart_pending = False
         self._surveyed = False
         self._survey_until_s = float("inf")
-        self._jump: BoardPose | None = None  # a board pose that jumped from the adopted one, not adopted (yet)
-        self._jump_since_s = 0.0
-        self.board_note = ""  # why a board report was not taken (status)
         self._on_stage = {Stage.FLY: self._on_fly, Stage.DESCEND: self._on_descend, Stage.CREEP: self._on_creep,
                           Stage.PRESS: self._on_press, Stage.CHAIN: self._on_chain, Stage.UNPRESS: self._on_unpress,
                           Stage.BRAKE: self._on_brake, Stage.LIFT: self._on_lift, Stage.HOLD: self._on_hold,
                           Stage.LOOK: self._on_look, Stage.SURVEY: self._on_survey}
         self._on_chain_result = {ChainResult.TRANSITION: self._entered_transition,
-                                 ChainResult.WIPE: self._entered_wipe, ChainResult.FINISHED: self._begin_retreat,
+                                 ChainResult.WIPE: self._entered_wipe, ChainResult.FINISHED: self.stops.begin_retreat,
                                  ChainResult.ERROR: self._chain_failed}
+
+    # ------------------------------------------------------------------ the state, as the cell sees it
+    @property
+    def phase(self) -> Phase:
+        """What the cell sees."""
+        return self.state.phase
+
+    @property
+    def reason(self) -> str:
+        """Why the phase (set in PAUSED, FAULT, ESTOP)."""
+        return self.state.reason
+
+    @property
+    def current_mp(self) -> str:
+        """``"periodic k"``, ``"transitional k"``, ``"approach"``, ``"lift"``, ... for status."""
+        return self.state.current_mp
+
+    @property
+    def stain_id(self) -> int:
+        """The stain being wiped or approached (-1 none)."""
+        return self.state.stain_id
+
+    @property
+    def board(self) -> BoardPose | None:
+        """The adopted board (None until a board report in reach)."""
+        return self.state.board
+
+    @property
+    def board_note(self) -> str:
+        """Why the last board report was not taken ("" none; status)."""
+        return self.watch.note
+
+    @property
+    def clock_s(self) -> float:
+        """The skill's clock [s]: the sum of the steps' ``dt_s``."""
+        return self.state.clock_s
+
+    @property
+    def ticks(self) -> int:
+        """Steps and waits so far."""
+        return self.state.ticks
 
     # ------------------------------------------------------------------ inputs
     def set_stains(self, board: BoardPose, stains: list[StainState]) -> None:
         """A fresh view of the board and its stains (kappa per stain).
 
         A board out of the arm's reach is refused; one that jumps from the adopted pose (beyond
-        ``board_jump_m`` / ``board_jump_rad``) is not adopted and its stains are not taken (:meth:`_board_jumped`).
+        ``board_jump_m`` / ``board_jump_rad``) is not adopted and its stains are not taken (:meth:`BoardWatch.take`);
+        a new stain out of the arm's reach is skipped (:meth:`BoardWatch.skip_out_of_reach`).
         """
-        board = self.surface.shifted(board)  # where the touches put the seen board's surface
-        why = self._out_of_reach(board)
-        if why is not None:
-            self.counters["boards_out_of_reach"] += 1
-            self.board_note = why
+        if not self.watch.take(board):
             return
-        if self.board is None:
-            self.board = board
-        elif self._jump_of(board) is not None:
-            self._board_jumped(board)
-            return
-        elif not board.close_to(self.board):
-            self._board_moved(board)
-        if self._jump is not None:
-            self.counters["board_jumps_back"] += 1  # the adopted pose is reported again: the jump is over
-            self._jump, self.board_note = None, ""
         self.stains_fresh = True
         smeared_before = len(self.book.smeared)
-        if self.book.update(stains, self.clock_s) and self.phase in _ACTIVE:
+        if self.book.update(stains, self.state.clock_s) and self.state.phase in ACTIVE:
             self.counters["stain_set_changes"] += 1
         for s in list(self.book.smeared.values())[smeared_before:]:
             self.counters["stains_smeared"] += 1
             log.warning("stain %d: smeared (%.0f %% left after %d passes without progress): moving on", s.id,
                         100.0 * s.remaining, s.passes)
-        self._skip_out_of_reach(stains)
-        moved = self.chain.adapt(self.book, self.clock_s) if self.phase == Phase.WIPE else None
+        self.watch.skip_out_of_reach(stains)
+        moved = self.chain.adapt(self.book, self.state.clock_s) if self.state.phase == Phase.WIPE else None
         if moved is not None:
             self.counters["anchor_moves"] += 1
             if moved == ChainResult.ERROR:
                 self._chain_failed()
 
-    def _skip_out_of_reach(self, stains: list[StainState]) -> None:
-        """Close every new stain the arm cannot reach (:meth:`FreeMotion.reach_problem`), named and counted: it is
-        skipped, never attempted. Each stain is looked at once per adopted board."""
-        if self._reach_board is not self.board:
-            self._reach_board, self._reach_checked = self.board, set()
-        for s in stains:
-            if s.id in self._reach_checked or s.kappa:
-                continue
-            self._reach_checked.add(s.id)
-            why = self.motion.reach_problem(self.board, s.centre_m)
-            if why is not None:
-                self.book.close_out_of_reach(s.id, why)
-                self.counters["stains_out_of_reach"] += 1
-                log.warning("stain %d at (%.2f, %.2f) m on the board is out of the arm's reach, skipped: %s", s.id,
-                            *s.centre_m, why)
-
     def stains_stale(self, reason: str) -> None:
         """No stains update for too long: pause off the board (resumes on the next :meth:`set_stains`)."""
         self.stains_fresh = False
-        if self.phase in _ACTIVE:
-            self._stop(Phase.PAUSED, reason)
+        if self.state.phase in ACTIVE:
+            self.stops.stop(Phase.PAUSED, reason)
 
     def estop(self, reason: str) -> None:
         """E-stop: lift off (fast force ramp) and hold until :meth:`clear`; latched across restarts."""
         reason = reason or "e-stop"
         self.counters["estops"] += 1
         self._estop = reason
-        if self.phase != Phase.ESTOP or self._resume_after_lift:  # not yet stopping, or already released
-            self._stop(Phase.ESTOP, reason, fast=True)
+        if self.state.phase != Phase.ESTOP or self.stops.resume_after_lift:  # not yet stopping, or already released
+            self.stops.stop(Phase.ESTOP, reason, fast=True)
         else:
-            self.reason = reason
+            self.state.reason = reason
 
     def fault(self, reason: str, at_the_arm: bool = False) -> None:
         """A fault (force cap, no contact found, planning failed): lift off, hold until :meth:`clear`.
@@ -215,12 +213,12 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         ``at_the_arm``: the arm does not follow the reference (a torque nothing explains): the stop starts from
         the pose last measured, at rest, not from the reference, which may have run ahead of the arm; braking that
         reference would keep the spring stretched between them and release it into the arm."""
-        if self.phase not in _HALTED:
+        if self.state.phase not in HALTED:
             self.counters["faults"] += 1
             log.error("FAULT: %s", reason)
-            if at_the_arm and self._last_tool is not None:
-                self.motion.rest_at(self._last_tool)
-            self._stop(Phase.FAULT, reason)
+            if at_the_arm and self.state.last_tool is not None:
+                self.motion.rest_at(self.state.last_tool)
+            self.stops.stop(Phase.FAULT, reason)
 
     def clear(self) -> None:
         """Release an e-stop or a fault: re-approach the open stains (PAUSED while they are stale, DONE if none).
@@ -229,28 +227,28 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         lift first, PAUSED (:data:`RELEASED_LIFTING`): the e-stop or fault is over, and a watcher that ends a run
         held in ESTOP or FAULT must not count that lift as one."""
         self._estop = None
-        if self.phase in _HALTED and self._initialised:
-            self._resume_after_lift = True
-            if self._stage == Stage.HOLD:
+        if self.state.phase in HALTED and self._initialised:
+            self.stops.resume_after_lift = True
+            if self.state.stage == Stage.HOLD:
                 self._resume()
             else:
-                self._set_phase(Phase.PAUSED, RELEASED_LIFTING)
+                self.state.set_phase(Phase.PAUSED, RELEASED_LIFTING)
 
     def robot_lost(self, reason: str) -> None:
         """No robot to command: FAULT at once, no motion (nothing would execute it)."""
-        if self.phase != Phase.FAULT or self.reason != reason:
+        if self.state.phase != Phase.FAULT or self.state.reason != reason:
             self.counters["faults"] += 1
             log.error("FAULT: %s", reason)
-        self._set_phase(Phase.FAULT, reason)
-        self._stage = Stage.HOLD
+        self.state.set_phase(Phase.FAULT, reason)
+        self.state.stage = Stage.HOLD
         self.motion.cancel_turn()
 
     @property
     def pad_down(self) -> bool:
         """The pad presses (by the setpoint, or by the measured force: ``RELEASED_N`` or more, whatever the board
         model says), or moves less than ``LIFTED_M`` above the board: stopping now would leave it there."""
-        return self._initialised and (self._sp.contact or self._last_force_n >= RELEASED_N
-                                      or (self._stage != Stage.HOLD and self._last_h < LIFTED_M))
+        return self._initialised and (self._sp.contact or self.state.last_force_n >= RELEASED_N
+                                      or (self.state.stage != Stage.HOLD and self._last_h < LIFTED_M))
 
     def restart(self) -> None:
         """The robot came back after a loss: start over from WAIT_PEERS at the measured pose on the next step (and
@@ -261,11 +259,11 @@ class SkillExecutor(BoardWatch, ExecutorStops):
     # ------------------------------------------------------------------ the tick
     def wait(self) -> None:
         """No board known yet (no stains ever received): report WAIT_PEERS (or a latched ESTOP); the caller holds."""
-        self.ticks += 1
+        self.state.ticks += 1
         if self._estop is not None:
-            self._set_phase(Phase.ESTOP, self._estop)
-        elif self.phase in (Phase.INIT, Phase.ESTOP):
-            self._set_phase(Phase.WAIT_PEERS, "")
+            self.state.set_phase(Phase.ESTOP, self._estop)
+        elif self.state.phase in (Phase.INIT, Phase.ESTOP):
+            self.state.set_phase(Phase.WAIT_PEERS, "")
 
     def step(self, dt_s: float, tool: ToolState) -> Setpoint:
         """Advance by ``dt_s`` [s] given the measured tool (board frame); returns the setpoint (reused next tick).
@@ -274,14 +272,14 @@ class SkillExecutor(BoardWatch, ExecutorStops):
 
         Needs a board (:meth:`set_stains` called once); until then call :meth:`wait`.
         """
-        self.ticks += 1
-        self.clock_s += dt_s
+        self.state.ticks += 1
+        self.state.clock_s += dt_s
         self._last_h = tool.h
-        self._last_force_n = tool.force_n
-        self._last_tool = tool
+        self.state.last_force_n = tool.force_n
+        self.state.last_tool = tool
         if not self._initialised or self._restart_pending:
             self._start_over(tool)
-        if self.phase == Phase.WAIT_PEERS:
+        if self.state.phase == Phase.WAIT_PEERS:
             if self.stains_fresh and self._estop is None:
                 self.motion.hold_here(tool)
                 self._survey_or_start()
@@ -289,7 +287,7 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         if dt_s <= 0.0:
             return self._sp  # the skill's clock stands still (the robot braked): nothing moves on
         self.motion.step_turn(dt_s)
-        self._on_stage[self._stage](dt_s, tool)
+        self._on_stage[self.state.stage](dt_s, tool)
         return self._sp
 
     def _start_over(self, tool: ToolState) -> None:
@@ -297,19 +295,19 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         self.motion.hold_here(tool)
         self._initialised = True
         self._restart_pending = False
-        self.phase, self.reason, self.current_mp, self.stain_id = Phase.WAIT_PEERS, "", "", -1
-        self._stage = Stage.HOLD
+        st = self.state
+        st.phase, st.reason, st.current_mp, st.stain_id, st.stage = Phase.WAIT_PEERS, "", "", -1, Stage.HOLD
         if tool.force_n > self.f.contact_threshold_n and not self.p.air:
             self.motion.press_measured(tool.force_n)  # keep pressing what it measures, then ramp out and lift
-            self._stop(Phase.PAUSED, "robot back with the pad on the board: lifting off before re-approaching")
+            self.stops.stop(Phase.PAUSED, "robot back with the pad on the board: lifting off before re-approaching")
         if self._estop is not None:
-            self._stop(Phase.ESTOP, self._estop, fast=True)
+            self.stops.stop(Phase.ESTOP, self._estop, fast=True)
 
     # ------------------------------------------------------------------ one handler per stage
     def _on_fly(self, dt: float, tool: ToolState) -> None:
         if self.motion.move(dt) and not self.motion.turning:
             self.motion.descend(first_touch=self.surface.untouched)
-            self.current_mp, self._stage = "descend", Stage.DESCEND
+            self.state.current_mp, self.state.stage = "descend", Stage.DESCEND
 
     def _on_descend(self, dt: float, tool: ToolState) -> None:
         arrived = self.motion.move(dt)
@@ -320,7 +318,7 @@ class SkillExecutor(BoardWatch, ExecutorStops):
             self._begin_press(tool)
         elif arrived:
             self.motion.creep()
-            self._stage = Stage.CREEP
+            self.state.stage = Stage.CREEP
 
     def _on_creep(self, dt: float, tool: ToolState) -> None:
         arrived = self.motion.move(dt)
@@ -335,63 +333,70 @@ class SkillExecutor(BoardWatch, ExecutorStops):
             self._begin_chain()
 
     def _on_chain(self, dt: float, tool: ToolState) -> None:
-        result = self.chain.update(dt, self._sp, self.book, self.clock_s)
+        result = self.chain.update(dt, self._sp, self.book, self.state.clock_s)
         if result != ChainResult.WORKING:
             self._on_chain_result[result]()
 
     def _on_unpress(self, dt: float, tool: ToolState) -> None:
         if self.motion.unpress(dt):
-            self._begin_lift(tool)
+            self.stops.begin_lift(tool)
 
     def _on_brake(self, dt: float, tool: ToolState) -> None:
         if self.motion.move(dt):
-            self._begin_lift(tool)
+            self.stops.begin_lift(tool)
 
     def _on_lift(self, dt: float, tool: ToolState) -> None:
         if not self.motion.move(dt):
             return
-        self._stage = Stage.HOLD
-        if self.phase == Phase.RETREAT:
-            if not self._begin_look():
-                self._done()
-        elif self._resume_after_lift:  # released while lifting (PAUSED)
+        self.state.stage = Stage.HOLD
+        if self.state.phase == Phase.RETREAT:
+            if not self.stops.begin_look():
+                self.stops.done()
+        elif self.stops.resume_after_lift:  # released while lifting (PAUSED)
             self._resume()
 
     def _on_look(self, dt: float, tool: ToolState) -> None:
         if self.motion.move(dt):
-            self.book.looked_at(self.clock_s)  # perception gets its full recheck_s from here
-            self._done()
+            self.book.looked_at(self.state.clock_s)  # perception gets its full recheck_s from here
+            self.stops.done()
 
     def _on_survey(self, dt: float, tool: ToolState) -> None:
         if self._survey_until_s == float("inf"):
             if self.motion.move(dt) and not self.motion.turning:
-                self._survey_until_s = self.clock_s + self.p.survey_s  # perception's time to see the board
-                self.current_mp = "survey: looking"
-        elif self.clock_s >= self._survey_until_s:
+                self._survey_until_s = self.state.clock_s + self.p.survey_s  # perception's time to see the board
+                self.state.current_mp = "survey: looking"
+        elif self.state.clock_s >= self._survey_until_s:
             self._start_approach_or_done()
 
     def _on_hold(self, dt: float, tool: ToolState) -> None:
         self.motion.rest_in_plane()
-        if tool.force_n >= RELEASED_N and not self._sp.contact and self.phase not in _ACTIVE:
-            self._lift_from_measured(tool)  # a stop must end with the pad off the board
+        if self.stops.lift_if_pressing(tool):  # a stop must end with the pad off the board
             return
-        if tool.force_n < RELEASED_N:
-            self._forced_lifts = 0
         if self._confirm_jump():
             return
-        if self.phase == Phase.PAUSED and self.stains_fresh:
+        if self.state.phase == Phase.PAUSED and self.stains_fresh:
             self._resume()
-        elif self.phase == Phase.DONE and self.stains_fresh and self.book.open_stains(self.clock_s):
+        elif self.state.phase == Phase.DONE and self.stains_fresh and self.book.open_stains(self.state.clock_s):
             self.counters["new_stains_after_done"] += 1
             self._start_approach_or_done()
+
+    def _confirm_jump(self) -> bool:
+        """Holding in the air: a jumped board pose that has held still long enough is adopted and surveyed (at once
+        if PAUSED with fresh stains); True while one waits."""
+        found = self.watch.confirm_jump()
+        if found == Jump.ADOPTED:
+            self._surveyed = False  # the new pose is surveyed before any approach
+            if self.state.phase == Phase.PAUSED and self.stains_fresh and self._estop is None:
+                self._survey_or_start()
+        return found == Jump.PENDING
 
     # ------------------------------------------------------------------ approach and the MP chain
     def _resume(self) -> None:
         if self._estop is not None:
             return
         if not self.stains_fresh:
-            self._set_phase(Phase.PAUSED, "waiting for fresh stains")
-            self._stage, self.current_mp = Stage.HOLD, "hold"
+            self.state.set_phase(Phase.PAUSED, "waiting for fresh stains")
+            self.state.stage, self.state.current_mp = Stage.HOLD, "hold"
             return
         self._start_approach_or_done()
 
@@ -402,49 +407,49 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         holds still, DONE)."""
         stains = self.book.stains.values()
         all_judged_clean = bool(stains) and all(st.kappa for st in stains)
-        if self._surveyed or self.p.survey_s <= 0.0 or self.p.look_clearance_m <= 0.0 or self.board is None \
+        if self._surveyed or self.p.survey_s <= 0.0 or self.p.look_clearance_m <= 0.0 or self.state.board is None \
                 or all_judged_clean:
             self._start_approach_or_done()
             return
         self._surveyed = True
         self._survey_until_s = float("inf")
         self.counters["surveys"] += 1
-        self._set_phase(Phase.APPROACH, "")
-        self.stain_id, self.current_mp = -1, "survey"
-        self.motion.fly_to_survey(self.board)
-        self._stage = Stage.SURVEY
+        self.state.set_phase(Phase.APPROACH, "")
+        self.state.stain_id, self.state.current_mp = -1, "survey"
+        self.motion.fly_to_survey(self.state.board)
+        self.state.stage = Stage.SURVEY
 
     def _start_approach_or_done(self) -> None:
         """Plan over the open stains and fly to the first; DONE if nothing is left to wipe."""
-        open_stains = self.book.open_stains(self.clock_s, by_ink=self.planner.adaptive)
-        self._resume_after_lift = False
+        open_stains = self.book.open_stains(self.state.clock_s, by_ink=self.planner.adaptive)
+        self.stops.resume_after_lift = False
         if not open_stains:
-            self._done()
-            self.stain_id = -1
+            self.stops.done()
+            self.state.stain_id = -1
             return
         try:
             self._plan = plan(self.skill, open_stains, self._sp.xy.copy(), self.planner)
         except PlanningError as exc:
             self.counters["faults"] += 1
             log.error("FAULT: planning failed: %s", exc)
-            self._set_phase(Phase.FAULT, f"planning failed: {exc}")
-            self._stage = Stage.HOLD
+            self.state.set_phase(Phase.FAULT, f"planning failed: {exc}")
+            self.state.stage = Stage.HOLD
             return
         self.counters["plans"] += 1
         first = self._plan.wipes[0]
-        self._set_phase(Phase.APPROACH, "")
-        self.stain_id, self.current_mp = first.stain.id, "approach"
-        self.motion.fly_to_hover(first.anchor_m, self.board)
-        self._stage = Stage.FLY
+        self.state.set_phase(Phase.APPROACH, "")
+        self.state.stain_id, self.state.current_mp = first.stain.id, "approach"
+        self.motion.fly_to_hover(first.anchor_m, self.state.board)
+        self.state.stage = Stage.FLY
 
     def _begin_press(self, tool: ToolState) -> None:
         """Contact found on the way down: press, and learn where the surface is (:mod:`controller.surface_touch`)."""
         self.motion.press(tool)
-        self.current_mp, self._stage = "press", Stage.PRESS
-        board = self.board
+        self.state.current_mp, self.state.stage = "press", Stage.PRESS
+        board = self.state.board
         if board is not None and (touched := self.surface.touched(board, tool.h)) is not board:
             self.motion.adopt_board(board, touched)
-            self.board = touched
+            self.state.board = touched
             self.counters["surface_touches"] += 1
             self.counters["surface_offset_um"] = round(self.surface.offset_m * 1e6)
 
@@ -454,7 +459,7 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         on a board near it, that is where the elbow folds to its limit; the tilted board's pad dipped into it at
         33 N)."""
         self.motion.rest_in_plane()
-        board = self.board
+        board = self.state.board
         if board is not None:
             away = 0.5 * board.size_m - board.to_board(np.zeros(3))[:2]
             n = float(np.linalg.norm(away))
@@ -462,24 +467,17 @@ class SkillExecutor(BoardWatch, ExecutorStops):
         self._on_chain_result[self.chain.start(self._plan, self._sp)]()
 
     def _entered_transition(self) -> None:
-        self._set_phase(Phase.TRANSITION, "")
-        self.current_mp = self.chain.current_mp
-        self.stain_id = self.chain.wipe.stain.id
-        self.junction_ticks.append(self.ticks)
+        self.state.set_phase(Phase.TRANSITION, "")
+        self.state.current_mp = self.chain.current_mp
+        self.state.stain_id = self.chain.wipe.stain.id
+        self.junction_ticks.append(self.state.ticks)
         self.counters["transitions"] += 1
-        self._stage = Stage.CHAIN
+        self.state.stage = Stage.CHAIN
 
     def _entered_wipe(self) -> None:
-        self._set_phase(Phase.WIPE, "")
-        self.current_mp = self.chain.current_mp
-        self.junction_ticks.append(self.ticks)
+        self.state.set_phase(Phase.WIPE, "")
+        self.state.current_mp = self.chain.current_mp
+        self.junction_ticks.append(self.state.ticks)
 
     def _chain_failed(self) -> None:
         self.fault(self.chain.error)
-
-    # ------------------------------------------------------------------ the phase
-    def _set_phase(self, phase: Phase, reason: str) -> None:
-        if phase != self.phase or reason != self.reason:
-            log.info("phase %s -> %s%s", self.phase, phase, f" ({reason})" if reason else "")
-            self.counters[f"phase_{phase.lower()}"] += 1
-        self.phase, self.reason = phase, reason

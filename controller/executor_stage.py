@@ -8,8 +8,10 @@ from enum import IntEnum
 
 from interfaces.messages import Phase
 
-_ACTIVE = (Phase.APPROACH, Phase.WIPE, Phase.TRANSITION)
-_HALTED = (Phase.FAULT, Phase.ESTOP)
+#: The phases in which the skill moves the pad towards or over the stains.
+ACTIVE = (Phase.APPROACH, Phase.WIPE, Phase.TRANSITION)
+#: The phases that hold until a release (:meth:`SkillExecutor.clear`) or a restart.
+HALTED = (Phase.FAULT, Phase.ESTOP)
 #: The pad counts as off the board this far above it [m] (see :attr:`SkillExecutor.pad_down`).
 LIFTED_M = 0.005
 #: Below this measured contact force [N] the pad counts as released (:attr:`SkillExecutor.pad_down`).

@@ -435,7 +435,7 @@ def test_the_pad_touches_down_at_the_creep_speed_wherever_the_board_is_within_th
         sp = ex.step(0.001, arm.tool)
         if ex.current_mp == "descend":
             v_h.append(sp.v_h)
-            stages.append(ex._stage)
+            stages.append(ex.state.stage)
         arm.follow(sp)
         if arm.tool.force_n >= ex.f.contact_threshold_n and touch is None:
             touch = v_h[-1]
