@@ -130,10 +130,8 @@ def test_no_source_file_is_over_the_line_limit():
     assert not over, f"over {MAX_LINES} lines: " + ", ".join(f"{f} ({n})" for f, n in sorted(over.items()))
 
 
-#: ``(file, name)``: the private names one module still imports from another, left to the executor's
-#: restructuring (the skill state's ``_ACTIVE`` / ``_HALTED`` of controller/executor_stage.py).
-PRIVATE_IMPORTS_LEFT = {("controller/board_watch.py", "_ACTIVE"), ("controller/board_watch.py", "_HALTED"),
-                        ("controller/executor.py", "_ACTIVE"), ("controller/executor.py", "_HALTED")}
+#: ``(file, name)``: the private names one module may still import from another (none).
+PRIVATE_IMPORTS_LEFT: set[tuple[str, str]] = set()
 
 
 def test_no_module_imports_another_modules_private_name():
