@@ -3,12 +3,13 @@
 :mod:`robot.port` is what a robot side implements (read / write / hold,
 lifecycle, capabilities); :mod:`robot.server` owns the ``robot/*``
 protocol for all of them; :mod:`robot.gate` checks every command before it
-reaches hardware. Implementations: the simulator (:mod:`sim.service`), a
-mock arm for tests (:mod:`robot.mock`) and the KUKA LBR iiwa through
-lbr_fri_ros2_stack (:mod:`robot.lbr`).
+reaches hardware and makes it a :mod:`robot.command` (torques or a hold).
+Implementations: the simulator (:mod:`sim.service`), a mock arm for tests
+(:mod:`robot.mock`) and the KUKA LBR iiwa through lbr_fri_ros2_stack
+(:mod:`robot.lbr`).
 """
 
 __all__ = [
-    "cli", "command_auth", "gate", "guard", "guard_bands", "guard_log", "guard_model", "lbr", "mock", "port", "server",
-    "server_params"
+    "cli", "command", "command_auth", "gate", "guard", "guard_bands", "guard_log", "guard_model", "lbr", "mock", "port",
+    "server", "server_params"
 ]

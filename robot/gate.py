@@ -23,6 +23,8 @@ import numpy as np
 
 from interfaces.messages import HOLD, TorqueCommand
 
+from .command import Command, CommandKind
+
 #: Default torque-rate limit at the robot side [Nm/s]: 10 Nm per ms, for gross errors only (the
 #: controller limits its own rate to about 1 Nm/ms).
 DEFAULT_TAU_RATE_NM_S = 10_000.0
@@ -34,7 +36,8 @@ DEFAULT_CONTACT_TAU_RATE_NM_S = 2_000.0
 
 
 class CommandGate:
-    """Turns a decoded :class:`TorqueCommand` into torques for the hardware, ``"hold"``, or None (dropped).
+    """Turns a decoded :class:`TorqueCommand` into a :class:`~robot.command.Command` for the hardware (torques or a
+    hold), or None (dropped). The wire's mode string is read here and nowhere else on the robot side.
 
     Parameters
     ----------
@@ -49,7 +52,8 @@ class CommandGate:
                  dt_s: float = 0.001, contact_tau_rate_nm_s: float | None = None) -> None:
         self.tau_max = np.asarray(tau_max, float)
         self.counters = counters
-        self.tau = np.zeros_like(self.tau_max)
+        self.command = Command(len(self.tau_max))  # what check and accept return, reused by the next call
+        self.tau = self.command.tau_nm  # (n,) [Nm]: its torques, also limit_rate's output
         self._prev = np.zeros_like(self.tau_max)
         self._step = np.zeros_like(self.tau_max)  # scratch: the 1 kHz path allocates nothing here
         self._have_prev = False  # the first command of a lock-step run, before anything held the arm, has none
@@ -92,12 +96,12 @@ class CommandGate:
         self._have_prev = True
         self._held = False
 
-    def check(self, cmd: TorqueCommand) -> np.ndarray | str | None:
-        """The command's torques (n,) [Nm] clipped to the limits (a buffer reused by the next call), ``"hold"``, or
-        None if dropped; no rate limit (:meth:`limit_rate` applies it cycle by cycle)."""
+    def check(self, cmd: TorqueCommand) -> Command | None:
+        """The command as :attr:`command` (reused by the next call): its torques (n,) [Nm] clipped to the limits, or
+        a hold; None if dropped. No rate limit (:meth:`limit_rate` applies it cycle by cycle)."""
         if cmd.mode == HOLD:
             self.counters["commands_hold"] += 1
-            return HOLD  # the reference stays: the robot side sets it to what the hold applied (:meth:`ran`)
+            return self.command.set_hold()  # the reference stays: the robot side sets it to what the hold applied
         if len(cmd.tau_nm) != len(self.tau_max):
             self.counters["commands_dropped_wrong_length"] += 1
             return None
@@ -109,17 +113,18 @@ class CommandGate:
             self.counters["commands_clipped"] += 1
             np.clip(self.tau, -self.tau_max, self.tau_max, out=self.tau)
         self.counters["commands_applied"] += 1
-        return self.tau
+        self.command.kind = CommandKind.TORQUE
+        return self.command
 
-    def accept(self, cmd: TorqueCommand, elapsed_s: float | None = None) -> np.ndarray | str | None:
-        """:meth:`check`, then the rate limit: torques (n,) [Nm] (a buffer reused by the next call), ``"hold"``, or
-        None if dropped.
+    def accept(self, cmd: TorqueCommand, elapsed_s: float | None = None) -> Command | None:
+        """:meth:`check`, then the rate limit on torques: :attr:`command` (reused by the next call), torques (n,) [Nm]
+        or a hold, or None if dropped.
 
         ``elapsed_s`` : time since the last applied command [s] (default one cycle): the rate limit allows
         ``tau_rate_nm_s`` times that, so commands that come late or after skipped periods are not clipped (the
         arm ran on the last one meanwhile); after a hold (:meth:`ran`) one cycle's step only.
         """
-        tau = self.check(cmd)
-        if isinstance(tau, np.ndarray):
+        command = self.check(cmd)
+        if command is not None and not command.is_hold:
             self._limit_rate(elapsed_s)
-        return tau
+        return command

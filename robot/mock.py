@@ -15,7 +15,7 @@ import numpy as np
 
 from interfaces.messages import Capabilities
 
-from .port import Reading, RobotPort
+from .port import Applied, Reading, RobotPort
 
 
 class MockArm(RobotPort):
@@ -40,13 +40,14 @@ class MockArm(RobotPort):
         return Reading(self.q.copy(), self.dq.copy(), self.tau.copy(), np.zeros(6),
                        int(round(self.steps * self.dt_s * 1e9)))
 
-    def write(self, tau_nm: np.ndarray) -> None:
+    def write(self, tau_nm: np.ndarray) -> Applied:
         self.tau[:] = tau_nm
         self.dq += self.dt_s * (self.tau - self.damping * self.dq) / self.inertia
         self.q += self.dt_s * self.dq
         self.steps += 1
+        return Applied.TORQUES
 
-    def hold(self) -> None:
+    def hold(self) -> Applied:
         self.tau[:] = 0.0
         if self.brake_rad_s2 is None:
             self.dq[:] = 0.0
@@ -55,6 +56,7 @@ class MockArm(RobotPort):
             self.q += self.dt_s * self.dq
         self.steps += 1
         self.holds += 1
+        return Applied.HELD
 
     def held_torque_nm(self) -> np.ndarray:
         """What the last cycle applied: nothing, after a hold (the mock has no gravity)."""

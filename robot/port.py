@@ -4,7 +4,8 @@ In the spirit of a ros2_control hardware interface: a lifecycle
 (:meth:`RobotPort.activate` / :meth:`RobotPort.deactivate`), one
 :meth:`RobotPort.read` of the measured state and one
 :meth:`RobotPort.write` of joint torques (or :meth:`RobotPort.hold`) per
-cycle, and declared :class:`~interfaces.messages.Capabilities`. The
+cycle, each saying what it did (:class:`Applied`), and declared
+:class:`~interfaces.messages.Capabilities`. The
 ``robot/*`` protocol (timing modes, sequence matching, re-sends, stale
 commands, the command gate, counters) belongs to
 :class:`robot.server.RobotServer` alone; a port never sees a message.
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from enum import Enum
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -31,6 +33,26 @@ from interfaces.messages import Capabilities
 
 if TYPE_CHECKING:
     from interfaces.robot_model import RobotModel
+
+
+class Applied(Enum):
+    """What a port did with one cycle: what :meth:`RobotPort.write` and its holds return."""
+
+    TORQUES = "torques"  #: the command's torques went to the robot
+    #: the port's hold (:meth:`RobotPort.hold`): the brakes; the lbr adapter's repeats a fresh last command first
+    HELD = "held"
+    BRAKED = "braked"  #: the hold at once, no repeat of the last command (:meth:`RobotPort.speed_hold`)
+    YIELDED = "yielded"  #: damping on top of gravity compensation, no task torque (:meth:`RobotPort.yield_hold`)
+    ESTOP_HELD = "estop_held"  #: the e-stop's hold, at once (:meth:`RobotPort.estop_hold`)
+    #: :meth:`RobotPort.write` on a port that is not commanding the robot (the lbr adapter disarmed, or disarming on
+    #: a guard trip): the torques were not sent, only the port's stop hold. The server serves on as after torques.
+    DISARMED = "disarmed"
+
+    @property
+    def took_command(self) -> bool:
+        """Whether the cycle was the controller's command (:attr:`TORQUES`, or :attr:`DISARMED`: taken, not sent);
+        every other outcome is a hold of some kind."""
+        return self is Applied.TORQUES or self is Applied.DISARMED
 
 
 @dataclass
@@ -98,28 +120,32 @@ class RobotPort(ABC):
         """Clocked ports: set ``wake`` (a threading.Event) whenever a new measurement arrives. Default: nothing."""
 
     @abstractmethod
-    def write(self, tau_nm: np.ndarray) -> None:
-        """Apply joint torques (n,) [Nm] for one cycle (already gated: finite, within limits)."""
+    def write(self, tau_nm: np.ndarray) -> Applied:
+        """Apply joint torques (n,) [Nm] for one cycle (already gated: finite, within limits): :attr:`Applied.TORQUES`
+        (:attr:`Applied.DISARMED` from a port that is not commanding the robot)."""
 
     @abstractmethod
-    def hold(self) -> None:
-        """Brake and hold the current position for one cycle, whatever was commanded before."""
+    def hold(self) -> Applied:
+        """Brake and hold the current position for one cycle, whatever was commanded before: :attr:`Applied.HELD`."""
 
-    def estop_hold(self) -> None:
-        """Hold for one cycle because the e-stop is engaged: at once, no grace (default: :meth:`hold`)."""
-        self.hold()
+    def estop_hold(self) -> Applied:
+        """Hold for one cycle because the e-stop is engaged: at once, no grace (default: :meth:`hold`, and what it
+        did); :attr:`Applied.ESTOP_HELD` from a port with a hold of its own for it."""
+        return self.hold()
 
-    def speed_hold(self) -> None:
+    def speed_hold(self) -> Applied:
         """Hold for one cycle because a joint is too fast: at once, no repeat of the last command (which is
-        what sped it up). Default: :meth:`hold`."""
-        self.hold()
+        what sped it up). Default: :meth:`hold`, and what it did; :attr:`Applied.BRAKED` from a port with a hold
+        of its own for it."""
+        return self.hold()
 
-    def yield_hold(self, tau_nm: np.ndarray) -> None:
+    def yield_hold(self, tau_nm: np.ndarray) -> Applied:
         """Yield for one cycle because the contact force is over the robot side's cap: apply ``tau_nm`` (n,) [Nm]
         (the server's joint damping) on top of gravity compensation and nothing else, so whatever presses on the
-        tool pushes the arm back. Default: :meth:`speed_hold` (a port whose hold does not press, such as the lbr
-        adapter's joint spring at the measured pose, needs nothing more)."""
-        self.speed_hold()
+        tool pushes the arm back (:attr:`Applied.YIELDED`). Default: :meth:`speed_hold`, and what it did (a port
+        whose hold does not press, such as the lbr adapter's joint spring at the measured pose, needs nothing
+        more)."""
+        return self.speed_hold()
 
     def held_torque_nm(self) -> np.ndarray | None:
         """The torques (n,) [Nm] the arm ran on over the last cycle, a hold, in command terms (without the gravity a

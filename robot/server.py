@@ -80,14 +80,15 @@ import numpy as np
 
 from interfaces.loop_hygiene import LoopHygiene
 from interfaces.loop_stats import LoopStats
-from interfaces.messages import HOLD, Estop, RobotState, ServiceStatus, TorqueCommand
+from interfaces.messages import Estop, RobotState, ServiceStatus, TorqueCommand
 from interfaces.session import ServiceNode
 
+from .command import Command
 from .command_auth import CommandAuth
 from .gate import CommandGate
 from .guard import Action, RobotGuard
 from .guard_log import log_guard_episodes
-from .port import Reading, RobotPort
+from .port import Applied, Reading, RobotPort
 from .server_params import ServerParams
 
 __all__ = ["RobotServer", "ServerParams"]
@@ -120,7 +121,8 @@ class RobotServer:
         self._latency_us = np.zeros(2000)  # clocked: state published -> its answer forwarded [us], a ring
         self._n_latency = 0
         self.steps = 0
-        self.braked = True
+        self.braked = True  # the last cycle held (any outcome but the controller's command: Applied.took_command)
+        self.outcome = Applied.HELD  # what the port did with the last cycle
         self.applied_seq = -1  # the seq of the controller's command written in the last cycle; -1: none (a hold)
         self.held_cycles = 0  # states published saying -1 (each seq once): RobotState.held_cycles
         self._held_counted_seq = -1
@@ -134,6 +136,8 @@ class RobotServer:
         self._reading: Reading | None = None  # the last reading published
         self._damping = np.zeros(port.n_joints)  # the yield's torques (n,) [Nm], reused
         self._written = np.zeros(port.n_joints)  # the torques last applied (n,) [Nm]
+        self._hold = Command(port.n_joints)  # a hold, for the cycles the server holds by itself
+        self._held = Command(port.n_joints)  # real time: the newest command accepted, kept over the cycles
         self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
         self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
         self.auth = CommandAuth(node, self.counters)  # commands' MACs and signed releases, whoever relayed them
@@ -176,52 +180,51 @@ class RobotServer:
                 else:
                     self.counters["estop_releases_ignored_on_the_engage_key"] += 1
 
-    def _apply(self, command: np.ndarray | str, seq: int = -1) -> None:
-        """Write ``command`` (gated torques answering state ``seq``, or ``"hold"``) to the port: one cycle, or what
-        the e-stop or the guard makes of it (a hold, a brake, a yield). The next state reports ``seq`` as applied, or
-        -1 when the cycle applied none of the controller's torques; then the gate counts from what the arm held."""
+    def _apply(self, command: Command, seq: int = -1) -> None:
+        """Write ``command`` (gated torques answering state ``seq``, or a hold) to the port: one cycle, or what the
+        e-stop or the guard makes of it (a hold, a brake, a yield). What the port did (:class:`Applied`) decides the
+        rest: the next state reports ``seq`` as applied when the port took the command, else -1, and the gate
+        counts from what the arm held."""
         self._poll_estop()
-        self.applied_seq = -1
         action = self.guard.action
-        torques = not isinstance(command, str)
-        was_braked, self.braked = self.braked, True
+        torques = not command.is_hold
         if self.estop_reason is not None:
             if torques:
                 self.counters["commands_held_for_estop"] += 1
-            self.port.estop_hold()
+            done = self.port.estop_hold()
         elif action != Action.APPLY:  # before the controller's own hold too: a held pad presses on, a repeat speeds on
-            self._guard_hold(action, torques)
+            done = self._guard_hold(action, torques)
         elif not torques:
-            if not was_braked:
+            if not self.braked:
                 self.counters["holds_applied"] += 1
-            self.port.hold()
+            done = self.port.hold()
         else:
             # rate-limited again (a command applied again after a hold climbs from what held the arm), and predicted;
             # not a lock-step run's first command, before which nothing held the arm: taken as the gate passed it
             first = not self.gate.rated
-            tau = command if first else self.gate.limit_rate(command)
+            tau = command.tau_nm if first else self.gate.limit_rate(command.tau_nm)
             if not first and self._speeds_over(tau):
-                self._guard_hold(self.guard.action, torques)
+                done = self._guard_hold(self.guard.action, torques)
             else:
-                self.port.write(tau)
-                self._written[:] = tau
-                self.braked = False
-                self.applied_seq = seq
+                done = self.port.write(tau)
+                if done.took_command:
+                    self._written[:] = tau
+        self.outcome, self.braked = done, not done.took_command
+        self.applied_seq = -1 if self.braked else seq
         if self.braked:
             held = self.port.held_torque_nm()
             self.gate.ran(self._written if held is None else held)
         self.steps += 1
 
-    def _guard_hold(self, action: Action, torques: bool) -> None:
+    def _guard_hold(self, action: Action, torques: bool) -> Applied:
         """One cycle of what the guard asks instead of the command: a yield, the FAULT's e-stop hold, or a brake."""
         if torques and self.guard.latch.latched:
             self.counters["commands_held_for_guard_fault"] += 1
         if action == Action.YIELD:
-            self.port.yield_hold(self.guard.damping_into(self._reading.dq_rad_s, self._damping))
-        elif action == Action.FAULT:
-            self.port.estop_hold()
-        else:
-            self.port.speed_hold()
+            return self.port.yield_hold(self.guard.damping_into(self._reading.dq_rad_s, self._damping))
+        if action == Action.FAULT:
+            return self.port.estop_hold()
+        return self.port.speed_hold()
 
     def _speeds_over(self, tau_nm: np.ndarray) -> bool:
         """Whether one cycle of ``tau_nm`` (n,) [Nm] would take a joint or the tool over its speed brake (the guard's
@@ -315,7 +318,7 @@ class RobotServer:
         self._sources = [latest]
         period_ns = int(round(1e9 / self.p.rate_hz))
         stale_ns = int(self.p.stale_limit_s * 1e9)
-        held: np.ndarray | str | None = None
+        held: Command | None = None  # the newest command accepted (a copy in self._held), None before the first
         held_seq = -1
         last_cmd_ns = -stale_ns - 1
         next_ns = time.monotonic_ns()
@@ -336,14 +339,14 @@ class RobotServer:
                 elif cmd is not None and self._from_served_controller(cmd):
                     accepted = self.gate.check(cmd)  # the rate limit applies cycle by cycle (_apply)
                     if accepted is not None:
-                        held = accepted if isinstance(accepted, str) else accepted.copy()
+                        held = self._held.assign(accepted)
                         held_seq, last_cmd_ns = cmd.seq, t0
                 fresh = held is not None and t0 - last_cmd_ns <= stale_ns
                 if not fresh and held is not None and not self.braked:
                     self.counters["stale_command_brakes"] += 1
                     log.warning("no fresh command for %.0f ms: braking", (t0 - last_cmd_ns) / 1e6)
                 t1 = time.monotonic_ns()
-                self._apply(held if fresh else HOLD, held_seq)
+                self._apply(held if held is not None and fresh else self._hold, held_seq)
                 self.port.after_cycle(lockstep=False)
                 t2 = time.monotonic_ns()
                 self.publish_state()
@@ -389,7 +392,7 @@ class RobotServer:
                     if seq >= 0 and last_applied < seq:
                         self.counters["commands_late"] += 1
                         if not lockstep:
-                            self._apply(HOLD)  # this cycle is held: its answer did not come in time
+                            self._apply(self._hold)  # this cycle is held: its answer did not come in time
                     seq += 1
                     self.publish_state(seq)
                     self.stats.add((t0 - last_state_ns) / 1e3, 0.0, 0.0, (time.monotonic_ns() - t0) / 1e3)
@@ -423,7 +426,7 @@ class RobotServer:
                 stale = time.monotonic_ns() - last_state_ns > stale_ns  # this state's age: a slow robot is not late
                 if not lockstep and last_applied < seq and not self.braked and stale:
                     self.counters["stale_command_brakes"] += 1
-                    self._apply(HOLD)
+                    self._apply(self._hold)
                 self._publish_status()
                 hygiene.collect_due(0)  # only a pile forces it here (no answer, no slack measured)
                 if self.p.max_steps and self.steps >= self.p.max_steps:

@@ -1,8 +1,9 @@
 """The simulated cell without any networking: board, dirt, arm, one step at a time.
 
 :class:`SimCore` is what the service shell (:mod:`sim.service`) drives and
-what benchmarks time alone: ``step(torques or "hold")`` advances physics by
-one period, reads the arm back and lets the pad wipe the dirt under it.
+what benchmarks time alone: ``step(torques)`` (or ``step_braked()``)
+advances physics by one period, reads the arm back and lets the pad wipe
+the dirt under it.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import pybullet as pb
 
 from interfaces.description import PAD_SIZE_M
 from interfaces.errors import ConfigError
-from interfaces.messages import HOLD
 from interfaces.robot_model import RobotModel
 
 from .board import Board, board_from_params, check_board, start_configuration, wipe_region
@@ -126,19 +126,28 @@ class SimCore:
         """Simulated time [ns] of the current state."""
         return int(round(self.steps * 1e9 / self.params.rate_hz))
 
-    def step(self, command: np.ndarray | str) -> Readout:
-        """Apply torques (7,) [Nm] (validated) or ``"hold"`` (brake), step once, read, wipe. The hand (if a
-        script is set) acts on the pad through the step, from the last readout."""
+    def step(self, tau_nm: np.ndarray) -> Readout:
+        """Apply torques (7,) [Nm] (validated), step once, read, wipe. The hand (if a script is set) acts on the pad
+        through the step, from the last readout."""
+        self._hand_acts()
+        self.robot.write(tau_nm)
+        return self._advance()
+
+    def step_braked(self) -> Readout:
+        """Brake (hold the position, no torques), step once, read, wipe; the hand acts as in :meth:`step`."""
+        self._hand_acts()
+        self.robot.brake()
+        return self._advance()
+
+    def _hand_acts(self) -> None:
+        """The hand's wrench on the pad over the coming step (if a script is set), from the last readout."""
         if self.hand is not None:
             o = self.robot.out
             self.robot.external_wrench[:] = self.hand.update(self.steps * self.params.dt_s, o.tcp_p, o.tcp_v, o.tcp_R,
                                                              o.tcp_w)
-        if isinstance(command, str):
-            if command != HOLD:
-                raise ValueError(f"command must be torques or {HOLD!r}, got {command!r}")
-            self.robot.brake()
-        else:
-            self.robot.write(command)
+
+    def _advance(self) -> Readout:
+        """Step the physics once with what was written, read back, count, wipe."""
         self.robot.step()
         self.steps += 1
         out = self.robot.read()

@@ -17,10 +17,10 @@ from collections import Counter
 
 import numpy as np
 
-from interfaces.messages import HOLD, Capabilities, ServiceStatus, SimTruth
+from interfaces.messages import Capabilities, ServiceStatus, SimTruth
 from interfaces.session import ServiceNode
 from interfaces.transforms import pose_from_transform
-from robot.port import Reading, RobotPort
+from robot.port import Applied, Reading, RobotPort
 from robot.server import RobotServer, ServerParams
 
 from .core import SimCore
@@ -88,21 +88,24 @@ class SimPort(RobotPort):
         q, dq, tau, wrench = self.core.measured
         return Reading(q, dq, tau, wrench, self.core.time_ns)
 
-    def write(self, tau_nm: np.ndarray) -> None:
+    def write(self, tau_nm: np.ndarray) -> Applied:
         for _ in range(self.substeps):
             self.core.step(tau_nm)
+        return Applied.TORQUES
 
-    def hold(self) -> None:
+    def hold(self) -> Applied:
         for _ in range(self.substeps):
-            self.core.step(HOLD)
+            self.core.step_braked()
+        return Applied.HELD
 
-    def yield_hold(self, tau_nm: np.ndarray) -> None:
+    def yield_hold(self, tau_nm: np.ndarray) -> Applied:
         """``tau_nm`` (7,) [Nm] on top of gravity compensation (the sim's own, at each step's pose: the robot's
         compensation when it compensates, else the true weight): no brake, no task torque; a pad pressed into the
         board is pushed back by it."""
         robot = self.core.robot
         for _ in range(self.substeps):
             self.core.step(tau_nm if self.p.gravity_compensated else tau_nm + robot.gravity())
+        return Applied.YIELDED
 
     def held_torque_nm(self) -> np.ndarray:
         """What the arm ran on over the last step in command terms: the applied torques (the brakes' while braked),

@@ -169,7 +169,7 @@ def _brake_then_release(skill, held_flag: bool) -> tuple[float, float, float, Ph
             if after is None and core.executor.phase == Phase.WIPE and core.executor.clock_s > 4.0:
                 after = 0
                 for _ in range(gap):
-                    sim.step("hold")
+                    sim.step_braked()
                 o = sim.out
                 tau = core.tick(o.q, o.dq, o.wrench, True, gap * DT, None, None, robot_held=held_flag)
             sim.step(tau.copy())
@@ -243,7 +243,7 @@ def _hold_mid_transition(skill, held: int = 150) -> tuple[np.ndarray, list, floa
             if len(taus) > 25:  # the brake stops the arm over 20 ms (BRAKE_STOP_S); the reference goes as far as it
                 ref_speed = max(ref_speed, float(np.linalg.norm(core.ref.twist[:3])),
                                 float(np.linalg.norm(core.ref.accel[:3])))
-            sim.step("hold")
+            sim.step_braked()
             if len(taus) > held:
                 break
     finally:
@@ -299,7 +299,7 @@ def _released_after_a_hold(skill, held: int, override_drops: bool = True) -> tup
                 continue
             if n - start < held:
                 core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
-                sim.step("hold")
+                sim.step_braked()
             else:
                 sim.step(core.tick(o.q, o.dq, o.wrench, True, DT).copy())
             forces.append(sim.out.normal_force_n)

@@ -175,7 +175,6 @@ def test_the_brake_stops_every_joint_together_over_its_stop_time_and_then_holds(
     """sim.robot.BRAKE_STOP_S: each joint's speed falls from what it was to zero along one ramp, all joints in
     proportion (the arm stays on its path, a path-maintaining stop), and then the arm stands; a brake that locked
     every joint within a step pressed a wiping pad into the board for that step (36 N at 10 N wiping)."""
-    from interfaces.messages import HOLD
     from sim.robot import BRAKE_STOP_S
 
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True}))
@@ -188,7 +187,7 @@ def test_the_brake_stops_every_joint_together_over_its_stop_time_and_then_holds(
         steps = int(round(BRAKE_STOP_S / sim.params.dt_s))
         speeds = []
         for _ in range(steps + 30):
-            sim.step(HOLD)
+            sim.step_braked()
             speeds.append(sim.out.dq.copy())
     finally:
         sim.close()

@@ -13,6 +13,7 @@ from interfaces.description import PAD_SIZE_M
 from interfaces.errors import ConfigError
 from interfaces.messages import HOLD, TorqueCommand
 from interfaces.robot_model import RobotModel
+from robot.command import CommandKind
 from robot.gate import CommandGate
 from robot.guard import Action, GuardLimits, RobotGuard
 from robot.guard_bands import Band, ContactPlane, FaultLatch, Trend, ahead_of, look_ahead_into
@@ -93,16 +94,16 @@ def test_after_a_hold_the_gate_ramps_from_what_the_arm_held_not_from_nothing_and
     counters = Counter()
     gate = CommandGate(np.full(2, 100.0), counters, tau_rate_nm_s=5000.0, dt_s=0.001)  # 5 Nm a cycle
     gate.ran(np.array([30.0, -10.0]))  # the brakes held 30 and -10 Nm before the first command
-    np.testing.assert_array_equal(gate.accept(cmd([100.0, 100.0])), [35.0, -5.0])
-    assert gate.accept(cmd([0.0, 0.0], HOLD)) == HOLD
+    np.testing.assert_array_equal(gate.accept(cmd([100.0, 100.0])).tau_nm, [35.0, -5.0])
+    assert gate.accept(cmd([0.0, 0.0], HOLD)).kind is CommandKind.HOLD
     gate.ran(np.array([20.0, 0.0]))  # what the hold applied
-    np.testing.assert_array_equal(gate.accept(cmd([100.0, 100.0]), elapsed_s=0.05), [25.0, 5.0]), \
+    np.testing.assert_array_equal(gate.accept(cmd([100.0, 100.0]), elapsed_s=0.05).tau_nm, [25.0, 5.0]), \
         "however long the hold, one cycle's step from it"
-    np.testing.assert_array_equal(gate.accept(cmd([100.0, 100.0]), elapsed_s=0.003), [40.0, 20.0]), \
+    np.testing.assert_array_equal(gate.accept(cmd([100.0, 100.0]), elapsed_s=0.003).tau_nm, [40.0, 20.0]), \
         "a late command after applied ones: the cycles between ran on the last"
     # real time: the newest command is applied again each cycle; after a brake it climbs from the brakes' torque
     gate.ran(np.array([0.0, 0.0]))
-    target = gate.check(cmd([12.0, -12.0])).copy()
+    target = gate.check(cmd([12.0, -12.0])).tau_nm.copy()
     assert [gate.limit_rate(target).tolist() for _ in range(4)] == [[5.0, -5.0], [10.0, -10.0], [12.0, -12.0],
                                                                   [12.0, -12.0]]
     assert counters["commands_rate_limited"] == 5 and counters["commands_applied"] == 4
@@ -111,11 +112,11 @@ def test_after_a_hold_the_gate_ramps_from_what_the_arm_held_not_from_nothing_and
 def test_while_the_pad_touches_the_gate_ramps_at_the_contact_rate():
     gate = CommandGate(np.full(1, 100.0), Counter(), tau_rate_nm_s=10_000.0, dt_s=0.001, contact_tau_rate_nm_s=2000.0)
     gate.ran(np.zeros(1))
-    assert gate.accept(cmd([50.0]))[0] == 10.0
+    assert gate.accept(cmd([50.0])).tau_nm[0] == 10.0
     gate.touching = True
-    assert gate.accept(cmd([50.0]))[0] == 12.0
+    assert gate.accept(cmd([50.0])).tau_nm[0] == 12.0
     gate.touching = False
-    assert gate.accept(cmd([50.0]))[0] == 22.0
+    assert gate.accept(cmd([50.0])).tau_nm[0] == 22.0
 
 
 # ------------------------------------------------------------------------------------------ the description's view

@@ -12,9 +12,10 @@ import pytest
 from matplotlib.path import Path as MplPath
 
 from interfaces.errors import ConfigError
-from interfaces.messages import HOLD, TorqueCommand
+from interfaces.messages import TorqueCommand
 from interfaces.robot_model import RobotModel
 from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from robot.command import CommandKind
 from robot.gate import CommandGate
 from sim import cli
 from sim.board import board_from_params, check_board, start_configuration
@@ -190,9 +191,12 @@ def test_stain_specs_are_checked():
 def test_command_gate_clips_drops_and_counts():
     counters: Counter = Counter()
     gate = CommandGate(np.array([10.0, 5.0]), counters)
-    np.testing.assert_array_equal(gate.accept(TorqueCommand(seq=0, stamp_ns=0, tau_nm=[20.0, -1.0])), [10.0, -1.0])
+    torques = gate.accept(TorqueCommand(seq=0, stamp_ns=0, tau_nm=[20.0, -1.0]))
+    assert torques.kind is CommandKind.TORQUE
+    np.testing.assert_array_equal(torques.tau_nm, [10.0, -1.0])
     assert gate.accept(TorqueCommand(seq=0, stamp_ns=0, tau_nm=[1.0])) is None
-    assert gate.accept(TorqueCommand(seq=0, stamp_ns=0, tau_nm=[], mode="hold")) == HOLD
+    assert gate.accept(TorqueCommand(seq=0, stamp_ns=0, tau_nm=[], mode="hold")).kind is CommandKind.HOLD, \
+        "the wire's mode string becomes the tagged kind"
     assert counters == Counter(commands_clipped=1, commands_applied=1, commands_dropped_wrong_length=1,
                                commands_hold=1)
 

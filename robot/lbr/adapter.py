@@ -65,7 +65,7 @@ import numpy as np
 from interfaces.messages import ArmRequest, Capabilities
 from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
-from robot.port import Reading, RobotPort
+from robot.port import Applied, Reading, RobotPort
 
 from .arming import REST_SPEED_RAD_S, arming_refusal, left_commanding
 from .brake import ContactBrake
@@ -284,14 +284,14 @@ class LbrPort(RobotPort):
     def read(self) -> Reading:
         return self._reading
 
-    def write(self, tau_nm: np.ndarray) -> None:
+    def write(self, tau_nm: np.ndarray) -> Applied:
         why = self._cannot_arm() if not self.armed and self.arm_pending else None
         if not self.armed and not (self.arm_pending and why is None
                                    and self.arm("--arm at start-up, and the controller answers")):
             self.disarm_reason = f"waiting to arm (--arm): {why}" if why else self.disarm_reason
             self.counts["commands_while_disarmed"] += 1
             self._send_hold_if_stopped()
-            return
+            return Applied.DISARMED
         r = self._reading
         # the rate guard compares with the last sent command over the robot time since (late cycles in between)
         since_s = (r.robot_time_ns - self._tau_prev_ns) * 1e-9 if self._tau_prev is not None else None
@@ -300,21 +300,21 @@ class LbrPort(RobotPort):
         if reason is not None:
             self.counts["guard_trips"] += 1
             self.disarm(f"guard: {reason}")
-            return
+            return Applied.DISARMED
         target, overlay = self.spring.command(r.q_rad, np.asarray(tau_nm, float), r.dq_rad_s,
                                               self._state.sample_time_s, self._cycles_per_state)
         self._send(target, overlay)
-        self._tau_prev = np.array(tau_nm, float)
-        self._tau_prev_ns = r.robot_time_ns
+        self._tau_prev, self._tau_prev_ns = np.array(tau_nm, float), r.robot_time_ns
         self._holding_since_ns = None
         self.counts["commands_sent"] += 1
+        return Applied.TORQUES
 
-    def hold(self) -> None:
+    def hold(self) -> Applied:
         """Hold this cycle: the last command again while it is younger than ``stale_limit_s`` (a late answer must
         not step the torque), then the brake (:mod:`robot.lbr.brake`); disarm after ``hold_timeout_s``."""
         if not self.armed:
             self._send_hold_if_stopped()
-            return
+            return Applied.HELD
         r, now = self._reading, time.monotonic_ns()
         repeat = self._tau_prev is not None and (r.robot_time_ns - self._tau_prev_ns) * 1e-9 <= self.p.stale_limit_s
         if not repeat and self._holding_since_ns is None:
@@ -323,33 +323,36 @@ class LbrPort(RobotPort):
         elif not repeat and (now - self._holding_since_ns) * 1e-9 > self.p.hold_timeout_s:
             self.disarm(f"no controller command for {(now - self._holding_since_ns) / 1e6:.0f} ms: holding the "
                         "measured pose on the robot's joint impedance")
-            return
+            return Applied.HELD
         tau = self._tau_prev if repeat else self._brake.torque(r.dq_rad_s, r.robot_time_ns)
         self._send(*self.spring.command(r.q_rad, tau, r.dq_rad_s, self._state.sample_time_s, self._cycles_per_state))
         self.counts["commands_repeated" if repeat else "holds_sent"] += 1
+        return Applied.HELD
 
-    def speed_hold(self) -> None:
+    def speed_hold(self) -> Applied:
         """A joint too fast (the server's speed brake): the hold at once, no repeat of the last command; past a
         guard (the joint's speed over the guard's, a position limit ahead), disarm as a command would."""
         if not self.armed:
             self._send_hold_if_stopped()
-            return
+            return Applied.BRAKED
         r = self._reading
         reason = guard_trip(r.q_rad, r.dq_rad_s, self._zeros, None, self._state.sample_time_s, self.limits)
         if reason is not None:
             self.counts["guard_trips"] += 1
-            self.disarm(f"guard: {reason}")
-            return
-        self._send_hold()
-        self.counts["speed_holds_sent"] += 1
+            self.disarm(f"guard: {reason}")  # which sends the hold
+        else:
+            self._send_hold()
+            self.counts["speed_holds_sent"] += 1
+        return Applied.BRAKED
 
-    def estop_hold(self) -> None:
+    def estop_hold(self) -> Applied:
         """E-stop: the hold at once (no repeat of the last command)."""
         if self.armed:
             self._send_hold()
             self.counts["estop_holds_sent"] += 1
         else:
             self._send_hold_if_stopped()
+        return Applied.ESTOP_HELD
 
     def activate(self) -> None:
         log.info("lbr: monitoring %s (commands only once armed)", self.p.topics.key(self.p.state_topic))

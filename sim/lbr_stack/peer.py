@@ -96,7 +96,7 @@ import pinocchio as pin
 
 from interfaces.errors import ConfigError
 from interfaces.loop_stats import LoopStats
-from interfaces.messages import HOLD, ServiceStatus
+from interfaces.messages import ServiceStatus
 from interfaces.robot_model import RobotModel
 from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.lbr.msgs import (
@@ -296,7 +296,7 @@ class LbrPeer:
         else:
             self._robot_command = None
             for _ in range(self.port.substeps):
-                core.step(HOLD)
+                core.step_braked()
             self.counters["cycles_held"] += 1
         self._cycles += 1
         if self.stack_up and self.activated and self._cycles % self._ft_every == 0:
