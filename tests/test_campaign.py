@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -360,3 +361,38 @@ def test_a_pool_worker_runs_each_cell_in_its_own_environment_not_the_one_before(
     assert "LAMPS__SIM__PLANT__TOOL_MASS_KG" in seen[0] and seen[1] == {}, seen
     assert set(seen[2]) == {"LAMPS__SIM__PLANT__RANDOM_MASS_ERROR", "LAMPS__SIM__PLANT__RANDOM_COM_ERROR_M",
                             "LAMPS__SIM__PLANT__SEED"}, seen
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's")
+def test_a_pool_worker_ends_when_the_campaign_that_started_it_is_killed():
+    """A campaign killed mid-run left its workers running their cells for minutes on cores nobody asked for."""
+    parent = subprocess.Popen(
+        [sys.executable, "-c", "import subprocess, time\nfrom launch.campaign_pool import Worker\nw = Worker()\n"
+                               # a busy worker reads nothing: its stdin's end must not be what stops it (a sleeper
+                               # keeps the pipe open as the cell in hand keeps the worker from reading)
+                               "s = subprocess.Popen(['sleep', '60'], pass_fds=(w._stdin.fileno(),))\n"
+                               "print(w._proc.pid, s.pid, flush=True)\ntime.sleep(120)"],
+        cwd=REPO, stdout=subprocess.PIPE, text=True)
+    try:
+        assert parent.stdout is not None
+        worker, sleeper = (int(x) for x in parent.stdout.readline().split())
+        time.sleep(8.0)  # the worker is up: imports done, the request made
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(10.0)
+        end = time.monotonic() + 30.0
+        while time.monotonic() < end:
+            try:
+                os.kill(worker, 0)
+                with open(f"/proc/{worker}/stat") as f:
+                    if f.read().split()[2] == "Z":  # ended, not yet reaped by init
+                        break
+            except (ProcessLookupError, FileNotFoundError):
+                break
+            time.sleep(0.2)
+        else:
+            os.kill(worker, signal.SIGKILL)
+            raise AssertionError("the worker outlived its campaign by 30 s")
+    finally:
+        parent.kill()
+        with contextlib.suppress(ProcessLookupError, UnboundLocalError):
+            os.kill(sleeper, signal.SIGKILL)
