@@ -20,7 +20,9 @@ tool_mass_kg``) PyBullet reports each point's lateral friction against
 the pad's sliding (a 1.4 kg tool: -3.3 N along a pad moving at -0.023 m/s,
 where the arm's motion says +3.4 N), and a force sensor that reads the
 friction backwards is a torque the controller cannot explain. The points
-still say whether the pad touches (and whether an arm link does); a
+still say whether the pad touches (and whether an arm link does) and give
+the normal force the wiping and the sim's truth use (that one they report
+right); a
 braked step (PyBullet's velocity motors, torques unknown) takes their
 wrench as reported.
 """
@@ -124,6 +126,10 @@ class SimRobot:
         self._q0: list[float] = self._zeros
         self._J: np.ndarray | None = None  # (6, n) the pad's Jacobian at the step's start, when it was needed
         self._torques_known = False
+        self._y = np.zeros(n)
+        self._ddq = np.zeros(n)
+        self._JJt = np.zeros((6, 6))
+        self._eps6 = 1e-9 * np.eye(6)  # J J^T regularised: finite at a singular pose
         self.read()
         if not self._rigid:
             self._drive_torque()  # compiles (or loads) the kernel now, not in the first step
@@ -182,10 +188,15 @@ class SimRobot:
         if not self._torques_known:
             return
         J = self._J if self._J is not None else self._jacobian(self._q0)
-        y = self._M @ ((o.dq - self._dq0) / self.dt_s)
+        y, ddq, JJt = self._y, self._ddq, self._JJt
+        np.subtract(o.dq, self._dq0, out=ddq)
+        ddq /= self.dt_s
+        np.matmul(self._M, ddq, out=y)
         y += self._h
         y -= self._tau_pb
-        o.wrench[:] = np.linalg.solve(J @ J.T + 1e-9 * np.eye(6), J @ y)
+        np.matmul(J, J.T, out=JJt)
+        JJt += self._eps6
+        o.wrench[:] = np.linalg.solve(JJt, J @ y)
         o.wrench -= self.external_wrench
 
     def brake(self) -> None:
