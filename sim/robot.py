@@ -144,13 +144,16 @@ class SimRobot:
         if self.gravity_compensated:
             tau = tau + self.compensation()
         np.maximum(np.minimum(tau, self.tau_max, out=self._tau_cmd), self._tau_min, out=self._tau_cmd)  # np.clip's cost
-        if self._rigid:
-            self._start_dynamics()
+        if self._rigid:  # no drive needs M and h: taken only while the pad touched (its first step keeps the points')
+            touched = bool(self.out.wrench.any())
+            if touched:
+                self._start_dynamics()
             self._tau_pb[:] = self._tau_cmd
             applied = self._tau_pb
+            self._torques_known = touched
         else:
             applied = self._drive_torque()
-        self._torques_known = True
+            self._torques_known = True
         pb.setJointMotorControlArray(self.w.robot, self._joints, pb.TORQUE_CONTROL, forces=applied.tolist(),
                                      physicsClientId=self.c)
 
