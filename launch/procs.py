@@ -52,6 +52,7 @@ class Child:
         log_dir.mkdir(parents=True, exist_ok=True)
         self._log: TextIO = open(log_dir / f"{name}.log", "a", encoding="utf-8")
         self._echo = echo
+        self._terminated = False  # SIGTERM sent: a second one would find Python's default handler back at its exit
         self.proc = subprocess.Popen(argv, env={**inherited_environment(), **env}, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, bufsize=1,
                                      start_new_session=True,
@@ -81,8 +82,11 @@ class Child:
         return self.tail[-1].strip() if self.tail else "(no output)"
 
     def terminate(self) -> None:
-        """SIGTERM to the group, without waiting (:meth:`stop` waits, and kills)."""
-        if self.proc.poll() is None:
+        """SIGTERM to the group, once, without waiting (:meth:`stop` waits, and kills). Once only: a service that
+        took the first is on its way out, and while Python finalizes it has restored the default handlers, so a
+        second SIGTERM kills it (exit -15) instead of letting it end cleanly."""
+        if self.proc.poll() is None and not self._terminated:
+            self._terminated = True
             try:
                 os.killpg(self.proc.pid, signal.SIGTERM)
             except ProcessLookupError:
