@@ -282,7 +282,12 @@ def test_a_lost_fri_link_disarms_on_the_frozen_clock_and_the_hold_is_what_the_st
     assert "time stamp has not advanced" in st.detail and "FRI link is lost" in st.detail, st.detail
     assert st.counters["frozen_stamps"] == 1 and st.counters["disarms"] == 1, st.counters
     assert repeats >= 20, "the manager re-published the frozen state"
-    assert 40.0 <= latency_ms <= 40.0 + 60.0, latency_ms  # 20 periods of 2 ms, then one loop of ours
+    # the adapter judges on its own clock: never before 20 periods of 2 ms from its own first sight of the stamp
+    own_ms = float(re.search(r"has not advanced for (\d+) ms", st.detail).group(1))
+    assert own_ms >= 40.0, st.detail
+    # the tap sees the same states over its own route: its first sight of the stamp may come a few ms after the
+    # adapter's on a loaded machine, so from here the latency is 40 ms less that jitter, then one loop of ours
+    assert 40.0 - 5.0 <= latency_ms <= 40.0 + 60.0, latency_ms
     np.testing.assert_array_equal(hold_q, [s for _, s in before if s.stamp_ns == frozen_stamp][0].q_rad)
     assert force_before >= 8.0 and force_after < 2.0, (force_before, force_after)
     assert peer.counters["stack_up"] == 1 and peer.counters["session_state"] == int(msgs.SessionState.COMMANDING_ACTIVE)
