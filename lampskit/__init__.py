@@ -17,4 +17,4 @@ root of every error the project raises on purpose. The ``lamps demo``,
 ``learn``, ``segment``, ``plan`` commands are in :mod:`lampskit.cli`.
 """
 
-__all__ = ["atomic", "cli", "core", "errors", "figures", "learn"]
+__all__ = ["atomic", "cli", "core", "errors", "figures", "learn", "spd"]

@@ -34,6 +34,7 @@ import numba as nb
 import numpy as np
 
 from interfaces.joint_dynamics import JointDynamics
+from lampskit.spd import cholesky_lower_in_place, cholesky_solve_in_place
 
 _jit = nb.njit(cache=True)
 
@@ -76,28 +77,12 @@ def drive_torque_into(tau: np.ndarray, dq: np.ndarray, fv: np.ndarray, fc: np.nd
         t = math.tanh(dq[i] / v_eps)
         a[i] = tau[i] - (fc[i] * t + fv[i] * dq[i]) - h_hat[i]
         L[i, i] = M[i, i] + armature[i] + dt_s * (fv[i] + fc[i] / v_eps * (1.0 - t * t))
-    for j in range(n):  # Cholesky of the lower triangle, in place
-        s = L[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            s = M[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    for i in range(n):  # L y = b, then L^T a = y
-        s = a[i]
-        for k in range(i):
-            s -= L[i, k] * a[k]
-        a[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):
-        s = a[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * a[k]
-        a[i] = s / L[i, i]
+    for i in range(n):  # M + Ia + dt D: M's lower triangle, the diagonal above
+        for j in range(i):
+            L[i, j] = M[i, j]
+    if not cholesky_lower_in_place(L):
+        return False
+    cholesky_solve_in_place(L, a)
     for i in range(n):
         s = h_hat[i]
         for k in range(n):

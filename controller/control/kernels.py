@@ -44,49 +44,25 @@ import math
 import numba as nb
 import numpy as np
 
+from lampskit.spd import cholesky_inverse_into, cholesky_lower_in_place
+
 _jit = nb.njit(cache=True)  # keeps the GIL: see the module docstring
 
 
 @_jit
 def spd_inverse_into(A: np.ndarray, out: np.ndarray, L: np.ndarray) -> bool:
-    """``out = A^-1`` for a symmetric positive definite ``A`` (n, n) by Cholesky; ``L`` (n, n) is scratch.
+    """``out = A^-1`` for a symmetric positive definite ``A`` (n, n) by Cholesky (:mod:`lampskit.spd`); ``L`` (n, n)
+    is scratch.
 
     Returns False (``out`` undefined) when ``A`` is not positive definite.
     """
     n = A.shape[0]
-    L[:, :] = 0.0
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    # L^-1 in place of out's lower triangle (column by column: forward substitution on unit vectors)
-    out[:, :] = 0.0
-    for j in range(n):
-        out[j, j] = 1.0 / L[j, j]
-        for i in range(j + 1, n):
-            s = 0.0
-            for k in range(j, i):
-                s -= L[i, k] * out[k, j]
-            out[i, j] = s / L[i, i]
-    # A^-1 = L^-T L^-1, symmetric: fill the lower triangle from sums over the rows below, then mirror
     for i in range(n):
         for j in range(i + 1):
-            s = 0.0
-            for k in range(i, n):
-                s += out[k, i] * out[k, j]
-            L[i, j] = s
-    for i in range(n):
-        for j in range(i + 1):
-            out[i, j] = L[i, j]
-            out[j, i] = L[i, j]
+            L[i, j] = A[i, j]
+    if not cholesky_lower_in_place(L):
+        return False
+    cholesky_inverse_into(L, out)
     return True
 
 
