@@ -22,17 +22,19 @@ from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
+from interfaces.service_main import log_to_stderr, refuse, serve
 from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError, SkillFileError
 
 SERVICE = "controller"
+PROG = "lamps controller"
 #: A real-time rate is refused when the control law's median tick takes more than this share of the period.
 MAX_TICK_SHARE = 0.5
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="lamps controller",
+        prog=PROG,
         description="Runs a learned LAMPS skill on the robot over Zenoh: fixed-rate Cartesian impedance "
                     "(Pinocchio) with normal force regulation. Options override the config file.")
     p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh] and [controller] tables")
@@ -133,8 +135,7 @@ def write_trace(path: str, core) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
-                        format="%(asctime)s controller %(levelname)s %(name)s: %(message)s")
+    log_to_stderr("controller", a.verbose)
     try:
         zenoh_settings, params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
@@ -146,31 +147,27 @@ def main(argv: list[str] | None = None) -> int:
         model = RobotModel(joints=joint_dynamics_from_config(a.config))  # the [joints] table the sim reads too
         timing = check_rate(params, skill, model)
     except (LampsError, OSError) as exc:
-        print(f"lamps controller: error: {exc}", file=sys.stderr)
-        return 1
+        return refuse(PROG, exc)
     if a.check:
         print(f"ok: skill with {len(skill.periodic)} periodic and {len(skill.transitional)} transitional MPs, "
               f"mode {params.mode} at {params.rate_hz:g} Hz ({timing}), stains from {params.stains_from}, "
               f"keys under {zenoh_settings.keys.prefix}")
         return 0
-    from interfaces.session import ServiceNode
+    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
+    return serve(PROG, SERVICE, zenoh_settings, lambda node: _serve(node, a, params, skill, model))
 
+
+def _serve(node, a: argparse.Namespace, params, skill, model) -> int:
+    """Run the controller on its open ``node`` until a stop signal; its trace written on the way out."""
     from .core import ControllerCore
     from .service import ControllerService
 
-    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
-    try:
-        node = ServiceNode(SERVICE, zenoh_settings).__enter__()
-    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
-        print(f"lamps controller: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-        return 1
     core = ControllerCore(params, skill, model)
     service = ControllerService(params, node, core)
     on_stop_signals(service.stop)
     try:
         ticks = service.run()
     finally:
-        node.close()
         if a.trace and core.trace is not None:
             write_trace(a.trace, core)
     logging.getLogger("controller").info("stopped after %d ticks in phase %s", ticks, core.executor.phase)

@@ -23,15 +23,18 @@ import msgspec
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 from interfaces.priority import BACKGROUND, set_service_priority, wanted_nice
+from interfaces.service_main import log_to_stderr, refuse, serve
 from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
 
 from .params import PerceptionParams, parse_source
 
+PROG = "lamps perception"
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="lamps perception",
+        prog=PROG,
         description="Finds the board from its ArUco markers, the stains on it and when each is wiped (kappa); "
                     "publishes perception/stains over Zenoh. Options override the config file.")
     p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh] and [perception] tables")
@@ -114,15 +117,12 @@ def calibrate_main(a: argparse.Namespace) -> int:
     folder = Path(a.calibrate)
     images = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
     if not images:
-        print(f"lamps perception: error: --calibrate {folder}: no {'/'.join(IMAGE_SUFFIXES)} images there",
-              file=sys.stderr)
-        return 1
+        return refuse(PROG, f"--calibrate {folder}: no {'/'.join(IMAGE_SUFFIXES)} images there")
     try:
         result = calibrate(images, a.pattern)
         write_camera_info(a.calibration_out, result.calibration)
     except (CalibrationError, OSError) as exc:
-        print(f"lamps perception: error: {exc}", file=sys.stderr)
-        return 1
+        return refuse(PROG, exc)
     K, d = result.calibration.K, result.calibration.dist
     print(f"calibrated from {len(result.used)} of {len(images)} images ({result.calibration.width} x "
           f"{result.calibration.height} px): fx {K[0, 0]:.1f} fy {K[1, 1]:.1f} cx {K[0, 2]:.1f} cy {K[1, 2]:.1f} px, "
@@ -137,8 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     if a.calibrate:
         return calibrate_main(a)
-    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
-                        format="%(asctime)s perception %(levelname)s %(name)s: %(message)s")
+    log_to_stderr("perception", a.verbose)
     try:
         zenoh_settings, params = load(a)
         wanted_nice(BACKGROUND)  # a bad LAMPS_NICE is refused with the rest of the configuration
@@ -147,17 +146,14 @@ def main(argv: list[str] | None = None) -> int:
             raise InterfaceError("--no-zenoh needs an offline source (--source folder:DIR, video:FILE or device:N)")
         source = None if kind in ("zenoh", "ros") else open_source(params, None)
     except (LampsError, OSError) as exc:
-        print(f"lamps perception: error: {exc}", file=sys.stderr)
-        return 1
+        return refuse(PROG, exc)
     if a.fit_inks:
         from .fit_inks import main_fit_inks
 
         if source is not None:
             source.close()
         if not a.masks:
-            print("lamps perception: error: --fit-inks needs --masks FILE (the drawings' outlines and inks)",
-                  file=sys.stderr)
-            return 1
+            return refuse(PROG, "--fit-inks needs --masks FILE (the drawings' outlines and inks)")
         return main_fit_inks(a.fit_inks, a.masks, params)
     if a.check_board:
         from .check_board import main_check_board
@@ -170,21 +166,23 @@ def main(argv: list[str] | None = None) -> int:
         if source is not None:
             source.close()
         return 0
-    from interfaces.session import ServiceNode
+    from interfaces.message_limits import max_message_bytes
 
-    from .service import SERVICE, PerceptionService
+    from .service import SERVICE
 
     set_service_priority(BACKGROUND)  # before the Zenoh session starts its threads: they inherit it
-    node = None
-    if not a.no_zenoh:
-        try:
-            from interfaces.message_limits import max_message_bytes
+    if a.no_zenoh:
+        return _serve(None, a, params, kind, source)
+    # ROS images through the bridge may be larger than the cell's own frames (message_limits)
+    return serve(PROG, SERVICE, zenoh_settings, lambda node: _serve(node, a, params, kind, source),
+                 max_message_bytes(ros_images=kind == "ros"), on_open_failure=source.close if source else None)
 
-            # ROS images through the bridge may be larger than the cell's own frames (message_limits)
-            node = ServiceNode(SERVICE, zenoh_settings, max_message_bytes(ros_images=kind == "ros")).__enter__()
-        except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
-            print(f"lamps perception: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-            return 1
+
+def _serve(node, a: argparse.Namespace, params, kind: str, source) -> int:
+    """Serve frames from ``source`` (None: the camera's key on ``node``) until a stop signal or the source's end;
+    ``node`` None: offline, the stains to ``--jsonl`` only."""
+    from .service import PerceptionService
+
     if source is None:
         source = open_source(params, node)
     partial = f"{a.jsonl}.partial" if a.jsonl else None
@@ -199,8 +197,6 @@ def main(argv: list[str] | None = None) -> int:
         frames = service.run()
     finally:
         source.close()
-        if node is not None:
-            node.close()
         if out is not None and partial is not None:
             out.close()
             os.replace(partial, a.jsonl)

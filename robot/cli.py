@@ -30,10 +30,12 @@ from interfaces.config import add_zenoh_options, check_range, load_config, zenoh
 from interfaces.errors import ConfigError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
+from interfaces.service_main import log_to_stderr, refuse, serve
 from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
 
 SERVICE = "robot"
+PROG = "lamps robot"
 BACKENDS = ("lbr", "mock")
 
 
@@ -93,15 +95,13 @@ def load(a: argparse.Namespace):
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
-                        format="%(asctime)s robot %(levelname)s %(name)s: %(message)s")
+    log_to_stderr("robot", a.verbose)
     try:
         zenoh_settings, lbr_params, server_params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
     except LampsError as exc:
-        print(f"lamps robot: error: {exc}", file=sys.stderr)
-        return 1
+        return refuse(PROG, exc)
     if a.check:
         where = (f"topics under /{lbr_params.namespace}, {lbr_params.branch} joint names, FRI "
                  f"{lbr_params.fri_major} states" if a.backend == "lbr" else "a mock arm")
@@ -111,45 +111,39 @@ def main(argv: list[str] | None = None) -> int:
                   "with open_loop: false and [lbr] open_loop = false (docs/real-robot.md)")
         return 0
     if (a.watchdog or a.preflight) and a.backend != "lbr":
-        print("lamps robot: error: --watchdog and --preflight need --backend lbr", file=sys.stderr)
-        return 1
-    from interfaces.session import ServiceNode
+        return refuse(PROG, "--watchdog and --preflight need --backend lbr")
+    if a.watchdog:
+        from .lbr.watchdog import WATCHDOG_SERVICE
 
-    if a.watchdog or a.preflight:
-        return _watchdog(zenoh_settings, lbr_params) if a.watchdog else _preflight(zenoh_settings, lbr_params)
+        return serve(PROG, WATCHDOG_SERVICE, zenoh_settings, lambda node: _watchdog(node, lbr_params))
+    if a.preflight:
+        from .lbr.preflight import run_preflight
+
+        return serve(PROG, "lbr-preflight", zenoh_settings, lambda node: run_preflight(lbr_params, node))
+    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
+    return serve(PROG, SERVICE, zenoh_settings, lambda node: _serve(node, a.backend, lbr_params, server_params))
+
+
+def _serve(node, backend: str, lbr_params, server_params) -> int:
+    """Serve the robot side on its open ``node`` until a stop signal."""
     from .server import RobotServer
 
-    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
-    try:
-        node = ServiceNode(SERVICE, zenoh_settings).__enter__()
-    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
-        print(f"lamps robot: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-        return 1
-    try:
-        port = _port(a.backend, lbr_params, node)
-        server = RobotServer(port, node, server_params, SERVICE, node.keys.robot_status)
-        on_stop_signals(server.stop)
-        server.run()
-        port.close()
-    finally:
-        node.close()
+    port = _port(backend, lbr_params, node)
+    server = RobotServer(port, node, server_params, SERVICE, node.keys.robot_status)
+    on_stop_signals(server.stop)
+    server.run()
+    port.close()
     reason = getattr(port, "disarm_reason", "")
     logging.getLogger("robot").warning("stopped after %d cycles%s", server.steps, f" ({reason})" if reason else "")
     return 0
 
 
-def _watchdog(zenoh_settings, lbr_params) -> int:
+def _watchdog(node, lbr_params) -> int:
+    """Watch the stack for a controller gone silent, on its open ``node``, until a stop signal."""
     import threading
 
-    from interfaces.session import ServiceNode
+    from .lbr.watchdog import Watchdog
 
-    from .lbr.watchdog import WATCHDOG_SERVICE, Watchdog
-
-    try:
-        node = ServiceNode(WATCHDOG_SERVICE, zenoh_settings).__enter__()
-    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
-        print(f"lamps robot: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-        return 1
     stop = threading.Event()
     on_stop_signals(stop)
     dog = Watchdog(lbr_params, node.session, lbr_params.watchdog_after_s)
@@ -157,25 +151,8 @@ def _watchdog(zenoh_settings, lbr_params) -> int:
         dog.run(stop)
     finally:
         dog.close()
-        node.close()
     logging.getLogger("robot").warning("watchdog stopped: %s", dict(dog.watch.counts))
     return 0
-
-
-def _preflight(zenoh_settings, lbr_params) -> int:
-    from interfaces.session import ServiceNode
-
-    from .lbr.preflight import run_preflight
-
-    try:
-        node = ServiceNode("lbr-preflight", zenoh_settings).__enter__()
-    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
-        print(f"lamps robot: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-        return 1
-    try:
-        return run_preflight(lbr_params, node)
-    finally:
-        node.close()
 
 
 def _port(backend: str, lbr_params, node):

@@ -18,15 +18,17 @@ from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
+from interfaces.service_main import log_to_stderr, refuse, serve
 from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
 
 SERVICE = "sim"
+PROG = "lamps sim"
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="lamps sim",
+        prog=PROG,
         description="PyBullet iiwa 14 with an eraser, a whiteboard with dirt and a camera, served over Zenoh. "
                     "Options override the config file, which overrides the defaults.")
     p.add_argument("--config", metavar="FILE", help="TOML config with [zenoh], [sim] and [joints] tables")
@@ -101,8 +103,7 @@ def load_joints(a: argparse.Namespace):
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
-                        format="%(asctime)s sim %(levelname)s %(name)s: %(message)s")
+    log_to_stderr("sim", a.verbose)
     try:
         zenoh_settings, params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
@@ -113,25 +114,21 @@ def main(argv: list[str] | None = None) -> int:
 
         core = SimCore(params, RobotModel(joints=load_joints(a)))
     except LampsError as exc:
-        print(f"lamps sim: error: {exc}", file=sys.stderr)
-        return 1
+        return refuse(PROG, exc)
     if a.check:
         d = core.dirt
         print(f"ok: {params.board.preset} board {core.board.size_m.tolist()} m, {len(d.stains)} stains, "
               f"mode {params.mode}, keys under {zenoh_settings.keys.prefix}")
         core.close()
         return 0
-    from interfaces.session import ServiceNode
+    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
+    return serve(PROG, SERVICE, zenoh_settings, lambda node: _serve(node, params, core), on_open_failure=core.close)
 
+
+def _serve(node, params, core) -> int:
+    """Run the simulator on its open ``node`` until a stop signal."""
     from .service import SimService
 
-    set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
-    try:
-        node = ServiceNode(SERVICE, zenoh_settings).__enter__()
-    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
-        core.close()
-        print(f"lamps sim: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-        return 1
     service = SimService(params, node, core)
     on_stop_signals(service.stop)
     try:
@@ -140,10 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         if service.stop.is_set():  # stopped while starting: the signal reached the renderer too, not a fault
             logging.getLogger("sim").info("stopped during start-up (%s)", exc)
             return 0
-        print(f"lamps sim: error: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        node.close()
+        return refuse(PROG, exc)
     logging.getLogger("sim").info("stopped after %d steps", steps)
     return 0
 

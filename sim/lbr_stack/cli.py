@@ -17,6 +17,7 @@ import sys
 from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.priority import REALTIME, set_service_priority, wanted_nice
 from interfaces.realtime import RealtimeRequest
+from interfaces.service_main import log_to_stderr, refuse, serve
 from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
 
@@ -58,8 +59,7 @@ def load(a: argparse.Namespace):
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
-                        format="%(asctime)s lbr-peer %(levelname)s %(name)s: %(message)s")
+    log_to_stderr("lbr-peer", a.verbose)
     try:
         zenoh_settings, params, sim_params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
@@ -70,8 +70,7 @@ def main(argv: list[str] | None = None) -> int:
 
         core = SimCore(sim_params, RobotModel(joints=joint_dynamics_from_config(a.config)))
     except LampsError as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 1
+        return refuse(PROG, exc)
     if a.check:
         t = params.topics
         print(f"ok: keys {t.key(t.state)}, {t.key(t.torque_command)}, {t.key(t.wrench)}, {t.key(t.joint_states)}; "
@@ -82,27 +81,22 @@ def main(argv: list[str] | None = None) -> int:
               f"{len(core.dirt.stains)} stains, sim keys under {zenoh_settings.keys.prefix}")
         core.close()
         return 0
-    return _serve(zenoh_settings, params, sim_params, core)
-
-
-def _serve(zenoh_settings, params, sim_params, core) -> int:
-    from interfaces.session import ServiceNode
-
-    from .peer import SERVICE, LbrPeer
+    from .peer import SERVICE
 
     set_service_priority(REALTIME)  # before the Zenoh session starts its threads: they inherit it
-    try:
-        node = ServiceNode(SERVICE, zenoh_settings).__enter__()
-    except Exception as exc:  # zenoh raises its own error type for a bad or busy endpoint
-        core.close()
-        print(f"{PROG}: error: cannot open the Zenoh session ({exc})", file=sys.stderr)
-        return 1
+    return serve(PROG, SERVICE, zenoh_settings, lambda node: _serve(node, params, sim_params, core),
+                 on_open_failure=core.close)
+
+
+def _serve(node, params, sim_params, core) -> int:
+    """Play the lbr stack on its open ``node`` until a stop signal or the stack's exit."""
+    from .peer import LbrPeer
+
     log = logging.getLogger("sim.lbr_stack.peer")
     try:
         peer = LbrPeer(params, sim_params, node, core)
     except Exception:
         core.close()
-        node.close()
         raise
     on_stop_signals(peer.stop)
     try:
@@ -111,10 +105,7 @@ def _serve(zenoh_settings, params, sim_params, core) -> int:
         if peer.stop.is_set():  # stopped while the camera renderer started: the signal reached it too
             log.info("stopped during start-up (%s)", exc)
             return 0
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        node.close()
+        return refuse(PROG, exc)
     log.info("stopped after %d steps%s", steps, f"; the stack had exited: {peer.stack_exit}" if peer.stack_exit else "")
     return 0
 
