@@ -69,11 +69,12 @@ from controller.control.impedance import (  # noqa: E402
     task_stiffness,
 )
 from controller.core import ControllerCore  # noqa: E402
-from controller.executor_types import BoardPose, StainState  # noqa: E402
+from controller.executor_types import BoardPose  # noqa: E402
 from controller.params import ControllerParams  # noqa: E402
 from interfaces.config import ZenohSettings  # noqa: E402
 from interfaces.messages import ControllerStatus, ServiceStatus, SimTruth  # noqa: E402
 from interfaces.session import ServiceNode  # noqa: E402
+from lampskit.core.planner_types import Stain  # noqa: E402
 from lampskit.learn.learn import bundled_skill  # noqa: E402
 from sim.core import SimCore  # noqa: E402
 from sim.params import SimParams  # noqa: E402
@@ -88,7 +89,7 @@ SAMPLE_S = 0.5
 # ---------------------------------------------------------------------------------------------- 1. in process
 def _feed_stains(core: ControllerCore, sim: SimCore) -> None:
     board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
-    stains = [StainState(s.id, np.array(s.centre_m), s.size_m, bool(r <= 0.03))
+    stains = [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=bool(r <= 0.03))
               for s, r in zip(sim.dirt.stains, sim.dirt.remaining())]
     core.executor.set_stains(board, stains)
 

@@ -10,11 +10,12 @@ from enum import IntEnum
 import numpy as np
 
 from interfaces.messages import Phase
+from lampskit.core.planner_types import Stain
 
 from .executor_stage import ACTIVE, HALTED, Stage
 from .executor_state import ExecutorState
 from .executor_stops import ExecutorStops
-from .executor_types import BoardPose, StainState
+from .executor_types import BoardPose
 from .free_motion import FreeMotion
 from .params import ExecutorParams
 from .stain_book import StainBook
@@ -92,7 +93,7 @@ class BoardWatch:
             self._jump, self.note = None, ""
         return True
 
-    def skip_out_of_reach(self, stains: list[StainState]) -> None:
+    def skip_out_of_reach(self, stains: list[Stain]) -> None:
         """Close every new stain the arm cannot reach (:meth:`FreeMotion.reach_problem`), named and counted: it is
         skipped, never attempted. Each stain is looked at once per adopted board."""
         st = self.state

@@ -52,7 +52,7 @@ import numpy as np
 from interfaces.messages import Phase
 from lampskit.core.chain import ChainResult, MpChain
 from lampskit.core.planner import plan
-from lampskit.core.planner_types import Plan, PlannerParams
+from lampskit.core.planner_types import Plan, PlannerParams, Stain
 from lampskit.core.skill import Skill
 from lampskit.errors import PlanningError
 
@@ -60,7 +60,7 @@ from .board_watch import BoardWatch, Jump
 from .executor_stage import ACTIVE, HALTED, LIFTED_M, RELEASED_N, Stage
 from .executor_state import ExecutorState
 from .executor_stops import ExecutorStops
-from .executor_types import BoardPose, Setpoint, StainState, ToolState
+from .executor_types import BoardPose, Setpoint, ToolState
 from .free_motion import FreeMotion
 from .params import ExecutorParams, ForceParams
 from .stain_book import StainBook
@@ -167,7 +167,7 @@ class SkillExecutor:
         return self.state.ticks
 
     # ------------------------------------------------------------------ inputs
-    def set_stains(self, board: BoardPose, stains: list[StainState]) -> None:
+    def set_stains(self, board: BoardPose, stains: list[Stain]) -> None:
         """A fresh view of the board and its stains (kappa per stain).
 
         A board out of the arm's reach is refused; one that jumps from the adopted pose (beyond

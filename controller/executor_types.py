@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from interfaces.transforms import tool_rotation_on_board
-from lampskit.core.planner_types import Stain
 
 from .reach import ArmReach
 
@@ -52,25 +51,6 @@ class BoardPose:
         moved = np.linalg.norm(self.origin_m - other.origin_m)
         turned = np.linalg.norm(self.R - other.R)  # ~ angle for small turns
         return bool(moved <= tol_m and turned <= tol_rad)
-
-
-@dataclass(frozen=True)
-class StainState:
-    """One stain as the executor knows it: id, centre (2,) in the board plane [m], size [m] (along its main axis),
-    kappa (done); width [m] across the main axis (0: not known), main axis [rad] from board x; ``ink``: the shape
-    of the ink that remains of it (centre, size, width, axis; None: not reported); ``smeared``: perception says
-    passes no longer clean it, with ``remaining`` (fraction of its first sighting) after ``passes`` passes."""
-
-    id: int
-    centre_m: np.ndarray
-    size_m: float
-    kappa: bool
-    width_m: float = 0.0
-    axis_rad: float = 0.0
-    ink: Stain | None = None
-    smeared: bool = False
-    remaining: float = 1.0
-    passes: int = 0
 
 
 @dataclass

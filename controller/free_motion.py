@@ -15,8 +15,9 @@ from __future__ import annotations
 import numpy as np
 
 from interfaces.transforms import tool_rotation_on_board
+from lampskit.core.planner_types import Stain
 
-from .executor_types import BoardPose, Setpoint, StainState, ToolState, look_point
+from .executor_types import BoardPose, Setpoint, ToolState, look_point
 from .motion import (
     OrientationBlend,
     Quintic,
@@ -253,7 +254,7 @@ class FreeMotion:
         self.fly_to_hover(look_point(board, corners, [0.0] * 4, self.p.look_clearance_m, self.arm, self.p.standoff_m),
                           board)
 
-    def fly_to_look(self, board: BoardPose, pending: list[StainState], attempt: int = 0) -> bool:
+    def fly_to_look(self, board: BoardPose, pending: list[Stain], attempt: int = 0) -> bool:
         """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there.
 
         The arm reaches back towards the robot base, away from them, so the

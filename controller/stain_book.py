@@ -25,8 +25,6 @@ from collections import Counter
 
 from lampskit.core.planner_types import Stain
 
-from .executor_types import StainState
-
 
 class StainBook:
     """The stains last seen and the passes made over them.
@@ -40,9 +38,9 @@ class StainBook:
 
     Attributes
     ----------
-    stains : dict of int to StainState
+    stains : dict of int to Stain
         The last view, by stain id.
-    smeared : dict of int to StainState
+    smeared : dict of int to Stain
         The stains closed as smeared, as they were when closed, by id.
     out_of_reach : dict of int to str
         The stains closed as out of the arm's reach, with why, by id.
@@ -51,14 +49,14 @@ class StainBook:
     def __init__(self, recheck_s: float, max_passes: int) -> None:
         self.recheck_s = recheck_s
         self.max_passes = max_passes
-        self.stains: dict[int, StainState] = {}
+        self.stains: dict[int, Stain] = {}
         self._given_up: set[int] = set()
         self._passes: Counter[int] = Counter()
         self._left_at: dict[int, float] = {}  # stain id -> clock [s] at the end of a pass without kappa
-        self.smeared: dict[int, StainState] = {}
+        self.smeared: dict[int, Stain] = {}
         self.out_of_reach: dict[int, str] = {}
 
-    def update(self, stains: list[StainState], clock_s: float) -> bool:
+    def update(self, stains: list[Stain], clock_s: float) -> bool:
         """A fresh view of the stains (kappa per stain): True if it changes which are open at ``clock_s`` [s]."""
         old_open = self.open_ids(clock_s)
         self.stains = {s.id: s for s in stains}
@@ -107,13 +105,12 @@ class StainBook:
                  if not s.kappa and not self._closed(s.id) and s.id != exclude
                  and clock_s - self._left_at.get(s.id, -math.inf) >= self.recheck_s]
         fewest = min((self._passes[s.id] for s in ready), default=0)
-        return [(s.ink if by_ink and s.ink is not None else Stain(s.id, s.centre_m, s.size_m, s.width_m, s.axis_rad))
-                for s in ready if self._passes[s.id] == fewest]
+        return [s.ink if by_ink and s.ink is not None else s for s in ready if self._passes[s.id] == fewest]
 
     def open_ids(self, clock_s: float) -> set[int]:
         return {s.id for s in self.open_stains(clock_s)}
 
-    def pending(self) -> list[StainState]:
+    def pending(self) -> list[Stain]:
         """Stains passed over without kappa, waiting to be looked at (not given up)."""
         return [s for i, s in self.stains.items() if not s.kappa and i in self._left_at and not self._closed(i)]
 

@@ -176,7 +176,7 @@ class _Book:
     max_passes = 3
 
     def __init__(self, stain: Stain) -> None:
-        self.stains = {stain.id: _View(stain.centre_m, None)}
+        self.stains = {stain.id: stain}
         self._stain = stain
 
     def is_done(self, stain_id: int) -> bool:
@@ -187,11 +187,6 @@ class _Book:
 
     def open_stains(self, clock_s: float, by_ink: bool = False, exclude: int | None = None) -> list[Stain]:
         return [self._stain] if self._stain.id != exclude else []
-
-
-class _View:
-    def __init__(self, centre_m, ink) -> None:
-        self.centre_m, self.ink = centre_m, ink
 
 
 class _Ref:
@@ -214,7 +209,7 @@ def _wiping_chain(skill, params: PlannerParams):
 def test_the_chain_follows_the_ink_while_wiping_at_most_every_half_second(skill):
     chain, book, ref, clock, _ = _wiping_chain(skill, ADAPTIVE)
     r0 = chain.wipe.amplitude_m
-    book.stains[0].ink = Stain(0, np.array([0.42, 0.3]), 0.05)
+    book.stains[0] = dataclasses.replace(book.stains[0], ink=Stain(0, np.array([0.42, 0.3]), 0.05))
     assert chain.adapt(book, clock) == ChainResult.WORKING
     assert chain.counters["adaptations"] == 1 and chain.wipe.amplitude_m < r0
     assert chain.adapt(book, clock + 0.1) is None  # too soon
@@ -236,9 +231,9 @@ def test_the_chain_follows_the_ink_while_wiping_at_most_every_half_second(skill)
 
 def test_fixed_wiping_only_follows_a_moved_stain(skill):
     chain, book, ref, clock, _ = _wiping_chain(skill, PlannerParams(adaptive=False))
-    book.stains[0].ink = Stain(0, np.array([0.42, 0.3]), 0.05)
+    book.stains[0] = dataclasses.replace(book.stains[0], ink=Stain(0, np.array([0.42, 0.3]), 0.05))
     assert chain.adapt(book, clock) is None  # the ink is not followed
-    book.stains[0].centre_m = np.array([0.405, 0.3])
+    book.stains[0] = dataclasses.replace(book.stains[0], centre_m=np.array([0.405, 0.3]))
     assert chain.adapt(book, clock) == ChainResult.WORKING
     assert chain.counters["adaptations"] == 0
 

@@ -143,14 +143,14 @@ def test_a_stain_beyond_the_arm_is_skipped_with_the_reason_never_attempted(learn
     """A wall board 1.6 m wide: its far end is beyond the stretched arm. That stain is closed as out of reach,
     named and counted; the others are planned as before."""
     from controller.executor import SkillExecutor
-    from controller.executor_types import StainState
+    from lampskit.core.planner_types import Stain
 
     from .test_controller_units import BOARD
 
     ex = SkillExecutor(learned_skill, ExecutorParams(survey_s=0.0))
     ex.motion.arm = arm_reach(RobotModel())
     big = BoardPose(BOARD.R, BOARD.origin_m, np.array([1.6, 0.6]))
-    near, far = StainState(0, np.array([0.3, 0.3]), 0.06, False), StainState(1, np.array([1.4, 0.3]), 0.06, False)
+    near, far = Stain(0, np.array([0.3, 0.3]), 0.06, kappa=False), Stain(1, np.array([1.4, 0.3]), 0.06, kappa=False)
     ex.set_stains(big, [near, far])
     assert set(ex.book.out_of_reach) == {1} and "beyond the stretched arm" in ex.book.out_of_reach[1]
     assert ex.counters["stains_out_of_reach"] == 1 and ex.book.is_done(1)

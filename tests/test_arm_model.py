@@ -11,7 +11,7 @@ import pytest
 
 from controller.control.model_correction import MODEL_MISMATCH, CorrectionParams, ModelCorrection
 from controller.core import ControllerCore
-from controller.executor_types import BoardPose, StainState
+from controller.executor_types import BoardPose
 from controller.params import ControllerParams
 from controller.tool_estimate import GRAVITY_M_S2, ToolEstimate, tool_regressor_into
 from controller.trace import PHASE_CODES, TRACE_COLUMNS
@@ -19,6 +19,7 @@ from interfaces.description import ERASER_LINK
 from interfaces.errors import ConfigError
 from interfaces.messages import ControllerStatus, Phase
 from interfaces.robot_model import RobotModel
+from lampskit.core.planner_types import Stain
 
 #: The learning controller (opt-in: [controller.model] enabled, with the identification roll).
 LEARNING = {"enabled": True, "identify_s": 2.0}
@@ -108,7 +109,7 @@ def test_a_bad_model_setting_is_refused_naming_the_key(key, value):
 
 def _stains(core: ControllerCore, sim) -> None:
     board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
-    core.executor.set_stains(board, [StainState(s.id, np.array(s.centre_m), s.size_m, bool(r <= 0.03))
+    core.executor.set_stains(board, [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=bool(r <= 0.03))
                                      for s, r in zip(sim.dirt.stains, sim.dirt.remaining())])
 
 

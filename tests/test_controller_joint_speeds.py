@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from controller.core import TRACE_COLUMNS, ControllerCore
-from controller.executor_types import BoardPose, StainState
+from controller.executor_types import BoardPose
 from controller.params import ControllerParams
 from interfaces.robot_model import RobotModel
+from lampskit.core.planner_types import Stain
 from robot.lbr.params import LbrParams
 from sim.core import SimCore
 from sim.params import SimParams
@@ -16,7 +17,7 @@ from sim.params import SimParams
 
 def _feed_stains(core: ControllerCore, sim: SimCore) -> None:
     board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
-    stains = [StainState(s.id, np.array(s.centre_m), s.size_m, bool(r <= 0.03))
+    stains = [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=bool(r <= 0.03))
               for s, r in zip(sim.dirt.stains, sim.dirt.remaining())]
     core.executor.set_stains(board, stains)
 

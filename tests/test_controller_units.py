@@ -19,13 +19,14 @@ from controller.control.limits import (
 )
 from controller.executor import SkillExecutor
 from controller.executor_stage import Stage
-from controller.executor_types import BoardPose, StainState, ToolState, look_point
+from controller.executor_types import BoardPose, ToolState, look_point
 from controller.motion import OrientationBlend, Quintic, bounded_brake_to_rest, brake_peaks, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
 from controller.stain_book import StainBook
 from interfaces.errors import ConfigError
 from interfaces.transforms import tool_rotation_on_board
 from lampskit.core.chain import ChainStep
+from lampskit.core.planner_types import Stain
 from lampskit.errors import PlanningError
 
 
@@ -185,7 +186,7 @@ class IdealArm:
 
 def stains(kappa=(False, False, False)):
     centres = [(0.2, 0.2), (0.55, 0.35), (0.3, 0.45)]
-    return [StainState(i, np.array(c), 0.06, k) for i, (c, k) in enumerate(zip(centres, kappa))]
+    return [Stain(i, np.array(c), 0.06, kappa=k) for i, (c, k) in enumerate(zip(centres, kappa))]
 
 
 def run(ex: SkillExecutor, arm: IdealArm, seconds: float, on_tick=None) -> list[tuple]:
@@ -308,7 +309,7 @@ def test_a_vanished_stain_is_not_visited_and_new_stains_after_done_are(learned_s
     log = run(ex, arm, 14.0)  # the first touch of the board creeps from first_creep_height_m
     assert ex.phase == "DONE" and {e[1] for e in log if e[0] == "WIPE"} == {0}
     assert ex.counters["wipe_timeouts"] == 1
-    ex.set_stains(BOARD, stains()[:1] + [StainState(7, np.array([0.6, 0.2]), 0.05, False)])
+    ex.set_stains(BOARD, stains()[:1] + [Stain(7, np.array([0.6, 0.2]), 0.05, kappa=False)])
     log = run(ex, arm, 10.0)
     assert 7 in {e[1] for e in log if e[0] == "WIPE"}
     assert 0 not in {e[1] for e in log if e[0] == "WIPE"}  # given up after its timeout, not retried
@@ -500,7 +501,7 @@ def test_a_stain_without_kappa_gets_another_pass_after_the_others_and_a_recheck(
     ex2.set_stains(BOARD, stains()[:1])
     log = run(ex2, arm, 6.0)
     # alone on the board: lifted off after the pass, a fresh view; kappa from it ends the job
-    ex2.set_stains(BOARD, [StainState(0, stains()[0].centre_m, stains()[0].size_m, True)])
+    ex2.set_stains(BOARD, [Stain(0, stains()[0].centre_m, stains()[0].size_m, kappa=True)])
     run(ex2, arm, 6.0)
     assert ex2.phase == "DONE" and ex2.counters["wipe_timeouts"] >= 1
 
@@ -509,18 +510,18 @@ def test_a_stain_passed_without_kappa_waits_until_no_stain_has_fewer_passes():
     """kappa comes seconds after the pad has left (once the arm no longer hides the stain): a stain wiped once is
     not wiped again, however long ago, while a stain not yet wiped is open; then it is, after ``recheck_s``."""
     book = StainBook(recheck_s=1.0, max_passes=3)
-    a, b, c = (StainState(i, np.array([0.1 + 0.2 * i, 0.2]), 0.05, False) for i in range(3))
+    a, b, c = (Stain(i, np.array([0.1 + 0.2 * i, 0.2]), 0.05, kappa=False) for i in range(3))
     book.update([a, b, c], 0.0)
     assert book.open_ids(0.0) == {0, 1, 2}
     assert not book.end_pass(0, 1.0)
     assert book.open_ids(1.5) == {1, 2} and book.open_ids(30.0) == {1, 2}
     book.end_pass(1, 2.0)
-    book.update([a, b, StainState(2, c.centre_m, c.size_m, True)], 3.0)  # c done: a and b have one pass each
+    book.update([a, b, Stain(2, c.centre_m, c.size_m, kappa=True)], 3.0)  # c done: a and b have one pass each
     assert book.open_ids(3.0) == {0, 1} and book.open_ids(2.5) == {0}
     book.end_pass(0, 4.0)
     assert book.open_ids(10.0) == {1}
-    done_c = StainState(2, c.centre_m, c.size_m, True)
-    book.update([a, StainState(1, b.centre_m, b.size_m, True), done_c], 10.0)
+    done_c = Stain(2, c.centre_m, c.size_m, kappa=True)
+    book.update([a, Stain(1, b.centre_m, b.size_m, kappa=True), done_c], 10.0)
     assert book.open_ids(10.0) == {0}
     # the stain just left does not count (recheck_s 0: it would be the only one open, and the chain would end)
     book = StainBook(recheck_s=0.0, max_passes=5)
@@ -653,7 +654,7 @@ def test_after_the_last_pass_without_kappa_the_pad_waits_off_the_stain_for_the_c
     # it waits there a full recheck_s (perception's time to look) before another pass
     log2 = run(ex, arm, 0.9)
     assert all(e[0] == "DONE" for e in log2)
-    ex.set_stains(BOARD, [StainState(0, s0.centre_m, s0.size_m, True)])  # kappa from the fresh view
+    ex.set_stains(BOARD, [Stain(0, s0.centre_m, s0.size_m, kappa=True)])  # kappa from the fresh view
     log3 = run(ex, arm, 2.0)
     assert all(e[0] == "DONE" for e in log3) and ex.counters["wipe_timeouts"] == 1
     # without a clearance it holds where the pass ended, as before

@@ -16,9 +16,10 @@ import pytest
 import controller.core
 from controller.control.watch import ContactWatch, DisturbanceWatch
 from controller.core import ControllerCore
-from controller.executor_types import BoardPose, StainState
+from controller.executor_types import BoardPose
 from controller.params import ControllerParams
 from interfaces.messages import Phase
+from lampskit.core.planner_types import Stain
 from sim.core import SimCore
 from sim.params import SimParams
 
@@ -65,7 +66,7 @@ def test_the_contact_watch_trips_only_while_pressing_with_nothing_measured():
 
 def _stains(core: ControllerCore, sim: SimCore) -> None:
     board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
-    core.executor.set_stains(board, [StainState(s.id, np.array(s.centre_m), s.size_m, bool(r <= 0.03))
+    core.executor.set_stains(board, [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=bool(r <= 0.03))
                                      for s, r in zip(sim.dirt.stains, sim.dirt.remaining())])
 
 

@@ -246,7 +246,8 @@ def test_no_kernel_compiles_inside_a_tick():
         import controller.control.kernels as K, controller.motion as motion
         import controller.control.demand_kernels as DK, controller.control.limit_kernels as LK
         from controller.core import ControllerCore
-        from controller.executor_types import BoardPose, StainState
+        from controller.executor_types import BoardPose
+        from lampskit.core.planner_types import Stain
         from controller.params import ControllerParams
         from lampskit.learn.learn import bundled_skill
         from sim.core import SimCore
@@ -268,7 +269,7 @@ def test_no_kernel_compiles_inside_a_tick():
         for n in range(8000):  # the first touch creeps from 35 mm: WIPE comes after 4 s
             if n % 100 == 0:
                 board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
-                core.executor.set_stains(board, [StainState(s.id, np.array(s.centre_m), s.size_m, False)
+                core.executor.set_stains(board, [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=False)
                                                  for s in sim.dirt.stains])
             o = sim.out
             tau = core.tick(o.q, o.dq, o.wrench, False, 0.001, applied_nm=None if n == 0 else tau_prev)

@@ -14,10 +14,11 @@ import pinocchio as pin
 import pytest
 
 from controller.core import ControllerCore
-from controller.executor_types import BoardPose, StainState
+from controller.executor_types import BoardPose
 from controller.params import ControllerParams
 from interfaces.messages import Phase
 from interfaces.robot_model import RobotModel
+from lampskit.core.planner_types import Stain
 from robot.lbr.brake import ContactBrake
 from robot.lbr.compensation import JointSpring
 from robot.lbr.msgs import ClientCommandMode, SessionState
@@ -34,7 +35,7 @@ HELD = 40  # FRI cycles without a controller answer (80 ms)
 
 def _stains(core: ControllerCore, sim: SimCore) -> None:
     board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
-    core.executor.set_stains(board, [StainState(s.id, np.array(s.centre_m), s.size_m, bool(r <= 0.03))
+    core.executor.set_stains(board, [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=bool(r <= 0.03))
                                      for s, r in zip(sim.dirt.stains, sim.dirt.remaining())])
 
 

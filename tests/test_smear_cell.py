@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from controller.executor_types import StainState
 from controller.stain_book import StainBook
 from interfaces.errors import ConfigError
+from lampskit.core.planner_types import Stain
 from launch.report import stains_section, summary_lines
 from perception.params import PerceptionParams
 from sim.board import board_from_params
@@ -53,8 +53,8 @@ def test_a_ghost_keeps_its_share_of_the_dirt_however_often_it_is_wiped():
         stains_from_specs([{"centre_m": [0.3, 0.3], "size_m": 0.05, "ghost": 1.0}], lo, hi)
 
 
-def _stain(i: int, smeared: bool = False, kappa: bool = False) -> StainState:
-    return StainState(i, np.array([0.1 + 0.2 * i, 0.2]), 0.05, kappa, smeared=smeared, remaining=0.4, passes=4)
+def _stain(i: int, smeared: bool = False, kappa: bool = False) -> Stain:
+    return Stain(i, np.array([0.1 + 0.2 * i, 0.2]), 0.05, kappa=kappa, smeared=smeared, remaining=0.4, passes=4)
 
 
 def test_a_smear_closes_a_stain_only_after_a_pass_of_the_executors_own():

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from controller.core import ControllerCore
-from controller.executor_types import BoardPose, StainState
+from controller.executor_types import BoardPose
 from controller.params import ControllerParams
 from controller.surface_touch import SurfaceTouch
 from interfaces.messages import Phase
+from lampskit.core.planner_types import Stain
 from sim.core import SimCore
 from sim.params import SimParams
 
@@ -49,7 +50,7 @@ def _run(params: dict, seen_offset_m: float, ticks: int = 40_000) -> tuple[float
         seen = BoardPose.from_transform(T, sim.board.size_m)
         for n in range(ticks):
             if n % 100 == 0:
-                core.executor.set_stains(seen, [StainState(s.id, np.array(s.centre_m), s.size_m, bool(r <= 0.03))
+                core.executor.set_stains(seen, [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=bool(r <= 0.03))
                                                 for s, r in zip(sim.dirt.stains, sim.dirt.remaining())])
             o = sim.out
             tau = core.tick(o.q, o.dq, o.wrench, True, DT)

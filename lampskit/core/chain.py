@@ -70,16 +70,6 @@ class Reference(Protocol):
     a_xy: np.ndarray
 
 
-class StainView(Protocol):
-    """One stain as the chain reads it: centre (2,) [m] and, for adaptive wiping, the ink left (or None)."""
-
-    @property
-    def centre_m(self) -> np.ndarray: ...
-
-    @property
-    def ink(self) -> Stain | None: ...
-
-
 class Book(Protocol):
     """What the chain asks about the stains (the executor's :class:`controller.stain_book.StainBook`, or the
     rollout's plan with a stand-in for kappa)."""
@@ -87,7 +77,7 @@ class Book(Protocol):
     max_passes: int
 
     @property
-    def stains(self) -> Mapping[int, StainView]: ...
+    def stains(self) -> Mapping[int, Stain]: ...  # the chain reads a stain's centre and the ink left
 
     def is_done(self, stain_id: int) -> bool: ...
 

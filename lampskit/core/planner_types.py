@@ -12,7 +12,9 @@ from lampskit.errors import PlanningError
 
 @dataclass(frozen=True)
 class Stain:
-    """A stain on the board, as perception reports it.
+    """A stain on the board, as perception reports it: its shape, which the planner wipes, and what the executor
+    knows of it (kappa, the ink left, a smear). The one type of a stain past the wire (perception's message is
+    :class:`interfaces.messages.StainObservation`; :func:`controller.stains_in.stain_state` makes this of it).
 
     Attributes
     ----------
@@ -26,6 +28,13 @@ class Stain:
         Extent across the main axis [m]; 0 = not known (taken as round).
     axis_rad : float
         Direction of the main axis in the board plane [rad] (from board x).
+    kappa : bool
+        Wiping it is complete (perception's completion flag; the planner never reads it).
+    ink : Stain or None
+        The shape of the ink that remains of it (None: not reported).
+    smeared : bool
+        Perception says passes no longer clean it, with ``remaining`` (fraction of its first sighting, [0, 1]) after
+        ``passes`` passes.
     """
 
     id: int
@@ -33,6 +42,11 @@ class Stain:
     size_m: float
     width_m: float = 0.0
     axis_rad: float = 0.0
+    kappa: bool = False
+    ink: Stain | None = None
+    smeared: bool = False
+    remaining: float = 1.0
+    passes: int = 0
 
     def __post_init__(self) -> None:
         c = np.asarray(self.centre_m, dtype=float).reshape(-1)

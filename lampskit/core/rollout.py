@@ -125,12 +125,6 @@ class _Reference:
     a_xy: np.ndarray
 
 
-@dataclass
-class _StainView:
-    centre_m: np.ndarray
-    ink: Stain | None = None
-
-
 class _PlanBook:
     """The plan's stains for the chain, with ``is_done(wipe, cycles)`` standing in for kappa: a stain is done once
     the chain has wiped it long enough (and stays done)."""
@@ -139,7 +133,7 @@ class _PlanBook:
 
     def __init__(self, plan_: Plan, chain: MpChain, is_done: Callable[[Wipe, float], bool]) -> None:
         self._plan, self._chain, self._is_done = plan_, chain, is_done
-        self.stains = {w.stain.id: _StainView(w.stain.centre_m) for w in plan_.wipes}
+        self.stains = {w.stain.id: w.stain for w in plan_.wipes}
         self._done: set[int] = set()
 
     def is_done(self, stain_id: int) -> bool:
