@@ -94,8 +94,8 @@ class BoardWatch:
         return True
 
     def skip_out_of_reach(self, stains: list[Stain]) -> None:
-        """Close every new stain the arm cannot reach (:meth:`FreeMotion.reach_problem`), named and counted: it is
-        skipped, never attempted. Each stain is looked at once per adopted board."""
+        """Close every new stain the arm cannot wipe whole (:meth:`FreeMotion.stain_reach_problem`), named and
+        counted: it is skipped, never attempted. Each stain is looked at once per adopted board."""
         st = self.state
         board = st.board
         if board is None:  # (none adopted: no stains taken)
@@ -106,7 +106,7 @@ class BoardWatch:
             if s.id in self._reach_checked or s.kappa:
                 continue
             self._reach_checked.add(s.id)
-            why = self.motion.reach_problem(board, s.centre_m)
+            why = self.motion.stain_reach_problem(board, s)
             if why is not None:
                 self.book.close_out_of_reach(s.id, why)
                 st.counters["stains_out_of_reach"] += 1

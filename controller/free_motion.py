@@ -234,6 +234,25 @@ class FreeMotion:
             return f"at the edge of the arm's reach: the elbow stretched to {elbow:.2f} rad ({d:.2f} m from the base)"
         return None
 
+    def stain_reach_problem(self, board: BoardPose, stain: Stain) -> str | None:
+        """Why the arm cannot wipe ``stain`` whole (None: it can, or no :attr:`arm`): its centre or one of its ends
+        (half its size either way along its main axis, half its width across; round when the width is not known),
+        where the wiping pad's centre goes, is beyond the arm (:meth:`reach_problem`). A stain whose far end lies
+        where the elbow stretches straight would be wiped through the arm's singular pose."""
+        why = self.reach_problem(board, stain.centre_m)
+        if why is not None or self.arm is None:
+            return why
+        u = np.array([np.cos(stain.axis_rad), np.sin(stain.axis_rad)])
+        v = np.array([-u[1], u[0]])
+        half_w = 0.5 * (stain.width_m if stain.width_m > 0.0 else stain.size_m)
+        for name, d in (("end", 0.5 * stain.size_m * u), ("end", -0.5 * stain.size_m * u), ("side", half_w * v),
+                        ("side", -half_w * v)):
+            xy = stain.centre_m + d
+            why = self.reach_problem(board, xy)
+            if why is not None:
+                return f"its {name} at ({xy[0]:.2f}, {xy[1]:.2f}) m is {why}"
+        return None
+
     def _reachable_height(self, board: BoardPose | None, xy: np.ndarray, goal_h: float, lowest_h: float) -> float:
         """The highest height [m] up to ``goal_h`` above ``xy`` (2,) [m] that is :meth:`roomy`, scanned down in
         5 mm steps to ``lowest_h``; ``goal_h`` without the arm or the board."""

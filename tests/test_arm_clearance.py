@@ -25,6 +25,7 @@ from controller.params import ExecutorParams, ForceParams, LimitParams
 from controller.reach import arm_reach
 from interfaces.errors import ConfigError
 from interfaces.robot_model import RobotModel
+from interfaces.transforms import tool_rotation_on_board
 
 from .conftest import REPO
 
@@ -157,6 +158,41 @@ def test_a_stain_beyond_the_arm_is_skipped_with_the_reason_never_attempted(learn
     assert [s.id for s in ex.book.open_stains(0.0)] == [0]
     ex.set_stains(big, [near, far])  # looked at once per board
     assert ex.counters["stains_out_of_reach"] == 1
+
+
+def test_a_stain_whose_far_end_would_stretch_the_elbow_straight_is_skipped_naming_the_end(learned_skill):
+    """Its centre is in reach, but wiping it whole would take the pad past where the elbow comes within
+    UNREACHABLE_STRETCH_RAD of stretched straight (the arm's singular pose): skipped, the end and why named; a
+    stain as large beside it, clear of that edge, is planned."""
+    from controller.executor import SkillExecutor
+    from controller.free_motion import UNREACHABLE_STRETCH_RAD
+    from lampskit.core.planner_types import Stain
+
+    from .test_controller_units import BOARD
+
+    ex = SkillExecutor(learned_skill, ExecutorParams(survey_s=0.0))
+    arm = ex.motion.arm = arm_reach(RobotModel())
+    big = BoardPose(BOARD.R, BOARD.origin_m, np.array([1.6, 0.6]))
+    R = tool_rotation_on_board(big.R)
+
+    def roomy(x: float) -> bool:  # the elbow bent more than UNREACHABLE_STRETCH_RAD (inf: beyond the arm)
+        return UNREACHABLE_STRETCH_RAD < arm.elbow_rad(big.to_world(np.array([x, 0.3, 0.0])), R) < np.inf
+
+    lo, hi = 0.3, 1.6  # where along board x the elbow comes to stretched (it stretches outwards)
+    assert roomy(lo) and not roomy(hi)
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if roomy(mid) else (lo, mid)
+    edge = lo
+    reaching = Stain(0, np.array([edge - 0.03, 0.3]), 0.12, width_m=0.02)  # main axis along x: its end 3 cm past
+    clear = Stain(1, np.array([edge - 0.2, 0.3]), 0.12, width_m=0.02)
+    assert ex.motion.reach_problem(big, reaching.centre_m) is None  # its centre alone would pass
+    ex.set_stains(big, [reaching, clear])
+    assert set(ex.book.out_of_reach) == {0}, ex.book.out_of_reach
+    why = ex.book.out_of_reach[0]
+    # the band where the elbow is bent less than 0.1 rad is a millimetre wide: past it, the arm does not reach
+    assert why.startswith(f"its end at ({edge + 0.03:.2f}, 0.30) m is ") and "stretched" in why, why
+    assert [s.id for s in ex.book.open_stains(0.0)] == [1]
 
 
 def test_the_clearance_fades_out_while_a_joint_runs_fast():
