@@ -62,7 +62,7 @@ class ControllerAuth:
 
     def housekeeping(self) -> None:
         """Introduce the controller when due; take a new robot side's introduction (an ECDH, a few per run)."""
-        if self.identity is None:
+        if self.identity is None or self._intros is None:  # (the introductions are read with an identity only)
             return
         intro = self._intros.take()
         if intro is not None and intro.nonce != self._nonce:

@@ -436,10 +436,11 @@ class SkillExecutor:
             self.state.stage = Stage.HOLD
             return
         self.counters["plans"] += 1
-        first = self._plan.wipes[0]
+        first, board = self._plan.wipes[0], self.state.board
+        assert board is not None, "a plan without a board"  # plans are made on the adopted board only
         self.state.set_phase(Phase.APPROACH, "")
         self.state.stain_id, self.state.current_mp = first.stain.id, "approach"
-        self.motion.fly_to_hover(first.anchor_m, self.state.board)
+        self.motion.fly_to_hover(first.anchor_m, board)
         self.state.stage = Stage.FLY
 
     def _begin_press(self, tool: ToolState) -> None:
@@ -464,12 +465,15 @@ class SkillExecutor:
             away = 0.5 * board.size_m - board.to_board(np.zeros(3))[:2]
             n = float(np.linalg.norm(away))
             self.chain.finish_heading = away / n if n > 1e-6 else None
+        assert self._plan is not None, "the chain begun without a plan"
         self._on_chain_result[self.chain.start(self._plan, self._sp)]()
 
     def _entered_transition(self) -> None:
         self.state.set_phase(Phase.TRANSITION, "")
         self.state.current_mp = self.chain.current_mp
-        self.state.stain_id = self.chain.wipe.stain.id
+        wipe = self.chain.wipe
+        assert wipe is not None, "a transition leads into a wipe"
+        self.state.stain_id = wipe.stain.id
         self.junction_ticks.append(self.state.ticks)
         self.counters["transitions"] += 1
         self.state.stage = Stage.CHAIN

@@ -304,6 +304,7 @@ class FreeMotion:
     def move(self, dt_s: float) -> bool:
         """Advance x, y, h along the quintic by ``dt_s`` [s]; True once at its end."""
         m, sp = self._mover, self.setpoint
+        assert m is not None, "move() before a move was started"
         m.update(dt_s)
         sp.xy[:] = m.position[:2]
         sp.v_xy[:] = m.velocity[:2]
@@ -319,6 +320,7 @@ class FreeMotion:
     def unpress(self, dt_s: float) -> bool:
         """Advance the in-plane brake and the force ramp by ``dt_s`` [s]; True once both are done."""
         b, sp = self._xy_brake, self.setpoint
+        assert b is not None, "unpress() before a press ended"
         b.update(dt_s)
         sp.xy[:], sp.v_xy[:], sp.a_xy[:] = b.position, b.velocity, b.acceleration
         return self.ramp_force(dt_s) and b.finished

@@ -221,6 +221,7 @@ class RobotServer:
         if torques and self.guard.latch.latched:
             self.counters["commands_held_for_guard_fault"] += 1
         if action == Action.YIELD:
+            assert self._reading is not None, "a guard's yield before the first reading"
             return self.port.yield_hold(self.guard.damping_into(self._reading.dq_rad_s, self._damping))
         if action == Action.FAULT:
             return self.port.estop_hold()
@@ -230,6 +231,7 @@ class RobotServer:
         """Whether one cycle of ``tau_nm`` (n,) [Nm] would take a joint or the tool over its speed brake (the guard's
         prediction; counted and logged as an episode): then the cycle brakes instead."""
         r, rate_hz = self._reading, self.port.capabilities.state_rate_hz or self.p.rate_hz  # a clocked robot's own
+        assert r is not None, "a command judged before the first reading"
         entered = self.guard.check_command(r.q_rad, r.dq_rad_s, tau_nm, 1.0 / rate_hz, r.robot_time_ns * 1e-9)
         if entered:
             self._log_guard(entered, r)
