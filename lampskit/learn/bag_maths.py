@@ -138,7 +138,8 @@ def chain_to(frame: str, links: dict[str, FrameLink], base: str | None) -> list[
     if frame not in links:
         found = sorted(links)[:12]
         raise DemoError(f"no transform to the frame {frame!r}; the transforms' child frames are {found}")
-    chain, at = [], frame
+    chain: list[FrameLink] = []
+    at = frame
     while at in links and at != base:
         link = links[at]
         if any(c.child == link.parent for c in chain) or link.parent == frame:
@@ -161,6 +162,7 @@ def compose_chain(chain: list[FrameLink]) -> tuple[np.ndarray, np.ndarray, np.nd
     if not moving:
         raise DemoError(f"the frame {chain[0].child!r} never moves: every transform above it is static")
     t_ns = moving[0].t_ns
+    assert t_ns is not None  # (a moving link has stamps)
     idx = [None if c.t_ns is None else np.searchsorted(c.t_ns, t_ns, side="right") - 1 for c in chain]
     keep = np.all([i >= 0 for i in idx if i is not None], axis=0)
     t_ns = t_ns[keep]

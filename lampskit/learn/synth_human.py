@@ -70,7 +70,7 @@ def pause_on_board(run: Stroke, nxt: Stroke, pause_s: float, rng: np.random.Gene
     """Out of ``run`` to rest on the board beside it for ``pause_s``, then on into ``nxt``."""
     a, b = run.end_centre3, nxt.centre3
     side = rng.uniform(-1, 1, 2)
-    stop = np.array([*(a[:2] + 0.03 * side / max(np.linalg.norm(side), 1e-9)), 0.0])
+    stop = np.array([*(a[:2] + 0.03 * side / max(float(np.linalg.norm(side)), 1e-9)), 0.0])
     t_out = float(rng.uniform(0.6, 0.9))
     t_on = max(0.8, float(np.linalg.norm(b - stop)) / rng.uniform(0.25, 0.4))
     return [Transition(a, stop, t_out, np.zeros(3), run, None, min(0.4, 0.35 / t_out)), Rest(stop, pause_s),

@@ -246,8 +246,9 @@ def draw_messy_take(seed: int, n_phases: int | None = None, rate_hz: float | Non
         amp = float(rng.uniform(0.03, 0.06))
         drift = rng.uniform(0, 0.05) * _unit(rng)
         slow = int(rng.integers(0, 2))
-        phases.append(PhaseSpec(tuple(centre), str(rng.choice(["zigzag", "circle"])), float(rng.uniform(0.7, 1.5)),
-                                amp, float(rng.uniform(0, np.pi)), int(rng.integers(8, 17)), tuple(drift),
+        phases.append(PhaseSpec((float(centre[0]), float(centre[1])), str(rng.choice(["zigzag", "circle"])),
+                                float(rng.uniform(0.7, 1.5)), amp, float(rng.uniform(0, np.pi)),
+                                int(rng.integers(8, 17)), (float(drift[0]), float(drift[1])),
                                 slow_strokes=slow, pauses=int(rng.integers(0, 3 - slow)),
                                 pause_s=float(rng.uniform(0.3, 0.8))))
         if i == n - 1:

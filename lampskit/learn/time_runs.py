@@ -169,6 +169,7 @@ def merge_short_runs(runs: list[Run], t_s: np.ndarray, min_duration_s: float, tr
         if new == c:
             kept.add(a)
             continue
+        assert new is not None  # (more than one run: a neighbour on one side at least)
         runs[i] = (new, runs[i][1], runs[i][2])
         runs = join_runs(runs)
         kept = {r[1] for r in runs} & kept
@@ -262,7 +263,8 @@ def refine_boundaries(runs: list[Run], smooth: np.ndarray, rate_hz: float) -> li
 
             def same_phase(before: tuple[int, int], after: tuple[int, int]) -> bool:
                 # same_phase is called within this iteration only (by _wiping_phases below)
-                sides = tuple(period_samples(velocity[lo + x0:lo + x1], rate_hz) for x0, x1 in (before, after))  # noqa: B023
+                sides = (period_samples(velocity[lo + before[0]:lo + before[1]], rate_hz),  # noqa: B023
+                         period_samples(velocity[lo + after[0]:lo + after[1]], rate_hz))  # noqa: B023
                 return not gap_evidence(smooth[lo:hi], rest, before, after, period, rate_hz, sides).cuts  # noqa: B023
 
             for s0, s1 in _wiping_phases(stretches, same_phase):
