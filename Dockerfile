@@ -39,6 +39,8 @@ COPY controller ./controller
 COPY sim ./sim
 COPY perception ./perception
 COPY interfaces ./interfaces
+COPY runtime ./runtime
+COPY arm ./arm
 COPY launch ./launch
 COPY config ./config
 RUN pip install --no-deps --no-build-isolation . && rm -rf build *.egg-info && lamps --version

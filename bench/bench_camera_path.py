@@ -42,10 +42,10 @@ sys.path.insert(0, str(REPO / "bench"))
 
 from service_procs import BenchError, Proc, free_port  # noqa: E402
 
-from interfaces.config import ZenohSettings  # noqa: E402
 from interfaces.messages import ServiceStatus, Stains  # noqa: E402
-from interfaces.session import ServiceNode  # noqa: E402
 from perception.ros_images import store  # noqa: E402
+from runtime.config import ZenohSettings  # noqa: E402
+from runtime.session import ServiceNode  # noqa: E402
 
 TOPIC = "/camera/color/image_raw"
 BOARD = REPO / "tests" / "fixtures" / "whiteboards" / "board.toml"

@@ -34,7 +34,7 @@ REPO = Path(__file__).resolve().parent.parent
 def campaign(out: Path, seeds: str, stains: str, skill: Path, jobs: int, ray: bool, network: bool,
              env: dict) -> tuple[float, float, list[dict]]:
     """(wall [s], CPU of the campaign and every child it waited for [s], its cells)."""
-    argv = [sys.executable, "-m", "interfaces.cli", "campaign", "--seeds", seeds, "--stains", stains, "--boards",
+    argv = [sys.executable, "-m", "runtime.cli", "campaign", "--seeds", seeds, "--stains", stains, "--boards",
             "wall", "--jobs", str(jobs), "--skill", str(skill), "--out", str(out)] + (["--ray"] if ray else []) \
         + ([] if network else ["--no-network"])
     cpu0 = os.times()
@@ -59,7 +59,7 @@ def main() -> int:
            "RAY_AUTH_TOKEN": secrets.token_hex(16)}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        learn = subprocess.run([sys.executable, "-m", "interfaces.cli", "demo", "--stains", "3", "--seed", "0", "--out",
+        learn = subprocess.run([sys.executable, "-m", "runtime.cli", "demo", "--stains", "3", "--seed", "0", "--out",
                                 str(tmp / "learn")], cwd=REPO, capture_output=True, text=True, env=env)
         if learn.returncode != 0:
             raise SystemExit(f"learning failed: {learn.stderr[-1000:]}")

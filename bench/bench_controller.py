@@ -71,11 +71,11 @@ from controller.control.impedance import (  # noqa: E402
 from controller.core import ControllerCore  # noqa: E402
 from controller.executor_types import BoardPose  # noqa: E402
 from controller.params import ControllerParams  # noqa: E402
-from interfaces.config import ZenohSettings  # noqa: E402
 from interfaces.messages import ControllerStatus, ServiceStatus, SimTruth  # noqa: E402
-from interfaces.session import ServiceNode  # noqa: E402
 from lampskit.core.planner_types import Stain  # noqa: E402
 from lampskit.learn.learn import bundled_skill  # noqa: E402
+from runtime.config import ZenohSettings  # noqa: E402
+from runtime.session import ServiceNode  # noqa: E402
 from sim.core import SimCore  # noqa: E402
 from sim.params import SimParams  # noqa: E402
 

@@ -26,12 +26,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from arm.robot_model import RobotModel  # noqa: E402
 from controller.control.limits import SpeedOverride  # noqa: E402
-from interfaces.loop_hygiene import LoopHygiene  # noqa: E402
-from interfaces.loop_stats import LoopStats  # noqa: E402
-from interfaces.robot_model import RobotModel  # noqa: E402
 from robot.mock import MockArm  # noqa: E402
 from robot.server import RobotServer, ServerParams  # noqa: E402
+from runtime.loop_hygiene import LoopHygiene  # noqa: E402
+from runtime.loop_stats import LoopStats  # noqa: E402
 
 
 class _Node:  # RobotServer only reads .keys and opens two inboxes at construction

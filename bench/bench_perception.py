@@ -43,8 +43,8 @@ sys.path.insert(0, str(REPO))
 
 from sklearn.cluster import DBSCAN  # noqa: E402
 
+from arm.robot_model import RobotModel  # noqa: E402
 from interfaces.messages import CameraFrame  # noqa: E402
-from interfaces.robot_model import RobotModel  # noqa: E402
 from perception.cluster import cluster_pixels  # noqa: E402
 from perception.evaluate import kappa_timings  # noqa: E402
 from perception.frames import frame_from_message  # noqa: E402
@@ -132,7 +132,7 @@ import pickle, sys, time
 import numpy as np, cv2
 cv2.setNumThreads(1)
 sys.path.insert(0, sys.argv[1])
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 from perception.frames import frame_from_message
 from perception.params import PerceptionParams
 from perception.pipeline import Perception

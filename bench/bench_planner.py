@@ -79,9 +79,9 @@ def ticks_during_replan(skill, stains, start, threaded: bool, ticks_after: int =
     ``threaded`` on the real-time controller's :class:`~controller.planner_thread.PlannerThread`.
     Returns the worst tick [ms] (from its deadline to its end: what the robot waits for) over the plan and
     ``ticks_after`` more periods, and the periods the plan took."""
+    from arm.robot_model import RobotModel
     from controller.control.impedance import Reference, impedance_torque
     from controller.control.params import ImpedanceParams
-    from interfaces.robot_model import RobotModel
 
     model, imp = RobotModel(), ImpedanceParams()
     q = np.array([0.2, 0.5, -0.3, -1.3, 0.4, 0.8, -0.2])

@@ -75,7 +75,7 @@ def run_cell(out: Path, seed: int, plant: dict[str, str], mode: str, skill: Path
     env = {k: v for k, v in env.items() if not k.startswith("LAMPS__CONTROLLER__MODEL__")}
     env.update({f"LAMPS__CONTROLLER__MODEL__{k}": v for k, v in CONTROLLERS[controller].items()})
     env["PYTHONPATH"] = str(REPO)
-    argv = [sys.executable, "-m", "interfaces.cli", "up", "--no-network", "--seed", str(seed), "--out", str(out),
+    argv = [sys.executable, "-m", "runtime.cli", "up", "--no-network", "--seed", str(seed), "--out", str(out),
             "-q", "--max-duration", "900"] + (["--skill", str(skill)] if skill is not None else [])
     t0 = time.monotonic()
     r = subprocess.run(argv, cwd=REPO, env=env, capture_output=True, text=True)

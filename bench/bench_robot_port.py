@@ -40,13 +40,13 @@ import zenoh  # noqa: E402
 from bench_controller import bench_lockstep, bench_realtime  # noqa: E402
 from service_procs import BenchError, free_port  # noqa: E402
 
-from interfaces.config import ZenohSettings  # noqa: E402
 from interfaces.messages import RobotState, TorqueCommand  # noqa: E402
-from interfaces.session import ServiceNode, zenoh_config  # noqa: E402
 from robot.lbr.adapter import LbrPort  # noqa: E402
 from robot.lbr.msgs import LbrState, decode_state, encode_state, encode_torque_command  # noqa: E402
 from robot.lbr.params import LbrParams  # noqa: E402
 from robot.server import RobotServer, ServerParams  # noqa: E402
+from runtime.config import ZenohSettings  # noqa: E402
+from runtime.session import ServiceNode, zenoh_config  # noqa: E402
 
 Q0 = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0])
 

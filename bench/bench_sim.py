@@ -33,8 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from arm.robot_model import RobotModel  # noqa: E402
 from interfaces.messages import RobotState, TorqueCommand  # noqa: E402
-from interfaces.robot_model import RobotModel  # noqa: E402
 from sim.core import SimCore  # noqa: E402
 from sim.params import SimParams  # noqa: E402
 from tests.zenoh_helpers import SimProcess, latest_status, run_lockstep  # noqa: E402

@@ -5,7 +5,7 @@ Usage: .venv/bin/python bench/bench_sim_armature.py [--quick] [--json OUT]
 ``SimCore.step`` alone (no network), the arm approaching the board, then
 pressing the pad on it with 10 N while sliding (the scripted client of the
 sim tests, its torques computed outside the timed region), for four sets
-of joint figures (:mod:`interfaces.joint_dynamics`):
+of joint figures (:mod:`arm.joint_dynamics`):
 
 * rigid: no armature, no friction; the motor torques go to PyBullet as they are.
 * friction only: the drive path (mass matrix, inverse dynamics, contact
@@ -34,8 +34,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from interfaces.joint_dynamics import FR3_REFLECTED_INERTIA_KG_M2, JointDynamics  # noqa: E402
-from interfaces.robot_model import RobotModel  # noqa: E402
+from arm.joint_dynamics import FR3_REFLECTED_INERTIA_KG_M2, JointDynamics  # noqa: E402
+from arm.robot_model import RobotModel  # noqa: E402
 from sim.core import SimCore  # noqa: E402
 from sim.params import SimParams  # noqa: E402
 

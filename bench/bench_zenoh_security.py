@@ -40,11 +40,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from interfaces.config import ZenohSettings  # noqa: E402
-from interfaces.credentials import identity_folder, make_credentials  # noqa: E402
 from interfaces.messages import Capabilities, RobotState, TorqueCommand  # noqa: E402
-from interfaces.session import ServiceNode  # noqa: E402
 from launch.compose import free_port  # noqa: E402
+from runtime.config import ZenohSettings  # noqa: E402
+from runtime.credentials import identity_folder, make_credentials  # noqa: E402
+from runtime.session import ServiceNode  # noqa: E402
 
 
 def _settings(role: str, rid: str, port: int, listen: bool, secrets: Path, acl: bool, tls: bool) -> ZenohSettings:
@@ -63,7 +63,7 @@ def _router(rid: str, port: int, secrets: Path):
 
     env = {**os.environ, "LAMPS_ROBOT_ID": rid, "LAMPS_ZENOH_ACCESS_CONTROL": "true",
            "LAMPS_ZENOH_IDENTITY": str(identity_folder(secrets, "router"))}
-    proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "router", "--listen", f"tls/127.0.0.1:{port}",
+    proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "router", "--listen", f"tls/127.0.0.1:{port}",
                              "--status-s", "0"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:

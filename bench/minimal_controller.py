@@ -4,7 +4,7 @@ Usage (started by ``bench/bench_controller.py``): ``python bench/minimal_control
 --robot-id ID --seconds S``; prints one JSON line of figures at the end.
 
 The same process set-up as ``lamps controller --mode realtime`` (nice -10, the loop thread under
-:class:`~interfaces.loop_hygiene.LoopHygiene`: SCHED_FIFO, locked memory, the collector in the slack),
+:class:`~runtime.loop_hygiene.LoopHygiene`: SCHED_FIFO, locked memory, the collector in the slack),
 the same Zenoh readers and writers (an ``Inbox`` of the newest ``RobotState``, ``TorqueCommand`` with the
 control path's QoS), the same answer-each-state-as-it-comes loop; the tick only copies zeros into the
 command (the robot side must compensate gravity: ``lamps sim --gravity-compensated``). What the real
@@ -25,12 +25,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from interfaces.config import ZenohSettings  # noqa: E402
-from interfaces.loop_hygiene import LoopHygiene  # noqa: E402
 from interfaces.messages import RobotState, TorqueCommand  # noqa: E402
-from interfaces.priority import REALTIME, set_service_priority  # noqa: E402
-from interfaces.session import ServiceNode  # noqa: E402
-from interfaces.stop_signals import on_stop_signals  # noqa: E402
+from runtime.config import ZenohSettings  # noqa: E402
+from runtime.loop_hygiene import LoopHygiene  # noqa: E402
+from runtime.priority import REALTIME, set_service_priority  # noqa: E402
+from runtime.session import ServiceNode  # noqa: E402
+from runtime.stop_signals import on_stop_signals  # noqa: E402
 
 
 def run(connect: str, robot_id: str, seconds: float) -> dict:

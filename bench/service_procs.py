@@ -15,10 +15,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from interfaces.config import ZenohSettings
-from interfaces.session import ServiceNode
 from lampskit.core.skill import save_skill
 from lampskit.learn.learn import bundled_skill
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 REPO = Path(__file__).resolve().parent.parent
 #: The controller's start-up refusal of a rate its tick timing check says it cannot hold; retried this often.
@@ -45,7 +45,7 @@ class Proc:
         self.name = name
         self.log_path = log_dir / f"{name}.log"
         self._log = open(self.log_path, "w+")  # noqa: SIM115 (open for the process's life)
-        # a bench's services run plain TCP on loopback on purpose unless given identities (interfaces/service_security)
+        # a bench's services run plain TCP on loopback on purpose unless given identities (runtime/service_security)
         env = dict(os.environ, PYTHONUNBUFFERED="1", **{"LAMPS_ZENOH_INSECURE": "true", **(env or {})})
         self.proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=self._log, stderr=subprocess.STDOUT, text=True)
 
@@ -145,7 +145,7 @@ def sim_and_controller(mode: str, robot: str = "sim", env: dict[str, str] | None
             ends = (free_port(),)
             side, ctl_cmd = _as_clients(side, ctl_cmd, f"tcp/127.0.0.1:{ends[0]}")
             env = dict(env or {}, LAMPS_ZENOH_MODE="client")
-            procs.append(Proc("router", [sys.executable, "-m", "interfaces.cli", "router", "--listen",
+            procs.append(Proc("router", [sys.executable, "-m", "runtime.cli", "router", "--listen",
                                          f"tcp/127.0.0.1:{ends[0]}", "--status-s", "0", "--robot-id", rid],
                               Path(tmp)))
             _wait_listening(procs[-1], ends[0])

@@ -39,7 +39,7 @@ class ArmModel:
     """Correction, load estimate and identification motion of one controller (see the module docstring).
 
     params : :class:`~controller.control.model_correction.CorrectionParams`; model : the controller's
-    :class:`~interfaces.robot_model.RobotModel`; contact_threshold_n : a wrench above it is a touch [N].
+    :class:`~arm.robot_model.RobotModel`; contact_threshold_n : a wrench above it is a touch [N].
     """
 
     def __init__(self, params, model, contact_threshold_n: float) -> None:

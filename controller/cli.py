@@ -2,7 +2,7 @@
 
 Configuration comes from ``--config FILE`` (TOML, ``[zenoh]`` and
 ``[controller]`` tables, see :mod:`controller.params`; ``[joints]``, the
-arm's rotor inertia and friction, :mod:`interfaces.joint_dynamics`), then ``LAMPS_*``
+arm's rotor inertia and friction, :mod:`arm.joint_dynamics`), then ``LAMPS_*``
 environment variables, then the options below (highest priority). A bad
 config, a skill file that does not load, or a rate this machine cannot
 hold is a one-line error and exit code 1 before anything starts; Ctrl-C or
@@ -18,13 +18,13 @@ import time
 
 import numpy as np
 
-from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
-from interfaces.priority import REALTIME, set_service_priority, wanted_nice
-from interfaces.realtime import RealtimeRequest
-from interfaces.service_main import log_to_stderr, refuse, serve
-from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError, SkillFileError
+from runtime.config import add_zenoh_options, load_config, zenoh_with_options
+from runtime.priority import REALTIME, set_service_priority, wanted_nice
+from runtime.realtime import RealtimeRequest
+from runtime.service_main import log_to_stderr, refuse, serve
+from runtime.stop_signals import on_stop_signals
 
 SERVICE = "controller"
 PROG = "lamps controller"
@@ -140,8 +140,8 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_settings, params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
-        from interfaces.joint_dynamics import joint_dynamics_from_config
-        from interfaces.robot_model import RobotModel
+        from arm.joint_dynamics import joint_dynamics_from_config
+        from arm.robot_model import RobotModel
 
         skill = load_runnable_skill(params.skill)
         model = RobotModel(joints=joint_dynamics_from_config(a.config))  # the [joints] table the sim reads too

@@ -32,7 +32,7 @@ from interfaces.arm_auth import (
     peer_public_key,
 )
 from interfaces.messages import Estop, Introduction, TorqueCommand
-from interfaces.service_security import IN_PROCESS
+from runtime.service_security import IN_PROCESS
 
 log = logging.getLogger(__name__)
 

@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from arm.robot_model import RobotModel
 from interfaces.messages import Phase
-from interfaces.robot_model import RobotModel
 from lampskit.core.skill import Skill
 
 from .arm_model import ArmModel

@@ -27,11 +27,11 @@ from typing import Annotated, Any
 
 from controller.control.model_correction import CorrectionParams
 from controller.control.params import ControlConfigError, ImpedanceParams
-from interfaces.config import In, check_declared, dataclass_from_table
-from interfaces.config import check_range as _range
 from interfaces.errors import ConfigError
 from lampskit.core.planner_types import PlannerParams
 from lampskit.errors import PlanningError
+from runtime.config import In, check_declared, dataclass_from_table
+from runtime.config import check_range as _range
 
 MODES = ("lockstep", "realtime")
 #: No robot state this long [s, wall] is a lost robot, per mode (``robot_lost_s = 0``).

@@ -15,7 +15,7 @@ import sys
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
-from interfaces.realtime import keep_fair
+from runtime.realtime import keep_fair
 
 #: The interpreter's switch interval while a plan runs [s].
 SWITCH_INTERVAL_S = 2e-4
@@ -24,7 +24,7 @@ SWITCH_INTERVAL_S = 2e-4
 class PlannerThread(ThreadPoolExecutor):
     """One worker thread, started at construction (create it before the loop's thread turns real-time: a
     thread inherits its creator's scheduling) and kept under the fair scheduler when the loop raises the
-    process's I/O threads (:func:`~interfaces.realtime.keep_fair`). ``submit`` as for any executor."""
+    process's I/O threads (:func:`~runtime.realtime.keep_fair`). ``submit`` as for any executor."""
 
     def __init__(self) -> None:
         super().__init__(max_workers=1, thread_name_prefix="lamps-planner")

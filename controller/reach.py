@@ -49,7 +49,7 @@ class ArmReach:
 
 
 def arm_reach(model) -> ArmReach:
-    """The :class:`ArmReach` of a :class:`~interfaces.robot_model.RobotModel` (its joints 2, 4 and 6 are the
+    """The :class:`ArmReach` of a :class:`~arm.robot_model.RobotModel` (its joints 2, 4 and 6 are the
     shoulder, elbow and wrist centres), from its kinematics at zero."""
     import pinocchio as pin
 

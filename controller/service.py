@@ -34,9 +34,9 @@ import numpy as np
 from interfaces.arm_estimate import ArmEstimate
 from interfaces.messages import (HOLD, ControllerStatus, ControllerTrace, Estop, RobotState, SimTruth, Stains,
                                  TorqueCommand)
-from interfaces.loop_hygiene import LoopHygiene
-from interfaces.loop_stats import LoopStats
-from interfaces.session import ServiceNode
+from runtime.loop_hygiene import LoopHygiene
+from runtime.loop_stats import LoopStats
+from runtime.session import ServiceNode
 
 from lampskit.errors import PlanningError
 
@@ -120,7 +120,7 @@ class ControllerService:
         return self.ticks
 
     def lockstep_states(self):
-        """The lock-step state reader (an :class:`~interfaces.session.Inbox`), its counters in the status."""
+        """The lock-step state reader (an :class:`~runtime.session.Inbox`), its counters in the status."""
         self._state_reader = self.node.inbox(self.keys.robot_state, RobotState, maxlen=8)
         return self._state_reader
 

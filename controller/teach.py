@@ -24,8 +24,8 @@ from collections import Counter
 
 import numpy as np
 
+from arm.robot_model import RobotModel
 from interfaces.messages import Phase
-from interfaces.robot_model import RobotModel
 
 from .control.force import NormalForceRegulator
 from .control.impedance import Kinematics

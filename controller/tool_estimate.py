@@ -37,7 +37,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from interfaces.description import ERASER_LINK
+from arm.description import ERASER_LINK
 
 #: Gravity in the world (robot base) frame [m/s^2].
 GRAVITY_M_S2 = np.array([0.0, 0.0, -9.81])
@@ -107,7 +107,7 @@ class ToolEstimate:
 
     @classmethod
     def for_model(cls, model) -> ToolEstimate:
-        """For a :class:`~interfaces.robot_model.RobotModel` (the pad frame's place on the flange from its model)."""
+        """For a :class:`~arm.robot_model.RobotModel` (the pad frame's place on the flange from its model)."""
         m = model.model
         flange = m.frames[m.getFrameId(ERASER_LINK)].placement
         pad = m.frames[model.tcp_id].placement

@@ -1,8 +1,8 @@
-"""The contract every process shares: keys, messages, config, the CLI."""
+"""The wire contract every process shares: keys, messages and their checks and codec, the access list's roles, the
+commands' authentication, frames and transforms. Its runtime (sessions, settings, security) is :mod:`runtime`, the
+arm's model :mod:`arm`."""
 
 __all__ = [
-    "access", "arm_auth", "arm_estimate", "board_markers", "certificates", "cli", "codec", "config", "credentials",
-    "description", "errors", "joint_dynamics", "keys", "local_bus", "loop_hygiene", "loop_stats", "message_checks",
-    "message_limits", "messages", "priority", "realtime", "robot_model", "service_main", "service_security",
-    "session", "stain_shape", "stop_signals", "transforms"
+    "access", "arm_auth", "arm_estimate", "board_markers", "codec", "errors", "keys", "message_checks",
+    "message_limits", "messages", "stain_shape", "transforms"
 ]

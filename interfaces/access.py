@@ -1,7 +1,7 @@
 """Who may write what in a cell: the roles, and Zenoh's access control built from them (default deny).
 
 Every service joins as one role. By default the role is the common name of
-its own TLS certificate (mutual TLS, :mod:`interfaces.credentials`: each
+its own TLS certificate (mutual TLS, :mod:`runtime.credentials`: each
 service holds only its own private key, and both ends of every link prove
 who they are, whichever side opened it); a cell that still uses Zenoh's
 user-password authentication is named by user name instead, which identifies

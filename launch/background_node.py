@@ -15,21 +15,21 @@ from typing import TYPE_CHECKING
 from lampskit.errors import LampsError
 
 if TYPE_CHECKING:
-    from interfaces.config import ZenohSettings
-    from interfaces.session import ServiceNode
+    from runtime.config import ZenohSettings
+    from runtime.session import ServiceNode
 
 
 def open_background_node(prog: str, service: str, args, cells: tuple[str, ...] = ()
                          ) -> tuple[ServiceNode, ZenohSettings, threading.Event] | None:
     """(node, settings, stop event) for ``service``, or None after printing ``<prog>: error: ...``.
 
-    args : parsed options with ``config`` and the options of ``interfaces.config.add_zenoh_options``.
+    args : parsed options with ``config`` and the options of ``runtime.config.add_zenoh_options``.
     cells : the robot ids of a site's cells the service follows (the site viewer: ``[zenoh] cells`` set to them,
     the node's own keys, its liveliness token, the first cell's); () keeps the configured ones.
     """
-    from interfaces.config import load_config, zenoh_with_options
-    from interfaces.priority import BACKGROUND, leave_background, set_service_priority
-    from interfaces.stop_signals import on_stop_signals
+    from runtime.config import load_config, zenoh_with_options
+    from runtime.priority import BACKGROUND, leave_background, set_service_priority
+    from runtime.stop_signals import on_stop_signals
 
     stop = threading.Event()
     on_stop_signals(stop, background=True)
@@ -41,7 +41,7 @@ def open_background_node(prog: str, service: str, args, cells: tuple[str, ...] =
         set_service_priority(BACKGROUND)
         if stop.is_set():  # stopped before it stepped back: its handler found nothing to leave
             leave_background()
-        from interfaces.session import ServiceNode
+        from runtime.session import ServiceNode
 
         node = ServiceNode(service, settings).__enter__()
     except LampsError as exc:

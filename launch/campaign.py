@@ -76,8 +76,8 @@ log = logging.getLogger(__name__)
 
 def felt_model() -> dict[str, float]:
     """The sim's removal law at the controller's wiping force, and the report's level of a wiped stain."""
+    from arm.description import PAD_SIZE_M
     from controller.params import ControllerParams
-    from interfaces.description import PAD_SIZE_M
     from sim.params import SimParams
 
     from .report import TRUTH_LEVEL
@@ -118,7 +118,7 @@ def _learn_skill(out: Path) -> Path:
     """The bundled demo learned once, as ``lamps up`` learns it by default."""
     learn = out / "learn"
     log.info("learning the bundled demo into %s", learn)
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "demo", "--stains", "3", "--seed", "0", "--out",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "demo", "--stains", "3", "--seed", "0", "--out",
                         str(learn)], capture_output=True, text=True, env={**os.environ, "MPLBACKEND": "Agg"})
     if r.returncode != 0 or not (learn / "skill.json").is_file():
         raise CampaignError(f"learning the skill failed (exit {r.returncode}): {r.stderr.strip()[-300:]}")
@@ -128,8 +128,8 @@ def _learn_skill(out: Path) -> Path:
 def _bounds(cells: list[Cell]) -> tuple[dict[Cell, tuple], dict[Cell, float], dict[str, float], float, float]:
     """Per cell its stains (areas, centres) and lower bound; the felt model; the planner's speed bound and the
     pad's width."""
+    from arm.description import PAD_SIZE_M
     from controller.params import ControllerParams
-    from interfaces.description import PAD_SIZE_M
     from lampskit.core.planner_types import PlannerParams
 
     tables = {b: _board_table(b) for b in dict.fromkeys(c.board for c in cells)}

@@ -67,7 +67,7 @@ def plant_error(plant: str, seed: int) -> float:
 @functools.lru_cache(maxsize=1)
 def _described_link_mass_kg() -> np.ndarray:
     """(7,) the description's link masses [kg], links A1..A7."""
-    from interfaces.robot_model import RobotModel
+    from arm.robot_model import RobotModel
 
     m = RobotModel().model
     return np.array([m.inertias[i].mass for i in range(1, 8)])

@@ -55,7 +55,7 @@ def run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
     why = ""
     for attempt in range(3):  # a port taken by something else: again on another range
         ports = base + attempt * PORT_SLOTS * PORT_STRIDE if network else None
-        argv = [sys.executable, "-m", "interfaces.cli", "up", *up_argv(cell, skill, run_dir, max_duration_s, ports)]
+        argv = [sys.executable, "-m", "runtime.cli", "up", *up_argv(cell, skill, run_dir, max_duration_s, ports)]
         log.info("cell %s: %s", cell.name, " ".join(argv[2:]))
         r = subprocess.run(argv, capture_output=True, text=True, env={**os.environ, **cell_env(cell)},
                            timeout=max_duration_s + 120)

@@ -125,7 +125,7 @@ def _learn(a, out: Path, echo, stop_requested: threading.Event) -> Path:
             raise UpError(f"--skill {a.skill}: no such file")
         return skill
     learn = out / "learn"
-    lamps = (sys.executable, "-m", "interfaces.cli")
+    lamps = (sys.executable, "-m", "runtime.cli")
     if a.demo:
         if not Path(a.demo.split("#")[0]).is_file():
             raise UpError(f"--demo {a.demo}: no such file")
@@ -148,7 +148,7 @@ def up_main(argv: list[str] | None = None) -> int:
     a = build_up_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="lamps up %(levelname)s: %(message)s")
-    from interfaces.stop_signals import on_stop_signals
+    from runtime.stop_signals import on_stop_signals
 
     stop_requested = threading.Event()
     on_stop_signals(stop_requested)
@@ -431,9 +431,9 @@ def _port_busy(port: int) -> bool:
 def _watcher(cell: _Cell):
     """The launcher's session, as the operator (its identity is in the run's credentials whether or not the list is
     on): linked to every service, or a client of the router."""
-    from interfaces.config import ZenohSettings
-    from interfaces.credentials import identity_folder
-    from interfaces.session import ServiceNode
+    from runtime.config import ZenohSettings
+    from runtime.credentials import identity_folder
+    from runtime.session import ServiceNode
 
     endpoints = tuple(e for s in cell.services for e in s.listen_endpoints)
     settings = ZenohSettings(connect=(cell.router,) if cell.router else endpoints,

@@ -342,7 +342,7 @@ def localize(services: list[ComposeService], port_of: Mapping[tuple[str, int], i
     service's ``/secrets`` in environment values becomes the folder of the
     role its compose volume mounts there (``./secrets/<role>:/secrets``).
     """
-    lamps = lamps_argv0 or (sys.executable, "-m", "interfaces.cli")
+    lamps = lamps_argv0 or (sys.executable, "-m", "runtime.cli")
     host_of: dict[str, str] = {}
     for s in services:
         for h in (s.name, *s.aliases):

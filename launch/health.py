@@ -65,14 +65,14 @@ def alive(service: str, timeout_s: float, env: dict[str, str] | None = None) -> 
     (no listen endpoint of its own) within ``timeout_s``, else why not."""
     from dataclasses import replace
 
-    from interfaces.config import load_config
     from interfaces.errors import ConfigError
+    from runtime.config import load_config
 
     try:
         settings = replace(load_config(None, env).zenoh, listen=())
         import zenoh
 
-        from interfaces.session import zenoh_config
+        from runtime.session import zenoh_config
 
         with zenoh.open(zenoh_config(settings)) as session:
             key = settings.keys.alive(service)

@@ -2,7 +2,7 @@
 
 The learner itself knows no robot (``lampskit`` imports nothing of the cell): a robot recording is read with
 the arm it is handed (:class:`~lampskit.learn.bags.ArmKinematics`). This module builds that arm from the robot
-description (:mod:`interfaces.robot_model`: Pinocchio forward kinematics of the KUKA LBR iiwa 14 with the
+description (:mod:`arm.robot_model`: Pinocchio forward kinematics of the KUKA LBR iiwa 14 with the
 eraser) and from the lbr stack's message definitions (:mod:`robot.lbr.msgs`).
 
 Joint names accepted, joint 1 first:
@@ -10,7 +10,7 @@ Joint names accepted, joint 1 first:
 - ``A1`` .. ``A7`` (lbr_fri_ros2_stack ``humble`` cca24ae,
   lbr_description/urdf/iiwa14/iiwa14_description.xacro:50, 84, 118, ...);
 - ``<robot_name>_A1`` .. (``rolling`` 218d723, same file lines 51, 85, ..., 255; ``lbr`` by default);
-- ``iiwa_joint_1`` .. (this project's description, :data:`interfaces.description.JOINT_NAMES`).
+- ``iiwa_joint_1`` .. (this project's description, :data:`arm.description.JOINT_NAMES`).
 """
 
 from __future__ import annotations
@@ -39,11 +39,11 @@ def learn_main(argv: list[str]) -> int:
 
 
 def described_arm() -> ArmKinematics:
-    """The arm of :mod:`interfaces.description`: Pinocchio FK to the flange, the eraser's pad as the tool."""
+    """The arm of :mod:`arm.description`: Pinocchio FK to the flange, the eraser's pad as the tool."""
     import pinocchio as pin
 
-    from interfaces.description import ERASER_LINK, TCP_FRAME
-    from interfaces.robot_model import RobotModel
+    from arm.description import ERASER_LINK, TCP_FRAME
+    from arm.robot_model import RobotModel
     from robot.lbr.msgs import LBR_STATE_MSG, LBR_STATE_MSG_FRI2
 
     model = RobotModel()

@@ -212,7 +212,7 @@ class LiveView:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from interfaces.config import add_zenoh_options
+    from runtime.config import add_zenoh_options
 
     p = argparse.ArgumentParser(prog="lamps foxglove", description=(
         "Serve the running cell to the Foxglove app over its WebSocket protocol (open ws://HOST:PORT in the app; "
@@ -262,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     if a.print_token:
         return _print_token(a, token)
-    from interfaces.stop_signals import wait_for
+    from runtime.stop_signals import wait_for
 
     from .background_node import open_background_node
 
@@ -293,8 +293,8 @@ def main(argv: list[str] | None = None) -> int:
 def _checked_token(a) -> str | None:
     """The token of the options (None: none) if the view may serve on ``--host`` with it; ValueError saying why
     not (no token beyond loopback, a short one, an identity or a file that cannot be read)."""
-    from interfaces.config import load_config, zenoh_with_options
     from lampskit.errors import LampsError
+    from runtime.config import load_config, zenoh_with_options
 
     from .ws_server import check_token
 

@@ -7,7 +7,7 @@ the same classes, :class:`~sim.service.SimPort` served by
 :class:`~robot.server.RobotServer`, :class:`~controller.service.ControllerService`,
 :class:`~perception.service.PerceptionService` reading
 :class:`~perception.sources.ZenohSource`, :class:`~launch.record.Recorder`,
-each on a :class:`~interfaces.local_bus.LocalNode` instead of a Zenoh session
+each on a :class:`~runtime.local_bus.LocalNode` instead of a Zenoh session
 (same codec, same readers and counters). One thread steps them in the lock-step
 order of the networked cell: state k to the controller
 (:meth:`~controller.service.ControllerService.answer`), its command to the
@@ -72,18 +72,18 @@ class _Cell:
     """The services of one cell on one bus, built from their compose environments as their commands build them."""
 
     def __init__(self, envs: dict[str, dict[str, str]], out: Path) -> None:
+        from arm.joint_dynamics import joint_dynamics_from_config
+        from arm.robot_model import RobotModel
         from controller.cli import load_runnable_skill
         from controller.core import ControllerCore
         from controller.params import ControllerParams
         from controller.service import ControllerService
-        from interfaces.config import load_config
-        from interfaces.joint_dynamics import joint_dynamics_from_config
-        from interfaces.local_bus import LocalBus, LocalNode, LocalSession
-        from interfaces.robot_model import RobotModel
         from perception.params import PerceptionParams
         from perception.service import PerceptionService
         from perception.sources import ZenohSource
         from robot.server import RobotServer, ServerParams
+        from runtime.config import load_config
+        from runtime.local_bus import LocalBus, LocalNode, LocalSession
         from sim.core import SimCore
         from sim.params import SimParams
         from sim.service import SimPort

@@ -31,7 +31,7 @@ def _die_with_parent() -> None:  # runs in the child between fork and exec
 
 
 #: Switches that weaken a service's security: a launcher never passes them on from its own environment, only
-#: when it sets them itself (interfaces/service_security.py: no silent insecurity).
+#: when it sets them itself (runtime/service_security.py: no silent insecurity).
 SECURITY_SWITCHES = ("LAMPS_ZENOH_INSECURE", "LAMPS_ZENOH_ACCESS_CONTROL", "LAMPS_ACCESS_CONTROL",
                      "LAMPS__ZENOH__INSECURE", "LAMPS__ZENOH__ACCESS_CONTROL")
 

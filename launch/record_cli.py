@@ -21,7 +21,7 @@ from pathlib import Path
 
 
 def record_main(argv: list[str] | None = None) -> int:
-    from interfaces.config import add_zenoh_options
+    from runtime.config import add_zenoh_options
 
     p = argparse.ArgumentParser(prog="lamps record", description=(
         "Record every key of the cell into DIR/recording.mcap (opens in Foxglove) until stopped (SIGTERM or "
@@ -51,7 +51,7 @@ def record_main(argv: list[str] | None = None) -> int:
         p.error("--until done follows one cell's controller: not with --cells")
     if a.max_duration is not None and not (a.max_duration > 0 and a.max_duration < float("inf")):
         p.error(f"--max-duration must be a positive number of seconds, got {a.max_duration}")
-    from interfaces.stop_signals import wait_for
+    from runtime.stop_signals import wait_for
 
     from .background_node import open_background_node
     from .record import Recorder, budget_from_env

@@ -247,7 +247,7 @@ def _final_status(run: Run) -> tuple[int | None, dict | None]:
 
 def _safety_section(run: Run) -> dict[str, float]:
     """The physical contact force (sim truth) and the joint speeds (every robot state), over the whole run."""
-    from interfaces.robot_model import RobotModel
+    from arm.robot_model import RobotModel
 
     dq_max = RobotModel().limits.dq_max
     worst = 0.0

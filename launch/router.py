@@ -32,7 +32,7 @@ import sys
 import threading
 
 from interfaces.errors import ConfigError
-from interfaces.stop_signals import on_stop_signals, wait_for
+from runtime.stop_signals import on_stop_signals, wait_for
 
 log = logging.getLogger("lamps.router")
 
@@ -51,7 +51,7 @@ def router_settings(settings, listen: tuple[str, ...]):
 def main(argv: list[str] | None = None) -> int:
     from dataclasses import replace
 
-    from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
+    from runtime.config import add_zenoh_options, load_config, zenoh_with_options
 
     ap = argparse.ArgumentParser(prog="lamps router", description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", help="TOML configuration ([zenoh]: identity, access_control, robot_id, ...)")
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
             log.warning("access control is off: every client with a cell certificate may put on every key")
         import zenoh
 
-        from interfaces.session import zenoh_config
+        from runtime.session import zenoh_config
 
         zenoh.try_init_log_from_env()  # RUST_LOG: Zenoh's own log on stderr (the refusals above); unset: quiet
         session = zenoh.open(zenoh_config(settings))

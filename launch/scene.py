@@ -43,7 +43,7 @@ import numpy as np
 import pinocchio as pin
 from foxglove import messages as fm
 
-from interfaces.description import TCP_FRAME, URDF_PATH, urdf_attr
+from arm.description import TCP_FRAME, URDF_PATH, urdf_attr
 from interfaces.keys import Keys
 from interfaces.messages import CameraFrame, RobotState, Stains
 

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     import zenoh
 
 #: The command every child runs: this interpreter and the console script's module.
-LAMPS = (sys.executable, "-m", "interfaces.cli")
+LAMPS = (sys.executable, "-m", "runtime.cli")
 #: How long a cell's ``lamps up`` may take to stop its services and write its report once asked to.
 CELL_STOP_S = 180.0
 
@@ -59,7 +59,7 @@ def clients_of_router(services: list, endpoint: str) -> list:
 def cell_credentials(a, out: Path) -> Path:
     """The cell's identities: ``--credentials`` (whose cell, if it names one, is the robot id), else new ones (and a
     new CA) in the run folder."""
-    from interfaces.credentials import cell_of, identity_files, identity_folder, make_credentials
+    from runtime.credentials import cell_of, identity_files, identity_folder, make_credentials
 
     if not getattr(a, "credentials", None):
         make_credentials(out / "credentials", if_missing=True)
@@ -79,8 +79,8 @@ def cell_credentials(a, out: Path) -> Path:
 def run_cells(a, skill: Path, out: Path, stop_requested) -> int:
     """Run ``a.cells`` cells through one router (see the module docstring); the exit code."""
     from interfaces.access import RELAY, SITE_VIEWER
-    from interfaces.credentials import identity_folder, make_credentials
     from interfaces.keys import DEFAULT_ROBOT_ID
+    from runtime.credentials import identity_folder, make_credentials
 
     from .procs import Child, wait_port
 
@@ -211,10 +211,10 @@ class SiteView:
         import zenoh
 
         from interfaces.access import SITE_VIEWER
-        from interfaces.config import ZenohSettings
         from interfaces.keys import Keys
         from interfaces.messages import ControllerStatus, SimTruth
-        from interfaces.session import Latest, zenoh_config
+        from runtime.config import ZenohSettings
+        from runtime.session import Latest, zenoh_config
 
         settings = ZenohSettings(mode="client", connect=(self.endpoint,), cells=self.cells, access_control=True,
                                  identity=str(self.creds / SITE_VIEWER))

@@ -31,7 +31,7 @@ SETTLE_S = 0.5
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from interfaces.config import add_zenoh_options
+    from runtime.config import add_zenoh_options
 
     p = argparse.ArgumentParser(prog="lamps teach", description=(
         "Teach mode: the arm is hand-guided (no stiffness, light damping, gravity compensated, the force and "
@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING,
                         format="lamps teach %(levelname)s: %(message)s")
-    from interfaces.stop_signals import on_stop_signals
+    from runtime.stop_signals import on_stop_signals
 
     stop = threading.Event()
     on_stop_signals(stop)
@@ -93,10 +93,10 @@ def _check(a) -> Path:
 
 
 def _teach(a, stop: threading.Event) -> int:
+    from arm.joint_dynamics import joint_dynamics_from_config
+    from arm.robot_model import RobotModel
     from controller.params import ControllerParams
-    from interfaces.config import load_config
-    from interfaces.joint_dynamics import joint_dynamics_from_config
-    from interfaces.robot_model import RobotModel
+    from runtime.config import load_config
 
     out = _check(a)
     cfg = load_config(a.config)
@@ -114,7 +114,7 @@ def _teach(a, stop: threading.Event) -> int:
               flush=True)
         why = run_local(sim_p, ctrl_p, joints, recorder, duration, stop, _note)
     else:
-        from interfaces.config import zenoh_with_options
+        from runtime.config import zenoh_with_options
 
         from .teach_cell import run_network
 

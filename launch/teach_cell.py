@@ -80,10 +80,10 @@ def run_local(sim_p, ctrl_p, envs_joints, recorder: PathRecorder, duration_s: fl
     """Teach in the simulated cell, network-free, for ``duration_s`` of robot time (or until stopped); the states
     go to ``recorder``. Returns why it ended; raises :class:`TeachError` on a FAULT or ESTOP (the demonstration
     is then not to be written)."""
-    from interfaces.local_bus import LocalBus, LocalNode
+    from arm.robot_model import RobotModel
     from interfaces.messages import Phase, RobotState
-    from interfaces.robot_model import RobotModel
     from robot.server import RobotServer, ServerParams
+    from runtime.local_bus import LocalBus, LocalNode
     from sim.core import SimCore
     from sim.service import SimPort
 
@@ -151,7 +151,7 @@ def run_network(settings, ctrl_p, model, recorder: PathRecorder, duration_s: flo
     ``robot/state`` under ``settings``' prefix, until stopped or ``duration_s`` of robot time from the first
     recorded state. Raises :class:`TeachError` when no state comes within ``wait_s`` [s], or on a halt."""
     from interfaces.messages import Phase, RobotState
-    from interfaces.session import ServiceNode
+    from runtime.session import ServiceNode
 
     try:
         node = ServiceNode("controller", settings).__enter__()

@@ -4,7 +4,7 @@ A real iiwa's links are light grey (board-like: read as clean board, they
 would hide a stain and let kappa come), its joints, wrist and cable dark
 (read as black ink where black is in the palette). Its joint states say
 where every link is: each visual shape of the shared description
-(``interfaces/description/iiwa14_eraser.urdf``: one cylinder per link, the
+(``arm/description/iiwa14_eraser.urdf``: one cylinder per link, the
 eraser's boxes), as a convex solid of :data:`SIDES`-gon rings, is placed
 by the forward kinematics (Pinocchio, the same file), projected from the
 camera's centre onto the board plane (:func:`~perception.self_filter.board_shadow`)
@@ -24,7 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from interfaces.description import URDF_PATH, urdf_attr, urdf_child
+from arm.description import URDF_PATH, urdf_attr, urdf_child
 
 from .rectify import BoardGrid
 from .self_filter import ArmState, board_shadow

@@ -20,12 +20,12 @@ import sys
 
 import msgspec
 
-from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
-from interfaces.priority import BACKGROUND, set_service_priority, wanted_nice
-from interfaces.service_main import log_to_stderr, refuse, serve
-from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
+from runtime.config import add_zenoh_options, load_config, zenoh_with_options
+from runtime.priority import BACKGROUND, set_service_priority, wanted_nice
+from runtime.service_main import log_to_stderr, refuse, serve
+from runtime.stop_signals import on_stop_signals
 
 from .params import PerceptionParams, parse_source
 

@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 from typing import Annotated, Any, cast
 
 from interfaces.board_markers import DEFAULT_LAYOUT, MarkerLayout
-from interfaces.config import In, check_declared, check_vector, dataclass_from_table
 from interfaces.errors import ConfigError
+from runtime.config import In, check_declared, check_vector, dataclass_from_table
 
 from .smear import SmearParams
 

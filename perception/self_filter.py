@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from interfaces.description import ERASER_DEPTH_M, PAD_SIZE_M
+from arm.description import ERASER_DEPTH_M, PAD_SIZE_M
 
 from .rectify import BoardGrid
 
@@ -105,7 +105,7 @@ class ToolTrack:
     """
 
     def __init__(self, max_age_s: float, history: int = 512) -> None:
-        from interfaces.robot_model import RobotModel
+        from arm.robot_model import RobotModel
 
         self.max_age_s = float(max_age_s)
         self._states: deque[tuple[int, float, np.ndarray, np.ndarray]] = deque(maxlen=history)

@@ -35,7 +35,7 @@ from .pipeline import Perception, Result
 from .self_filter import ToolTrack
 
 if TYPE_CHECKING:
-    from interfaces.session import Latest
+    from runtime.session import Latest
 
 log = logging.getLogger(__name__)
 SERVICE = "perception"

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated
 
-from interfaces.config import In, check_declared
+from runtime.config import In, check_declared
 
 
 @dataclass(frozen=True)

@@ -26,13 +26,13 @@ import argparse
 import logging
 import sys
 
-from interfaces.config import add_zenoh_options, check_range, load_config, zenoh_with_options
 from interfaces.errors import ConfigError
-from interfaces.priority import REALTIME, set_service_priority, wanted_nice
-from interfaces.realtime import RealtimeRequest
-from interfaces.service_main import log_to_stderr, refuse, serve
-from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
+from runtime.config import add_zenoh_options, check_range, load_config, zenoh_with_options
+from runtime.priority import REALTIME, set_service_priority, wanted_nice
+from runtime.realtime import RealtimeRequest
+from runtime.service_main import log_to_stderr, refuse, serve
+from runtime.stop_signals import on_stop_signals
 
 SERVICE = "robot"
 PROG = "lamps robot"

@@ -1,6 +1,6 @@
 """The robot side's view of its arm through the description: the pad's motion and one cycle of a command ahead.
 
-:class:`ToolMotion` wraps a :class:`~interfaces.robot_model.RobotModel`
+:class:`ToolMotion` wraps a :class:`~arm.robot_model.RobotModel`
 (Pinocchio) with its own data (one instance per thread, as the model asks):
 the pad centre's position, axis and linear velocity from ``q``, ``dq`` (one
 forward pass with velocities, about 6 us), and the joint speeds one cycle of a

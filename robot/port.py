@@ -32,7 +32,7 @@ import numpy as np
 from interfaces.messages import Capabilities
 
 if TYPE_CHECKING:
-    from interfaces.robot_model import RobotModel
+    from arm.robot_model import RobotModel
 
 
 class Applied(Enum):

@@ -78,10 +78,10 @@ from collections import Counter
 
 import numpy as np
 
-from interfaces.loop_hygiene import LoopHygiene
-from interfaces.loop_stats import LoopStats
 from interfaces.messages import Estop, RobotState, ServiceStatus, TorqueCommand
-from interfaces.session import ServiceNode
+from runtime.loop_hygiene import LoopHygiene
+from runtime.loop_stats import LoopStats
+from runtime.session import ServiceNode
 
 from .command import Command
 from .command_auth import CommandAuth
@@ -264,7 +264,7 @@ class RobotServer:
 
     # -- loops -------------------------------------------------------------------------------------
     def start_lockstep(self):
-        """The lock-step command reader (an :class:`~interfaces.session.Inbox`), the first state published."""
+        """The lock-step command reader (an :class:`~runtime.session.Inbox`), the first state published."""
         inbox = self.node.inbox(self.keys.robot_command, TorqueCommand)
         self._sources = [inbox]
         self.publish_state()

@@ -7,9 +7,9 @@ from typing import Annotated
 
 import numpy as np
 
-from interfaces.config import In, check_declared
-from interfaces.description import PAD_SIZE_M
+from arm.description import PAD_SIZE_M
 from interfaces.errors import ConfigError
+from runtime.config import In, check_declared
 
 from .gate import DEFAULT_CONTACT_TAU_RATE_NM_S, DEFAULT_TAU_RATE_NM_S
 from .guard import GuardLimits

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from arm.robot_model import IkError, RobotModel
 from interfaces.errors import ConfigError
-from interfaces.robot_model import IkError, RobotModel
 from interfaces.transforms import matrix_from_quat_wxyz, tool_rotation_on_board, transform
 
 from .params import BoardParams

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
-from interfaces.robot_model import RobotModel
 from interfaces.transforms import quat_wxyz_from_matrix
 
 #: The generator's second seed word: the boards' stream, apart from any other use of the cell's seed.

@@ -2,8 +2,8 @@
 
 Configuration comes from ``--config FILE`` (TOML, ``[zenoh]`` and ``[sim]``
 tables, see :mod:`sim.params`; ``[joints]``, the drives' rotor inertia and
-friction, :mod:`interfaces.joint_dynamics`), then ``LAMPS_*`` environment variables
-(:mod:`interfaces.config`), then the options below (highest priority).
+friction, :mod:`arm.joint_dynamics`), then ``LAMPS_*`` environment variables
+(:mod:`runtime.config`), then the options below (highest priority).
 A broken config file or an impossible board pose is a one-line error and
 exit code 1 before anything starts; Ctrl-C or SIGTERM stops it cleanly.
 """
@@ -14,13 +14,13 @@ import argparse
 import logging
 import sys
 
-from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
 from interfaces.errors import InterfaceError
-from interfaces.priority import REALTIME, set_service_priority, wanted_nice
-from interfaces.realtime import RealtimeRequest
-from interfaces.service_main import log_to_stderr, refuse, serve
-from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
+from runtime.config import add_zenoh_options, load_config, zenoh_with_options
+from runtime.priority import REALTIME, set_service_priority, wanted_nice
+from runtime.realtime import RealtimeRequest
+from runtime.service_main import log_to_stderr, refuse, serve
+from runtime.stop_signals import on_stop_signals
 
 SERVICE = "sim"
 PROG = "lamps sim"
@@ -96,7 +96,7 @@ def load(a: argparse.Namespace):
 
 def load_joints(a: argparse.Namespace):
     """The drives' rotor inertia and friction: the ``[joints]`` table of the file, with environment overrides."""
-    from interfaces.joint_dynamics import joint_dynamics_from_config
+    from arm.joint_dynamics import joint_dynamics_from_config
 
     return joint_dynamics_from_config(a.config)
 
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_settings, params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
-        from interfaces.robot_model import RobotModel
+        from arm.robot_model import RobotModel
 
         from .core import SimCore
 

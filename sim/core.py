@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pybullet as pb
 
-from interfaces.description import PAD_SIZE_M
+from arm.description import PAD_SIZE_M
+from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
-from interfaces.robot_model import RobotModel
 
 from .board import Board, board_from_params, check_board, start_configuration, wipe_region
 from .camera import camera_pose

@@ -6,7 +6,7 @@ PyBullet has no armature and integrates (semi-implicit Euler, step dt)
 
 with h = C dq + g and f the contact wrench on the pad. The arm with
 reflected rotor inertia Ia and joint friction tau_f(dq)
-(:mod:`interfaces.joint_dynamics`) obeys instead
+(:mod:`arm.joint_dynamics`) obeys instead
 
     (M + Ia) ddq = tau - tau_f - h + J^T f.
 
@@ -33,7 +33,7 @@ import math
 import numba as nb
 import numpy as np
 
-from interfaces.joint_dynamics import JointDynamics
+from arm.joint_dynamics import JointDynamics
 from lampskit.spd import cholesky_lower_in_place, cholesky_solve_in_place
 
 _jit = nb.njit(cache=True)
@@ -73,7 +73,7 @@ def drive_torque_into(tau: np.ndarray, dq: np.ndarray, fv: np.ndarray, fc: np.nd
     armature : (n,) [kg m^2]. Returns False (``out`` undefined) when M + Ia + dt D is not positive definite.
     """
     n = tau.shape[0]
-    for i in range(n):  # friction (the tanh law of interfaces.joint_dynamics) and its slope on the diagonal
+    for i in range(n):  # friction (the tanh law of arm.joint_dynamics) and its slope on the diagonal
         t = math.tanh(dq[i] / v_eps)
         a[i] = tau[i] - (fc[i] * t + fv[i] * dq[i]) - h_hat[i]
         L[i, i] = M[i, i] + armature[i] + dt_s * (fv[i] + fc[i] / v_eps * (1.0 - t * t))

@@ -27,11 +27,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
-from interfaces.config import In, check_declared, check_int
-from interfaces.config import check_range as _range
-from interfaces.config import check_vector as _vector
-from interfaces.config import dataclass_from_table as _from_table
 from interfaces.errors import ConfigError
+from runtime.config import In, check_declared, check_int
+from runtime.config import check_range as _range
+from runtime.config import check_vector as _vector
+from runtime.config import dataclass_from_table as _from_table
 
 from .plant_params import PlantParams
 
@@ -246,7 +246,7 @@ class SimParams:
     centre ``start_standoff_m`` off its surface. max_steps : stop after
     this many steps (0 = run until stopped). The joints' rotor inertia and
     friction are not here: the ``[joints]`` table sets them for the sim and
-    the controller alike (:mod:`interfaces.joint_dynamics`).
+    the controller alike (:mod:`arm.joint_dynamics`).
     """
 
     mode: str = "lockstep"

@@ -18,8 +18,8 @@ from dataclasses import replace
 import numpy as np
 import pybullet as pb
 
-from interfaces.description import ERASER_DEPTH_M, ERASER_LINK, URDF_PATH, urdf_attr, urdf_child
-from interfaces.joint_dynamics import JointDynamics
+from arm.description import ERASER_DEPTH_M, ERASER_LINK, URDF_PATH, urdf_attr, urdf_child
+from arm.joint_dynamics import JointDynamics
 
 from .plant_params import N_LINKS, PROFILES, PlantParams
 

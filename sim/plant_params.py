@@ -1,6 +1,6 @@
 """The simulated arm as a setting: the ``[sim.plant]`` table, how the simulated iiwa differs from the description.
 
-The controller loads the description (``interfaces/description/iiwa14_eraser.urdf``) and the ``[joints]``
+The controller loads the description (``arm/description/iiwa14_eraser.urdf``) and the ``[joints]``
 table; the simulator builds its arm from the same description changed by this table (:mod:`sim.plant`), so a
 controller meets an arm that is not its model, as on a real robot. Nothing here reaches the controller except
 through the robot's states. Every key is optional; the defaults are the description itself::
@@ -30,8 +30,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from interfaces.config import In, check_declared, check_int, check_range, check_vector
 from interfaces.errors import ConfigError
+from runtime.config import In, check_declared, check_int, check_range, check_vector
 
 N_LINKS = 7
 
@@ -44,7 +44,7 @@ N_LINKS = 7
 #: transcriptions disagree on how those columns line up, so they are not used: the profile keeps the
 #: description's centres of mass and scales each link's inertia with its mass (the described shape, the
 #: identified mass). The profile changes the link masses only; joint friction stays the [joints] table's
-#: (Xu et al. 2020, Table 6, :mod:`interfaces.joint_dynamics`).
+#: (Xu et al. 2020, Table 6, :mod:`arm.joint_dynamics`).
 STUERZ_2017_LINK_MASS_KG: tuple[float, ...] = (3.94781, 4.50275, 2.45520, 2.61155, 3.41000, 3.38795, 0.35432)
 
 #: Named plants: profile name -> link masses [kg] (links A1..A7).

@@ -37,9 +37,9 @@ import cv2
 import numpy as np
 
 from interfaces.messages import CameraFrame
-from interfaces.priority import BACKGROUND, set_service_priority
 from interfaces.transforms import pose_from_transform
 from lampskit.errors import LampsError
+from runtime.priority import BACKGROUND, set_service_priority
 
 from .board import Board
 from .camera import (
@@ -77,7 +77,7 @@ def _render_main(conn, setup: _Setup) -> None:  # runs in the renderer process
     from .world import build_world
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the sim, which then stops us in order
-    try:  # the renderer is background work: the 1 kHz loops go first (interfaces.priority)
+    try:  # the renderer is background work: the 1 kHz loops go first (runtime.priority)
         set_service_priority(BACKGROUND)
     except LampsError as exc:
         log.warning("camera renderer priority: %s", exc)

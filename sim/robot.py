@@ -4,7 +4,7 @@
 ``step`` the physics, ``read`` joint state, applied torques and the
 eraser's contact with the board. The written torques drive joints with
 rotor inertia and friction (:mod:`.drive`, figures in
-:mod:`interfaces.joint_dynamics`). Readouts land in one preallocated
+:mod:`arm.joint_dynamics`). Readouts land in one preallocated
 :class:`Readout`, so a step allocates little.
 
 The contact wrench is what the arm felt, from its own motion: PyBullet
@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet as pb
 
-from interfaces.joint_dynamics import JointDynamics
+from arm.joint_dynamics import JointDynamics
 
 from .drive import drive_torque_into
 from .plant import tool_gravity_torque

@@ -18,10 +18,10 @@ from collections import Counter
 import numpy as np
 
 from interfaces.messages import Capabilities, ServiceStatus, SimTruth
-from interfaces.session import ServiceNode
 from interfaces.transforms import pose_from_transform
 from robot.port import Applied, Reading, RobotPort
 from robot.server import RobotServer, ServerParams
+from runtime.session import ServiceNode
 
 from .core import SimCore
 from .params import SimParams

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 
-from interfaces.description import ERASER_LINK, JOINT_NAMES, TCP_FRAME, URDF_PATH
+from arm.description import ERASER_LINK, JOINT_NAMES, TCP_FRAME, URDF_PATH
 from interfaces.errors import ConfigError
 from interfaces.transforms import quat_wxyz_from_matrix, xyzw_from_wxyz
 

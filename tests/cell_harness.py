@@ -23,11 +23,11 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
-from interfaces.config import ZenohSettings
-from interfaces.credentials import identity_folder
 from interfaces.keys import Keys
 from interfaces.messages import ControllerStatus
-from interfaces.session import ServiceNode
+from runtime.config import ZenohSettings
+from runtime.credentials import identity_folder
+from runtime.session import ServiceNode
 
 from .conftest import REPO
 from .zenoh_helpers import free_port
@@ -198,7 +198,7 @@ class Cell:
                "LAMPS_ZENOH_ACCESS_CONTROL": "true" if self.router_acl else "false",
                "LAMPS_ZENOH_INSECURE": "false" if self.router_acl else "true",
                "LAMPS_ZENOH_IDENTITY": str(identity_folder(self.cell.credentials, "router"))}
-        child = Child("router", (sys.executable, "-m", "interfaces.cli", "router", "--listen", self.router_endpoint,
+        child = Child("router", (sys.executable, "-m", "runtime.cli", "router", "--listen", self.router_endpoint,
                                  "--status-s", "0"), env,
                       self.out / "logs")
         self.children["router"] = child

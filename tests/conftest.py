@@ -11,7 +11,7 @@ import pytest
 
 matplotlib.use("Agg")
 # Services started by the tests without an identity run plain TCP on loopback on purpose (a service refuses to
-# start so unless told: interfaces/service_security.py); tests of security give identities, and the test of the
+# start so unless told: runtime/service_security.py); tests of security give identities, and the test of the
 # refusal removes this. `lamps up` never passes it on to its services.
 os.environ.setdefault("LAMPS_ZENOH_INSECURE", "true")
 

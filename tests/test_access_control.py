@@ -16,13 +16,13 @@ import pytest
 import zenoh
 
 from interfaces.access import IDENTITIES, RELAY, ROLE_SERVICES, ROLES, cell_acl, may_put, writers
-from interfaces.certificates import issue, write_key_and_cert
-from interfaces.config import ZenohSettings
-from interfaces.credentials import BRIDGE_CONFIG, CA_FOLDER, identity_files, identity_folder, make_credentials
-from interfaces.credentials import main as credentials_main
 from interfaces.errors import ConfigError
 from interfaces.keys import Keys
-from interfaces.session import ServiceNode, zenoh_config
+from runtime.certificates import issue, write_key_and_cert
+from runtime.config import ZenohSettings
+from runtime.credentials import BRIDGE_CONFIG, CA_FOLDER, identity_files, identity_folder, make_credentials
+from runtime.credentials import main as credentials_main
+from runtime.session import ServiceNode, zenoh_config
 
 from .zenoh_helpers import free_port, wait_for, wait_subscribed
 

@@ -19,8 +19,8 @@ from interfaces.arm_auth import (
     release_estop,
     sign_release,
 )
-from interfaces.config import ZenohSettings
-from interfaces.credentials import identity_files, identity_folder, make_credentials
+from runtime.config import ZenohSettings
+from runtime.credentials import identity_files, identity_folder, make_credentials
 
 
 @pytest.fixture(scope="module")

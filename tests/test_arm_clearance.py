@@ -15,6 +15,7 @@ import sys
 import numpy as np
 import pytest
 
+from arm.robot_model import RobotModel
 from controller.control.impedance import Kinematics, Reference, TaskShaping, impedance_torque
 from controller.control.limits import clearance_torque
 from controller.control.params import ImpedanceParams
@@ -24,7 +25,6 @@ from controller.motion import bounded_brake_to_rest
 from controller.params import ExecutorParams, ForceParams, LimitParams
 from controller.reach import arm_reach
 from interfaces.errors import ConfigError
-from interfaces.robot_model import RobotModel
 from interfaces.transforms import tool_rotation_on_board
 
 from .conftest import REPO
@@ -129,7 +129,7 @@ def test_a_lift_ends_where_the_elbow_has_room():
 @pytest.mark.slow
 def test_random_board_27_cleans_without_the_robot_side_braking(tmp_path):
     out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--no-network", "--board", "random:27",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "up", "--no-network", "--board", "random:27",
                         "--stains", "4", "--seed", "27", "--out", str(out), "-q"], cwd=REPO, capture_output=True,
                        text=True, timeout=900)
     report = json.loads((out / "report.json").read_text())

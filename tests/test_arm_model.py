@@ -9,16 +9,16 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from arm.description import ERASER_LINK
+from arm.robot_model import RobotModel
 from controller.control.model_correction import MODEL_MISMATCH, CorrectionParams, ModelCorrection
 from controller.core import ControllerCore
 from controller.executor_types import BoardPose
 from controller.params import ControllerParams
 from controller.tool_estimate import GRAVITY_M_S2, ToolEstimate, tool_regressor_into
 from controller.trace import PHASE_CODES, TRACE_COLUMNS
-from interfaces.description import ERASER_LINK
 from interfaces.errors import ConfigError
 from interfaces.messages import ControllerStatus, Phase
-from interfaces.robot_model import RobotModel
 from lampskit.core.planner_types import Stain
 
 #: The learning controller (opt-in: [controller.model] enabled, with the identification roll).

@@ -16,7 +16,7 @@ import pytest
 
 from interfaces.codec import encode
 from interfaces.messages import ControllerStatus, Estop, Pose, SimTruth, Stains, TorqueCommand
-from interfaces.session import ServiceNode
+from runtime.session import ServiceNode
 
 from .cell_harness import Cell
 from .zenoh_helpers import free_port, wait_sample

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from interfaces.codec import encode
-from interfaces.config import ZenohSettings
-from interfaces.credentials import identity_folder, make_credentials
 from interfaces.messages import Estop, RobotState, ServiceStatus, TorqueCommand
-from interfaces.session import ServiceNode
+from runtime.config import ZenohSettings
+from runtime.credentials import identity_folder, make_credentials
+from runtime.session import ServiceNode
 
 from .cell_harness import Cell
 from .conftest import REPO
@@ -119,7 +119,7 @@ def test_through_a_router_whose_list_is_off_nothing_moves_the_arm(tmp_path, lear
 
 def _service(argv: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
     base = {k: v for k, v in os.environ.items() if not k.startswith("LAMPS_ZENOH_")}
-    return subprocess.run([sys.executable, "-m", "interfaces.cli", *argv], cwd=REPO, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "runtime.cli", *argv], cwd=REPO, capture_output=True, text=True,
                           timeout=120, env={**base, **env})
 
 
@@ -150,7 +150,7 @@ def test_a_service_without_an_identity_or_a_robot_without_its_list_refuses_to_st
 
 
 def test_an_insecure_service_says_so_in_every_status(tmp_path):
-    from interfaces.service_security import security_summary
+    from runtime.service_security import security_summary
 
     creds = tmp_path / "c"
     make_credentials(creds)

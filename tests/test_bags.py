@@ -18,7 +18,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 from interfaces.transforms import tool_rotation_on_board
 from lampskit.core.rotations import quat_wxyz_from_matrix
 from lampskit.errors import DemoError
@@ -318,8 +318,8 @@ def test_thinning_keeps_every_kth_sample_down_to_the_rate():
 
 
 def test_lamps_learn_reads_a_bag_with_its_options(recordings, csv_skill, tmp_path, capsys):
-    from interfaces.cli import main
     from lampskit.core.skill import load_skill
+    from runtime.cli import main
 
     out = tmp_path / "skill.json"
     assert main(["learn", str(recordings["sqlite3"]), "--topic", "/tf", "--frame", "lbr_link_ee",
@@ -334,7 +334,7 @@ def test_lamps_learn_reads_a_bag_with_its_options(recordings, csv_skill, tmp_pat
 ])
 def test_lamps_learn_refuses_in_one_line_without_output(recordings, tmp_path, capsys, args, match):
     """The reason is the last line (argparse prints its usage above a bad option's)."""
-    from interfaces.cli import main
+    from runtime.cli import main
 
     out = tmp_path / "skill.json"
     try:
@@ -356,7 +356,7 @@ def test_the_learning_library_alone_refuses_a_recording_it_has_no_arm_for(record
 
 
 def test_recording_options_on_a_csv_are_refused(tmp_path, known, capsys):
-    from interfaces.cli import main
+    from runtime.cli import main
 
     csv = demo_io.write_demo_csv(tmp_path / "d.csv", known["demo"])
     assert main(["learn", str(csv), "-o", str(tmp_path / "s.json"), "--frame", "x", "--start", "1"]) == 1

@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
+from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
-from interfaces.robot_model import RobotModel
 from interfaces.transforms import matrix_from_quat_wxyz
 from launch.campaign_cells import cells_of
 from launch.cli import UpError, board_env

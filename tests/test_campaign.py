@@ -168,9 +168,9 @@ def test_each_seed_runs_once_per_plant_and_the_plant_reaches_the_simulator_only(
     import json
 
     from controller.params import ControllerParams
-    from interfaces.config import load_config
     from launch.campaign_plants import PLANTS, plant_error, plant_table
     from launch.campaign_run import cell_env
+    from runtime.config import load_config
     from sim.params import SimParams
 
     cells = cells_of([3], [2], ["wall"], ("fixed",), plants=PLANTS)
@@ -216,7 +216,7 @@ def test_the_table_groups_plants_and_reports_tracking_force_spread_and_joint_spe
 
 
 def _campaign(*args: str, timeout: float = 900.0, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "interfaces.cli", "campaign", *args], cwd=REPO,
+    return subprocess.run([sys.executable, "-m", "runtime.cli", "campaign", *args], cwd=REPO,
                           capture_output=True, text=True, timeout=timeout,
                           env={**(env or os.environ), "MPLBACKEND": "Agg"})
 
@@ -241,7 +241,7 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     out = tmp_path / "campaign"
     args = ["--seeds", "0", "--stains", "1", "--boards", "wall", "--wiping", "fixed,adaptive", "--jobs", "1",
             "--skill", str(learned_skill_file), "--out", str(out), "--no-network"]
-    proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "campaign", *args], cwd=REPO,
+    proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "campaign", *args], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
                             env={**os.environ, "MPLBACKEND": "Agg"})
     lines: list[str] = []
@@ -287,7 +287,7 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     # a campaign's cell writes report.json without plots; lamps report draws them from its recording
     cell_dir = Path(result["cells"][0]["run_dir"])
     assert report["plots"] == [] and not list(cell_dir.glob("*.png"))
-    drawn = subprocess.run([sys.executable, "-m", "interfaces.cli", "report", str(cell_dir)], cwd=REPO,
+    drawn = subprocess.run([sys.executable, "-m", "runtime.cli", "report", str(cell_dir)], cwd=REPO,
                            capture_output=True, text=True, env={**os.environ, "MPLBACKEND": "Agg"}, timeout=300)
     assert drawn.returncode == 0, drawn.stderr[-2000:]
     assert len(json.loads((cell_dir / "report.json").read_text())["plots"]) >= 3 and list(cell_dir.glob("*.png"))

@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from interfaces.cli import COMMANDS, main
+from runtime.cli import COMMANDS, main
 
 from .conftest import REAL_DEMOS, REPO
 
@@ -56,7 +56,7 @@ def test_version_names_lamps_and_the_libraries_a_bug_report_needs(capsys):
 
 
 def test_rust_log_shows_zenohs_own_log(tmp_path):
-    code = ("from interfaces.config import ZenohSettings\nfrom interfaces.session import ServiceNode\n"
+    code = ("from runtime.config import ZenohSettings\nfrom runtime.session import ServiceNode\n"
             "with ServiceNode('sim', ZenohSettings(listen=('tcp/127.0.0.1:0',), robot_id='logtest')):\n    pass\n")
     quiet = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60)
     loud = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60,
@@ -67,7 +67,7 @@ def test_rust_log_shows_zenohs_own_log(tmp_path):
 
 
 def test_console_script_runs_as_a_process():
-    res = subprocess.run([sys.executable, "-m", "interfaces.cli", "segment", "--help"],
+    res = subprocess.run([sys.executable, "-m", "runtime.cli", "segment", "--help"],
                          capture_output=True, text=True, cwd=REPO, timeout=120)
     assert res.returncode == 0 and "--method" in res.stdout
 
@@ -216,7 +216,7 @@ def test_bad_stains_argument(skill_file, capsys):
 @pytest.mark.slow
 def test_readme_main_job_runs(tmp_path):
     """The README's main command (the embedded default) completes and writes its outputs."""
-    res = subprocess.run([sys.executable, "-m", "interfaces.cli", "demo", "--out", str(tmp_path / "run")],
+    res = subprocess.run([sys.executable, "-m", "runtime.cli", "demo", "--out", str(tmp_path / "run")],
                          capture_output=True, text=True, cwd=REPO, timeout=600)
     assert res.returncode == 0, res.stderr
     names = {p.name for p in (tmp_path / "run").iterdir()}

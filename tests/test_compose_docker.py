@@ -77,8 +77,8 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
         up = _compose(project, env, "up", "-d", timeout=900)
         assert up.returncode == 0, f"docker compose up failed:\n{up.stderr[-4000:]}"
         # the live view (profile foxglove) serves the running cell on the host's port
-        from interfaces.credentials import identity_files, identity_folder
         from launch.live import live_token
+        from runtime.credentials import identity_files, identity_folder
 
         token = live_token(identity_files(identity_folder(host / "secrets", "recorder"))[2])
         client = wait_for(lambda: _connect(ws_port, token), 120.0, "the foxglove service's WebSocket port",

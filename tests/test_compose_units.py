@@ -43,13 +43,13 @@ def test_health_is_ready_only_when_every_endpoint_accepts(capsys):
 
 def test_health_reads_the_services_own_listen_endpoints_and_refuses_nothing_to_probe():
     env = {**os.environ, "LAMPS_ZENOH_LISTEN": ""}
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "health"], env=env, capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "health"], env=env, capture_output=True, text=True)
     assert r.returncode == 2 and "nothing to probe" in r.stderr
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         s.listen()
         env["LAMPS_ZENOH_LISTEN"] = f"tcp/0.0.0.0:{s.getsockname()[1]}"
-        r = subprocess.run([sys.executable, "-m", "interfaces.cli", "health"], env=env, capture_output=True,
+        r = subprocess.run([sys.executable, "-m", "runtime.cli", "health"], env=env, capture_output=True,
                            text=True)
         assert r.returncode == 0, r.stderr
 

@@ -7,9 +7,9 @@ import pinocchio as pin
 import pytest
 import scipy.linalg
 
+from arm.robot_model import RobotModel
 from controller.control.impedance import Kinematics, Reference, impedance_torque, pose_error, task_modes
 from controller.control.params import ControlConfigError, ImpedanceParams, mode_frequency_cap
-from interfaces.robot_model import RobotModel
 from robot.lbr.guards import VelocityFilter
 from sim.core import SimCore
 from sim.params import SimParams

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from arm.robot_model import RobotModel
 from controller.core import TRACE_COLUMNS, ControllerCore
 from controller.executor_types import BoardPose
 from controller.params import ControllerParams
-from interfaces.robot_model import RobotModel
 from lampskit.core.planner_types import Stain
 from robot.lbr.params import LbrParams
 from sim.core import SimCore

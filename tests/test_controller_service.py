@@ -20,7 +20,6 @@ import pytest
 from controller.core import TRACE_COLUMNS, ControllerCore
 from controller.params import ControllerParams
 from controller.service import ControllerService
-from interfaces.config import ZenohSettings
 from interfaces.messages import (
     Capabilities,
     ControllerStatus,
@@ -31,9 +30,10 @@ from interfaces.messages import (
     ServiceStatus,
     SimTruth,
 )
-from interfaces.session import ServiceNode
 from lampskit.core.skill import PeriodicEntry
 from lampskit.learn.periodic_fit import learn_periodic
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 from .zenoh_helpers import REPO, SimProcess, free_port, latest_status, wait_for, wait_sample, wait_subscribed
 
@@ -346,7 +346,7 @@ def _until_counted(status, sends: dict) -> bool:
 
 
 def _controller(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "interfaces.cli", "controller", *args], cwd=REPO,
+    return subprocess.run([sys.executable, "-m", "runtime.cli", "controller", *args], cwd=REPO,
                           capture_output=True, text=True, timeout=timeout)
 
 
@@ -367,9 +367,9 @@ def test_a_rate_whose_period_the_tick_cannot_fit_is_refused(monkeypatch, learned
     """The start-up check measures the tick (since the law was compiled, even 10 kHz fits here: a slow
     machine is stood in for by the measurement) and refuses a real-time rate it cannot hold, naming it."""
     import controller.cli as cli
+    from arm.robot_model import RobotModel
     from controller.params import ControllerParams
     from interfaces.errors import InterfaceError
-    from interfaces.robot_model import RobotModel
 
     params = ControllerParams.from_table({"mode": "realtime", "rate_hz": 1000.0})
     model = RobotModel()

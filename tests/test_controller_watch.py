@@ -198,7 +198,7 @@ def test_the_skill_clock_stands_still_while_the_robot_brakes_so_the_release_does
     22.4 mm and the contact lost for 0.2 s. With the override holding the wiping back, as it did before its
     look-ahead followed the motion: 3.3, 7.7 and 16 mm). Unflagged, a gap longer than two periods is our own
     stall and the skill's step is capped to two periods (core.SKILL_STEP_CAP_PERIODS). With the joints' rotor
-    inertia and friction (interfaces/joint_dynamics.py) the capped release loses the 2 N for up to 89 ms (flagged
+    inertia and friction (arm/joint_dynamics.py) the capped release loses the 2 N for up to 89 ms (flagged
     0 ms; without friction 20 ms, without rotor inertia 0 ms): the friction holds the braked wrist back while
     the force comes back; the reference running on loses it for 0.2 s."""
     before, lag, lost_s, phase, _ = _brake_then_release(learned_skill, held_flag=True)

@@ -28,10 +28,12 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from interfaces.certificates import CA_CERT, DEFAULT_DAYS, cert_paths
-from interfaces.certificates import main as certificates_main
 from interfaces.codec import encode
-from interfaces.credentials import (
+from interfaces.keys import Keys
+from interfaces.messages import Estop
+from runtime.certificates import CA_CERT, DEFAULT_DAYS, cert_paths
+from runtime.certificates import main as certificates_main
+from runtime.credentials import (
     CA_FILE,
     CA_FOLDER,
     RUN_DAYS,
@@ -41,9 +43,7 @@ from interfaces.credentials import (
     identity_folder,
     make_credentials,
 )
-from interfaces.credentials import main as credentials_main
-from interfaces.keys import Keys
-from interfaces.messages import Estop
+from runtime.credentials import main as credentials_main
 
 from .zenoh_helpers import free_port
 

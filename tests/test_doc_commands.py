@@ -15,7 +15,7 @@ import shlex
 
 import pytest
 
-from interfaces.cli import COMMANDS, main
+from runtime.cli import COMMANDS, main
 
 from .conftest import REPO
 

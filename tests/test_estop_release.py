@@ -32,17 +32,17 @@ import pytest
 from controller.executor import RELEASED_LIFTING, SkillExecutor
 from controller.params import ExecutorParams
 from interfaces.arm_auth import release_estop
-from interfaces.config import ZenohSettings
-from interfaces.credentials import identity_folder
 from interfaces.messages import ControllerStatus, Estop, ServiceStatus
-from interfaces.session import ServiceNode
+from runtime.config import ZenohSettings
+from runtime.credentials import identity_folder
+from runtime.session import ServiceNode
 
 from .cell_harness import Cell
 from .conftest import REPO
 from .test_controller_units import BOARD, IdealArm, phases, run, stains
 from .zenoh_helpers import free_port, wait_for, wait_sample, wait_subscribed
 
-LAMPS = ("-m", "interfaces.cli")
+LAMPS = ("-m", "runtime.cli")
 GOING = ("APPROACH", "WIPE", "TRANSITION", "RETREAT", "DONE")
 #: Both sides released, the controller's status leaves ESTOP within this [s] (a status every 50 ms).
 LEAVES_ESTOP_S = 0.5

@@ -18,7 +18,7 @@ import zenoh
 
 from interfaces.codec import encode
 from interfaces.messages import Estop, ServiceStatus, TorqueCommand
-from interfaces.session import ServiceNode
+from runtime.session import ServiceNode
 
 from .cell_harness import Cell
 from .zenoh_helpers import wait_sample

@@ -101,13 +101,13 @@ def test_demonstrations_with_different_phases_are_refused_naming_them():
 def test_lamps_learn_takes_several_demonstrations(tmp_path):
     paths = [write_demo_csv(tmp_path / f"take{k}.csv", d) for k, d in enumerate(_copies(2))]
     out = tmp_path / "skill.json"
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "learn", *map(str, paths), "-o", str(out)],
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "learn", *map(str, paths), "-o", str(out)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "fused from 2 demonstrations" in r.stdout and "spread" in r.stdout
     skill = load_skill(out)
     assert len(skill.source["demos"]) == 2 and len(skill.source["spread"]["periodic"]) == 3
     assert json.loads(out.read_text())["source"]["spread"]["transitional"][0]["n_demos"] == 2
-    bad = subprocess.run([sys.executable, "-m", "interfaces.cli", "learn", str(paths[0]), str(tmp_path / "nope.csv"),
+    bad = subprocess.run([sys.executable, "-m", "runtime.cli", "learn", str(paths[0]), str(tmp_path / "nope.csv"),
                           "-o", str(tmp_path / "x.json")], capture_output=True, text=True, timeout=300)
     assert bad.returncode != 0 and "nope.csv" in bad.stderr and not (tmp_path / "x.json").exists()

@@ -17,12 +17,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from interfaces.codec import Decoder, encode
-from interfaces.config import load_config
 from interfaces.errors import ConfigError, MessageDecodeError
 from interfaces.messages import MESSAGE_TYPES
 from lampskit.core.skill import load_skill
 from lampskit.errors import LampsError
 from lampskit.learn.demo_io import read_demo
+from runtime.config import load_config
 
 from .test_interfaces_messages import samples
 

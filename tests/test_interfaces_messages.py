@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from interfaces.codec import Decoder, decode, encode
-from interfaces.config import ZenohSettings, load_config
 from interfaces.errors import ConfigError, MessageDecodeError
 from interfaces.keys import Keys
 from interfaces.messages import (
@@ -35,6 +34,7 @@ from interfaces.messages import (
     Stains,
     TorqueCommand,
 )
+from runtime.config import ZenohSettings, load_config
 
 RNG = np.random.default_rng(0)
 IDENTITY = Pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])
@@ -285,7 +285,7 @@ def test_strings_are_bounded_on_the_wire_and_clipped_when_built():
 
 @pytest.mark.parametrize("m", [1, 2, 3, 100, 101, 1999, 2000])
 def test_the_loops_99th_percentile_is_numpys_bit_for_bit(m):
-    from interfaces.loop_stats import p99_by_row
+    from runtime.loop_stats import p99_by_row
 
     rng = np.random.default_rng(m)
     for b in (rng.exponential(100.0, (4, m)), np.round(rng.normal(50.0, 20.0, (4, m))), np.full((4, m), 7.25)):

@@ -7,9 +7,9 @@ import time
 import pytest
 
 from interfaces.codec import encode
-from interfaces.config import ZenohSettings
 from interfaces.messages import Capabilities, Estop, RobotState, ServiceStatus, TorqueCommand
-from interfaces.session import ServiceNode, publisher_qos
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode, publisher_qos
 
 from .zenoh_helpers import free_port, wait_alive, wait_for, wait_gone, wait_sample, wait_subscribed
 
@@ -226,7 +226,7 @@ def test_a_zenoh_config_file_adds_what_the_settings_do_not_cover(tmp_path):
 ])
 def test_a_zenoh_config_file_is_refused_naming_what_is_wrong(tmp_path, text, match):
     from interfaces.errors import ConfigError
-    from interfaces.session import zenoh_config
+    from runtime.session import zenoh_config
 
     path = _zenoh_file(tmp_path / "zenoh.json5", text)
     with pytest.raises(ConfigError, match=match):
@@ -242,7 +242,7 @@ def test_every_service_takes_a_zenoh_config_file_on_its_command_line(tmp_path):
     from .zenoh_helpers import REPO
 
     missing = tmp_path / "missing.json5"
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "robot", "--backend", "mock", "--zenoh-config",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "robot", "--backend", "mock", "--zenoh-config",
                         str(missing)], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and f"config_file '{missing}' is not a file" in r.stderr, r.stderr
 

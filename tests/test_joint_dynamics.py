@@ -6,15 +6,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from interfaces.errors import ConfigError
-from interfaces.joint_dynamics import (
+from arm.joint_dynamics import (
     COULOMB_NM,
     FR3_REFLECTED_INERTIA_KG_M2,
     JointDynamics,
     friction_torque,
     joint_dynamics_from_config,
 )
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
+from interfaces.errors import ConfigError
 from sim.core import SimCore
 from sim.drive import drive_torque
 from sim.params import SimParams

@@ -17,6 +17,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from arm.robot_model import RobotModel
 from controller.control import demand_kernels, kernels, limit_kernels
 from controller.control.impedance import (
     Kinematics,
@@ -29,7 +30,6 @@ from controller.control.impedance import (
 from controller.control.limits import TorqueShaper
 from controller.control.params import ImpedanceParams
 from controller.control.watch import DisturbanceWatch
-from interfaces.robot_model import RobotModel
 
 from .numpy_law import numpy_kinematics, numpy_law, numpy_modes
 

@@ -24,7 +24,6 @@ import numpy as np
 import pytest
 
 from controller.core import PHASE_CODES
-from interfaces.cli import COMMANDS
 from interfaces.errors import ConfigError
 from interfaces.keys import Keys
 from interfaces.messages import Phase
@@ -33,11 +32,12 @@ from launch.compose import active, free_port, load_compose, localize, run_locall
 from launch.compose_interp import substitute
 from launch.record import read_recording, trace_array
 from launch.report import SCHEMA, build_report
+from runtime.cli import COMMANDS
 
 from .conftest import REPO
 
 COMPOSE = REPO / "docker-compose.yml"
-LAMPS = [sys.executable, "-m", "interfaces.cli"]
+LAMPS = [sys.executable, "-m", "runtime.cli"]
 
 
 # ------------------------------------------------------------------------------------------ compose file as data
@@ -119,7 +119,7 @@ def test_every_zenoh_service_of_every_profile_joins_with_its_roles_identity_and_
     view = {s.name: s for s in localize(run_locally(active(services, ("sim", "foxglove"))), secrets=tmp_path / "c")}
     argv = view["foxglove"].argv
     assert argv[argv.index("--host") + 1] == "127.0.0.1" and "--token-from-identity" in argv, argv
-    # no variable of the environment turns the list off (no silent insecurity: interfaces/service_security.py)
+    # no variable of the environment turns the list off (no silent insecurity: runtime/service_security.py)
     off = load_compose(COMPOSE, {"LAMPS_ACCESS_CONTROL": "false", "LAMPS_ZENOH_INSECURE": "true"})
     assert all(s.environment.get("LAMPS_ZENOH_ACCESS_CONTROL") == "true" and "LAMPS_ZENOH_INSECURE" not in
                s.environment for n, s in off.items() if n not in ("skill", "bridge", "credentials", "folders")), off
@@ -129,7 +129,7 @@ def test_every_zenoh_service_of_every_profile_joins_with_its_roles_identity_and_
                          "folders and credentials services) for another role's private key or the CA's",
                    "only the service's own role key, never another's nor the CA's")
 def test_a_service_reaches_its_own_roles_secret_and_no_other(tmp_path):
-    from interfaces.credentials import CA_FOLDER, identity_files, identity_folder, make_credentials
+    from runtime.credentials import CA_FOLDER, identity_files, identity_folder, make_credentials
 
     host = tmp_path / "host"
     make_credentials(host / "secrets")
@@ -179,7 +179,7 @@ def test_localize_maps_service_names_to_loopback_and_listen_ports_to_local_ones(
     assert local["perception"].environment["LAMPS_ZENOH_CONNECT"] == "tls/127.0.0.1:20001,tls/127.0.0.1:20002"
     assert local["recorder"].environment["LAMPS_ZENOH_CONNECT"] == \
         "tls/127.0.0.1:20001,tls/127.0.0.1:20002,tls/127.0.0.1:20003"
-    assert local["sim"].argv[:3] == (sys.executable, "-m", "interfaces.cli") and local["sim"].argv[3] == "sim"
+    assert local["sim"].argv[:3] == (sys.executable, "-m", "runtime.cli") and local["sim"].argv[3] == "sim"
     # free ports by default, all different
     ports = [p for s in localize(services) for p in s.listen_ports]
     assert len(ports) == 3 == len(set(ports))
@@ -236,7 +236,7 @@ def test_the_image_installs_every_package_and_the_robot_description(tmp_path):
     assert r.returncode == 0, r.stderr
     import zipfile
     names = zipfile.ZipFile(next(tmp_path.glob("lamps-*.whl"))).namelist()
-    assert "interfaces/description/iiwa14_eraser.urdf" in names
+    assert "arm/description/iiwa14_eraser.urdf" in names
     assert any(n.startswith("launch/") for n in names)
 
 
@@ -564,7 +564,7 @@ def test_a_board_pose_file_becomes_the_sims_board_table(tmp_path):
                  'size_m = [0.6, 0.5]\n')
     env = board_env(str(f))
     assert env["LAMPS__SIM__BOARD__PRESET"] == '"custom"' and env["LAMPS__SIM__BOARD__SIZE_M"] == "[0.6, 0.5]"
-    from interfaces.config import load_config
+    from runtime.config import load_config
     from sim.params import SimParams
 
     board = load_config(None, env=env).table("sim")["board"]

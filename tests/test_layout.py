@@ -32,7 +32,7 @@ def _loaded_after(code: str) -> list[str]:
 
 
 def _third_party(modules: list[str]) -> set[str]:
-    own = {"lampskit", "controller", "interfaces", "sim", "perception", "launch"}
+    own = {"lampskit", "controller", "interfaces", "runtime", "arm", "sim", "perception", "launch"}
     tops = {m.split(".")[0] for m in modules}
     return {m for m in tops if m not in sys.stdlib_module_names and m not in own and not m.startswith("_")
             and m not in ("cmeel_pth",) and "editable" not in m}
@@ -67,11 +67,17 @@ def _imports(path: Path) -> list[tuple[int, str]]:
 
 
 @pytest.mark.parametrize("folder, forbidden", [
-    ("lampskit/core", ("lampskit.learn", "lampskit.figures", "lampskit.cli", "interfaces", "controller", "sim",
+    ("lampskit/core", ("lampskit.learn", "lampskit.figures", "lampskit.cli", "interfaces", "runtime", "arm",
+                       "controller", "sim",
                        "perception", "launch", "scipy", "sklearn", "matplotlib")),
-    ("lampskit/learn", ("lampskit.figures", "lampskit.cli", "interfaces", "controller", "sim", "perception", "launch")),
+    ("lampskit/learn", ("lampskit.figures", "lampskit.cli", "interfaces", "runtime", "arm", "controller", "sim",
+                        "perception", "launch")),
     # the learning library knows no cell: the cell hands it what it needs (launch.learn: the described arm)
-    ("lampskit", ("interfaces", "controller", "sim", "perception", "launch", "robot")),
+    ("lampskit", ("interfaces", "runtime", "arm", "controller", "sim", "perception", "launch", "robot")),
+    # the wire contract knows no process: its sessions, settings, security and the arm's model build on it (its
+    # keys are Zenoh key expressions: the access list intersects them with Zenoh's own)
+    ("interfaces", ("runtime", "arm", "controller", "sim", "perception", "launch", "robot", "lampskit.learn",
+                    "numba", "pybullet", "pinocchio")),
     ("controller", ("lampskit.learn", "lampskit.figures", "lampskit.cli", "matplotlib", "sklearn", "sim",
                     "perception", "launch", "robot")),
     # the robot side drives the real arm: the simulated lbr stack (sim.lbr_stack) is a simulator backend, not its own
@@ -87,9 +93,9 @@ def test_no_module_imports_across_the_layout(folder, forbidden):
 
 
 def test_every_error_the_project_raises_on_purpose_shares_one_root():
+    from arm.robot_model import IkError
     from controller.control.params import ControlConfigError
     from interfaces.errors import ConfigError, InterfaceError, MessageDecodeError
-    from interfaces.robot_model import IkError
     from lampskit.errors import DemoError, LampsError, LearningError, PlanningError, SegmentationError, SkillFileError
     from launch.cli import UpError
     from perception.frames import FrameError
@@ -104,7 +110,8 @@ def test_every_error_the_project_raises_on_purpose_shares_one_root():
 #: The longest a source file outside tests/ may be [lines]: past it, a module holds more than one purpose.
 MAX_LINES = 500
 #: The project's folders of source (a checkout without git: these are walked).
-SOURCE_FOLDERS = ("controller", "sim", "perception", "interfaces", "robot", "launch", "lampskit", "bench", "scripts")
+SOURCE_FOLDERS = ("controller", "sim", "perception", "interfaces", "runtime", "arm", "robot", "launch", "lampskit",
+                  "bench", "scripts")
 
 
 def _source_files() -> list[Path]:
@@ -172,7 +179,7 @@ def test_every_package_says_what_it_is_and_what_it_exports():
 
 
 def test_importing_every_package_is_cheap():
-    loaded = _loaded_after("import controller, interfaces, lampskit, launch, perception, robot, sim")
+    loaded = _loaded_after("import arm, controller, interfaces, lampskit, launch, perception, robot, runtime, sim")
     assert not [m for m in loaded if m.split(".")[0] in ("numpy", "pybullet", "numba", "zenoh", "pinocchio")]
 
 

@@ -22,9 +22,8 @@ import pytest
 import zenoh
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from arm.robot_model import RobotModel
 from interfaces.messages import ArmRequest, RobotState, ServiceStatus, TorqueCommand
-from interfaces.robot_model import RobotModel
-from interfaces.session import zenoh_config
 from robot.lbr.adapter import LbrPort
 from robot.lbr.compensation import JointSpring, filter_alpha
 from robot.lbr.guards import GuardLimits, VelocityFilter, guard_trip
@@ -44,6 +43,7 @@ from robot.lbr.msgs import (
 )
 from robot.lbr.params import DEFAULT_JOINT_NAMES, LbrParams
 from robot.server import ServerParams
+from runtime.session import zenoh_config
 
 from .test_robot_server import ServerThread
 from .zenoh_helpers import wait_for, wait_sample, wait_subscribed

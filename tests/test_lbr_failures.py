@@ -38,12 +38,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from interfaces.config import ZenohSettings
+from arm.robot_model import RobotModel
 from interfaces.messages import RobotState, ServiceStatus, SimTruth, TorqueCommand
-from interfaces.robot_model import RobotModel
-from interfaces.session import ServiceNode
 from robot.lbr import msgs
 from robot.lbr.release import RELEASE_JOINT_POSITION, RELEASE_TORQUE, is_release
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 from sim.board import board_from_params
 from sim.params import BoardParams
 

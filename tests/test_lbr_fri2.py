@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 from robot.lbr.compensation import JointSpring
 from robot.lbr.msgs import ClientCommandMode, SessionState
 from sim.core import SimCore

@@ -13,11 +13,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from arm.robot_model import RobotModel
 from controller.core import ControllerCore
 from controller.executor_types import BoardPose
 from controller.params import ControllerParams
 from interfaces.messages import Phase
-from interfaces.robot_model import RobotModel
 from lampskit.core.planner_types import Stain
 from robot.lbr.brake import ContactBrake
 from robot.lbr.compensation import JointSpring

@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from interfaces.config import ZenohSettings
+from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
 from interfaces.messages import ServiceStatus, SimTruth
-from interfaces.robot_model import RobotModel
-from interfaces.session import ServiceNode
 from robot.lbr import msgs
 from robot.lbr.msgs import SessionState
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 from sim.lbr_stack.commands import TORQUE_COMMAND_BYTES, CommandBox, drop_reason
 from sim.lbr_stack.params import LbrPeerParams
 from sim.lbr_stack.peer import external_torque_nm, sim_params_for_peer, substeps_for_peer
@@ -186,7 +186,7 @@ def test_check_names_the_keys_and_a_bad_config_is_one_line(tmp_path, capsys):
 
 
 def test_lbr_peer_is_a_lamps_command():
-    from interfaces.cli import COMMANDS
+    from runtime.cli import COMMANDS
 
     assert COMMANDS["lbr-peer"][0] == "sim.lbr_stack.cli:main"
 

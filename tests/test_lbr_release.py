@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 from robot.lbr.msgs import ClientCommandMode, SessionState, encode_torque_command
 from robot.lbr.release import RELEASE_BYTES, RELEASE_JOINT_POSITION, RELEASE_TORQUE, is_release
 from robot.lbr.watchdog import RELEASE_BURST, ReleaseWatch

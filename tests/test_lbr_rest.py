@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 from robot.lbr.arming import arming_refusal
 from robot.lbr.msgs import LbrState, SessionState
 from robot.lbr.params import LbrParams

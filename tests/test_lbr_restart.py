@@ -22,11 +22,11 @@ import time
 import numpy as np
 import pytest
 
-from interfaces.config import ZenohSettings
+from arm.robot_model import RobotModel
 from interfaces.messages import ArmRequest, ServiceStatus, SimTruth
-from interfaces.robot_model import RobotModel
-from interfaces.session import ServiceNode
 from robot.lbr import msgs
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 from sim.board import board_from_params
 from sim.params import BoardParams
 

@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 from robot.lbr.compensation import filter_alpha
 from robot.lbr.msgs import ClientCommandMode, SessionState
 from robot.lbr.tip import tip_jacobian, tip_pose

@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from interfaces.config import ZenohSettings
 from interfaces.messages import ArmRequest, ControllerStatus, ServiceStatus, SimTruth
-from interfaces.session import ServiceNode
 from robot.lbr import msgs
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 from .conftest import REPO
 from .zenoh_helpers import free_port, wait_for, wait_sample

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 from robot.lbr.stack_chain import stack_chain, tip_in_link7
 from robot.lbr.tip import stack_wrench_to_tcp, tip_jacobian, tip_pose
 from sim.lbr_stack.stack import estimated_wrench

@@ -27,11 +27,11 @@ import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from interfaces.config import ZenohSettings
 from interfaces.messages import CameraFrame, CameraIntrinsics, Capabilities, ControllerStatus, RobotState
-from interfaces.session import ServiceNode
 from launch.live import LiveView, live_token
 from launch.ws_server import FoxgloveWsServer, TokenRequired, check_token, is_loopback
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 from .mcap_check import protobuf_class
 from .test_scene import camera_message, stains_message
@@ -248,7 +248,7 @@ def test_a_sites_layout_has_a_tab_per_cell_with_its_own_panels_and_frames(tmp_pa
     from .conftest import REPO
 
     out = tmp_path / "site.json"
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--cells", "iiwa-1,iiwa-2",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "foxglove", "--cells", "iiwa-1,iiwa-2",
                         "--write-layout", str(out)], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "the cells iiwa-1, iiwa-2" in r.stdout, r.stderr
     site = json.loads(out.read_text())
@@ -260,7 +260,7 @@ def test_a_sites_layout_has_a_tab_per_cell_with_its_own_panels_and_frames(tmp_pa
         assert one_topics <= topics
         assert site["configById"][f"3D!scene-{robot}"]["followTf"] == f"{robot}/world"
     assert len(site["configById"]) == 2 * len(cell_layout()["configById"]) + 1
-    bad = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--cells", "iiwa-1,site-viewer",
+    bad = subprocess.run([sys.executable, "-m", "runtime.cli", "foxglove", "--cells", "iiwa-1,site-viewer",
                           "--write-layout", str(tmp_path / "x.json")], cwd=REPO, capture_output=True, text=True,
                          timeout=60)
     assert bad.returncode == 2 and "--cells iiwa-1,site-viewer" in bad.stderr and not (tmp_path / "x.json").exists()
@@ -305,13 +305,13 @@ def test_a_view_beyond_loopback_without_a_token_refuses_to_start_and_says_why(tm
     with pytest.raises(TokenRequired, match="0.0.0.0 reaches beyond this machine"):
         FoxgloveWsServer("x", "0.0.0.0", free_port())
     env = {k: v for k, v in os.environ.items() if k != "LAMPS_LIVE_TOKEN"}
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--host", "0.0.0.0", "--port",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "foxglove", "--host", "0.0.0.0", "--port",
                         str(free_port()), "--insecure"], cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
     assert r.returncode == 1, r.stderr
     assert "error: serving on 0.0.0.0 reaches beyond this machine" in r.stderr and "--token-from-identity" in r.stderr
     short = tmp_path / "token"
     short.write_text("abc\n")
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--host", "0.0.0.0", "--token-file",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "foxglove", "--host", "0.0.0.0", "--token-file",
                         str(short), "--insecure"], cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
     assert r.returncode == 1 and "3 characters: at least 16" in r.stderr, r.stderr
 
@@ -320,7 +320,7 @@ def test_the_identity_token_is_its_keys_own_and_printed_for_the_clients(tmp_path
     import subprocess
     import sys
 
-    from interfaces.credentials import identity_files, identity_folder, make_credentials
+    from runtime.credentials import identity_files, identity_folder, make_credentials
 
     from .conftest import REPO
 
@@ -332,13 +332,13 @@ def test_the_identity_token_is_its_keys_own_and_printed_for_the_clients(tmp_path
     assert token != live_token(identity_files(identity_folder(tmp_path / "b", "recorder"))[2])
     assert token != live_token(identity_files(identity_folder(tmp_path / "a", "perception"))[2])
     env = {**os.environ, "LAMPS_ZENOH_IDENTITY": str(identity_folder(tmp_path / "a", "recorder"))}
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--host", "0.0.0.0", "--port", "8765",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "foxglove", "--host", "0.0.0.0", "--port", "8765",
                         "--token-from-identity", "--print-token"], cwd=REPO, capture_output=True, text=True,
                        timeout=60, env=env)
     assert r.returncode == 0 and r.stdout.strip() == token, r.stderr
     assert f"ws://HOST:8765/?token={token}" in r.stderr
     env.pop("LAMPS_ZENOH_IDENTITY")
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "foxglove", "--token-from-identity", "--print-token",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "foxglove", "--token-from-identity", "--print-token",
                         "--insecure"], cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
     assert r.returncode == 1 and "--token-from-identity: the live view has no identity" in r.stderr, r.stderr
 

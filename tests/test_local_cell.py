@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 
 from interfaces.codec import encode
-from interfaces.config import ZenohSettings
-from interfaces.local_bus import LocalBus, LocalNode
 from interfaces.messages import SCHEMA_VERSION, Capabilities, Estop, RobotState, TorqueCommand
+from runtime.config import ZenohSettings
+from runtime.local_bus import LocalBus, LocalNode
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -91,7 +91,7 @@ def test_each_node_has_its_own_session_id_and_an_estop_reaches_both_sides():
     (["--cells", "2"], "--no-network runs one simulated cell in lock-step only"),
 ])
 def test_what_needs_the_network_is_refused_before_anything_starts(tmp_path, args, match):
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--no-network", "--out", str(tmp_path / "r"),
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "up", "--no-network", "--out", str(tmp_path / "r"),
                         *args], capture_output=True, text=True, timeout=120, cwd=REPO)
     assert r.returncode == 1 and match in r.stderr, r.stderr
     assert not (tmp_path / "r").exists()

@@ -9,7 +9,7 @@ import weakref
 
 import pytest
 
-from interfaces.loop_hygiene import GC_FORCE_FACTOR, LoopHygiene
+from runtime.loop_hygiene import GC_FORCE_FACTOR, LoopHygiene
 
 
 class _Node:

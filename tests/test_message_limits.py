@@ -130,8 +130,8 @@ def test_a_128_mb_put_costs_a_limited_receiver_a_few_times_the_limit_not_the_put
 
 
 def test_every_session_of_the_cell_takes_the_cells_limit_unless_told_otherwise(tmp_path):
-    from interfaces.config import ZenohSettings
-    from interfaces.session import zenoh_config
+    from runtime.config import ZenohSettings
+    from runtime.session import zenoh_config
 
     path = MAX_MESSAGE_SIZE_PATH
     assert json.loads(zenoh_config(ZenohSettings()).get_json(path)) == max_message_bytes()

@@ -16,13 +16,13 @@ import zenoh
 from cryptography import x509
 from cryptography.hazmat.primitives.asymmetric import ec
 
-from interfaces.certificates import CA_CERT, CA_KEY, add_certificate, cert_paths
-from interfaces.certificates import main as certificates_main
 from interfaces.codec import encode
-from interfaces.config import ZenohSettings
 from interfaces.errors import ConfigError
 from interfaces.messages import Estop
-from interfaces.session import ServiceNode, zenoh_config
+from runtime.certificates import CA_CERT, CA_KEY, add_certificate, cert_paths
+from runtime.certificates import main as certificates_main
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode, zenoh_config
 
 from .zenoh_helpers import free_port, wait_alive
 

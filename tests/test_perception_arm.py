@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 from perception.arm_mask import ArmSilhouette, ArmState
 from perception.frames import Frame, camera_matrix
 from perception.params import PerceptionParams

@@ -12,8 +12,8 @@ import msgspec
 import numpy as np
 import pytest
 
+from arm.robot_model import RobotModel
 from interfaces.messages import CameraFrame, SimTruth
-from interfaces.robot_model import RobotModel
 from interfaces.transforms import transform_from_pose
 from perception.board import pose_distance
 from perception.frames import frame_from_message

@@ -13,12 +13,12 @@ import cv2
 import numpy as np
 import pytest
 
-from interfaces.config import ZenohSettings
-from interfaces.credentials import identity_folder, make_credentials
-from interfaces.session import ServiceNode
 from perception.frames import FrameError
 from perception.params import PerceptionParams
 from perception.ros_images import RosImageSource, decode_camera_info, decode_compressed, decode_image, info_topic, store
+from runtime.config import ZenohSettings
+from runtime.credentials import identity_folder, make_credentials
+from runtime.session import ServiceNode
 
 from .conftest import REPO
 from .zenoh_helpers import free_port, wait_for, wait_subscribed

@@ -17,14 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from interfaces.config import ZenohSettings
+from arm.robot_model import RobotModel
 from interfaces.messages import CameraFrame, CameraIntrinsics, Pose, ServiceStatus, SimTruth, Stains
-from interfaces.robot_model import RobotModel
-from interfaces.session import ServiceNode
 from perception.evaluate import kappa_timings
 from perception.params import PerceptionParams
 from perception.service import PerceptionService
 from perception.sources import ZenohSource
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 from .test_controller_service import ControllerThread
 from .zenoh_helpers import REPO, SimProcess, free_port, run_lockstep, wait_for, wait_sample, wait_subscribed

@@ -1,4 +1,4 @@
-"""CPU priority per kind of service (:mod:`interfaces.priority`), each case in its own process."""
+"""CPU priority per kind of service (:mod:`runtime.priority`), each case in its own process."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from interfaces.errors import ConfigError
-from interfaces.priority import BACKGROUND, REALTIME, wanted_nice
+from runtime.priority import BACKGROUND, REALTIME, wanted_nice
 
 from .zenoh_helpers import REPO
 
@@ -19,7 +19,7 @@ from .zenoh_helpers import REPO
 # started after it; prints the report and every thread's nice value.
 PROBE = """
 import json, os, sys, threading
-from interfaces.priority import set_service_priority
+from runtime.priority import set_service_priority
 if os.geteuid() == 0:
     os.setpriority(os.PRIO_PROCESS, 0, 0)  # start from nice 0 whatever the test runner runs at
 if len(sys.argv) > 2:
@@ -72,7 +72,7 @@ def test_lamps_nice_overrides_or_keeps_and_a_bad_value_is_named():
 
 
 def test_a_bad_lamps_nice_stops_a_service_at_start_up_naming_it(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "robot", "--backend", "mock"], cwd=REPO,
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "robot", "--backend", "mock"], cwd=REPO,
                        capture_output=True, text=True, timeout=60, env={**os.environ, "LAMPS_NICE": "fast"})
     assert r.returncode == 1 and "LAMPS_NICE must be an integer" in r.stderr, r.stderr
 
@@ -85,12 +85,12 @@ def test_a_check_run_leaves_the_callers_priority_alone():
     assert os.getpriority(os.PRIO_PROCESS, 0) == before
 
 
-# A background service waiting for its stop: a second thread, the handler of interfaces.stop_signals; prints
+# A background service waiting for its stop: a second thread, the handler of runtime.stop_signals; prints
 # "ready", then, once stopped, every thread's nice value.
 STOP_PROBE = """
 import json, os, signal, sys, threading
-from interfaces.priority import BACKGROUND, set_service_priority
-from interfaces.stop_signals import on_stop_signals
+from runtime.priority import BACKGROUND, set_service_priority
+from runtime.stop_signals import on_stop_signals
 if os.geteuid() == 0:
     os.setpriority(os.PRIO_PROCESS, 0, 0)
 if len(sys.argv) > 1:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from arm.robot_model import IkError, RobotModel
 from controller.executor_types import LOOK_ELBOW_ROOM_RAD, BoardPose, look_point
 from controller.reach import arm_reach
-from interfaces.robot_model import IkError, RobotModel
 from interfaces.transforms import tool_rotation_on_board
 from sim.board import board_from_params, start_configuration
 from sim.params import BoardParams

@@ -14,13 +14,13 @@ import sys
 import pytest
 
 from interfaces.errors import ConfigError
-from interfaces.realtime import DEFAULT_PRIORITY, RealtimeRequest
+from runtime.realtime import DEFAULT_PRIORITY, RealtimeRequest
 
 from .conftest import REPO
 
 CHILD = """
 import os, threading
-from interfaces.realtime import RealtimeRequest, apply_realtime, keep_fair
+from runtime.realtime import RealtimeRequest, apply_realtime, keep_fair
 ids, stop = {{}}, threading.Event()
 def worker(name, fair):
     if fair:

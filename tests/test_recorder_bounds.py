@@ -19,10 +19,8 @@ import zenoh
 
 from interfaces.access import ROLES, may_put
 from interfaces.codec import encode
-from interfaces.config import ZenohSettings
 from interfaces.keys import Keys
 from interfaces.messages import MAX_PAYLOAD_BYTES, CameraFrame, RobotState, ServiceStatus
-from interfaces.session import ServiceNode
 from launch.record import (
     CHUNK_BYTES,
     REJECTED_NOTES_PER_KEY,
@@ -35,6 +33,8 @@ from launch.record import (
 )
 from launch.record_budget import FULL, MAX_KEYS, QUEUE_BYTES, SHARES, SHUT, THIN, THIN_FROM, THIN_PERIOD_S, Budget
 from launch.record_json import message_type_of
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 from .zenoh_helpers import free_port, wait_for, wait_subscribed
 

@@ -29,8 +29,6 @@ import pytest
 import zenoh
 
 from interfaces.codec import encode
-from interfaces.config import ZenohSettings
-from interfaces.credentials import identity_folder, make_credentials
 from interfaces.message_limits import MAX_MESSAGE_SIZE_PATH, max_message_bytes
 from interfaces.messages import (
     CameraFrame,
@@ -45,8 +43,10 @@ from interfaces.messages import (
     Stains,
     TorqueCommand,
 )
-from interfaces.session import ServiceNode
 from launch.record import read_recording
+from runtime.config import ZenohSettings
+from runtime.credentials import identity_folder, make_credentials
+from runtime.session import ServiceNode
 
 from .zenoh_helpers import REPO, free_port, wait_for
 
@@ -77,7 +77,7 @@ def _node(creds, role: str, rid: str, port: int) -> ServiceNode:
 
 def _blocking(node: ServiceNode, key: str):
     """A publisher that waits rather than drops: a congested link drops a control-path publisher's samples before
-    they leave (``interfaces.session.CONTROL_QOS``); this test is about what the recorder does with those it gets."""
+    they leave (``runtime.session.CONTROL_QOS``); this test is about what the recorder does with those it gets."""
     return node.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
 
 
@@ -170,7 +170,7 @@ def test_a_perception_flood_to_the_budget_leaves_the_cell_recorded_the_report_ri
            "LAMPS_ZENOH_IDENTITY": str(identity_folder(creds, "recorder")), "LAMPS_ZENOH_GOSSIP": "false",
            "LAMPS_ZENOH_CONFIG_FILE": str(limits), "LAMPS_RECORD_MAX_MB": "200", "LAMPS_REPORT_PLOTS": "0"}
     env.pop("LAMPS_ZENOH_INSECURE", None)
-    rec = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "record", "--out", str(out)], env=env, cwd=REPO,
+    rec = subprocess.Popen([sys.executable, "-m", "runtime.cli", "record", "--out", str(out)], env=env, cwd=REPO,
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     nodes: list[ServiceNode] = []
     stop_flood, sent, peak = threading.Event(), {"frames": 0, "huge": 0}, [0.0, 0.0]  # the flood's halves

@@ -13,10 +13,10 @@ import pytest
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from interfaces.config import ZenohSettings
 from interfaces.messages import ServiceStatus
-from interfaces.session import ServiceNode
 from launch.record import CHUNK_BYTES, RESUMED_TOPIC, McapSink, Recorder, read_recording, recover_recording
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 from .zenoh_helpers import REPO, free_port, wait_for
 
@@ -62,7 +62,7 @@ def test_lamps_report_recovers_the_recording_of_a_killed_recorder(tmp_path):
     out = tmp_path / "run"
     env = {**os.environ, "LAMPS_ROBOT_ID": rid, "LAMPS_ZENOH_CONNECT": f"tcp/127.0.0.1:{port}"}
     with ServiceNode("svc", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=rid)) as node:
-        rec = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "record", "--out", str(out)], env=env,
+        rec = subprocess.Popen([sys.executable, "-m", "runtime.cli", "record", "--out", str(out)], env=env,
                                cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
             wait_for(lambda: "recorder" in node.alive_services(0.5), 30.0, "the recorder's liveliness token")
@@ -77,7 +77,7 @@ def test_lamps_report_recovers_the_recording_of_a_killed_recorder(tmp_path):
             rec.send_signal(signal.SIGKILL)
             rec.wait(10)
     assert not (out / "recording.mcap").exists() and (out / "recording.mcap.partial").is_file()
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "report", str(out)], cwd=REPO, capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "report", str(out)], cwd=REPO, capture_output=True,
                        text=True, timeout=120)
     assert "recovered" in r.stdout, r.stdout + r.stderr
     assert _messages(out / "recording.mcap") > 0.5 * i, (i, r.stdout)

@@ -13,12 +13,12 @@ from __future__ import annotations
 import secrets
 import time
 
-from interfaces.config import ZenohSettings
 from interfaces.messages import ControllerStatus, SimTruth
-from interfaces.session import ServiceNode
 from launch.record import SELF_REPORTS_TOPIC, Recorder, read_recording
 from launch.record_budget import SHUT
 from launch.report import build_report
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 from .zenoh_helpers import free_port, wait_for, wait_subscribed
 

@@ -7,13 +7,13 @@ from collections import Counter
 
 import numpy as np
 
-from interfaces.local_bus import LocalBus, LocalNode
 from interfaces.messages import HOLD, TORQUE, TorqueCommand
 from robot.command import Command, CommandKind
 from robot.gate import CommandGate
 from robot.mock import MockArm
 from robot.port import Applied
 from robot.server import RobotServer, ServerParams
+from runtime.local_bus import LocalBus, LocalNode
 
 
 def test_a_command_is_a_reused_record_tagged_torque_or_hold():

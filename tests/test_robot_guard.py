@@ -15,8 +15,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from arm.robot_model import RobotModel
 from interfaces.messages import Estop, RobotState, ServiceStatus, SimTruth
-from interfaces.robot_model import RobotModel
 from robot.server import ServerParams
 from sim.board import board_from_params
 from sim.params import BoardParams

@@ -9,10 +9,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from interfaces.description import PAD_SIZE_M
+from arm.description import PAD_SIZE_M
+from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
 from interfaces.messages import HOLD, TorqueCommand
-from interfaces.robot_model import RobotModel
 from robot.command import CommandKind
 from robot.gate import CommandGate
 from robot.guard import Action, GuardLimits, RobotGuard
@@ -245,7 +245,7 @@ def test_server_params_state_their_ranges_and_the_brake_bands_order():
 def pressed_sim(model: RobotModel, force_n: float):
     """A sim (wall board, the pad 1 cm off it) whose pad a scripted client pressed onto the board at ``force_n``;
     returns the port (:class:`sim.service.SimPort` on an in-process bus)."""
-    from interfaces.local_bus import LocalBus, LocalNode
+    from runtime.local_bus import LocalBus, LocalNode
     from sim.core import SimCore
     from sim.params import SimParams
     from sim.service import SimPort

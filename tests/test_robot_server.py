@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from interfaces.codec import encode
-from interfaces.config import ZenohSettings
 from interfaces.messages import HOLD, RobotState, ServiceStatus, TorqueCommand
-from interfaces.session import ServiceNode
 from robot.mock import MockArm
 from robot.server import RobotServer, ServerParams
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 from .zenoh_helpers import free_port, wait_for, wait_sample, wait_subscribed
 

@@ -21,11 +21,11 @@ import pytest
 import zenoh
 
 from interfaces.access import RELAY, ROLES, SITE_VIEWER, cell_acl, role_and_cell, site_acl
-from interfaces.config import ZenohSettings
-from interfaces.credentials import identity_folder, make_credentials
 from interfaces.errors import ConfigError
-from interfaces.session import zenoh_config
 from launch.health import accepts
+from runtime.config import ZenohSettings
+from runtime.credentials import identity_folder, make_credentials
+from runtime.session import zenoh_config
 
 from .conftest import REPO
 from .mcap_check import protobuf_class
@@ -48,7 +48,7 @@ class _Router:
                "LAMPS_ZENOH_IDENTITY": str(identity_folder(credentials, RELAY)), "PATH": "/usr/bin:/bin",
                "PYTHONPATH": str(REPO), "RUST_LOG": DENIALS_LOG, "NO_COLOR": "1",
                **({"LAMPS_ZENOH_CELLS": ",".join(cells)} if cells else {})}
-        self.proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "router", "--listen", self.endpoint,
+        self.proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "router", "--listen", self.endpoint,
                                       "--status-s", "0"], env=env, cwd=tmp, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True)
         deadline = time.monotonic() + 60.0
@@ -300,7 +300,7 @@ def test_one_recording_of_every_cell_through_the_router_as_the_site_viewer(site,
     out = tmp_path / "site-recording"
     env = {**os.environ, "PYTHONPATH": str(REPO), "LAMPS_ZENOH_MODE": "client", "LAMPS_ZENOH_CONNECT": router.endpoint,
            "LAMPS_ZENOH_ACCESS_CONTROL": "true", "LAMPS_ZENOH_IDENTITY": str(creds / SITE_VIEWER)}
-    rec = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "record", "--cells", ",".join(CELLS), "--out",
+    rec = subprocess.Popen([sys.executable, "-m", "runtime.cli", "record", "--cells", ",".join(CELLS), "--out",
                             str(out)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     robots = [_client(router, c, identity_folder(creds, "robot", c)) for c in CELLS]
     try:
@@ -351,7 +351,7 @@ def test_the_site_list_confines_each_cells_roles_to_its_own_prefix():
 
 
 def test_site_credentials_name_each_cells_roles_and_a_service_refuses_another_cells_identity(tmp_path):
-    from interfaces.credentials import cell_of
+    from runtime.credentials import cell_of
 
     creds = tmp_path / "c"
     folders = make_credentials(creds, cells=CELLS)
@@ -373,7 +373,7 @@ def test_two_lockstep_cells_clean_their_boards_side_by_side_through_one_router(t
     from .test_live_view import follow_live
 
     out, ws_port = tmp_path / "site", free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "interfaces.cli", "up", "--cells", "2", "--stains", "1", "--seed",
+    proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "up", "--cells", "2", "--stains", "1", "--seed",
                              "3", "--skill", str(learned_skill_file), "--out", str(out), "--max-duration", "400", "-q",
                              "--foxglove", str(ws_port)], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"})
@@ -410,12 +410,12 @@ def test_health_alive_sees_a_clients_token_through_the_router_and_names_a_missin
     router, robot_id, creds = cell
     env = {"LAMPS_ROBOT_ID": robot_id, "LAMPS_ZENOH_MODE": "client", "LAMPS_ZENOH_CONNECT": router.endpoint,
            "LAMPS_ZENOH_ACCESS_CONTROL": "true", "LAMPS_ZENOH_IDENTITY": str(identity_folder(creds, "robot"))}
-    from interfaces.session import ServiceNode
+    from runtime.session import ServiceNode
 
     settings = ZenohSettings(mode="client", connect=(router.endpoint,), robot_id=robot_id, access_control=True,
                              identity=str(identity_folder(creds, "robot")))
     with ServiceNode("sim", settings):
-        r = subprocess.run([sys.executable, "-m", "interfaces.cli", "health", "--alive", "sim", "--timeout", "3",
+        r = subprocess.run([sys.executable, "-m", "runtime.cli", "health", "--alive", "sim", "--timeout", "3",
                             "-v"],
                            env={**os.environ, **env, "PYTHONPATH": str(REPO)}, capture_output=True, text=True,
                            timeout=60)

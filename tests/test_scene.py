@@ -6,9 +6,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from arm.robot_model import RobotModel
 from interfaces.keys import Keys
 from interfaces.messages import CameraFrame, CameraIntrinsics, Capabilities, Pose, RobotState, StainObservation, Stains
-from interfaces.robot_model import RobotModel
 from launch.record import McapSink
 from launch.scene import TF_PERIOD_S, SceneBuilder, ellipse_on_board, project, urdf_visuals
 

@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from interfaces.cli import main
 from lampskit.learn.segmentation import segment
 from lampskit.learn.synth_messy import Move, PhaseSpec, messy_take
+from runtime.cli import main
 
 
 @pytest.fixture(scope="module")

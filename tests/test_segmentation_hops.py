@@ -52,7 +52,7 @@ def test_a_hop_lifts_moves_and_lasts_as_asked():
     centres = [s.strokes[k].centre_m for k in range(3)]
     for c0, c1 in zip(centres, centres[1:]):
         assert np.linalg.norm(c1 - c0) == pytest.approx(hop.move_pads * PAD_LENGTH_M)
-    from interfaces.description import PAD_SIZE_M
+    from arm.description import PAD_SIZE_M
 
     assert PAD_LENGTH_M == PAD_SIZE_M[0]
     plain = synthesize_demo(3, 0, noise_m=0.0)

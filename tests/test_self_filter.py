@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from interfaces.description import ERASER_DEPTH_M, PAD_SIZE_M
-from interfaces.robot_model import RobotModel
+from arm.description import ERASER_DEPTH_M, PAD_SIZE_M
+from arm.robot_model import RobotModel
 from interfaces.transforms import transform
 from perception.classify import InkClassifier
 from perception.params import InkParams, PerceptionParams

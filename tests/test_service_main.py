@@ -1,4 +1,4 @@
-"""The services' one ``main()`` skeleton (interfaces.service_main), over real Zenoh sessions on loopback: a node
+"""The services' one ``main()`` skeleton (runtime.service_main), over real Zenoh sessions on loopback: a node
 that does not open is one error line and exit 1, with what was made before it released; a node that opened is
 closed (its liveliness token gone) whether the service's body returns or raises."""
 
@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from interfaces.config import ZenohSettings
-from interfaces.service_main import refuse, serve
-from interfaces.session import ServiceNode
+from runtime.config import ZenohSettings
+from runtime.service_main import refuse, serve
+from runtime.session import ServiceNode
 
 from .zenoh_helpers import free_port, wait_alive, wait_gone
 

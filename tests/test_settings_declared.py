@@ -15,11 +15,11 @@ import pytest
 
 from controller.control.model_correction import CorrectionParams
 from controller.params import ControllerParams, ExecutorParams, ForceParams, LimitParams, TeachParams
-from interfaces.config import declared_bounds
 from interfaces.errors import ConfigError
 from perception.params import BoardParams as PBoard
 from perception.params import CameraModelParams, InkParams, KappaParams, PerceptionParams, StainParams
 from robot.lbr.params import LbrParams
+from runtime.config import declared_bounds
 from sim.lbr_stack.params import LbrPeerParams
 from sim.params import BoardParams as SBoard
 from sim.params import CameraParams, ContactParams, DirtParams, HandParams, SimParams

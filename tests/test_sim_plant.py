@@ -12,11 +12,11 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from interfaces.config import declared_bounds, load_config
-from interfaces.description import URDF_PATH
+from arm.description import URDF_PATH
+from arm.joint_dynamics import JointDynamics, joint_dynamics_from_config
+from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
-from interfaces.joint_dynamics import JointDynamics, joint_dynamics_from_config
-from interfaces.robot_model import RobotModel
+from runtime.config import declared_bounds, load_config
 from sim.core import SimCore
 from sim.params import SimParams
 from sim.plant import LINK_NAMES, tool_gravity_torque
@@ -151,7 +151,7 @@ def test_no_controller_or_robot_side_module_reads_the_plant():
     reads the table (tests, the bench and the sim itself may)."""
     pattern = re.compile(r"sim\.plant|sim\.params|plant_params|[\"']plant[\"']|PLANT__")
     offenders = []
-    for folder in ("controller", "robot", "interfaces", "perception", "lampskit"):
+    for folder in ("controller", "robot", "interfaces", "runtime", "arm", "perception", "lampskit"):
         for path in (REPO / folder).rglob("*.py"):
             if pattern.search(path.read_text()):
                 offenders.append(str(path.relative_to(REPO)))

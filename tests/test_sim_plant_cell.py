@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from interfaces.config import load_config
+from runtime.config import load_config
 from sim.params import SimParams
 
 from .conftest import REPO
@@ -28,7 +28,7 @@ def test_a_network_free_cell_on_the_identified_plant_cleans_its_board(tmp_path):
     env = {k: v for k, v in os.environ.items() if not k.startswith("LAMPS__SIM__PLANT__")}
     env.update(PLANT_ENV)
     out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--no-network", "--seed", "0", "--out",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "up", "--no-network", "--seed", "0", "--out",
                         str(out), "-q", "--max-duration", "600"], cwd=REPO, env=env, capture_output=True, text=True,
                        timeout=900)
     assert (out / "report.json").exists(), r.stderr[-3000:]

@@ -10,10 +10,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from arm.robot_model import RobotModel
 from interfaces.board_markers import marker_corners_board
 from interfaces.codec import encode
 from interfaces.messages import CameraFrame, RobotState, SimTruth, TorqueCommand
-from interfaces.robot_model import RobotModel
 from interfaces.transforms import transform_from_pose
 from sim.board import board_from_params
 from sim.camera import project

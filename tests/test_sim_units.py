@@ -11,9 +11,9 @@ import pybullet as pb
 import pytest
 from matplotlib.path import Path as MplPath
 
+from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
 from interfaces.messages import TorqueCommand
-from interfaces.robot_model import RobotModel
 from interfaces.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 from robot.command import CommandKind
 from robot.gate import CommandGate
@@ -295,7 +295,7 @@ def test_sim_cli_checks_config_and_board_at_start(tmp_path, capsys):
 
 
 def test_the_example_config_loads_and_says_the_defaults():
-    from interfaces.config import load_config
+    from runtime.config import load_config
 
     cfg = load_config(Path(__file__).resolve().parent.parent / "config" / "example.toml", env={})
     assert SimParams.from_table(cfg.table("sim")) == SimParams()

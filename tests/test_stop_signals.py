@@ -1,5 +1,5 @@
 """SIGTERM ends a service's wait wherever the kernel delivers it, and its handler never blocks
-(:mod:`interfaces.stop_signals`), each case in its own process."""
+(:mod:`runtime.stop_signals`), each case in its own process."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from .zenoh_helpers import REPO
 # the kernel hands a process's signal to any thread). Prints "stopped" once the wait returns.
 ELSEWHERE = """
 import signal, sys, threading, time
-from interfaces.stop_signals import on_stop_signals, wait_for
+from runtime.stop_signals import on_stop_signals, wait_for
 stop = threading.Event()
 on_stop_signals(stop)
 def other():
@@ -33,7 +33,7 @@ print("stopped after %.2f s" % (time.monotonic() - t0), flush=True)
 # stop.wait() (entering it, it holds the lock for a call or two). Prints "stopped" once the event is set.
 LOCK_HELD = """
 import signal, sys, threading
-from interfaces.stop_signals import on_stop_signals
+from runtime.stop_signals import on_stop_signals
 stop = threading.Event()
 if sys.argv[1] == "plain":
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -12,18 +12,18 @@ import time
 import numpy as np
 import pytest
 
+from arm.robot_model import RobotModel
 from controller.params import ControllerParams
 from controller.teach import TeachCore
 from interfaces.errors import ConfigError
 from interfaces.messages import Phase
-from interfaces.robot_model import RobotModel
 from launch.teach_cell import PathRecorder
 from sim.hand import Hand, HandScript, rotation_vector
 from sim.params import HandParams
 
 from .conftest import REPO
 
-LAMPS = (sys.executable, "-m", "interfaces.cli")
+LAMPS = (sys.executable, "-m", "runtime.cli")
 Q = np.array([0.1, 0.6, -0.1, -1.4, 0.1, 0.8, 0.2])
 
 

@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from interfaces.config import ZenohSettings
 from interfaces.messages import RobotState, ServiceStatus, TorqueCommand
-from interfaces.session import ServiceNode
+from runtime.config import ZenohSettings
+from runtime.session import ServiceNode
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 
 from .kernels import impedance_into, kinematics_terms, task_modes_into
 from .params import ImpedanceParams

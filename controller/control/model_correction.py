@@ -43,8 +43,8 @@ import numba as nb
 import numpy as np
 
 from controller.tool_estimate import GRAVITY_M_S2, tool_regressor_into
-from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
+from runtime.config import In, check_declared
 
 #: The status warning's name when the correction stays at its bound.
 MODEL_MISMATCH = "model_mismatch"

@@ -54,7 +54,7 @@ from lampskit.learn.synth_pieces import Rest, Stroke, StrokeSpec, Transition
 
 #: Board area in which stains are placed, board frame [m] (x range, y range).
 BOARD_AREA_M = ((0.10, 1.00), (0.10, 0.70))
-#: The eraser pad's length [m], the unit of a hop's move (``interfaces.description.PAD_SIZE_M[0]``; the
+#: The eraser pad's length [m], the unit of a hop's move (``arm.description.PAD_SIZE_M[0]``; the
 #: offline learner does not import the cell's description, a test keeps the two equal).
 PAD_LENGTH_M = 0.12
 

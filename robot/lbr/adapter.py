@@ -63,8 +63,8 @@ from collections import Counter
 import numpy as np
 
 from interfaces.messages import ArmRequest, Capabilities
-from interfaces.robot_model import RobotModel
-from interfaces.session import CONTROL_QOS, ServiceNode
+from arm.robot_model import RobotModel
+from runtime.session import CONTROL_QOS, ServiceNode
 from robot.port import Applied, Reading, RobotPort
 
 from .arming import REST_SPEED_RAD_S, arming_refusal, left_commanding

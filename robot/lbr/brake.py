@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 
 
 class ContactBrake:

@@ -47,9 +47,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated
 
-from interfaces.config import In, check_declared, dataclass_from_table
-from interfaces.config import check_range as _range
 from interfaces.errors import ConfigError
+from runtime.config import In, check_declared, dataclass_from_table
+from runtime.config import check_range as _range
 
 from .msgs import FRI_MAJORS, N_JOINTS, LbrTopics, stack_joint_names
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 
 from .arming import REST_SPEED_RAD_S
 from .compensation import filter_alpha

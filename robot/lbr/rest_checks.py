@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 
 #: Standard gravity [m/s^2].
 GRAVITY_M_S2 = 9.81

@@ -8,7 +8,7 @@ iiwa14_description.xacro (rolling 218d723) puts the joints A1..A7 at the
 origins and axes of :data:`STACK_JOINTS` (every rpy 0) and ``link_ee``
 0.035 m above ``link_7`` (:data:`STACK_EE_IN_LINK7_M`); humble cca24ae has
 the same numbers (``joint_ee`` at :287-291). At q = 0 its link_7 is 1.271 m
-above link_0, ours (``iiwa_link_7``, interfaces/description/
+above link_0, ours (``iiwa_link_7``, arm/description/
 iiwa14_eraser.urdf) 1.261 m: the two descriptions put link 7 at different
 points of the same arm, and the tip is the flange (1.306 m, KUKA's data
 sheet). :func:`tip_in_link7` derives the tip's pose in our link 7 from both
@@ -22,7 +22,7 @@ import functools
 import numpy as np
 import pinocchio as pin
 
-from interfaces.robot_model import URDF_PATH
+from arm.robot_model import URDF_PATH
 
 #: (origin xyz [m] in the parent link, axis) of the stack's joints A1..A7, rpy all 0:
 #: iiwa14_description.xacro (rolling 218d723) :52,55 / :86,89 / :120,123 / :154,157 / :188,191 / :222,225 /
@@ -38,7 +38,7 @@ STACK_JOINTS: tuple[tuple[tuple[float, float, float], tuple[float, float, float]
 )
 #: ``<robot>_joint_ee``: link_ee in link_7, xyz [m], rpy 0 (iiwa14_description.xacro:288-292, rolling 218d723).
 STACK_EE_IN_LINK7_M = (0.0, 0.0, 0.035)
-#: Our link 7 (interfaces/description/iiwa14_eraser.urdf).
+#: Our link 7 (arm/description/iiwa14_eraser.urdf).
 LINK7_FRAME = "iiwa_link_7"
 STACK_EE_FRAME = "lbr_link_ee"
 

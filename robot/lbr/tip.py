@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from interfaces.robot_model import RobotModel
+from arm.robot_model import RobotModel
 
 from .stack_chain import LINK7_FRAME, tip_in_link7
 

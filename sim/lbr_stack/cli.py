@@ -3,7 +3,7 @@
 Configuration comes from ``--config FILE`` (TOML: ``[zenoh]``, ``[lbr_peer]``
 and ``[sim]`` for the arm, board, dirt and camera; see
 :mod:`sim.lbr_stack.params` and :mod:`sim.lbr_stack.peer`), then ``LAMPS_*`` environment variables
-(:mod:`interfaces.config`), then the options below (highest priority).
+(:mod:`runtime.config`), then the options below (highest priority).
 A broken config file or an impossible board pose is a one-line error and
 exit code 1 before anything starts; Ctrl-C or SIGTERM stops it cleanly.
 """
@@ -14,12 +14,12 @@ import argparse
 import logging
 import sys
 
-from interfaces.config import add_zenoh_options, load_config, zenoh_with_options
-from interfaces.priority import REALTIME, set_service_priority, wanted_nice
-from interfaces.realtime import RealtimeRequest
-from interfaces.service_main import log_to_stderr, refuse, serve
-from interfaces.stop_signals import on_stop_signals
 from lampskit.errors import LampsError
+from runtime.config import add_zenoh_options, load_config, zenoh_with_options
+from runtime.priority import REALTIME, set_service_priority, wanted_nice
+from runtime.realtime import RealtimeRequest
+from runtime.service_main import log_to_stderr, refuse, serve
+from runtime.stop_signals import on_stop_signals
 
 PROG = "lamps lbr-peer"
 
@@ -64,8 +64,8 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_settings, params, sim_params = load(a)
         wanted_nice(REALTIME)  # a bad LAMPS_NICE is refused with the rest of the configuration
         RealtimeRequest.from_env()  # and a bad LAMPS_RT_PRIORITY, LAMPS_MLOCK or LAMPS_CPUS
-        from interfaces.joint_dynamics import joint_dynamics_from_config
-        from interfaces.robot_model import RobotModel
+        from arm.joint_dynamics import joint_dynamics_from_config
+        from arm.robot_model import RobotModel
         from sim.core import SimCore
 
         core = SimCore(sim_params, RobotModel(joints=joint_dynamics_from_config(a.config)))

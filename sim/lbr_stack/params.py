@@ -54,7 +54,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from interfaces.config import In, check_declared, check_range, dataclass_from_table
 from interfaces.errors import ConfigError
 from robot.lbr.msgs import (
     FRI_MAJORS,
@@ -65,6 +64,7 @@ from robot.lbr.msgs import (
     OperationMode,
     stack_joint_names,
 )
+from runtime.config import In, check_declared, check_range, dataclass_from_table
 
 MODES = ("lockstep", "realtime")
 MANAGER_CLOCKS = ("own", "fri")

@@ -94,11 +94,9 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
-from interfaces.loop_stats import LoopStats
 from interfaces.messages import ServiceStatus
-from interfaces.robot_model import RobotModel
-from interfaces.session import CONTROL_QOS, ServiceNode
 from robot.lbr.msgs import (
     N_JOINTS,
     DriveState,
@@ -110,6 +108,8 @@ from robot.lbr.msgs import (
     encode_wrench,
 )
 from robot.lbr.tip import tip_jacobian, tip_pose
+from runtime.loop_stats import LoopStats
+from runtime.session import CONTROL_QOS, ServiceNode
 from sim.core import SimCore
 from sim.params import SimParams
 from sim.service import SimPort

@@ -47,10 +47,9 @@ import ipaddress
 import sys
 from pathlib import Path
 
+from interfaces.access import ROLES
+from interfaces.errors import ConfigError
 from lampskit.atomic import write_atomic
-
-from .access import ROLES
-from .errors import ConfigError
 
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
 #: Validity of certificates made for a site, by ``lamps certificates`` and ``lamps credentials`` [days].

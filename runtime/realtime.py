@@ -1,6 +1,6 @@
 """Real-time scheduling, locked memory and CPU affinity for the thread of a 1 kHz loop.
 
-Nice values (:mod:`interfaces.priority`) only weigh the fair scheduler's
+Nice values (:mod:`runtime.priority`) only weigh the fair scheduler's
 shares: a nice -10 loop that wakes while another process runs still waits
 for that process's slice to end. A thread under ``SCHED_FIFO`` preempts
 every ordinary thread the moment it wakes, which is what a loop owing the
@@ -25,7 +25,7 @@ and stay where they are: as ``SCHED_FIFO`` threads they would hold a core
 against every ordinary process for a whole plan. Threads started later by
 a raised thread inherit its scheduling.
 
-:func:`apply_realtime` is called by :class:`~interfaces.loop_hygiene.LoopHygiene`
+:func:`apply_realtime` is called by :class:`~runtime.loop_hygiene.LoopHygiene`
 on the loop's thread when the loop starts. What it asks for, from the
 environment (one service at a time, like ``LAMPS_NICE``):
 
@@ -57,7 +57,7 @@ import sys
 import threading
 from dataclasses import dataclass
 
-from .errors import ConfigError
+from interfaces.errors import ConfigError
 
 log = logging.getLogger(__name__)
 

@@ -1,4 +1,4 @@
-"""Open a Zenoh session from :class:`~interfaces.config.ZenohSettings`, announce the service, read newest samples.
+"""Open a Zenoh session from :class:`~runtime.config.ZenohSettings`, announce the service, read newest samples.
 
 * :func:`zenoh_config` builds the ``zenoh.Config`` (peer mode, explicit
   endpoints, multicast scouting off unless asked for; user-password
@@ -35,12 +35,13 @@ from typing import Any, Generic, TypeVar
 import msgspec
 import zenoh
 
-from .access import cell_acl, role_and_cell, site_acl
-from .codec import Decoder, encode
+from interfaces.access import cell_acl, role_and_cell, site_acl
+from interfaces.codec import Decoder, encode
+from interfaces.errors import ConfigError, MessageDecodeError
+from interfaces.keys import Keys
+from interfaces.messages import ControllerStatus, Message, ServiceStatus
+
 from .config import ZenohSettings
-from .errors import ConfigError, MessageDecodeError
-from .keys import Keys
-from .messages import ControllerStatus, Message, ServiceStatus
 
 log = logging.getLogger(__name__)
 M = TypeVar("M", bound=Message)
@@ -91,8 +92,8 @@ def zenoh_config(settings: ZenohSettings, max_message_bytes: int | None = None) 
     reassembled, :mod:`interfaces.message_limits`); default the cell's largest message bound, unless the
     ``config_file`` sets one.
     """
-    from .message_limits import MAX_MESSAGE_SIZE_PATH
-    from .message_limits import max_message_bytes as cell_max
+    from interfaces.message_limits import MAX_MESSAGE_SIZE_PATH
+    from interfaces.message_limits import max_message_bytes as cell_max
 
     cfg = _base_config(settings.config_file)
     if max_message_bytes is not None or cfg.get_json(MAX_MESSAGE_SIZE_PATH) == zenoh.Config().get_json(
@@ -207,7 +208,7 @@ class Latest(Generic[M]):
 
 def _message(decode: Decoder, sample):
     """The message of ``sample`` (raises MessageDecodeError). The size is checked before the payload is copied
-    out (a huge one is never parsed). A payload of the in-process bus (:mod:`interfaces.local_bus`) is the
+    out (a huge one is never parsed). A payload of the in-process bus (:mod:`runtime.local_bus`) is the
     published message itself, or decoded once for all its readers of one type (``decoded``: the messages are
     frozen); Zenoh's is decoded by each reader."""
     payload = sample.payload
@@ -321,7 +322,7 @@ class ServiceNode:
         self._token: zenoh.LivelinessToken | None = None
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._readers: list[Latest | Inbox] = []
-        #: how this node joined, carried by every status it publishes (:mod:`interfaces.service_security`)
+        #: how this node joined, carried by every status it publishes (:mod:`runtime.service_security`)
         self.security = ""
 
     def __enter__(self) -> ServiceNode:

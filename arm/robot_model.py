@@ -16,8 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from interfaces.errors import InterfaceError
+
 from .description import TCP_FRAME, URDF_PATH
-from .errors import InterfaceError
 from .joint_dynamics import JointDynamics
 
 

@@ -23,7 +23,7 @@ it returns goes into the service's status (:data:`REPORT`).
 
 A background service told to stop leaves its low priority
 (:func:`leave_background`, from its signal handler:
-:func:`interfaces.stop_signals.on_stop_signals`): its exit now holds up the
+:func:`runtime.stop_signals.on_stop_signals`): its exit now holds up the
 launcher, and on a shared machine another cell's loops at nice -10 would
 leave it about 1 % of a core for it (a perception once took more than the
 launcher's 10 s to close its session so, and was killed).
@@ -35,7 +35,7 @@ import logging
 import os
 import threading
 
-from .errors import ConfigError
+from interfaces.errors import ConfigError
 
 log = logging.getLogger(__name__)
 

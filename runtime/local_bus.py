@@ -1,9 +1,9 @@
-"""The cell's keys without a network: an in-process bus behind the same :class:`~interfaces.session.ServiceNode`.
+"""The cell's keys without a network: an in-process bus behind the same :class:`~runtime.session.ServiceNode`.
 
-A :class:`LocalNode` is a :class:`~interfaces.session.ServiceNode` whose
+A :class:`LocalNode` is a :class:`~runtime.session.ServiceNode` whose
 session is a :class:`LocalSession` on a shared :class:`LocalBus` instead of
 a Zenoh session: the services publish, read (through the same
-:class:`~interfaces.session.Latest` and :class:`~interfaces.session.Inbox`,
+:class:`~runtime.session.Latest` and :class:`~runtime.session.Inbox`,
 bad payloads counted alike) and declare liveliness exactly as on Zenoh, but a
 put is handed to every matching subscriber in the putting thread, at once, in
 order, never lost. A published message travels as itself (messages are
@@ -26,9 +26,10 @@ from typing import cast
 
 import zenoh
 
-from .codec import encode
+from interfaces.codec import encode
+from interfaces.messages import SCHEMA_VERSION, Message
+
 from .config import ZenohSettings
-from .messages import SCHEMA_VERSION, Message
 from .session import Latest, ServiceNode
 
 

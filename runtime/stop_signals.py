@@ -15,7 +15,7 @@ Two ways a Python service can miss its stop signal, and what this module does:
   the set to a new low-level thread (none of :mod:`threading`'s locks taken).
 
 A background service also leaves its low CPU priority in the handler
-(:func:`interfaces.priority.leave_background`).
+(:func:`runtime.priority.leave_background`).
 """
 
 from __future__ import annotations

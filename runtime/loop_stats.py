@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from .messages import LoopTiming
+from interfaces.messages import LoopTiming
 
 DEFAULT_WINDOW = 2000
 

@@ -21,11 +21,11 @@ Each certificate names the hosts its role is reached at (the compose service
 names and aliases of that role, ``localhost`` and ``127.0.0.1``, plus every
 ``--host``): Zenoh checks the listener's name on every TLS link a service
 opens. Elliptic-curve keys (P-256) and SHA-256 signatures, as
-:mod:`interfaces.certificates` makes them (a CA that certifies end entities
+:mod:`runtime.certificates` makes them (a CA that certifies end entities
 only, ``pathlen:0``).
 
 Lifetimes: ``lamps credentials DIR`` (a site's, compose's ``./secrets``)
-are valid :data:`~interfaces.certificates.DEFAULT_DAYS` (365) days, or
+are valid :data:`~runtime.certificates.DEFAULT_DAYS` (365) days, or
 ``--days N``; :func:`make_credentials` called without ``days`` (what
 ``lamps up`` makes in each run folder, ``<run>/credentials/``) makes
 one-run credentials, valid :data:`RUN_DAYS` (24 hours). A complete set
@@ -56,9 +56,7 @@ import json
 import sys
 from pathlib import Path
 
-from lampskit.atomic import write_atomic, write_text_atomic
-
-from .access import (
+from interfaces.access import (
     DEFAULT_ROS_NAMESPACES,
     IDENTITIES,
     RELAY,
@@ -69,8 +67,10 @@ from .access import (
     identity_name,
     role_and_cell,
 )
+from interfaces.keys import Keys
+from lampskit.atomic import write_atomic, write_text_atomic
+
 from .certificates import DEFAULT_DAYS, DEFAULT_HOSTS, MAX_DAYS, issue, new_ca, write_key_and_cert
-from .keys import Keys
 
 CA_FOLDER = "ca"
 #: The files of an identity folder: the CA's certificate, the role's certificate, its private key.

@@ -1,7 +1,7 @@
 """Joint dynamics of the iiwa 14 that the rigid-body description leaves out: rotor inertia and joint friction.
 
 One source for the simulator (:mod:`sim.drive` applies them in PyBullet's
-torque path) and for Pinocchio (:class:`~interfaces.robot_model.RobotModel`
+torque path) and for Pinocchio (:class:`~arm.robot_model.RobotModel`
 puts them in ``model.armature``, ``model.damping`` and ``model.friction``),
 so the controller's inertia is the simulated arm's. Per joint i the motor
 torque tau_i [Nm] meets
@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import check_range, check_vector, dataclass_from_table, load_config
+from runtime.config import check_range, check_vector, dataclass_from_table, load_config
 
 N_JOINTS = 7
 

@@ -20,12 +20,12 @@ the robot side's, :mod:`robot.server`):
   :attr:`LoopHygiene.report`.
 * **Real-time scheduling** (a wall- or robot-clocked loop in a real-time
   service's process, not lock-step): ``SCHED_FIFO`` for the loop's thread,
-  locked memory, CPU affinity if asked (:mod:`interfaces.realtime`); counted
+  locked memory, CPU affinity if asked (:mod:`runtime.realtime`); counted
   as ``loop_sched_fifo_priority`` (0: refused or off) and
   ``loop_memory_locked`` in the service's status counters.
 
 :attr:`LoopHygiene.report` says what was applied, for the service's status, with
-the process's CPU priority (:mod:`interfaces.priority`).
+the process's CPU priority (:mod:`runtime.priority`).
 """
 
 from __future__ import annotations
@@ -38,8 +38,9 @@ import sys
 import time
 from collections import Counter
 
+from interfaces.errors import ConfigError
+
 from . import priority
-from .errors import ConfigError
 from .realtime import apply_realtime
 
 log = logging.getLogger(__name__)
@@ -83,8 +84,8 @@ class LoopHygiene:
     def start(self, realtime: bool = False) -> None:
         """Collect and freeze what exists, take the collector over, fine sleeps for the calling thread; with
         ``realtime`` (a loop on a wall or robot clock, not lock-step) in a process set up as a real-time
-        service (:func:`~interfaces.priority.set_service_priority`), also real-time scheduling, locked memory
-        and the CPUs asked for (:func:`~interfaces.realtime.apply_realtime`); a test running a loop in its own
+        service (:func:`~runtime.priority.set_service_priority`), also real-time scheduling, locked memory
+        and the CPUs asked for (:func:`~runtime.realtime.apply_realtime`); a test running a loop in its own
         process is left alone."""
         gc.collect()
         gc.freeze()
@@ -129,7 +130,7 @@ class LoopHygiene:
 
     def next_period(self, stats, deadline_ns: int, period_ns: int) -> int:
         """End one period of a fixed-rate loop: the next deadline after ``deadline_ns`` (missed periods counted as
-        overruns in ``stats``, a :class:`~interfaces.loop_stats.LoopStats`, and skipped), waited for; returns it."""
+        overruns in ``stats``, a :class:`~runtime.loop_stats.LoopStats`, and skipped), waited for; returns it."""
         deadline_ns = stats.next_deadline(deadline_ns, period_ns, time.monotonic_ns())
         self.wait_until(deadline_ns)
         return deadline_ns

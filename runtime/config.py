@@ -20,7 +20,7 @@ and ``connect`` (lists of endpoints such as ``tcp/127.0.0.1:7447``),
 ones they connect to and link directly; false: only the configured links,
 e.g. when a link must pass a particular network path),
 ``robot_id``, ``key_prefix`` (default ``lamps/<robot_id>``); identity and
-access control (:mod:`interfaces.access`, :mod:`interfaces.credentials`):
+access control (:mod:`interfaces.access`, :mod:`runtime.credentials`):
 ``identity`` (the service's folder from ``lamps credentials DIR``: its
 role's certificate and key and the cell's CA; mutual TLS, every endpoint
 then ``tls/...``), or ``tls_ca``, ``tls_certificate`` and ``tls_private_key``
@@ -29,7 +29,7 @@ cell's default-deny access list, subjects the certificates' common names;
 unset: on whenever the service has an identity); ``insecure`` (shorthand
 ``LAMPS_ZENOH_INSECURE``, option ``--insecure``: a service started without
 an identity, or with the access list off, runs only when told so, and says
-so in every status, :mod:`interfaces.service_security`; the robot role's
+so in every status, :mod:`runtime.service_security`; the robot role's
 access list stays on whatever it says);
 ``ros_namespaces`` (default ``["lbr", "camera"]``: the ROS topic namespaces
 zenoh-bridge-ros2dds carries, the keys the robot side and the bridge may put);
@@ -61,9 +61,9 @@ from typing import Annotated, Any
 
 import msgspec
 
-from .access import DEFAULT_ROS_NAMESPACES, ROLES, check_cells
-from .errors import ConfigError
-from .keys import DEFAULT_ROBOT_ID, Keys
+from interfaces.access import DEFAULT_ROS_NAMESPACES, ROLES, check_cells
+from interfaces.errors import ConfigError
+from interfaces.keys import DEFAULT_ROBOT_ID, Keys
 
 ZENOH_MODES = ("peer", "client", "router")
 _SHORTHANDS = {
@@ -375,7 +375,7 @@ def zenoh_with_options(settings: ZenohSettings, args) -> ZenohSettings:
     """``settings`` with the options of :func:`add_zenoh_options` that were given (they win over the file).
 
     These are the settings a service starts with: ConfigError when they would run it without an identity or
-    without its access list unasked (:func:`interfaces.service_security.check_service_security`)."""
+    without its access list unasked (:func:`runtime.service_security.check_service_security`)."""
     from .service_security import check_service_security
 
     over = {k: v for k, v in (("listen", args.listen), ("connect", args.connect), ("robot_id", args.robot_id),

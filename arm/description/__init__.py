@@ -4,7 +4,7 @@
 arm: PyBullet and Pinocchio load the same file, so the sim and the
 controller agree on kinematics, limits and inertia. See the file's header
 for where each number comes from. The joints' rotor inertia and friction
-are not in the file: :mod:`interfaces.joint_dynamics` gives both sides them.
+are not in the file: :mod:`arm.joint_dynamics` gives both sides them.
 """
 
 from __future__ import annotations

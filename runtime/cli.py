@@ -39,9 +39,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "router": ("launch.router:main", "a Zenoh router with the cell's identities and access list (several hosts)"),
     "health": ("launch.health:main", "is this service ready (its Zenoh endpoints accept connections)? compose's probe"),
     "folders": ("launch.folders:main", "make the cell's host folders and give them to the service user (compose)"),
-    "credentials": ("interfaces.credentials:main",
+    "credentials": ("runtime.credentials:main",
                     "make a cell's CA and one mutual-TLS identity per role (the access list's subjects)"),
-    "certificates": ("interfaces.certificates:main",
+    "certificates": ("runtime.certificates:main",
                      "make a CA and certificates for other names (flat layout; --add signs one more)"),
     "bench": ("launch.bench:main", "run every benchmark into bench.json and a markdown page (a source checkout)"),
 }

@@ -8,7 +8,7 @@ live view, router, teach) starts only
 * without either, or with the access list off, when told so on purpose:
   ``--insecure`` / ``[zenoh] insecure = true`` / ``LAMPS_ZENOH_INSECURE=true``.
   It then logs a warning and every status it publishes says ``INSECURE``
-  (:func:`security_summary`, carried by :class:`~interfaces.session.ServiceNode`).
+  (:func:`security_summary`, carried by :class:`~runtime.session.ServiceNode`).
 
 Whatever the flag, the robot role's access list cannot be turned off (its
 identity moves the arm).
@@ -21,10 +21,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .access import role_and_cell
-from .errors import ConfigError
+from interfaces.access import role_and_cell
+from interfaces.errors import ConfigError
 
-if TYPE_CHECKING:  # interfaces.config calls check_service_security
+if TYPE_CHECKING:  # runtime.config calls check_service_security
     from .config import ZenohSettings
 
 #: What a status says of a service on the in-process bus (no network, nothing to authenticate).
