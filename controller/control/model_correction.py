@@ -42,7 +42,7 @@ from typing import Annotated
 import numba as nb
 import numpy as np
 
-from controller.tool_estimate import GRAVITY_M_S2, tool_regressor_into
+from controller.tool_estimate import GRAVITY_M_S2, TORQUE_NOISE_NM, tool_regressor_into
 from interfaces.config import In, check_declared
 from interfaces.errors import ConfigError
 
@@ -65,6 +65,8 @@ class CorrectionParams:
     warn_s : a joint at its bound this long raises :data:`MODEL_MISMATCH` [s].
     identify_s : the identification motion's length before the skill starts [s] (0: none;
     :mod:`controller.arm_model`); identify_roll_rad : how far it rolls the pad about its normal [rad].
+    torque_noise_nm : the joint-torque sensors' noise (standard deviation) [Nm]: the flange load estimate fits a
+    direction when its standard error at this noise is within 5 g m (:mod:`controller.tool_estimate`).
     """
 
     enabled: bool = False
@@ -73,6 +75,7 @@ class CorrectionParams:
     warn_s: Annotated[float, In(0.0, 60.0)] = 0.5
     identify_s: Annotated[float, In(0.0, 30.0)] = 0.0
     identify_roll_rad: Annotated[float, In(0.0, 1.5)] = 0.5
+    torque_noise_nm: Annotated[float, In(0.001, 5.0)] = TORQUE_NOISE_NM
 
     def __post_init__(self) -> None:
         check_declared(self, "controller.model")
