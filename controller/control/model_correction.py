@@ -14,8 +14,7 @@ too, ``tau_d = c - delta`` whatever ``c`` is: the observer
     c = Y(q) theta + z,     dz/dt = -tau_d / T_i,   |z_i| <= z_max_i
 
 drives ``c`` to ``delta`` with the time constant ``T_i`` (a first-order
-estimator; it does not feed back on the pad's position, so it adds no
-oscillation to the impedance loop). ``Y(q) theta`` is the estimated
+estimator; it does not feed back on the pad's position). ``Y(q) theta`` is the estimated
 flange load (:mod:`controller.tool_estimate`) once it is fitted: its gravity
 torque follows the pose exactly, ``z`` keeps what the load does not explain
 (link masses, centres of mass), at the pose where it was learned.
@@ -31,7 +30,10 @@ state: the residual is not evaluated). Nothing resets at a phase change: the
 arm's weight does not change with the phase; a restart keeps it too.
 
 In the same residual: inertia errors ``(M - M_true) ddq``, zero-mean over a
-wiping period, averaged out by ``T_i``; unmodelled joint friction.
+wiping period, and the change of the links' static error across the wiped
+area; ``c`` follows them below ``1 / (2 pi T_i)`` (3.2 Hz at 0.05 s: a
+disturbance observer on the measured acceleration, docs/controller.md says
+what that bought on the heavier plants); unmodelled joint friction.
 """
 
 from __future__ import annotations
@@ -70,7 +72,7 @@ class CorrectionParams:
     """
 
     enabled: bool = False
-    integral_s: Annotated[float, In(0.01, 10.0)] = 0.2
+    integral_s: Annotated[float, In(0.01, 10.0)] = 0.05
     bound_share: Annotated[float, In(0.0, 0.5)] = 0.15
     warn_s: Annotated[float, In(0.0, 60.0)] = 0.5
     identify_s: Annotated[float, In(0.0, 30.0)] = 0.0
