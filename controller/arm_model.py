@@ -45,7 +45,7 @@ class ArmModel:
     def __init__(self, params, model, contact_threshold_n: float) -> None:
         self.p = params
         self.correction = ModelCorrection(params, model.limits.tau_max)
-        self.tool = ToolEstimate.for_model(model)
+        self.tool = ToolEstimate.for_model(model, params.torque_noise_nm)
         self.fitted = False  # the fit was made (at the first contact) and handed to the correction
         self.identify_t_s = 0.0  # time spent in the identification motion [s]
         self._every = 0

@@ -14,8 +14,7 @@ too, ``tau_d = c - delta`` whatever ``c`` is: the observer
     c = Y(q) theta + z,     dz/dt = -tau_d / T_i,   |z_i| <= z_max_i
 
 drives ``c`` to ``delta`` with the time constant ``T_i`` (a first-order
-estimator; it does not feed back on the pad's position, so it adds no
-oscillation to the impedance loop). ``Y(q) theta`` is the estimated
+estimator; it does not feed back on the pad's position). ``Y(q) theta`` is the estimated
 flange load (:mod:`controller.tool_estimate`) once it is fitted: its gravity
 torque follows the pose exactly, ``z`` keeps what the load does not explain
 (link masses, centres of mass), at the pose where it was learned.
@@ -31,7 +30,10 @@ state: the residual is not evaluated). Nothing resets at a phase change: the
 arm's weight does not change with the phase; a restart keeps it too.
 
 In the same residual: inertia errors ``(M - M_true) ddq``, zero-mean over a
-wiping period, averaged out by ``T_i``; unmodelled joint friction.
+wiping period, and the change of the links' static error across the wiped
+area; ``c`` follows them below ``1 / (2 pi T_i)`` (3.2 Hz at 0.05 s: a
+disturbance observer on the measured acceleration, docs/controller.md says
+what that bought on the heavier plants); unmodelled joint friction.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from typing import Annotated
 import numba as nb
 import numpy as np
 
-from controller.tool_estimate import GRAVITY_M_S2, tool_regressor_into
+from controller.tool_estimate import GRAVITY_M_S2, TORQUE_NOISE_NM, tool_regressor_into
 from interfaces.errors import ConfigError
 from runtime.config import In, check_declared
 
@@ -65,14 +67,17 @@ class CorrectionParams:
     warn_s : a joint at its bound this long raises :data:`MODEL_MISMATCH` [s].
     identify_s : the identification motion's length before the skill starts [s] (0: none;
     :mod:`controller.arm_model`); identify_roll_rad : how far it rolls the pad about its normal [rad].
+    torque_noise_nm : the joint-torque sensors' noise (standard deviation) [Nm]: the flange load estimate fits a
+    direction when its standard error at this noise is within 5 g m (:mod:`controller.tool_estimate`).
     """
 
     enabled: bool = False
-    integral_s: Annotated[float, In(0.01, 10.0)] = 0.2
+    integral_s: Annotated[float, In(0.01, 10.0)] = 0.05
     bound_share: Annotated[float, In(0.0, 0.5)] = 0.15
     warn_s: Annotated[float, In(0.0, 60.0)] = 0.5
     identify_s: Annotated[float, In(0.0, 30.0)] = 0.0
     identify_roll_rad: Annotated[float, In(0.0, 1.5)] = 0.5
+    torque_noise_nm: Annotated[float, In(0.001, 5.0)] = TORQUE_NOISE_NM
 
     def __post_init__(self) -> None:
         check_declared(self, "controller.model")
