@@ -39,6 +39,19 @@ from lampskit.spd import cholesky_lower_in_place, cholesky_solve_in_place
 _jit = nb.njit(cache=True)
 
 
+def drives_record(joints: JointDynamics, dt_s: float) -> np.ndarray:
+    """The drives' record for :func:`drive_torque_into`, made once: a one-element structured array with fields fv,
+    fc (n,) viscous [Nm s/rad] and Coulomb [Nm] friction, v_eps the Coulomb smoothing speed [rad/s], armature (n,)
+    [kg m^2], dt_s the physics step [s], and the kernel's scratch L (n, n), a (n,)."""
+    n = len(joints.armature_kg_m2)
+    rec = np.zeros(1, np.dtype([("fv", "f8", n), ("fc", "f8", n), ("armature", "f8", n), ("v_eps", "f8"),
+                                ("dt_s", "f8"), ("L", "f8", (n, n)), ("a", "f8", n)], align=True))
+    r = rec[0]
+    r["fv"], r["fc"], r["armature"] = joints.viscous_nm_s_rad, joints.coulomb_nm, joints.armature_kg_m2
+    r["v_eps"], r["dt_s"] = joints.coulomb_velocity_rad_s, dt_s
+    return rec
+
+
 def drive_torque(tau: np.ndarray, dq: np.ndarray, M: np.ndarray, h_hat: np.ndarray, joints: JointDynamics,
                  dt_s: float) -> np.ndarray:
     """(n,) torques [Nm] for PyBullet that give the arm with armature and friction its acceleration.
@@ -56,22 +69,19 @@ def drive_torque(tau: np.ndarray, dq: np.ndarray, M: np.ndarray, h_hat: np.ndarr
     if not dt_s > 0.0:
         raise ValueError(f"dt_s must be positive, got {dt_s}")
     out = np.empty(n)
-    if not drive_torque_into(tau, dq, np.array(joints.viscous_nm_s_rad), np.array(joints.coulomb_nm),
-                             joints.coulomb_velocity_rad_s, M, h_hat, np.array(joints.armature_kg_m2), float(dt_s),
-                             out, np.empty((n, n)), np.empty(n)):
+    if not drive_torque_into(tau, dq, M, h_hat, drives_record(joints, float(dt_s)), out):
         raise ValueError("M + diag(armature) is not positive definite")
     return out
 
 
 @_jit
-def drive_torque_into(tau: np.ndarray, dq: np.ndarray, fv: np.ndarray, fc: np.ndarray, v_eps: float, M: np.ndarray,
-                      h_hat: np.ndarray, armature: np.ndarray, dt_s: float, out: np.ndarray, L: np.ndarray,
-                      a: np.ndarray) -> bool:
-    """Unchecked :func:`drive_torque` into ``out`` (n,); ``L`` (n, n) and ``a`` (n,) are scratch (the 1 kHz path).
-
-    fv, fc : (n,) viscous [Nm s/rad] and Coulomb [Nm] friction; v_eps : Coulomb smoothing speed [rad/s];
-    armature : (n,) [kg m^2]. Returns False (``out`` undefined) when M + Ia + dt D is not positive definite.
-    """
+def drive_torque_into(tau: np.ndarray, dq: np.ndarray, M: np.ndarray, h_hat: np.ndarray, drives: np.ndarray,
+                      out: np.ndarray) -> bool:
+    """Unchecked :func:`drive_torque` into ``out`` (n,), the drives and the scratch in ``drives``
+    (:func:`drives_record`; the 1 kHz path). Returns False (``out`` undefined) when M + Ia + dt D is not
+    positive definite."""
+    d = drives[0]
+    fv, fc, v_eps, armature, dt_s, L, a = d.fv, d.fc, d.v_eps, d.armature, d.dt_s, d.L, d.a
     n = tau.shape[0]
     for i in range(n):  # friction (the tanh law of arm.joint_dynamics) and its slope on the diagonal
         t = math.tanh(dq[i] / v_eps)

@@ -36,7 +36,7 @@ import pybullet as pb
 
 from arm.joint_dynamics import JointDynamics
 
-from .drive import drive_torque_into
+from .drive import drive_torque_into, drives_record
 from .plant import tool_gravity_torque
 from .world import GRAVITY_M_S2, World
 
@@ -114,11 +114,7 @@ class SimRobot:
         self._zeros = [0.0] * n
         self._tau_cmd = np.zeros(n)
         self._tau_pb = np.zeros(n)
-        self._armature = np.array(self.joints.armature_kg_m2)
-        self._fv = np.array(self.joints.viscous_nm_s_rad)
-        self._fc = np.array(self.joints.coulomb_nm)
-        self._L = np.zeros((n, n))
-        self._a = np.zeros(n)
+        self._drives = drives_record(self.joints, self.dt_s)  # the drives' friction and armature, the kernel's scratch
         # the step's start, for the contact wrench from the motion: M (n, n), h = C dq + g (n,), dq, tau_pb known
         self._M = np.zeros((n, n))
         self._h = np.zeros(n)
@@ -181,8 +177,7 @@ class SimRobot:
         h_hat = self._h.copy()
         if self._J is not None:  # the contact of the last step stands for this one's, the hand's is this step's
             h_hat -= self._J.T @ (o.wrench + self.external_wrench)
-        ok = drive_torque_into(self._tau_cmd, o.dq, self._fv, self._fc, self.joints.coulomb_velocity_rad_s, M, h_hat,
-                               self._armature, self.dt_s, self._tau_pb, self._L, self._a)
+        ok = drive_torque_into(self._tau_cmd, o.dq, M, h_hat, self._drives, self._tau_pb)
         return self._tau_pb if ok else self._tau_cmd  # (M + Ia is positive definite for any arm PyBullet loads)
 
     def _wrench_from_motion(self, o: Readout) -> None:
