@@ -45,7 +45,7 @@ from .control.impedance import (
     task_stiffness,
 )
 from .control.kernels import reference_into, tool_in_board, trace_row
-from .control.limit_kernels import clearance_into, limit_torque
+from .control.limit_kernels import clearance_into, limit_torque, self_motion_limit_into
 from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
 from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
@@ -126,7 +126,7 @@ class ControllerCore:
         self.mode_cap_rad_s = params.impedance.max_mode_frequency_rad_s
         self.kin = Kinematics(self.model)
         self._terms = new_terms(self.kin)
-        self._limit_work = np.zeros((2, self.model.nq))
+        self._limit_work = np.zeros((3, self.model.nq))
         self._q = np.zeros(self.model.nq)
         self._dq = np.zeros(self.model.nq)
         self._wrench = np.zeros(6)
@@ -159,6 +159,8 @@ class ControllerCore:
         shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3), posture_nm=self._clearance)
         clearance_into(q, self._dq, lim.q_min, lim.q_max, 0.5, self._singular, 0.3, 0.0, 0.0, lim.dq_max, 0.6,
                        self._clearance)
+        self_motion_limit_into(self._clearance, self._dq, kin.M, kin.M_inv, kin.J, kin.Lambda, lim.dq_max, 0.2,
+                               1.0, self._limit_work)
         impedance_torque(self.model, q, self._dq, Reference(), imp, q, True, shaping, kin, modes, self._terms)
         limit_torque(self._tau, q, self._dq, lim.q_min, lim.q_max, 0.1, 0.0, 0.0, self._speed_onset, 0.0, kin.M,
                      self._tau.copy(), self.shaper.tau_max, 1.0, kin.g, True, self._limit_work)
@@ -428,6 +430,8 @@ class ControllerCore:
             clearance_into(q, dq, model.limits.q_min, model.limits.q_max, lim.clearance_zone_rad, self._singular,
                            lim.singular_clearance_rad, lim.clearance_stiffness_nm_rad, lim.clearance_damping_nm_s_rad,
                            model.limits.dq_max, lim.clearance_speed_share, self._clearance)
+            self_motion_limit_into(self._clearance, dq, kin.M, kin.M_inv, kin.J, kin.Lambda, model.limits.dq_max,
+                                   lim.self_motion_share, lim.self_motion_brake_1_s, self._limit_work)
         terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.q_rest, not gravity_compensated,
                                  self.shaping, kin, self._task_modes(kin), self._terms)
         self.last_terms = terms

@@ -90,7 +90,11 @@ class LimitParams:
     clearance_stiffness_nm_rad and clearance_damping_nm_s_rad (0 stiffness:
     off; :func:`controller.control.limits.clearance_torque`), faded out
     while the fastest joint runs at 0.2 below clearance_speed_share to
-    clearance_speed_share of its speed limit;
+    clearance_speed_share of its speed limit, and while the self-motion it
+    drives in the nullspace turns a joint at 0.1 below self_motion_share to
+    self_motion_share of its speed limit; any self-motion above
+    self_motion_share is braked with self_motion_brake_1_s [1/s] on the
+    arm's inertia (:func:`controller.control.limits.self_motion_limit`);
     max_speed_m_s : the pad is braked above this Cartesian speed [m/s];
     reference_joint_speed_share : the skill is slowed down (time scaling)
     where its reference would ask a joint for more than this share of its
@@ -126,7 +130,9 @@ class LimitParams:
     singular_clearance_rad: Annotated[float, In(0.0, 1.0)] = 0.6
     clearance_stiffness_nm_rad: Annotated[float, In(0.0, 500.0)] = 40.0
     clearance_damping_nm_s_rad: Annotated[float, In(0.0, 100.0)] = 6.0
-    clearance_speed_share: Annotated[float, In(0.2, 1.0)] = 0.6
+    clearance_speed_share: Annotated[float, In(0.2, 1.0)] = 1.0
+    self_motion_share: Annotated[float, In(0.1, 10.0)] = 0.2
+    self_motion_brake_1_s: Annotated[float, In(0.0, 400.0)] = 50.0
     max_speed_m_s: Annotated[float, In(0.05, 2.0)] = 0.6
     speed_brake_gain_n_s_m: Annotated[float, In(0.0, 5000.0)] = 200.0
     reference_joint_speed_share: Annotated[float, In(0.05, 10.0)] = 0.6

@@ -1,7 +1,7 @@
 """The torque limits of :mod:`.limits`, compiled (numba, as :mod:`.kernels`, whose docstring says why and how): the
-joint-limit repulsion, the joint-speed brake, the torque rate and absolute limits, and :func:`limit_torque`, which
-runs them fused in the 1 kHz tick. The numpy-facing API of :mod:`.limits` calls these, so there is one
-implementation of each formula."""
+joint-limit repulsion, the clearance posture and the bound on the self-motion it drives, the joint-speed brake, the
+torque rate and absolute limits, and :func:`limit_torque`, which runs them fused in the 1 kHz tick. The numpy-facing
+API of :mod:`.limits` calls these, so there is one implementation of each formula."""
 
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ import numpy as np
 _jit = nb.njit(cache=True)  # keeps the GIL: see the docstring of controller.control.kernels
 #: The clearance fades out over this much of a joint's speed limit, below its ``speed_share``.
 CLEARANCE_FADE_SHARE = 0.2
+#: The clearance fades out over this much of a joint's speed limit in its own self-motion, below its share.
+SELF_MOTION_FADE_SHARE = 0.1
 
 
 @_jit
@@ -53,6 +55,103 @@ def clearance_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.n
     if gain < 1.0:
         for i in range(n):
             out[i] *= gain
+
+
+@_jit
+def self_motion_limit_into(tau_c: np.ndarray, dq: np.ndarray, M: np.ndarray, M_inv: np.ndarray, J: np.ndarray,
+                           Lam: np.ndarray, dq_max: np.ndarray, share: float, brake_1_s: float,
+                           work: np.ndarray) -> float:
+    """Bound the self-motion (the arm's motion in the task's nullspace) in the nullspace torques ``tau_c`` (n,)
+    [Nm], in place; returns the gain (0-1) left on the clearance ``tau_c`` came in with.
+
+    The nullspace: ``N^T = I - J^T Lam J M^-1`` (M, M_inv (n, n); J (6, n); Lam (6, 6) the task inertia, as the
+    law projects with); a self-motion ``v`` has ``J v = 0``, and the task's motion (in the range of ``M^-1 J^T``)
+    is M-orthogonal to it. Two bounds, in joint speeds ``dq`` (n,) [rad/s] against ``dq_max`` (n,) [rad/s]:
+
+    * the clearance's own drive: ``tau_c`` accelerates the arm along ``a = M^-1 N^T tau_c``; the joint speeds
+      along it now (the M-orthogonal projection of ``dq`` on ``a``, ``s a`` with ``s = a^T M dq / a^T M a``) have
+      the largest share ``s max_i |a_i| / dq_max_i`` (signed: positive along the push). ``tau_c`` fades out while
+      that share runs from ``share`` - :data:`SELF_MOTION_FADE_SHARE` to ``share``: at rest it holds at full
+      strength, and near a singular pose, where a radian of the pushed joint turns others by many (A5 and A7
+      near A6 = 0), it moves the arm only as fast as the fastest of them may turn.
+    * any self-motion (the rest posture's pull too, which the clearance may have held back): the nullspace part
+      of the joint speeds, ``v = dq - M^-1 J^T Lam J dq``, is braked by ``-brake_1_s g M v`` added to ``tau_c``,
+      ``g`` rising from 0 to 1 while the largest share ``max_i |v_i| / dq_max_i`` runs from ``share`` to
+      ``share`` + :data:`SELF_MOTION_FADE_SHARE` (``M v`` lies in the nullspace: the pad is not braked).
+
+    work : (3, n) scratch, n >= 6."""
+    n = tau_c.shape[0]
+    a = work[0]
+    y = work[1]
+    z = work[2]
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += M_inv[i, j] * tau_c[j]
+        a[i] = s  # M^-1 tau_c
+    _to_nullspace(a, M_inv, J, Lam, y, z)  # a = M^-1 N^T tau_c
+    sigma = 0.0
+    for i in range(n):
+        sigma = max(sigma, abs(a[i]) / dq_max[i])
+    gain = 1.0
+    if sigma > 0.0:
+        ama = 0.0
+        amdq = 0.0
+        for i in range(n):
+            ma = 0.0
+            for j in range(n):
+                ma += M[i, j] * a[j]
+            ama += a[i] * ma
+            amdq += dq[i] * ma
+        if ama > 0.0:
+            moving = amdq / ama * sigma  # the share of the fastest joint in the self-motion along the push
+            gain = min(max((share - moving) / SELF_MOTION_FADE_SHARE, 0.0), 1.0)
+            if gain < 1.0:
+                for i in range(n):
+                    tau_c[i] *= gain
+    if brake_1_s > 0.0:
+        for i in range(n):
+            a[i] = dq[i]
+        _to_nullspace(a, M_inv, J, Lam, y, z)  # a = v, the self-motion; z = J^T Lam J dq
+        top = 0.0
+        for i in range(n):
+            top = max(top, abs(a[i]) / dq_max[i])
+        g = min(max((top - share) / SELF_MOTION_FADE_SHARE, 0.0), 1.0)
+        if g > 0.0:
+            for i in range(n):  # M v = M dq - J^T Lam J dq
+                s = 0.0
+                for j in range(n):
+                    s += M[i, j] * dq[j]
+                tau_c[i] -= brake_1_s * g * (s - z[i])
+    return gain
+
+
+@_jit
+def _to_nullspace(x: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray, b1: np.ndarray,
+                  b2: np.ndarray) -> None:
+    """``x`` (n,) [joint velocity or acceleration] := ``x - M^-1 J^T Lam J x``, its dynamically consistent
+    nullspace part, in place; leaves ``b2`` (n,) = ``J^T Lam J x`` (of the ``x`` given); ``b1`` (>= 6,) scratch."""
+    n = x.shape[0]
+    for r in range(6):
+        s = 0.0
+        for j in range(n):
+            s += J[r, j] * x[j]
+        b2[r] = s  # J x
+    for r in range(6):
+        s = 0.0
+        for j in range(6):
+            s += Lam[r, j] * b2[j]
+        b1[r] = s  # Lam J x
+    for i in range(n):
+        s = 0.0
+        for r in range(6):
+            s += J[r, i] * b1[r]
+        b2[i] = s  # J^T Lam J x
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += M_inv[i, j] * b2[j]
+        x[i] -= s
 
 
 @_jit

@@ -10,6 +10,10 @@ compiled, :mod:`.kernels`, and the 1 kHz tick runs them fused in :func:`~.kernel
   the margin's edge).
 * :func:`clearance_torque`: the nullspace posture that keeps joints out of a
   wider zone before their limits and away from the arm's stretched poses.
+* :func:`self_motion_limit`: the clearance scaled so that the self-motion it
+  drives in the task's nullspace turns no joint faster than a share of its
+  speed limit (near a singular pose a small push turns joints fast), and a
+  brake on any self-motion above that share.
 * :func:`saturate_norm`: clip a vector's length (the translational pose
   error, so a far reference cannot command a violent pull).
 * :func:`speed_excess_force`: a braking force along the pad's velocity
@@ -28,7 +32,7 @@ import math
 import numpy as np
 
 from .demand_kernels import largest_share
-from .limit_kernels import clearance_into, margin_torque_into, shape_into, speed_brake_into
+from .limit_kernels import clearance_into, margin_torque_into, self_motion_limit_into, shape_into, speed_brake_into
 
 
 class TorqueShaper:
@@ -118,6 +122,32 @@ def clearance_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np
                    float(zone_rad), np.asarray(singular, float), float(singular_rad), float(stiffness_nm_rad),
                    float(damping_nm_s_rad), limit, float(speed_share), out)
     return out
+
+
+def self_motion_limit(tau_c: np.ndarray, dq: np.ndarray, M: np.ndarray, M_inv: np.ndarray, J: np.ndarray,
+                      Lam: np.ndarray, dq_max: np.ndarray, share: float, brake_1_s: float = 0.0,
+                      work: np.ndarray | None = None) -> float:
+    """Scale the clearance ``tau_c`` (n,) [Nm] in place so that the self-motion it drives in the task's nullspace
+    turns no joint faster than ``share`` of its limit ``dq_max`` (n,) [rad/s], and add a brake ``brake_1_s`` [1/s]
+    on any self-motion above that share; returns the clearance's gain in [0, 1].
+
+    dq (n,) [rad/s]; M, M_inv (n, n) the joint-space inertia and its inverse; J (6, n) the task Jacobian; Lam
+    (6, 6) the task inertia (as the law projects with); work : (3, n) scratch (the 1 kHz path), else allocated.
+    The formula: :func:`~.limit_kernels.self_motion_limit_into`."""
+    tau_c = np.asarray(tau_c)
+    n = len(tau_c)
+    for name, arr, shape in (("dq", dq, (n,)), ("M", M, (n, n)), ("M_inv", M_inv, (n, n)), ("J", J, (6, n)),
+                             ("Lam", Lam, (6, 6)), ("dq_max", dq_max, (n,))):
+        if np.shape(arr) != shape:
+            raise ValueError(f"self_motion_limit: {name} must have shape {shape}, got {np.shape(arr)}")
+    if n < 6 or not share > 0.0 or not brake_1_s >= 0.0:
+        raise ValueError(f"self_motion_limit: needs n >= 6 joints, share > 0 and brake_1_s >= 0, got n={n}, "
+                         f"share={share!r}, brake_1_s={brake_1_s!r}")
+    if work is None:
+        work = np.zeros((3, n))
+    return float(self_motion_limit_into(tau_c, np.asarray(dq, float), np.asarray(M, float),
+                                        np.asarray(M_inv, float), np.asarray(J, float), np.asarray(Lam, float),
+                                        np.asarray(dq_max, float), float(share), float(brake_1_s), work))
 
 
 def saturate_norm(v: np.ndarray, max_norm: float) -> bool:
