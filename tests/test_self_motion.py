@@ -16,9 +16,9 @@ import sys
 import numpy as np
 import pytest
 
+from arm.robot_model import RobotModel
 from controller.control.impedance import Kinematics
 from controller.control.limits import self_motion_limit
-from interfaces.robot_model import RobotModel
 
 from .conftest import REPO
 
@@ -93,7 +93,7 @@ def test_bad_arguments_are_named():
 @pytest.mark.slow
 def test_random_board_9_wipes_with_every_joint_under_0_8_of_its_speed_limit(tmp_path):
     out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "interfaces.cli", "up", "--no-network", "--board", "random:9",
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "up", "--no-network", "--board", "random:9",
                         "--stains", "6", "--seed", "9", "--out", str(out), "-q"], cwd=REPO, capture_output=True,
                        text=True, timeout=900)
     report = json.loads((out / "report.json").read_text())
