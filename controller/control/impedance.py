@@ -45,6 +45,7 @@ from interfaces.robot_model import RobotModel
 
 from .kernels import impedance_into, kinematics_terms, task_modes_into
 from .params import ImpedanceParams
+from .records import arm_dtype, new_record, view
 
 #: Regularisation of the task inertia's inverse: Lambda = (J M^-1 J^T + eps I)^-1 stays finite at singularities.
 LAMBDA_EPS = 1e-6
@@ -74,19 +75,20 @@ class Kinematics:
 
     def __init__(self, model: RobotModel) -> None:
         self.model = model
-        n = model.nq
-        self.M = np.zeros((n, n))
-        self.M_inv = np.zeros((n, n))
-        self.J = np.zeros((6, n))
-        self.Lambda = np.zeros((6, 6))
-        self.p = np.zeros(3)
-        self.R = np.eye(3)
-        self.twist = np.zeros(6)
-        self.nle = np.zeros(n)
-        self.g = np.zeros(n)
-        self.drift = np.zeros(6)
-        self._A = np.zeros((6, 6))
-        self._L = np.zeros((6, 6))
+        #: the terms as one record (:func:`~.records.arm_dtype`), what the kernels take; the attributes view it
+        self.rec = new_record(arm_dtype(model.nq))
+        rec = self.rec
+        self.M = view(rec, "M")
+        self.M_inv = view(rec, "M_inv")
+        self.J = view(rec, "J")
+        self.Lambda = view(rec, "Lam")
+        self.p = view(rec, "p")
+        self.R = view(rec, "R")
+        self.R[:] = np.eye(3)
+        self.twist = view(rec, "twist")
+        self.nle = view(rec, "nle")
+        self.g = view(rec, "g")
+        self.drift = view(rec, "drift")
 
     def update(self, q: np.ndarray, dq: np.ndarray) -> Kinematics:
         m, d, f = self.model.model, self.model.data, self.model.tcp_id
@@ -96,10 +98,9 @@ class Kinematics:
         oMf = pin.updateFramePlacement(m, d, f)
         # dJ dq: the pad's classical acceleration at zero joint acceleration (computeAllTerms' forward pass)
         acc = pin.getFrameClassicalAcceleration(m, d, f, pin.LOCAL_WORLD_ALIGNED)
-        if not kinematics_terms(d.M, M_inv, pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED), dq, LAMBDA_EPS,
-                                oMf.translation, oMf.rotation, d.nle, d.g, acc.vector, self.M, self.M_inv, self.J,
-                                self.Lambda, self.twist, self.p, self.R, self.nle, self.g, self.drift,
-                                self._A, self._L):
+        pin_out = (d.M, M_inv, pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED), oMf.translation,
+                   oMf.rotation, d.nle, d.g, acc.vector)
+        if not kinematics_terms(pin_out, dq, LAMBDA_EPS, self.rec):
             # only with non-finite inputs (the matrix is SPD by construction): what numpy makes of them
             self.Lambda[:] = np.linalg.inv(self.J @ self.M_inv @ self.J.T + LAMBDA_EPS * np.eye(6))
         return self

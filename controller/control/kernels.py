@@ -91,19 +91,21 @@ def spd_inverse_into(A: np.ndarray, out: np.ndarray, L: np.ndarray) -> bool:
 
 
 @_jit
-def kinematics_terms(M_upper: np.ndarray, Minv_upper: np.ndarray, J_pin: np.ndarray, dq: np.ndarray, eps: float,
-                     p_pin: np.ndarray, R_pin: np.ndarray, nle_pin: np.ndarray, g_pin: np.ndarray,
-                     drift_pin: np.ndarray, M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray,
-                     twist: np.ndarray, p: np.ndarray, R: np.ndarray, nle: np.ndarray, g: np.ndarray,
-                     drift: np.ndarray, A: np.ndarray, L: np.ndarray) -> bool:
-    """The law's arm terms from Pinocchio's outputs (``*_pin``, read as they are), written into the caller's arrays.
+def kinematics_terms(pin_out: tuple, dq: np.ndarray, eps: float, arm: np.ndarray) -> bool:
+    """The law's arm terms from Pinocchio's outputs, written into the arm's record.
 
-    M_upper, Minv_upper : (n, n) inertia and its inverse, upper triangles valid (older Pinocchio fills only
-    those); J_pin : (6, n) pad Jacobian, world-aligned; dq : (n,) [rad/s]; eps : regularisation of the task
-    inertia's inverse; p_pin (3,) [m], R_pin (3, 3): pad pose; nle_pin, g_pin (n,) [Nm]; drift_pin (6,): dJ dq.
-    Out: M, M_inv (n, n) symmetric; J, p, R, nle, g, drift copied; Lam (6, 6) = (J M^-1 J^T + eps I)^-1;
-    twist (6,) = J dq. A, L (6, 6): scratch. Returns False when Lam could not be formed (not positive definite).
+    pin_out : Pinocchio's arrays as it returns them (read, not kept): ``(M_upper, Minv_upper, J, p, R, nle, g,
+    drift)``, the inertia (n, n) and its inverse with their upper triangles valid (older Pinocchio fills only
+    those), the pad Jacobian (6, n) world-aligned, the pad pose p (3,) [m], R (3, 3), nle, g (n,) [Nm],
+    drift (6,) = dJ dq. dq : (n,) [rad/s]; eps : regularisation of the task inertia's inverse.
+    arm : a record of :func:`~.records.arm_dtype`: M, M_inv symmetric, J, p, R, nle, g, drift copied,
+    Lam (6, 6) = (J M^-1 J^T + eps I)^-1, twist (6,) = J dq (A, L its scratch).
+    Returns False when Lam could not be formed (not positive definite).
     """
+    M_upper, Minv_upper, J_pin, p_pin, R_pin, nle_pin, g_pin, drift_pin = pin_out
+    a = arm[0]
+    M, M_inv, J, Lam, twist = a.M, a.M_inv, a.J, a.Lam, a.twist
+    p, R, nle, g, drift, A = a.p, a.R, a.nle, a.g, a.drift, a.A
     n = M.shape[0]
     for i in range(3):
         p[i] = p_pin[i]
@@ -139,7 +141,7 @@ def kinematics_terms(M_upper: np.ndarray, Minv_upper: np.ndarray, J_pin: np.ndar
             A[r, c] = s
             A[c, r] = s
         A[r, r] += eps
-    return spd_inverse_into(A, Lam, L)
+    return spd_inverse_into(A, Lam, a.L)
 
 
 @_jit
