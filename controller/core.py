@@ -89,13 +89,15 @@ class ControllerCore:
         self.ref = Reference()
         self.shaping = TaskShaping(normal_damping_1_s=f.normal_damping_1_s,
                                    max_position_error_m=params.limits.max_position_error_m,
-                                   max_rotation_error_rad=params.limits.max_rotation_error_rad)
+                                   max_rotation_error_rad=params.limits.max_rotation_error_rad,
+                                   n_joints=self.model.nq)
         # the clearance posture (controller.control.limits.clearance_torque), into the shaping's nullspace torques
         self._singular = np.zeros(self.model.nq)
         self._singular[[j - 1 for j in params.limits.singular_joints if j <= self.model.nq]] = 1.0
         self._clearance = np.zeros(self.model.nq)
-        if params.limits.clearance_stiffness_nm_rad > 0.0:
+        if params.limits.clearance_stiffness_nm_rad > 0.0:  # the clearance is written into the shaping's record
             self.shaping.posture_nm = self._clearance
+            self._clearance = self.shaping.posture_nm
         self.q_rest: np.ndarray | None = None
         self._hold: tuple[np.ndarray, np.ndarray] | None = None
         self._since_start_s = 0.0
@@ -156,7 +158,8 @@ class ControllerCore:
         imp = self.p.impedance
         modes = task_modes(kin.Lambda, task_stiffness(imp), imp.damping_factor, self.mode_cap_rad_s,
                            self._modes_out)
-        shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3), posture_nm=self._clearance)
+        shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3), posture_nm=self._clearance,
+                              n_joints=self.model.nq)
         clearance_into(q, self._dq, lim.q_min, lim.q_max, 0.5, self._singular, 0.3, 0.0, 0.0, lim.dq_max, 0.6,
                        self._clearance)
         impedance_torque(self.model, q, self._dq, Reference(), imp, q, True, shaping, kin, modes, self._terms)

@@ -202,26 +202,31 @@ def _remove_along(v: np.ndarray, n: np.ndarray) -> None:
 
 
 @_jit
-def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray, twist: np.ndarray,
-                   drift: np.ndarray, nle: np.ndarray, g: np.ndarray, p: np.ndarray, R: np.ndarray,
-                   p_ref: np.ndarray, R_ref: np.ndarray, twist_ref: np.ndarray, accel_ref: np.ndarray,
-                   force_axis: np.ndarray, use_axis: bool, press_n: float, normal_damping_1_s: float,
-                   max_position_error_m: float, max_rotation_error_rad: float,
-                   extra_force_n: np.ndarray, use_extra: bool, posture_nm: np.ndarray, use_posture: bool,
-                   B: np.ndarray, k: np.ndarray, d: np.ndarray, kn: float, q_rest: np.ndarray, q: np.ndarray,
-                   dq: np.ndarray, add_gravity: bool,
-                   tau: np.ndarray, F: np.ndarray, e: np.ndarray, de: np.ndarray, tau_null: np.ndarray,
-                   work: np.ndarray) -> None:
+def impedance_into(arm: np.ndarray, ref: np.ndarray, modes: np.ndarray, shaping: np.ndarray, state: tuple,
+                   kn: float, add_gravity: bool, out: np.ndarray) -> None:
     """The impedance law of :mod:`.impedance` (its module docstring has the equations), written in place.
 
-    Inputs as :func:`~.impedance.impedance_torque` takes them, unpacked: the arm's terms (M, M_inv (n, n);
-    J (6, n); Lam (6, 6); twist, drift (6,); nle, g (n,); p (3,) [m]; R (3, 3)), the reference, the
-    task shaping (``use_axis`` / ``use_extra`` / ``use_posture`` say whether ``force_axis`` / ``extra_force_n`` /
-    ``posture_nm``, joint torques (n,) [Nm] added to the posture before its projection, apply), the
-    modes (B (6, 6), k, d (6,)), the posture stiffness ``kn`` [Nm/rad] and rest pose, the state.
-    Out: tau (n,) [Nm], F (6,) task wrench, e (6,) pose error, de (6,) twist error, tau_null (n,).
-    work : (7, max(n, 6)) scratch.
+    Records (:mod:`.records`): arm (:func:`~.records.arm_dtype`, the arm's terms at the state), ref
+    (:data:`~.records.REFERENCE_DTYPE`), modes (:data:`~.records.MODES_DTYPE`: B (6, 6), k, d (6,)), shaping
+    (:func:`~.records.law_dtype`: ``use_axis`` / ``use_extra`` / ``use_posture`` say whether ``force_axis`` /
+    ``extra_force_n`` / ``posture_nm``, joint torques (n,) [Nm] added to the posture before its projection,
+    apply). state : ``(q, dq, q_rest)`` (n,) each [rad, rad/s, rad]; kn : the posture stiffness [Nm/rad];
+    add_gravity : add g (the robot does not). out (:func:`~.records.terms_dtype`): tau (n,) [Nm], F (6,) task
+    wrench, e (6,) pose error, de (6,) twist error, tau_null (n,); its work (7, max(n, 6)) is scratch.
     """
+    q, dq, q_rest = state
+    a_ = arm[0]
+    M, M_inv, J, Lam, twist, drift, nle, g, p, R = (a_.M, a_.M_inv, a_.J, a_.Lam, a_.twist, a_.drift, a_.nle, a_.g,
+                                                     a_.p, a_.R)
+    r_ = ref[0]
+    p_ref, R_ref, twist_ref, accel_ref = r_.p, r_.R, r_.twist, r_.accel
+    m_ = modes[0]
+    B, k, d = m_.B, m_.k, m_.d
+    sh = shaping[0]
+    force_axis, use_axis, press_n = sh.force_axis, sh.use_axis, sh.press_n
+    extra_force_n, use_extra, posture_nm, use_posture = sh.extra_force_n, sh.use_extra, sh.posture_nm, sh.use_posture
+    o_ = out[0]
+    tau, F, e, de, tau_null, work = o_.tau, o_.F, o_.e, o_.de, o_.tau_null, o_.work
     n = M.shape[0]
     a = work[0]
     mod = work[1]
@@ -237,8 +242,8 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
                 s += R_ref[i, m] * R[j, m]
             Rrel[i, j] = s
     log3_into(Rrel, e[3:])
-    _clip_norm3(e, 0, max_position_error_m)
-    _clip_norm3(e, 3, max_rotation_error_rad)
+    _clip_norm3(e, 0, sh.max_position_error_m)
+    _clip_norm3(e, 3, sh.max_rotation_error_rad)
     for i in range(6):
         de[i] = twist_ref[i] - twist[i]
         a[i] = accel_ref[i] - drift[i]
@@ -269,7 +274,7 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
             vn += twist[i] * force_axis[i]
             for j in range(3):
                 lam_n += force_axis[i] * Lam[i, j] * force_axis[j]
-        f = press_n + lam_n * normal_damping_1_s * vn
+        f = press_n + lam_n * sh.normal_damping_1_s * vn
         for i in range(3):
             F[i] -= f * force_axis[i]
     if use_extra:
@@ -338,10 +343,12 @@ def disturbance_into(M: np.ndarray, nle: np.ndarray, J: np.ndarray, dq: np.ndarr
 
 
 @_jit
-def task_modes_into(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float, B: np.ndarray,
-                    k: np.ndarray, d: np.ndarray) -> None:
-    """The modes of :func:`~.impedance.task_modes` into ``B`` (6, 6), ``k``, ``d`` (6,): eigen-decomposition of
-    ``S^-1 Lam S^-1`` (S = diag(sqrt(K))), modal stiffness capped at ``max_omega^2 m``, damping ``2 zeta sqrt(k m)``."""
+def task_modes_into(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float, modes: np.ndarray) -> None:
+    """The modes of :func:`~.impedance.task_modes` into the record ``modes`` (:data:`~.records.MODES_DTYPE`: B
+    (6, 6), k, d (6,)): eigen-decomposition of ``S^-1 Lam S^-1`` (S = diag(sqrt(K))), modal stiffness capped at
+    ``max_omega^2 m``, damping ``2 zeta sqrt(k m)``."""
+    m_ = modes[0]
+    B, k, d = m_.B, m_.k, m_.d
     s = np.sqrt(K)
     m, U = np.linalg.eigh(Lam / np.outer(s, s))
     for i in range(6):

@@ -70,3 +70,25 @@ def new_record(dtype: np.dtype) -> np.ndarray:
 def view(rec: np.ndarray, name: str) -> np.ndarray:
     """The field ``name`` of the one-element record ``rec``: a view (writes reach the kernel's record)."""
     return rec[name][0]
+
+
+class RecordViews:
+    """A base for objects whose array attributes view one record (``rec``): assigning to such an attribute
+    (``ref.p_m = x``) copies ``x`` into the record, so the kernels see it; other attributes behave as usual.
+
+    ``_views`` maps each such attribute to its field; :meth:`_bind` makes the record and the views.
+    """
+
+    _views: dict[str, str] = {}
+
+    def _bind(self, dtype: np.dtype) -> None:
+        rec = new_record(dtype)
+        object.__setattr__(self, "rec", rec)
+        for attr, name in self._views.items():
+            object.__setattr__(self, attr, view(rec, name))
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if name in self._views and name in self.__dict__:
+            self.__dict__[name][...] = value
+        else:
+            object.__setattr__(self, name, value)
