@@ -48,6 +48,7 @@ from .control.kernels import reference_into, tool_in_board, trace_row
 from .control.limit_kernels import clearance_into, limit_torque
 from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
 from .control.params import mode_frequency_cap
+from .control.records import BOARD_DTYPE, new_record, view
 from .control.watch import ContactWatch, DisturbanceWatch
 from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
@@ -116,8 +117,10 @@ class ControllerCore:
         self._demand = np.zeros(self.model.nq)
         self._demand_work = np.zeros((4, 7))
         self._board: BoardPose | None = None
-        self._board_R = np.eye(3)
-        self._board_origin = np.zeros(3)
+        self._board_rec = new_record(BOARD_DTYPE)  # the board's pose as the kernels take it
+        self._board_R = view(self._board_rec, "R")
+        self._board_R[:] = np.eye(3)
+        self._board_origin = view(self._board_rec, "origin")
         self.override_used = 1.0
         self._modes = None
         self._modes_out = TaskModes(np.zeros((6, 6)), np.zeros(6), np.zeros(6))
@@ -167,17 +170,17 @@ class ControllerCore:
                      self._tau.copy(), self.shaper.tau_max, 1.0, kin.g, True, self._limit_work)
         self._tau[:] = 0.0
         sp = Setpoint()
-        reference_into(self._board_origin, self._board_R, sp.xy, 0.0, sp.v_xy, 0.0, sp.a_xy, 0.0, sp.R, sp.omega,
-                       sp.domega, 1.0, self.ref.p_m, self.ref.R, self.ref.twist, self.ref.accel)
+        reference_into(self._board_rec, (sp.xy, sp.v_xy, sp.a_xy, sp.R, sp.omega, sp.domega), (0.0, 0.0, 0.0), 1.0,
+                       self.ref.rec)
         joint_demand_into(kin.M_inv, kin.J, kin.Lambda, self.ref.twist, self.ref.accel, 1.0, OVERRIDE_LOOKAHEAD_S,
                           self._demand, self._demand_work)
         self.disturbance.compile(kin)
         largest_share(self._demand, self.override.inv_dq_max)
-        tool_in_board(self._board_origin, self._board_R, kin.p, kin.twist, self._wrench, self._xyh, self._v_board)
+        tool_in_board(self._board_rec, kin.rec, self._wrench, self._xyh, self._v_board)
         if self.trace is not None:
             row = self.trace.data[0]
-            trace_row(row, 0.0, 0.0, True, sp.xy, sp.v_xy, sp.a_xy, 1.0, self._xyh, 0.0, self.ref.p_m, kin.p, 0.0,
-                      0.0)
+            trace_row(row, (0.0, 0.0, 1.0), (True, sp.xy, sp.v_xy, sp.a_xy, 0.0), self._xyh, self.ref.p_m, kin.p,
+                      (0.0, 0.0))
             row[:] = 0.0
         self.ref.p_m[:] = 0.0
         self.ref.R[:] = np.eye(3)
@@ -357,7 +360,7 @@ class ControllerCore:
         """The pad in the board frame, the force along the normal ``n`` (3,) (filtered; over the cap: a fault)."""
         self._use_board(board)
         xyh, vb = self._xyh, self._v_board
-        self.normal_force_n = tool_in_board(self._board_origin, self._board_R, kin.p, kin.twist, wrench, xyh, vb)
+        self.normal_force_n = tool_in_board(self._board_rec, kin.rec, wrench, xyh, vb)
         self.force.measure(self.normal_force_n, dt_s)
         ex = self.executor
         if self.force.over_cap and ex.phase not in _HALTED:
@@ -378,9 +381,9 @@ class ControllerCore:
         accelerations x scale^2); in contact, the measured height and no normal motion. One compiled call."""
         ref = self.ref
         c = sp.contact
-        reference_into(self._board_origin, self._board_R, sp.xy, float(tool.h if c else sp.h), sp.v_xy,
-                       0.0 if c else float(sp.v_h), sp.a_xy, 0.0 if c else float(sp.a_h), sp.R, sp.omega,
-                       sp.domega, float(scale), ref.p_m, ref.R, ref.twist, ref.accel)
+        normal = (float(tool.h), 0.0, 0.0) if c else (float(sp.h), float(sp.v_h), float(sp.a_h))
+        reference_into(self._board_rec, (sp.xy, sp.v_xy, sp.a_xy, sp.R, sp.omega, sp.domega), normal, float(scale),
+                       ref.rec)
 
     def _update_override(self, kin: Kinematics, sp: Setpoint, scale: float, dt_s: float) -> None:
         """The time scale of the next tick from the joint speeds the unscaled reference asks for (the least-inertia
@@ -483,6 +486,6 @@ class ControllerCore:
     def _record(self, sp: Setpoint | None, p: np.ndarray) -> None:
         has_sp = sp is not None
         sp = sp or self._no_setpoint
-        trace_row(self.trace.row(), self.time_s, float(PHASE_CODES.get(self.executor.phase, -1)), has_sp, sp.xy,
-                  sp.v_xy, sp.a_xy, self.override_used, self._xyh, float(sp.contact), self.ref.p_m, p,
-                  self.normal_force_n, self.press_n)
+        clock = (self.time_s, float(PHASE_CODES.get(self.executor.phase, -1)), float(self.override_used))
+        trace_row(self.trace.row(), clock, (has_sp, sp.xy, sp.v_xy, sp.a_xy, float(sp.contact)), self._xyh,
+                  self.ref.p_m, p, (float(self.normal_force_n), float(self.press_n)))

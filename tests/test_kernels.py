@@ -17,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from controller.control import demand_kernels, kernels, limit_kernels
+from controller.control import demand_kernels, kernels, limit_kernels, records
 from controller.control.impedance import (
     Kinematics,
     Reference,
@@ -177,8 +177,11 @@ def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model, rng):
     origin = rng.normal(0, 1, 3)
     xy, v, a = rng.normal(size=2), rng.normal(size=2), rng.normal(size=2)
     om, dom = rng.normal(size=3), rng.normal(size=3)
-    p, R, tw, ac = np.zeros(3), np.zeros((3, 3)), np.zeros(6), np.zeros(6)
-    kernels.reference_into(origin, Rb, xy, 0.01, v, 0.2, a, 0.3, Rb, om, dom, 0.6, p, R, tw, ac)
+    board = records.new_record(records.BOARD_DTYPE)
+    board["origin"], board["R"] = origin, Rb
+    ref = Reference()
+    kernels.reference_into(board, (xy, v, a, Rb, om, dom), (0.01, 0.2, 0.3), 0.6, ref.rec)
+    p, tw, ac = ref.p_m, ref.twist, ref.accel
     np.testing.assert_allclose(p, origin + Rb @ np.r_[xy, 0.01], atol=1e-14)
     np.testing.assert_allclose(tw, np.r_[Rb @ np.r_[v, 0.2], om] * 0.6, atol=1e-14)
     np.testing.assert_allclose(ac, np.r_[Rb @ np.r_[a, 0.3], dom] * 0.36, atol=1e-14)
@@ -195,7 +198,7 @@ def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model, rng):
     np.testing.assert_allclose(demand, np.where(abs(now) > abs(ahead), now, ahead), rtol=1e-9)
     # the pad in the board frame and the normal force
     xyh, vb = np.zeros(3), np.zeros(3)
-    f = kernels.tool_in_board(origin, Rb, kin.p, kin.twist, wrench, xyh, vb)
+    f = kernels.tool_in_board(board, kin.rec, wrench, xyh, vb)
     np.testing.assert_allclose(xyh, (kin.p - origin) @ Rb, atol=1e-14)
     np.testing.assert_allclose(vb, Rb.T @ kin.twist[:3], atol=1e-14)
     assert f == pytest.approx(wrench[:3] @ Rb[:, 2], abs=1e-14)

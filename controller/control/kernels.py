@@ -317,12 +317,17 @@ def impedance_into(arm: np.ndarray, ref: np.ndarray, modes: np.ndarray, shaping:
 
 
 @_jit
-def disturbance_into(M: np.ndarray, nle: np.ndarray, J: np.ndarray, dq: np.ndarray, dq_prev: np.ndarray,
-                     tau_applied: np.ndarray, wrench: np.ndarray, dt_s: float, gain: float, tau_d: np.ndarray,
-                     limit: np.ndarray, raw: np.ndarray) -> float:
+def disturbance_into(arm: tuple, dq: np.ndarray, tau_applied: np.ndarray, wrench: np.ndarray, dt_s: float,
+                     gain: float, watch: np.ndarray) -> float:
     """One cycle of :class:`~.watch.DisturbanceWatch`: ``tau_d += gain (raw - tau_d)`` with
-    ``raw = M (dq - dq_prev) / dt + nle - tau_applied - J^T wrench`` (all (n,) [Nm]; J (6, n)); ``dq_prev``
-    becomes ``dq``. Returns ``max |tau_d| / limit``. raw : (n,) scratch."""
+    ``raw = M (dq - dq_prev) / dt + nle - tau_applied - J^T wrench`` (all (n,) [Nm]).
+
+    arm : ``(M, nle, J)``, (n, n), (n,) [Nm], (6, n) world-aligned; dq (n,) [rad/s]; wrench (6,) [N, Nm];
+    watch : the watch's record (:func:`~.records.disturbance_dtype`: tau_d, limit, dq_prev, which becomes
+    ``dq``, raw scratch). Returns ``max |tau_d| / limit``."""
+    M, nle, J = arm
+    w_ = watch[0]
+    tau_d, limit, dq_prev, raw = w_.tau_d, w_.limit, w_.dq_prev, w_.raw
     n = dq.shape[0]
     for i in range(n):
         raw[i] = (dq[i] - dq_prev[i]) / dt_s
@@ -361,17 +366,21 @@ def task_modes_into(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s
 
 
 @_jit
-def reference_into(origin: np.ndarray, R_board: np.ndarray, xy: np.ndarray, h: float, v_xy: np.ndarray,
-                   v_h: float, a_xy: np.ndarray, a_h: float, R_sp: np.ndarray, omega: np.ndarray,
-                   domega: np.ndarray, scale: float, p_ref: np.ndarray, R_ref: np.ndarray, twist_ref: np.ndarray,
-                   accel_ref: np.ndarray) -> None:
+def reference_into(board: np.ndarray, setpoint: tuple, normal: tuple, scale: float, ref: np.ndarray) -> None:
     """The world reference of a board-frame setpoint at the time scale ``scale``.
 
-    origin (3,) [m], R_board (3, 3): the board (its third axis the outward normal); xy, v_xy, a_xy (2,) and h,
-    v_h, a_h: the in-plane and normal position [m], velocity, acceleration; R_sp (3, 3), omega, domega (3,):
-    orientation and its rates. Out: p_ref (3,), R_ref (3, 3), twist_ref and accel_ref (6,), velocities times
-    ``scale`` and accelerations times ``scale^2``.
+    board : a record of :data:`~.records.BOARD_DTYPE` (origin (3,) [m], R (3, 3), its third axis the outward
+    normal); setpoint : ``(xy, v_xy, a_xy, R, omega, domega)``, the in-plane position [m], velocity,
+    acceleration (2,), the orientation (3, 3) and its rates (3,); normal : ``(h, v_h, a_h)`` along the normal.
+    ref : the reference's record (:data:`~.records.REFERENCE_DTYPE`), written: p (3,), R (3, 3), twist and
+    accel (6,), velocities times ``scale`` and accelerations times ``scale^2``.
     """
+    xy, v_xy, a_xy, R_sp, omega, domega = setpoint
+    h, v_h, a_h = normal
+    b_ = board[0]
+    origin, R_board = b_.origin, b_.R
+    r_ = ref[0]
+    p_ref, R_ref, twist_ref, accel_ref = r_.p, r_.R, r_.twist, r_.accel
     s2 = scale * scale
     for i in range(3):
         p_ref[i] = origin[i] + R_board[i, 0] * xy[0] + R_board[i, 1] * xy[1] + R_board[i, 2] * h
@@ -384,11 +393,16 @@ def reference_into(origin: np.ndarray, R_board: np.ndarray, xy: np.ndarray, h: f
 
 
 @_jit
-def tool_in_board(origin: np.ndarray, R_board: np.ndarray, p: np.ndarray, twist: np.ndarray, wrench: np.ndarray,
-                  xyh: np.ndarray, v_board: np.ndarray) -> float:
-    """The pad at world ``p`` (3,) [m] moving with ``twist`` (6,) in the board frame (origin (3,), axes R_board
-    (3, 3), third the outward normal): ``xyh`` (3,) = R_board^T (p - origin), ``v_board`` (3,) = R_board^T v.
-    Returns the normal force [N], ``wrench[:3] . normal`` (positive when the board pushes the pad back)."""
+def tool_in_board(board: np.ndarray, arm: np.ndarray, wrench: np.ndarray, xyh: np.ndarray,
+                  v_board: np.ndarray) -> float:
+    """The pad in the board frame: board, a record of :data:`~.records.BOARD_DTYPE` (origin (3,) [m], R (3, 3)
+    its axes, the third the outward normal); arm, the arm's record (:func:`~.records.arm_dtype`: the pad at p
+    (3,) [m] moving with twist (6,)). Out: ``xyh`` (3,) = R^T (p - origin), ``v_board`` (3,) = R^T v. Returns
+    the normal force [N], ``wrench[:3] . normal`` (positive when the board pushes the pad back)."""
+    b_ = board[0]
+    origin, R_board = b_.origin, b_.R
+    a_ = arm[0]
+    p, twist = a_.p, a_.twist
     f = 0.0
     for j in range(3):
         x = 0.0
@@ -403,11 +417,17 @@ def tool_in_board(origin: np.ndarray, R_board: np.ndarray, p: np.ndarray, twist:
 
 
 @_jit
-def trace_row(r: np.ndarray, t_s: float, phase: float, has_setpoint: bool, xy: np.ndarray, v_xy: np.ndarray,
-              a_xy: np.ndarray, scale: float, xyh: np.ndarray, contact: float, p_ref: np.ndarray, p: np.ndarray,
-              force_n: float, press_n: float) -> None:
-    """One row of the controller's trace (its columns: ``controller.core.TRACE_COLUMNS``); the in-plane rates
-    as executed (velocity x scale, acceleration x scale^2). Without a setpoint, columns 2-10 and 19 stay."""
+def trace_row(r: np.ndarray, clock: tuple, setpoint: tuple, xyh: np.ndarray, p_ref: np.ndarray, p: np.ndarray,
+              forces: tuple) -> None:
+    """One row ``r`` of the controller's trace (its columns: ``controller.core.TRACE_COLUMNS``).
+
+    clock : ``(t_s, phase, scale)``, the controller's time [s], the phase's code, the time scale; setpoint :
+    ``(has_setpoint, xy, v_xy, a_xy, contact)``, in-plane rates written as executed (velocity x scale,
+    acceleration x scale^2), without a setpoint columns 2-10 and 19 stay; xyh (3,) the pad in the board frame
+    [m]; p_ref, p (3,) the reference and the pad [m]; forces : ``(force_n, press_n)`` measured, commanded [N]."""
+    t_s, phase, scale = clock
+    has_setpoint, xy, v_xy, a_xy, contact = setpoint
+    force_n, press_n = forces
     r[0] = t_s
     r[1] = phase
     if has_setpoint:
