@@ -1,26 +1,22 @@
 """One control tick, without I/O: measured joints in, joint torques out.
 
-:class:`ControllerCore` ties the skill executor (board-frame setpoints), the
-normal force regulator, the Cartesian impedance law and the torque shaping
-together. The service (:mod:`controller.service`) feeds it robot states on
-its clock; tests and benchmarks can call it directly against an in-process
-simulator.
+:class:`ControllerCore` ties the skill executor (board-frame setpoints), the normal force regulator, the Cartesian
+impedance law and the torque shaping together. The service (:mod:`controller.service`) feeds it robot states on its
+clock; tests and benchmarks can call it directly against an in-process simulator.
 
 Per tick:
 
-1. pad pose and twist from Pinocchio; in the board frame: (x, y, h),
-   in-plane speed, normal force from the measured contact wrench;
-2. watches (executor fault, lift off): filtered force above the cap; a
-   joint torque neither the last applied command nor the measured contact
-   explains (:class:`~controller.control.watch.DisturbanceWatch`); contact
-   lost while pressing;
-3. executor setpoint -> world reference (position, orientation, twist,
-   acceleration); in contact the normal is force-regulated (PI + feed-forward);
-4. impedance torque with the pose error clipped, the stiffness ramped in
-   after (re)starts, a brake above the Cartesian speed limit, plus a
-   repulsion near joint limits, a brake on joints above their share of the
-   speed limit; then absolute and rate torque limits (the
-   model gravity, when the robot lacks its own, is outside the rate limit).
+1. pad pose and twist from Pinocchio; in the board frame: (x, y, h), in-plane speed, normal force from the measured
+   contact wrench;
+2. watches (executor fault, lift off): filtered force above the cap; a joint torque neither the last applied command
+   nor the measured contact explains (:class:`~controller.control.watch.DisturbanceWatch`); contact lost while
+   pressing;
+3. executor setpoint -> world reference (position, orientation, twist, acceleration); in contact the normal is
+   force-regulated (PI + feed-forward);
+4. impedance torque with the pose error clipped, the stiffness ramped in after (re)starts, a brake above the
+   Cartesian speed limit, plus a repulsion near joint limits, a brake on joints above their share of the speed
+   limit; then absolute and rate torque limits (the model gravity, when the robot lacks its own, is outside the rate
+   limit).
 """
 
 from __future__ import annotations
@@ -35,20 +31,20 @@ from .arm_model import ArmModel
 from .control.demand_kernels import joint_demand_into, largest_share
 from .control.force import NormalForceRegulator
 from .control.impedance import (
+    ImpedanceTerms,
     Kinematics,
     Reference,
-    TaskModes,
     TaskShaping,
     impedance_torque,
-    new_terms,
     task_modes,
     task_stiffness,
 )
 from .control.kernels import reference_into, tool_in_board, trace_row
 from .control.limit_kernels import clearance_into, limit_torque, self_motion_limit_into
-from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
+from .control.limits import SpeedOverride, TorqueShaper, limits_from_settings, speed_excess_force
 from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
+from .core_state import ModesCache, TickBuffers, TickClock, TickMemory
 from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
 from .params import ControllerParams
@@ -69,12 +65,11 @@ OVERRIDE_LOOKAHEAD_S = 0.1
 class ControllerCore:
     """The controller's per-tick computation. See the module docstring.
 
-    Attributes
-    ----------
-    executor : SkillExecutor
-    normal_force_n : float
-        Last measured normal force [N] (0 before a board is known).
-    last_terms : ImpedanceTerms or None
+    Its parts: the skill ``executor``, the ``force`` regulator, the torque ``shaper``, the speed ``override``,
+    the watches (``disturbance``, ``contact_watch``), the ``arm`` it learns, the law's inputs (``kin``,
+    ``ref``, ``shaping``) and what it keeps between ticks, grouped (:mod:`controller.core_state`): ``buf``
+    (the preallocated arrays), ``clock``, ``modes``, ``mem``; the properties below read the figures others
+    report (the status, tests).
     """
 
     def __init__(self, params: ControllerParams, skill: Skill, model: RobotModel | None = None) -> None:
@@ -89,94 +84,106 @@ class ControllerCore:
         self.ref = Reference()
         self.shaping = TaskShaping(normal_damping_1_s=f.normal_damping_1_s,
                                    max_position_error_m=params.limits.max_position_error_m,
-                                   max_rotation_error_rad=params.limits.max_rotation_error_rad)
-        # the clearance posture (controller.control.limits.clearance_torque), into the shaping's nullspace torques
-        self._singular = np.zeros(self.model.nq)
-        self._singular[[j - 1 for j in params.limits.singular_joints if j <= self.model.nq]] = 1.0
-        self._clearance = np.zeros(self.model.nq)
-        if params.limits.clearance_stiffness_nm_rad > 0.0:
-            self.shaping.posture_nm = self._clearance
-        self.q_rest: np.ndarray | None = None
-        self._hold: tuple[np.ndarray, np.ndarray] | None = None
-        self._since_start_s = 0.0
-        self.normal_force_n = 0.0
-        self.press_n = 0.0
-        self.last_terms = None
-        self.time_s = 0.0
+                                   max_rotation_error_rad=params.limits.max_rotation_error_rad,
+                                   n_joints=self.model.nq)
         # published in batches with each status: a ring of >= 5 s covers a late status
         n_trace = max(params.trace_ticks, int(5 * params.rate_hz) if params.publish_trace else 0)
         self.trace = Trace(n_trace) if n_trace else None
-        self._tau = np.zeros(self.model.nq)
-        self._period_s = 1.0 / params.rate_hz
-        self._speed_onset = params.limits.joint_speed_share * self.model.limits.dq_max
         self.override = SpeedOverride(self.model.limits.dq_max, params.limits.reference_joint_speed_share,
                                       jerk_bound_m_s3=params.planner.max_jerk_m_s3)
-        self._demand = np.zeros(self.model.nq)
-        self._demand_work = np.zeros((4, 7))
-        self._board: BoardPose | None = None
-        self._board_R = np.eye(3)
-        self._board_origin = np.zeros(3)
-        self.override_used = 1.0
-        self._modes = None
-        self._modes_out = TaskModes(np.zeros((6, 6)), np.zeros(6), np.zeros(6))
-        self._modes_age = 0
-        self._modes_scale = -1.0
-        self.robot_rate_hz = 0.0  # unknown until a state says
-        self.skill_steps_capped = 0  # ticks whose skill step was cut to SKILL_STEP_CAP_PERIODS robot periods
-        self.mode_cap_rad_s = params.impedance.max_mode_frequency_rad_s
         self.kin = Kinematics(self.model)
-        self._terms = new_terms(self.kin)
-        self._limit_work = np.zeros((3, self.model.nq))
-        self._q = np.zeros(self.model.nq)
-        self._dq = np.zeros(self.model.nq)
-        self._wrench = np.zeros(6)
-        self._extra_force = np.zeros(3)
-        self._xyh = np.zeros(3)
-        self._v_board = np.zeros(3)
-        self._no_setpoint = Setpoint()
+        # the clearance posture (controller.control.limits.clearance_torque), into the shaping's nullspace torques
+        self.buf = TickBuffers(self.kin, limits_from_settings(self.model.limits, params.limits))
+        if params.limits.clearance_stiffness_nm_rad > 0.0:  # the clearance is written into the shaping's record
+            self.shaping.posture_nm = self.buf.clearance
+            posture = self.shaping.posture_nm
+            assert posture is not None
+            self.buf.clearance = posture
+        self.clock = TickClock(params.rate_hz)
+        self.modes = ModesCache(params.impedance.max_mode_frequency_rad_s)
+        self.mem = TickMemory()
         watch = params.limits
         self.disturbance = DisturbanceWatch(watch.disturbance_share * lim.tau_max, watch.disturbance_filter_s,
                                             watch.disturbance_persist_s)
-        self._applied = np.zeros(self.model.nq)
-        self._sp_v_xy = np.zeros(2)  # the last setpoint's in-plane velocity at time scale 1 (board frame) [m/s]
-        self._xy_prev: np.ndarray | None = None  # the pad's in-plane position at the last tick (board frame) [m]
-        self._last_applied = np.zeros(self.model.nq)  # the newest torques the robot said it applied [Nm], as sent
-        self._applied_known = False
         self.contact_watch = ContactWatch(f.contact_threshold_n, f.contact_loss_s)
         self.arm = ArmModel(params.model, self.model, f.contact_threshold_n)  # the load and model error learned
         self._compile_law()
+
+    @property
+    def time_s(self) -> float:
+        """The robot time the ticks covered [s]."""
+        return self.clock.time_s
+
+    @property
+    def robot_rate_hz(self) -> float:
+        """The robot's declared state rate [Hz], 0 until a state said it."""
+        return self.clock.robot_rate_hz
+
+    @property
+    def skill_steps_capped(self) -> int:
+        """Ticks whose skill step was cut to :data:`SKILL_STEP_CAP_PERIODS` robot periods."""
+        return self.clock.skill_steps_capped
+
+    @property
+    def mode_cap_rad_s(self) -> float:
+        """The cap on the task modes' frequency [rad/s] for the robot's rate."""
+        return self.modes.cap_rad_s
+
+    @property
+    def q_rest(self) -> np.ndarray | None:
+        """(n,) [rad] the posture's rest pose (the first state's), None before."""
+        return self.mem.q_rest
+
+    @property
+    def normal_force_n(self) -> float:
+        """Last measured normal force [N] (0 before a board is known)."""
+        return self.mem.normal_force_n
+
+    @property
+    def press_n(self) -> float:
+        """The press force last commanded [N] (0 out of contact)."""
+        return self.mem.press_n
+
+    @property
+    def override_used(self) -> float:
+        """The time scale the last skill step used."""
+        return self.mem.override_used
+
+    @property
+    def last_terms(self) -> ImpedanceTerms | None:
+        """The law's terms of the last tick (None before one)."""
+        return self.mem.last_terms
 
     def _compile_law(self) -> None:
         """Compile the law's kernels for the argument types the tick passes them (or load them from numba's
         cache): the first tick must not wait a second or more for the compiler. Leaves no state behind."""
         lim = self.model.limits
-        q = self._q
+        q = self.buf.q
         q[:] = 0.5 * (lim.q_min + lim.q_max)
-        kin = self.kin.update(q, self._dq)
+        kin = self.kin.update(q, self.buf.dq)
         imp = self.p.impedance
-        modes = task_modes(kin.Lambda, task_stiffness(imp), imp.damping_factor, self.mode_cap_rad_s,
-                           self._modes_out)
-        shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3), posture_nm=self._clearance)
-        clearance_into(q, self._dq, lim.q_min, lim.q_max, 0.5, self._singular, 0.3, 0.0, 0.0, lim.dq_max, 0.6,
-                       self._clearance)
-        self_motion_limit_into(self._clearance, self._dq, kin.M, kin.M_inv, kin.J, kin.Lambda, lim.dq_max, 0.2,
-                               1.0, self._limit_work)
-        impedance_torque(self.model, q, self._dq, Reference(), imp, q, True, shaping, kin, modes, self._terms)
-        limit_torque(self._tau, q, self._dq, lim.q_min, lim.q_max, 0.1, 0.0, 0.0, self._speed_onset, 0.0, kin.M,
-                     self._tau.copy(), self.shaper.tau_max, 1.0, kin.g, True, self._limit_work)
-        self._tau[:] = 0.0
+        modes = task_modes(kin.Lambda, task_stiffness(imp), imp.damping_factor, self.modes.cap_rad_s,
+                           self.modes.out)
+        shaping = TaskShaping(force_axis=np.eye(3)[:, 2], extra_force_n=np.zeros(3), posture_nm=self.buf.clearance,
+                              n_joints=self.model.nq)
+        buf = self.buf
+        clearance_into(q, buf.dq, buf.limits, buf.clearance)
+        self_motion_limit_into(buf.clearance, buf.dq, kin.M, kin.M_inv, kin.J, kin.Lambda, buf.limits)
+        impedance_torque(self.model, q, buf.dq, Reference(), imp, q, True, shaping, kin, modes, buf.terms)
+        limit_torque(buf.tau, q, buf.dq, kin.M, kin.g, True, buf.limits, self.shaper.rec.copy(), 1.0)
+        buf.tau[:] = 0.0
         sp = Setpoint()
-        reference_into(self._board_origin, self._board_R, sp.xy, 0.0, sp.v_xy, 0.0, sp.a_xy, 0.0, sp.R, sp.omega,
-                       sp.domega, 1.0, self.ref.p_m, self.ref.R, self.ref.twist, self.ref.accel)
+        reference_into(self.buf.board, (sp.xy, sp.v_xy, sp.a_xy, sp.R, sp.omega, sp.domega), (0.0, 0.0, 0.0), 1.0,
+                       self.ref.rec)
         joint_demand_into(kin.M_inv, kin.J, kin.Lambda, self.ref.twist, self.ref.accel, 1.0, OVERRIDE_LOOKAHEAD_S,
-                          self._demand, self._demand_work)
+                          self.buf.demand, self.buf.demand_work)
         self.disturbance.compile(kin)
-        largest_share(self._demand, self.override.inv_dq_max)
-        tool_in_board(self._board_origin, self._board_R, kin.p, kin.twist, self._wrench, self._xyh, self._v_board)
+        largest_share(self.buf.demand, self.override.inv_dq_max)
+        tool_in_board(self.buf.board, kin.rec, self.buf.wrench, self.buf.xyh, self.buf.v_board)
         if self.trace is not None:
             row = self.trace.data[0]
-            trace_row(row, 0.0, 0.0, True, sp.xy, sp.v_xy, sp.a_xy, 1.0, self._xyh, 0.0, self.ref.p_m, kin.p, 0.0,
-                      0.0)
+            trace_row(row, (0.0, 0.0, 1.0), (True, sp.xy, sp.v_xy, sp.a_xy, 0.0), self.buf.xyh, self.ref.p_m, kin.p,
+                      (0.0, 0.0))
             row[:] = 0.0
         self.ref.p_m[:] = 0.0
         self.ref.R[:] = np.eye(3)
@@ -184,14 +191,14 @@ class ControllerCore:
 
     def restart(self) -> None:
         """The robot came back after a loss: hold where it is, ramp the gains in again, re-approach."""
-        self._hold = None
-        self.q_rest = None
-        self._since_start_s = 0.0
+        self.mem.hold = None
+        self.mem.q_rest = None
+        self.clock.since_start_s = 0.0
         self.force.reset()
         self.override.reset()
         self.disturbance.reset()
-        self._applied_known = False
-        self._xy_prev = None
+        self.mem.applied_known = False
+        self.mem.xy_prev = None
         self.executor.restart()
 
     def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
@@ -223,13 +230,13 @@ class ControllerCore:
         last cycle when ``applied_nm`` is None for states skipped since (the
         robot's count said it held in one of them): where the rate limit counts from.
         """
-        self.time_s += dt_s
-        self._q[:] = q  # the compiled law sees the same array types every tick (no recompilation)
-        self._dq[:] = dq
-        self._wrench[:] = wrench
-        q, dq, wrench = self._q, self._dq, self._wrench
-        if self.q_rest is None:
-            self.q_rest = q.copy()
+        self.clock.time_s += dt_s
+        self.buf.q[:] = q  # the compiled law sees the same array types every tick (no recompilation)
+        self.buf.dq[:] = dq
+        self.buf.wrench[:] = wrench
+        q, dq, wrench = self.buf.q, self.buf.dq, self.buf.wrench
+        if self.mem.q_rest is None:
+            self.mem.q_rest = q.copy()
             self.shaper.reset(None)
         if tau_max_nm is not None:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
@@ -238,8 +245,8 @@ class ControllerCore:
         self._watch_disturbance(kin, dq, wrench, gravity_compensated, dt_s, applied_nm)
         known = applied_nm if applied_nm is not None else running_nm
         if known is not None:
-            self._last_applied[:] = known
-            self._applied_known = True
+            self.buf.last_applied[:] = known
+            self.mem.applied_known = True
         if robot_held:
             self.contact_watch.lost_s = 0.0
             self._rate_from_applied(kin, gravity_compensated)
@@ -249,7 +256,7 @@ class ControllerCore:
             self._hold_reference(kin)
             if identifying:  # the pad rolls about its normal, for the load estimate
                 ref = self.ref
-                self.arm.identify_reference(self._hold[1], dt_s, ref.R, ref.twist, ref.accel)
+                self.arm.identify_reference(self.mem.hold[1], dt_s, ref.R, ref.twist, ref.accel)
             sp = None
         else:
             n = board.normal
@@ -264,18 +271,18 @@ class ControllerCore:
             else:
                 scale = self.override.scale
                 step = self._skill_step(dt_s) * scale
-            self.override_used = scale
+            self.mem.override_used = scale
             sp = self.executor.step(step, tool)
             if sp.contact:
                 self.arm.first_contact()
-            self._sp_v_xy[:] = sp.v_xy
+            self.buf.sp_v_xy[:] = sp.v_xy
             self._reference_from_setpoint(board, n, sp, tool, scale)
             self._regulate_force(n, sp, 0.0 if robot_held else dt_s)
             if not robot_held:
                 self._update_override(kin, sp, scale, dt_s)
-            if self._xy_prev is None:
-                self._xy_prev = np.zeros(2)
-            self._xy_prev[:] = tool.xy
+            if self.mem.xy_prev is None:
+                self.mem.xy_prev = np.zeros(2)
+            self.mem.xy_prev[:] = tool.xy
         self._shape_task(kin, dt_s)
         tau = self._torque(q, dq, kin, gravity_compensated, dt_s)
         if self.trace is not None:
@@ -289,7 +296,7 @@ class ControllerCore:
         if applied_nm is None:
             watch.skip(dq)
             return
-        applied = self._applied
+        applied = self.buf.applied
         applied[:] = applied_nm
         if gravity_compensated:  # the robot adds its own gravity, not the model correction (which is in kin.g)
             applied += kin.g
@@ -315,8 +322,8 @@ class ControllerCore:
         behind the pad over a 42 ms gap in a real-time lbr-sim run, and pulling the pad back from its run-out
         pressed its edge into the board at 77 N.
         """
-        xy, prev = tool.xy, self._xy_prev
-        v = self._sp_v_xy
+        xy, prev = tool.xy, self.mem.xy_prev
+        v = self.buf.sp_v_xy
         vv = float(v @ v)
         if prev is None or vv < 1e-8:
             return 0.0
@@ -332,44 +339,44 @@ class ControllerCore:
         real-time lbr-sim run: the pad bounced off the board and came back at 79 N). Counted from the applied
         torques, the first command after a hold is within one rate step of what the robot was applying.
         """
-        if not self._applied_known:
+        if not self.mem.applied_known:
             return
         prev = self.shaper.prev
-        prev[:] = self._last_applied
+        prev[:] = self.buf.last_applied
         if not gravity_compensated:  # the rate limit leaves gravity out (``limit_torque``), the answers carry it
             prev -= kin.g
 
     def _hold_reference(self, kin: Kinematics) -> None:
         """No board yet: the executor waits and the reference holds the pose of the first such tick."""
         self.executor.wait()
-        if self._hold is None:
-            self._hold = (kin.p.copy(), kin.R.copy())
+        if self.mem.hold is None:
+            self.mem.hold = (kin.p.copy(), kin.R.copy())
         ref = self.ref
-        ref.p_m[:], ref.R[:] = self._hold
+        ref.p_m[:], ref.R[:] = self.mem.hold
         ref.twist[:] = 0.0
         ref.accel[:] = 0.0
         self.shaping.force_axis = None
-        self.normal_force_n = 0.0
+        self.mem.normal_force_n = 0.0
 
     def _measure_tool(self, board: BoardPose, n: np.ndarray, kin: Kinematics, wrench: np.ndarray,
                       dt_s: float) -> ToolState:
         """The pad in the board frame, the force along the normal ``n`` (3,) (filtered; over the cap: a fault)."""
         self._use_board(board)
-        xyh, vb = self._xyh, self._v_board
-        self.normal_force_n = tool_in_board(self._board_origin, self._board_R, kin.p, kin.twist, wrench, xyh, vb)
-        self.force.measure(self.normal_force_n, dt_s)
+        xyh, vb = self.buf.xyh, self.buf.v_board
+        self.mem.normal_force_n = tool_in_board(self.buf.board, kin.rec, wrench, xyh, vb)
+        self.force.measure(self.mem.normal_force_n, dt_s)
         ex = self.executor
         if self.force.over_cap and ex.phase not in _HALTED:
             ex.fault(f"normal force {self.force.filtered_n:.1f} N above the cap {self.p.force.cap_n:.0f} N")
         # views of the controller's buffers: the executor copies what it keeps
-        return ToolState(xyh[:2], float(xyh[2]), vb[:2], float(vb[2]), kin.R, self.normal_force_n)
+        return ToolState(xyh[:2], float(xyh[2]), vb[:2], float(vb[2]), kin.R, self.mem.normal_force_n)
 
     def _use_board(self, board: BoardPose) -> None:
         """Copy a new board's pose into the controller's own arrays (the kernels always see the same types)."""
-        if board is not self._board:
-            self._board = board
-            self._board_R[:] = board.R
-            self._board_origin[:] = board.origin_m
+        if board is not self.mem.board:
+            self.mem.board = board
+            self.buf.board_R[:] = board.R
+            self.buf.board_origin[:] = board.origin_m
 
     def _reference_from_setpoint(self, board: BoardPose, n: np.ndarray, sp: Setpoint, tool: ToolState,
                                  scale: float) -> None:
@@ -377,9 +384,9 @@ class ControllerCore:
         accelerations x scale^2); in contact, the measured height and no normal motion. One compiled call."""
         ref = self.ref
         c = sp.contact
-        reference_into(self._board_origin, self._board_R, sp.xy, float(tool.h if c else sp.h), sp.v_xy,
-                       0.0 if c else float(sp.v_h), sp.a_xy, 0.0 if c else float(sp.a_h), sp.R, sp.omega,
-                       sp.domega, float(scale), ref.p_m, ref.R, ref.twist, ref.accel)
+        normal = (float(tool.h), 0.0, 0.0) if c else (float(sp.h), float(sp.v_h), float(sp.a_h))
+        reference_into(self.buf.board, (sp.xy, sp.v_xy, sp.a_xy, sp.R, sp.omega, sp.domega), normal, float(scale),
+                       ref.rec)
 
     def _update_override(self, kin: Kinematics, sp: Setpoint, scale: float, dt_s: float) -> None:
         """The time scale of the next tick from the joint speeds the unscaled reference asks for (the least-inertia
@@ -387,65 +394,60 @@ class ControllerCore:
         within the planner's jerk bound on the executed in-plane reference (the setpoint's unscaled acceleration)."""
         ref = self.ref
         joint_demand_into(kin.M_inv, kin.J, kin.Lambda, ref.twist, ref.accel, float(scale), OVERRIDE_LOOKAHEAD_S,
-                          self._demand, self._demand_work)
-        self.override.update(self._demand, dt_s, sp.a_xy)
+                          self.buf.demand, self.buf.demand_work)
+        self.override.update(self.buf.demand, dt_s, sp.a_xy)
 
     def _regulate_force(self, n: np.ndarray, sp: Setpoint, dt_s: float) -> None:
         """In contact, the press force along the normal ``n`` (3,) from the regulator (PI + feed-forward); else none."""
         shaping = self.shaping
         if sp.contact:
             shaping.force_axis = n
-            in_contact = self.normal_force_n > self.p.force.contact_threshold_n
-            self.press_n = self.force.command(sp.force_n, self.normal_force_n, dt_s, in_contact)
-            shaping.press_n = self.press_n
-            if self.contact_watch.update(sp.force_n, self.normal_force_n, dt_s):
+            in_contact = self.mem.normal_force_n > self.p.force.contact_threshold_n
+            self.mem.press_n = self.force.command(sp.force_n, self.mem.normal_force_n, dt_s, in_contact)
+            shaping.press_n = self.mem.press_n
+            if self.contact_watch.update(sp.force_n, self.mem.normal_force_n, dt_s):
                 self.contact_watch.lost_s = 0.0
                 ex = self.executor
                 where = f" in {ex.current_mp}" + (f" at stain {ex.stain_id}" if ex.stain_id >= 0 else "")
-                self.executor.fault(f"contact lost{where}: {self.normal_force_n:.1f} N measured for "
+                self.executor.fault(f"contact lost{where}: {self.mem.normal_force_n:.1f} N measured for "
                                     f"{self.contact_watch.persist_s * 1000:.0f} ms while pressing "
                                     f"{sp.force_n:.1f} N (board gone? pad off? force sensor?)")
         else:
             shaping.force_axis = None
-            self.press_n = 0.0
+            self.mem.press_n = 0.0
             self.force.reset()
             self.contact_watch.lost_s = 0.0
 
     def _shape_task(self, kin: Kinematics, dt_s: float) -> None:
         """Stiffness ramped in (smoothstep from 20 %) since the (re)start; a brake above the speed limit."""
-        self._since_start_s += dt_s
+        self.clock.since_start_s += dt_s
         ramp = self.p.limits.gain_ramp_s
-        s = 1.0 if ramp <= 0 else min(self._since_start_s / ramp, 1.0)
+        s = 1.0 if ramp <= 0 else min(self.clock.since_start_s / ramp, 1.0)
         self.shaping.stiffness_scale = 0.2 + 0.8 * s * s * (3.0 - 2.0 * s)
         lim = self.p.limits
         self.shaping.extra_force_n = speed_excess_force(kin.twist, lim.max_speed_m_s, lim.speed_brake_gain_n_s_m,
-                                                        self._extra_force)
+                                                        self.buf.extra_force)
 
     def _torque(self, q: np.ndarray, dq: np.ndarray, kin: Kinematics, gravity_compensated: bool,
                 dt_s: float) -> np.ndarray:
         """Impedance torque plus the joint-limit repulsion and the joint-speed brake, then the rate and absolute
         limits (gravity outside the rate limit): two compiled calls, no allocation."""
-        model, lim = self.model, self.p.limits
+        model = self.model
         if self.shaping.posture_nm is not None:
-            clearance_into(q, dq, model.limits.q_min, model.limits.q_max, lim.clearance_zone_rad, self._singular,
-                           lim.singular_clearance_rad, lim.clearance_stiffness_nm_rad, lim.clearance_damping_nm_s_rad,
-                           model.limits.dq_max, lim.clearance_speed_share, self._clearance)
-            self_motion_limit_into(self._clearance, dq, kin.M, kin.M_inv, kin.J, kin.Lambda, model.limits.dq_max,
-                                   lim.self_motion_share, lim.self_motion_brake_1_s, self._limit_work)
-        terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.q_rest, not gravity_compensated,
-                                 self.shaping, kin, self._task_modes(kin), self._terms)
-        self.last_terms = terms
-        tau = self._tau
+            clearance_into(q, dq, self.buf.limits, self.buf.clearance)
+            self_motion_limit_into(self.buf.clearance, dq, kin.M, kin.M_inv, kin.J, kin.Lambda, self.buf.limits)
+        terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.mem.q_rest, not gravity_compensated,
+                                 self.shaping, kin, self._task_modes(kin), self.buf.terms)
+        self.mem.last_terms = terms
+        tau = self.buf.tau
         tau[:] = terms.tau_nm
         if gravity_compensated:  # the robot adds its own gravity and load data; the correction is ours to send
             tau += self.arm.correction.c
         # the robot steps from one command to the next within one of its cycles, however long the controller
         # took: the rate limit is per answer (at most one nominal period's worth), not per elapsed time
         shaper = self.shaper
-        hit = limit_torque(tau, q, dq, model.limits.q_min, model.limits.q_max, lim.joint_margin_rad,
-                           lim.joint_margin_stiffness_nm_rad, lim.joint_margin_damping_nm_s_rad, self._speed_onset,
-                           lim.joint_speed_brake_1_s, kin.M, shaper.prev, shaper.tau_max,
-                           shaper.rate * min(dt_s, self._period_s), kin.g, not gravity_compensated, self._limit_work)
+        hit = limit_torque(tau, q, dq, kin.M, kin.g, not gravity_compensated, self.buf.limits, shaper.rec,
+                           shaper.rate * min(dt_s, self.clock.period_s))
         shaper.count(hit)
         return tau
 
@@ -455,35 +457,35 @@ class ControllerCore:
         stood still while the robot repeated or held an old command; the arm did not follow the reference, so,
         as over a held cycle, the skill's clock does not run on (in one step it would also leap: the executed
         reference's acceleration jumped there, 1.4 km/s^3 of jerk after a 36 ms stall)."""
-        period = 1.0 / self.robot_rate_hz if self.robot_rate_hz > 0 else self._period_s
+        period = 1.0 / self.clock.robot_rate_hz if self.clock.robot_rate_hz > 0 else self.clock.period_s
         cap = SKILL_STEP_CAP_PERIODS * period
         if dt_s > cap:
-            self.skill_steps_capped += 1
+            self.clock.skill_steps_capped += 1
             return cap
         return dt_s
 
     def follow_robot_rate(self, rate_hz: float) -> None:
         """The robot sends states at ``rate_hz`` (its declared capability): cap the task modes for that loop
         delay (:func:`~controller.control.params.mode_frequency_cap`); the modes are recomputed at once."""
-        if rate_hz == self.robot_rate_hz:
+        if rate_hz == self.clock.robot_rate_hz:
             return
-        self.robot_rate_hz = rate_hz
-        self.mode_cap_rad_s = mode_frequency_cap(self.p.impedance.max_mode_frequency_rad_s, rate_hz)
-        self._modes = None
+        self.clock.robot_rate_hz = rate_hz
+        self.modes.cap_rad_s = mode_frequency_cap(self.p.impedance.max_mode_frequency_rad_s, rate_hz)
+        self.modes.current = None
 
     def _task_modes(self, kin: Kinematics):
         scale = self.shaping.stiffness_scale
-        self._modes_age += 1
-        if self._modes is None or self._modes_age >= MODES_EVERY_TICKS or scale != self._modes_scale:
+        self.modes.age += 1
+        if self.modes.current is None or self.modes.age >= MODES_EVERY_TICKS or scale != self.modes.scale:
             imp = self.p.impedance
-            self._modes = task_modes(kin.Lambda, task_stiffness(imp, scale), imp.damping_factor,
-                                     self.mode_cap_rad_s, self._modes_out)
-            self._modes_age, self._modes_scale = 0, scale
-        return self._modes
+            self.modes.current = task_modes(kin.Lambda, task_stiffness(imp, scale), imp.damping_factor,
+                                     self.modes.cap_rad_s, self.modes.out)
+            self.modes.age, self.modes.scale = 0, scale
+        return self.modes.current
 
     def _record(self, sp: Setpoint | None, p: np.ndarray) -> None:
         has_sp = sp is not None
-        sp = sp or self._no_setpoint
-        trace_row(self.trace.row(), self.time_s, float(PHASE_CODES.get(self.executor.phase, -1)), has_sp, sp.xy,
-                  sp.v_xy, sp.a_xy, self.override_used, self._xyh, float(sp.contact), self.ref.p_m, p,
-                  self.normal_force_n, self.press_n)
+        sp = sp or self.buf.no_setpoint
+        clock = (self.clock.time_s, float(PHASE_CODES.get(self.executor.phase, -1)), float(self.mem.override_used))
+        trace_row(self.trace.row(), clock, (has_sp, sp.xy, sp.v_xy, sp.a_xy, float(sp.contact)), self.buf.xyh,
+                  self.ref.p_m, p, (float(self.mem.normal_force_n), float(self.mem.press_n)))

@@ -30,7 +30,7 @@ from interfaces.messages import Phase
 from .control.force import NormalForceRegulator
 from .control.impedance import Kinematics
 from .control.limit_kernels import limit_torque
-from .control.limits import SpeedOverride, TorqueShaper, speed_excess_force
+from .control.limits import SpeedOverride, TorqueShaper, limits_from_settings, speed_excess_force
 from .params import ControllerParams
 
 
@@ -121,12 +121,11 @@ class TeachCore:
         self.mode_cap_rad_s = params.impedance.max_mode_frequency_rad_s
         self.skill_steps_capped = 0
         self._period_s = 1.0 / params.rate_hz
-        self._speed_onset = params.limits.joint_speed_share * lim.dq_max
+        self._limits = limits_from_settings(lim, params.limits)  # the repulsion and the speed brake of the tick
         n = self.model.nq
         self._tau = np.zeros(n)
         self._force = np.zeros(6)
         self._brake = np.zeros(3)
-        self._work = np.zeros((2, n))
         self._q_hold: np.ndarray | None = None
 
     def restart(self) -> None:
@@ -161,11 +160,9 @@ class TeachCore:
         tau += kin.nle  # C dq + g, then g off again when the robot adds it itself
         if gravity_compensated:
             tau -= kin.g
-        lim, model, shaper = self.p.limits, self.model, self.shaper
-        hit = limit_torque(tau, q, dq, model.limits.q_min, model.limits.q_max, lim.joint_margin_rad,
-                           lim.joint_margin_stiffness_nm_rad, lim.joint_margin_damping_nm_s_rad, self._speed_onset,
-                           lim.joint_speed_brake_1_s, kin.M, shaper.prev, shaper.tau_max,
-                           shaper.rate * min(dt_s, self._period_s), kin.g, not gravity_compensated, self._work)
+        shaper = self.shaper
+        hit = limit_torque(tau, q, dq, kin.M, kin.g, not gravity_compensated, self._limits, shaper.rec,
+                           shaper.rate * min(dt_s, self._period_s))
         shaper.count(hit)
         return tau
 

@@ -18,7 +18,7 @@ import pinocchio as pin
 import pytest
 
 from arm.robot_model import RobotModel
-from controller.control import demand_kernels, kernels, limit_kernels
+from controller.control import demand_kernels, kernels, limit_kernels, records
 from controller.control.impedance import (
     Kinematics,
     Reference,
@@ -27,7 +27,7 @@ from controller.control.impedance import (
     task_modes,
     task_stiffness,
 )
-from controller.control.limits import TorqueShaper
+from controller.control.limits import LIMIT_SETTINGS, TorqueShaper, limits_record
 from controller.control.params import ImpedanceParams
 from controller.control.watch import DisturbanceWatch
 
@@ -151,9 +151,11 @@ def test_limits_equal_the_numpy_formulation(model, rng):
         want = np.clip(want - off, prev - 1.0, prev + 1.0) + off
         want = np.clip(want, -lim.tau_max, lim.tau_max)
         got = tau.copy()
-        hit = limit_kernels.limit_torque(got, q, dq, lim.q_min, lim.q_max, 0.1, 300.0, 10.0, onset, 50.0,
-                                         np.diag(M_diag), shaper.prev, shaper.tau_max, 1.0, g, gravity,
-                                         np.zeros((2, n)))
+        limits = limits_record(lim.q_min, lim.q_max, lim.dq_max, onset, np.zeros(n),
+                               **{**dict.fromkeys(LIMIT_SETTINGS, 0.0), "margin_rad": 0.1,
+                                  "margin_stiffness_nm_rad": 300.0, "margin_damping_nm_s_rad": 10.0,
+                                  "speed_brake_1_s": 50.0})
+        hit = limit_kernels.limit_torque(got, q, dq, np.diag(M_diag), g, gravity, limits, shaper.rec, 1.0)
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
         np.testing.assert_allclose(shaper.prev, want - off, atol=1e-9)
         assert hit & 1  # 60 Nm from a random previous command is always more than 1 Nm away
@@ -177,8 +179,11 @@ def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model, rng):
     origin = rng.normal(0, 1, 3)
     xy, v, a = rng.normal(size=2), rng.normal(size=2), rng.normal(size=2)
     om, dom = rng.normal(size=3), rng.normal(size=3)
-    p, R, tw, ac = np.zeros(3), np.zeros((3, 3)), np.zeros(6), np.zeros(6)
-    kernels.reference_into(origin, Rb, xy, 0.01, v, 0.2, a, 0.3, Rb, om, dom, 0.6, p, R, tw, ac)
+    board = records.new_record(records.BOARD_DTYPE)
+    board["origin"], board["R"] = origin, Rb
+    ref = Reference()
+    kernels.reference_into(board, (xy, v, a, Rb, om, dom), (0.01, 0.2, 0.3), 0.6, ref.rec)
+    p, tw, ac = ref.p_m, ref.twist, ref.accel
     np.testing.assert_allclose(p, origin + Rb @ np.r_[xy, 0.01], atol=1e-14)
     np.testing.assert_allclose(tw, np.r_[Rb @ np.r_[v, 0.2], om] * 0.6, atol=1e-14)
     np.testing.assert_allclose(ac, np.r_[Rb @ np.r_[a, 0.3], dom] * 0.36, atol=1e-14)
@@ -195,7 +200,7 @@ def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model, rng):
     np.testing.assert_allclose(demand, np.where(abs(now) > abs(ahead), now, ahead), rtol=1e-9)
     # the pad in the board frame and the normal force
     xyh, vb = np.zeros(3), np.zeros(3)
-    f = kernels.tool_in_board(origin, Rb, kin.p, kin.twist, wrench, xyh, vb)
+    f = kernels.tool_in_board(board, kin.rec, wrench, xyh, vb)
     np.testing.assert_allclose(xyh, (kin.p - origin) @ Rb, atol=1e-14)
     np.testing.assert_allclose(vb, Rb.T @ kin.twist[:3], atol=1e-14)
     assert f == pytest.approx(wrench[:3] @ Rb[:, 2], abs=1e-14)

@@ -5,5 +5,6 @@ The controller service (:mod:`controller.service`) runs it in its fixed-rate loo
 """
 
 __all__ = [
-    "demand_kernels", "force", "impedance", "kernels", "limit_kernels", "limits", "model_correction", "params", "watch"
+    "demand_kernels", "force", "impedance", "kernels", "limit_kernels", "limits", "model_correction", "params",
+    "records", "watch",
 ]

@@ -36,8 +36,6 @@ shorter way and has no quaternion sign ambiguity.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 import pinocchio as pin
 
@@ -45,22 +43,36 @@ from arm.robot_model import RobotModel
 
 from .kernels import impedance_into, kinematics_terms, task_modes_into
 from .params import ImpedanceParams
+from .records import MODES_DTYPE, REFERENCE_DTYPE, RecordViews, arm_dtype, law_dtype, new_record, terms_dtype, view
 
 #: Regularisation of the task inertia's inverse: Lambda = (J M^-1 J^T + eps I)^-1 stays finite at singularities.
 LAMBDA_EPS = 1e-6
 
 
-@dataclass
-class Reference:
-    """Where the pad should be: position (3,) [m], orientation (3, 3), twist (6,) [m/s, rad/s], acceleration (6,)."""
+class Reference(RecordViews):
+    """Where the pad should be: position ``p_m`` (3,) [m], orientation ``R`` (3, 3), ``twist`` (6,) [m/s, rad/s],
+    acceleration ``accel`` (6,) [m/s^2, rad/s^2], world axes (zero and identity when not given).
 
-    p_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    R: np.ndarray = field(default_factory=lambda: np.eye(3))
-    twist: np.ndarray = field(default_factory=lambda: np.zeros(6))
-    accel: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    The arrays view one record (``rec``, :data:`~.records.REFERENCE_DTYPE`), what the kernels take: write into
+    them (``ref.p_m[:] = ...``; ``ref.p_m = ...`` copies too).
+    """
+
+    _views = {"p_m": "p", "R": "R", "twist": "twist", "accel": "accel"}
+    p_m: np.ndarray
+    R: np.ndarray
+    twist: np.ndarray
+    accel: np.ndarray
+
+    def __init__(self, p_m: np.ndarray | None = None, R: np.ndarray | None = None, twist: np.ndarray | None = None,
+                 accel: np.ndarray | None = None) -> None:
+        self._bind(REFERENCE_DTYPE)
+        self.R[:] = np.eye(3) if R is None else R
+        for mine, given in ((self.p_m, p_m), (self.twist, twist), (self.accel, accel)):
+            if given is not None:
+                mine[:] = given
 
 
-class Kinematics:
+class Kinematics(RecordViews):
     """Everything the law needs about the arm at (q, dq), from one Pinocchio pass per tick.
 
     Call :meth:`update`; then ``M`` (7, 7) inertia, ``M_inv``, ``J`` (6, 7)
@@ -72,21 +84,23 @@ class Kinematics:
     (:func:`~.kernels.kinematics_terms`).
     """
 
+    _views = {"M": "M", "M_inv": "M_inv", "J": "J", "Lambda": "Lam", "p": "p", "R": "R", "twist": "twist",
+              "nle": "nle", "g": "g", "drift": "drift"}
+    M: np.ndarray
+    M_inv: np.ndarray
+    J: np.ndarray
+    Lambda: np.ndarray
+    p: np.ndarray
+    R: np.ndarray
+    twist: np.ndarray
+    nle: np.ndarray
+    g: np.ndarray
+    drift: np.ndarray
+
     def __init__(self, model: RobotModel) -> None:
         self.model = model
-        n = model.nq
-        self.M = np.zeros((n, n))
-        self.M_inv = np.zeros((n, n))
-        self.J = np.zeros((6, n))
-        self.Lambda = np.zeros((6, 6))
-        self.p = np.zeros(3)
-        self.R = np.eye(3)
-        self.twist = np.zeros(6)
-        self.nle = np.zeros(n)
-        self.g = np.zeros(n)
-        self.drift = np.zeros(6)
-        self._A = np.zeros((6, 6))
-        self._L = np.zeros((6, 6))
+        self._bind(arm_dtype(model.nq))  # the terms as one record, what the kernels take; the attributes view it
+        self.R[:] = np.eye(3)
 
     def update(self, q: np.ndarray, dq: np.ndarray) -> Kinematics:
         m, d, f = self.model.model, self.model.data, self.model.tcp_id
@@ -96,33 +110,31 @@ class Kinematics:
         oMf = pin.updateFramePlacement(m, d, f)
         # dJ dq: the pad's classical acceleration at zero joint acceleration (computeAllTerms' forward pass)
         acc = pin.getFrameClassicalAcceleration(m, d, f, pin.LOCAL_WORLD_ALIGNED)
-        if not kinematics_terms(d.M, M_inv, pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED), dq, LAMBDA_EPS,
-                                oMf.translation, oMf.rotation, d.nle, d.g, acc.vector, self.M, self.M_inv, self.J,
-                                self.Lambda, self.twist, self.p, self.R, self.nle, self.g, self.drift,
-                                self._A, self._L):
+        pin_out = (d.M, M_inv, pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED), oMf.translation,
+                   oMf.rotation, d.nle, d.g, acc.vector)
+        if not kinematics_terms(pin_out, dq, LAMBDA_EPS, self.rec):
             # only with non-finite inputs (the matrix is SPD by construction): what numpy makes of them
             self.Lambda[:] = np.linalg.inv(self.J @ self.M_inv @ self.J.T + LAMBDA_EPS * np.eye(6))
         return self
 
 
-@dataclass
-class ImpedanceTerms:
-    """The parts of one evaluation, for logs and tests (all world axes)."""
+class ImpedanceTerms(RecordViews):
+    """The parts of one evaluation, for logs and tests (all world axes): ``tau_nm`` (n,) [Nm], ``wrench_task``
+    (6,) task wrench, ``pose_error`` (6,), ``twist_error`` (6,), ``tau_nullspace`` (n,) [Nm] (views of the
+    record ``rec``, :func:`~.records.terms_dtype`, that the kernel writes); and the arm's ``p_m``, ``R``,
+    ``twist``, ``Lambda``, ``J`` at that state (:class:`Kinematics`' own arrays when made by :func:`new_terms`)."""
 
+    _views = {"tau_nm": "tau", "wrench_task": "F", "pose_error": "e", "twist_error": "de",
+              "tau_nullspace": "tau_null"}
     tau_nm: np.ndarray
     wrench_task: np.ndarray
     pose_error: np.ndarray
     twist_error: np.ndarray
     tau_nullspace: np.ndarray
-    p_m: np.ndarray
-    R: np.ndarray
-    twist: np.ndarray
-    Lambda: np.ndarray
-    J: np.ndarray
-    _work: np.ndarray = field(default=None, repr=False)  # the kernel's scratch, (7, max(n, 6))
-    _axis: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)  # shaping's vectors, copied
-    _extra: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
-    _posture: np.ndarray = field(default_factory=lambda: np.zeros(7), repr=False)
+
+    def __init__(self, kin: Kinematics) -> None:
+        self._bind(terms_dtype(kin.model.nq))
+        self.p_m, self.R, self.twist, self.Lambda, self.J = kin.p, kin.R, kin.twist, kin.Lambda, kin.J
 
 
 def pose_error(p_ref: np.ndarray, R_ref: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -130,7 +142,6 @@ def pose_error(p_ref: np.ndarray, R_ref: np.ndarray, p: np.ndarray, R: np.ndarra
     return np.concatenate([p_ref - p, pin.log3(R_ref @ R.T)])
 
 
-@dataclass
 class TaskShaping:
     """Per-tick modifiers of the impedance law (defaults: the plain law).
 
@@ -142,35 +153,106 @@ class TaskShaping:
     along it. stiffness_scale : factor on K (and D by sqrt) for gain ramps.
     max_position_error_m, max_rotation_error_rad : the pose error is
     clipped to these lengths. extra_force_n : (3,) more force on the pad
-    [N] (world; e.g. a speed-limit brake). posture_nm : (n,) joint torques
+    [N] (world; e.g. a speed-limit brake). posture_nm : (n_joints,) joint torques
     [Nm] added to the posture, projected into the task's nullspace with it.
+
+    All but ``stiffness_scale`` live in one record (``rec``, :func:`~.records.law_dtype`), what the kernel
+    takes: setting a vector copies it in (a getter returns the record's view, or None when not set).
     """
 
-    force_axis: np.ndarray | None = None
-    press_n: float = 0.0
-    normal_damping_1_s: float = 0.0
-    stiffness_scale: float = 1.0
-    max_position_error_m: float = np.inf
-    max_rotation_error_rad: float = np.inf
-    extra_force_n: np.ndarray | None = None
-    posture_nm: np.ndarray | None = None
+    def __init__(self, force_axis: np.ndarray | None = None, press_n: float = 0.0, normal_damping_1_s: float = 0.0,
+                 stiffness_scale: float = 1.0, max_position_error_m: float = np.inf,
+                 max_rotation_error_rad: float = np.inf, extra_force_n: np.ndarray | None = None,
+                 posture_nm: np.ndarray | None = None, n_joints: int = 7) -> None:
+        self.rec = new_record(law_dtype(n_joints))
+        rec = self.rec
+        self._axis, self._extra, self._posture = view(rec, "force_axis"), view(rec, "extra_force_n"), \
+            view(rec, "posture_nm")
+        self._use = {name: rec[name] for name in ("use_axis", "use_extra", "use_posture")}  # (1,) views
+        self._press = rec["press_n"]
+        self.stiffness_scale = stiffness_scale
+        rec["normal_damping_1_s"] = normal_damping_1_s
+        rec["max_position_error_m"] = max_position_error_m
+        rec["max_rotation_error_rad"] = max_rotation_error_rad
+        self.force_axis = force_axis
+        self.press_n = press_n
+        self.extra_force_n = extra_force_n
+        self.posture_nm = posture_nm
+
+    def _set(self, flag: str, mine: np.ndarray, given: np.ndarray | None) -> None:
+        if given is not None:
+            if np.shape(given) != mine.shape:
+                raise ValueError(f"TaskShaping: {flag[4:]} of shape {np.shape(given)}, expected {mine.shape}")
+            mine[:] = given
+        self._use[flag][0] = given is not None
+
+    @property
+    def force_axis(self) -> np.ndarray | None:
+        return self._axis if self._use["use_axis"][0] else None
+
+    @force_axis.setter
+    def force_axis(self, axis: np.ndarray | None) -> None:
+        self._set("use_axis", self._axis, axis)
+
+    @property
+    def extra_force_n(self) -> np.ndarray | None:
+        return self._extra if self._use["use_extra"][0] else None
+
+    @extra_force_n.setter
+    def extra_force_n(self, force: np.ndarray | None) -> None:
+        self._set("use_extra", self._extra, force)
+
+    @property
+    def posture_nm(self) -> np.ndarray | None:
+        return self._posture if self._use["use_posture"][0] else None
+
+    @posture_nm.setter
+    def posture_nm(self, tau: np.ndarray | None) -> None:
+        self._set("use_posture", self._posture, tau)
+
+    @property
+    def press_n(self) -> float:
+        return float(self._press[0])
+
+    @press_n.setter
+    def press_n(self, f: float) -> None:
+        self._press[0] = f
+
+    @property
+    def normal_damping_1_s(self) -> float:
+        return float(self.rec["normal_damping_1_s"][0])
+
+    @property
+    def max_position_error_m(self) -> float:
+        return float(self.rec["max_position_error_m"][0])
+
+    @property
+    def max_rotation_error_rad(self) -> float:
+        return float(self.rec["max_rotation_error_rad"][0])
 
 
 _PLAIN = TaskShaping()
 
 
-@dataclass
-class TaskModes:
+class TaskModes(RecordViews):
     """Stiffness and damping of the task as modes: ``K = B diag(k) B^T``, ``D = B diag(d) B^T``.
 
     B (6, 6): the mode shapes, scaled so that ``B^-1 Lambda B^-T`` is
     diagonal too (the modal masses); k (6,), d (6,): modal stiffness and
     damping (multiply by the 6-vectors in ``B^T`` coordinates).
+    The arrays view one record (``rec``, :data:`~.records.MODES_DTYPE`), what the kernels take.
     """
 
+    _views = {"B": "B", "k": "k", "d": "d"}
     B: np.ndarray
     k: np.ndarray
     d: np.ndarray
+
+    def __init__(self, B: np.ndarray | None = None, k: np.ndarray | None = None, d: np.ndarray | None = None) -> None:
+        self._bind(MODES_DTYPE)
+        for mine, given in ((self.B, B), (self.k, k), (self.d, d)):
+            if given is not None:
+                mine[:] = given
 
     def wrench(self, e: np.ndarray, de: np.ndarray) -> np.ndarray:
         """K e + D de (6,) for pose error ``e`` (6,) and twist error ``de`` (6,), without forming K or D."""
@@ -204,9 +286,9 @@ def task_modes(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: flo
     (:func:`~.kernels.task_modes_into`).
     """
     if out is None:
-        out = TaskModes(np.zeros((6, 6)), np.zeros(6), np.zeros(6))
+        out = TaskModes()
     task_modes_into(np.ascontiguousarray(Lam, float), np.ascontiguousarray(K, float), float(zeta),
-                    float(max_omega_rad_s), out.B, out.k, out.d)
+                    float(max_omega_rad_s), out.rec)
     return out
 
 
@@ -237,28 +319,14 @@ def impedance_torque(model: RobotModel, q: np.ndarray, dq: np.ndarray, ref: Refe
         out = new_terms(kin)
         out.p_m, out.R, out.twist, out.Lambda, out.J = (kin.p.copy(), kin.R.copy(), kin.twist.copy(),
                                                        kin.Lambda.copy(), kin.J.copy())
-    axis, extra = shaping.force_axis, shaping.extra_force_n
-    if axis is not None:  # into the terms' own buffers: the kernel then always sees the same array types
-        out._axis[:] = axis
-    if extra is not None:
-        out._extra[:] = extra
-    posture = shaping.posture_nm
-    if posture is not None:
-        out._posture[:] = posture
-    impedance_into(kin.M, kin.M_inv, kin.J, kin.Lambda, kin.twist, kin.drift, kin.nle, kin.g, kin.p, kin.R,
-                   ref.p_m, ref.R, ref.twist, ref.accel,
-                   out._axis, axis is not None, float(shaping.press_n),
-                   float(shaping.normal_damping_1_s), float(shaping.max_position_error_m),
-                   float(shaping.max_rotation_error_rad), out._extra, extra is not None, out._posture,
-                   posture is not None,
-                   modes.B, modes.k, modes.d, float(params.nullspace_stiffness_nm_rad), q_rest, q, dq,
-                   bool(add_gravity),
-                   out.tau_nm, out.wrench_task, out.pose_error, out.twist_error, out.tau_nullspace, out._work)
+    if len(shaping._posture) != len(kin.g):
+        raise ValueError(f"TaskShaping for {len(shaping._posture)} joints, the arm has {len(kin.g)}: "
+                         f"TaskShaping(n_joints={len(kin.g)})")
+    impedance_into(kin.rec, ref.rec, modes.rec, shaping.rec, (q, dq, q_rest),
+                   float(params.nullspace_stiffness_nm_rad), bool(add_gravity), out.rec)
     return out
 
 
 def new_terms(kin: Kinematics) -> ImpedanceTerms:
     """Preallocated :class:`ImpedanceTerms` for :func:`impedance_torque`'s ``out`` (pose arrays: ``kin``'s)."""
-    n = kin.model.nq
-    return ImpedanceTerms(np.zeros(n), np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(n), kin.p, kin.R,
-                          kin.twist, kin.Lambda, kin.J, np.zeros((7, max(n, 6))), _posture=np.zeros(n))
+    return ImpedanceTerms(kin)

@@ -67,19 +67,21 @@ def spd_inverse_into(A: np.ndarray, out: np.ndarray, L: np.ndarray) -> bool:
 
 
 @_jit
-def kinematics_terms(M_upper: np.ndarray, Minv_upper: np.ndarray, J_pin: np.ndarray, dq: np.ndarray, eps: float,
-                     p_pin: np.ndarray, R_pin: np.ndarray, nle_pin: np.ndarray, g_pin: np.ndarray,
-                     drift_pin: np.ndarray, M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray,
-                     twist: np.ndarray, p: np.ndarray, R: np.ndarray, nle: np.ndarray, g: np.ndarray,
-                     drift: np.ndarray, A: np.ndarray, L: np.ndarray) -> bool:
-    """The law's arm terms from Pinocchio's outputs (``*_pin``, read as they are), written into the caller's arrays.
+def kinematics_terms(pin_out: tuple, dq: np.ndarray, eps: float, arm: np.ndarray) -> bool:
+    """The law's arm terms from Pinocchio's outputs, written into the arm's record.
 
-    M_upper, Minv_upper : (n, n) inertia and its inverse, upper triangles valid (older Pinocchio fills only
-    those); J_pin : (6, n) pad Jacobian, world-aligned; dq : (n,) [rad/s]; eps : regularisation of the task
-    inertia's inverse; p_pin (3,) [m], R_pin (3, 3): pad pose; nle_pin, g_pin (n,) [Nm]; drift_pin (6,): dJ dq.
-    Out: M, M_inv (n, n) symmetric; J, p, R, nle, g, drift copied; Lam (6, 6) = (J M^-1 J^T + eps I)^-1;
-    twist (6,) = J dq. A, L (6, 6): scratch. Returns False when Lam could not be formed (not positive definite).
+    pin_out : Pinocchio's arrays as it returns them (read, not kept): ``(M_upper, Minv_upper, J, p, R, nle, g,
+    drift)``, the inertia (n, n) and its inverse with their upper triangles valid (older Pinocchio fills only
+    those), the pad Jacobian (6, n) world-aligned, the pad pose p (3,) [m], R (3, 3), nle, g (n,) [Nm],
+    drift (6,) = dJ dq. dq : (n,) [rad/s]; eps : regularisation of the task inertia's inverse.
+    arm : a record of :func:`~.records.arm_dtype`: M, M_inv symmetric, J, p, R, nle, g, drift copied,
+    Lam (6, 6) = (J M^-1 J^T + eps I)^-1, twist (6,) = J dq (A, L its scratch).
+    Returns False when Lam could not be formed (not positive definite).
     """
+    M_upper, Minv_upper, J_pin, p_pin, R_pin, nle_pin, g_pin, drift_pin = pin_out
+    a = arm[0]
+    M, M_inv, J, Lam, twist = a.M, a.M_inv, a.J, a.Lam, a.twist
+    p, R, nle, g, drift, A = a.p, a.R, a.nle, a.g, a.drift, a.A
     n = M.shape[0]
     for i in range(3):
         p[i] = p_pin[i]
@@ -115,7 +117,7 @@ def kinematics_terms(M_upper: np.ndarray, Minv_upper: np.ndarray, J_pin: np.ndar
             A[r, c] = s
             A[c, r] = s
         A[r, r] += eps
-    return spd_inverse_into(A, Lam, L)
+    return spd_inverse_into(A, Lam, a.L)
 
 
 @_jit
@@ -176,26 +178,31 @@ def _remove_along(v: np.ndarray, n: np.ndarray) -> None:
 
 
 @_jit
-def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndarray, twist: np.ndarray,
-                   drift: np.ndarray, nle: np.ndarray, g: np.ndarray, p: np.ndarray, R: np.ndarray,
-                   p_ref: np.ndarray, R_ref: np.ndarray, twist_ref: np.ndarray, accel_ref: np.ndarray,
-                   force_axis: np.ndarray, use_axis: bool, press_n: float, normal_damping_1_s: float,
-                   max_position_error_m: float, max_rotation_error_rad: float,
-                   extra_force_n: np.ndarray, use_extra: bool, posture_nm: np.ndarray, use_posture: bool,
-                   B: np.ndarray, k: np.ndarray, d: np.ndarray, kn: float, q_rest: np.ndarray, q: np.ndarray,
-                   dq: np.ndarray, add_gravity: bool,
-                   tau: np.ndarray, F: np.ndarray, e: np.ndarray, de: np.ndarray, tau_null: np.ndarray,
-                   work: np.ndarray) -> None:
+def impedance_into(arm: np.ndarray, ref: np.ndarray, modes: np.ndarray, shaping: np.ndarray, state: tuple,
+                   kn: float, add_gravity: bool, out: np.ndarray) -> None:
     """The impedance law of :mod:`.impedance` (its module docstring has the equations), written in place.
 
-    Inputs as :func:`~.impedance.impedance_torque` takes them, unpacked: the arm's terms (M, M_inv (n, n);
-    J (6, n); Lam (6, 6); twist, drift (6,); nle, g (n,); p (3,) [m]; R (3, 3)), the reference, the
-    task shaping (``use_axis`` / ``use_extra`` / ``use_posture`` say whether ``force_axis`` / ``extra_force_n`` /
-    ``posture_nm``, joint torques (n,) [Nm] added to the posture before its projection, apply), the
-    modes (B (6, 6), k, d (6,)), the posture stiffness ``kn`` [Nm/rad] and rest pose, the state.
-    Out: tau (n,) [Nm], F (6,) task wrench, e (6,) pose error, de (6,) twist error, tau_null (n,).
-    work : (7, max(n, 6)) scratch.
+    Records (:mod:`.records`): arm (:func:`~.records.arm_dtype`, the arm's terms at the state), ref
+    (:data:`~.records.REFERENCE_DTYPE`), modes (:data:`~.records.MODES_DTYPE`: B (6, 6), k, d (6,)), shaping
+    (:func:`~.records.law_dtype`: ``use_axis`` / ``use_extra`` / ``use_posture`` say whether ``force_axis`` /
+    ``extra_force_n`` / ``posture_nm``, joint torques (n,) [Nm] added to the posture before its projection,
+    apply). state : ``(q, dq, q_rest)`` (n,) each [rad, rad/s, rad]; kn : the posture stiffness [Nm/rad];
+    add_gravity : add g (the robot does not). out (:func:`~.records.terms_dtype`): tau (n,) [Nm], F (6,) task
+    wrench, e (6,) pose error, de (6,) twist error, tau_null (n,); its work (7, max(n, 6)) is scratch.
     """
+    q, dq, q_rest = state
+    a_ = arm[0]
+    M, M_inv, J, Lam, twist, drift, nle, g, p, R = (a_.M, a_.M_inv, a_.J, a_.Lam, a_.twist, a_.drift, a_.nle, a_.g,
+                                                     a_.p, a_.R)
+    r_ = ref[0]
+    p_ref, R_ref, twist_ref, accel_ref = r_.p, r_.R, r_.twist, r_.accel
+    m_ = modes[0]
+    B, k, d = m_.B, m_.k, m_.d
+    sh = shaping[0]
+    force_axis, use_axis, press_n = sh.force_axis, sh.use_axis, sh.press_n
+    extra_force_n, use_extra, posture_nm, use_posture = sh.extra_force_n, sh.use_extra, sh.posture_nm, sh.use_posture
+    o_ = out[0]
+    tau, F, e, de, tau_null, work = o_.tau, o_.F, o_.e, o_.de, o_.tau_null, o_.work
     n = M.shape[0]
     a = work[0]
     mod = work[1]
@@ -211,8 +218,8 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
                 s += R_ref[i, m] * R[j, m]
             Rrel[i, j] = s
     log3_into(Rrel, e[3:])
-    _clip_norm3(e, 0, max_position_error_m)
-    _clip_norm3(e, 3, max_rotation_error_rad)
+    _clip_norm3(e, 0, sh.max_position_error_m)
+    _clip_norm3(e, 3, sh.max_rotation_error_rad)
     for i in range(6):
         de[i] = twist_ref[i] - twist[i]
         a[i] = accel_ref[i] - drift[i]
@@ -243,7 +250,7 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
             vn += twist[i] * force_axis[i]
             for j in range(3):
                 lam_n += force_axis[i] * Lam[i, j] * force_axis[j]
-        f = press_n + lam_n * normal_damping_1_s * vn
+        f = press_n + lam_n * sh.normal_damping_1_s * vn
         for i in range(3):
             F[i] -= f * force_axis[i]
     if use_extra:
@@ -286,12 +293,17 @@ def impedance_into(M: np.ndarray, M_inv: np.ndarray, J: np.ndarray, Lam: np.ndar
 
 
 @_jit
-def disturbance_into(M: np.ndarray, nle: np.ndarray, J: np.ndarray, dq: np.ndarray, dq_prev: np.ndarray,
-                     tau_applied: np.ndarray, wrench: np.ndarray, dt_s: float, gain: float, tau_d: np.ndarray,
-                     limit: np.ndarray, raw: np.ndarray) -> float:
+def disturbance_into(arm: tuple, dq: np.ndarray, tau_applied: np.ndarray, wrench: np.ndarray, dt_s: float,
+                     gain: float, watch: np.ndarray) -> float:
     """One cycle of :class:`~.watch.DisturbanceWatch`: ``tau_d += gain (raw - tau_d)`` with
-    ``raw = M (dq - dq_prev) / dt + nle - tau_applied - J^T wrench`` (all (n,) [Nm]; J (6, n)); ``dq_prev``
-    becomes ``dq``. Returns ``max |tau_d| / limit``. raw : (n,) scratch."""
+    ``raw = M (dq - dq_prev) / dt + nle - tau_applied - J^T wrench`` (all (n,) [Nm]).
+
+    arm : ``(M, nle, J)``, (n, n), (n,) [Nm], (6, n) world-aligned; dq (n,) [rad/s]; wrench (6,) [N, Nm];
+    watch : the watch's record (:func:`~.records.disturbance_dtype`: tau_d, limit, dq_prev, which becomes
+    ``dq``, raw scratch). Returns ``max |tau_d| / limit``."""
+    M, nle, J = arm
+    w_ = watch[0]
+    tau_d, limit, dq_prev, raw = w_.tau_d, w_.limit, w_.dq_prev, w_.raw
     n = dq.shape[0]
     for i in range(n):
         raw[i] = (dq[i] - dq_prev[i]) / dt_s
@@ -312,10 +324,12 @@ def disturbance_into(M: np.ndarray, nle: np.ndarray, J: np.ndarray, dq: np.ndarr
 
 
 @_jit
-def task_modes_into(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float, B: np.ndarray,
-                    k: np.ndarray, d: np.ndarray) -> None:
-    """The modes of :func:`~.impedance.task_modes` into ``B`` (6, 6), ``k``, ``d`` (6,): eigen-decomposition of
-    ``S^-1 Lam S^-1`` (S = diag(sqrt(K))), modal stiffness capped at ``max_omega^2 m``, damping ``2 zeta sqrt(k m)``."""
+def task_modes_into(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s: float, modes: np.ndarray) -> None:
+    """The modes of :func:`~.impedance.task_modes` into the record ``modes`` (:data:`~.records.MODES_DTYPE`: B
+    (6, 6), k, d (6,)): eigen-decomposition of ``S^-1 Lam S^-1`` (S = diag(sqrt(K))), modal stiffness capped at
+    ``max_omega^2 m``, damping ``2 zeta sqrt(k m)``."""
+    m_ = modes[0]
+    B, k, d = m_.B, m_.k, m_.d
     s = np.sqrt(K)
     m, U = np.linalg.eigh(Lam / np.outer(s, s))
     for i in range(6):
@@ -328,17 +342,21 @@ def task_modes_into(Lam: np.ndarray, K: np.ndarray, zeta: float, max_omega_rad_s
 
 
 @_jit
-def reference_into(origin: np.ndarray, R_board: np.ndarray, xy: np.ndarray, h: float, v_xy: np.ndarray,
-                   v_h: float, a_xy: np.ndarray, a_h: float, R_sp: np.ndarray, omega: np.ndarray,
-                   domega: np.ndarray, scale: float, p_ref: np.ndarray, R_ref: np.ndarray, twist_ref: np.ndarray,
-                   accel_ref: np.ndarray) -> None:
+def reference_into(board: np.ndarray, setpoint: tuple, normal: tuple, scale: float, ref: np.ndarray) -> None:
     """The world reference of a board-frame setpoint at the time scale ``scale``.
 
-    origin (3,) [m], R_board (3, 3): the board (its third axis the outward normal); xy, v_xy, a_xy (2,) and h,
-    v_h, a_h: the in-plane and normal position [m], velocity, acceleration; R_sp (3, 3), omega, domega (3,):
-    orientation and its rates. Out: p_ref (3,), R_ref (3, 3), twist_ref and accel_ref (6,), velocities times
-    ``scale`` and accelerations times ``scale^2``.
+    board : a record of :data:`~.records.BOARD_DTYPE` (origin (3,) [m], R (3, 3), its third axis the outward
+    normal); setpoint : ``(xy, v_xy, a_xy, R, omega, domega)``, the in-plane position [m], velocity,
+    acceleration (2,), the orientation (3, 3) and its rates (3,); normal : ``(h, v_h, a_h)`` along the normal.
+    ref : the reference's record (:data:`~.records.REFERENCE_DTYPE`), written: p (3,), R (3, 3), twist and
+    accel (6,), velocities times ``scale`` and accelerations times ``scale^2``.
     """
+    xy, v_xy, a_xy, R_sp, omega, domega = setpoint
+    h, v_h, a_h = normal
+    b_ = board[0]
+    origin, R_board = b_.origin, b_.R
+    r_ = ref[0]
+    p_ref, R_ref, twist_ref, accel_ref = r_.p, r_.R, r_.twist, r_.accel
     s2 = scale * scale
     for i in range(3):
         p_ref[i] = origin[i] + R_board[i, 0] * xy[0] + R_board[i, 1] * xy[1] + R_board[i, 2] * h
@@ -351,11 +369,16 @@ def reference_into(origin: np.ndarray, R_board: np.ndarray, xy: np.ndarray, h: f
 
 
 @_jit
-def tool_in_board(origin: np.ndarray, R_board: np.ndarray, p: np.ndarray, twist: np.ndarray, wrench: np.ndarray,
-                  xyh: np.ndarray, v_board: np.ndarray) -> float:
-    """The pad at world ``p`` (3,) [m] moving with ``twist`` (6,) in the board frame (origin (3,), axes R_board
-    (3, 3), third the outward normal): ``xyh`` (3,) = R_board^T (p - origin), ``v_board`` (3,) = R_board^T v.
-    Returns the normal force [N], ``wrench[:3] . normal`` (positive when the board pushes the pad back)."""
+def tool_in_board(board: np.ndarray, arm: np.ndarray, wrench: np.ndarray, xyh: np.ndarray,
+                  v_board: np.ndarray) -> float:
+    """The pad in the board frame: board, a record of :data:`~.records.BOARD_DTYPE` (origin (3,) [m], R (3, 3)
+    its axes, the third the outward normal); arm, the arm's record (:func:`~.records.arm_dtype`: the pad at p
+    (3,) [m] moving with twist (6,)). Out: ``xyh`` (3,) = R^T (p - origin), ``v_board`` (3,) = R^T v. Returns
+    the normal force [N], ``wrench[:3] . normal`` (positive when the board pushes the pad back)."""
+    b_ = board[0]
+    origin, R_board = b_.origin, b_.R
+    a_ = arm[0]
+    p, twist = a_.p, a_.twist
     f = 0.0
     for j in range(3):
         x = 0.0
@@ -370,11 +393,17 @@ def tool_in_board(origin: np.ndarray, R_board: np.ndarray, p: np.ndarray, twist:
 
 
 @_jit
-def trace_row(r: np.ndarray, t_s: float, phase: float, has_setpoint: bool, xy: np.ndarray, v_xy: np.ndarray,
-              a_xy: np.ndarray, scale: float, xyh: np.ndarray, contact: float, p_ref: np.ndarray, p: np.ndarray,
-              force_n: float, press_n: float) -> None:
-    """One row of the controller's trace (its columns: ``controller.core.TRACE_COLUMNS``); the in-plane rates
-    as executed (velocity x scale, acceleration x scale^2). Without a setpoint, columns 2-10 and 19 stay."""
+def trace_row(r: np.ndarray, clock: tuple, setpoint: tuple, xyh: np.ndarray, p_ref: np.ndarray, p: np.ndarray,
+              forces: tuple) -> None:
+    """One row ``r`` of the controller's trace (its columns: ``controller.core.TRACE_COLUMNS``).
+
+    clock : ``(t_s, phase, scale)``, the controller's time [s], the phase's code, the time scale; setpoint :
+    ``(has_setpoint, xy, v_xy, a_xy, contact)``, in-plane rates written as executed (velocity x scale,
+    acceleration x scale^2), without a setpoint columns 2-10 and 19 stay; xyh (3,) the pad in the board frame
+    [m]; p_ref, p (3,) the reference and the pad [m]; forces : ``(force_n, press_n)`` measured, commanded [N]."""
+    t_s, phase, scale = clock
+    has_setpoint, xy, v_xy, a_xy, contact = setpoint
+    force_n, press_n = forces
     r[0] = t_s
     r[1] = phase
     if has_setpoint:

@@ -9,6 +9,28 @@ import numba as nb
 import numpy as np
 
 _jit = nb.njit(cache=True)  # keeps the GIL: see the docstring of controller.control.kernels
+
+
+def limits_dtype(n: int) -> np.dtype:
+    """The torque limits' settings for an arm of ``n`` joints, one record the kernels read by name (made once:
+    :func:`~.limits.limits_record`): q_min, q_max (n,) position limits [rad], dq_max (n,) speed limits [rad/s],
+    speed_onset_rad_s (n,) where the joint-speed brake starts, singular (n,) 1.0 on the joints whose zero
+    stretches the arm; the repulsion's margin_rad [rad], margin_stiffness_nm_rad, margin_damping_nm_s_rad; the
+    brake's speed_brake_1_s [1/s]; the clearance's zone_rad, singular_rad [rad], clearance_stiffness_nm_rad,
+    clearance_damping_nm_s_rad, clearance_speed_share; the self-motion's self_motion_share and
+    self_motion_brake_1_s [1/s]; and work (3, max(n, 6)), the kernels' scratch."""
+    v = [(name, "f8", n) for name in ("q_min", "q_max", "dq_max", "speed_onset_rad_s", "singular")]
+    f = [(name, "f8") for name in ("margin_rad", "margin_stiffness_nm_rad", "margin_damping_nm_s_rad",
+                                   "speed_brake_1_s", "zone_rad", "singular_rad", "clearance_stiffness_nm_rad",
+                                   "clearance_damping_nm_s_rad", "clearance_speed_share", "self_motion_share",
+                                   "self_motion_brake_1_s")]
+    return np.dtype([*v, *f, ("work", "f8", (3, max(n, 6)))], align=True)
+
+
+def shaper_dtype(n: int) -> np.dtype:
+    """The torque shaper's state (:class:`~.limits.TorqueShaper`): prev (n,) the last torque sent less its offset
+    [Nm], tau_max (n,) the absolute limits [Nm]."""
+    return np.dtype([("prev", "f8", n), ("tau_max", "f8", n)], align=True)
 #: The clearance fades out over this much of a joint's speed limit, below its ``speed_share``.
 CLEARANCE_FADE_SHARE = 0.2
 #: The clearance fades out over this much of a joint's speed limit in its own self-motion, below its share.
@@ -29,29 +51,29 @@ def margin_torque_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: 
 
 
 @_jit
-def clearance_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, zone_rad: float,
-                   singular: np.ndarray, singular_rad: float, stiffness_nm_rad: float, damping_nm_s_rad: float,
-                   dq_max: np.ndarray, speed_share: float, out: np.ndarray) -> None:
-    """``out`` (n,) [Nm]: the clearance posture of :func:`~.limits.clearance_torque`: a spring of
-    ``stiffness_nm_rad`` on each joint's depth into the ``zone_rad`` before a position limit, and on a joint with
-    ``singular[i]`` (1.0; else 0.0) on its depth into ``singular_rad`` around zero (the arm stretched at that
-    joint), pushed out the way it is (positive at exactly zero); damped by ``damping_nm_s_rad`` on motion
-    deeper in, scaled by the depth's share of its zone (zero at the zone's edge: continuous); all of it faded out
-    while the fastest joint moves at ``speed_share`` - 0.2 to ``speed_share`` of its limit ``dq_max`` (n,)
-    [rad/s] (near a singular pose a small push moves the joints fast: the clearance never drives one)."""
-    margin_torque_into(q, dq, q_min, q_max, zone_rad, stiffness_nm_rad, damping_nm_s_rad, out)  # the limits' part
+def clearance_into(q: np.ndarray, dq: np.ndarray, lim: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (n,) [Nm]: the clearance posture of :func:`~.limits.clearance_torque` with the settings of ``lim``
+    (:func:`limits_dtype`): a spring of ``clearance_stiffness_nm_rad`` on each joint's depth into the ``zone_rad``
+    before a position limit, and on a ``singular`` joint on its depth into ``singular_rad`` around zero (the arm
+    stretched at that joint), pushed out the way it is (positive at exactly zero); damped by
+    ``clearance_damping_nm_s_rad`` on motion deeper in, scaled by the depth's share of its zone (zero at the
+    zone's edge: continuous); all of it faded out while the fastest joint moves at ``clearance_speed_share`` - 0.2
+    to ``clearance_speed_share`` of its limit ``dq_max`` (near a singular pose a small push moves the joints fast:
+    the clearance never drives one)."""
+    c = lim[0]
+    k, d, singular_rad = c.clearance_stiffness_nm_rad, c.clearance_damping_nm_s_rad, c.singular_rad
+    margin_torque_into(q, dq, c.q_min, c.q_max, c.zone_rad, k, d, out)  # the limits' part
     n = q.shape[0]
     if singular_rad > 0.0:
         for i in range(n):
             depth = max(singular_rad - abs(q[i]), 0.0)
-            if singular[i] > 0.0 and depth > 0.0:
+            if c.singular[i] > 0.0 and depth > 0.0:
                 side = 1.0 if q[i] >= 0.0 else -1.0
-                out[i] += side * (stiffness_nm_rad * depth - damping_nm_s_rad * depth / singular_rad
-                                  * min(side * dq[i], 0.0))
+                out[i] += side * (k * depth - d * depth / singular_rad * min(side * dq[i], 0.0))
     share = 0.0
     for i in range(n):
-        share = max(share, abs(dq[i]) / dq_max[i])
-    gain = min(max((speed_share - share) / CLEARANCE_FADE_SHARE, 0.0), 1.0)
+        share = max(share, abs(dq[i]) / c.dq_max[i])
+    gain = min(max((c.clearance_speed_share - share) / CLEARANCE_FADE_SHARE, 0.0), 1.0)
     if gain < 1.0:
         for i in range(n):
             out[i] *= gain
@@ -59,8 +81,7 @@ def clearance_into(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.n
 
 @_jit
 def self_motion_limit_into(tau_c: np.ndarray, dq: np.ndarray, M: np.ndarray, M_inv: np.ndarray, J: np.ndarray,
-                           Lam: np.ndarray, dq_max: np.ndarray, share: float, brake_1_s: float,
-                           work: np.ndarray) -> float:
+                           Lam: np.ndarray, lim: np.ndarray) -> float:
     """Bound the self-motion (the arm's motion in the task's nullspace) in the nullspace torques ``tau_c`` (n,)
     [Nm], in place; returns the gain (0-1) left on the clearance ``tau_c`` came in with.
 
@@ -79,7 +100,10 @@ def self_motion_limit_into(tau_c: np.ndarray, dq: np.ndarray, M: np.ndarray, M_i
       ``g`` rising from 0 to 1 while the largest share ``max_i |v_i| / dq_max_i`` runs from ``share`` to
       ``share`` + :data:`SELF_MOTION_FADE_SHARE` (``M v`` lies in the nullspace: the pad is not braked).
 
-    work : (3, n) scratch, n >= 6."""
+    ``dq_max``, ``share`` (``self_motion_share``) and ``brake_1_s`` (``self_motion_brake_1_s``) are ``lim``'s
+    (:func:`limits_dtype`), its ``work`` the scratch; n >= 6."""
+    c = lim[0]
+    dq_max, share, brake_1_s, work = c.dq_max, c.self_motion_share, c.self_motion_brake_1_s, c.work
     n = tau_c.shape[0]
     a = work[0]
     y = work[1]
@@ -197,21 +221,23 @@ def shape_into(tau: np.ndarray, prev: np.ndarray, tau_max: np.ndarray, step: flo
 
 
 @_jit
-def limit_torque(tau: np.ndarray, q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray,
-                 margin_rad: float, margin_stiffness: float, margin_damping: float, onset_rad_s: np.ndarray,
-                 brake_1_s: float, M: np.ndarray, prev: np.ndarray, tau_max: np.ndarray, step: float,
-                 gravity: np.ndarray, use_gravity: bool, work: np.ndarray) -> int:
-    """``tau`` (n,) [Nm] plus the joint-limit repulsion and the joint-speed brake (on M's diagonal), then shaped
-    (:func:`shape_into`, ``gravity`` outside the rate limit when ``use_gravity``). work : (2, n) scratch.
+def limit_torque(tau: np.ndarray, q: np.ndarray, dq: np.ndarray, M: np.ndarray, gravity: np.ndarray,
+                 use_gravity: bool, lim: np.ndarray, shaper: np.ndarray, step: float) -> int:
+    """``tau`` (n,) [Nm] plus the joint-limit repulsion and the joint-speed brake (on M's (n, n) diagonal) of
+    ``lim`` (:func:`limits_dtype`), then shaped by ``shaper`` (:func:`shaper_dtype`) with a rate limit of
+    ``step`` [Nm] (:func:`shape_into`; ``gravity`` (n,) [Nm] outside the rate limit when ``use_gravity``).
     Returns :func:`shape_into`'s bit set."""
     n = tau.shape[0]
-    margin = work[0]
-    brake = work[1]
-    margin_torque_into(q, dq, q_min, q_max, margin_rad, margin_stiffness, margin_damping, margin)
+    c = lim[0]
+    margin = c.work[0]
+    brake = c.work[1]
+    margin_torque_into(q, dq, c.q_min, c.q_max, c.margin_rad, c.margin_stiffness_nm_rad, c.margin_damping_nm_s_rad,
+                       margin)
     for i in range(n):
         brake[i] = M[i, i]
-    speed_brake_into(dq, onset_rad_s, brake_1_s, brake, brake)
+    speed_brake_into(dq, c.speed_onset_rad_s, c.speed_brake_1_s, brake, brake)
     for i in range(n):
         tau[i] += margin[i]
         tau[i] += brake[i]
-    return shape_into(tau, prev, tau_max, step, gravity, use_gravity)
+    sh = shaper[0]
+    return shape_into(tau, sh.prev, sh.tau_max, step, gravity, use_gravity)

@@ -32,7 +32,15 @@ import math
 import numpy as np
 
 from .demand_kernels import largest_share
-from .limit_kernels import clearance_into, margin_torque_into, self_motion_limit_into, shape_into, speed_brake_into
+from .limit_kernels import (
+    clearance_into,
+    limits_dtype,
+    margin_torque_into,
+    self_motion_limit_into,
+    shape_into,
+    shaper_dtype,
+    speed_brake_into,
+)
 
 
 class TorqueShaper:
@@ -47,14 +55,19 @@ class TorqueShaper:
 
     Attributes
     ----------
+    rec : the one-element record :func:`~.limit_kernels.limit_torque` takes (:func:`~.limit_kernels.shaper_dtype`)
+    tau_max, prev : (n,) [Nm] views of its fields: the absolute limits, the last torque sent less its offset
     clipped_abs, clipped_rate : int
         Ticks on which any joint hit the absolute / rate limit (for status).
     """
 
     def __init__(self, tau_max_nm: np.ndarray, rate_nm_s: float) -> None:
-        self.tau_max = np.asarray(tau_max_nm, float).copy()
+        tau_max = np.asarray(tau_max_nm, float)
+        self.rec = np.zeros(1, shaper_dtype(len(tau_max)))
+        self.tau_max: np.ndarray = self.rec["tau_max"][0]
+        self.prev: np.ndarray = self.rec["prev"][0]
+        self.tau_max[:] = tau_max
         self.rate = float(rate_nm_s)
-        self.prev = np.zeros_like(self.tau_max)
         self.clipped_abs = 0
         self.clipped_rate = 0
 
@@ -83,6 +96,59 @@ class TorqueShaper:
 
 
 _NO_OFFSET = np.zeros(0)
+
+
+def limits_record(q_min: np.ndarray, q_max: np.ndarray, dq_max: np.ndarray, speed_onset_rad_s: np.ndarray,
+                  singular: np.ndarray, **settings: float) -> np.ndarray:
+    """The limits' record (:func:`~.limit_kernels.limits_dtype`) for an arm of n joints: the (n,) arrays as given
+    (``singular`` 1.0 on the joints whose zero stretches the arm), the scalar ``settings`` by their field names
+    (every one of them: margin_rad, margin_stiffness_nm_rad, margin_damping_nm_s_rad, speed_brake_1_s, zone_rad,
+    singular_rad, clearance_stiffness_nm_rad, clearance_damping_nm_s_rad, clearance_speed_share,
+    self_motion_share, self_motion_brake_1_s). ValueError naming a missing or unknown one, or a wrong shape."""
+    n = len(q_min)
+    dtype = limits_dtype(n)
+    rec = np.zeros(1, dtype)
+    arrays = {"q_min": q_min, "q_max": q_max, "dq_max": dq_max, "speed_onset_rad_s": speed_onset_rad_s,
+              "singular": singular}
+    scalars = list(LIMIT_SETTINGS)
+    if sorted(settings) != sorted(scalars):
+        raise ValueError(f"limits_record: settings must be {scalars}, missing "
+                         f"{sorted(set(scalars) - set(settings))}, unknown {sorted(set(settings) - set(scalars))}")
+    for name, arr in arrays.items():
+        if np.shape(arr) != (n,):
+            raise ValueError(f"limits_record: {name} must have shape ({n},), got {np.shape(arr)}")
+        rec[name][0] = arr
+    for name, value in settings.items():
+        rec[name][0] = float(value)
+    return rec
+
+
+def limits_from_settings(arm_limits, p) -> np.ndarray:
+    """The controller's limits record (:func:`limits_record`) from the arm's limits ``arm_limits`` (q_min, q_max,
+    dq_max (n,), :class:`arm.robot_model.JointLimits`) and the ``[controller.limits]`` settings ``p``
+    (:class:`controller.params.LimitParams`): the joint-speed brake from ``joint_speed_share`` of each speed
+    limit, the clearance on the ``singular_joints`` (1-based)."""
+    n = len(arm_limits.q_min)
+    singular = np.zeros(n)
+    singular[[j - 1 for j in p.singular_joints if j <= n]] = 1.0
+    return limits_record(arm_limits.q_min, arm_limits.q_max, arm_limits.dq_max,
+                         p.joint_speed_share * np.asarray(arm_limits.dq_max, float), singular,
+                         margin_rad=p.joint_margin_rad, margin_stiffness_nm_rad=p.joint_margin_stiffness_nm_rad,
+                         margin_damping_nm_s_rad=p.joint_margin_damping_nm_s_rad,
+                         speed_brake_1_s=p.joint_speed_brake_1_s, zone_rad=p.clearance_zone_rad,
+                         singular_rad=p.singular_clearance_rad,
+                         clearance_stiffness_nm_rad=p.clearance_stiffness_nm_rad,
+                         clearance_damping_nm_s_rad=p.clearance_damping_nm_s_rad,
+                         clearance_speed_share=p.clearance_speed_share, self_motion_share=p.self_motion_share,
+                         self_motion_brake_1_s=p.self_motion_brake_1_s)
+
+
+#: The scalar settings of :func:`limits_record`, by name.
+LIMIT_SETTINGS = ("margin_rad", "margin_stiffness_nm_rad", "margin_damping_nm_s_rad", "speed_brake_1_s", "zone_rad",
+                  "singular_rad", "clearance_stiffness_nm_rad", "clearance_damping_nm_s_rad", "clearance_speed_share",
+                  "self_motion_share", "self_motion_brake_1_s")
+#: Every one at zero: the numpy-facing functions below set the ones they use.
+_NO_LIMITS = dict.fromkeys(LIMIT_SETTINGS, 0.0)
 
 
 def joint_margin_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, margin_rad: float,
@@ -115,25 +181,28 @@ def clearance_torque(q: np.ndarray, dq: np.ndarray, q_min: np.ndarray, q_max: np
     the zone (continuous at the zone's edge); faded out while the fastest joint runs at ``speed_share`` - 0.2 to
     ``speed_share`` of its limit ``dq_max`` (n,) [rad/s] (default: never); into ``out`` when given (the 1 kHz
     path)."""
+    n = len(q)
     if out is None:
-        out = np.empty(len(q))
-    limit = np.ones(len(q)) if dq_max is None else np.asarray(dq_max, float)
-    clearance_into(np.asarray(q, float), np.asarray(dq, float), np.asarray(q_min, float), np.asarray(q_max, float),
-                   float(zone_rad), np.asarray(singular, float), float(singular_rad), float(stiffness_nm_rad),
-                   float(damping_nm_s_rad), limit, float(speed_share), out)
+        out = np.empty(n)
+    lim = limits_record(np.asarray(q_min, float), np.asarray(q_max, float),
+                        np.ones(n) if dq_max is None else np.asarray(dq_max, float), np.zeros(n),
+                        np.asarray(singular, float), **{**_NO_LIMITS, "zone_rad": zone_rad,
+                                                        "singular_rad": singular_rad,
+                                                        "clearance_stiffness_nm_rad": stiffness_nm_rad,
+                                                        "clearance_damping_nm_s_rad": damping_nm_s_rad,
+                                                        "clearance_speed_share": speed_share})
+    clearance_into(np.asarray(q, float), np.asarray(dq, float), lim, out)
     return out
 
 
 def self_motion_limit(tau_c: np.ndarray, dq: np.ndarray, M: np.ndarray, M_inv: np.ndarray, J: np.ndarray,
-                      Lam: np.ndarray, dq_max: np.ndarray, share: float, brake_1_s: float = 0.0,
-                      work: np.ndarray | None = None) -> float:
+                      Lam: np.ndarray, dq_max: np.ndarray, share: float, brake_1_s: float = 0.0) -> float:
     """Scale the clearance ``tau_c`` (n,) [Nm] in place so that the self-motion it drives in the task's nullspace
     turns no joint faster than ``share`` of its limit ``dq_max`` (n,) [rad/s], and add a brake ``brake_1_s`` [1/s]
     on any self-motion above that share; returns the clearance's gain in [0, 1].
 
     dq (n,) [rad/s]; M, M_inv (n, n) the joint-space inertia and its inverse; J (6, n) the task Jacobian; Lam
-    (6, 6) the task inertia (as the law projects with); work : (3, n) scratch (the 1 kHz path), else allocated.
-    The formula: :func:`~.limit_kernels.self_motion_limit_into`."""
+    (6, 6) the task inertia (as the law projects with). The formula: :func:`~.limit_kernels.self_motion_limit_into`."""
     tau_c = np.asarray(tau_c)
     n = len(tau_c)
     for name, arr, shape in (("dq", dq, (n,)), ("M", M, (n, n)), ("M_inv", M_inv, (n, n)), ("J", J, (6, n)),
@@ -143,11 +212,10 @@ def self_motion_limit(tau_c: np.ndarray, dq: np.ndarray, M: np.ndarray, M_inv: n
     if n < 6 or not share > 0.0 or not brake_1_s >= 0.0:
         raise ValueError(f"self_motion_limit: needs n >= 6 joints, share > 0 and brake_1_s >= 0, got n={n}, "
                          f"share={share!r}, brake_1_s={brake_1_s!r}")
-    if work is None:
-        work = np.zeros((3, n))
+    lim = limits_record(np.zeros(n), np.zeros(n), np.asarray(dq_max, float), np.zeros(n), np.zeros(n),
+                        **{**_NO_LIMITS, "self_motion_share": share, "self_motion_brake_1_s": brake_1_s})
     return float(self_motion_limit_into(tau_c, np.asarray(dq, float), np.asarray(M, float),
-                                        np.asarray(M_inv, float), np.asarray(J, float), np.asarray(Lam, float),
-                                        np.asarray(dq_max, float), float(share), float(brake_1_s), work))
+                                        np.asarray(M_inv, float), np.asarray(J, float), np.asarray(Lam, float), lim))
 
 
 def saturate_norm(v: np.ndarray, max_norm: float) -> bool:

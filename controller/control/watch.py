@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels import disturbance_into
+from .records import disturbance_dtype, new_record, view
 
 
 class DisturbanceWatch:
@@ -39,13 +40,15 @@ class DisturbanceWatch:
     """
 
     def __init__(self, limit_nm: np.ndarray, filter_s: float, persist_s: float) -> None:
-        self.limit = np.asarray(limit_nm, float).copy()
+        limit = np.asarray(limit_nm, float)
+        #: the state the kernel keeps (:func:`~.records.disturbance_dtype`); ``limit``, ``tau_d`` view it
+        self.rec = new_record(disturbance_dtype(len(limit)))
+        self.limit = view(self.rec, "limit")
+        self.limit[:] = limit
+        self.tau_d = view(self.rec, "tau_d")
+        self._dq_prev = view(self.rec, "dq_prev")
         self.filter_s = float(filter_s)
         self.persist_s = float(persist_s)
-        n = len(self.limit)
-        self.tau_d = np.zeros(n)
-        self._raw = np.zeros(n)
-        self._dq_prev = np.zeros(n)
         self._have_prev = False
         self.over_s = 0.0
         self.peak_ratio = 0.0  # largest |tau_d| / limit since the last reset (status, tuning)
@@ -74,8 +77,8 @@ class DisturbanceWatch:
         if not self._have_prev or dt_s <= 0.0:
             self.skip(dq)
             return self.tripped
-        ratio = disturbance_into(M, nle, J, dq, self._dq_prev, tau_applied, wrench, float(dt_s),
-                                 min(dt_s / (self.filter_s + dt_s), 1.0), self.tau_d, self.limit, self._raw)
+        ratio = disturbance_into((M, nle, J), dq, tau_applied, wrench, float(dt_s),
+                                 min(dt_s / (self.filter_s + dt_s), 1.0), self.rec)
         self.peak_ratio = max(self.peak_ratio, ratio)
         self.over_s = self.over_s + dt_s if ratio > 1.0 else 0.0
         if self.over_s >= self.persist_s:
@@ -86,8 +89,9 @@ class DisturbanceWatch:
         """Compile the kernel for the arrays a controller passes (its :class:`~.impedance.Kinematics` ``kin``,
         own (n,) and (6,) buffers) without touching the watch's state."""
         n = len(self.limit)
-        disturbance_into(kin.M, kin.nle, kin.J, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(6), 0.001, 0.5,
-                         np.zeros(n), self.limit, np.zeros(n))
+        rec = new_record(self.rec.dtype)
+        rec["limit"] = 1.0
+        disturbance_into((kin.M, kin.nle, kin.J), np.zeros(n), np.zeros(n), np.zeros(6), 0.001, 0.5, rec)
 
     def worst_joint(self) -> int:
         """Index of the joint with the largest disturbance relative to its limit."""
