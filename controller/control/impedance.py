@@ -169,6 +169,7 @@ class TaskShaping:
         self._axis, self._extra, self._posture = view(rec, "force_axis"), view(rec, "extra_force_n"), \
             view(rec, "posture_nm")
         self._use = {name: rec[name] for name in ("use_axis", "use_extra", "use_posture")}  # (1,) views
+        self._has = {"use_axis": False, "use_extra": False, "use_posture": False}  # the flags, read without numpy
         self._press = rec["press_n"]
         self.stiffness_scale = stiffness_scale
         rec["normal_damping_1_s"] = normal_damping_1_s
@@ -184,11 +185,14 @@ class TaskShaping:
             if np.shape(given) != mine.shape:
                 raise ValueError(f"TaskShaping: {flag[4:]} of shape {np.shape(given)}, expected {mine.shape}")
             mine[:] = given
-        self._use[flag][0] = given is not None
+        has = given is not None
+        if has is not self._has[flag]:  # the record's flag written only when it changes (a numpy write per tick)
+            self._use[flag][0] = has
+            self._has[flag] = has
 
     @property
     def force_axis(self) -> np.ndarray | None:
-        return self._axis if self._use["use_axis"][0] else None
+        return self._axis if self._has["use_axis"] else None
 
     @force_axis.setter
     def force_axis(self, axis: np.ndarray | None) -> None:
@@ -196,7 +200,7 @@ class TaskShaping:
 
     @property
     def extra_force_n(self) -> np.ndarray | None:
-        return self._extra if self._use["use_extra"][0] else None
+        return self._extra if self._has["use_extra"] else None
 
     @extra_force_n.setter
     def extra_force_n(self, force: np.ndarray | None) -> None:
@@ -204,7 +208,7 @@ class TaskShaping:
 
     @property
     def posture_nm(self) -> np.ndarray | None:
-        return self._posture if self._use["use_posture"][0] else None
+        return self._posture if self._has["use_posture"] else None
 
     @posture_nm.setter
     def posture_nm(self, tau: np.ndarray | None) -> None:
