@@ -126,16 +126,22 @@ def test_a_lift_ends_where_the_elbow_has_room():
     assert motion.lift(tool)  # without the board: the full standoff, as before
 
 
+def run_random_board(tmp_path, seed: int, stains: int) -> tuple[dict, str, dict]:
+    """``lamps up --no-network`` on the random board ``seed`` with ``stains`` stains (seed ``seed``): its report,
+    its output and the simulator's counters."""
+    out = tmp_path / "run"
+    r = subprocess.run([sys.executable, "-m", "runtime.cli", "up", "--no-network", "--board", f"random:{seed}",
+                        "--stains", str(stains), "--seed", str(seed), "--out", str(out), "-q"], cwd=REPO,
+                       capture_output=True, text=True, timeout=900)
+    report = json.loads((out / "report.json").read_text())
+    print(r.stdout[-2000:])
+    return report, r.stdout, report["counters"]["sim"]
+
+
 @pytest.mark.slow
 def test_random_board_27_cleans_without_the_robot_side_braking(tmp_path):
-    out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "runtime.cli", "up", "--no-network", "--board", "random:27",
-                        "--stains", "4", "--seed", "27", "--out", str(out), "-q"], cwd=REPO, capture_output=True,
-                       text=True, timeout=900)
-    report = json.loads((out / "report.json").read_text())
-    sim = report["counters"]["sim"]
-    print(r.stdout[-2000:])
-    assert report["outcome"] == "cleaned", (report["outcome"], report["faults"], r.stdout[-3000:])
+    report, stdout, sim = run_random_board(tmp_path, 27, 4)
+    assert report["outcome"] == "cleaned", (report["outcome"], report["faults"], stdout[-3000:])
     assert not {k: v for k, v in sim.items() if ("brake" in k or "yield" in k or "fault" in k) and v}, sim
     assert report["max_joint_speed_ratio"] < 0.8
 

@@ -9,18 +9,12 @@ the rest posture's pull and, faded out by the wrist's speed, let that pull spin 
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
 from arm.robot_model import RobotModel
 from controller.control.impedance import Kinematics
 from controller.control.limits import self_motion_limit
-
-from .conftest import REPO
 
 #: Near the wrist's singular pose (A6 = 0.15 rad): A5 and A7 turn about nearly one axis.
 Q_WRIST = np.array([0.2, 0.7, -0.1, -1.3, 0.4, 0.15, 0.3])
@@ -92,13 +86,9 @@ def test_bad_arguments_are_named():
 
 @pytest.mark.slow
 def test_random_board_9_wipes_with_every_joint_under_0_8_of_its_speed_limit(tmp_path):
-    out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "runtime.cli", "up", "--no-network", "--board", "random:9",
-                        "--stains", "6", "--seed", "9", "--out", str(out), "-q"], cwd=REPO, capture_output=True,
-                       text=True, timeout=900)
-    report = json.loads((out / "report.json").read_text())
-    sim = report["counters"]["sim"]
-    print(r.stdout[-2000:])
-    assert report["outcome"] == "cleaned", (report["outcome"], report["faults"], r.stdout[-3000:])
+    from .test_arm_clearance import run_random_board
+
+    report, stdout, sim = run_random_board(tmp_path, 9, 6)
+    assert report["outcome"] == "cleaned", (report["outcome"], report["faults"], stdout[-3000:])
     assert not {k: v for k, v in sim.items() if ("brake" in k or "yield" in k or "fault" in k) and v}, sim
     assert report["max_joint_speed_ratio"] < 0.8, report["max_joint_speed_ratio"]
