@@ -1,6 +1,10 @@
 """Controller benchmarks: control-law time per tick, real-time loop against the sim, lock-step closed loop.
 
-Usage: .venv/bin/python bench/bench_controller.py [--quick] [--json OUT]
+Usage: .venv/bin/python bench/bench_controller.py [--quick] [--json OUT] [--baseline COMMIT [--rounds N]]
+
+With ``--baseline COMMIT``: items 1 and 2 only (the tick alone, the real-time loop as deployed), from this
+checkout and from COMMIT (a temporary git worktree, :mod:`ab_trees`) taking turns ``--rounds`` times (3) in
+one run; the medians of each and their ratio.
 
 1. Control-law compute time per tick: ``ControllerCore.tick`` alone, timed
    with ``perf_counter_ns`` around each call, in-process against an
@@ -71,6 +75,7 @@ from controller.control.impedance import (  # noqa: E402
 from controller.core import ControllerCore  # noqa: E402
 from controller.executor_types import BoardPose  # noqa: E402
 from controller.params import ControllerParams  # noqa: E402
+from controller.tick_io import TickInput, TickOutput  # noqa: E402
 from interfaces.messages import ControllerStatus, ServiceStatus, SimTruth  # noqa: E402
 from lampskit.core.planner_types import Stain  # noqa: E402
 from lampskit.learn.learn import bundled_skill  # noqa: E402
@@ -105,6 +110,7 @@ def _stats_us(ns: np.ndarray) -> dict:
 def bench_tick(skill) -> dict:
     sim = SimCore(SimParams.from_table({"camera": {"enabled": False}}))
     core = ControllerCore(ControllerParams.from_table({}), skill)
+    inp, out = TickInput.zeros(core.model.nq), TickOutput.zeros(core.model.nq)
     times = np.zeros(MAX_TICKS, np.int64)
     states: list[tuple[np.ndarray, np.ndarray]] = []
     phases: list[str] = []
@@ -115,9 +121,11 @@ def bench_tick(skill) -> dict:
             if n % STAINS_EVERY == 0:
                 _feed_stains(core, sim)
             o = sim.out
+            inp.set_state(o.q, o.dq, o.wrench, 0.001, False)
             t0 = time.perf_counter_ns()
-            tau = core.tick(o.q, o.dq, o.wrench, False, 0.001)
+            core.tick(inp, out)
             times[n] = time.perf_counter_ns() - t0
+            tau = out.tau_nm
             phases.append(core.executor.phase)
             if n % LAW_STATE_EVERY == 0:
                 states.append((o.q.copy(), o.dq.copy()))
@@ -425,7 +433,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="10 s real-time run instead of 60 s")
     ap.add_argument("--json", metavar="OUT", help="also write the figures as JSON")
+    ap.add_argument("--baseline", metavar="COMMIT", help="only the tick and the real-time loop, against COMMIT")
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of each tree with --baseline (3)")
     a = ap.parse_args()
+    if a.baseline:
+        import ab_trees
+
+        return ab_trees.compare_with(REPO, a.baseline, max(a.rounds, 1), a.quick)
     cmd = ".venv/bin/python bench/bench_controller.py" + (" --quick" if a.quick else "")
     res = {"machine": f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"}
     try:

@@ -1,11 +1,12 @@
-"""Cost per cycle of what the real-time loops do besides their work: the robot side's joint speed brake check,
+"""Cost per cycle of what the real-time loops do besides their work: the robot side's guard on one reading,
 the loop hygiene's end of period (collection check, deadline) and the controller's speed override (its jerk limit
 on the scale's changes), against an empty call in the same run.
 
 Usage: .venv/bin/python bench/bench_loop_additions.py [--quick] [--json OUT]
 
 Each call is timed on its own with ``perf_counter_ns`` (about 0.1 us of it is the timer), 20,000 times
-(5,000 with --quick): ``RobotServer._watch_speed`` on a 7-joint state (the sim's limits); the collection
+(5,000 with --quick): ``RobotGuard.observe`` on a 7-joint state (the sim's speed limits, joint speeds only; and
+with the described arm: the pad's speeds and press speed by Pinocchio too); the collection
 check of ``LoopHygiene.collect_due`` with nothing due; ``LoopHygiene.next_period`` with a 1 ns period (its
 deadline is due at once: the cost of ending a period, not its wait); ``SpeedOverride.update`` without the
 skill's acceleration (no jerk limit: as before it), with it and a steady scale, and with it while the scale
@@ -28,19 +29,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from arm.robot_model import RobotModel  # noqa: E402
 from controller.control.limits import SpeedOverride  # noqa: E402
+from robot.guard import RobotGuard  # noqa: E402
 from robot.mock import MockArm  # noqa: E402
-from robot.server import RobotServer, ServerParams  # noqa: E402
+from robot.server_params import ServerParams  # noqa: E402
 from runtime.loop_hygiene import LoopHygiene  # noqa: E402
 from runtime.loop_stats import LoopStats  # noqa: E402
-
-
-class _Node:  # RobotServer only reads .keys and opens two inboxes at construction
-    class keys:  # noqa: N801
-        controller_estop = "e"
-        controller_estop_release = "r"
-
-    def inbox(self, *a, **k):
-        return None
 
 
 def _time(fn, n: int) -> np.ndarray:
@@ -58,15 +51,19 @@ def main() -> int:
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
     n = 5000 if a.quick else 20000
-    arm = MockArm(dq_max_rad_s=RobotModel().limits.dq_max)
-    srv = RobotServer(arm, _Node(), ServerParams(mode="realtime"), "robot", "s")
+    model = RobotModel()
+    arm = MockArm(dq_max_rad_s=model.limits.dq_max)
+    limits = ServerParams(mode="realtime").guard_limits(arm)
+    joints_only, described = RobotGuard(limits), RobotGuard(limits, model)
     rng = np.random.default_rng(0)
+    qs = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0]) + rng.uniform(-0.3, 0.3, (64, 7))  # near a wiping pose
     dqs = rng.uniform(-0.5, 0.5, (64, 7))
+    wrench = np.zeros(6)
     k = [0]
 
-    def watch():
+    def watch(guard: RobotGuard):
         k[0] += 1
-        srv._watch_speed(dqs[k[0] & 63])
+        guard.observe(qs[k[0] & 63], dqs[k[0] & 63], wrench, k[0] * 1e-3)
 
     accel = np.array([3.0, -1.0])
     demands = (np.full(7, 0.2), np.full(7, 1.0))
@@ -85,7 +82,8 @@ def main() -> int:
     stats = LoopStats()
     try:
         rows = {"empty call (baseline)": _time(lambda: None, n),
-                "RobotServer._watch_speed (7 joints)": _time(watch, n),
+                "RobotGuard.observe, joint speeds (7 joints)": _time(lambda: watch(joints_only), n),
+                "RobotGuard.observe, the described arm (pad speeds too)": _time(lambda: watch(described), n),
                 "LoopHygiene.collect_due, nothing due": _time(lambda: h.collect_due(500_000), n),
                 "LoopHygiene.next_period, no wait": _time(lambda: h.next_period(stats, 0, 1), n),
                 "SpeedOverride.update, scale changing, no jerk limit": _time(override(False, True), n),

@@ -97,17 +97,17 @@ def tick_cost_us(params, skill, model, n: int = 300) -> np.ndarray:
     import dataclasses
 
     from .core import ControllerCore
+    from .tick_io import TickInput, TickOutput
 
     core = ControllerCore(dataclasses.replace(params, trace_ticks=0), skill, model)
-    q = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0])
-    dq = np.full(7, 0.05)
-    w = np.zeros(6)
-    out = np.empty(n)
+    inp, out = TickInput.zeros(7), TickOutput.zeros(7)
+    inp.set_state([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0], np.full(7, 0.05), np.zeros(6), params.dt_s, False)
+    costs = np.empty(n)
     for i in range(n):
         t0 = time.perf_counter_ns()
-        core.tick(q, dq, w, False, params.dt_s)
-        out[i] = (time.perf_counter_ns() - t0) / 1e3
-    return out
+        core.tick(inp, out)
+        costs[i] = (time.perf_counter_ns() - t0) / 1e3
+    return costs
 
 
 def check_rate(params, skill, model) -> str:

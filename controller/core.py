@@ -21,6 +21,8 @@ Per tick:
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from arm.robot_model import RobotModel
@@ -49,6 +51,7 @@ from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
 from .params import ControllerParams
 from .reach import arm_reach
+from .tick_io import LastCommand, TickInput, TickOutput, TickStatus, conclude
 from .trace import PHASE_CODES, TRACE_COLUMNS, Trace  # noqa: F401 (the trace's names, exported here too)
 
 #: The skill's clock advances at most this many robot periods in one tick (a longer gap between states: our own
@@ -201,35 +204,29 @@ class ControllerCore:
         self.mem.xy_prev = None
         self.executor.restart()
 
-    def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool,
-             dt_s: float, tau_max_nm: np.ndarray | None = None, applied_nm: np.ndarray | None = None,
-             robot_held: bool = False, running_nm: np.ndarray | None = None) -> np.ndarray:
-        """Torques (7,) [Nm] to send for the measured state (an internal buffer: copy to keep).
+    def tick(self, inp: TickInput, out: TickOutput) -> TickStatus:
+        """One tick: the torques answering the state in ``inp`` into ``out`` (:mod:`controller.tick_io`); the status.
 
-        q, dq : (7,) [rad], [rad/s]; wrench : (6,) contact wrench on the pad
-        (world axes, force first) [N, Nm]; gravity_compensated : the robot
-        adds gravity itself; dt_s : time since the last tick [s];
-        tau_max_nm : (7,) the robot's declared torque limits (the tighter
-        of these and the description's apply); applied_nm : (7,) the torques
-        this controller sent that the robot applied over the last ``dt_s``
-        (without gravity when the robot adds it), None when unknown (a hold,
-        a skipped state): what the disturbance watch checks the motion against;
-        robot_held : the robot braked over the last cycle instead of applying
-        a command (a stale or missing answer; a robot found running on an old
-        command): the skill's clock runs only as far as the arm went along the
-        path (:meth:`_held_step`: a braked arm stands, and the reference with
-        it, or it would run ahead and, released, the arm would leap to catch up
-        and bounce off the board; an arm coasting on the stack's last message
-        keeps the reference with it), the reference's rates at that time
-        scale, the speed override drops to that pace and climbs back once
-        commands apply again (:meth:`SpeedOverride.held`: a released arm is
-        not asked to be at full speed at once), the force integral stands, and
-        the rate limit counts from the torques last applied; a contact lost meanwhile
-        is not ours, so the contact-loss watch starts counting again;
-        running_nm : (7,) the torques of the command the robot ran on over the
-        last cycle when ``applied_nm`` is None for states skipped since (the
-        robot's count said it held in one of them): where the rate limit counts from.
-        """
+        After ``LastCommand.HELD`` the skill's clock runs only as far as the arm went along the path
+        (:meth:`_held_step`: an arm whose reference ran on while braked would leap to catch up once released and
+        bounce off the board), the speed override drops to that pace and climbs back once commands apply again
+        (:meth:`SpeedOverride.held`), the force integral stands, the rate limit counts from the torques last
+        applied, and the contact-loss watch counts again (a contact lost meanwhile is not ours)."""
+        t0 = time.perf_counter_ns()
+        applied = inp.applied_nm if inp.last == LastCommand.APPLIED else None
+        running = inp.running_nm if applied is None and inp.running_known else None
+        tau = self._control(inp.q_rad, inp.dq_rad_s, inp.wrench, inp.gravity_compensated, inp.dt_s, inp.tau_max_nm,
+                            applied, inp.last == LastCommand.HELD, running)
+        status = conclude(out, tau, self.executor.phase in _HALTED, t0)
+        if status == TickStatus.NON_FINITE:
+            self.shaper.reset(None)
+            self.executor.fault("the control law gave non-finite torques (absurd robot state?)")
+        return status
+
+    def _control(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool, dt_s: float,
+                 tau_max_nm: np.ndarray | None, applied_nm: np.ndarray | None, robot_held: bool,
+                 running_nm: np.ndarray | None) -> np.ndarray:
+        """:meth:`tick`'s torques (n,) [Nm] (an internal buffer), its record unpacked (None: not known)."""
         self.clock.time_s += dt_s
         self.buf.q[:] = q  # the compiled law sees the same array types every tick (no recompilation)
         self.buf.dq[:] = dq
@@ -255,8 +252,9 @@ class ControllerCore:
         if board is None or identifying:
             self._hold_reference(kin)
             if identifying:  # the pad rolls about its normal, for the load estimate
-                ref = self.ref
-                self.arm.identify_reference(self.mem.hold[1], dt_s, ref.R, ref.twist, ref.accel)
+                ref, hold = self.ref, self.mem.hold
+                assert hold is not None, "the reference held without a pose"  # _hold_reference set it
+                self.arm.identify_reference(hold[1], dt_s, ref.R, ref.twist, ref.accel)
             sp = None
         else:
             n = board.normal
@@ -436,7 +434,9 @@ class ControllerCore:
         if self.shaping.posture_nm is not None:
             clearance_into(q, dq, self.buf.limits, self.buf.clearance)
             self_motion_limit_into(self.buf.clearance, dq, kin.M, kin.M_inv, kin.J, kin.Lambda, self.buf.limits)
-        terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, self.mem.q_rest, not gravity_compensated,
+        q_rest = self.mem.q_rest
+        assert q_rest is not None, "a torque before the first state set the rest posture"
+        terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, q_rest, not gravity_compensated,
                                  self.shaping, kin, self._task_modes(kin), self.buf.terms)
         self.mem.last_terms = terms
         tau = self.buf.tau
@@ -487,5 +487,6 @@ class ControllerCore:
         has_sp = sp is not None
         sp = sp or self.buf.no_setpoint
         clock = (self.clock.time_s, float(PHASE_CODES.get(self.executor.phase, -1)), float(self.mem.override_used))
+        assert self.trace is not None, "a tick recorded without a trace"
         trace_row(self.trace.row(), clock, (has_sp, sp.xy, sp.v_xy, sp.a_xy, float(sp.contact)), self.buf.xyh,
                   self.ref.p_m, p, (float(self.mem.normal_force_n), float(self.mem.press_n)))

@@ -58,6 +58,7 @@ from lampskit.errors import PlanningError
 
 from .board_watch import BoardWatch, Jump
 from .executor_stage import ACTIVE, HALTED, LIFTED_M, RELEASED_N, Stage
+from .executor_starts import BoardSurvey, StartLatches
 from .executor_state import ExecutorState
 from .executor_stops import ExecutorStops
 from .executor_types import BoardPose, Setpoint, ToolState
@@ -111,12 +112,8 @@ class SkillExecutor:
         self.watch = BoardWatch(self.state, self.motion, self.surface, self.book, self.stops, self.p)
         self._sp = self.motion.setpoint
         self._plan: Plan | None = None
-        self._last_h = float("inf")  # the pad above the board at the last step [m]
-        self._initialised = False
-        self._estop: str | None = None
-        self._restart_pending = False
-        self._surveyed = False
-        self._survey_until_s = float("inf")
+        self._latches = StartLatches()
+        self._survey = BoardSurvey()
         self._on_stage = {Stage.FLY: self._on_fly, Stage.DESCEND: self._on_descend, Stage.CREEP: self._on_creep,
                           Stage.PRESS: self._on_press, Stage.CHAIN: self._on_chain, Stage.UNPRESS: self._on_unpress,
                           Stage.BRAKE: self._on_brake, Stage.LIFT: self._on_lift, Stage.HOLD: self._on_hold,
@@ -201,7 +198,7 @@ class SkillExecutor:
         """E-stop: lift off (fast force ramp) and hold until :meth:`clear`; latched across restarts."""
         reason = reason or "e-stop"
         self.counters["estops"] += 1
-        self._estop = reason
+        self._latches.estop = reason
         if self.state.phase != Phase.ESTOP or self.stops.resume_after_lift:  # not yet stopping, or already released
             self.stops.stop(Phase.ESTOP, reason, fast=True)
         else:
@@ -226,8 +223,8 @@ class SkillExecutor:
         A stop that has not lifted off yet (its motion stood still while the robot side held the arm) finishes its
         lift first, PAUSED (:data:`RELEASED_LIFTING`): the e-stop or fault is over, and a watcher that ends a run
         held in ESTOP or FAULT must not count that lift as one."""
-        self._estop = None
-        if self.state.phase in HALTED and self._initialised:
+        self._latches.estop = None
+        if self.state.phase in HALTED and self._latches.initialised:
             self.stops.resume_after_lift = True
             if self.state.stage == Stage.HOLD:
                 self._resume()
@@ -247,21 +244,21 @@ class SkillExecutor:
     def pad_down(self) -> bool:
         """The pad presses (by the setpoint, or by the measured force: ``RELEASED_N`` or more, whatever the board
         model says), or moves less than ``LIFTED_M`` above the board: stopping now would leave it there."""
-        return self._initialised and (self._sp.contact or self.state.last_force_n >= RELEASED_N
-                                      or (self.state.stage != Stage.HOLD and self._last_h < LIFTED_M))
+        return self._latches.initialised and (self._sp.contact or self.state.last_force_n >= RELEASED_N
+                                              or (self.state.stage != Stage.HOLD and self.state.last_h_m < LIFTED_M))
 
     def restart(self) -> None:
         """The robot came back after a loss: start over from WAIT_PEERS at the measured pose on the next step (and
         survey the board again: the arm may be anywhere)."""
-        self._restart_pending = True
-        self._surveyed = False
+        self._latches.restart_pending = True
+        self._survey.forget()
 
     # ------------------------------------------------------------------ the tick
     def wait(self) -> None:
         """No board known yet (no stains ever received): report WAIT_PEERS (or a latched ESTOP); the caller holds."""
         self.state.ticks += 1
-        if self._estop is not None:
-            self.state.set_phase(Phase.ESTOP, self._estop)
+        if self._latches.estop is not None:
+            self.state.set_phase(Phase.ESTOP, self._latches.estop)
         elif self.state.phase in (Phase.INIT, Phase.ESTOP):
             self.state.set_phase(Phase.WAIT_PEERS, "")
 
@@ -274,13 +271,13 @@ class SkillExecutor:
         """
         self.state.ticks += 1
         self.state.clock_s += dt_s
-        self._last_h = tool.h
+        self.state.last_h_m = tool.h
         self.state.last_force_n = tool.force_n
         self.state.last_tool = tool
-        if not self._initialised or self._restart_pending:
+        if not self._latches.initialised or self._latches.restart_pending:
             self._start_over(tool)
         if self.state.phase == Phase.WAIT_PEERS:
-            if self.stains_fresh and self._estop is None:
+            if self.stains_fresh and self._latches.estop is None:
                 self.motion.hold_here(tool)
                 self._survey_or_start()
             return self._sp
@@ -293,15 +290,15 @@ class SkillExecutor:
     def _start_over(self, tool: ToolState) -> None:
         """WAIT_PEERS holding the measured pose; a pad found pressing ramps out and lifts first."""
         self.motion.hold_here(tool)
-        self._initialised = True
-        self._restart_pending = False
+        self._latches.initialised = True
+        self._latches.restart_pending = False
         st = self.state
         st.phase, st.reason, st.current_mp, st.stain_id, st.stage = Phase.WAIT_PEERS, "", "", -1, Stage.HOLD
         if tool.force_n > self.f.contact_threshold_n and not self.p.air:
             self.motion.press_measured(tool.force_n)  # keep pressing what it measures, then ramp out and lift
             self.stops.stop(Phase.PAUSED, "robot back with the pad on the board: lifting off before re-approaching")
-        if self._estop is not None:
-            self.stops.stop(Phase.ESTOP, self._estop, fast=True)
+        if self._latches.estop is not None:
+            self.stops.stop(Phase.ESTOP, self._latches.estop, fast=True)
 
     # ------------------------------------------------------------------ one handler per stage
     def _on_fly(self, dt: float, tool: ToolState) -> None:
@@ -361,11 +358,11 @@ class SkillExecutor:
             self.stops.done()
 
     def _on_survey(self, dt: float, tool: ToolState) -> None:
-        if self._survey_until_s == float("inf"):
+        if self._survey.until_s == float("inf"):
             if self.motion.move(dt) and not self.motion.turning:
-                self._survey_until_s = self.state.clock_s + self.p.survey_s  # perception's time to see the board
+                self._survey.until_s = self.state.clock_s + self.p.survey_s  # perception's time to see the board
                 self.state.current_mp = "survey: looking"
-        elif self.state.clock_s >= self._survey_until_s:
+        elif self.state.clock_s >= self._survey.until_s:
             self._start_approach_or_done()
 
     def _on_hold(self, dt: float, tool: ToolState) -> None:
@@ -385,14 +382,14 @@ class SkillExecutor:
         if PAUSED with fresh stains); True while one waits."""
         found = self.watch.confirm_jump()
         if found == Jump.ADOPTED:
-            self._surveyed = False  # the new pose is surveyed before any approach
-            if self.state.phase == Phase.PAUSED and self.stains_fresh and self._estop is None:
+            self._survey.forget()  # the new pose is surveyed before any approach
+            if self.state.phase == Phase.PAUSED and self.stains_fresh and self._latches.estop is None:
                 self._survey_or_start()
         return found == Jump.PENDING
 
     # ------------------------------------------------------------------ approach and the MP chain
     def _resume(self) -> None:
-        if self._estop is not None:
+        if self._latches.estop is not None:
             return
         if not self.stains_fresh:
             self.state.set_phase(Phase.PAUSED, "waiting for fresh stains")
@@ -407,12 +404,11 @@ class SkillExecutor:
         holds still, DONE)."""
         stains = self.book.stains.values()
         all_judged_clean = bool(stains) and all(st.kappa for st in stains)
-        if self._surveyed or self.p.survey_s <= 0.0 or self.p.look_clearance_m <= 0.0 or self.state.board is None \
+        if self._survey.done or self.p.survey_s <= 0.0 or self.p.look_clearance_m <= 0.0 or self.state.board is None \
                 or all_judged_clean:
             self._start_approach_or_done()
             return
-        self._surveyed = True
-        self._survey_until_s = float("inf")
+        self._survey.begin()
         self.counters["surveys"] += 1
         self.state.set_phase(Phase.APPROACH, "")
         self.state.stain_id, self.state.current_mp = -1, "survey"

@@ -48,6 +48,8 @@ class ExecutorState:
         Steps and waits so far.
     last_force_n : float
         The measured push of the board on the pad at the last step [N].
+    last_h_m : float
+        The measured pad's height above the board at the last step [m] (infinite before the first).
     last_tool : ToolState or None
         The pad measured at the last step (None before the first).
     """
@@ -64,6 +66,7 @@ class ExecutorState:
     clock_s: float = 0.0
     ticks: int = 0
     last_force_n: float = 0.0
+    last_h_m: float = float("inf")
     last_tool: ToolState | None = None
 
     def set_phase(self, phase: Phase, reason: str) -> None:

@@ -32,29 +32,29 @@ from collections import Counter
 import numpy as np
 
 from interfaces.arm_estimate import ArmEstimate
-from interfaces.messages import (HOLD, ControllerStatus, ControllerTrace, Estop, RobotState, SimTruth, Stains,
-                                 TorqueCommand)
+from interfaces.messages import HOLD, ControllerStatus, RobotState, SimTruth, Stains, TorqueCommand
 from runtime.loop_hygiene import LoopHygiene
 from runtime.loop_stats import LoopStats
-from runtime.session import ServiceNode
+from runtime.session import Latest, ServiceNode
 
 from lampskit.errors import PlanningError
 
 from .command_auth import ControllerAuth
 from .control.limits import load_scale
 from .control.watch import OverloadWatch
-from .core import TRACE_COLUMNS, ControllerCore
+from .core import ControllerCore
+from .estop import ControllerEstop
 from .params import ControllerParams
 from .planner_thread import PlannerThread
-from .robot_holds import RobotHolds
+from .robot_link import RobotLink
+from .sent_answers import SENT_RING, SentAnswers
 from .stains_in import stains_update
+from .status_out import StatusOut
+from .tick_io import LastCommand, TickInput, TickOutput, TickStatus
 
 log = logging.getLogger(__name__)
 
 SERVICE = "controller"
-#: How many answers are kept to look up the one a robot state says it applied (>= the states a real-time
-#: robot may run ahead of its answers).
-SENT_RING = 64
 #: On a stop request with the pad on the board, the loop goes on this long at most [s] while it lifts off.
 LIFT_ON_STOP_S = 6.0
 
@@ -71,36 +71,20 @@ class ControllerService:
         self.stop = threading.Event()
         self.stats = LoopStats()
         self.ticks = 0
-        self._status_period_s = 1.0 / params.status_rate_hz
-        self._next_status = 0.0
-        self._status_seq = 0
-        self._trace_sent = 0
-        self._trace_seq = 0
-        self._last_seq = -1
-        self._holds = RobotHolds()  # a hold in the states skipped, from the robot's count
-        self._last_robot_ns: int | None = None
-        self._last_command: TorqueCommand | None = None
-        # the torques sent for the last SENT_RING states (row seq % SENT_RING; -1: a hold), for the disturbance watch
-        self._sent_tau = np.zeros((SENT_RING, core.model.nq))
-        self._sent_seq = np.full(SENT_RING, -1, dtype=np.int64)
+        self._out = StatusOut(1.0 / params.status_rate_hz)
+        self._link = RobotLink(1.0 / params.rate_hz)
+        self._sent = SentAnswers(core.model.nq)  # for the disturbance watch and states said again
         self._session_id = str(node.session.zid())
         self._auth = ControllerAuth(node, self._session_id, self.counters)  # commands' MACs, signed releases
         self._stop_since: float | None = None  # the robot side serves one controller session
         lim = params.limits
         self._overload = OverloadWatch(lim.overload_share, lim.overload_filter_s, lim.overload_persist_s,
                                        lim.overload_slow_share, lim.overload_recover_s)
-        self._stains_clock = None
-        self._lost = False
-        self._ever_state = False
-        self._nq = core.model.nq
-        if params.stains_from == "truth":
-            self._stains = node.latest(self.keys.sim_truth, SimTruth)
-        else:
-            self._stains = node.latest(self.keys.perception_stains, Stains)
-        self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
-        self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
-        self._robot_estop = False  # the last state said the robot side's e-stop is engaged
-        self._estop_ours = False  # our own e-stop is latched (an engage on controller/estop, not yet released)
+        self._stains_clock: float | None = None
+        self._tick_io = (TickInput.zeros(core.model.nq), TickOutput.zeros(core.model.nq))  # refilled every tick
+        self._stains: Latest[SimTruth] | Latest[Stains] = node.latest(self.keys.sim_truth, SimTruth) \
+            if params.stains_from == "truth" else node.latest(self.keys.perception_stains, Stains)
+        self._estop = ControllerEstop(node, core, self._auth, self.counters, log)
 
     # ------------------------------------------------------------------ loops
     def run(self) -> int:
@@ -133,7 +117,7 @@ class ControllerService:
             state = self._usable(states.get(0.02))
             now = time.monotonic()
             if state is None:
-                self._poll_estop()
+                self._estop.poll()
                 self._check_lost(now - last_state_wall)
                 self._publish_status()
                 continue
@@ -147,17 +131,18 @@ class ControllerService:
         """Answer one lock-step ``state`` (a usable one): the e-stop keys read, a re-sent state answered again,
         a new one ticked and answered, the status when due; True when it was ticked. ``t0_ns``, ``t_prev_ns``:
         when the wait for it began and the last tick ended (perf counter), for the loop's timing."""
-        self._poll_estop()
-        if state.seq == self._last_seq and self._last_command is not None and not self._lost:
-            self._last_command = self._auth.with_mac(self._last_command)  # a key proven since it was sent
-            self.node.publish(self.keys.robot_command, self._last_command)  # a re-sent state: same answer
+        self._estop.poll()
+        sent, link = self._sent, self._link
+        if state.seq == link.last_seq and sent.last is not None and not link.lost:
+            sent.last = self._auth.with_mac(sent.last)  # a key proven since it was sent
+            self.node.publish(self.keys.robot_command, sent.last)  # a re-sent state: same answer
             self.counters["states_answered_again"] += 1
             return False
-        if state.seq < self._last_seq or self._lost:
+        if state.seq < link.last_seq or link.lost:
             self._robot_back(state)
-        elif self._last_seq >= 0 and state.seq != self._last_seq + 1:
-            self.counters["states_skipped"] += state.seq - self._last_seq - 1
-        dt = self._dt_from_robot_clock(state)
+        elif link.last_seq >= 0 and state.seq != link.last_seq + 1:
+            self.counters["states_skipped"] += state.seq - link.last_seq - 1
+        dt = link.dt_s(state)
         self._poll_stains(state.robot_time_ns * 1e-9)
         t1 = time.perf_counter_ns()
         tau = self._control(state, dt)
@@ -192,7 +177,7 @@ class ControllerService:
                 new = self._usable(states.get(nominal_s))
                 t0 = time.monotonic_ns()
                 if new is not None:
-                    if state is not None and new.seq < state.seq or self._lost:
+                    if state is not None and new.seq < state.seq or self._link.lost:
                         self._robot_back(new)
                         answered_seq = -1
                     rate = new.capabilities.state_rate_hz
@@ -201,7 +186,7 @@ class ControllerService:
                         self.counters["robot_rate_changes"] += 1
                         log.info("the robot publishes states at %.0f Hz: this loop follows it", rate)
                     state, state_ns = new, t0
-                self._poll_estop()
+                self._estop.poll()
                 t1 = t2 = time.monotonic_ns()
                 if state is None or t0 - state_ns > timeout_ns:
                     if state is not None:
@@ -211,7 +196,7 @@ class ControllerService:
                     missed = state.seq - answered_seq - 1 if answered_seq >= 0 else 0
                     if missed > 0:
                         self.stats.overruns += missed  # robot periods left unanswered
-                    dt = self._dt_from_robot_clock(state)  # the robot's own time, also across skipped periods
+                    dt = self._link.dt_s(state)  # the robot's own time, also across skipped periods
                     # the overload is ours: states that came while an older one waited (a state lost on the way
                     # never came: not this loop's fault)
                     ours, replaced_seen = states.replaced - replaced_seen, states.replaced
@@ -249,7 +234,7 @@ class ControllerService:
         ex = self.core.executor
         if self._stop_since is None:
             self._stop_since = time.monotonic()
-            if ex.pad_down and self._ever_state and not self._lost:
+            if ex.pad_down and self._link.ever_state and not self._link.lost:
                 self.counters["lifts_on_stop"] += 1
                 log.warning("stop requested with the pad on the board: lifting off first (at most %.0f s)",
                             LIFT_ON_STOP_S)
@@ -257,7 +242,7 @@ class ControllerService:
                 self._publish_status(force=True)
                 return False
             return True
-        if not ex.pad_down or self._lost:
+        if not ex.pad_down or self._link.lost:
             return True
         if time.monotonic() - self._stop_since > LIFT_ON_STOP_S:
             log.error("the pad did not lift off within %.0f s of the stop request: exiting anyway", LIFT_ON_STOP_S)
@@ -273,93 +258,74 @@ class ControllerService:
 
     def _control(self, state: RobotState, dt: float) -> np.ndarray | None:
         """Torques answering ``state``, or None when the tick failed (then the answer is ``hold``)."""
-        self._ever_state = True
-        if state.estop != self._robot_estop:
-            self._follow_robot_estop(state.estop)
+        link = self._link
+        link.ever_state = True
+        if state.estop != self._estop.robot_engaged:
+            self._estop.follow_robot(state.estop)
         applied = self._applied(state)
-        self._last_seq = state.seq
+        link.last_seq = state.seq
         self.ticks += 1
-        q = np.asarray(state.q_rad)
-        dq = np.asarray(state.dq_rad_s)
-        wrench = np.asarray(state.wrench_world)
         caps = state.capabilities
         if caps.state_rate_hz != self.core.robot_rate_hz:
             self.core.follow_robot_rate(caps.state_rate_hz)
             log.info("robot states at %.0f Hz: task modes capped at %.0f rad/s", caps.state_rate_hz,
                      self.core.mode_cap_rad_s)
+        inp, out = self._tick_io
+        inp.set_state(state.q_rad, state.dq_rad_s, state.wrench_world, dt, caps.gravity_compensated)
+        inp.tau_max_nm[:] = caps.torque_limits_nm
+        last = LastCommand.HELD if link.holds.held_since_last(state.command_seq, state.held_cycles) else \
+            LastCommand.UNKNOWN if applied is None else LastCommand.APPLIED
+        inp.set_last(last, applied, self._sent.running(state.command_seq) if applied is None else None)
         try:
-            tau = self.core.tick(q, dq, wrench, caps.gravity_compensated, dt, np.asarray(caps.torque_limits_nm),
-                                 applied, robot_held=self._holds.held_since_last(state.command_seq,
-                                                                                  state.held_cycles),
-                                 running_nm=self._running(state) if applied is None else None)
+            status = self.core.tick(inp, out)
         except Exception as exc:  # a bug or an absurd state must not end the loop: fault, count, go on
             self.counters["tick_errors"] += 1
             log.exception("control tick failed")
             self.core.executor.fault(f"control tick failed: {type(exc).__name__}: {exc}")
             self.core.shaper.reset(None)
             return None
-        if not np.isfinite(tau).all():
+        if status == TickStatus.NON_FINITE:  # the core faulted its executor
             self.counters["non_finite_torques"] += 1
-            self.core.shaper.reset(None)
-            self.core.executor.fault("the control law gave non-finite torques (absurd robot state?)")
             return None
-        return tau
+        return out.tau_nm
 
     def _applied(self, state: RobotState) -> np.ndarray | None:
         """The torques of ours the robot applied between the last answered state and ``state``; None when that is
         not one known command (a hold, a state in between not seen, an answer no longer kept)."""
-        if self._last_seq < 0 or state.seq != self._last_seq + 1:
+        if self._link.last_seq < 0 or state.seq != self._link.last_seq + 1:
             return None
-        return self._running(state)
-
-    def _running(self, state: RobotState) -> np.ndarray | None:
-        """The torques of the command the robot ran on over the cycle before ``state`` (states skipped or not), if
-        it is one of ours still kept; None for a hold."""
-        c = state.command_seq
-        if c < 0:
-            return None
-        row = c % SENT_RING
-        return self._sent_tau[row] if self._sent_seq[row] == c else None
+        return self._sent.running(state.command_seq)
 
     def _usable(self, state: RobotState | None) -> RobotState | None:
         """``state`` if this robot model can use it (checked before its seq counts for anything), else None."""
-        if state is not None and len(state.q_rad) != self._nq:
-            self.counters[f"robot_state_dropped: {len(state.q_rad)} joints, the model has {self._nq}"] += 1
+        nq = self.core.model.nq
+        if state is not None and len(state.q_rad) != nq:
+            self.counters[f"robot_state_dropped: {len(state.q_rad)} joints, the model has {nq}"] += 1
             return None
         return state
 
     def _send(self, seq: int, tau: np.ndarray | None) -> None:
         """Answer state ``seq``: the torques, or (``tau`` None: the tick failed) ``hold``, which the robot side
         applies by braking; the controller never goes silent on a state it has taken."""
-        row = seq % SENT_RING
+        row, sent = seq % SENT_RING, self._sent
         if tau is None:
             self.counters["holds_sent"] += 1
-            zeros = [0.0] * self._nq
+            zeros = [0.0] * self.core.model.nq
             cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=zeros, mode=HOLD,
                                 session=self._session_id, mac=self._auth.mac(seq, HOLD, zeros))
-            self._sent_seq[row] = -1
+            sent.seq[row] = -1
         else:
             tau_nm = tau.tolist()
             cmd = TorqueCommand(seq=seq, stamp_ns=time.monotonic_ns(), tau_nm=tau_nm, session=self._session_id,
                                 mac=self._auth.mac(seq, "torque", tau_nm))
-            self._sent_tau[row] = tau
-            self._sent_seq[row] = seq
-        self._last_command = cmd
+            sent.tau[row] = tau
+            sent.seq[row] = seq
+        sent.last = cmd
         self.node.publish(self.keys.robot_command, cmd)
 
-    def _dt_from_robot_clock(self, state: RobotState) -> float:
-        """Time since the last answered state on the robot's clock; the nominal period when that is unusable."""
-        dt = 1.0 / self.p.rate_hz
-        if self._last_robot_ns is not None and state.robot_time_ns > self._last_robot_ns:
-            measured = (state.robot_time_ns - self._last_robot_ns) * 1e-9
-            if measured <= 0.1:
-                dt = measured
-        self._last_robot_ns = state.robot_time_ns
-        return dt
-
     def _check_lost(self, silence_s: float) -> None:
-        if self._ever_state and not self._lost and silence_s >= self.p.robot_lost_or_default_s:
-            self._lost = True
+        if self._link.ever_state and not self._link.lost and silence_s >= self.p.robot_lost_or_default_s:
+            self._link.lost = True
             self.counters["robot_lost"] += 1
             self.core.executor.robot_lost(f"no robot state for {silence_s * 1000:.0f} ms")
             self._publish_status(force=True)
@@ -380,15 +346,11 @@ class ControllerService:
 
     def _robot_back(self, state: RobotState) -> None:
         log.warning("robot states back (seq %d after %d): restarting from the measured pose", state.seq,
-                    self._last_seq)
+                    self._link.last_seq)
         self.counters["robot_restarts"] += 1
         self._overload.reset()
-        self._lost = False
-        self._last_robot_ns = None
-        self._last_seq = -1
-        self._last_command = None
-        self._sent_seq[:] = -1  # a new robot counts its states from 0 again
-        self._holds.reset()  # and its held cycles
+        self._link.back()  # a new robot counts its states and held cycles from 0 again
+        self._sent.forget()
         self._stains_clock = None  # a new sim's clock starts again
         self.core.restart()
 
@@ -410,67 +372,26 @@ class ControllerService:
             self.counters["stains_stale"] += 1
             ex.stains_stale(f"no stains update for {clock_s - self._stains_clock:.1f} s")
 
-    def _follow_robot_estop(self, engaged: bool) -> None:
-        """The robot side's e-stop and ours agree: while its e-stop is engaged (it holds whatever we send) we are
-        in ESTOP too, also when the engage never reached us (a lost sample, a controller started afterwards); when
-        the operator's release reaches it, we resume unless our own e-stop is still latched."""
-        self._robot_estop = engaged
-        if engaged:
-            self.counters["robot_estops_seen"] += 1
-            log.warning("the robot side reports its e-stop engaged: ESTOP until it is released")
-            if not self._estop_ours:
-                self.core.executor.estop("e-stop engaged on the robot side")
-        elif not self._estop_ours:
-            log.warning("the robot side's e-stop released")
-            self.core.executor.clear()
-
-    def _poll_estop(self) -> None:
-        """Engage on ``controller/estop``; release only from ``controller/estop/release`` (the operator's key under
-        access control): a release on the engage key is ignored and counted. A release while the robot side
-        still reports its e-stop engaged waits for it (:meth:`_follow_robot_estop`)."""
-        for inbox, release_key in ((self._estops, False), (self._releases, True)):
-            while True:
-                e = inbox.get(0.0)
-                if e is None:
-                    break
-                if e.engaged:
-                    log.warning("e-stop from %s: %s", e.source or "?", e.reason)
-                    self._estop_ours = True
-                    self.core.executor.estop(f"e-stop: {e.reason}" + (f" ({e.source})" if e.source else ""))
-                elif release_key and not self._auth.release_ok(e):
-                    continue  # not the operator's signature, or a replay: counted and logged
-                elif release_key:
-                    log.warning("e-stop released by %s", e.source or "?")
-                    self.counters["estop_releases"] += 1
-                    self._estop_ours = False
-                    if self._robot_estop:
-                        self.core.executor.estop("released here; waiting for the robot side's e-stop release")
-                    else:
-                        self.core.executor.clear()
-                else:
-                    self.counters["estop_releases_ignored_on_the_engage_key"] += 1
-                    log.warning("e-stop release from %s on the engage key ignored (releases go to %s)",
-                                e.source or "?", self.keys.controller_estop_release)
-
     # ------------------------------------------------------------------ status
     def status(self) -> ControllerStatus:
         ex, core = self.core.executor, self.core
         counters = dict(self.counters)
         counters.update(ex.counters)
         counters.update(torque_rate_clipped=core.shaper.clipped_rate, torque_abs_clipped=core.shaper.clipped_abs,
-                        robot_estop_engaged=int(self._robot_estop), estop_latched=int(self._estop_ours),
+                        robot_estop_engaged=int(self._estop.robot_engaged), estop_latched=int(self._estop.ours),
                         overload_slowed_ticks=core.override.load_limited_ticks,
                         override_jerk_limited_ticks=core.override.jerk_limited_ticks,
-                        skill_steps_capped=core.skill_steps_capped, robot_holds_in_skipped_states=self._holds.missed)
+                        skill_steps_capped=core.skill_steps_capped,
+                        robot_holds_in_skipped_states=self._link.holds.missed)
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
-                             ("estop", self._estops), ("estop_release", self._releases)):
+                             ("estop", self._estop.engages), ("estop_release", self._estop.releases)):
             if reader is None:
                 continue
             counters[f"{name}_received"] = reader.received
             for reason, n in reader.bad.items():
                 counters[f"{name}_dropped: {reason}"] = n
-        self._status_seq += 1
-        return ControllerStatus(seq=self._status_seq, stamp_ns=time.monotonic_ns(), phase=ex.phase, reason=ex.reason,
+        self._out.seq += 1
+        return ControllerStatus(seq=self._out.seq, stamp_ns=time.monotonic_ns(), phase=ex.phase, reason=ex.reason,
                                 current_mp=ex.current_mp, stain_id=ex.stain_id,
                                 normal_force_n=float(core.normal_force_n), timing=self.stats.summary(),
                                 counters=counters, wall_ns=time.time_ns(),
@@ -479,21 +400,16 @@ class ControllerService:
 
     def _publish_status(self, force: bool = False) -> None:
         self._auth.housekeeping()  # introductions: a try_recv and a clock read unless one is due
-        now = time.monotonic()
-        if not force and now < self._next_status:
+        if not self._out.due(time.monotonic(), force):
             return
-        self._next_status = now + self._status_period_s
         self.node.publish(self.keys.controller_status, self.status())
         if self.p.publish_trace and self.core.trace is not None:
             self._publish_trace()
 
     def _publish_trace(self) -> None:
-        first, rows, dropped = self.core.trace.since(self._trace_sent)
-        if not len(rows):
-            return
-        self._trace_sent = first + len(rows)
-        self._trace_seq += 1
-        self.node.publish(self.keys.controller_trace, ControllerTrace(
-            seq=self._trace_seq, stamp_ns=time.monotonic_ns(), columns=list(TRACE_COLUMNS), first_tick=first,
-            n_rows=len(rows), data=rows.astype("<f8").tobytes(), dropped=dropped))
+        trace = self.core.trace
+        assert trace is not None, "a trace published without its ring"
+        msg = self._out.trace_message(trace)
+        if msg is not None:
+            self.node.publish(self.keys.controller_trace, msg)
 

@@ -20,6 +20,7 @@ is off, since the hand's push is exactly a joint torque the command does not exp
 
 from __future__ import annotations
 
+import time
 from collections import Counter
 
 import numpy as np
@@ -32,6 +33,7 @@ from .control.impedance import Kinematics
 from .control.limit_kernels import limit_torque
 from .control.limits import SpeedOverride, TorqueShaper, limits_from_settings, speed_excess_force
 from .params import ControllerParams
+from .tick_io import TickInput, TickOutput, TickStatus, conclude
 
 
 class _NoChain:
@@ -138,17 +140,24 @@ class TeachCore:
     def follow_robot_rate(self, rate_hz: float) -> None:
         self.robot_rate_hz = rate_hz
 
-    def tick(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool, dt_s: float,
-             tau_max_nm: np.ndarray | None = None, applied_nm: np.ndarray | None = None,
-             robot_held: bool = False, running_nm: np.ndarray | None = None) -> np.ndarray:
-        """Torques (7,) [Nm] for the measured state (an internal buffer); arguments as
-        :meth:`ControllerCore.tick <controller.core.ControllerCore.tick>` (``applied_nm``, ``robot_held`` and
-        ``running_nm`` unused: no disturbance watch, no skill clock)."""
+    def tick(self, inp: TickInput, out: TickOutput) -> TickStatus:
+        """One tick, as :meth:`ControllerCore.tick <controller.core.ControllerCore.tick>` (what became of the last
+        command unused: no disturbance watch, no skill clock)."""
+        t0 = time.perf_counter_ns()
+        tau = self._control(inp.q_rad, inp.dq_rad_s, inp.wrench, inp.gravity_compensated, inp.dt_s, inp.tau_max_nm)
+        status = conclude(out, tau, self.executor.halted, t0)
+        if status == TickStatus.NON_FINITE:
+            self.shaper.reset(None)
+            self.executor.fault("the teach law gave non-finite torques (absurd robot state?)")
+        return status
+
+    def _control(self, q: np.ndarray, dq: np.ndarray, wrench: np.ndarray, gravity_compensated: bool, dt_s: float,
+                 tau_max_nm: np.ndarray) -> np.ndarray:
+        """:meth:`tick`'s torques (n,) [Nm] (an internal buffer)."""
         self.time_s += dt_s
         q = np.asarray(q, float)
         dq = np.asarray(dq, float)
-        if tau_max_nm is not None:
-            np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
+        np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
         self._watch_force(np.asarray(wrench, float), dt_s)
         tau = self._tau

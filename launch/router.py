@@ -20,7 +20,10 @@ cell; the ``site-viewer`` reads them all. Each refusal is logged with
 
 A service that must not pay the extra hop (the controller and the robot
 side at 1 kHz) can stay a peer with a direct link to its partner and a
-link to the router for the rest. Runs until SIGTERM or Ctrl-C; with ``-v`` logs
+link to the router for the rest. The router's threads run ``SCHED_FIFO``
+one below the loops (as the services' I/O threads; ``LAMPS_RT_PRIORITY``,
+``LAMPS_MLOCK``, :func:`runtime.realtime.apply_relay_realtime`): the
+routed states and commands must not wait behind ordinary processes. Runs until SIGTERM or Ctrl-C; with ``-v`` logs
 the sessions it routes every ``--status-s`` seconds (0: never).
 """
 
@@ -32,6 +35,7 @@ import sys
 import threading
 
 from interfaces.errors import ConfigError
+from runtime.realtime import RealtimeRequest, apply_relay_realtime
 from runtime.stop_signals import on_stop_signals, wait_for
 
 log = logging.getLogger("lamps.router")
@@ -78,7 +82,9 @@ def main(argv: list[str] | None = None) -> int:
         from runtime.session import zenoh_config
 
         zenoh.try_init_log_from_env()  # RUST_LOG: Zenoh's own log on stderr (the refusals above); unset: quiet
+        threads = RealtimeRequest.from_env()  # a bad LAMPS_RT_PRIORITY or LAMPS_MLOCK is refused before Zenoh starts
         session = zenoh.open(zenoh_config(settings))
+        rt = apply_relay_realtime(threads)  # its threads as a loop's I/O threads: it relays the 1 kHz states, commands
     except ConfigError as exc:
         print(f"lamps router: {exc}", file=sys.stderr)
         return 2
@@ -91,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
              ", ".join(settings.cells) or settings.robot_id,
              ", ".join(settings.listen), "on" if settings.access_control else "off",
              settings.tls_certificate or "none")
-    print(f"lamps router: listening on {', '.join(settings.listen)}", flush=True)
+    print(f"lamps router: listening on {', '.join(settings.listen)}; threads {rt.report}", flush=True)
     try:
         while not wait_for(stop, a.status_s if a.status_s > 0 else None):
             info = session.info

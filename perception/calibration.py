@@ -106,17 +106,16 @@ def read_calibration(path: str | Path) -> Calibration:
     if fs is None or not fs.isOpened():
         raise CalibrationError(f"{p}: neither a ROS camera_info YAML nor an OpenCV calibration file")
     try:
-        K = next((fs.getNode(n).mat() for n in ("camera_matrix", "cameraMatrix", "K")
-                  if not fs.getNode(n).empty()), None)
+        Ks = [fs.getNode(n).mat() for n in ("camera_matrix", "cameraMatrix", "K") if not fs.getNode(n).empty()]
         dist = next((fs.getNode(n).mat() for n in ("distortion_coefficients", "dist_coeffs", "distCoeffs", "D")
                      if not fs.getNode(n).empty()), np.zeros(0))
         width = int(fs.getNode("image_width").real() or 0)
         height = int(fs.getNode("image_height").real() or 0)
     finally:
         fs.release()
-    if K is None:
+    if not Ks:
         raise CalibrationError(f"{p}: no camera_matrix (or cameraMatrix, K) in it")
-    K, dist = _checked(np.asarray(K, float), np.asarray(dist if dist is not None else [], float), p)
+    K, dist = _checked(np.asarray(Ks[0], float), np.asarray(dist if dist is not None else [], float), p)
     return Calibration(K, dist, width, height)
 
 
@@ -173,8 +172,8 @@ def calibrate(images: list[Path], pattern: str) -> CalibrationResult:
         if size is not None and grey.shape[::-1] != size:
             skipped.append(f"{path.name}: {grey.shape[1]} x {grey.shape[0]} px, the others {size[0]} x {size[1]}")
             continue
-        ok, corners = cv2.findChessboardCorners(grey, (cols, rows), cv2.CALIB_CB_ADAPTIVE_THRESH
-                                                | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        ok, corners = cv2.findChessboardCorners(grey, (cols, rows), None,
+                                                flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
         if not ok:
             skipped.append(f"{path.name}: no {cols} x {rows} chessboard found")
             continue
@@ -187,6 +186,7 @@ def calibrate(images: list[Path], pattern: str) -> CalibrationResult:
     if len(used) < 3:
         raise CalibrationError(f"calibration needs the chessboard in at least 3 images, found it in {len(used)}"
                                + (f" ({'; '.join(skipped[:5])})" if skipped else ""))
+    assert size is not None  # set with the first image the chessboard was found in
     rms, K, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, size, None, None)
     if not math.isfinite(rms):
         raise CalibrationError("OpenCV's calibration did not converge")

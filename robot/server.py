@@ -78,18 +78,23 @@ from collections import Counter
 
 import numpy as np
 
-from interfaces.messages import Estop, RobotState, ServiceStatus, TorqueCommand
+from interfaces.messages import RobotState, ServiceStatus, TorqueCommand
 from runtime.loop_hygiene import LoopHygiene
 from runtime.loop_stats import LoopStats
 from runtime.session import ServiceNode
 
 from .command import Command
 from .command_auth import CommandAuth
+from .estop import RobotEstop
 from .gate import CommandGate
 from .guard import Action, RobotGuard
 from .guard_log import log_guard_episodes
+from .late_answer import LateAnswerDamping
 from .port import Applied, Reading, RobotPort
+from .served_controller import ServedController
+from .server_cycle import CycleRecord, TorqueBuffers
 from .server_params import ServerParams
+from .server_status import AnswerLatency, StatusOut
 
 __all__ = ["RobotServer", "ServerParams"]
 
@@ -103,6 +108,19 @@ class RobotServer:
     ----------
     port : the hardware side. node : an open :class:`ServiceNode`. params : timing.
     service : the name in the status. status_key : where the status goes.
+
+    Attributes
+    ----------
+    steps : int
+        Cycles written so far.
+    cycle : CycleRecord
+        What the port did with the last cycle (``outcome``, ``braked``, ``applied_seq``) and the holds reported.
+    buffers : TorqueBuffers
+        The torques reused every cycle (the server's hold, the newest command held, the yield's, the last written).
+    estop : RobotEstop
+        The e-stop's keys and its reason while engaged. served : ServedController, the controller session served.
+    out : StatusOut
+        Where and when the status goes. latency : AnswerLatency, a clocked robot's answer latency for the status.
     """
 
     def __init__(self, port: RobotPort, node: ServiceNode, params: ServerParams, service: str,
@@ -110,110 +128,76 @@ class RobotServer:
         self.port = port
         self.node = node
         self.p = params
-        self.service = service
         self.keys = node.keys
-        self.status_key = status_key
+        self.out = StatusOut(service, status_key, 1.0 / params.status_rate_hz)
         self.counters: Counter[str] = Counter()
         self.gate = CommandGate(np.asarray(port.capabilities.torque_limits_nm), self.counters,
                                 params.tau_rate_nm_s, 1.0 / params.rate_hz, params.contact_tau_rate_nm_s)
         self.stop = threading.Event()
         self.stats = LoopStats()
-        self._latency_us = np.zeros(2000)  # clocked: state published -> its answer forwarded [us], a ring
-        self._n_latency = 0
+        self.latency = AnswerLatency()  # clocked ports only
         self.steps = 0
-        self.braked = True  # the last cycle held (any outcome but the controller's command: Applied.took_command)
-        self.outcome = Applied.HELD  # what the port did with the last cycle
-        self.applied_seq = -1  # the seq of the controller's command written in the last cycle; -1: none (a hold)
-        self.held_cycles = 0  # states published saying -1 (each seq once): RobotState.held_cycles
-        self._held_counted_seq = -1
+        self.cycle = CycleRecord()
         self._sources: list = []
-        self._status_period_s = 1.0 / params.status_rate_hz
-        self._next_status = 0.0
-        self.estop_reason: str | None = None
-        self.controller: str | None = None  # the controller session served
-        self._controller_seen_ns = 0
         self.guard = RobotGuard(params.guard_limits(port), port.limits_model, port.capabilities.gravity_compensated)
         self._reading: Reading | None = None  # the last reading published
-        self._damping = np.zeros(port.n_joints)  # the yield's torques (n,) [Nm], reused
-        self._written = np.zeros(port.n_joints)  # the torques last applied (n,) [Nm]
-        self._hold = Command(port.n_joints)  # a hold, for the cycles the server holds by itself
-        self._held = Command(port.n_joints)  # real time: the newest command accepted, kept over the cycles
-        self._estops = node.inbox(self.keys.controller_estop, Estop, maxlen=32)
-        self._releases = node.inbox(self.keys.controller_estop_release, Estop, maxlen=32)
+        self.late = LateAnswerDamping(port.limits_model, params.late_damping_rad_s, self.gate.tau_max)
+        self.buffers = TorqueBuffers(port.n_joints)
         self.auth = CommandAuth(node, self.counters)  # commands' MACs and signed releases, whoever relayed them
+        self.estop = RobotEstop(node, self.auth, self.guard, self.counters, log)
+        self.served = ServedController(self.auth, self.counters, params.rebind_after_s, log)
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def run(self) -> int:
         """Serve until stopped; returns the number of written cycles."""
         self.port.activate()
         try:
-            if self.port.clocked:
-                self._run_clocked()
-            elif self.p.mode == "lockstep":
-                self._run_lockstep()
-            else:
-                self._run_realtime()
+            loop = self._run_clocked if self.port.clocked else \
+                self._run_lockstep if self.p.mode == "lockstep" else self._run_realtime
+            loop()
         finally:
             self.port.deactivate()
             self._publish_status(force=True)
         return self.steps
 
     # -- one cycle ---------------------------------------------------------------------------------
-    def _poll_estop(self) -> None:
-        for inbox, release_key in ((self._estops, False), (self._releases, True)):
-            while (e := inbox.get(0.0)) is not None:
-                if e.engaged:
-                    if self.estop_reason is None:
-                        log.warning("e-stop from %s: %s; holding whatever is commanded", e.source or "?", e.reason)
-                    self.counters["estops"] += 1
-                    self.estop_reason = f"{e.reason[:80]} ({e.source[:40] or '?'})"
-                elif release_key and not self.auth.release_ok(e):
-                    continue  # not signed by the operator, or a replay: counted and logged
-                elif release_key:
-                    if self.estop_reason is not None:
-                        log.warning("e-stop released by %s", e.source or "?")
-                    if self.guard.release():
-                        log.warning("FAULT-hold released by %s: serving commands again", e.source or "?")
-                        self.counters["guard_fault_releases"] += 1
-                    self.counters["estop_releases"] += 1
-                    self.estop_reason = None
-                else:
-                    self.counters["estop_releases_ignored_on_the_engage_key"] += 1
-
     def _apply(self, command: Command, seq: int = -1) -> None:
         """Write ``command`` (gated torques answering state ``seq``, or a hold) to the port: one cycle, or what the
         e-stop or the guard makes of it (a hold, a brake, a yield). What the port did (:class:`Applied`) decides the
         rest: the next state reports ``seq`` as applied when the port took the command, else -1, and the gate
         counts from what the arm held."""
-        self._poll_estop()
+        self.estop.poll()
         action = self.guard.action
         torques = not command.is_hold
-        if self.estop_reason is not None:
+        if self.estop.reason is not None:
             if torques:
                 self.counters["commands_held_for_estop"] += 1
             done = self.port.estop_hold()
         elif action != Action.APPLY:  # before the controller's own hold too: a held pad presses on, a repeat speeds on
             done = self._guard_hold(action, torques)
         elif not torques:
-            if not self.braked:
+            if not self.cycle.braked:
                 self.counters["holds_applied"] += 1
             done = self.port.hold()
         else:
             # rate-limited again (a command applied again after a hold climbs from what held the arm), and predicted;
             # not a lock-step run's first command, before which nothing held the arm: taken as the gate passed it
             first = not self.gate.rated
-            tau = command.tau_nm if first else self.gate.limit_rate(command.tau_nm)
+            tau = command.tau_nm
+            if self.late.on:  # opt-in: the motion since the state it answers, damped
+                tau = self.late.apply(tau, seq)
+                self.counters["cycles_late_answer_damped"] += self.late.damped_nm > 0
+            tau = tau if first else self.gate.limit_rate(tau)
             if not first and self._speeds_over(tau):
                 done = self._guard_hold(self.guard.action, torques)
             else:
                 done = self.port.write(tau)
                 if done.took_command:
-                    self._written[:] = tau
-        self.outcome, self.braked = done, not done.took_command
-        self.applied_seq = -1 if self.braked else seq
-        if self.braked:
+                    self.buffers.written[:] = tau
+        self.cycle.took(done, seq)
+        if self.cycle.braked:
             held = self.port.held_torque_nm()
-            self.gate.ran(self._written if held is None else held)
+            self.gate.ran(self.buffers.written if held is None else held)
         self.steps += 1
 
     def _guard_hold(self, action: Action, torques: bool) -> Applied:
@@ -222,7 +206,7 @@ class RobotServer:
             self.counters["commands_held_for_guard_fault"] += 1
         if action == Action.YIELD:
             assert self._reading is not None, "a guard's yield before the first reading"
-            return self.port.yield_hold(self.guard.damping_into(self._reading.dq_rad_s, self._damping))
+            return self.port.yield_hold(self.guard.damping_into(self._reading.dq_rad_s, self.buffers.damping))
         if action == Action.FAULT:
             return self.port.estop_hold()
         return self.port.speed_hold()
@@ -236,25 +220,6 @@ class RobotServer:
         if entered:
             self._log_guard(entered, r)
         return bool(entered)
-
-    def _from_served_controller(self, cmd: TorqueCommand) -> bool:
-        """True for a command of the controller session served (binding the first; re-binding to a newcomer only
-        after the served one has been silent for ``rebind_after_s``); another session's command is counted. A
-        command whose MAC is not its session's (:mod:`robot.command_auth`) is refused first, counted."""
-        if not self.auth.command_ok(cmd):
-            return False
-        now = time.monotonic_ns()
-        if cmd.session != self.controller:
-            if self.controller is not None and now - self._controller_seen_ns < self.p.rebind_after_s * 1e9:
-                self.counters["commands_from_another_controller"] += 1
-                return False
-            if self.controller is not None:
-                self.counters["controller_changes"] += 1
-            log.warning("serving controller session %s%s", cmd.session[:40] or "?",
-                        "" if self.controller is None else f" (after {self.controller[:40] or '?'} fell silent)")
-            self.controller = cmd.session
-        self._controller_seen_ns = now
-        return True
 
     def _in_sequence(self, cmd: TorqueCommand, seq: int) -> bool:
         if cmd.seq != seq:
@@ -299,7 +264,7 @@ class RobotServer:
         """One lock-step cycle on ``cmd``: if it answers the current state (served controller, in sequence, passed
         by the gate) the port is written, its extras run and the next state goes out; False when it was dropped
         (counted). ``t0_ns``, ``t_prev_ns``: when the wait for it began and the last cycle ended (perf counter)."""
-        if not self._from_served_controller(cmd) or not self._in_sequence(cmd, self.steps):
+        if not self.served.accepts(cmd) or not self._in_sequence(cmd, self.steps):
             return False
         command = self.gate.accept(cmd)
         if command is None:
@@ -320,7 +285,7 @@ class RobotServer:
         self._sources = [latest]
         period_ns = int(round(1e9 / self.p.rate_hz))
         stale_ns = int(self.p.stale_limit_s * 1e9)
-        held: Command | None = None  # the newest command accepted (a copy in self._held), None before the first
+        held: Command | None = None  # the newest command accepted (a copy in buffers.held), None before the first
         held_seq = -1
         last_cmd_ns = -stale_ns - 1
         next_ns = time.monotonic_ns()
@@ -338,17 +303,17 @@ class RobotServer:
                 cmd = latest.take()
                 if cmd is not None and cmd.seq < first_seq:
                     self.counters["commands_from_before_a_freeze"] += 1
-                elif cmd is not None and self._from_served_controller(cmd):
+                elif cmd is not None and self.served.accepts(cmd):
                     accepted = self.gate.check(cmd)  # the rate limit applies cycle by cycle (_apply)
                     if accepted is not None:
-                        held = self._held.assign(accepted)
+                        held = self.buffers.held.assign(accepted)
                         held_seq, last_cmd_ns = cmd.seq, t0
                 fresh = held is not None and t0 - last_cmd_ns <= stale_ns
-                if not fresh and held is not None and not self.braked:
+                if not fresh and held is not None and not self.cycle.braked:
                     self.counters["stale_command_brakes"] += 1
                     log.warning("no fresh command for %.0f ms: braking", (t0 - last_cmd_ns) / 1e6)
                 t1 = time.monotonic_ns()
-                self._apply(held if held is not None and fresh else self._hold, held_seq)
+                self._apply(held if held is not None and fresh else self.buffers.hold, held_seq)
                 self.port.after_cycle(lockstep=False)
                 t2 = time.monotonic_ns()
                 self.publish_state()
@@ -394,7 +359,7 @@ class RobotServer:
                     if seq >= 0 and last_applied < seq:
                         self.counters["commands_late"] += 1
                         if not lockstep:
-                            self._apply(self._hold)  # this cycle is held: its answer did not come in time
+                            self._apply(self.buffers.hold)  # this cycle is held: its answer did not come in time
                     seq += 1
                     self.publish_state(seq)
                     self.stats.add((t0 - last_state_ns) / 1e3, 0.0, 0.0, (time.monotonic_ns() - t0) / 1e3)
@@ -405,7 +370,7 @@ class RobotServer:
                     last_pub_ns = t0
                 cmd = inbox.get(0.0)
                 while cmd is not None:
-                    if not self._from_served_controller(cmd):
+                    if not self.served.accepts(cmd):
                         pass
                     elif cmd.seq <= last_applied or not 0 <= seq - cmd.seq <= max_lag:
                         self.counters["commands_out_of_sequence"] += 1
@@ -418,17 +383,15 @@ class RobotServer:
                             last_applied = cmd.seq
                             last_good_ns = time.monotonic_ns()
                             if cmd.seq == seq:
-                                self._latency_us[self._n_latency % len(self._latency_us)] = \
-                                    (last_good_ns - last_state_ns) / 1e3
-                                self._n_latency += 1
+                                self.latency.add((last_good_ns - last_state_ns) / 1e3)
                                 hygiene.collect_due(period_ns - (last_good_ns - last_state_ns))  # the slack now
                             else:
                                 self.counters["answers_one_or_more_states_late"] += 1
                     cmd = inbox.get(0.0)
                 stale = time.monotonic_ns() - last_state_ns > stale_ns  # this state's age: a slow robot is not late
-                if not lockstep and last_applied < seq and not self.braked and stale:
+                if not lockstep and last_applied < seq and not self.cycle.braked and stale:
                     self.counters["stale_command_brakes"] += 1
-                    self._apply(self._hold)
+                    self._apply(self.buffers.hold)
                 self._publish_status()
                 hygiene.collect_due(0)  # only a pile forces it here (no answer, no slack measured)
                 if self.p.max_steps and self.steps >= self.p.max_steps:
@@ -440,21 +403,20 @@ class RobotServer:
     def publish_state(self, seq: int | None = None) -> None:
         """Publish the port's reading as state ``seq`` (default: the cycles written so far)."""
         r = self._reading = self.port.read()
-        entered = self.guard.observe(r.q_rad, r.dq_rad_s, r.wrench_world, r.robot_time_ns * 1e-9, held=self.braked)
+        entered = self.guard.observe(r.q_rad, r.dq_rad_s, r.wrench_world, r.robot_time_ns * 1e-9,
+                                     held=self.cycle.braked)
         if entered:
             self._log_guard(entered, r)
         self.gate.touching = self.guard.touching
         seq = self.steps if seq is None else seq
-        applied = self.applied_seq if self.port.applying() else -1
-        if applied < 0 and seq != self._held_counted_seq:  # a state said again (lock-step) is one cycle
-            self.held_cycles += 1
-            self._held_counted_seq = seq
+        self.late.record(seq, r.q_rad, r.dq_rad_s)
+        applied = self.cycle.command_seq(self.port.applying(), seq)
         self.node.publish(self.keys.robot_state, RobotState(
             seq=seq, stamp_ns=time.monotonic_ns(), q_rad=r.q_rad.tolist(),
             dq_rad_s=r.dq_rad_s.tolist(), tau_nm=r.tau_nm.tolist(), wrench_world=r.wrench_world.tolist(),
             capabilities=self.port.capabilities, robot_time_ns=r.robot_time_ns, wall_ns=time.time_ns(),
-            command_seq=applied, estop=self.estop_reason is not None or self.guard.latch.latched,
-            held_cycles=self.held_cycles))
+            command_seq=applied, estop=self.estop.reason is not None or self.guard.latch.latched,
+            held_cycles=self.cycle.held_cycles))
 
     def _log_guard(self, entered: tuple[str, ...], r: Reading) -> None:
         """Count and log each limit episode that began (and the FAULT-hold, if they latched it)."""
@@ -467,30 +429,22 @@ class RobotServer:
             for reason, n in list(source.bad.items()):  # Zenoh's thread may add a reason meanwhile
                 counters[f"commands_dropped_bad_payload: {reason}"] = n
         counters.update(self.port.counters())
-        if self._n_latency:  # the round trip through the controller, as the robot side sees it
-            lat = self._latency_us[:min(self._n_latency, len(self._latency_us))]
-            p50, p99 = np.percentile(lat, [50, 99])
-            counters.update(answer_latency_p50_us=int(p50), answer_latency_p99_us=int(p99))
-        counters["estop_engaged"] = int(self.estop_reason is not None)
+        self.latency.into(counters)  # the round trip through the controller, as the robot side sees it
+        counters["estop_engaged"] = int(self.estop.reason is not None)
         counters["guard_fault_latched"] = int(self.guard.latch.latched)
         counters["guard_episodes_in_hold"] = self.guard.episodes_in_hold
-        for name, source in (("estop", self._estops), ("estop_release", self._releases)):
-            for reason, n in list(source.bad.items()):
-                counters[f"{name}_dropped: {reason}"] = n
-        estop = "" if self.estop_reason is None else f" estop=engaged ({self.estop_reason})"
-        served = "" if self.controller is None else f" controller={self.controller[:12] or '?'}"
+        self.estop.dropped_into(counters)
+        estop = "" if self.estop.reason is None else f" estop=engaged ({self.estop.reason})"
+        served = "" if self.served.session is None else f" controller={self.served.session[:12] or '?'}"
         fault = "" if self.guard.fault_reason is None else f" guard=FAULT ({self.guard.fault_reason})"
-        detail = (f"mode={'clocked' if self.port.clocked else self.p.mode} step={self.steps} braked={self.braked}"
-                  f"{served}{estop}{fault}")
+        mode = "clocked" if self.port.clocked else self.p.mode
+        detail = f"mode={mode} step={self.steps} braked={self.cycle.braked}{served}{estop}{fault}"
         extra = self.port.detail()
-        return ServiceStatus(service=self.service, seq=self.steps, stamp_ns=time.monotonic_ns(), counters=counters,
+        return ServiceStatus(service=self.out.service, seq=self.steps, stamp_ns=time.monotonic_ns(), counters=counters,
                              detail=f"{detail} {extra}".strip(), timing=self.stats.summary())
 
     def _publish_status(self, force: bool = False) -> None:
         self.auth.housekeeping()  # introductions: a poll and a clock read unless one is due
-        self._poll_estop()  # also while no command comes (a lock-step robot waiting for its answer)
-        now = time.monotonic()
-        if not force and now < self._next_status:
-            return
-        self._next_status = now + self._status_period_s
-        self.node.publish(self.status_key, self.status())
+        self.estop.poll()  # also while no command comes (a lock-step robot waiting for its answer)
+        if self.out.due(time.monotonic(), force):
+            self.node.publish(self.out.key, self.status())

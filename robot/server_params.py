@@ -38,8 +38,11 @@ class ServerParams:
     force over this [N] marks the surface (and makes a press too fast a yield, not a brake); force_cap_n : yield
     while the contact force is over this [N] (0: never); force_release_share : the yield lets go under this
     share of the cap; yield_damping_share : each joint's damping in a yield, as the share of its torque limit it
-    gives at its speed limit; fault_episodes, fault_window_s : that many brake or yield episodes within that long [s]
-    (robot time) latch the FAULT-hold until the operator's e-stop release (0 episodes: never).
+    gives at its speed limit; late_damping_rad_s : a command applied more than two states after the one it
+    answers gets each joint's motion since damped as a mode of this frequency [rad/s] on its inertia
+    (:mod:`robot.late_answer`; 0, the default: never); fault_episodes, fault_window_s : that many brake or yield
+    episodes within that long [s] (robot time) latch the FAULT-hold until the operator's e-stop release (0
+    episodes: never).
     """
 
     mode: str = "lockstep"
@@ -60,6 +63,7 @@ class ServerParams:
     force_cap_n: Annotated[float, In(0.0, 1000.0)] = 45.0
     force_release_share: Annotated[float, In(0.0, 1.0)] = 0.8
     yield_damping_share: Annotated[float, In(0.0, 1.0)] = 0.1
+    late_damping_rad_s: Annotated[float, In(0.0, 500.0)] = 0.0
     fault_episodes: Annotated[int, In(0, 1000)] = 5
     fault_window_s: Annotated[float, In(0.0, 60.0)] = 1.0
 

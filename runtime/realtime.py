@@ -170,6 +170,32 @@ def apply_realtime(request: RealtimeRequest | None = None) -> RealtimeResult:
                           report, raised)
 
 
+def apply_relay_realtime(request: RealtimeRequest | None = None) -> RealtimeResult:
+    """For a process with no loop of its own that relays the loops' messages (``lamps router``): every thread of
+    the process, the calling one too, to ``SCHED_FIFO`` one below the loop's priority, as a service's I/O threads
+    (``LAMPS_RT_PRIORITY``; ``off``: all stay fair), and memory locked (``LAMPS_MLOCK``). Each state and command
+    of a routed cell passes through it: left fair, it waits behind every ordinary process while the loops it
+    serves run ``SCHED_FIFO``, and on a 2-core cell the routed round trip reached 29-64 periods at its 99th
+    percentile and 144 at its worst (docs/benchmarks.md). Call after the Zenoh session is open (its threads
+    exist)."""
+    request = RealtimeRequest.from_env() if request is None else request
+    if not sys.platform.startswith("linux"):
+        return RealtimeResult(0, False, f"real-time scheduling: not on Linux ({sys.platform})")
+    if request.priority is None:
+        parts = ["threads fair (LAMPS_RT_PRIORITY=off)"]
+        raised = 0
+    else:
+        priority = max(1, request.priority - 1)
+        fifo = _fifo(priority)
+        raised, text = _raise_others(priority) if fifo.startswith("SCHED_FIFO") else (0, fifo)
+        raised += fifo.startswith("SCHED_FIFO")
+        parts = [text if raised else fifo]
+    parts.append(_mlock(request.lock_memory))
+    report = "; ".join(parts)
+    log.info("relay threads: %s", report)
+    return RealtimeResult(0, parts[-1] == "memory locked", report, raised)
+
+
 def _raise_others(priority: int) -> tuple[int, str]:
     """Every thread of this process but the calling one and those kept fair to ``SCHED_FIFO`` ``priority``;
     (how many, the report's words)."""

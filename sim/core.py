@@ -8,12 +8,9 @@ the dirt under it.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pybullet as pb
 
-from arm.description import PAD_SIZE_M
 from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
 
@@ -24,6 +21,7 @@ from .hand import hand_from_params
 from .params import SimParams
 from .plant import Measurement, plant_joints, plant_urdf
 from .robot import Readout, SimRobot
+from .wiping import PadWiper
 from .world import build_world
 
 
@@ -54,6 +52,7 @@ class SimCore:
     model : the description the arm was built from (limits, start pose)
     joints : the simulated drives' rotor inertia and friction
     measured : (q, dq, tau, wrench) as the robot's sensors report them (delayed, biased, noisy per the plant)
+    wiper : the pad's removal of :attr:`dirt` from :attr:`board`
     """
 
     def __init__(self, params: SimParams, model: RobotModel | None = None) -> None:
@@ -106,10 +105,7 @@ class SimCore:
         except ConfigError:
             self.close()
             raise
-        self._cos_tilt = math.cos(math.radians(params.dirt.max_tilt_deg))
-        self._half_pad = (PAD_SIZE_M[0] / 2, PAD_SIZE_M[1] / 2)
-        self._wipe_every = params.dirt.wipe_every_steps
-        self._wipe_dt_s = params.dt_s * self._wipe_every
+        self.wiper = PadWiper(self.board, self.dirt, params.dirt, params.dt_s)
 
     def _check_start_clear(self) -> None:
         hits = pb.getClosestPoints(self.world.robot, self.world.board, 0.0, physicsClientId=self.client)
@@ -156,8 +152,8 @@ class SimCore:
             self.peak_force_n = out.normal_force_n
         if out.arm_contact:
             self.arm_contact_steps += 1
-        if self.steps % self._wipe_every == 0:
-            self._wipe(out)
+        if self.steps % self.wiper.every_steps == 0:
+            self.wiper.wipe(out)
         return out
 
     def _measure(self, o: Readout) -> tuple[np.ndarray, ...]:
@@ -169,21 +165,6 @@ class SimCore:
         """The largest normal force of the pad on the board [N] over the steps since the last call; restarts."""
         peak, self.peak_force_n = self.peak_force_n, self.robot.out.normal_force_n
         return max(peak, self.peak_force_n)
-
-    def _wipe(self, o: Readout) -> None:
-        if o.normal_force_n <= self.params.dirt.threshold_force_n:
-            return
-        R = self.board.R
-        tool_z = o.tcp_R[:, 2]
-        if -(tool_z @ self.board.normal_world) < self._cos_tilt:
-            return  # tilted: only an edge touches
-        centre = (o.tcp_p - self.board.origin_m) @ R
-        axis = o.tcp_R[:, 0] @ R[:, :2]
-        norm = math.hypot(axis[0], axis[1])
-        vel = o.tcp_v @ R[:, :2]
-        spin = float(o.tcp_w @ R[:, 2])
-        self.dirt.wipe(centre[:2], axis / norm, self._half_pad, vel, spin, o.normal_force_n,
-                       self._wipe_dt_s, self.params.dirt.threshold_force_n, self.params.dirt.rate_per_n_m)
 
     def close(self) -> None:
         if self.client is not None:

@@ -240,6 +240,9 @@ class SimParams:
     command older than this makes the robot brake and hold.
     speed_brake_share : the robot side brakes while a joint moves faster than
     this share of its speed limit, as a robot's safety controller does (0: off).
+    late_damping_rad_s : a command applied more than two states after the one
+    it answers gets the arm's motion since damped, each joint a mode of this
+    frequency on its inertia (:mod:`robot.late_answer`; 0, the default: off).
     gravity_compensated : add gravity torques like the real iiwa's own
     controller does (declared in RobotState.capabilities). start_q_rad :
     start joint positions, or None for an automatic pose facing the board
@@ -254,6 +257,7 @@ class SimParams:
     rate_hz: Annotated[float, In(100.0, 5000.0)] = 1000.0
     stale_limit_s: float = 0.02
     speed_brake_share: Annotated[float, In(0.0, 1.0)] = 0.95
+    late_damping_rad_s: Annotated[float, In(0.0, 500.0)] = 0.0
     gravity_compensated: bool = False
     start_q_rad: tuple[float, ...] | None = None
     start_standoff_m: Annotated[float, In(0.01, 0.5)] = 0.08

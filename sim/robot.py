@@ -38,6 +38,7 @@ from arm.joint_dynamics import JointDynamics
 
 from .drive import drive_torque_into, drives_record
 from .plant import tool_gravity_torque
+from .step_dynamics import StepDynamics
 from .world import GRAVITY_M_S2, World
 
 
@@ -71,6 +72,35 @@ class Readout:
 BRAKE_STOP_S = 0.02
 
 
+class BrakeRamp:
+    """A brake's stop: each joint's speed ramped from what it was when the brake engaged to zero over
+    :data:`BRAKE_STOP_S`, all joints together.
+
+    steps : the ramp's length [physics steps]; k : the steps of it done (``steps``: the arm stands);
+    dq_start : (n,) the joint speeds the brake began at [rad/s].
+    """
+
+    __slots__ = ("steps", "k", "dq_start")
+
+    def __init__(self, n: int, dt_s: float) -> None:
+        self.steps = max(int(round(BRAKE_STOP_S / dt_s)), 1)
+        self.k = self.steps
+        self.dq_start = np.zeros(n)
+
+    def start(self, dq: np.ndarray) -> None:
+        """Begin the ramp from the joint speeds ``dq`` (n,) [rad/s]."""
+        self.dq_start[:] = dq
+        self.k = 0
+
+    def next_speeds(self) -> list[float] | None:
+        """The joints' target speeds [rad/s] for the next step; None once the ramp is done."""
+        if self.k >= self.steps:
+            return None
+        self.k += 1
+        left = 1.0 - self.k / self.steps
+        return (self.dq_start * left).tolist()
+
+
 class SimRobot:
     """Torque-controlled arm with brakes, in a built :class:`~sim.world.World`.
 
@@ -102,9 +132,7 @@ class SimRobot:
         self.dt_s = float(dt_s if dt_s is not None
                           else pb.getPhysicsEngineParameters(physicsClientId=self.c)["fixedTimeStep"])
         self.braked = False
-        self._stop_steps = max(int(round(BRAKE_STOP_S / self.dt_s)), 1)
-        self._stop_k = self._stop_steps  # steps of the ramp done (all: standing)
-        self._stop_dq = np.zeros(len(world.joints))  # (n,) the joint speeds the brake began at [rad/s]
+        self._brake = BrakeRamp(len(world.joints), self.dt_s)
         self.out = Readout()
         #: (6,) a wrench [N, Nm] (world axes, at the pad centre) someone else puts on the tool for the next step
         #: (the operator's hand, :mod:`.hand`); not in the contact wrench the readout reports
@@ -113,19 +141,8 @@ class SimRobot:
         n = len(self._joints)
         self._zeros = [0.0] * n
         self._tau_cmd = np.zeros(n)
-        self._tau_pb = np.zeros(n)
         self._drives = drives_record(self.joints, self.dt_s)  # the drives' friction and armature, the kernel's scratch
-        # the step's start, for the contact wrench from the motion: M (n, n), h = C dq + g (n,), dq, tau_pb known
-        self._M = np.zeros((n, n))
-        self._h = np.zeros(n)
-        self._dq0 = np.zeros(n)
-        self._q0: list[float] = self._zeros
-        self._J: np.ndarray | None = None  # (6, n) the pad's Jacobian at the step's start, when it was needed
-        self._torques_known = False
-        self._y = np.zeros(n)
-        self._ddq = np.zeros(n)
-        self._JJt = np.zeros((6, 6))
-        self._eps6 = 1e-9 * np.eye(6)  # J J^T regularised: finite at a singular pose
+        self._step = StepDynamics(world, self._zeros, self.dt_s)  # the step's start, for the wrench from the motion
         self.read()
         if not self._rigid:
             self._drive_torque()  # compiles (or loads) the kernel now, not in the first step
@@ -140,76 +157,46 @@ class SimRobot:
         if self.gravity_compensated:
             tau = tau + self.compensation()
         np.maximum(np.minimum(tau, self.tau_max, out=self._tau_cmd), self._tau_min, out=self._tau_cmd)  # np.clip's cost
+        st = self._step
         if self._rigid:  # no drive needs M and h: taken only while the pad touched (its first step keeps the points')
             touched = bool(self.out.wrench.any())
             if touched:
                 self._start_dynamics()
-            self._tau_pb[:] = self._tau_cmd
-            applied = self._tau_pb
-            self._torques_known = touched
+            st.tau_pb[:] = self._tau_cmd
+            applied = st.tau_pb
+            st.torques_known = touched
         else:
             applied = self._drive_torque()
-            self._torques_known = True
+            st.torques_known = True
         pb.setJointMotorControlArray(self.w.robot, self._joints, pb.TORQUE_CONTROL, forces=applied.tolist(),
                                      physicsClientId=self.c)
 
     def _start_dynamics(self) -> None:
         """PyBullet's ``M`` and ``h = C dq + g`` at the step's start (and the pad's Jacobian while it is loaded)."""
-        o, robot, c = self.out, self.w.robot, self.c
-        self._q0 = q = o.q.tolist()
-        self._dq0[:] = o.dq
-        self._M[:] = pb.calculateMassMatrix(robot, q, physicsClientId=c)
-        self._h[:] = pb.calculateInverseDynamics(robot, q, o.dq.tolist(), self._zeros, physicsClientId=c)
-        self._J = self._jacobian(q) if o.wrench.any() or self.external_wrench.any() else None
-
-    def _jacobian(self, q: list[float]) -> np.ndarray:
-        """(6, n) the pad centre's Jacobian at ``q``, world axes (the TCP link's inertial frame is its link frame,
-        about which the wrench is taken)."""
-        lin, ang = pb.calculateJacobian(self.w.robot, self.w.tcp_link, [0.0, 0.0, 0.0], q, self._zeros, self._zeros,
-                                        physicsClientId=self.c)
-        return np.array(lin + ang)
+        o = self.out
+        self._step.take(o.q, o.dq, bool(o.wrench.any() or self.external_wrench.any()))
 
     def _drive_torque(self) -> np.ndarray:
         """The torques PyBullet must apply so the arm moves as one with armature and friction (:mod:`.drive`)."""
-        o = self.out
+        o, st = self.out, self._step
         self._start_dynamics()
-        M = self._M
-        h_hat = self._h.copy()
-        if self._J is not None:  # the contact of the last step stands for this one's, the hand's is this step's
-            h_hat -= self._J.T @ (o.wrench + self.external_wrench)
-        ok = drive_torque_into(self._tau_cmd, o.dq, M, h_hat, self._drives, self._tau_pb)
-        return self._tau_pb if ok else self._tau_cmd  # (M + Ia is positive definite for any arm PyBullet loads)
-
-    def _wrench_from_motion(self, o: Readout) -> None:
-        """Replace ``o.wrench`` by the wrench the step's motion says the pad felt (the module docstring), less the
-        hand's; kept as the contact points report it after a braked step or before any torques."""
-        if not self._torques_known:
-            return
-        J = self._J if self._J is not None else self._jacobian(self._q0)
-        y, ddq, JJt = self._y, self._ddq, self._JJt
-        np.subtract(o.dq, self._dq0, out=ddq)
-        ddq /= self.dt_s
-        np.matmul(self._M, ddq, out=y)
-        y += self._h
-        y -= self._tau_pb
-        np.matmul(J, J.T, out=JJt)
-        JJt += self._eps6
-        o.wrench[:] = np.linalg.solve(JJt, J @ y)
-        o.wrench -= self.external_wrench
+        M = st.M
+        h_hat = st.h.copy()
+        if st.J is not None:  # the contact of the last step stands for this one's, the hand's is this step's
+            h_hat -= st.J.T @ (o.wrench + self.external_wrench)
+        ok = drive_torque_into(self._tau_cmd, o.dq, M, h_hat, self._drives, st.tau_pb)
+        return st.tau_pb if ok else self._tau_cmd  # (M + Ia is positive definite for any arm PyBullet loads)
 
     def brake(self) -> None:
         """Engage the brakes for the next step: every joint's speed ramped from what it was when they engaged to
         zero over :data:`BRAKE_STOP_S`, all together, then held at zero, with up to its torque limit."""
-        self._torques_known = False  # PyBullet's velocity motors: what they apply is not known here
+        self._step.torques_known = False  # PyBullet's velocity motors: what they apply is not known here
         if not self.braked:
             self.braked = True
-            self._stop_dq[:] = self.out.dq
-            self._stop_k = 0
-        if self._stop_k < self._stop_steps:
-            self._stop_k += 1
-            left = 1.0 - self._stop_k / self._stop_steps
-            pb.setJointMotorControlArray(self.w.robot, self._joints, pb.VELOCITY_CONTROL,
-                                         targetVelocities=(self._stop_dq * left).tolist(),
+            self._brake.start(self.out.dq)
+        speeds = self._brake.next_speeds()
+        if speeds is not None:
+            pb.setJointMotorControlArray(self.w.robot, self._joints, pb.VELOCITY_CONTROL, targetVelocities=speeds,
                                          forces=self.tau_max.tolist(), physicsClientId=self.c)
 
     def gravity(self) -> np.ndarray:
@@ -274,6 +261,6 @@ class SimRobot:
             fx, fy, fz = fx + cx, fy + cy, fz + cz
             mx, my, mz = mx + ry * cz - rz * cy, my + rz * cx - rx * cz, mz + rx * cy - ry * cx
         o.wrench[:] = (fx, fy, fz, mx, my, mz)
-        if fx or fy or fz:
-            self._wrench_from_motion(o)
+        if fx or fy or fz:  # the wrench the step's motion says the pad felt (the module docstring), less the hand's
+            self._step.wrench_into(o.wrench, o.dq, self.external_wrench)
         o.normal_force_n = float(fx * self.normal[0] + fy * self.normal[1] + fz * self.normal[2])

@@ -182,7 +182,8 @@ class SimService:
         server_params = ServerParams(mode=params.mode, rate_hz=params.rate_hz, stale_limit_s=params.stale_limit_s,
                                      republish_s=params.lockstep_republish_s, max_steps=params.max_steps,
                                      status_rate_hz=params.status_rate_hz,
-                                     speed_brake_share=params.speed_brake_share)
+                                     speed_brake_share=params.speed_brake_share,
+                                     late_damping_rad_s=params.late_damping_rad_s)
         self.server = RobotServer(self.port, node, server_params, SERVICE, node.keys.sim_status)
         self.stop = self.server.stop
 

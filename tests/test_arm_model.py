@@ -21,6 +21,8 @@ from interfaces.errors import ConfigError
 from interfaces.messages import ControllerStatus, Phase
 from lampskit.core.planner_types import Stain
 
+from .core_ticks import tick
+
 #: The learning controller (opt-in: [controller.model] enabled, with the identification roll).
 LEARNING = {"enabled": True, "identify_s": 2.0}
 
@@ -159,7 +161,7 @@ def _run(skill, plant: dict, compensated: bool, until_first_wipe: bool, ticks: i
             if n >= 100 and n % 100 == 0:
                 _stains(core, sim)
             o = sim.out
-            applied = core.tick(o.q, o.dq, o.wrench, compensated, DT, None, applied).copy()
+            applied = tick(core, o.q, o.dq, o.wrench, compensated, DT, None, applied).copy()
             if at_wipe is None and core.executor.phase == Phase.WIPE:
                 t = core.arm.tool
                 at_wipe = (t.valid, t.mass_kg, t.com_flange_m.copy())

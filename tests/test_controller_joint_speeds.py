@@ -14,6 +14,8 @@ from robot.lbr.params import LbrParams
 from sim.core import SimCore
 from sim.params import SimParams
 
+from .core_ticks import tick
+
 
 def _feed_stains(core: ControllerCore, sim: SimCore) -> None:
     board = BoardPose.from_transform(sim.board.T_board_to_world, sim.board.size_m)
@@ -34,7 +36,7 @@ def _run(learned_skill, limits: dict, planner: dict | None = None) -> tuple[Cont
             if n % 100 == 0:
                 _feed_stains(core, sim)
             o = sim.out
-            tau = core.tick(o.q, o.dq, o.wrench, True, 0.001)
+            tau = tick(core, o.q, o.dq, o.wrench, True, 0.001)
             sim.step(tau.copy())
             np.maximum(peak, np.abs(sim.out.dq) / dq_max, out=peak)
             if core.executor.phase == "DONE":

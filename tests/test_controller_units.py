@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import concurrent.futures
+import os
 import threading
 
 import numpy as np
@@ -940,6 +941,43 @@ def test_the_planner_thread_exists_at_once_and_shortens_the_switch_interval_only
     finally:
         pool.shutdown()
         sys.setswitchinterval(normal)
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setscheduler"), reason="Linux scheduling")
+def test_the_planner_runs_its_jobs_at_the_lowest_fifo_priority_while_its_loop_runs_fifo():
+    """A fair planner thread holding the interpreter waits for a core behind every FIFO thread while the loop
+    waits for the interpreter; while the loop runs SCHED_FIFO, each job runs at SCHED_FIFO 1."""
+    from controller.planner_thread import PLAN_PRIORITY, PlannerThread
+
+    def policy() -> tuple[int, int]:
+        return os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+
+    loop = {}
+
+    def loop_thread() -> None:  # a loop's thread makes the planner, then turns real-time, as the service does
+        pool = PlannerThread()
+        try:
+            loop["fair"] = pool.submit(policy).result(5.0)
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+            except PermissionError:
+                loop["skip"] = True
+                return
+            loop["fifo"] = pool.submit(policy).result(5.0)
+            loop["said"] = pool.policy
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+            loop["back"] = pool.submit(policy).result(5.0)
+        finally:
+            pool.shutdown()
+
+    t = threading.Thread(target=loop_thread)
+    t.start()
+    t.join(20.0)
+    if loop.get("skip"):
+        pytest.skip("no permission for SCHED_FIFO here")
+    assert loop["fair"] == (os.SCHED_OTHER, 0)
+    assert loop["fifo"] == (os.SCHED_FIFO, PLAN_PRIORITY) and loop["said"] == f"FIFO {PLAN_PRIORITY}"
+    assert loop["back"] == (os.SCHED_OTHER, 0)
 
 
 def test_the_overload_watch_trips_on_a_sustained_share_of_unanswered_states_only():

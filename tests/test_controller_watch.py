@@ -23,6 +23,8 @@ from lampskit.core.planner_types import Stain
 from sim.core import SimCore
 from sim.params import SimParams
 
+from .core_ticks import tick
+
 DT = 0.001
 
 
@@ -82,7 +84,7 @@ def _run(skill, table: dict, until, disturb, ticks: int = 30_000):
             if n % 100 == 0:
                 _stains(core, sim)
             o = sim.out
-            tau = core.tick(o.q, o.dq, o.wrench, True, DT, None, applied)
+            tau = tick(core, o.q, o.dq, o.wrench, True, DT, None, applied)
             applied = tau.copy()  # what the controller sent, and what the sim reports it applied
             if start is None and until(core):
                 start = n
@@ -145,7 +147,7 @@ def test_contact_lost_while_the_robot_braked_is_the_brakes_doing_not_a_fault(lea
     try:
         _stains(core, sim)
         o = sim.out
-        core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
+        tick(core, o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
     finally:
         sim.close()
     assert core.contact_watch.lost_s == 0.0
@@ -164,7 +166,7 @@ def _brake_then_release(skill, held_flag: bool) -> tuple[float, float, float, Ph
             if n % 100 == 0:
                 _stains(core, sim)
             o = sim.out
-            tau = core.tick(o.q, o.dq, o.wrench, True, DT)
+            tau = tick(core, o.q, o.dq, o.wrench, True, DT)
             if after is None and core.executor.phase == Phase.WIPE:
                 lag_before = (lag_before + [float(np.linalg.norm(core.ref.p_m - core.kin.p))])[-300:]
             if after is None and core.executor.phase == Phase.WIPE and core.executor.clock_s > 4.0:
@@ -172,7 +174,7 @@ def _brake_then_release(skill, held_flag: bool) -> tuple[float, float, float, Ph
                 for _ in range(gap):
                     sim.step_braked()
                 o = sim.out
-                tau = core.tick(o.q, o.dq, o.wrench, True, gap * DT, None, None, robot_held=held_flag)
+                tau = tick(core, o.q, o.dq, o.wrench, True, gap * DT, None, None, robot_held=held_flag)
             sim.step(tau.copy())
             if after is not None:
                 after += 1
@@ -231,7 +233,7 @@ def _hold_mid_transition(skill, held: int = 150) -> tuple[np.ndarray, list, floa
                 _stains(core, sim)
             o = sim.out
             if not taus:
-                tau = core.tick(o.q, o.dq, o.wrench, True, DT)
+                tau = tick(core, o.q, o.dq, o.wrench, True, DT)
                 ex = core.executor
                 at_speed = ex.phase == Phase.TRANSITION and ex.pad_down and np.linalg.norm(core.ref.twist[:3]) > 0.25
                 sim.step(tau.copy())
@@ -239,7 +241,7 @@ def _hold_mid_transition(skill, held: int = 150) -> tuple[np.ndarray, list, floa
                     integral0 = core.force.integral
                     taus.append(None)
                 continue
-            tau = core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
+            tau = tick(core, o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
             taus.append(tau.copy())
             if len(taus) > 25:  # the brake stops the arm over 20 ms (BRAKE_STOP_S); the reference goes as far as it
                 ref_speed = max(ref_speed, float(np.linalg.norm(core.ref.twist[:3])),
@@ -291,7 +293,7 @@ def _released_after_a_hold(skill, held: int, override_drops: bool = True) -> tup
                 _stains(core, sim)
             o = sim.out
             if start is None:
-                sim.step(core.tick(o.q, o.dq, o.wrench, True, DT).copy())
+                sim.step(tick(core, o.q, o.dq, o.wrench, True, DT).copy())
                 ex = core.executor
                 if ex.phase == Phase.WIPE and ex.pad_down:
                     before = max(before, sim.out.normal_force_n)
@@ -299,10 +301,10 @@ def _released_after_a_hold(skill, held: int, override_drops: bool = True) -> tup
                         start = n
                 continue
             if n - start < held:
-                core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
+                tick(core, o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True)
                 sim.step_braked()
             else:
-                sim.step(core.tick(o.q, o.dq, o.wrench, True, DT).copy())
+                sim.step(tick(core, o.q, o.dq, o.wrench, True, DT).copy())
             forces.append(sim.out.normal_force_n)
             if n - start >= held + 200:
                 break
@@ -339,10 +341,10 @@ def test_after_a_hold_seen_only_through_the_count_the_rate_limit_counts_from_the
         o = sim.out
         tau = None
         for _ in range(50):
-            tau = core.tick(o.q, o.dq, o.wrench, True, DT, None, tau).copy()
+            tau = tick(core, o.q, o.dq, o.wrench, True, DT, None, tau).copy()
         step = core.shaper.rate * DT
         running = tau + np.where(np.arange(7) % 2 == 0, 6.0, -6.0)  # answers to the states skipped walked away
-        out = core.tick(o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True, running_nm=running)
+        out = tick(core, o.q, o.dq, o.wrench, True, DT, None, None, robot_held=True, running_nm=running)
         assert np.max(np.abs(out - running)) <= step + 1e-9, (out - running)
         assert np.max(np.abs(out - tau)) > 4.0, "counted from the old applied torques"
     finally:

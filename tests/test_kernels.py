@@ -252,6 +252,7 @@ def test_no_kernel_compiles_inside_a_tick():
         import controller.control.demand_kernels as DK, controller.control.limit_kernels as LK
         from controller.core import ControllerCore
         from controller.executor_types import BoardPose
+        from controller.tick_io import LastCommand, TickInput, TickOutput
         from lampskit.core.planner_types import Stain
         from controller.params import ControllerParams
         from lampskit.learn.learn import bundled_skill
@@ -269,6 +270,7 @@ def test_no_kernel_compiles_inside_a_tick():
         sim = SimCore(SimParams.from_table({"camera": {"enabled": False}}))
         core = ControllerCore(ControllerParams.from_table({"trace_ticks": 100, "executor": {"survey_s": 0.0}}),
                               bundled_skill())
+        inp, out = TickInput.zeros(7), TickOutput.zeros(7)
         before = signatures()
         phases = set()
         for n in range(8000):  # the first touch creeps from 35 mm: WIPE comes after 4 s
@@ -277,8 +279,10 @@ def test_no_kernel_compiles_inside_a_tick():
                 core.executor.set_stains(board, [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=False)
                                                  for s in sim.dirt.stains])
             o = sim.out
-            tau = core.tick(o.q, o.dq, o.wrench, False, 0.001, applied_nm=None if n == 0 else tau_prev)
-            tau_prev = tau.copy()
+            inp.set_state(o.q, o.dq, o.wrench, 0.001, False)
+            inp.set_last(LastCommand.UNKNOWN if n == 0 else LastCommand.APPLIED, None if n == 0 else tau_prev)
+            core.tick(inp, out)
+            tau_prev = out.tau_nm.copy()
             phases.add(str(core.executor.phase))
             sim.step(tau_prev)
         sim.close()

@@ -24,10 +24,12 @@ from robot.lbr.compensation import JointSpring
 from robot.lbr.msgs import ClientCommandMode, SessionState
 from robot.lbr.params import LbrParams
 from sim.core import SimCore
+from sim.lbr_stack.fri_robot import external_torque_nm
 from sim.lbr_stack.params import LbrPeerParams
-from sim.lbr_stack.peer import external_torque_nm
 from sim.lbr_stack.stack import StackClient, impedance_damping, joint_impedance_torque
 from sim.params import SimParams
+
+from .core_ticks import tick
 
 T = 0.002  # the FRI period [s]
 HELD = 40  # FRI cycles without a controller answer (80 ms)
@@ -73,7 +75,7 @@ def _hold_while_wiping(skill, brake: bool, after: int = 300) -> dict:
                 spring.observe(st.q_rad, t_ns, T, st.q_commanded_rad)
                 q, dq, wrench = snap
                 if k0 is None or not k0 <= k < k0 + HELD:
-                    tau = core.tick(q, dq, wrench, True, T, None, tau).copy()
+                    tau = tick(core, q, dq, wrench, True, T, None, tau).copy()
                     pending = spring.command(q, tau, dq, T)
                 elif brake:
                     if k == k0:

@@ -30,10 +30,12 @@ from robot.lbr.compensation import AppliedWatch, JointSpring
 from robot.lbr.msgs import ClientCommandMode, SessionState
 from robot.lbr.params import LbrParams
 from sim.core import SimCore
+from sim.lbr_stack.fri_robot import external_torque_nm
 from sim.lbr_stack.params import LbrPeerParams
-from sim.lbr_stack.peer import external_torque_nm
 from sim.lbr_stack.stack import StackClient, StackError, impedance_damping, joint_impedance_torque
 from sim.params import SimParams
+
+from .core_ticks import tick
 
 T = 0.002  # the FRI period [s]
 
@@ -85,7 +87,7 @@ def _outage(skill, check_applied: bool, steer_speed_rad_s: float, outage: int = 
                 spring.observe(st.q_rad, t_ns, T, st.q_commanded_rad)
                 held = check_applied and watch.old(robot_cmd.torque, t_ns, lbr.stale_limit_s + 2 * T)
                 q, dq, wrench = snap
-                tau = core.tick(q, dq, wrench, True, T, None, None if held else sent[0], robot_held=held).copy()
+                tau = tick(core, q, dq, wrench, True, T, None, None if held else sent[0], robot_held=held).copy()
                 if not held and sent[0] is not None:
                     applied = sent[0]
                 elif held and applied is not None:

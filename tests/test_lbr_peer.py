@@ -29,8 +29,9 @@ from robot.lbr.msgs import SessionState
 from runtime.config import ZenohSettings
 from runtime.session import ServiceNode
 from sim.lbr_stack.commands import TORQUE_COMMAND_BYTES, CommandBox, drop_reason
+from sim.lbr_stack.fri_robot import external_torque_nm
 from sim.lbr_stack.params import LbrPeerParams
-from sim.lbr_stack.peer import external_torque_nm, sim_params_for_peer, substeps_for_peer
+from sim.lbr_stack.peer import sim_params_for_peer, substeps_for_peer
 
 from .conftest import REPO
 from .zenoh_helpers import free_port, toml_value, wait_alive, wait_for, wait_sample, wait_subscribed, write_config

@@ -11,7 +11,8 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from lampskit.core.periodic import PeriodicMP, forcing, periodic_state
-from lampskit.core.periodic_runner import PeriodicRunner, PeriodicStatus, rollout, step_matrix
+from lampskit.core.periodic_runner import PeriodicRunner, PeriodicStatus, rollout
+from lampskit.core.periodic_step import step_matrix
 from lampskit.errors import LearningError, PlanningError, SkillFileError
 from lampskit.learn.periodic_fit import forcing_target, learn_periodic, significant_harmonics
 from lampskit.learn.periodic_phase import assign_phase, estimate_frequency

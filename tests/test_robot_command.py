@@ -64,7 +64,7 @@ def _cycles(arm: MockArm, modes: list[str]) -> list[tuple[Applied, bool, int]]:
         out = []
         for seq, mode in enumerate(modes):
             assert srv.lockstep_cycle(TorqueCommand(seq=seq, stamp_ns=0, tau_nm=[1.0] * 7, mode=mode))
-            out.append((srv.outcome, srv.braked, srv.applied_seq))
+            out.append((srv.cycle.outcome, srv.cycle.braked, srv.cycle.applied_seq))
     return out
 
 

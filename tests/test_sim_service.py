@@ -174,8 +174,9 @@ def _newest_truth(reader) -> tuple[int, list[float]]:
 @pytest.mark.alone
 @pytest.mark.parametrize("stale_limit_s, should_brake", [(0.02, True), (1.0, False)])
 def test_realtime_stale_command_makes_the_arm_brake_and_hold(tmp_path, model, stale_limit_s, should_brake):
-    cfg = {"mode": "realtime", "stale_limit_s": stale_limit_s, "camera": NO_CAMERA,
-           "speed_brake_share": 0.95 if should_brake else 0.0}  # the control case: no speed brake either
+    cfg = {"mode": "realtime", "stale_limit_s": stale_limit_s, "camera": NO_CAMERA,  # the control case: no speed
+           "speed_brake_share": 0.95 if should_brake else 0.0,  # brake and no late-answer damping either (held,
+           "late_damping_rad_s": 120.0 if should_brake else 0.0}  # the push moves joint 1 0.2 rad in 0.4 s with it)
     with SimProcess(tmp_path, cfg) as sim:
         states = sim.node.latest(sim.keys.robot_state, RobotState)
         first = wait_for(states.take, 10.0, "a robot state")

@@ -16,6 +16,8 @@ from lampskit.core.planner_types import Stain
 from sim.core import SimCore
 from sim.params import SimParams
 
+from .core_ticks import tick
+
 DT = 0.001
 
 
@@ -53,7 +55,7 @@ def _run(params: dict, seen_offset_m: float, ticks: int = 40_000) -> tuple[float
                 core.executor.set_stains(seen, [Stain(s.id, np.array(s.centre_m), s.size_m, kappa=bool(r <= 0.03))
                                                 for s, r in zip(sim.dirt.stains, sim.dirt.remaining())])
             o = sim.out
-            tau = core.tick(o.q, o.dq, o.wrench, True, DT)
+            tau = tick(core, o.q, o.dq, o.wrench, True, DT)
             sim.step(tau.copy())
             worst = max(worst, sim.take_peak_force_n())  # the true normal force over every physics step
             if core.executor.phase in (Phase.DONE, Phase.FAULT):

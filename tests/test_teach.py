@@ -22,6 +22,7 @@ from sim.hand import Hand, HandScript, rotation_vector
 from sim.params import HandParams
 
 from .conftest import REPO
+from .core_ticks import tick
 
 LAMPS = (sys.executable, "-m", "runtime.cli")
 Q = np.array([0.1, 0.6, -0.1, -1.4, 0.1, 0.8, 0.2])
@@ -35,9 +36,9 @@ def test_at_rest_the_arm_gets_its_gravity_and_nothing_else():
     """No stiffness: wherever it is, the arm at rest is only held up (or, when the robot adds gravity, left alone)."""
     core, model = _core(), RobotModel()
     for q in (Q, Q + 0.3):
-        tau = core.tick(q, np.zeros(7), np.zeros(6), False, 1e-3).copy()
+        tau = tick(core, q, np.zeros(7), np.zeros(6), False, 1e-3).copy()
         np.testing.assert_allclose(tau, model.gravity(q), atol=1e-9)
-        np.testing.assert_allclose(core.tick(q, np.zeros(7), np.zeros(6), True, 1e-3), 0.0, atol=1e-9)
+        np.testing.assert_allclose(tick(core, q, np.zeros(7), np.zeros(6), True, 1e-3), 0.0, atol=1e-9)
     assert core.executor.phase == Phase.TEACH
 
 
@@ -48,7 +49,7 @@ def test_moving_the_arm_meets_only_damping():
     rng = np.random.default_rng(0)
     for _ in range(5):
         dq = rng.normal(0.0, 0.2, 7)
-        tau = core.tick(Q, dq, np.zeros(6), True, 1e-3).copy()
+        tau = tick(core, Q, dq, np.zeros(6), True, 1e-3).copy()
         coriolis = core.kin.nle - core.kin.g
         J = model.tcp_jacobian(Q)
         D = np.diag([25.0] * 3 + [1.0] * 3)
@@ -59,10 +60,10 @@ def test_moving_the_arm_meets_only_damping():
 def test_a_contact_force_over_the_cap_halts_into_a_hold_of_that_pose():
     core = _core(force_cap_n=20.0)
     for _ in range(30):
-        core.tick(Q, np.zeros(7), np.array([0.0, 0.0, 30.0, 0, 0, 0]), True, 1e-3)
+        tick(core, Q, np.zeros(7), np.array([0.0, 0.0, 30.0, 0, 0, 0]), True, 1e-3)
     assert core.executor.phase == Phase.FAULT and "above the teach cap 20 N" in core.executor.reason
     pushed = Q + np.r_[0.05, np.zeros(6)]
-    tau = core.tick(pushed, np.zeros(7), np.zeros(6), True, 1e-3)
+    tau = tick(core, pushed, np.zeros(7), np.zeros(6), True, 1e-3)
     assert tau[0] < -1.0  # pulled back towards the pose of the halt
     core.executor.clear()  # a fault stays latched; an e-stop released does not
     assert core.executor.phase == Phase.FAULT
@@ -143,7 +144,7 @@ def test_a_hand_that_holds_the_pad_off_its_start_moves_it_there(tmp_path):
     try:
         for _ in range(2000):
             o = sim.out
-            sim.step(core.tick(o.q, o.dq, o.wrench, False, 1e-3).copy())
+            sim.step(tick(core, o.q, o.dq, o.wrench, False, 1e-3).copy())
         assert np.linalg.norm(sim.out.tcp_p - goal) < 0.004, sim.out.tcp_p - goal
         assert np.linalg.norm(sim.out.tcp_v) < 0.01 and core.executor.phase == Phase.TEACH
     finally:

@@ -80,6 +80,7 @@ class RecordViews:
     """
 
     _views: dict[str, str] = {}
+    rec: np.ndarray  #: the one-element record the views look into (made by :meth:`_bind`)
 
     def _bind(self, dtype: np.dtype) -> None:
         rec = new_record(dtype)

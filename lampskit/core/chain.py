@@ -44,12 +44,14 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from collections.abc import Mapping
-from concurrent.futures import Executor, Future
+from concurrent.futures import Executor
 from enum import IntEnum
 from typing import Protocol
 
 import numpy as np
 
+from lampskit.core.chain_jobs import PlannerJobs
+from lampskit.core.chain_pass import WipePass
 from lampskit.core.periodic import periodic_state
 from lampskit.core.periodic_runner import PeriodicRunner
 from lampskit.core.planner import adapted_wipe, exit_phase_delay, plan, plan_transition
@@ -160,20 +162,22 @@ class MpChain:
         self._plan: Plan | None = None
         self._entry: TransitionSpec | None = None
         self._next: Wipe | None = None
-        self._leave_at = 0.0
         #: (2,) unit direction [board frame] the last stroke heads in when the chain finishes, so the stop that
         #: follows runs that way (the executor: away from the robot base, where the arm has room); None: at once
         self.finish_heading: np.ndarray | None = None
-        #: where re-plans run (a one-thread executor), or None: in the tick
-        self.background: Executor | None = None
-        self._pending: Future | None = None
-        self._duration: Future | None = None  # the next transition's bounded duration, from the planner thread
-        self._wipe_t = 0.0
-        self._planned: Wipe | None = None  # the wipe as planned (adaptive wiping never exceeds its r)
-        self._wipe_phase0 = 0.0
-        self._adapted_at = -np.inf
+        self._jobs = PlannerJobs()
+        self._pass = WipePass()
         self._on_step = {ChainStep.TRANSIT: self._on_transit, ChainStep.WIPE: self._on_wipe,
                          ChainStep.LEAVE: self._on_leave, ChainStep.REPLAN: self._on_replan}
+
+    @property
+    def background(self) -> Executor | None:
+        """Where re-plans run (a one-thread executor), or None: in the tick."""
+        return self._jobs.executor
+
+    @background.setter
+    def background(self, executor: Executor | None) -> None:
+        self._jobs.executor = executor
 
     @property
     def entry(self) -> TransitionSpec | None:
@@ -185,7 +189,7 @@ class MpChain:
         """Cycles of the periodic MP run on the current stain since its transition ended (0 before)."""
         if self.step == ChainStep.TRANSIT:
             return 0.0
-        return (self._periodic().phase_unwrapped_rad - self._wipe_phase0) / (2 * np.pi)
+        return (self._periodic().phase_unwrapped_rad - self._pass.phase0_rad) / (2 * np.pi)
 
     @property
     def current_mp(self) -> str:
@@ -229,7 +233,7 @@ class MpChain:
 
     def start(self, plan_: Plan, reference: Reference) -> ChainResult:
         """Into the plan's first wipe from the reference's in-plane state: TRANSITION or ERROR."""
-        self._pending = self._duration = None  # a re-plan of a chain left earlier (a stop, a fault): of no use
+        self._jobs.drop()  # a re-plan of a chain left earlier (a stop, a fault): of no use
         self._plan = plan_
         return self._start_transition(plan_.wipes[0], reference)
 
@@ -252,7 +256,7 @@ class MpChain:
         centre if that moved over 2 mm. None if nothing changed."""
         if self.step != ChainStep.WIPE:
             return None
-        old, runner, planned = self._wiping(), self._periodic(), self._planned
+        old, runner, planned = self._wiping(), self._periodic(), self._pass.planned
         if planned is None:
             raise RuntimeError("MpChain: wiping without the wipe as planned")
         s = book.stains.get(old.stain.id)
@@ -262,7 +266,7 @@ class MpChain:
             if not np.linalg.norm(s.centre_m - runner.anchor_m) > 0.002:
                 return None
             return self._checked(runner.set_targets(anchor_m=s.centre_m))
-        if s.ink is None or clock_s - self._adapted_at < ADAPT_EVERY_S:
+        if s.ink is None or clock_s - self._pass.adapted_at_s < ADAPT_EVERY_S:
             return None
         new = adapted_wipe(self.skill, planned, old, s.ink, self.planner)
         eye = np.eye(2)
@@ -273,7 +277,7 @@ class MpChain:
                 or abs(new.omega_rad_s / old.omega_rad_s - 1.0) > ADAPT_MIN_RATIO
                 or stroke_change > ADAPT_MIN_STROKE):
             return None
-        self._adapted_at = clock_s
+        self._pass.adapted_at_s = clock_s
         self.counters["adaptations"] += 1
         self.wipe = new
         stroke = new.stroke if new.stroke is not None else (eye if old.stroke is not None else None)
@@ -295,7 +299,7 @@ class MpChain:
         status = self._periodic().update(dt_s)
         if status < 0:
             return self._checked(status)
-        self._wipe_t += dt_s
+        self._pass.t_s += dt_s
         return None
 
     def _on_wipe(self, dt_s: float, reference: Reference, book: Book, clock_s: float) -> ChainResult:
@@ -320,13 +324,9 @@ class MpChain:
     # ------------------------------------------------------------------ hand-overs
     def _start_transition(self, wipe: Wipe, reference: Reference) -> ChainResult:
         r = reference
-        duration, self._duration = self._duration, None
-        if duration is not None and duration.done() and duration.exception() is None:
-            duration = duration.result()
-        else:
-            if duration is not None:
-                self.counters["transitions_searched_in_tick"] += 1
-            duration = None
+        duration, late = self._jobs.take_duration()
+        if late:
+            self.counters["transitions_searched_in_tick"] += 1
         try:
             spec = plan_transition(self.skill, self._current_plan(), wipe,
                                    (r.xy.copy(), r.v_xy.copy(), r.a_xy.copy()), duration)
@@ -348,11 +348,7 @@ class MpChain:
         except PlanningError as exc:
             return self._failed(f"cannot start the periodic MP {wipe.periodic_index} on stain {wipe.stain.id}: {exc}")
         self._runner = runner
-        self._planned = wipe
-        self._wipe_phase0 = runner.phase_unwrapped_rad
-        self._adapted_at = -np.inf
-        self._wipe_t = 0.0
-        self._leave_at = np.inf
+        self._pass.begin(wipe, runner.phase_unwrapped_rad)
         self.step = ChainStep.WIPE
         if overrun_s > 0.0:
             status = runner.update(overrun_s)
@@ -367,7 +363,7 @@ class MpChain:
         if book.is_done(sid):
             return True
         cycles = self.cycles_wiped
-        if self._wipe_t < self.wipe_timeout_s and cycles < self.pass_cycles:
+        if self._pass.t_s < self.wipe_timeout_s and cycles < self.pass_cycles:
             return False
         self.counters["wipe_timeouts"] += 1  # a pass ended without kappa (by time or by cycles)
         if cycles >= self.pass_cycles:
@@ -375,7 +371,7 @@ class MpChain:
         if book.end_pass(sid, clock_s):
             log.warning("stain %d: no kappa after %d passes, giving up", sid, book.max_passes)
         else:
-            log.info("stain %d: no kappa after %.1f s (%.1f cycles), back to it later", sid, self._wipe_t, cycles)
+            log.info("stain %d: no kappa after %.1f s (%.1f cycles), back to it later", sid, self._pass.t_s, cycles)
         return True
 
     def _choose_next(self, runner: PeriodicRunner, book: Book, clock_s: float) -> ChainResult:
@@ -393,8 +389,8 @@ class MpChain:
             rest = tuple(w for w in wipes[k + 1:] + wipes[:max(k, 0)] if w.stain.id in ids)
             return self._leave_towards(runner, Plan(rest, followed.params) if rest else None)
         start = runner.position_m.copy()
-        if self.background is not None:
-            self._pending = self.background.submit(plan, self.skill, open_stains, start, self.planner)
+        if self._jobs.executor is not None:
+            self._jobs.replan = self._jobs.executor.submit(plan, self.skill, open_stains, start, self.planner)
             self.step = ChainStep.REPLAN
             return ChainResult.WORKING
         try:
@@ -408,11 +404,11 @@ class MpChain:
         runner = self._periodic()
         if (failed := self._wipe_on(dt_s)) is not None:
             return failed
-        pending = self._pending
+        pending = self._jobs.replan
         if pending is None or not pending.done():
             self.counters["ticks_waiting_for_a_plan"] += 1
             return ChainResult.WORKING
-        self._pending = None
+        self._jobs.replan = None
         try:
             new_plan = pending.result()
         except PlanningError as exc:
@@ -435,21 +431,22 @@ class MpChain:
             towards = runner.anchor_m + FINISH_LOOKOUT_M * self.finish_heading
         wipe = self._wiping()
         delay = 0.0 if towards is None else exit_phase_delay(self.skill, wipe, runner.phase_rad, towards)
-        self._leave_at = runner.phase_unwrapped_rad + delay
+        self._pass.leave_at_rad = runner.phase_unwrapped_rad + delay
         self.step = ChainStep.LEAVE
-        self._duration = None
-        if self.background is not None and self._next is not None:
+        jobs = self._jobs
+        jobs.duration = None
+        if jobs.executor is not None and self._next is not None:
             # the state at the exit phase, on the limit cycle the runner follows: what the transition starts from
             mp = self.skill.periodic[wipe.periodic_index].mp
             exit_state = periodic_state(mp, runner.phase_rad + delay, runner.anchor_m.copy(), runner.amplitude_m,
                                         runner.omega_rad_s, None if wipe.stroke is None else runner.stroke)
-            self._duration = self.background.submit(_bounded_duration_of, self.skill, self._current_plan(), self._next,
-                                                    tuple(np.array(x) for x in exit_state))
+            jobs.duration = jobs.executor.submit(_bounded_duration_of, self.skill, self._current_plan(), self._next,
+                                                 tuple(np.array(x) for x in exit_state))
         return ChainResult.WORKING
 
     def _leave_when_due(self, runner: PeriodicRunner, reference: Reference) -> ChainResult:
         """Once the phase reaches the exit phase: into the next stain, or FINISHED after the last."""
-        if runner.phase_unwrapped_rad < self._leave_at:
+        if runner.phase_unwrapped_rad < self._pass.leave_at_rad:
             return ChainResult.WORKING
         if self._next is None:
             return ChainResult.FINISHED

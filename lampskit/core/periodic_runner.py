@@ -24,6 +24,9 @@ from typing import NamedTuple
 import numpy as np
 
 from lampskit.core.periodic import TWO_PI, PeriodicMP, check_execution_params, check_stroke, periodic_state_unchecked
+from lampskit.core.periodic_forcing import ForcingEvaluator
+from lampskit.core.periodic_ramp import ParameterRamp
+from lampskit.core.periodic_step import StepMaps
 from lampskit.errors import PlanningError
 
 #: Default time constant tau of the critically damped parameter filters [s]: a step
@@ -37,57 +40,6 @@ class PeriodicStatus(IntEnum):
 
     WORKING = 0
     ERROR_INVALID_INPUT = -100
-
-
-def step_matrix(phase_step_rad: float, alpha: float, beta: float) -> np.ndarray:
-    """Exact one-step map of eqs. (1)-(2) for a phase step ``a = Omega dt``.
-
-    With ``x = (y1 - y_m, y2)`` per dimension, ``u0 = r F(phi_k)`` and
-    ``du = r (F(phi_k+1) - F(phi_k))`` (forcing linear in phase over the step)::
-
-        x_k+1 = Phi x_k + g0 u0 + g1 du,
-        Phi = exp(M a),  g0 = M^-1 (Phi - I) e2,  g1 = (M^-1 g0 - a M^-1 e2) / a,
-        M = [[0, 1], [-alpha beta, -alpha]].
-
-    Parameters
-    ----------
-    phase_step_rad : float
-        a = Omega dt > 0 [rad].
-    alpha, beta : float
-
-    Returns
-    -------
-    mat : array, shape (2, 4)
-        ``[Phi | g0 | g1]``, to multiply ``(x1, x2, u0, du)`` stacked as rows (4, n).
-    """
-    return np.array(_step_coefficients(phase_step_rad, alpha, beta)).reshape(2, 4)
-
-
-def _step_coefficients(a: float, alpha: float, beta: float) -> tuple[float, ...]:
-    """Entries of :func:`step_matrix`, row-major, as Python floats (no allocation of arrays)."""
-    k, c = alpha * beta, alpha
-    mu = -0.5 * c
-    disc = 0.25 * c * c - k
-    z = disc * a * a
-    if abs(z) < 1e-6:
-        cc = 1.0 + z / 2.0 + z * z / 24.0
-        ss = a * (1.0 + z / 6.0 + z * z / 120.0)
-    elif disc > 0:
-        q = math.sqrt(disc)
-        cc, ss = math.cosh(q * a), math.sinh(q * a) / q
-    else:
-        q = math.sqrt(-disc)
-        cc, ss = math.cos(q * a), math.sin(q * a) / q
-    e = math.exp(mu * a)
-    p11 = e * (cc - mu * ss)
-    p12 = e * ss
-    p21 = -k * e * ss
-    p22 = e * (cc - mu * ss - c * ss)
-    g0_1 = (-c * p12 - (p22 - 1.0)) / k
-    g0_2 = p12
-    g1_1 = (a - c * g0_1 - g0_2) / (k * a)
-    g1_2 = g0_1 / a
-    return p11, p12, g0_1, g1_1, p21, p22, g0_2, g1_2
 
 
 def _start_state(mp: PeriodicMP, phase: float, anchor: np.ndarray, amp: float, omega: float,
@@ -186,7 +138,8 @@ class PeriodicRunner:
         self.cycles = int(phase // TWO_PI)
         self.time_s = 0.0
         self.calculation_duration_us = 0.0
-        self._forcing_into(self.phase_rad, self._z[2])
+        ramp = self._ramp
+        self._forcing.into(self.phase_rad, self._z[2], ramp.S if ramp.has_stroke else None)
         self._write_outputs(self._z)
 
     def _allocate(self, mp: PeriodicMP, anchor: np.ndarray, amp: float, omega: float, tau: float,
@@ -195,44 +148,14 @@ class PeriodicRunner:
         n = mp.n_dims
         self.mp = mp
         self.n_dims = n
-        self._alpha, self._beta = mp.alpha, mp.beta
-        # Forcing, eq. (4): [cos phi, sin phi, 1] @ H = h (cos(phi - c) - 1), then
-        # exp, then psi @ [W | 1] gives numerator and denominator in one product.
-        self._cs = np.array([0.0, 0.0, 1.0])
-        self._h3 = np.ascontiguousarray(
-            np.stack([mp.widths * np.cos(mp.centres_rad), mp.widths * np.sin(mp.centres_rad), -mp.widths])
-        )
-        self._w1 = np.ascontiguousarray(np.column_stack([mp.weights, np.ones(mp.n_basis)]))
-        self._psi = np.empty(mp.n_basis)
-        self._num = np.empty(n + 1)
-        self._omega_f = 0.0 if tau == 0 else 1.0 / tau
-        # Effective parameters and their filters. Columns: y_m (n), r, Omega, the stroke's entries (n n, row-major);
-        # targets (n + 2 + n n,); filter state rows: error (value - target), rate.
-        self._ym = anchor.copy()
-        self._r, self._omega = amp, omega
-        self._has_stroke = stroke is not None  # without one the step skips the map (bit for bit as before strokes)
-        self._S = np.eye(n) if stroke is None else stroke.copy()
-        self._S_flat = self._S.reshape(-1)  # a view
-        self._f_raw = np.empty(n)
-        self._targets = np.concatenate([anchor, [amp, omega], self._S_flat])
-        self._ev = np.zeros((2, n + 2 + n * n))
-        self._ev_next = np.zeros((2, n + 2 + n * n))
-        self._filter_map = np.empty((2, 2))
-        self._filter_dt = math.nan
-        self._delta = np.empty(n)
-        self._settle_countdown = 0
-        self._ramping = False
+        self._forcing = ForcingEvaluator(mp)
+        self._ramp = ParameterRamp(anchor, amp, omega, stroke, tau)
+        self._maps = StepMaps(mp.alpha, mp.beta)
         # State, double-buffered, rows: x1 = y1 - y_m, x2 = y2, F(phi) (r = 1), dF over the step.
         self._z = np.zeros((4, n))
         self._z_next = np.zeros((4, n))
         self._z[0] = pos0 - anchor
         self._z[1] = vel0 / omega
-        # Step map [Phi | r g0 | r g1] (2, 4) and output map (3, 3), rebuilt when a, r or Omega change.
-        self._step = np.empty((2, 4))
-        self._step_key = (math.nan, math.nan)
-        self._out_map = np.zeros((3, 3))
-        self._out_map[0, 0] = 1.0
-        self._out_key = (math.nan, math.nan)
         # Outputs, rows: position [m], velocity [m/s], acceleration [m/s^2].
         self._out = np.empty((3, n))
         self.position_m = self._out[0]
@@ -243,27 +166,27 @@ class PeriodicRunner:
     @property
     def anchor_m(self) -> np.ndarray:
         """Effective y_m [m], shape (n_dims,) (a copy)."""
-        return self._ym.copy()
+        return self._ramp.ym.copy()
 
     @property
     def amplitude_m(self) -> float:
         """Effective r [m]."""
-        return self._r
+        return self._ramp.r
 
     @property
     def omega_rad_s(self) -> float:
         """Effective Omega [rad/s]."""
-        return self._omega
+        return self._ramp.omega
 
     @property
     def stroke(self) -> np.ndarray:
         """Effective stroke S, shape (n_dims, n_dims) (a copy; the identity when none was given)."""
-        return self._S.copy()
+        return self._ramp.S.copy()
 
     @property
     def is_ramping(self) -> bool:
         """True while y_m, r, Omega or the stroke still move toward their targets."""
-        return self._ramping
+        return self._ramp.ramping
 
     @property
     def phase_unwrapped_rad(self) -> float:
@@ -280,10 +203,9 @@ class PeriodicRunner:
         a non-finite value, a non-positive amplitude / frequency or a stroke
         outside :func:`~lampskit.core.periodic.check_stroke`.
         """
-        if anchor_m is not None:
-            anchor = np.asarray(anchor_m, dtype=float)
-            if anchor.shape != (self.n_dims,) or not np.isfinite(anchor).all():
-                return PeriodicStatus.ERROR_INVALID_INPUT
+        anchor = None if anchor_m is None else np.asarray(anchor_m, dtype=float)
+        if anchor is not None and (anchor.shape != (self.n_dims,) or not np.isfinite(anchor).all()):
+            return PeriodicStatus.ERROR_INVALID_INPUT
         for value in (amplitude_m, omega_rad_s):
             if value is not None and not (math.isfinite(value) and value > 0):
                 return PeriodicStatus.ERROR_INVALID_INPUT
@@ -292,24 +214,7 @@ class PeriodicRunner:
                 stroke = check_stroke(stroke, self.n_dims)
             except PlanningError:
                 return PeriodicStatus.ERROR_INVALID_INPUT
-        n, targets = self.n_dims, self._targets
-        if anchor_m is not None:
-            targets[:n] = anchor
-        if amplitude_m is not None:
-            targets[n] = float(amplitude_m)
-        if omega_rad_s is not None:
-            targets[n + 1] = float(omega_rad_s)
-        if stroke is not None:
-            targets[n + 2:] = stroke.reshape(-1)
-            self._has_stroke = True
-        if self._omega_f == 0.0:  # no ramp: jump now
-            self._snap_to_targets()
-        else:
-            self._ev[0, :n] = self._ym - targets[:n]
-            self._ev[0, n] = self._r - targets[n]
-            self._ev[0, n + 1] = self._omega - targets[n + 1]
-            np.subtract(self._S_flat, targets[n + 2:], out=self._ev[0, n + 2:])
-            self._ramping = True
+        self._ramp.retarget(anchor, amplitude_m, omega_rad_s, stroke, self._z[0])
         return PeriodicStatus.WORKING
 
     def update(self, dt_s: float) -> PeriodicStatus:
@@ -317,16 +222,13 @@ class PeriodicRunner:
         t0 = time.perf_counter_ns()
         if not 0.0 < dt_s <= MAX_DT_S:
             return PeriodicStatus.ERROR_INVALID_INPUT
-        if self._ramping:
-            self._advance_filters(dt_s)
-        a = self._omega * dt_s
-        r = self._r
-        if a != self._step_key[0] or r != self._step_key[1]:
-            p11, p12, g01, g11, p21, p22, g02, g12 = _step_coefficients(a, self._alpha, self._beta)
-            m = self._step
-            m[0, 0], m[0, 1], m[0, 2], m[0, 3] = p11, p12, r * g01, r * g11
-            m[1, 0], m[1, 1], m[1, 2], m[1, 3] = p21, p22, r * g02, r * g12
-            self._step_key = (a, r)
+        ramp, maps = self._ramp, self._maps
+        if ramp.ramping:
+            ramp.advance(dt_s, self._z[0])
+        a = ramp.omega * dt_s
+        r = ramp.r
+        if a != maps.step_key[0] or r != maps.step_key[1]:
+            maps.rebuild_step(a, r)
         phase = self.phase_rad + a
         if phase >= TWO_PI:
             wraps = int(phase // TWO_PI)
@@ -334,79 +236,23 @@ class PeriodicRunner:
             self.cycles += wraps
         self.phase_rad = phase
         z, z_next = self._z, self._z_next
-        self._forcing_into(phase, z_next[2])
+        self._forcing.into(phase, z_next[2], ramp.S if ramp.has_stroke else None)
         np.subtract(z_next[2], z[2], out=z[3])
-        np.matmul(self._step, z, out=z_next[:2])
+        np.matmul(maps.step, z, out=z_next[:2])
         self._z, self._z_next = z_next, z
         self._write_outputs(z_next)
         self.time_s += dt_s
         self.calculation_duration_us = (time.perf_counter_ns() - t0) * 1e-3
         return PeriodicStatus.WORKING
 
-    def _forcing_into(self, phase: float, out: np.ndarray) -> None:
-        """Eq. (4) with r = 1 at ``phase``, mapped by the stroke, into ``out`` (n,), without allocating."""
-        cs, psi, num = self._cs, self._psi, self._num
-        cs[0] = math.cos(phase)
-        cs[1] = math.sin(phase)
-        np.dot(cs, self._h3, out=psi)
-        np.exp(psi, out=psi)
-        np.dot(psi, self._w1, out=num)
-        if self._has_stroke:
-            np.divide(num[:-1], num[-1], out=self._f_raw)
-            np.dot(self._S, self._f_raw, out=out)
-        else:
-            np.divide(num[:-1], num[-1], out=out)
-
     def _write_outputs(self, z: np.ndarray) -> None:
         """[pos - y_m, vel, acc] = [[1, 0, 0], [0, W, 0], [-ab W^2, -a W^2, r W^2]] @ (x1, x2, F)."""
-        om, r = self._omega, self._r
-        if om != self._out_key[0] or r != self._out_key[1]:
-            om2, m = om * om, self._out_map
-            m[1, 1] = om
-            m[2, 0], m[2, 1], m[2, 2] = -self._alpha * self._beta * om2, -self._alpha * om2, r * om2
-            self._out_key = (om, r)
-        np.matmul(self._out_map, z[:3], out=self._out)
-        self.position_m += self._ym
-
-    def _advance_filters(self, dt: float) -> None:
-        """Exact step of the critically damped filters e'' = -w^2 e - 2 w e' (e = value - target).
-
-        ``e(t) = (e0 + g t) exp(-w t)``, ``e'(t) = (e0' - w g t) exp(-w t)``, ``g = e0' + w e0``:
-        one (2, 2) map applied to every column (y_m per dimension, r, Omega).
-        """
-        w = self._omega_f
-        if dt != self._filter_dt:
-            d = math.exp(-w * dt)
-            self._filter_map[:] = [[d * (1.0 + w * dt), d * dt], [-d * w * w * dt, d * (1.0 - w * dt)]]
-            self._filter_dt = dt
-        ev, ev_next, n = self._ev, self._ev_next, self.n_dims
-        np.matmul(self._filter_map, ev, out=ev_next)
-        # y_m moves by delta; x1 = y1 - y_m shifts so that y1 does not move.
-        np.subtract(ev_next[0, :n], ev[0, :n], out=self._delta)
-        self._ym += self._delta
-        self._z[0] -= self._delta
-        self._r = float(self._targets[n] + ev_next[0, n])
-        self._omega = float(self._targets[n + 1] + ev_next[0, n + 1])
-        if self._has_stroke:
-            np.add(self._targets[n + 2:], ev_next[0, n + 2:], out=self._S_flat)
-        self._ev, self._ev_next = ev_next, ev
-        self._settle_countdown -= 1
-        if self._settle_countdown <= 0:
-            self._settle_countdown = 32
-            scale = self._targets[n]  # amplitude for y_m and r, Omega for Omega
-            err = np.abs(ev_next[0]) + np.abs(ev_next[1]) / w
-            if err[: n + 1].max() < 1e-9 * scale and err[n + 1] < 1e-9 * self._targets[n + 1] \
-                    and err[n + 2:].max() < 1e-9:
-                self._snap_to_targets()
-
-    def _snap_to_targets(self) -> None:
-        n, targets = self.n_dims, self._targets
-        self._z[0] -= targets[:n] - self._ym
-        self._ym[:] = targets[:n]
-        self._r, self._omega = float(targets[n]), float(targets[n + 1])
-        self._S_flat[:] = targets[n + 2:]
-        self._ev[:] = 0.0
-        self._ramping = False
+        ramp, maps = self._ramp, self._maps
+        om, r = ramp.omega, ramp.r
+        if om != maps.out_key[0] or r != maps.out_key[1]:
+            maps.rebuild_out(om, r)
+        np.matmul(maps.out, z[:3], out=self._out)
+        self.position_m += ramp.ym
 
 
 class Rollout(NamedTuple):

@@ -32,6 +32,7 @@ import json
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -99,6 +100,9 @@ def read_recording_demo(spec: str | Path, arm: ArmKinematics, options: BagOption
         raise DemoError(f"{path}: {exc}") from None
     kind = topics[topic][0]
     where = f"{path} {topic}"
+    p: np.ndarray | None
+    R: np.ndarray | None
+    q: np.ndarray | None = None
     try:
         if kind == TF:
             t_ns, p, R = _tf_poses(source, topic, topics, options)
@@ -115,9 +119,11 @@ def read_recording_demo(spec: str | Path, arm: ArmKinematics, options: BagOption
         sub = bm.thin(t_s)
         keep, t_s = keep[sub], t_s[sub]
         if p is None:
+            assert q is not None  # a joint track
             p, R = arm.flange_poses(q[keep])
             offset = arm.tool_offset_m if options.tool_offset_m is None else options.tool_offset_m
         else:
+            assert R is not None  # a pose track has both
             p, R = p[keep], R[keep]
             offset = options.tool_offset_m or (0.0, 0.0, 0.0)
         pad = bm.pad_from_frame(p, R, np.asarray(offset, float))
@@ -172,18 +178,20 @@ def _stamps(stamps: list[int], logs: list[int]) -> np.ndarray:
 
 def _joint_track(source, topic: str, kind: str, arm: ArmKinematics) -> tuple[np.ndarray, np.ndarray]:
     stamps, logs, rows = [], [], []
-    cols = names = None
+    cols: np.ndarray | None = None
+    names: list[str] | None = None
     for log_ns, msg in source.messages([topic]):
         if kind == LBR_STATE:
             q, stamp = msg.measured_joint_position, int(msg.time_stamp_sec) * 10**9 + int(msg.time_stamp_nano_sec)
         elif kind == CELL_STATE:
             q, stamp = msg["q_rad"], int(msg.get("robot_time_ns") or msg.get("stamp_ns") or 0)
         else:
-            if names != list(msg.name):
-                names = list(msg.name)
+            msg_names = list(msg.name)
+            if names != msg_names:
+                names = msg_names
                 cols = bm.joint_columns(names, arm.joint_index, arm.n_joints, arm.joint_names)
-            if len(msg.position) != len(names):
-                raise DemoError(f"a message with {len(names)} joint names but {len(msg.position)} positions")
+            if len(msg.position) != len(msg_names):
+                raise DemoError(f"a message with {len(msg_names)} joint names but {len(msg.position)} positions")
             q, stamp = np.asarray(msg.position)[cols], _stamp_ns(msg.header.stamp)
         if len(q) != arm.n_joints:
             raise DemoError(f"{len(q)} joint positions in a message; the arm has {arm.n_joints}")
@@ -206,7 +214,7 @@ def _pose_track(source, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 def _tf_poses(source, topic: str, topics, options: BagOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The named frame's poses from ``topic`` (and ``/tf_static`` when the recording has it)."""
-    per_child: dict[str, dict[str, list]] = {}
+    per_child: dict[str, dict[str, Any]] = {}
     static_topics = {"/tf_static"} & set(topics)
     for log_ns, msg, static in ((t, m, topic_ in static_topics)
                                 for topic_, t, m in source.messages_with_topic([topic, *static_topics])):
@@ -227,6 +235,7 @@ def _tf_poses(source, topic: str, topics, options: BagOptions) -> tuple[np.ndarr
             links[child] = bm.FrameLink(rec["parent"], child, None, p[-1:], R[-1:])
         else:
             links[child] = bm.FrameLink(rec["parent"], child, t_ns[order], p, R)
+    assert options.frame is not None, "a tf track without the frame to follow"  # the options' check refuses it
     return bm.compose_chain(bm.chain_to(options.frame, links, options.base_frame))
 
 

@@ -101,6 +101,7 @@ runs are relabelled as in step 5, and none of steps 5-7's other parts run.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -294,7 +295,7 @@ class Segmentation:
         point, in OPTICS order), ``reachability`` [m] in that order (the
         first, infinite, value as None), the ``params`` and the ``cuts``.
         """
-        d = {
+        d: dict[str, Any] = {
             "method": self.method,
             "threshold": self.threshold,
             "min_samples": self.min_samples,
@@ -409,6 +410,7 @@ def _segment_impl(
         runs = merge_short_runs(runs, t, params.min_duration_s, transitions=True)
         runs, rejected = check_periodic(runs, smooth, params.min_path_ratio)
         if not any(c >= 0 for c, _, _ in runs):
+            assert eps is not None and ms is not None  # the OPTICS branch set both
             raise SegmentationError(_no_periodic_message(demo, eps, ms, rejected, params.min_path_ratio))
     elif method == "sklearn-optics":  # noise is transitional; none of steps 5-7
         runs = merge_short_runs(runs, t, params.min_duration_s, transitions=True)
@@ -477,7 +479,7 @@ def _no_periodic_message(
 
 
 def _is_int_at_least(value: object, low: int) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= low
+    return bool(isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= low)
 
 
 def _is_real(value: object) -> bool:

@@ -13,9 +13,14 @@ quality of GOOD or better (friClientIf.h:74-75,83-84), a frozen clock is
 a lost FRI link (:class:`~robot.lbr.watches.ClockWatch`), and a pad that
 presses at rest is a stack holding a command away from the arm
 (:func:`~robot.lbr.rest_checks.preload_refusal`).
+
+:class:`ArmState` is what the adapter keeps of it: whether it commands, why
+not, and the newest state at rest for the load-data note at arming.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,7 +36,7 @@ from .msgs import (
     enum_name,
 )
 from .params import LbrParams
-from .rest_checks import preload_refusal
+from .rest_checks import load_note, preload_refusal
 from .watches import ClockWatch
 
 #: Joint speed [rad/s] under which the arm counts as at rest for arming on an FRI 2 state (no commanded
@@ -97,3 +102,36 @@ def left_commanding(st: LbrState) -> str | None:
         return None
     return (f"robot left commanding (session {enum_name(SessionState, st.session_state)}, safety "
             f"{enum_name(SafetyState, st.safety_state)}, drives {enum_name(DriveState, st.drive_state)})")
+
+
+@dataclass(slots=True)
+class ArmState:
+    """Whether the adapter commands the robot, and what it says about it.
+
+    armed : commanding torques; pending : to arm at the first controller command the robot allows (``--arm``);
+    reason : why it does not command (the status's ``why=``; empty while armed); load_note : the tool mass the
+    external torque at rest implied at arming, when off the load data (empty: none); rest_wrench : (6,) the pad
+    wrench [N, Nm], world axes, in the newest state at rest while disarmed and pressing under
+    ``arm_preload_max_n``; rest_ns : its robot time [ns] (None: no such state yet).
+    """
+
+    armed: bool = False
+    pending: bool = False
+    reason: str = "not armed yet"
+    load_note: str = ""
+    rest_wrench: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    rest_ns: int | None = None
+
+    def observe_rest(self, wrench: np.ndarray, dq_rad_s: np.ndarray, t_ns: int, preload_max_n: float) -> None:
+        """A state of robot time ``t_ns`` with the pad ``wrench`` (6,) [N, Nm] and joint velocity ``dq_rad_s`` (7,)
+        [rad/s]: kept as the rest when disarmed, at rest and pressing no more than ``preload_max_n`` [N]."""
+        if not self.armed and float(np.max(np.abs(dq_rad_s))) <= REST_SPEED_RAD_S and \
+                float(np.linalg.norm(wrench[:3])) <= preload_max_n:
+            self.rest_wrench, self.rest_ns = wrench, t_ns
+
+    def note_load(self, tool_mass_kg: float, tolerance_kg: float) -> str:
+        """Set and return :attr:`load_note` from the newest rest, however old (an arm its load data leaves out sags
+        once commanding starts); empty when the load data fits or no rest was seen."""
+        w, rest_ns = self.rest_wrench, self.rest_ns
+        self.load_note = "" if rest_ns is None else load_note(w, tool_mass_kg, tolerance_kg) or ""
+        return self.load_note

@@ -163,24 +163,26 @@ class JointSpring:
 
     def _mirror(self, q: np.ndarray, t_ns: int, period_ns: int, tau_commanded: np.ndarray | None,
                 tol_nm: float) -> None:
+        t_last, c = self._t_ns, self.c
+        assert t_last is not None and c is not None, "mirrored before a state"  # observe's last branch
         named = self._named(tau_commanded, tol_nm) if self._settled is not None else None
         if named is None:  # the guess for every cycle since the last state
             if tau_commanded is not None:
                 self.echoes_missed += 1
-            cycles = max(round((t_ns - self._t_ns) / period_ns), 0)
+            cycles = max(round((t_ns - t_last) / period_ns), 0)
             for _ in range(min(cycles, 50)):
-                self.c += self.p * (self._targets[0] - q)
-            self._settled, self._settled_ns, self._named_at = self.c.copy(), t_ns, -1
+                c += self.p * (self._targets[0] - q)  # in place: self.c
+            self._settled, self._settled_ns, self._named_at = c.copy(), t_ns, -1
             return
         self.echoes_named += 1
         last = t_ns - period_ns  # the cycle the echo names
         self.lag_ns = last - self._sent_ns[named % self.RING]
         lo = max(self._named_at, self._count - self.RING, 0)
-        span = max(round((t_ns - self._t_ns) / period_ns), 1)  # cycles from the last state to this one
+        span = max(round((t_ns - t_last) / period_ns), 1)  # cycles from the last state to this one
         q_prev = self._q if self._q is not None else q
         t_cycle = self._settled_ns + period_ns
         for _ in range(min(round((last - self._settled_ns) / period_ns), 50)):
-            i = round((t_cycle - self._t_ns) / period_ns)  # from the last state's cycle
+            i = round((t_cycle - t_last) / period_ns)  # from the last state's cycle
             target = self._sent_target[named % self.RING] if t_cycle >= last else self._lagged(t_cycle, lo, named)
             self._settled += self.p * (target - (q_prev + (q - q_prev) * (min(max(i, 0), span) / span)))
             t_cycle += period_ns
@@ -326,8 +328,8 @@ class FreezeWatch:
         self.torque_change_nm = torque_change_nm
         self._q: np.ndarray | None = None
         self._since_ns = 0
-        self._tau_lo: np.ndarray | None = None
-        self._tau_hi: np.ndarray | None = None
+        self._tau_lo = np.zeros(0)  # the sent overlay's range since the positions froze (n,) [Nm], set at the first
+        self._tau_hi = np.zeros(0)
 
     def reset(self) -> None:
         self._q = None

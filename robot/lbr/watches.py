@@ -25,18 +25,23 @@ cca24ae) or of the FRI client SDK (lbr-stack/fri ``ros2-fri-1.15``
   does not echo the overlay bit for bit: the SDK documents
   ``getCommandedTorque()`` only as "the last commanded joint torques of the
   robot" (friLBRState.h:204-209).
+* :class:`LinkWatch` and :class:`AppliedCheck`: the adapter's watches on
+  the link as it runs them, state by state: the clock, the quality, frozen
+  positions and the states' flow; whether the robot runs on our overlays.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import time
 from collections import deque
 from enum import IntEnum
 
 import numpy as np
 
-from .msgs import ConnectionQuality, enum_name
+from .compensation import AppliedWatch, FreezeWatch
+from .msgs import ConnectionQuality, LbrState, enum_name
 
 
 class Clock(IntEnum):
@@ -200,6 +205,90 @@ class TorqueResolution:
         """Half the step (the robot rounds to the nearest one) with 1 % to spare, within [floor, cap] [Nm]."""
         half = 0.505 * self.step_nm if math.isfinite(self.step_nm) else self.floor_nm
         return min(max(half, self.floor_nm), self.cap_nm)
+
+
+class LinkWatch:
+    """The adapter's watches on the link, fed each state: whether the robot is there and runs as the arm.
+
+    clock : :class:`ClockWatch` (``frozen_stamp_periods``); quality : :class:`QualityWatch` (``disarm_at_quality``);
+    freeze : :class:`~robot.lbr.compensation.FreezeWatch` (``frozen_after_s``: positions still under a changing
+    overlay); last_state_ns : when [monotonic ns] the newest state arrived, a re-sent one too (None: none yet);
+    robot_waits : the server runs lock-step (the robot's clock waits for our answers, so it is not judged);
+    answered : (the robot time [ns] of the reading our last message answered, when [monotonic ns] we first did).
+    """
+
+    def __init__(self, frozen_stamp_periods: int, disarm_at_quality: int, frozen_after_s: float) -> None:
+        self.clock = ClockWatch(frozen_stamp_periods)
+        self.quality = QualityWatch(disarm_at_quality)
+        self.freeze = FreezeWatch(frozen_after_s)
+        self.last_state_ns: int | None = None
+        self.robot_waits = False
+        self.answered = (-1, 0)
+
+    def answer(self, robot_time_ns: int) -> None:
+        """A message went out answering the reading of robot time ``robot_time_ns``."""
+        if self.answered[0] != robot_time_ns:
+            self.answered = (robot_time_ns, time.monotonic_ns())
+
+    def state(self, st: LbrState, arrival_ns: int) -> Clock:
+        """A state arrived at ``arrival_ns`` [monotonic ns]: what it says of the robot's clock
+        (:meth:`ClockWatch.update`, its :attr:`ClockWatch.reason`)."""
+        self.last_state_ns = time.monotonic_ns()  # a re-sent state too: the robot is there, waiting
+        answered = self.answered[1] if self.answered[0] == self.clock.stamp_ns and not self.robot_waits else None
+        return self.clock.update(st.stamp_ns, st.sample_time_s, arrival_ns, answered)
+
+    def silence(self, limit_s: float) -> str | None:
+        """Why commanding must end when no state has come for over ``limit_s`` [s] (the stack or the bridge gone),
+        or None."""
+        if self.last_state_ns is None:
+            return None
+        silent_s = (time.monotonic_ns() - self.last_state_ns) * 1e-9
+        if silent_s <= limit_s:
+            return None
+        return (f"no robot state for {silent_s * 1e3:.0f} ms (the stack exits when the robot leaves "
+                f"COMMANDING_ACTIVE: launch it again; or the bridge is gone){self.quality.note()}")
+
+
+class AppliedCheck:
+    """Whether the robot runs on a recent overlay of ours, within the robot's learned resolution.
+
+    sent : :class:`~robot.lbr.compensation.AppliedWatch`, the overlays sent; resolution : :class:`TorqueResolution`
+    (``applied_tolerance_nm`` to ``applied_tolerance_max_nm``); enabled : ``check_applied``; stale_limit_s : how old
+    [s] an answer may be before the server holds; stall_s : ``applied_stall_s``, how long [s, robot time] an armed
+    adapter may see no state on a recent overlay; applying : the newest state's verdict; armed_ns : the robot time
+    [ns] at arming.
+    """
+
+    def __init__(self, tol_nm: float, tol_max_nm: float, enabled: bool, stale_limit_s: float,
+                 stall_s: float) -> None:
+        self.sent = AppliedWatch(tol_nm=tol_nm)
+        self.resolution = TorqueResolution(tol_nm, tol_max_nm)
+        self.enabled = enabled
+        self.stale_limit_s = stale_limit_s
+        self.stall_s = stall_s
+        self.applying = True
+        self.armed_ns = 0
+
+    def arm(self, t_ns: int) -> None:
+        """Armed at robot time ``t_ns``: what the robot ran on before is not judged."""
+        self.armed_ns = t_ns
+        self.sent.reset()
+
+    def update(self, st: LbrState, period_s: float, armed: bool) -> str | None:
+        """The state ``st`` (state period ``period_s`` [s]): sets :attr:`applying`; why to disarm, armed and no state
+        on a recent overlay for :attr:`stall_s`, or None."""
+        self.resolution.update(st.tau_commanded_nm)
+        checking = armed and self.enabled
+        # answer, manager cycle, FRI cycles applying and reporting it, manager cycle publishing: 2 periods of each
+        self.applying = not (checking and self.sent.old(st.tau_commanded_nm, st.stamp_ns,
+                                                        self.stale_limit_s + 2.0 * (period_s + st.sample_time_s),
+                                                        self.resolution.tolerance_nm()))
+        if not (checking and self.sent.sent_any):
+            return None
+        since_ns = st.stamp_ns - (self.sent.applied_ns if self.sent.applied_ns is not None else self.armed_ns)
+        if since_ns * 1e-9 > self.stall_s:
+            return self.sent.stall_reason(since_ns * 1e-9, self.resolution.tolerance_nm())
+        return None
 
 
 def _whole(v: np.ndarray) -> bool:

@@ -9,4 +9,4 @@ with :mod:`.commands` its torque-command subscription; :mod:`.cli`
 with the stack's file, line and commit.
 """
 
-__all__ = ["cli", "commands", "params", "peer", "stack"]
+__all__ = ["broadcast", "cli", "commands", "fri_robot", "params", "peer", "stack"]

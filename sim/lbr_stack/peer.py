@@ -92,41 +92,21 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
-from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
 from interfaces.messages import ServiceStatus
-from robot.lbr.msgs import (
-    N_JOINTS,
-    DriveState,
-    LbrState,
-    SafetyState,
-    SessionState,
-    encode_joint_state,
-    encode_state,
-    encode_wrench,
-)
-from robot.lbr.tip import tip_jacobian, tip_pose
+from robot.lbr.msgs import SessionState
 from runtime.loop_stats import LoopStats
-from runtime.session import CONTROL_QOS, ServiceNode
+from runtime.session import ServiceNode
 from sim.core import SimCore
 from sim.params import SimParams
 from sim.service import SimPort
 
+from .broadcast import Broadcasters
 from .commands import CommandBox
-from .params import COMMAND_MODES, CONTROL_MODES, OPERATION_MODES, LbrPeerParams
-from .stack import (
-    FriCommand,
-    FriLink,
-    RobotSession,
-    StackClient,
-    StackError,
-    estimated_wrench,
-    impedance_damping,
-    joint_impedance_torque,
-    reported_commanded_torque,
-)
+from .fri_robot import FriRobot
+from .params import CONTROL_MODES, LbrPeerParams
+from .stack import FriLink, RobotSession, StackClient, StackError, StackProcess
 
 log = logging.getLogger(__name__)
 
@@ -164,15 +144,6 @@ def next_manager_deadline(deadline_ns: int, period_ns: int, now_ns: int) -> tupl
     return deadline_ns, int(missed)
 
 
-def external_torque_nm(jacobian: np.ndarray, wrench: np.ndarray) -> np.ndarray:
-    """``tau_ext = J^T w`` (7,) [Nm]: the joint torques of a wrench the environment exerts on the tool.
-
-    jacobian : (6, 7) of the TCP, linear rows first, world-aligned axes; wrench : (6,) force [N] then
-    torque about the TCP [Nm], world axes (virtual work: ``tau_ext . dq = w . J dq``).
-    """
-    return jacobian.T @ wrench
-
-
 # -- the peer -------------------------------------------------------------------------------------------
 
 
@@ -192,44 +163,30 @@ class LbrPeer:
         self.node = node
         self.core = core or SimCore(sim_params)
         self.port = SimPort(sim_params, node, self.core, substeps_for_peer(sim_params, params))
-        self.model = RobotModel(joints=self.core.joints)  # the simulated drives' rotor inertia in M
-        lim = self.model.limits
+        self.robot = FriRobot(params, self.core, self.port.substeps)
+        lim = self.robot.model.limits
         self.stack = StackClient(params, lim.q_min, lim.q_max, lim.dq_max)
         self.session = RobotSession(params)
         self.link = FriLink(params)
-        self.stack_up = True
-        self.stack_exit = ""
-        self.activated = False  # the stack's hardware interface is past on_activate: it publishes
+        self.process = StackProcess()
         self.counters: Counter[str] = Counter()
         self.stats = LoopStats()
         self.stop = threading.Event()
         self._lockstep = params.mode == "lockstep"
         self._dt = params.sample_time_s
         self._cycles = 0  # FRI cycles
-        self._stiffness = np.full(N_JOINTS, params.joint_stiffness_nm_rad)
-        self._command_mode = int(COMMAND_MODES[params.client_command_mode])
-        self._control_mode = int(CONTROL_MODES[params.control_mode])
-        self._robot_command: FriCommand | None = None  # what the robot got in the last commanding cycle
-        self.spring_max_nm = 0.0  # the largest joint spring torque K |q_cmd - q| the robot applied [Nm]
-        self._ft_every = max(round(1.0 / (self._dt * params.ft_update_rate_hz)), 1)
-        self._joints_every = max(round(1.0 / (self._dt * params.joint_states_rate_hz)), 1)
-        # manager cycles between publications of the wrench and the joint states
-        self._ft_every_cm = max(round(params.update_rate_hz / params.ft_update_rate_hz), 1)
-        self._joints_every_cm = max(round(params.update_rate_hz / params.joint_states_rate_hz), 1)
-        self._cm_cycles = 0
-        self._wrench_tip = np.zeros(6)
-        self._frame_id = f"{params.robot_name}/link_ee" if params.branch == "humble" else \
-            f"{params.robot_name}_link_ee"
-        topics, raw = params.topics, node.session
-        self._pub_state = raw.declare_publisher(topics.key(topics.state), **CONTROL_QOS)
-        self._pub_wrench = raw.declare_publisher(topics.key(topics.wrench))
-        self._pub_joints = raw.declare_publisher(topics.key(topics.joint_states))
-        self.commands = CommandBox(raw, topics.key(topics.torque_command), channel=not self._lockstep)
-        self._zeros = np.zeros(N_JOINTS)
-        self._state_bytes = b""
+        self.outputs = Broadcasters(params, node.session, self.counters, self.robot.model, self.robot.command_mode,
+                                    self.robot.control_mode)
+        self.commands = CommandBox(node.session, params.topics.key(params.topics.torque_command),
+                                   channel=not self._lockstep)
         self._status_period_s = 1.0 / params.status_rate_hz
         self._next_status = 0.0
         self._t_prev_ns = time.monotonic_ns()
+
+    @property
+    def stack_exit(self) -> str:
+        """Why the stack exited ("" while it runs)."""
+        return self.process.exit_reason
 
     # -- lifecycle --------------------------------------------------------------------------------------
     def run(self) -> int:
@@ -247,8 +204,7 @@ class LbrPeer:
 
     def close(self) -> None:
         self.commands.close()
-        for pub in (self._pub_state, self._pub_wrench, self._pub_joints):
-            pub.undeclare()
+        self.outputs.close()
         self.port.close()
 
     def stop_app(self) -> None:
@@ -260,121 +216,65 @@ class LbrPeer:
         """The robot's cycle: the session, the stack's FRI answer, the robot's joint impedance over the physics
         steps of one FRI period (or the arm held), the robot's extras. While the link is lost the stack's FRI side
         does not run and the robot keeps its last command."""
-        core, o = self.core, self.core.out
+        core, robot, proc = self.core, self.robot, self.process
+        o = core.out
         t_ns = core.time_ns
         quality = self.link.quality(t_ns)
         session = self.session.advance(t_ns, quality)
         command = None
-        if self.stack_up and self.link.up(t_ns):
-            last = self._robot_command
+        if proc.up and self.link.up(t_ns):
+            last = robot.command
             q_commanded = last.joint_position if last is not None else o.q
-            reported = reported_commanded_torque(last.torque if last is not None else self._zeros,
-                                                 self.p.commanded_torque_resolution_nm,
-                                                 self.p.commanded_torque_offset_nm)
+            reported = robot.reported_torque()
             try:
-                command = self.stack.fri_cycle(session, o.q, q_commanded, o.tau, self._external_torque(),
-                                               self._command_mode, self._dt, stamp_ns=t_ns,
+                command = self.stack.fri_cycle(session, o.q, q_commanded, o.tau, robot.external_torque(),
+                                               robot.command_mode, self._dt, stamp_ns=t_ns,
                                                connection_quality=quality, tau_commanded=reported)
             except StackError as exc:
                 self._exit(str(exc))
-        elif self.stack_up:
-            command = self._robot_command  # no packet: the robot keeps the last command it got (assumed)
+        elif proc.up:
+            command = robot.command  # no packet: the robot keeps the last command it got (assumed)
             self.counters["fri_cycles_link_lost"] += 1
         if command is not None and session == SessionState.COMMANDING_ACTIVE and \
-                self._control_mode == CONTROL_MODES["joint_impedance"]:
-            prev = self._robot_command
-            dq_cmd = (command.joint_position - prev.joint_position) / self._dt \
-                if prev is not None and self.p.joint_damping_law == "relative" else self._zeros
-            self._robot_command = command
-            damping = impedance_damping(self._stiffness, self.p.joint_damping_ratio, self._inertia_diag(o.q))
-            for _ in range(self.port.substeps):
-                core.step(joint_impedance_torque(command.torque, command.joint_position, dq_cmd, o.q, o.dq,
-                                                 self._stiffness, damping) + self._unloaded_torque())
+                robot.control_mode == CONTROL_MODES["joint_impedance"]:
+            robot.apply(command)
             self.counters["cycles_commanding"] += 1
-            spring = float(np.max(np.abs(self._stiffness * (command.joint_position - o.q))))
-            self.spring_max_nm = max(self.spring_max_nm, spring)
         else:
-            self._robot_command = None
-            for _ in range(self.port.substeps):
-                core.step_braked()
+            robot.hold()
             self.counters["cycles_held"] += 1
         self._cycles += 1
-        if self.stack_up and self.activated and self._cycles % self._ft_every == 0:
-            self._update_wrench()
-        self.port.after_cycle(self._lockstep and self.stack_up and self.activated)
+        if proc.up and proc.activated and self._cycles % self.outputs.ft_every_fri == 0:
+            self.outputs.update_wrench(self.stack.state)
+        self.port.after_cycle(self._lockstep and proc.up and proc.activated)
 
     def cm_cycle(self, message: tuple[np.ndarray, np.ndarray] | None) -> None:
         """The controller manager's cycle: a new message to the torque controller (or None), read, update,
         write, and the broadcasters publish (once the stack is active)."""
-        if not self.stack_up:
+        proc = self.process
+        if not proc.up:
             return
         if message is not None:
             self.stack.receive(*message)
             self.counters["commands_received_by_controller"] += 1
-        if not self.activated:
+        if not proc.activated:
             if self.stack.state.session < SessionState.COMMANDING_WAIT:
                 return  # still in on_activate: nothing is published
-            self.activated = True
+            proc.activated = True
             log.info("the stack is active (session %s): publishing", self.stack.state.session.name)
         try:
             self.stack.cm_cycle()
         except StackError as exc:
             self._exit(str(exc))
             return
-        self._cm_cycles += 1
-        self._publish_outputs()
+        self.outputs.publish(self.stack.state)
 
     def _exit(self, reason: str) -> None:
-        if self.stack_up:
-            self.stack_up = False
-            self.stack_exit = reason
+        proc = self.process
+        if proc.up:
+            proc.up = False
+            proc.exit_reason = reason
             self.counters["stack_exits"] += 1
             log.warning("the stack exited: %s; the robot holds, nothing more is published", reason)
-
-    # -- pieces -----------------------------------------------------------------------------------------
-    def _external_torque(self) -> np.ndarray:
-        o = self.core.out
-        if np.any(o.wrench):
-            return external_torque_nm(self.model.tcp_jacobian(o.q), o.wrench) + self._unloaded_torque()
-        return self._unloaded_torque()  # free space: no contact
-
-    def _unloaded_torque(self) -> np.ndarray:
-        """(7,) [Nm] the weight of the tool mass the robot's load data leaves out (``tool_load_error_kg``), at the
-        pad: not compensated by the robot, so it is in the torque it applies and in the external torque."""
-        m = self.p.tool_load_error_kg
-        if m == 0.0:
-            return self._zeros
-        return external_torque_nm(self.model.tcp_jacobian(self.core.out.q), np.array([0, 0, -m * 9.81, 0, 0, 0]))
-
-    def _inertia_diag(self, q: np.ndarray) -> np.ndarray:
-        return np.diag(pin.crba(self.model.model, self.model.data, q)).copy()
-
-    def _update_wrench(self) -> None:
-        q = self.stack.state.q_rad
-        _, R = tip_pose(self.model, q)
-        p = self.p
-        self._wrench_tip = estimated_wrench(tip_jacobian(self.model, q), self.stack.state.tau_external_nm, R,
-                                            p.ft_damping, p.ft_force_threshold_n, p.ft_torque_threshold_nm,
-                                            threshold_in_tip=p.branch == "humble")
-
-    def _publish_outputs(self) -> None:
-        """The broadcasters: the stack's state as its last FRI cycle left it (a lost link leaves it, time stamp
-        included), the wrench and the joint states every few manager cycles."""
-        st, k = self.stack.state, self._cm_cycles
-        state = LbrState(
-            sample_time_s=st.sample_time_s or self._dt, session_state=int(st.session),
-            safety_state=int(SafetyState.NORMAL_OPERATION), operation_mode=int(OPERATION_MODES[self.p.operation_mode]),
-            drive_state=int(DriveState.ACTIVE), client_command_mode=self._command_mode,
-            control_mode=self._control_mode, stamp_ns=st.stamp_ns, q_rad=st.q_rad,
-            tau_measured_nm=st.tau_measured_nm, tau_external_nm=st.tau_external_nm, q_commanded_rad=st.q_commanded_rad,
-            tau_commanded_nm=st.tau_commanded_nm, connection_quality=st.connection_quality)
-        self._state_bytes = encode_state(state, fri_major=self.p.fri_major, ipo_joint_position_rad=st.ipo_rad)
-        self._pub_state.put(self._state_bytes)
-        self.counters["states_published"] += 1
-        if k % self._ft_every_cm == 0:
-            self._pub_wrench.put(encode_wrench(self._frame_id, self._wrench_tip, st.stamp_ns))
-        if k % self._joints_every_cm == 0:
-            self._pub_joints.put(encode_joint_state(self.p.joint_names, st.q_rad, st.stamp_ns))
 
     # -- loops ------------------------------------------------------------------------------------------
     def _run_realtime(self) -> None:
@@ -440,7 +340,7 @@ class LbrPeer:
         message = None
         running_on = False  # an answer did not come: the robot runs on its clock until one does
         while not self.stop.is_set():
-            if not (self.stack_up and self.activated):  # nobody can answer: the robot runs on its own clock
+            if not (self.process.up and self.process.activated):  # nobody can answer: the robot runs on its own clock
                 next_ns = self._paced(next_ns or time.monotonic_ns(), period_ns, take_newest=True)
                 continue
             t0 = time.perf_counter_ns()
@@ -469,9 +369,8 @@ class LbrPeer:
             self._publish_status()
             if command is not None:
                 return command
-            if self._state_bytes and time.monotonic() < deadline - 1e-3:
-                self._pub_state.put(self._state_bytes)  # the same state again: same stamp
-                self.counters["states_republished"] += 1
+            if self.outputs.state_bytes and time.monotonic() < deadline - 1e-3:
+                self.outputs.republish_state()  # the same state again: same stamp
         return None
 
     # -- status -----------------------------------------------------------------------------------------
@@ -480,14 +379,14 @@ class LbrPeer:
         counters.update(self.commands.counters())
         counters.update(self.port.counters())
         counters.update(session_state=int(self.session.state), steps=self.core.steps,
-                        stack_up=int(self.stack_up), spring_max_mnm=round(self.spring_max_nm * 1e3))
+                        stack_up=int(self.process.up), spring_max_mnm=round(self.robot.spring_max_nm * 1e3))
         t_ns = self.core.time_ns
         link = "" if self.link.up(t_ns) else " link=lost"
         manager = "fri" if self._lockstep else self.p.manager_clock
         detail = (f"mode={self.p.mode} step={self.core.steps} session={self.session.state.name} "
                   f"quality={self.link.quality(t_ns).name}{link} manager={manager} "
                   f"namespace={self.p.namespace} fri={self.p.fri_major} branch={self.p.branch} "
-                  f"open_loop={self.p.open_loop}" + (f" stack exited: {self.stack_exit[:120]}" if not self.stack_up
+                  f"open_loop={self.p.open_loop}" + (f" stack exited: {self.stack_exit[:120]}" if not self.process.up
                                                      else ""))
         return ServiceStatus(service=SERVICE, seq=self.core.steps, stamp_ns=time.monotonic_ns(), counters=counters,
                              detail=detail, timing=self.stats.summary())

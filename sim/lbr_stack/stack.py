@@ -110,6 +110,17 @@ class StackError(RuntimeError):
     """The stack stops: it throws, or its hardware interface returns ERROR (the driver must be launched again)."""
 
 
+@dataclass(slots=True)
+class StackProcess:
+    """The stack as a process: ``up`` while it runs (False once it exited: it publishes nothing more and the
+    robot holds), ``exit_reason`` why it exited ("" while up), ``activated`` once its hardware interface is past
+    on_activate (it publishes from then on)."""
+
+    up: bool = True
+    exit_reason: str = ""
+    activated: bool = False
+
+
 class CommandGuard:
     """The stack's ``default`` command guard (command_guard.cpp:7-64): the commanded joint position within the
     description's limits and the measured joint speed (position difference over the sample time) within its
