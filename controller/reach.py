@@ -11,6 +11,17 @@ reaches it, whatever the redundancy. The executor keeps its look points
 room, instead of commanding a pose the arm cannot take (on the table and the
 tilted board the near edge was out of reach: the pad dipped into the board
 at 30 N during the survey).
+
+The shoulder and the wrist have singular poses too: A2 = 0 lines A1 and A3
+up, A6 = 0 lines A5 and A7 up (the arm turns about one axis with two
+joints, and the task loses a direction). Neither follows from the pad pose
+alone: the elbow can swing on a circle about the shoulder-wrist line (the
+arm's self-motion) and with it the upper arm and the forearm. Over that
+circle ``|q2|``, the upper arm's angle from A1's axis, and ``|q6|``, the
+forearm's angle from A7's, each span a range in closed form; a pose where
+even the best swing leaves one of them near zero is wiped through the
+singularity whatever the nullspace posture does (:meth:`ArmReach.shoulder_tilt_max_rad`,
+:meth:`ArmReach.wrist_bend_range_rad`).
 """
 
 from __future__ import annotations
@@ -26,7 +37,10 @@ class ArmReach:
     """The arm's elbow geometry; poses in the world (robot base) frame [m].
 
     shoulder_m : (3,) shoulder centre (fixed); wrist_in_pad_m : (3,) wrist centre in the pad frame;
-    upper_m, fore_m : shoulder-elbow and elbow-wrist lengths; q4_max_rad : the elbow's limit (symmetric).
+    upper_m, fore_m : shoulder-elbow and elbow-wrist lengths; q4_max_rad : the elbow's limit (symmetric);
+    axis1 : (3,) A1's axis, world (the shoulder's ``q2 = 0`` direction of the upper arm); axis7_in_pad : (3,)
+    A7's axis in the pad frame, from the wrist centre outwards (the forearm's ``q6 = 0`` direction);
+    q6_max_rad : the wrist's limit (symmetric).
     """
 
     shoulder_m: np.ndarray
@@ -34,6 +48,9 @@ class ArmReach:
     upper_m: float
     fore_m: float
     q4_max_rad: float
+    axis1: np.ndarray
+    axis7_in_pad: np.ndarray
+    q6_max_rad: float
 
     def elbow_rad(self, p_m: np.ndarray, R: np.ndarray) -> float:
         """|q4| [rad] of any configuration putting the pad at ``p_m`` (3,) with orientation ``R`` (3, 3);
@@ -47,10 +64,49 @@ class ArmReach:
         """How far [rad] the elbow stays from its limit at that pad pose (negative: out of reach)."""
         return self.q4_max_rad - self.elbow_rad(p_m, R)
 
+    def _elbow_circle(self, p_m: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+        """The elbow's circle at that pad pose: (unit shoulder-to-wrist direction u (3,), the circle centre's
+        distance from the shoulder along u [m], its radius [m]); None beyond the stretched arm."""
+        sw = p_m + R @ self.wrist_in_pad_m - self.shoulder_m
+        d = float(np.linalg.norm(sw))
+        a, b = self.upper_m, self.fore_m
+        if d <= 1e-9 or d > a + b:
+            return None
+        along = (a * a - b * b + d * d) / (2.0 * d)
+        return sw / d, along, math.sqrt(max(a * a - along * along, 0.0))
+
+    def shoulder_tilt_max_rad(self, p_m: np.ndarray, R: np.ndarray) -> float:
+        """The largest ``|q2|`` [rad] over the elbow's swing at the pad pose ``p_m`` (3,), ``R`` (3, 3): the upper
+        arm's largest angle from A1's axis (near 0: the wrist centre above the shoulder, A1 and A3 lined up
+        whatever the elbow does); nan beyond the stretched arm."""
+        circle = self._elbow_circle(p_m, R)
+        if circle is None:
+            return math.nan
+        u, along, radius = circle
+        par = float(u @ self.axis1)
+        perp = math.sqrt(max(1.0 - par * par, 0.0))
+        return math.acos(min(max((along * par - radius * perp) / self.upper_m, -1.0), 1.0))
+
+    def wrist_bend_range_rad(self, p_m: np.ndarray, R: np.ndarray) -> tuple[float, float]:
+        """The least and the largest ``|q6|`` [rad] over the elbow's swing at that pad pose: the forearm's angles
+        from A7's axis (the largest near 0: A5 and A7 lined up whatever the elbow does; the least over the
+        wrist's limit: the wrist cannot bend that far); (nan, nan) beyond the stretched arm."""
+        circle = self._elbow_circle(p_m, R)
+        if circle is None:
+            return math.nan, math.nan
+        u, along, radius = circle
+        t = R @ self.axis7_in_pad
+        d = float(np.linalg.norm(p_m + R @ self.wrist_in_pad_m - self.shoulder_m))
+        par = float(u @ t)
+        perp = math.sqrt(max(1.0 - par * par, 0.0))
+        mid, swing = (d - along) * par / self.fore_m, radius * perp / self.fore_m
+        return (math.acos(min(max(mid + swing, -1.0), 1.0)), math.acos(min(max(mid - swing, -1.0), 1.0)))
+
 
 def arm_reach(model) -> ArmReach:
     """The :class:`ArmReach` of a :class:`~arm.robot_model.RobotModel` (its joints 2, 4 and 6 are the
-    shoulder, elbow and wrist centres), from its kinematics at zero."""
+    shoulder, elbow and wrist centres; each joint turns about its own z axis), from its kinematics at zero,
+    where the arm stands straight up: the upper arm along A1's axis, the forearm along A7's."""
     import pinocchio as pin
 
     q = np.zeros(model.nq)
@@ -61,4 +117,5 @@ def arm_reach(model) -> ArmReach:
     tcp = model.data.oMf[model.tcp_id]
     return ArmReach(shoulder_m=shoulder, wrist_in_pad_m=tcp.rotation.T @ (wrist - tcp.translation),
                     upper_m=float(np.linalg.norm(elbow - shoulder)), fore_m=float(np.linalg.norm(wrist - elbow)),
-                    q4_max_rad=float(model.limits.q_max[3]))
+                    q4_max_rad=float(model.limits.q_max[3]), axis1=joints[1].rotation[:, 2].copy(),
+                    axis7_in_pad=tcp.rotation.T @ joints[7].rotation[:, 2], q6_max_rad=float(model.limits.q_max[5]))
