@@ -42,7 +42,7 @@ from .control.impedance import (
     task_stiffness,
 )
 from .control.kernels import reference_into, tool_in_board, trace_row
-from .control.limit_kernels import clearance_into, limit_torque, self_motion_limit_into
+from .control.limit_kernels import clearance_into, limit_torque, normal_neutral_into, self_motion_limit_into
 from .control.limits import SpeedOverride, TorqueShaper, limits_from_settings, speed_excess_force
 from .control.params import mode_frequency_cap
 from .control.watch import ContactWatch, DisturbanceWatch
@@ -173,6 +173,9 @@ class ControllerCore:
         clearance_into(q, buf.dq, buf.limits, buf.clearance)
         self_motion_limit_into(buf.clearance, buf.dq, kin.M, kin.M_inv, kin.J, kin.Lambda, buf.limits)
         impedance_torque(self.model, q, buf.dq, Reference(), imp, q, True, shaping, kin, modes, buf.terms)
+        axis = shaping.force_axis
+        assert axis is not None  # set above: the same view type as the tick's
+        normal_neutral_into(q, buf.dq, kin.rec, buf.limits, axis, buf.neutral)
         limit_torque(buf.tau, q, buf.dq, kin.M, kin.g, True, buf.limits, self.shaper.rec.copy(), 1.0)
         buf.tau[:] = 0.0
         sp = Setpoint()
@@ -428,8 +431,9 @@ class ControllerCore:
 
     def _torque(self, q: np.ndarray, dq: np.ndarray, kin: Kinematics, gravity_compensated: bool,
                 dt_s: float) -> np.ndarray:
-        """Impedance torque plus the joint-limit repulsion and the joint-speed brake, then the rate and absolute
-        limits (gravity outside the rate limit): two compiled calls, no allocation."""
+        """Impedance torque plus the joint-limit repulsion and the joint-speed brake (pressing on a board: less
+        their force along its normal), then the rate and absolute limits (gravity outside the rate limit): two or
+        three compiled calls, no allocation."""
         model = self.model
         if self.shaping.posture_nm is not None:
             clearance_into(q, dq, self.buf.limits, self.buf.clearance)
@@ -445,6 +449,10 @@ class ControllerCore:
             tau += self.arm.correction.c
         # the robot steps from one command to the next within one of its cycles, however long the controller
         # took: the rate limit is per answer (at most one nominal period's worth), not per elapsed time
+        axis = self.shaping.force_axis
+        if axis is not None:  # pressing on a board: the limits' joint torques leave the press to the regulator
+            normal_neutral_into(q, dq, kin.rec, self.buf.limits, axis, self.buf.neutral)
+            tau += self.buf.neutral
         shaper = self.shaper
         hit = limit_torque(tau, q, dq, kin.M, kin.g, not gravity_compensated, self.buf.limits, shaper.rec,
                            shaper.rate * min(dt_s, self.clock.period_s))

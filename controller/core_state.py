@@ -22,8 +22,9 @@ class TickBuffers:
     kernels always see the same array types); tau (n,) [Nm]: the answer; applied, last_applied (n,) [Nm]: the
     torques the robot applied last cycle and the newest it said it applied; clearance (n,) [Nm] (the shaping's
     posture view when the clearance is on); limits: the torque limits' settings and scratch, one record
-    (:func:`~.control.limit_kernels.limits_dtype`); demand (n,) [rad/s], demand_work (4, 7): the override's
-    joint speeds and scratch; extra_force (3,)
+    (:func:`~.control.limit_kernels.limits_dtype`); neutral (n,) [Nm]: what takes the limits' push along the
+    board's normal out (:func:`~.control.limit_kernels.normal_neutral_into`); demand (n,) [rad/s], demand_work
+    (4, 7): the override's joint speeds and scratch; extra_force (3,)
     [N]: the speed brake's force; xyh, v_board (3,): the pad in the board frame [m, m/s]; sp_v_xy (2,) [m/s]:
     the last setpoint's in-plane velocity at time scale 1; board: the board's pose as a record
     (:data:`~.control.records.BOARD_DTYPE`), board_R (3, 3) and board_origin (3,) [m] its views; terms: the
@@ -34,7 +35,7 @@ class TickBuffers:
         n = kin.model.nq
         self.q, self.dq, self.wrench, self.tau = np.zeros(n), np.zeros(n), np.zeros(6), np.zeros(n)
         self.applied, self.last_applied = np.zeros(n), np.zeros(n)
-        self.clearance, self.limits = np.zeros(n), limits
+        self.clearance, self.limits, self.neutral = np.zeros(n), limits, np.zeros(n)
         self.demand, self.demand_work = np.zeros(n), np.zeros((4, 7))
         self.extra_force, self.xyh, self.v_board, self.sp_v_xy = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(2)
         self.board = new_record(BOARD_DTYPE)

@@ -161,6 +161,43 @@ def test_limits_equal_the_numpy_formulation(model, rng):
         assert hit & 1  # 60 Nm from a random previous command is always more than 1 Nm away
 
 
+
+def test_the_limits_press_nothing_along_the_board_normal_and_keep_the_rest(model, rng):
+    """Pressing on a board, what the joint-limit repulsion and the speed brake add is made neutral along its normal:
+    the task force of additions plus :func:`normal_neutral_into`'s torque has no component along it (numpy), its
+    other components are the additions' own, and the kernel returns the force it took out. On random board 35 the
+    elbow within the repulsion's margin pressed the pad with 15 N more than the regulator asked (20.6 N peak)."""
+    lim = model.limits
+    n = model.nq
+    kin = Kinematics(model)
+    onset = 0.6 * lim.dq_max
+    limits = limits_record(lim.q_min, lim.q_max, lim.dq_max, onset, np.zeros(n),
+                           **{**dict.fromkeys(LIMIT_SETTINGS, 0.0), "margin_rad": 0.12,
+                              "margin_stiffness_nm_rad": 300.0, "margin_damping_nm_s_rad": 10.0,
+                              "speed_brake_1_s": 50.0})
+    for _ in range(20):
+        q = lim.q_max - rng.uniform(0.0, 0.3, n)  # some joints inside the margin
+        dq = rng.normal(0, 1.5, n)  # some over the brake's onset
+        kin.update(q, dq)
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        lo_d = np.clip(lim.q_min + 0.12 - q, 0.0, None)
+        hi_d = np.clip(q - (lim.q_max - 0.12), 0.0, None)
+        add = 300.0 * (lo_d - hi_d) - 10.0 * (np.minimum(lo_d / 0.12, 1) * np.minimum(dq, 0)
+                                              + np.minimum(hi_d / 0.12, 1) * np.maximum(dq, 0))
+        add += -50.0 * np.maximum(np.abs(dq) - onset, 0.0) * np.sign(dq) * np.diag(kin.M)
+        image = kin.Lambda @ kin.J @ kin.M_inv  # the task force of a joint torque
+        out = np.zeros(n)
+        taken = limit_kernels.normal_neutral_into(q, dq, kin.rec, limits, axis, out)
+        f_add, f_sum = image @ add, image @ (add + out)
+        assert taken == pytest.approx(axis @ f_add[:3], rel=1e-9, abs=1e-9)
+        tol = 1e-4 * max(1.0, np.abs(f_add).max())  # Lambda carries the Cholesky's regularisation
+        assert abs(axis @ f_sum[:3]) < tol
+        np.testing.assert_allclose(f_sum[:3] - (axis @ f_sum[:3]) * axis, f_add[:3] - (axis @ f_add[:3]) * axis,
+                                   atol=tol)
+        np.testing.assert_allclose(f_sum[3:], f_add[3:], atol=tol)
+    assert abs(taken) > 1.0, "the draws press along the axis (the check can fail)"
+
 def test_disturbance_reference_demand_and_board_kernels_equal_numpy(model, rng):
     kin = Kinematics(model)
     q, dq = _random_state(model, rng)

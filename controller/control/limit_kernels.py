@@ -1,7 +1,8 @@
 """The torque limits of :mod:`.limits`, compiled (numba, as :mod:`.kernels`, whose docstring says why and how): the
 joint-limit repulsion, the clearance posture and the bound on the self-motion it drives, the joint-speed brake, the
-torque rate and absolute limits, and :func:`limit_torque`, which runs them fused in the 1 kHz tick. The numpy-facing
-API of :mod:`.limits` calls these, so there is one implementation of each formula."""
+torque rate and absolute limits, and :func:`limit_torque`, which runs them fused in the 1 kHz tick; while the pad
+presses on a board, :func:`normal_neutral_into` takes out what the repulsion and the brake would press with. The
+numpy-facing API of :mod:`.limits` calls these, so there is one implementation of each formula."""
 
 from __future__ import annotations
 
@@ -218,6 +219,55 @@ def shape_into(tau: np.ndarray, prev: np.ndarray, tau_max: np.ndarray, step: flo
             tau[i] = min(max(tau[i], -tau_max[i]), tau_max[i])
             prev[i] = tau[i] - offset[i] if use_offset else tau[i]
     return hit
+
+
+@_jit
+def normal_neutral_into(q: np.ndarray, dq: np.ndarray, arm: np.ndarray, lim: np.ndarray, axis: np.ndarray,
+                        out: np.ndarray) -> float:
+    """``out`` (n,) [Nm]: the joint torque that cancels, along the unit ``axis`` (3,) (world), the force on the pad
+    of what :func:`limit_torque` adds at ``q``, ``dq`` (n,): the joint-limit repulsion and the joint-speed brake of
+    ``lim``. Both act joint by joint, blind to the task; the pad's force on a board along ``axis`` is the force
+    regulator's alone, so the part of them it would feel is taken out: with ``f = Lam J M^-1 tau_add`` (the task
+    force a joint torque makes, ``arm``: :func:`~.records.arm_dtype` at that state), ``out = -J_v^T axis
+    (axis . f_v)`` (adding ``J^T w`` adds exactly ``w`` to it). Returns ``axis . f_v`` [N], the force taken out.
+    Scratch: ``lim``'s work rows (:func:`limit_torque` overwrites them)."""
+    n = q.shape[0]
+    c = lim[0]
+    a_ = arm[0]
+    J, Lam, M_inv = a_.J, a_.Lam, a_.M_inv
+    add = c.work[0]
+    brake = c.work[1]
+    margin_torque_into(q, dq, c.q_min, c.q_max, c.margin_rad, c.margin_stiffness_nm_rad, c.margin_damping_nm_s_rad,
+                       add)
+    for i in range(n):
+        brake[i] = a_.M[i, i]
+    speed_brake_into(dq, c.speed_onset_rad_s, c.speed_brake_1_s, brake, brake)
+    for i in range(n):
+        add[i] += brake[i]
+    y = c.work[1]  # M^-1 tau_add
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += M_inv[i, j] * add[j]
+        y[i] = s
+    jy = c.work[2]  # J M^-1 tau_add (6,)
+    for r in range(6):
+        s = 0.0
+        for j in range(n):
+            s += J[r, j] * y[j]
+        jy[r] = s
+    f_n = 0.0
+    for r in range(3):
+        s = 0.0
+        for k in range(6):
+            s += Lam[r, k] * jy[k]
+        f_n += axis[r] * s
+    for i in range(n):
+        s = 0.0
+        for r in range(3):
+            s += J[r, i] * axis[r]
+        out[i] = -s * f_n
+    return f_n
 
 
 @_jit
