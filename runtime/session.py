@@ -46,6 +46,13 @@ from .config import ZenohSettings
 log = logging.getLogger(__name__)
 M = TypeVar("M", bound=Message)
 
+#: Zenoh's back-off between attempts on a ``connect`` endpoint that is down or was lost (``connect/retry``), unless
+#: the ``config_file`` sets one: the first retry after 0.25 s, then doubling up to 1 s. Zenoh's own (1, 2, 4 s)
+#: left a restarted service unheard by the peers that connect to it (the recorder, perception, an operator) for up
+#: to 4 s after it listened again; a refused TCP connect on a dead endpoint once a second costs nothing.
+CONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2.0}
+CONNECT_RETRY_PATH = "connect/retry"
+
 #: At most one log line per key and this many seconds about bad samples.
 BAD_SAMPLE_LOG_PERIOD_S = 5.0
 #: At most this many distinct reasons are counted per key; the rest are "other reasons".
@@ -90,7 +97,7 @@ def zenoh_config(settings: ZenohSettings, max_message_bytes: int | None = None) 
 
     max_message_bytes : Zenoh's limit on a whole message the session takes [bytes] (a larger one is dropped while
     reassembled, :mod:`interfaces.message_limits`); default the cell's largest message bound, unless the
-    ``config_file`` sets one.
+    ``config_file`` sets one. The reconnect back-off is :data:`CONNECT_RETRY` unless the ``config_file`` sets one.
     """
     from interfaces.message_limits import MAX_MESSAGE_SIZE_PATH
     from interfaces.message_limits import max_message_bytes as cell_max
@@ -99,6 +106,8 @@ def zenoh_config(settings: ZenohSettings, max_message_bytes: int | None = None) 
     if max_message_bytes is not None or cfg.get_json(MAX_MESSAGE_SIZE_PATH) == zenoh.Config().get_json(
             MAX_MESSAGE_SIZE_PATH):
         cfg.insert_json5(MAX_MESSAGE_SIZE_PATH, json.dumps(int(max_message_bytes or cell_max())))
+    if cfg.get_json(CONNECT_RETRY_PATH) == zenoh.Config().get_json(CONNECT_RETRY_PATH):
+        cfg.insert_json5(CONNECT_RETRY_PATH, json.dumps(CONNECT_RETRY))
     cfg.insert_json5("mode", json.dumps(settings.mode))
     cfg.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
     cfg.insert_json5("scouting/gossip/enabled", json.dumps(settings.gossip))

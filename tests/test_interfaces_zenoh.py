@@ -158,6 +158,37 @@ def test_liveliness_follows_the_service():
         wait_gone(watcher, "perception")
 
 
+def test_a_restarted_service_is_heard_again_within_a_second_of_listening():
+    """A peer that connects to a service (the recorder to the controller) retries the lost link every second at
+    most (:data:`runtime.session.CONNECT_RETRY`): down 3.2 s, Zenoh's own back-off (1, 2, 4 s) would next try
+    3.8 s after the service listens again; ours tries within 1 s of it. A CI run's recorder missed a restarted
+    controller for its last 7 s."""
+    port = free_port()
+    robot = f"t{port}"
+    listen = ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=robot)
+    with ServiceNode("recorder", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=robot)) as watcher:
+        with ServiceNode("controller", listen):
+            wait_alive(watcher, "controller")
+        wait_gone(watcher, "controller")
+        time.sleep(3.2)
+        with ServiceNode("controller", listen):
+            t0 = time.monotonic()
+            wait_alive(watcher, "controller")
+            assert time.monotonic() - t0 < 2.5
+
+
+def test_the_reconnect_back_off_is_ours_unless_a_zenoh_file_sets_one(tmp_path):
+    import json
+
+    from runtime.session import CONNECT_RETRY, CONNECT_RETRY_PATH, zenoh_config
+
+    assert json.loads(zenoh_config(ZenohSettings()).get_json(CONNECT_RETRY_PATH)) == CONNECT_RETRY
+    own = _zenoh_file(tmp_path / "zenoh.json5", "{ connect: { retry: { period_init_ms: 3000, period_max_ms: 9000,"
+                                                 " period_increase_factor: 3 } } }")
+    got = json.loads(zenoh_config(ZenohSettings(config_file=own)).get_json(CONNECT_RETRY_PATH))
+    assert (got["period_init_ms"], got["period_max_ms"]) == (3000, 9000)
+
+
 def test_other_prefixes_are_not_heard():
     port = free_port()
     a = ServiceNode("sim", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id="cell-a"))
