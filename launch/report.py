@@ -238,10 +238,18 @@ def _force_section(tr: np.ndarray, col: dict[str, int], truth: list[dict], cap_n
 def _final_status(run: Run) -> tuple[int | None, dict | None]:
     """(its log time [ns], the controller's status) when the launcher began stopping the cell (what the stop itself
     does, e.g. the lift of a pad stopped mid-wipe, is in the faults, not the outcome); the last one without a
-    launcher; (None, None) without a status."""
+    launcher; (None, None) without a status.
+
+    "Before" is by the status's own ``wall_ns`` (the controller's clock when it published it) where the cell's
+    services share the launcher's wall clock: the recorder, a background process, may receive a status seconds
+    after it was said (16 s behind a routed real-time cell on 2 cores: its last status before the stop read
+    RETREAT while the controller had been DONE for 14 s). The network-free cell logs on the robot's clock, as its
+    ``stopping_wall_ns`` is, so there the log time decides."""
     msgs = run.rec.get(run.keys.controller_status, [])
     stopping = int(run.launcher.get("stopping_wall_ns", 0))
-    before = [(t, m) for t, m in msgs if t < stopping] if stopping else []
+    own_clock = run.launcher.get("network") != "none"
+    before = [(t, m) for t, m in msgs if (int(m.get("wall_ns") or t) if own_clock else t) < stopping] \
+        if stopping else []
     return before[-1] if before else (msgs[-1] if msgs else (None, None))
 
 

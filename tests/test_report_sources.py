@@ -83,3 +83,52 @@ def test_past_their_shares_the_end_of_the_run_comes_from_the_services_own_report
     assert not [f for f in report["faults"] if f["phase"] == "SERVICE"], report["faults"]
     said = [f["reason"] for f in report["faults"] if f["phase"] == "RECORDER"]
     assert any("controller/status used its share" in r for r in said) and any("sim/truth used" in r for r in said)
+
+
+def test_the_final_phase_is_what_the_controller_said_before_the_stop_not_when_the_recorder_heard_it(tmp_path):
+    """A recorder that hears the controller late (the routed real-time cell on 2 cores: a background recorder 16 s
+    behind its services) logs a DONE said before the launcher began stopping after that instant; the report reads
+    the phase by the status's own wall time (a cell whose services share the launcher's clock) and says cleaned,
+    not incomplete in the WIPE its log times would give. A network-free cell's log times are the robot's clock,
+    as its stopping time is: there the log time still decides."""
+    import json
+
+    port = free_port()
+    rid = f"late{port}"
+    rec_node = ServiceNode("recorder", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
+    cell = ServiceNode("cell", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
+    k = cell.keys
+    try:
+        rec = Recorder(rec_node.session, rec_node.keys, tmp_path)
+        for key in (k.controller_status, k.sim_truth):
+            wait_subscribed(cell.session, key)
+        for i in range(5):
+            cell.publish(k.controller_status, ControllerStatus(seq=i, stamp_ns=i, phase="WIPE", wall_ns=time.time_ns()))
+            cell.publish(k.sim_truth, SimTruth(seq=i, stamp_ns=i, stain_ids=[0], remaining=[1.0 - 0.2 * i],
+                                               total_dirt=100.0 - 20.0 * i, contact_force_n=9.0,
+                                               robot_time_ns=i * 10**8))
+        cell.publish(k.sim_truth, SimTruth(seq=5, stamp_ns=5, stain_ids=[0], remaining=[0.01], total_dirt=1.0,
+                                           contact_force_n=0.0, robot_time_ns=5 * 10**8))
+        account = rec.budget.account_of(k.controller_status)
+        wait_for(lambda: account.received == 5, 10.0, "the WIPE statuses received")
+        said = [ControllerStatus(seq=5 + i, stamp_ns=5 + i, phase="DONE", wall_ns=time.time_ns()) for i in range(3)]
+        stopping_ns = time.time_ns()  # the launcher begins stopping here: the DONE statuses reach the recorder after
+        time.sleep(0.3)
+        for status in said:
+            cell.publish(k.controller_status, status)
+        wait_for(lambda: account.received == 8, 10.0, "every status received")
+        rec.close()
+    finally:
+        cell.close()
+        rec_node.close()
+
+    logged = [t for t, m in read_recording(tmp_path / "recording.mcap")[k.controller_status] if m["phase"] == "DONE"]
+    assert min(logged) > stopping_ns, "the DONE statuses must be heard after the stop for this test to mean anything"
+    run = {"outcome": "done", "stopping_wall_ns": stopping_ns, "key_prefix": k.prefix}
+    (tmp_path / "run.json").write_text(json.dumps(run))
+    report = build_report(tmp_path, keys=k, plots=False)
+    assert (report["final_phase"], report["outcome"]) == ("DONE", "cleaned"), report["final_phase"]
+    assert abs(report["dirt_removed_fraction"] - 0.99) < 1e-9
+
+    (tmp_path / "run.json").write_text(json.dumps({**run, "network": "none"}))
+    assert build_report(tmp_path, keys=k, plots=False)["final_phase"] == "WIPE"
