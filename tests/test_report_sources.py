@@ -37,11 +37,16 @@ def _truth(i: int, dirt: float) -> SimTruth:
                     robot_time_ns=i * 10**9 // RATE_HZ)
 
 
-def test_past_their_shares_the_end_of_the_run_comes_from_the_services_own_reports(tmp_path):
+def _recorder_and_cell(tag: str) -> tuple[ServiceNode, ServiceNode]:
+    """A recorder's node listening on a free loopback port and a cell's node connected to it (robot id tag+port)."""
     port = free_port()
-    rid = f"src{port}"
+    rid = f"{tag}{port}"
     rec_node = ServiceNode("recorder", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
-    cell = ServiceNode("cell", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
+    return rec_node, ServiceNode("cell", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
+
+
+def test_past_their_shares_the_end_of_the_run_comes_from_the_services_own_reports(tmp_path):
+    rec_node, cell = _recorder_and_cell("src")
     k = cell.keys
     try:
         rec = Recorder(rec_node.session, rec_node.keys, tmp_path, budget_bytes=1024**2)
@@ -93,10 +98,7 @@ def test_the_final_phase_is_what_the_controller_said_before_the_stop_not_when_th
     as its stopping time is: there the log time still decides."""
     import json
 
-    port = free_port()
-    rid = f"late{port}"
-    rec_node = ServiceNode("recorder", ZenohSettings(listen=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
-    cell = ServiceNode("cell", ZenohSettings(connect=(f"tcp/127.0.0.1:{port}",), robot_id=rid)).__enter__()
+    rec_node, cell = _recorder_and_cell("late")
     k = cell.keys
     try:
         rec = Recorder(rec_node.session, rec_node.keys, tmp_path)
