@@ -56,6 +56,12 @@ def _barrier_key(keys: Keys, role: str) -> str:
     return "lbr/state" if role == "bridge" else keys.controller_estop
 
 
+def _put(sender: ServiceNode, key: str, payload: str) -> None:
+    """A put that waits for room on a congested link: the default drops it (zenoh's CongestionControl.DROP), and a
+    dropped put here would read as one the access list refused."""
+    sender.session.put(key, payload.encode(), congestion_control=zenoh.CongestionControl.BLOCK)
+
+
 def _until_heard(sender: ServiceNode, role: str, keys: Keys, got: dict[str, list], timeout_s: float = 10.0) -> None:
     """``sender`` puts a hello on every key its role may put until every receiver has one on each: from then on
     it knows every receiver's subscriptions (a put it sends is decided by the receiver's access list)."""
@@ -64,7 +70,7 @@ def _until_heard(sender: ServiceNode, role: str, keys: Keys, got: dict[str, list
     deadline = time.monotonic() + timeout_s
     while True:
         for k in allowed:
-            sender.session.put(k, tag.encode())
+            _put(sender, k, tag)
         time.sleep(0.05)
         if all({k for s, k in g if s == tag} >= set(allowed) for g in got.values()):
             return
@@ -198,8 +204,8 @@ def _matrix(creds: Path, receivers_connect: bool) -> None:
             _until_heard(senders[r], r, keys, got)
         for r in ROLES:
             for key in _attempts(keys):
-                senders[r].session.put(key, r.encode())
-            senders[r].session.put(_barrier_key(keys, r), f"{r}-barrier".encode())
+                _put(senders[r], key, r)
+            _put(senders[r], _barrier_key(keys, r), f"{r}-barrier")
         for q in ROLES:
             wait_for(lambda q=q: {s for s, _ in got[q] if s.endswith("-barrier")} == {f"{r}-barrier" for r in ROLES},
                      10.0, f"every sender's barrier at {q}")

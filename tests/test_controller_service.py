@@ -83,7 +83,8 @@ class ControllerThread:
 
     def wait_phase(self, phases: tuple[str, ...], timeout_s: float) -> str:
         return wait_for(lambda: self.phase in phases and self.phase, timeout_s,
-                        f"controller phase in {phases} (now {self.phase} {self.core.executor.reason!r})")
+                        f"controller phase in {phases} (now {self.phase} {self.core.executor.reason!r}; overload "
+                        f"trips {self.service.counters.get('overload_trips', 0)}: a busy machine reads as one)")
 
     def trace(self) -> np.ndarray:
         return self.core.trace.array()

@@ -582,7 +582,10 @@ def test_realtime_holds_a_silent_controller_then_disarms_and_keeps_sending_the_h
     assert all(not np.any(tau) for _, _, tau in stops), "zero overlay in every hold after the disarm"
     assert all(tuple(stack.sent.get(float(jp[0]))) == tuple(jp) for _, jp, _ in stops), "measured poses"
     c = final.counters
-    assert c["holds_sent"] >= 150 and c["disarms"] == 1 and c["stop_holds_sent"] >= 100, c
+    # the brake's count is the loop's rate over its span (span_s above is the rate-free check): 1 kHz gives ~300,
+    # a 2-core host busy with other work answered 132; after the disarm every state gets its hold (state-driven)
+    assert c["holds_sent"] >= len(before_disarm) // 2 and c["disarms"] == 1, c
+    assert c["stop_holds_sent"] >= 100, c
 
 
 # --------------------------------------------------------------------------
