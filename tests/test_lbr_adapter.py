@@ -305,7 +305,9 @@ def test_arming_is_refused_until_the_session_commands_and_a_disarm_request_stops
 def test_the_arm_parameter_arms_as_soon_as_the_session_allows():
     with Cell({"arm": True}) as cell:
         cell.answer(cell.step(Q0, session=READY), np.ones(7), sent=False)
-        st = cell.wait_status(lambda m: "session=MONITORING_READY" in m.detail, "a status in MONITORING_READY")
+        # the reason is the answer's (a status between the state and its answer still says "not armed yet")
+        st = cell.wait_status(lambda m: "session=MONITORING_READY" in m.detail and "waiting to arm" in m.detail,
+                              "a status in MONITORING_READY saying why it waits")
         assert "armed=False" in st.detail and st.counters.get("arm_refused", 0) == 0, st
         assert "why='waiting to arm (--arm): session state MONITORING_READY: start the LBRServer" in st.detail, st
         _, jp, tau = cell.answer(cell.step(Q0 + 1e-6), np.full(7, 0.5))  # the first commanding state
