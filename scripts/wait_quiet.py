@@ -1,8 +1,8 @@
 """Wait until the machine is quiet before the tests that need it to themselves (``./run-tests``' alone run).
 
-The alone tests run 1 kHz loops on the wall clock. Started straight after the 2-worker run, the first of them has
-met a machine still busy with what that run left behind (containers stopping, processes exiting, caches written)
-and its real-time controller missed 38-47 % of the robot's states for a whole minute. This waits until the CPUs
+The alone tests run 1 kHz loops on the wall clock; started straight after the 2-worker run, the first of them can
+meet a machine still busy with what that run left behind (containers stopping, processes exiting, caches written),
+and a starved real-time controller faults on overload before any test has loaded it. This waits until the CPUs
 are idle for a few seconds in a row (``/proc/stat``), at most ``--timeout`` seconds, and says what it waited for;
 if the machine does not settle it names the busiest processes and lets the tests run anyway (exit 0): a busy
 machine is worth knowing, not a failure of the code under test.
