@@ -691,6 +691,22 @@ def test_states_stopping_while_armed_disarms():
     assert st.counters["disarms"] == 1
 
 
+def test_in_lock_step_a_gap_on_the_wall_clock_disarms_only_after_lockstep_silence_s():
+    """A lock-step robot publishes every step it takes and takes none while it is not scheduled: a gap longer than
+    hold_timeout_s there is a loaded machine and keeps the arm armed; lockstep_silence_s of it is a lost link."""
+    with Cell({"hold_timeout_s": 0.1, "lockstep_silence_s": 1.0}, server={"mode": "lockstep"}) as cell:
+        cell.armed()
+        cell.answer(cell.step(Q0), np.ones(7))
+        t_last = time.monotonic()
+        time.sleep(0.5)  # five hold_timeout_s without a state
+        st = cell.wait_status(lambda m: True, "a status in the gap")
+        assert "armed=True" in st.detail and st.counters.get("disarms", 0) == 0, st
+        st = cell.wait_status(lambda m: "armed=False" in m.detail, "disarmed on the silence", 5.0)
+        gap_s = time.monotonic() - t_last
+    assert "why='no robot state for" in st.detail, st.detail
+    assert 1.0 <= gap_s, gap_s
+
+
 # --------------------------------------------------------------------------
 # 8. what the real stack needs before the adapter may command
 

@@ -345,9 +345,13 @@ class LbrPort(RobotPort):
 
     def _check_states_flow(self) -> None:
         """Armed without a robot state for ``hold_timeout_s`` (the stack or the bridge gone): disarm, so that the
-        adapter never resumes commanding from a stale picture when states come back."""
+        adapter never resumes commanding from a stale picture when states come back. In lock-step the robot
+        publishes every step it takes and takes none while it is not scheduled, so a wall-clock gap there is a
+        loaded machine, not a robot moving unseen: ``lockstep_silence_s`` (the controller's lock-step
+        ``robot_lost_s`` default) applies instead."""
         if self._arming.armed:
-            why = self._link.silence(self.p.hold_timeout_s)
+            limit_s = self.p.lockstep_silence_s if self._link.robot_waits else self.p.hold_timeout_s
+            why = self._link.silence(limit_s)
             if why is not None:
                 self.disarm(why)
 

@@ -24,6 +24,7 @@
     wrench_torque_threshold_nm = 0.5
     velocity_cutoff_hz = 80.0                # low-pass of the position difference
     hold_timeout_s = 0.5                     # holding this long without a controller command: disarm (the hold stays)
+    lockstep_silence_s = 2.0                 # lock-step: no robot state this long [s, wall] disarms (hold_timeout_s)
     stale_limit_s = 0.005                    # a controller answer later than this is not sent; hold instead
     check_applied = true                     # a state whose commanded torque is no recent overlay of ours: not applied
     applied_tolerance_nm = 0.001             # ... "ours" within this on every joint, or half the robot's learned step,
@@ -87,6 +88,7 @@ class LbrParams:
     wrench_torque_threshold_nm: Annotated[float, In(0.0, 100.0)] = 0.5
     velocity_cutoff_hz: Annotated[float, In(1.0, 500.0)] = 80.0
     hold_timeout_s: Annotated[float, In(0.001, 10.0)] = 0.5
+    lockstep_silence_s: Annotated[float, In(0.001, 60.0)] = 2.0
     stale_limit_s: Annotated[float, In(0.0005, 1.0)] = 0.005
     check_applied: bool = True
     applied_tolerance_nm: Annotated[float, In(1e-9, 1.0)] = 0.001
