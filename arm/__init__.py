@@ -2,4 +2,4 @@
 dynamics, limits, inverse kinematics) and its joints' rotor inertia and friction. The simulator and the controller load
 the same description; the simulated arm may be set to differ from it, the controller's model never does."""
 
-__all__ = ["description", "joint_dynamics", "robot_model"]
+__all__ = ["description", "joint_dynamics", "reach", "robot_model"]

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from arm.reach import arm_reach
 from arm.robot_model import RobotModel
 from interfaces.messages import Phase
 from lampskit.core.skill import Skill
@@ -50,7 +51,6 @@ from .core_state import ModesCache, TickBuffers, TickClock, TickMemory
 from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
 from .params import ControllerParams
-from .reach import arm_reach
 from .tick_io import LastCommand, TickInput, TickOutput, TickStatus, conclude
 from .trace import PHASE_CODES, TRACE_COLUMNS, Trace  # noqa: F401 (the trace's names, exported here too)
 

@@ -11,9 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from arm.reach import ArmReach
 from interfaces.transforms import tool_rotation_on_board
-
-from .reach import ArmReach
 
 #: The elbow's least distance [rad] from its limit at a look point (the controller's joint-limit repulsion acts
 #: within 0.12 rad; the flight there and the pose error need room beyond it; the wall board has 0.24 at its edge).

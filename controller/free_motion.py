@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from arm.reach import ArmReach, pad_reach_problem
 from interfaces.transforms import tool_rotation_on_board
 from lampskit.core.planner_types import Stain
 
@@ -30,7 +31,6 @@ from .motion import (
     vertical_move,
 )
 from .params import ExecutorParams, ForceParams
-from .reach import ArmReach
 
 #: An in-the-air stop takes at most this long [s] (its dip below the start height is <= 0.2 v T).
 AIR_BRAKE_S = 0.1
@@ -40,13 +40,6 @@ AIR_BRAKE_S = 0.1
 STRETCH_ROOM_RAD = 0.3
 #: ... but at least this far off the board [m], wherever that is.
 MIN_LIFT_M = 0.015
-#: A stain whose centre puts the elbow closer than this to stretched straight [rad] is out of reach: the pad
-#: would wipe at the edge of the arm's workspace, through its singular pose.
-UNREACHABLE_STRETCH_RAD = 0.1
-#: A pad pose where even the elbow's best swing leaves A2 or A6 this close to zero [rad] is out of reach: two
-#: joint axes lined up within 11 degrees, the arm at the shoulder's or the wrist's singularity whatever its
-#: nullspace posture does (:meth:`controller.reach.ArmReach.shoulder_tilt_max_rad`, ``wrist_bend_range_rad``).
-UNREACHABLE_ALIGNED_RAD = 0.2
 
 
 class FreeMotion:
@@ -222,33 +215,12 @@ class FreeMotion:
         return self.arm.elbow_rad(p, R) >= STRETCH_ROOM_RAD and self.arm.elbow_room_rad(p, R) >= 0.0
 
     def reach_problem(self, board: BoardPose, xy: np.ndarray) -> str | None:
-        """Why the pad, flat on ``board`` at ``xy`` (2,) [m], is beyond the arm (None: it is not, or no :attr:`arm`):
-        beyond the stretched arm, the elbow folded past its limit, the arm stretched straight (within
-        :data:`UNREACHABLE_STRETCH_RAD` of A4 = 0), the wrist centre over the shoulder or the forearm along the
-        pad's last axis at every swing of the elbow (A2 or A6 within :data:`UNREACHABLE_ALIGNED_RAD` of zero), or
-        the wrist bent past its limit at every swing."""
+        """Why the pad, flat on ``board`` at ``xy`` (2,) [m], is beyond the arm (:func:`arm.reach.pad_reach_problem`;
+        None: it is not, or no :attr:`arm`)."""
         if self.arm is None:
             return None
-        p, R = board.to_world(np.array([xy[0], xy[1], 0.0])), tool_rotation_on_board(board.R)
-        d = float(np.linalg.norm(p))
-        elbow = self.arm.elbow_rad(p, R)
-        if not np.isfinite(elbow):
-            return f"beyond the stretched arm ({d:.2f} m from the base)"
-        if self.arm.elbow_room_rad(p, R) < 0.0:
-            return f"too close to the shoulder: the elbow would fold past its limit ({d:.2f} m from the base)"
-        if elbow < UNREACHABLE_STRETCH_RAD:
-            return f"at the edge of the arm's reach: the elbow stretched to {elbow:.2f} rad ({d:.2f} m from the base)"
-        shoulder = self.arm.shoulder_tilt_max_rad(p, R)
-        if shoulder < UNREACHABLE_ALIGNED_RAD:
-            return (f"over the shoulder: A2 within {shoulder:.2f} rad of zero at any swing of the elbow (A1 and A3 "
-                    f"lined up, {d:.2f} m from the base)")
-        least, most = self.arm.wrist_bend_range_rad(p, R)
-        if most < UNREACHABLE_ALIGNED_RAD:
-            return (f"where the wrist stretches: A6 within {most:.2f} rad of zero at any swing of the elbow (A5 and A7 "
-                    f"lined up, {d:.2f} m from the base)")
-        if least > self.arm.q6_max_rad:
-            return f"where the wrist would bend past its limit: A6 at least {least:.2f} rad at any swing of the elbow"
-        return None
+        return pad_reach_problem(self.arm, board.to_world(np.array([xy[0], xy[1], 0.0])),
+                                 tool_rotation_on_board(board.R))
 
     def stain_reach_problem(self, board: BoardPose, stain: Stain) -> str | None:
         """Why the arm cannot wipe ``stain`` whole (None: it can, or no :attr:`arm`): its centre or one of its ends

@@ -15,7 +15,10 @@ along; board x runs along the width, horizontal before the roll (``(sin b, -cos 
 psi: the wall preset's for alpha = psi = 0), board y = n x x. A draw is kept only if the simulator
 would start on it with up to ``MAX_STAINS`` stains (:func:`board_refusal`: every corner above the
 robot's mounting plane, then :func:`sim.board.check_board`, :func:`sim.board.start_configuration`,
-the camera's pose and the stains' placement, as :class:`sim.core.SimCore` does); otherwise the next draw of the
+the camera's pose and the stains' placement, as :class:`sim.core.SimCore` does) and the controller would wipe a
+stain anywhere on its stain region (:func:`region_reach_problem`: the pad flat on every point of a
+``REACH_GRID_M`` grid over the region and ``REACH_BEYOND_M`` beyond it passes
+:func:`arm.reach.pad_reach_problem`, the test the controller skips a stain by); otherwise the next draw of the
 same generator is tried, up to ``MAX_TRIES``. The draws refused and why are returned, so a campaign can count them.
 """
 
@@ -27,9 +30,12 @@ from typing import Any
 
 import numpy as np
 
+from arm.reach import ArmReach, arm_reach, pad_reach_problem
 from arm.robot_model import RobotModel
 from interfaces.errors import ConfigError
 from interfaces.transforms import quat_wxyz_from_matrix
+
+from .board import Board, wipe_region
 
 #: The generator's second seed word: the boards' stream, apart from any other use of the cell's seed.
 STREAM = 48
@@ -39,6 +45,10 @@ MAX_TRIES = 400
 MIN_CORNER_HEIGHT_M = 0.02
 #: The most stains a random board must take (``lamps campaign --stains 1-6``).
 MAX_STAINS = 6
+#: The spacing of the points a board's stain region is checked at for the arm's reach [m].
+REACH_GRID_M = 0.02
+#: How far beyond the stain region the reach is checked [m]: perception's extent of a stain at the region's edge.
+REACH_BEYOND_M = 0.01
 #: The prefix of a random board's name (``random:17``: the board of seed 17).
 PREFIX = "random:"
 
@@ -68,9 +78,27 @@ def rotation_from_angles(tilt_deg: float, look_deg: float, roll_deg: float) -> n
     return np.column_stack([x, y, n])
 
 
-def board_refusal(table: dict[str, Any], model: RobotModel, seed: int = 0) -> str | None:
-    """Why the simulator would refuse to start on the ``[sim.board]`` ``table`` (None: it starts) with
-    ``MAX_STAINS`` stains drawn from ``seed``."""
+def region_reach_problem(board: Board, margin_m: float, reach: ArmReach) -> str | None:
+    """Why the controller would skip a stain somewhere on ``board``'s stain region (``margin_m`` [m] in from its edges;
+    None: nowhere): the first point of the ``REACH_GRID_M`` grid over the region grown by ``REACH_BEYOND_M``
+    where the pad, flat on the board, is beyond the arm (:func:`arm.reach.pad_reach_problem`)."""
+    lo, hi = wipe_region(board, margin_m)
+    lo, hi = np.maximum(lo - REACH_BEYOND_M, 0.0), np.minimum(hi + REACH_BEYOND_M, board.size_m)
+    counts = np.ceil((hi - lo) / REACH_GRID_M).astype(int) + 1
+    R = board.tool_rotation()
+    for x in np.linspace(lo[0], hi[0], counts[0]):
+        for y in np.linspace(lo[1], hi[1], counts[1]):
+            why = pad_reach_problem(reach, board.world_from_board(np.array([x, y])), R)
+            if why is not None:
+                return f"the stain region's point ({x:.2f}, {y:.2f}) m is {why}"
+    return None
+
+
+def board_refusal(table: dict[str, Any], model: RobotModel, seed: int = 0,
+                  reach: ArmReach | None = None) -> str | None:
+    """Why the simulator would refuse to start on the ``[sim.board]`` ``table`` with ``MAX_STAINS`` stains drawn
+    from ``seed``, or the controller would skip a stain on it (:func:`region_reach_problem`, with ``reach``,
+    default ``model``'s); None: neither."""
     from .board import board_from_params, check_board, start_configuration
     from .camera import camera_pose
     from .core import make_stains
@@ -83,7 +111,10 @@ def board_refusal(table: dict[str, Any], model: RobotModel, seed: int = 0) -> st
     low = min(float(c[2]) for c in corners)
     if low < MIN_CORNER_HEIGHT_M:
         return f"a corner {low:.2f} m above the robot's mounting plane (at least {MIN_CORNER_HEIGHT_M} m)"
-    try:
+    try:  # the closed-form reach first: it refuses most draws the IK of check_board would, in a fraction of the time
+        why = region_reach_problem(board, params.dirt.margin_m, reach or arm_reach(model))
+        if why is not None:
+            return why
         check_board(board, params.dirt.margin_m, model)
         start_configuration(board, params.start_standoff_m, model)
         if params.camera.enabled:
@@ -99,6 +130,7 @@ def sample_board(seed: int, model: RobotModel | None = None) -> BoardDraw:
     if seed < 0:
         raise ConfigError(f"a random board's seed must be >= 0, got {seed}")
     model = model or RobotModel()
+    reach = arm_reach(model)
     rng = np.random.default_rng([seed, STREAM])
     refused: list[str] = []
     for _ in range(MAX_TRIES):
@@ -111,7 +143,7 @@ def sample_board(seed: int, model: RobotModel | None = None) -> BoardDraw:
         table = {"preset": "custom", "origin_m": [round(float(v), 6) for v in origin],
                  "quat_wxyz": [round(float(v), 9) for v in quat_wxyz_from_matrix(R)],
                  "size_m": [round(float(w), 4), round(float(h), 4)]}
-        why = board_refusal(table, model, seed)
+        why = board_refusal(table, model, seed, reach)
         if why is None:
             return BoardDraw(table, float(tilt), float(turn), float(roll), refused)
         refused.append(why)

@@ -13,6 +13,7 @@ from interfaces.errors import ConfigError
 from interfaces.transforms import matrix_from_quat_wxyz
 from launch.campaign_cells import cells_of
 from launch.cli import UpError, board_env
+from sim.board import board_from_params
 from sim.board_sampler import (
     MAX_STAINS,
     board_refusal,
@@ -21,7 +22,7 @@ from sim.board_sampler import (
     rotation_from_angles,
     sample_board,
 )
-from sim.core import SimCore
+from sim.core import SimCore, make_stains
 from sim.params import SimParams
 
 SEEDS = range(12)
@@ -75,11 +76,58 @@ def test_the_simulator_starts_on_every_drawn_board_with_the_most_stains(draws):
 def test_a_refused_draw_says_why_and_an_unreachable_board_is_refused():
     far = {"preset": "custom", "origin_m": [1.6, 0.3, 0.3], "quat_wxyz": [0.5, 0.5, -0.5, -0.5], "size_m": [0.6, 0.5]}
     why = board_refusal(far, RobotModel())
-    assert why is not None and "impossible board pose" in why
+    assert why is not None and "beyond the stretched arm" in why
     low = {"preset": "custom", "origin_m": [0.4, 0.3, -0.2], "quat_wxyz": [0.5, 0.5, -0.5, -0.5],
            "size_m": [0.6, 0.5]}
     assert "mounting plane" in board_refusal(low, RobotModel())
     assert all(isinstance(r, str) and r for d in (sample_board(s) for s in (0, 1)) for r in d.refused)
+
+
+#: A board the simulator starts on whose stain region's near edge the elbow cannot reach: it folds past its limit
+#: there. Seed 69's first draw that passes the simulator's checks alone (sim/board.py check_board: the region's
+#: centre and corners); the controller skips two of its four stains (the cell ends incomplete).
+NEAR_SHOULDER = {"preset": "custom", "origin_m": [0.454434, 0.202834, 0.098618],
+                 "quat_wxyz": [0.545401999, 0.026884984, -0.326512865, -0.771494138], "size_m": [0.8985, 0.5271]}
+
+
+def _controller_reach_problems(table: dict, seed: int, stains: int) -> list[str]:
+    """The reasons the controller's reach test (controller/free_motion.py stain_reach_problem, the executor's) gives
+    for the stains the simulator places on ``table`` from ``seed``, each taken whole (its size along its axis and
+    its size / aspect across)."""
+    from arm.reach import arm_reach
+    from controller.executor_types import BoardPose
+    from controller.free_motion import FreeMotion
+    from controller.params import ExecutorParams, ForceParams
+    from lampskit.core.planner_types import Stain
+
+    params = SimParams.from_table({"board": table, "seed": seed, "dirt": {"stains": stains}})
+    board = board_from_params(params.board)
+    motion = FreeMotion(ExecutorParams(), ForceParams())
+    motion.arm = arm_reach(RobotModel())
+    pose = BoardPose(board.R.copy(), board.origin_m.copy(), board.size_m.copy())
+    out = []
+    for s in make_stains(params, board):
+        why = motion.stain_reach_problem(pose, Stain(s.id, np.array(s.centre_m), s.size_m, s.size_m / s.aspect,
+                                                     s.angle_rad))
+        if why is not None:
+            out.append(f"stain {s.id}: {why}")
+    return out
+
+
+def test_a_board_whose_stain_region_the_elbow_cannot_reach_is_refused_as_the_controller_would_skip_its_stains():
+    SimCore(SimParams.from_table({"board": NEAR_SHOULDER, "seed": 69, "dirt": {"stains": 4}})).close()  # it starts
+    skipped = _controller_reach_problems(NEAR_SHOULDER, 69, 4)
+    assert len(skipped) == 2 and all("elbow would fold past its limit" in why for why in skipped), skipped
+    why = board_refusal(NEAR_SHOULDER, RobotModel(), 69)
+    assert why is not None and why.startswith("the stain region's point") and "elbow would fold" in why, why
+    assert NEAR_SHOULDER not in [d.table for d in (sample_board(s) for s in (69,))]
+
+
+def test_the_controller_skips_no_stain_the_simulator_places_on_a_drawn_board(draws):
+    for s, d in draws.items():
+        assert _controller_reach_problems(d.table, s, MAX_STAINS) == [], f"seed {s}"
+        for n in (1, 3):
+            assert _controller_reach_problems(d.table, s, n) == [], f"seed {s}, {n} stains"
 
 
 def test_random_boards_by_name_for_lamps_up_and_the_campaign():

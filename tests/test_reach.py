@@ -1,13 +1,13 @@
-"""The elbow's reach (controller/reach.py) against Pinocchio, and look points the arm can take."""
+"""The elbow's reach (arm/reach.py) against Pinocchio, and look points the arm can take."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from arm.reach import arm_reach
 from arm.robot_model import IkError, RobotModel
 from controller.executor_types import LOOK_ELBOW_ROOM_RAD, BoardPose, look_point
-from controller.reach import arm_reach
 from interfaces.transforms import tool_rotation_on_board
 from sim.board import board_from_params, start_configuration
 from sim.params import BoardParams
@@ -98,7 +98,7 @@ def test_each_further_look_at_a_waiting_stain_is_from_another_point(model):
 
 def test_the_shoulder_and_wrist_ranges_hold_for_every_configuration(model):
     """Whatever the joints, |q2| is at most the shoulder's largest tilt and |q6| within the wrist's range at the pad
-    pose they make: the ranges span the elbow's whole swing (closed form, controller/reach.py)."""
+    pose they make: the ranges span the elbow's whole swing (closed form, arm/reach.py)."""
     arm = arm_reach(model)
     rng = np.random.default_rng(1)
     for _ in range(500):

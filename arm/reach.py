@@ -31,6 +31,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: A pad pose that puts the elbow closer than this to stretched straight [rad] is out of reach: the pad would wipe
+#: at the edge of the arm's workspace, through its singular pose.
+UNREACHABLE_STRETCH_RAD = 0.1
+#: A pad pose where even the elbow's best swing leaves A2 or A6 this close to zero [rad] is out of reach: two
+#: joint axes lined up within 11 degrees, the arm at the shoulder's or the wrist's singularity whatever its
+#: nullspace posture does (:meth:`ArmReach.shoulder_tilt_max_rad`, :meth:`ArmReach.wrist_bend_range_rad`).
+UNREACHABLE_ALIGNED_RAD = 0.2
+
 
 @dataclass(frozen=True)
 class ArmReach:
@@ -119,3 +127,31 @@ def arm_reach(model) -> ArmReach:
                     upper_m=float(np.linalg.norm(elbow - shoulder)), fore_m=float(np.linalg.norm(wrist - elbow)),
                     q4_max_rad=float(model.limits.q_max[3]), axis1=joints[1].rotation[:, 2].copy(),
                     axis7_in_pad=tcp.rotation.T @ joints[7].rotation[:, 2], q6_max_rad=float(model.limits.q_max[5]))
+
+
+def pad_reach_problem(arm: ArmReach, p_m: np.ndarray, R: np.ndarray) -> str | None:
+    """Why the pad at ``p_m`` (3,) [m, world] with orientation ``R`` (3, 3) is beyond the arm (None: it is not): beyond
+    the stretched arm, the elbow folded past its limit, the arm stretched straight (within
+    :data:`UNREACHABLE_STRETCH_RAD` of A4 = 0), the wrist centre over the shoulder or the forearm along the pad's
+    last axis at every swing of the elbow (A2 or A6 within :data:`UNREACHABLE_ALIGNED_RAD` of zero), or the wrist
+    bent past its limit at every swing. The controller skips a stain with such a point; the random boards
+    (:mod:`sim.board_sampler`) have none in their stain region."""
+    d = float(np.linalg.norm(p_m))
+    elbow = arm.elbow_rad(p_m, R)
+    if not math.isfinite(elbow):
+        return f"beyond the stretched arm ({d:.2f} m from the base)"
+    if arm.elbow_room_rad(p_m, R) < 0.0:
+        return f"too close to the shoulder: the elbow would fold past its limit ({d:.2f} m from the base)"
+    if elbow < UNREACHABLE_STRETCH_RAD:
+        return f"at the edge of the arm's reach: the elbow stretched to {elbow:.2f} rad ({d:.2f} m from the base)"
+    shoulder = arm.shoulder_tilt_max_rad(p_m, R)
+    if shoulder < UNREACHABLE_ALIGNED_RAD:
+        return (f"over the shoulder: A2 within {shoulder:.2f} rad of zero at any swing of the elbow (A1 and A3 "
+                f"lined up, {d:.2f} m from the base)")
+    least, most = arm.wrist_bend_range_rad(p_m, R)
+    if most < UNREACHABLE_ALIGNED_RAD:
+        return (f"where the wrist stretches: A6 within {most:.2f} rad of zero at any swing of the elbow (A5 and A7 "
+                f"lined up, {d:.2f} m from the base)")
+    if least > arm.q6_max_rad:
+        return f"where the wrist would bend past its limit: A6 at least {least:.2f} rad at any swing of the elbow"
+    return None
