@@ -141,6 +141,6 @@ class ExecutorStops:
         return True
 
     def done(self) -> None:
-        """DONE, holding."""
-        self.state.set_phase(Phase.DONE, "")
+        """DONE, holding; the reason names the stains left without kappa and why (:meth:`StainBook.left_undone`)."""
+        self.state.set_phase(Phase.DONE, self.book.left_undone())
         self.state.stage, self.state.current_mp = Stage.HOLD, "hold"

@@ -89,6 +89,23 @@ class StainBook:
             return True
         return False
 
+    def left_undone(self) -> str:
+        """Why the stains without kappa that are closed are left ("" none), each by perception's id and its centre on
+        the board: out of the arm's reach (the reason), smeared, or given up after ``max_passes`` passes; the reason
+        of a DONE that leaves them."""
+        parts = []
+        for i, s in sorted(self.stains.items()):
+            if s.kappa:
+                continue
+            at = f"stain {i} at ({s.centre_m[0]:.2f}, {s.centre_m[1]:.2f}) m"  # perception's id: where, to match it
+            if i in self.out_of_reach:
+                parts.append(f"{at} out of the arm's reach ({self.out_of_reach[i]})")
+            elif i in self.smeared:
+                parts.append(f"{at} smeared after {self._passes[i]} passes")
+            elif i in self._given_up:
+                parts.append(f"{at} given up after {self._passes[i]} passes")
+        return f"{len(parts)} stain(s) left: " + "; ".join(parts) if parts else ""
+
     def passes(self, stain_id: int) -> int:
         """Passes over the stain that ended without kappa."""
         return self._passes[stain_id]

@@ -41,6 +41,7 @@ def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: s
     end = report.get("job_end_s")
     robot_s = float(end) if end is not None else cell_s  # to DONE; a run that did not end DONE: the whole cell
     peaks = (report.get("motion_peaks") or {}).get("all", {})
+    controller_counters = (report.get("counters") or {}).get("controller", {})
     return {**row, "outcome": report.get("outcome", "?"), "dirt_removed": removed, "robot_time_s": robot_s,
             "cell_time_s": cell_s,
             "cell_time_over_cell_bound": cell_s / cell_b if cell_b > 0 else float("nan"),
@@ -59,6 +60,8 @@ def row_of(cell: Cell, report: dict[str, Any] | None, bound_s: float, run_dir: s
             "tracking_rms_m": float(report.get("tracking_rms_m", float("nan"))),
             "force_std_n": float(report.get("normal_force_std_n", float("nan"))),
             "max_joint_speed_ratio": float(report.get("max_joint_speed_ratio", float("nan"))),
+            "stains_out_of_reach": int(controller_counters.get("stains_out_of_reach", 0)),
+            "final_reason": report.get("final_reason", ""),
             "success": removed >= CLEAN_SHARE and not faults, "why": why}
 
 
@@ -77,7 +80,8 @@ def group_of(row: dict[str, Any]) -> str:
 def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per board (its name), wiping mode and plant, and ``all``: runs, success rate, dirt removed (median, min),
     robot time and its ratio to the lower bound (median), peak force and jerk (max), tracking and force spread
-    (median, max), joint speed (max), faults (sum), cells without a report."""
+    (median, max), joint speed (max), faults (sum), cells where the robot side acted (braked, yielded, held) and
+    cells whose controller skipped a stain out of the arm's reach, cells without a report."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in rows:
         wiping = r.get("wiping", "fixed")
@@ -109,6 +113,8 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
                      "tracking_rms_median_m": med("tracking_rms_m"), "tracking_rms_max_m": top("tracking_rms_m"),
                      "force_std_median_n": med("force_std_n"), "force_std_max_n": top("force_std_n"),
                      "joint_speed_ratio_max": top("max_joint_speed_ratio"),
+                     "robot_acted_cells": sum(1 for r in ran if r.get("robot_events", 0)),
+                     "out_of_reach_cells": sum(1 for r in ran if r.get("stains_out_of_reach", 0)),
                      "no_report": len(rs) - len(ran)}
     return out
 
@@ -119,8 +125,9 @@ def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], com
             "| robot time median [s] | time per stain median [s] | time / cell bound median (max); cell time "
             "| time / lower bound median | peak speed / accel. / jerk max [m/s, m/s^2, m/s^3] "
             "| peak contact force max [N] | force std median (max) [N] | tracking RMS median (max) [mm] "
-            "| joint speed max [share of limit] | faults | no report |\n"
-            "|---|---:|---:|---|---:|---:|---|---:|---|---:|---|---|---:|---:|---:|")
+            "| joint speed max [share of limit] | faults | cells the robot side acted | cells with stains out of reach "
+            "| no report |\n"
+            "|---|---:|---:|---|---:|---:|---|---:|---|---:|---|---|---:|---:|---:|---:|---:|")
     lines = [head]
     for name in sorted(summary, key=lambda n: (n.startswith("all "), n.split()[-1], n)):
         s = summary[name]
@@ -137,9 +144,11 @@ def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], com
                      f"{s.get('force_std_median_n', float('nan')):.2f} ({s.get('force_std_max_n', float('nan')):.2f})"
                      f" | {1e3 * s.get('tracking_rms_median_m', float('nan')):.2f} "
                      f"({1e3 * s.get('tracking_rms_max_m', float('nan')):.2f}) | "
-                     f"{s.get('joint_speed_ratio_max', float('nan')):.2f} | {s['faults']} | {s['no_report']} |")
+                     f"{s.get('joint_speed_ratio_max', float('nan')):.2f} | {s['faults']} | "
+                     f"{s.get('robot_acted_cells', 0)} | {s.get('out_of_reach_cells', 0)} | {s['no_report']} |")
     lines += ["", "| cell | outcome | removed | robot time [s] | cell bound [s] | lower bound [s] | peak force [N] "
-              "| peak jerk [m/s^3] | faults |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+              "| peak jerk [m/s^3] | faults, else why DONE left stains |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
         if r["outcome"] == "no report":
             lines.append(f"| {r['name']} | no report: {r['why']} | - | - | - | {r['lower_bound_s']:.1f} | - | - | - |")
@@ -147,7 +156,7 @@ def markdown(summary: dict[str, dict[str, Any]], rows: list[dict[str, Any]], com
         lines.append(f"| {r['name']} | {r['outcome']} | {r['dirt_removed']:.1%} | {r['robot_time_s']:.1f} | "
                      f"{r.get('cell_bound_s', float('nan')):.1f} | {r['lower_bound_s']:.1f} | "
                      f"{r['peak_contact_force_n']:.1f} | {r['peak_jerk_m_s3']:.0f} | "
-                     f"{'; '.join(r['fault_reasons']) or '-'} |")
+                     f"{'; '.join(r['fault_reasons']) or r.get('final_reason') or '-'} |")
     return "\n".join(lines) + f"\n\nreproduce: {command}\n"
 
 

@@ -40,6 +40,8 @@
   DONE; null if the run did not end DONE); ``final_retreat_s``: the RETREAT
   that led into that DONE, its first tick to the DONE (a re-pass's retreat
   and look before it are not counted; null without one).
+* ``final_phase`` and ``final_reason``: the controller's phase and its reason in the status the outcome is judged
+  on (a DONE that leaves stains without kappa names each and why: out of the arm's reach, smeared, given up).
 * ``loop_timing``: the controller's last reported loop statistics.
 * ``max_contact_force_n`` (the sim's truth: the physical contact force,
   whatever the controller measured, at each truth, 10 Hz),
@@ -138,6 +140,7 @@ def build_report(run_dir: Path, keys: Keys | None = None, cap_n: float | None = 
     report["faults"] = sorted(faults, key=lambda f: f["wall_ns"])
     final_ns, final_status = _final_status(run)
     report["final_phase"] = final_status["phase"] if final_status else "none"
+    report["final_reason"] = final_status.get("reason", "") if final_status else ""
     # what the controller estimated of the arm (its flange load, model error, a model_mismatch warning)
     report["arm_model"] = (final_status or {}).get("arm", {})
     report["outcome"] = _outcome(report["final_phase"], report["dirt_removed_fraction"], run.launcher.get("outcome"))
@@ -313,6 +316,8 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
               f"max {report['max_normal_force_n']:.1f} N; tracking RMS {report['tracking_rms_m'] * 1000:.2f} mm; "
               f"junction accel. step max {report['max_junction_accel_jump']:.3f} m/s^2 "
               f"({report['junction_step_ratio_max']:.2f}x an ordinary tick)")]
+    if report.get("final_reason"):
+        lines.append(f"  {report['final_phase']}: {report['final_reason']}")
     for s in report["stains"]:
         k = "no kappa" if s["kappa_s"] is None else f"kappa at {s['kappa_s']:.1f} s"
         if s.get("smeared"):

@@ -39,7 +39,7 @@ class RunEnd:
         self._fault_since = (self._fault_since if self._fault_since is not None else now_s) \
             if phase in (Phase.FAULT, Phase.ESTOP) else None
         if self._done_since is not None and done_clock - self._done_since >= self.settle_s:
-            return "done", "the controller is DONE"
+            return "done", "the controller is DONE" + (f": {reason}" if reason else "")
         if self._fault_since is not None and now_s - self._fault_since >= self.fault_hold_s:
             return "fault", f"controller {phase}: {reason}"
         return None

@@ -175,6 +175,9 @@ def test_a_stain_beyond_the_arm_is_skipped_with_the_reason_never_attempted(learn
     assert [s.id for s in ex.book.open_stains(0.0)] == [0]
     ex.set_stains(big, [near, far])  # looked at once per board
     assert ex.counters["stains_out_of_reach"] == 1
+    ex.stops.done()  # a DONE names the stain it leaves and why
+    assert ex.reason.startswith("1 stain(s) left: stain 1 at (1.40, 0.30) m out of the arm's reach (beyond the "
+                                "stretched arm"), ex.reason
 
 
 def test_a_stain_whose_far_end_would_stretch_the_elbow_straight_is_skipped_naming_the_end(learned_skill):

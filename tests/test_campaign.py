@@ -141,18 +141,24 @@ def test_rows_and_summary_count_success_faults_and_cells_without_a_report():
             row_of(Cell(1, 2, "wall"), _report(0.97, 30.0), 10.0, "b"),  # below 98 %: ran, not a success
             row_of(Cell(2, 1, "table"), _report(1.0, 25.0, [("ROBOT", "braked"), ("FAULT", "force cap")]), 5.0, "c"),
             row_of(Cell(3, 1, "table"), _report(1.0, 40.0, [("ROBOT", "braked")]), 8.0, "d"),
-            row_of(Cell(4, 1, "wall"), None, 7.0, "e", why="lamps up: error: port busy")]
-    assert [r["success"] for r in rows] == [True, False, False, True, False]
+            row_of(Cell(4, 1, "wall"), None, 7.0, "e", why="lamps up: error: port busy"),
+            row_of(Cell(5, 2, "wall"), {**_report(0.6, 30.0), "final_reason": "1 stain(s) left: stain 1 out of the "
+                   "arm's reach (x)", "counters": {"controller": {"stains_out_of_reach": 1}}}, 7.0, "f")]
+    assert [r["success"] for r in rows] == [True, False, False, True, False, False]
+    assert rows[5]["stains_out_of_reach"] == 1 and rows[0]["stains_out_of_reach"] == 0
     assert rows[2]["faults"] == 1 and rows[2]["robot_events"] == 1 and rows[2]["fault_reasons"] == ["force cap"]
     s = summarize(rows)
-    assert s["all fixed"]["runs"] == 5 and s["all fixed"]["success_rate"] == pytest.approx(0.4)
+    assert s["all fixed"]["runs"] == 6 and s["all fixed"]["success_rate"] == pytest.approx(2 / 6)
     assert s["all fixed"]["no_report"] == 1
-    assert s["wall fixed"]["dirt_removed_min"] == pytest.approx(0.97)
-    assert s["wall fixed"]["time_over_bound_median"] == 2.5
+    assert s["all fixed"]["robot_acted_cells"] == 2 and s["all fixed"]["out_of_reach_cells"] == 1
+    table = markdown(s, rows, "lamps campaign ...")
+    assert "| wall-s5-n2 | incomplete | 60.0% |" in table and "stain 1 out of the arm's reach (x) |" in table
+    assert s["wall fixed"]["dirt_removed_min"] == pytest.approx(0.6)
+    assert s["wall fixed"]["time_over_bound_median"] == 3.0
     assert s["table fixed"]["faults"] == 1 and s["table fixed"]["time_over_bound_max"] == pytest.approx(5.0)
     both = summarize(rows + [row_of(Cell(0, 1, "wall", "adaptive"), _report(1.0, 15.0), 10.0, "f")])
     assert both["all adaptive"]["runs"] == 1 and both["wall adaptive"]["robot_time_median_s"] == 15.0
-    assert both["all fixed"]["runs"] == 5
+    assert both["all fixed"]["runs"] == 6
 
 
 def test_each_seed_runs_once_per_wiping_mode_under_its_own_name():

@@ -96,6 +96,10 @@ def test_the_run_ends_after_done_or_a_fault_is_held():
     assert end.update(Phase.DONE, "", 3.0) is None
     assert end.update(Phase.DONE, "", 5.4) is None
     assert end.update(Phase.DONE, "", 5.5) == ("done", "the controller is DONE")
+    left = RunEnd(settle_s=1.0)
+    assert left.update(Phase.DONE, "1 stain(s) left: stain 2 smeared after 3 passes", 0.0) is None
+    assert left.update(Phase.DONE, "1 stain(s) left: stain 2 smeared after 3 passes", 1.0) == (
+        "done", "the controller is DONE: 1 stain(s) left: stain 2 smeared after 3 passes")
     end = RunEnd()
     assert end.update(Phase.ESTOP, "stop pressed", 0.0) is None
     assert end.update(Phase.ESTOP, "stop pressed", 4.9) is None

@@ -310,6 +310,7 @@ def test_a_vanished_stain_is_not_visited_and_new_stains_after_done_are(learned_s
     log = run(ex, arm, 14.0)  # the first touch of the board creeps from first_creep_height_m
     assert ex.phase == "DONE" and {e[1] for e in log if e[0] == "WIPE"} == {0}
     assert ex.counters["wipe_timeouts"] == 1
+    assert ex.reason.startswith("1 stain(s) left: stain 0 at (") and ex.reason.endswith(") m given up after 1 passes")
     ex.set_stains(BOARD, stains()[:1] + [Stain(7, np.array([0.6, 0.2]), 0.05, kappa=False)])
     log = run(ex, arm, 10.0)
     assert 7 in {e[1] for e in log if e[0] == "WIPE"}
@@ -530,6 +531,23 @@ def test_a_stain_passed_without_kappa_waits_until_no_stain_has_fewer_passes():
     book.end_pass(1, 1.0), book.end_pass(1, 2.0), book.end_pass(0, 3.0)
     assert {s.id for s in book.open_stains(3.0)} == {0}
     assert {s.id for s in book.open_stains(3.0, exclude=0)} == {1}
+
+
+def test_the_book_names_each_stain_it_closed_without_kappa_and_why():
+    """What a DONE leaves (its reason): out of the arm's reach with the reach test's words, smeared after its
+    passes, given up after ``max_passes``; a stain with kappa is not named."""
+    book = StainBook(recheck_s=0.0, max_passes=2)
+    far, smear, stubborn, clean = (Stain(i, np.array([0.1 + 0.2 * i, 0.2]), 0.05, kappa=False) for i in range(4))
+    book.update([far, smear, stubborn, clean], 0.0)
+    assert book.left_undone() == ""
+    book.close_out_of_reach(0, "beyond the stretched arm (1.21 m from the base)")
+    book.end_pass(1, 1.0)
+    book.update([far, Stain(1, smear.centre_m, smear.size_m, kappa=False, smeared=True), stubborn,
+                 Stain(3, clean.centre_m, clean.size_m, kappa=True)], 1.5)
+    book.end_pass(2, 2.0), book.end_pass(2, 3.0)
+    assert book.left_undone() == ("3 stain(s) left: stain 0 at (0.10, 0.20) m out of the arm's reach (beyond the "
+                                  "stretched arm (1.21 m from the base)); stain 1 at (0.30, 0.20) m smeared after 1 "
+                                  "passes; stain 2 at (0.50, 0.20) m given up after 2 passes")
 
 
 def test_a_pass_ends_after_pass_cycles_of_the_periodic_mp(learned_skill):
