@@ -436,7 +436,8 @@ class SkillExecutor:
         assert board is not None, "a plan without a board"  # plans are made on the adopted board only
         self.state.set_phase(Phase.APPROACH, "")
         self.state.stain_id, self.state.current_mp = first.stain.id, "approach"
-        self.motion.fly_to_hover(first.anchor_m, board)
+        if not self.motion.fly_to_hover(first.anchor_m, board):
+            self.counters["hovers_lowered"] += 1  # the elbow near its limit at the standoff
         self.state.stage = Stage.FLY
 
     def _begin_press(self, tool: ToolState) -> None:

@@ -40,6 +40,12 @@ AIR_BRAKE_S = 0.1
 STRETCH_ROOM_RAD = 0.3
 #: ... but at least this far off the board [m], wherever that is.
 MIN_LIFT_M = 0.015
+#: The pad hovers over a stain only where the elbow stays this far from its limit [rad] (lower, down to
+#: ``creep_height_m``, where it would not): beyond the controller's joint margin (``LimitParams.joint_margin_rad``,
+#: 0.12), inside which the limit's repulsion holds the elbow off the hover pose. On random board 279 the pad then
+#: waited 30 mm off its hover near the robot base and, when the descent brought the reference back in reach, sped
+#: down at 0.1 m/s into the board's zone: the robot side's press-speed brake.
+HOVER_ELBOW_ROOM_RAD = 0.15
 
 
 class FreeMotion:
@@ -108,14 +114,19 @@ class FreeMotion:
         xyh = new.to_board(old.to_world(sp.xyh()))
         sp.xy[:], sp.h = xyh[:2], float(xyh[2])
 
-    def fly_to_hover(self, xy_m: np.ndarray, board: BoardPose) -> None:
-        """Rest to rest to ``standoff_m`` above ``xy_m`` (2,) [m], turning the pad flat onto the board meanwhile."""
+    def fly_to_hover(self, xy_m: np.ndarray, board: BoardPose) -> bool:
+        """Rest to rest to ``standoff_m`` above ``xy_m`` (2,) [m], turning the pad flat onto the board meanwhile; with
+        :attr:`arm`, only as high as the elbow keeps :data:`HOVER_ELBOW_ROOM_RAD` from its limit and
+        :data:`STRETCH_ROOM_RAD` from stretched (down to ``creep_height_m``): False when the hover was lowered so."""
         sp = self.setpoint
-        self._mover = rest_to_rest(sp.xyh(), np.array([*xy_m, self.p.standoff_m]), self.p.approach_speed_m_s, 0.5)
         R_goal = tool_rotation_on_board(board.R)
+        h = self._reachable_height(board, xy_m, self.p.standoff_m, min(self.p.creep_height_m, self.p.standoff_m),
+                                   R_goal, HOVER_ELBOW_ROOM_RAD)
+        self._mover = rest_to_rest(sp.xyh(), np.array([*xy_m, h]), self.p.approach_speed_m_s, 0.5)
         T_turn = max(orientation_duration(sp.R, R_goal, self.p.turn_rate_rad_s), self._mover.T, 0.3)
         self._turn = OrientationBlend(sp.R, R_goal, T_turn)
         sp.contact = False
+        return h >= self.p.standoff_m
 
     def descend(self, first_touch: bool = False) -> None:
         """Down to ``creep_height_m`` (``first_touch``: the board's surface not touched yet, so only as far as
@@ -206,13 +217,15 @@ class FreeMotion:
         sp.h, sp.v_h, sp.a_h = h0, v0, 0.0
         return full
 
-    def roomy(self, board: BoardPose, xy: np.ndarray, h: float) -> bool:
-        """The pad at ``(xy, h)`` on ``board`` (2,) [m], turned as the setpoint is, leaves the elbow
-        :data:`STRETCH_ROOM_RAD` from stretched straight and within its limit (True without :attr:`arm`)."""
+    def roomy(self, board: BoardPose, xy: np.ndarray, h: float, R: np.ndarray | None = None,
+              limit_room_rad: float = 0.0) -> bool:
+        """The pad at ``(xy, h)`` on ``board`` (2,) [m], turned ``R`` (3, 3; default: as the setpoint is), leaves the
+        elbow :data:`STRETCH_ROOM_RAD` from stretched straight and ``limit_room_rad`` [rad] within its limit (True
+        without :attr:`arm`)."""
         if self.arm is None:
             return True
-        p, R = board.to_world(np.array([xy[0], xy[1], h])), self.setpoint.R
-        return self.arm.elbow_rad(p, R) >= STRETCH_ROOM_RAD and self.arm.elbow_room_rad(p, R) >= 0.0
+        p, R = board.to_world(np.array([xy[0], xy[1], h])), self.setpoint.R if R is None else R
+        return self.arm.elbow_rad(p, R) >= STRETCH_ROOM_RAD and self.arm.elbow_room_rad(p, R) >= limit_room_rad
 
     def reach_problem(self, board: BoardPose, xy: np.ndarray) -> str | None:
         """Why the pad, flat on ``board`` at ``xy`` (2,) [m], is beyond the arm (:func:`arm.reach.pad_reach_problem`;
@@ -241,14 +254,15 @@ class FreeMotion:
                 return f"its {name} at ({xy[0]:.2f}, {xy[1]:.2f}) m is {why}"
         return None
 
-    def _reachable_height(self, board: BoardPose | None, xy: np.ndarray, goal_h: float, lowest_h: float) -> float:
-        """The highest height [m] up to ``goal_h`` above ``xy`` (2,) [m] that is :meth:`roomy`, scanned down in
-        5 mm steps to ``lowest_h``; ``goal_h`` without the arm or the board."""
+    def _reachable_height(self, board: BoardPose | None, xy: np.ndarray, goal_h: float, lowest_h: float,
+                          R: np.ndarray | None = None, limit_room_rad: float = 0.0) -> float:
+        """The highest height [m] up to ``goal_h`` above ``xy`` (2,) [m] that is :meth:`roomy` (``R``,
+        ``limit_room_rad``), scanned down in 5 mm steps to ``lowest_h``; ``goal_h`` without the arm or the board."""
         if self.arm is None or board is None:
             return goal_h
         h = goal_h
         while h > lowest_h:
-            if self.roomy(board, xy, h):
+            if self.roomy(board, xy, h, R, limit_room_rad):
                 return h
             h -= 0.005
         return lowest_h

@@ -132,6 +132,29 @@ def test_a_lift_ends_where_the_elbow_has_room():
     assert motion.lift(tool)  # without the board: the full standoff, as before
 
 
+def test_the_hover_over_a_stain_near_the_shoulder_is_lowered_to_where_the_elbow_has_room():
+    """Random board 279: 40 mm above its stain at (0.15, 0.22) m the elbow would fold past its limit (the pad waited
+    30 mm off that hover and sped into the board as the descent came back in reach). The hover is lowered to where
+    the elbow keeps HOVER_ELBOW_ROOM_RAD, or to the creep height; where the standoff has room it stays."""
+    from controller.free_motion import HOVER_ELBOW_ROOM_RAD
+    from interfaces.messages import Pose
+    from interfaces.transforms import transform_from_pose
+    from sim.board_sampler import sample_board
+
+    t = sample_board(279).table
+    board = BoardPose.from_transform(transform_from_pose(Pose(t["origin_m"], t["quat_wxyz"])), t["size_m"])
+    motion = FreeMotion(ExecutorParams(), ForceParams())
+    motion.arm = arm_reach(RobotModel())
+    R, p = tool_rotation_on_board(board.R), ExecutorParams()
+    cramped, roomy = np.array([0.15, 0.22]), np.array([0.3, 0.3])
+    assert motion.arm.elbow_room_rad(board.to_world(np.array([*cramped, p.standoff_m])), R) < 0.0
+    assert not motion.fly_to_hover(cramped, board)
+    h = float(motion._mover.goal[0][2])
+    room = motion.arm.elbow_room_rad(board.to_world(np.array([*cramped, h])), R)
+    assert h < p.standoff_m and (room >= HOVER_ELBOW_ROOM_RAD or h == pytest.approx(p.creep_height_m)), (h, room)
+    assert motion.fly_to_hover(roomy, board) and float(motion._mover.goal[0][2]) == pytest.approx(p.standoff_m)
+
+
 def run_random_board(tmp_path, seed: int, stains: int, table: dict | None = None) -> tuple[dict, str, dict]:
     """``lamps up --no-network`` on the random board ``seed`` (or the ``[board]`` ``table``, from a TOML file) with
     ``stains`` stains (seed ``seed``): its report, its output and the simulator's counters."""
