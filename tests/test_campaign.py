@@ -151,6 +151,12 @@ def test_rows_and_summary_count_success_faults_and_cells_without_a_report():
     assert s["all fixed"]["runs"] == 6 and s["all fixed"]["success_rate"] == pytest.approx(2 / 6)
     assert s["all fixed"]["no_report"] == 1
     assert s["all fixed"]["robot_acted_cells"] == 2 and s["all fixed"]["out_of_reach_cells"] == 1
+    assert s["all fixed"]["force_over_bound_cells"] == 0 and s["all fixed"]["joint_over_bound_cells"] == 0
+    hot = row_of(Cell(6, 1, "wall"), {**_report(1.0, 20.0), "max_contact_force_n": 20.5,
+                                     "max_joint_speed_ratio": 0.81}, 7.0, "g")
+    hs = summarize(rows + [hot])["all fixed"]
+    assert hs["force_over_bound_cells"] == 1 and hs["joint_over_bound_cells"] == 1
+    assert "| 20.5 (1) |" in markdown(summarize(rows + [hot]), rows + [hot], "cmd")
     table = markdown(s, rows, "lamps campaign ...")
     assert "| wall-s5-n2 | incomplete | 60.0% |" in table and "stain 1 out of the arm's reach (x) |" in table
     assert s["wall fixed"]["dirt_removed_min"] == pytest.approx(0.6)
@@ -218,7 +224,7 @@ def test_the_table_groups_plants_and_reports_tracking_force_spread_and_joint_spe
     assert s["wall fixed random"]["tracking_rms_median_m"] == 0.004 and s["all fixed"]["force_std_max_n"] == 1.2
     assert s["all fixed"]["joint_speed_ratio_max"] == 0.7
     table = markdown(s, rows, "cmd")
-    assert "| wall fixed random | 1 |" in table and "1.20 (1.20) | 4.00 (4.00) | 0.70 |" in table, table
+    assert "| wall fixed random | 1 |" in table and "1.20 (1.20) | 4.00 (4.00) | 0.70 (0) |" in table, table
 
 
 def _campaign(*args: str, timeout: float = 900.0, env: dict | None = None) -> subprocess.CompletedProcess:
