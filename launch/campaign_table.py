@@ -14,7 +14,7 @@ from .campaign_cells import Cell
 
 #: A cell succeeds when it removed at least this share of its dirt (and nothing faulted).
 CLEAN_SHARE = 0.98
-#: The benchmark's bounds a cell is counted against (issue 48): the peak contact force [N] over every physics step,
+#: The random-board benchmark's bounds a cell is counted against: the peak contact force [N] over every physics step,
 #: the largest share of a joint's speed limit.
 FORCE_BOUND_N = 20.0
 JOINT_SPEED_BOUND = 0.8
