@@ -49,7 +49,22 @@ def test_an_unanswered_stamp_said_again_is_a_robot_waiting_not_a_lost_link():
     w.update(5 * MS, 0.001, 0, answered_ns=None)
     assert all(w.update(5 * MS, 0.001, k * 50 * MS, answered_ns=None) == Clock.REPEATED for k in range(1, 10))
     assert w.update(5 * MS, 0.001, 501 * MS, answered_ns=500 * MS) == Clock.REPEATED
-    assert w.update(5 * MS, 0.001, 520 * MS, answered_ns=500 * MS) == Clock.FROZEN
+    assert w.update(5 * MS, 0.001, 511 * MS, answered_ns=500 * MS) == Clock.REPEATED
+    assert w.update(5 * MS, 0.001, 521 * MS, answered_ns=500 * MS) == Clock.FROZEN
+
+
+def test_a_copy_after_a_silence_is_a_stalled_publisher_and_starts_the_count_again():
+    """A manager thread the host stalled for longer than the allowance publishes the state it last read once more,
+    then a new one: not a lost link (the silence is the hold watch's). Copies that then keep coming are one."""
+    w = ClockWatch(periods=20)
+    w.update(0, 0.002, 0, answered_ns=0)
+    assert w.update(0, 0.002, 60 * MS, answered_ns=0) == Clock.REPEATED
+    assert w.update(2 * MS, 0.002, 60 * MS + 100_000, answered_ns=0) == Clock.ADVANCED
+    w.update(4 * MS, 0.002, 70 * MS, answered_ns=70 * MS)
+    assert w.update(4 * MS, 0.002, 115 * MS, answered_ns=70 * MS) == Clock.REPEATED  # after a 45 ms silence
+    verdicts = [w.update(4 * MS, 0.002, (115 + 10 * k) * MS, answered_ns=70 * MS) for k in range(1, 6)]
+    assert verdicts == [Clock.REPEATED] * 3 + [Clock.FROZEN, Clock.REPEATED], verdicts
+    assert w.reason.startswith("the robot's time stamp has not advanced for 40 ms"), w.reason
 
 
 def test_the_period_allowance_is_the_robots_sample_time():
@@ -163,8 +178,9 @@ def test_arming_is_refused_below_good_and_on_a_frozen_clock():
     assert arming_refusal(_state(Q.GOOD), p, **kw) is None
     assert arming_refusal(_state(Q.FAIR), p, **kw) == "FRI connection quality FAIR: insufficient for command mode"
     clock.update(5 * MS, 0.001, 0, answered_ns=0)
-    clock.update(5 * MS, 0.001, 25 * MS, answered_ns=0)
-    assert arming_refusal(_state(), p, **kw).startswith("the robot's time stamp has not advanced for 25 ms")
+    for k in range(1, 6):
+        clock.update(5 * MS, 0.001, 5 * k * MS, answered_ns=0)
+    assert arming_refusal(_state(), p, **kw).startswith("the robot's time stamp has not advanced for 20 ms")
 
 
 # -- the stand-in's failures ----------------------------------------------------------------------------------

@@ -31,6 +31,7 @@
     applied_tolerance_max_nm = 0.05          # ... but never wider than this
     applied_stall_s = 1.0                    # armed, no state on a recent overlay for this robot time: disarm, say why
     frozen_stamp_periods = 20                # states arriving, their time stamp still for this many periods: link lost
+                                             # ... at least 20: at 1 ms, a 100 Hz manager re-publishes every 10
     disarm_at_quality = "POOR"               # FRI connection quality at which to disarm ("POOR" or "FAIR")
     max_joint_speed_scale = 0.8              # guard: this share of the description's joint speed limits
     speed_brake_share = 0.95                 # brake (hold) above this share of the guard's speed, or about to be
@@ -94,7 +95,7 @@ class LbrParams:
     applied_tolerance_nm: Annotated[float, In(1e-9, 1.0)] = 0.001
     applied_tolerance_max_nm: Annotated[float, In(1e-9, 10.0)] = 0.05
     applied_stall_s: Annotated[float, In(0.01, 60.0)] = 1.0
-    frozen_stamp_periods: Annotated[int, In(2, 100_000)] = 20
+    frozen_stamp_periods: Annotated[int, In(20, 100_000)] = 20
     disarm_at_quality: str = "POOR"
     max_joint_speed_scale: Annotated[float, In(0.01, 1.0)] = 0.8
     speed_brake_share: Annotated[float, In(0.0, 1.0)] = 0.95

@@ -66,6 +66,11 @@ class ClockWatch:
     without their time stamp advancing, counted from our answer to the newest, before the link counts as lost.
     A robot that waits for its answer says its state again (the lock-step simulated stack does; the real stack
     never waits), so an unanswered stamp is not judged, and one answered late counts from the answer.
+
+    "Keep arriving" means without a silence as long as the allowance between two of them: a lost link has the
+    manager re-publish every cycle (10 ms at most, lbr_controllers.yaml:5), while a manager thread the host
+    stalled publishes the state it last read once more when it runs again, then a new one. Such a copy after a
+    silence starts the count again; the silence itself is the hold watch's (``hold_timeout_s``).
     """
 
     def __init__(self, periods: int) -> None:
@@ -75,15 +80,19 @@ class ClockWatch:
         self.frozen = False  # the stamp has been judged frozen and has not advanced since
         self.frozen_ns = 0  # how long [our ns] the newest stamp has been arriving, as of the last state
         self.reason = ""
-        self._since_ns = 0  # when [our ns] the newest stamp first arrived
+        self._since_ns = 0  # when [our ns] the newest stamp first arrived (again after a silence)
+        self._last_ns = 0  # when [our ns] the newest stamp last arrived
 
     def update(self, stamp_ns: int, sample_time_s: float, arrival_ns: int, answered_ns: int | None) -> Clock:
         """One state: its time stamp [robot ns], sample time [s], arrival [ns, our monotonic clock]; ``answered_ns``:
         when [ns, our clock] we first answered the newest stamp (None: not yet). :attr:`reason` says why for the
         last FROZEN, RESAMPLED or WENT_BACK."""
         if self.stamp_ns is not None and self.sample_time_s is not None and stamp_ns == self.stamp_ns:
-            self.frozen_ns = arrival_ns - self._since_ns
             limit_ns = self.periods * self.sample_time_s * 1e9
+            if arrival_ns - self._last_ns >= limit_ns:
+                self._since_ns = arrival_ns  # a copy after a silence: the count starts again
+            self._last_ns = arrival_ns
+            self.frozen_ns = arrival_ns - self._since_ns
             if self.frozen or answered_ns is None or arrival_ns - max(answered_ns, self._since_ns) < limit_ns:
                 return Clock.REPEATED  # judged once an episode: FROZEN is returned for the first state past it
             self.frozen = True
@@ -94,7 +103,7 @@ class ClockWatch:
             return Clock.FROZEN
         old_stamp, old_sample = self.stamp_ns, self.sample_time_s
         self.stamp_ns, self.sample_time_s = stamp_ns, sample_time_s
-        self._since_ns, self.frozen, self.frozen_ns = arrival_ns, False, 0
+        self._since_ns, self._last_ns, self.frozen, self.frozen_ns = arrival_ns, arrival_ns, False, 0
         if old_stamp is not None and stamp_ns < old_stamp:
             self.reason = f"the robot's clock went back {(old_stamp - stamp_ns) / 1e6:.1f} ms"
             return Clock.WENT_BACK
