@@ -20,11 +20,14 @@ class RobotHolds:
     ----------
     missed : int
         Held cycles learnt of only through the count (in states the controller did not answer).
+    held : int
+        States after which the robot had held (:meth:`held_since_last` True).
     """
 
     def __init__(self) -> None:
         self._seen: int | None = None
         self.missed = 0
+        self.held = 0
 
     def reset(self) -> None:
         """A robot side back after a loss or a restart: its next state sets the count afresh."""
@@ -37,8 +40,12 @@ class RobotHolds:
         seen, self._seen = self._seen, held_cycles
         own = 1 if command_seq < 0 else 0
         if seen is None or held_cycles < seen:
-            return own > 0
-        between = held_cycles - seen - own
-        if between > 0:
-            self.missed += between
-        return own > 0 or between > 0
+            between = 0
+        else:
+            between = held_cycles - seen - own
+            if between > 0:
+                self.missed += between
+        if own > 0 or between > 0:
+            self.held += 1
+            return True
+        return False

@@ -382,7 +382,8 @@ class ControllerService:
                         overload_slowed_ticks=core.override.load_limited_ticks,
                         override_jerk_limited_ticks=core.override.jerk_limited_ticks,
                         skill_steps_capped=core.skill_steps_capped,
-                        robot_holds_in_skipped_states=self._link.holds.missed)
+                        robot_holds_in_skipped_states=self._link.holds.missed,
+                        states_after_a_robot_hold=self._link.holds.held)
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
                              ("estop", self._estop.engages), ("estop_release", self._estop.releases)):
             if reader is None:

@@ -17,6 +17,7 @@ def test_a_hold_in_a_skipped_state_is_seen_through_the_count():
     assert not h.held_since_last(8, 5)
     # skipped held states and a held newest one: held, the newest not counted as missed
     assert h.held_since_last(-1, 8) and h.missed == 5
+    assert h.held == 4  # the ticks after a hold, either way
 
 
 def test_the_first_state_and_a_restarted_robot_side_set_the_count_without_a_hold():
