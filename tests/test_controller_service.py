@@ -82,9 +82,29 @@ class ControllerThread:
         return self.core.executor.phase
 
     def wait_phase(self, phases: tuple[str, ...], timeout_s: float) -> str:
-        return wait_for(lambda: self.phase in phases and self.phase, timeout_s,
-                        f"controller phase in {phases} (now {self.phase} {self.core.executor.reason!r}; overload "
-                        f"trips {self.service.counters.get('overload_trips', 0)}: a busy machine reads as one)")
+        try:
+            return wait_for(lambda: self.phase in phases and self.phase, timeout_s,
+                            f"controller phase in {phases}")
+        except AssertionError as exc:
+            raise AssertionError(f"{exc} (now {self.phase} {self.core.executor.reason!r}; overload trips "
+                                 f"{self.service.counters.get('overload_trips', 0)}: a busy machine reads as one)\n"
+                                 f"{self.diagnosis()}") from None
+
+    def diagnosis(self) -> str:
+        """Where the executor stands, what the service counted, and whether the sim's states still flow (counted
+        over 1 s on the operator's session): for a test that waits in vain."""
+        ex, st = self.core.executor, self.service.status()
+        op = self.operator
+        sims = op.latest(op.keys.sim_status, ServiceStatus)
+        states = op.inbox(op.keys.robot_state, RobotState, maxlen=10)
+        time.sleep(1.0)
+        sim, flowing = sims.take(), states.received
+        sims.close()
+        states.close()
+        return (f"stage {ex.state.stage.name}, motion {ex.state.current_mp!r}, skill clock {ex.state.clock_s:.2f} s, "
+                f"controller clock {self.core.clock.time_s:.2f} s, override {self.core.override_used:.2f}, loop ticks "
+                f"{self.service.ticks}; executor {dict(ex.counters)}; service {st.counters}; robot states reaching "
+                f"the operator in 1 s: {flowing}; sim {sim.counters if sim else None} {sim.detail if sim else ''}")
 
     def trace(self) -> np.ndarray:
         return self.core.trace.array()
@@ -451,7 +471,10 @@ def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp
     """Graceful degradation: the real-time controller, its tick slowed to miss two robot states in three while it
     wipes, faults on the overload watch (not on the force cap) and lifts the pad off at the reduced rate; once the
     load has passed it starts again."""
-    with SimProcess(tmp_path, {"mode": "realtime", "camera": NO_CAMERA}) as sim:
+    # the sim under the fair scheduler as the controller is here (a loop in the test's process is never raised): a
+    # SCHED_FIFO sim, its I/O threads FIFO too, against a fair controller is an inversion production never has
+    # (both FIFO there), under which the controller once got no state for a minute at the start
+    with SimProcess(tmp_path, {"mode": "realtime", "camera": NO_CAMERA}, env={"LAMPS_RT_PRIORITY": "off"}) as sim:
         with ControllerThread(sim, learned_skill, {"mode": "realtime"}) as ctl:
             truth = ctl.operator.latest(ctl.operator.keys.sim_truth, SimTruth)
             ctl.wait_phase(("WIPE",), 60.0)
@@ -488,9 +511,20 @@ def test_a_sustained_overload_in_real_time_lifts_the_pad_off_with_the_reason(tmp
             # FAULT holds: the watch's share says so, or it tripped again after the load was taken away
             ctl.core.tick = tick
             t1, trips = time.monotonic(), ctl.service.counters["overload_trips"]
-            try:
-                ctl.wait_phase(("APPROACH", "WIPE", "TRANSITION"), 30.0)
+            shares: list[tuple[float, float]] = []  # (when, the watch's share), sampled while waiting
+
+            def going() -> bool:
+                shares.append((time.monotonic(), ctl.service._overload.share))
+                return ctl.phase in ("APPROACH", "WIPE", "TRANSITION")
+
+            end_wait, went = time.monotonic() + 30.0, False
+            while not (went := going()) and time.monotonic() < end_wait:
+                time.sleep(0.01)
+            if went:
                 assert time.monotonic() - t1 >= 2.5 and ctl.service.counters["overload_recoveries"] >= 1
-            except AssertionError:
-                share, again = ctl.service._overload.share, ctl.service.counters["overload_trips"] - trips
-                assert ctl.phase == "FAULT" and (share >= 0.05 or again >= 1), (share, again)
+            else:
+                # still FAULT: the share went over the calm level within the last calm period, or it tripped again
+                lim, end = ctl.params.limits, shares[-1][0]
+                recent = max(v for t, v in shares if t >= end - lim.overload_recover_s)
+                again = ctl.service.counters["overload_trips"] - trips
+                assert ctl.phase == "FAULT" and (recent >= lim.overload_slow_share or again >= 1), (recent, again)

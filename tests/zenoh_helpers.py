@@ -116,18 +116,21 @@ class SimProcess:
     """
 
     def __init__(self, tmp_path: Path, sim: dict, name: str = "sim", client: str = "test-client",
-                 port: int | None = None) -> None:
+                 port: int | None = None, env: dict[str, str] | None = None) -> None:
         self.port = port or free_port()
+        self.env = env or {}  # on top of ours (e.g. LAMPS_RT_PRIORITY)
         self.robot_id = f"t{self.port}"
         self.config = write_config(tmp_path / f"{name}.toml", self.port, self.robot_id, sim)
+        self.log_path = tmp_path / f"{name}.log"  # a file, not a pipe: a pipe nobody reads blocks the sim when full
         self.client_name = client
         self.proc: subprocess.Popen | None = None
         self.node: ServiceNode | None = None
 
     def __enter__(self) -> SimProcess:
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "--config", str(self.config)], cwd=REPO,
-                                     env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        env = dict(os.environ, PYTHONUNBUFFERED="1", **self.env)
+        with self.log_path.open("w") as log:
+            self.proc = subprocess.Popen([sys.executable, "-m", "sim.cli", "--config", str(self.config)], cwd=REPO,
+                                         env=env, stdout=log, stderr=subprocess.STDOUT)
         settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{self.port}",), robot_id=self.robot_id)
         self.node = ServiceNode(self.client_name, settings).__enter__()
         try:
@@ -152,7 +155,7 @@ class SimProcess:
 
     def _check_running(self) -> None:
         if self.proc.poll() is not None:
-            raise AssertionError(f"lamps sim exited with {self.proc.returncode}:\n{self.proc.stdout.read()}")
+            raise AssertionError(f"lamps sim exited with {self.proc.returncode}:\n{self.log_path.read_text()}")
 
     @property
     def keys(self):
@@ -170,7 +173,7 @@ class SimProcess:
             raise AssertionError("lamps sim did not stop on SIGINT") from None
 
     def output(self) -> str:
-        return self.proc.stdout.read() if self.proc and self.proc.poll() is not None else ""
+        return self.log_path.read_text() if self.proc and self.proc.poll() is not None else ""
 
     def __exit__(self, *exc) -> None:
         try:
