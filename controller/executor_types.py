@@ -11,28 +11,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arm.reach import ArmReach
-from interfaces.transforms import tool_rotation_on_board
-
-#: The elbow's least distance [rad] from its limit at a look point (the controller's joint-limit repulsion acts
-#: within 0.12 rad; the flight there and the pose error need room beyond it; the wall board has 0.24 at its edge).
-LOOK_ELBOW_ROOM_RAD = 0.2
-#: Turns [rad] off the line towards the robot base tried for a look point when that line is out of reach.
-LOOK_TURNS_RAD = tuple(np.radians([30.0, -30.0, 60.0, -60.0, 90.0, -90.0]))
-
 
 @dataclass(frozen=True)
 class BoardPose:
-    """The board: ``R`` (3, 3) its axes in the world, ``origin_m`` (3,) its corner, ``size_m`` (2,)."""
+    """The board: ``R`` (3, 3) its axes in the world, ``origin_m`` (3,) its corner, ``size_m`` (2,); ``camera_m``
+    (3,) where perception's camera sees it from, in the world [m] (None: not known)."""
 
     R: np.ndarray
     origin_m: np.ndarray
     size_m: np.ndarray
+    camera_m: np.ndarray | None = None
 
     @classmethod
-    def from_transform(cls, T: np.ndarray, size_m) -> BoardPose:
+    def from_transform(cls, T: np.ndarray, size_m, camera_m=None) -> BoardPose:
         T = np.asarray(T, float)
-        return cls(T[:3, :3].copy(), T[:3, 3].copy(), np.asarray(size_m, float).reshape(2))
+        camera = None if camera_m is None or len(camera_m) != 3 else np.asarray(camera_m, float).copy()
+        return cls(T[:3, :3].copy(), T[:3, 3].copy(), np.asarray(size_m, float).reshape(2), camera)
 
     @property
     def normal(self) -> np.ndarray:
@@ -93,64 +87,3 @@ class Setpoint:
     def xyh(self) -> np.ndarray:
         """(3,) a new array: the position (x, y, h) [m]."""
         return np.array([*self.xy, self.h])
-
-
-def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[float], clearance_m: float,
-               arm: ArmReach | None = None, height_m: float = 0.0, attempt: int = 0) -> np.ndarray:
-    """(2,) board point [m] from which the arm leaves ``centres_m`` (stains (2,), sizes [m]) in the camera's view.
-
-    The arm runs from the pad back towards the robot base, so the pad goes
-    ``clearance_m`` beyond the stains' extent in the direction of the base
-    (its projection on the board plane; the world origin), clipped into the
-    board. With the base right behind the stains: along board -x.
-
-    With ``arm``: only where the pad, ``height_m`` above the board and flat
-    on it, leaves the elbow :data:`LOOK_ELBOW_ROOM_RAD` from its limit (on a
-    board near the base its near edge is out of reach). If the point towards
-    the base is not, the same distance turned off that line
-    (:data:`LOOK_TURNS_RAD`, up to beside the stains) where it is still clear
-    of them; else as far towards the base as the arm reaches (the survey of a
-    whole board: no point is clear of it).
-
-    ``attempt`` k > 0 (the stains are still waiting for kappa after k looks: the arm hid them from there
-    too, e.g. a stain at a table's near edge that the links hang over from one side): the next of the points
-    that qualify (towards the base, then turned), in turn, so each look sees them from elsewhere.
-    """
-    c = np.mean(np.asarray(centres_m, float), axis=0)
-    reach = max(float(np.linalg.norm(np.asarray(x) - c)) + 0.5 * s for x, s in zip(centres_m, sizes_m))
-    d = board.to_board(np.zeros(3))[:2] - c
-    n = float(np.linalg.norm(d))
-    d = d / n if n > 1e-6 else np.array([-1.0, 0.0])
-
-    def at(t: float) -> np.ndarray:
-        return np.clip(c + d * t, 0.0, board.size_m)
-
-    far = reach + clearance_m
-    if arm is None:
-        return at(far)
-    R_pad = tool_rotation_on_board(board.R)
-
-    def roomy(xy: np.ndarray) -> bool:
-        return arm.elbow_room_rad(board.to_world(np.array([*xy, height_m])), R_pad) >= LOOK_ELBOW_ROOM_RAD
-
-    if attempt <= 0 and roomy(at(far)):
-        return at(far)
-    # towards the base is out of reach (a board near it), or was looked from already: turned off that line, up
-    # to beside the stains (never beyond them, where the arm would reach over them), while still clear of them
-    qualified = [at(far)] if roomy(at(far)) else []
-    for angle in LOOK_TURNS_RAD:
-        co, si = np.cos(angle), np.sin(angle)
-        xy = np.clip(c + far * np.array([co * d[0] - si * d[1], si * d[0] + co * d[1]]), 0.0, board.size_m)
-        if np.linalg.norm(xy - c) >= reach + 0.5 * clearance_m and roomy(xy):
-            if attempt <= 0:
-                return xy
-            qualified.append(xy)
-    if qualified:
-        return qualified[attempt % len(qualified)]
-    if not roomy(at(0.0)):
-        return at(0.0)
-    lo, hi = 0.0, far  # roomy at lo, not at hi: the elbow's room falls towards the base
-    for _ in range(12):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if roomy(at(mid)) else (lo, mid)
-    return at(lo)

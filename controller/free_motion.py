@@ -18,7 +18,8 @@ from arm.reach import ArmReach, pad_reach_problem
 from interfaces.transforms import tool_rotation_on_board
 from lampskit.core.planner_types import Stain
 
-from .executor_types import BoardPose, Setpoint, ToolState, look_point
+from .executor_types import BoardPose, Setpoint, ToolState
+from .look_points import SURVEY_HIDDEN_SLACK, board_targets, look_point, stain_targets
 from .motion import (
     OrientationBlend,
     Quintic,
@@ -268,12 +269,12 @@ class FreeMotion:
         return lowest_h
 
     def fly_to_survey(self, board: BoardPose) -> None:
-        """To ``standoff_m`` above the look point of the whole board (:func:`look_point` of its corners), turning the
-        pad flat: from there the arm hides none of the board from the camera."""
+        """To ``standoff_m`` above the look point of the whole board (:func:`look_point` of its corners, keeping
+        the whole board in the camera's view where its position is known), turning the pad flat."""
         w, h = (float(x) for x in board.size_m)
         corners = [np.array(c) for c in ((0.0, 0.0), (w, 0.0), (0.0, h), (w, h))]
-        self.fly_to_hover(look_point(board, corners, [0.0] * 4, self.p.look_clearance_m, self.arm, self.p.standoff_m),
-                          board)
+        self.fly_to_hover(look_point(board, corners, [0.0] * 4, self.p.look_clearance_m, self.arm, self.p.standoff_m,
+                                     targets_m=board_targets(board), slack=SURVEY_HIDDEN_SLACK), board)
 
     def fly_to_look(self, board: BoardPose, pending: list[Stain], attempt: int = 0) -> bool:
         """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there.
@@ -282,8 +283,9 @@ class FreeMotion:
         camera sees them; ``look_clearance_m`` beyond their edge. ``attempt``: looks made at them before
         (each from another point).
         """
-        goal = look_point(board, [s.centre_m for s in pending], [s.size_m for s in pending], self.p.look_clearance_m,
-                          self.arm, self.setpoint.h, attempt)
+        centres, sizes = [s.centre_m for s in pending], [s.size_m for s in pending]
+        goal = look_point(board, centres, sizes, self.p.look_clearance_m, self.arm, self.setpoint.h, attempt,
+                          stain_targets(centres, sizes))
         sp = self.setpoint
         if np.linalg.norm(goal - sp.xy) < 0.005:
             return False

@@ -39,7 +39,7 @@ def stains_update(msg: Stains | SimTruth, kappa_remaining: float,
     if msg.board == "lost":
         counters["stains_unknown"] += 1
         return None
-    board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), msg.board_size_m)
+    board = BoardPose.from_transform(transform_from_pose(msg.T_board_to_world), msg.board_size_m, msg.camera_world_m)
     return _with_stains(board, lambda: [stain_state(s) for s in msg.stains], counters)
 
 

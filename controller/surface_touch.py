@@ -16,7 +16,7 @@ absorbs in contact.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .executor_types import BoardPose
 
@@ -41,7 +41,7 @@ class SurfaceTouch:
         """The board ``seen`` by perception moved along its normal by the learnt offset (``seen`` if none)."""
         if self.offset_m == 0.0:
             return seen
-        return BoardPose(seen.R, seen.origin_m + self.offset_m * seen.normal, seen.size_m)
+        return replace(seen, origin_m=seen.origin_m + self.offset_m * seen.normal)
 
     def touched(self, board: BoardPose, h_m: float) -> BoardPose:
         """The pad met the surface at height ``h_m`` [m] above ``board`` (the shifted board in use): learn it;
@@ -51,10 +51,10 @@ class SurfaceTouch:
             return board
         self.offset_m += h_m
         self.touches += 1
-        return BoardPose(board.R, board.origin_m + h_m * board.normal, board.size_m)
+        return replace(board, origin_m=board.origin_m + h_m * board.normal)
 
     def forget(self, board: BoardPose) -> BoardPose:
         """A new board adopted: the offset no longer holds. Returns ``board`` (shifted by the old offset) as seen."""
-        seen = BoardPose(board.R, board.origin_m - self.offset_m * board.normal, board.size_m)
+        seen = replace(board, origin_m=board.origin_m - self.offset_m * board.normal)
         self.offset_m, self.touches = 0.0, 0
         return seen

@@ -1,18 +1,14 @@
 """Typed messages of the LAMPS cell (msgspec Structs, msgpack on the wire).
 
-Every message carries ``version`` (:data:`SCHEMA_VERSION`) and a type tag,
-so a payload of the wrong type or version is rejected on decode
-(:func:`interfaces.codec.decode`), never misread. Structs are encoded as
-msgpack arrays (``array_like``): compact, and floats are IEEE doubles, so
-float vectors round-trip bit-exactly. ``__post_init__`` checks what the
-types cannot: vector lengths, finiteness, ranges. It runs on decode too.
-The string and counter bounds and the shared checks are in
-:mod:`interfaces.message_checks`.
+Every message carries ``version`` (:data:`SCHEMA_VERSION`) and a type tag, so a payload of the wrong type or
+version is rejected on decode (:func:`interfaces.codec.decode`), never misread. Structs are encoded as msgpack
+arrays (``array_like``): compact, and floats are IEEE doubles, so float vectors round-trip bit-exactly.
+``__post_init__`` checks what the types cannot (vector lengths, finiteness, ranges), on decode too. The string
+and counter bounds and the shared checks are in :mod:`interfaces.message_checks`.
 
-Units are SI; stamps are ``time.monotonic_ns()`` of the sender
-(``stamp_ns``) plus ``time.time_ns()`` (``wall_ns``) where logs need it.
-Poses are ``position_m`` (3,) in the parent frame and ``quat_wxyz`` (4,),
-scalar first (PyBullet's scalar-last order is converted at the sim's edge).
+Units are SI; stamps are ``time.monotonic_ns()`` of the sender (``stamp_ns``) plus ``time.time_ns()``
+(``wall_ns``) where logs need it. Poses are ``position_m`` (3,) in the parent frame and ``quat_wxyz`` (4,), scalar
+first (PyBullet's scalar-last order is converted at the sim's edge).
 """
 
 from __future__ import annotations
@@ -304,7 +300,8 @@ class Stains(Message, frozen=True):
     good pose, markers hidden for a moment) or ``"lost"``: nothing is known
     now, every stain has ``visible = 0`` and ``kappa = False`` and a consumer
     must not act on the stains. frame_seq / robot_time_ns : the camera frame
-    the stains come from (robot_time_ns 0 when unknown).
+    the stains come from (robot_time_ns 0 when unknown). camera_world_m :
+    (3,) the camera's position in the world [m] (empty: not known).
     """
 
     seq: int
@@ -315,9 +312,12 @@ class Stains(Message, frozen=True):
     board: Name = "seen"
     frame_seq: int = -1
     robot_time_ns: int = 0
+    camera_world_m: list[float] = msgspec.field(default_factory=list)
 
     def __post_init__(self) -> None:
         check_finite("board_size_m", self.board_size_m, 2)
+        if self.camera_world_m:
+            check_finite("camera_world_m", self.camera_world_m, 3)
         if self.board not in BOARD_STATES:
             raise ValueError(f"board must be one of {BOARD_STATES}, got {self.board!r}")
         ids = [s.id for s in self.stains]

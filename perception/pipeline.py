@@ -165,4 +165,5 @@ class Perception:
         self._seq += 1
         return Stains(seq=self._seq, stamp_ns=time.monotonic_ns(), T_board_to_world=pose_from_transform(T),
                       board_size_m=[float(v) for v in est.size_m], stains=out, board=est.state,
-                      frame_seq=frame.seq, robot_time_ns=frame.robot_time_ns)
+                      frame_seq=frame.seq, robot_time_ns=frame.robot_time_ns,
+                      camera_world_m=[float(v) for v in frame.T_camera_to_world[:3, 3]])

@@ -20,7 +20,8 @@ from controller.control.limits import (
 )
 from controller.executor import SkillExecutor
 from controller.executor_stage import Stage
-from controller.executor_types import BoardPose, ToolState, look_point
+from controller.executor_types import BoardPose, ToolState
+from controller.look_points import look_point
 from controller.motion import OrientationBlend, Quintic, bounded_brake_to_rest, brake_peaks, brake_to_rest
 from controller.params import ControllerParams, ExecutorParams
 from controller.stain_book import StainBook

@@ -59,7 +59,8 @@ def samples():
                     T_camera_to_world=Pose([1.0, 0.2, 0.9], [0.5, 0.5, -0.5, 0.5])),
         Stains(seq=3, stamp_ns=4, T_board_to_world=IDENTITY, board_size_m=[1.2, 0.9],
                stains=[StainObservation(2, [0.3, 0.4], [0.8, 0.1, 0.9], 0.07, [0.07, 0.05], 0.4, 0.9, False),
-                       StainObservation(5, [0.9, 0.2], [0.8, -0.5, 0.7], 0.05, [0.05, 0.05], 0.0, 1.0, True)]),
+                       StainObservation(5, [0.9, 0.2], [0.8, -0.5, 0.7], 0.05, [0.05, 0.05], 0.0, 1.0, True)],
+               camera_world_m=[-0.1, -0.6, 1.0]),
         ControllerStatus(seq=9, stamp_ns=10, phase="WIPE", current_mp="periodic 1", stain_id=2, normal_force_n=9.8,
                          timing=LoopTiming(1000.0, 1012.5, 1100.0, 3.0, 40.0, 5.0, 10000, 2),
                          counters={"bad_state": 1}),
@@ -162,6 +163,11 @@ def test_constructors_validate_too():
     with pytest.raises(ValueError, match="unique"):
         Stains(seq=0, stamp_ns=0, T_board_to_world=IDENTITY, board_size_m=[1, 1],
                stains=[samples()[3].stains[0]] * 2)
+    with pytest.raises(ValueError, match="camera_world_m must hold 3 numbers, got 2"):
+        Stains(seq=0, stamp_ns=0, T_board_to_world=IDENTITY, board_size_m=[1, 1], stains=[], camera_world_m=[1, 2])
+    with pytest.raises(ValueError, match="camera_world_m must be finite"):
+        Stains(seq=0, stamp_ns=0, T_board_to_world=IDENTITY, board_size_m=[1, 1], stains=[],
+               camera_world_m=[1.0, math.nan, 0.0])
 
 
 def test_a_phase_is_its_name_on_the_wire_and_the_status_checks_against_the_one_list():

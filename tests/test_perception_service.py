@@ -12,12 +12,14 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
 from arm.robot_model import RobotModel
+from controller.stains_in import stains_update
 from interfaces.messages import CameraFrame, CameraIntrinsics, Pose, ServiceStatus, SimTruth, Stains
 from perception.evaluate import kappa_timings
 from perception.params import PerceptionParams
@@ -25,6 +27,9 @@ from perception.service import PerceptionService
 from perception.sources import ZenohSource
 from runtime.config import ZenohSettings
 from runtime.session import ServiceNode
+from sim.board import board_from_params
+from sim.camera import camera_pose
+from sim.params import SimParams
 
 from .test_controller_service import ControllerThread
 from .zenoh_helpers import REPO, SimProcess, free_port, run_lockstep, wait_for, wait_sample, wait_subscribed
@@ -177,6 +182,13 @@ def test_bad_frames_are_counted_with_reasons_and_a_lost_board_is_unknown_never_c
         good = per.sent[-1][1]
         n_stains = len(good.stains)
         assert good.board in ("seen", "held")
+        # where the camera sees the board from, as the sim placed it; the controller's board pose carries it
+        params = SimParams.from_table({"mode": "lockstep", "camera": {"rate_hz": 10.0}})
+        camera_m = camera_pose(params.camera, board_from_params(params.board))[:3, 3]
+        np.testing.assert_allclose(good.camera_world_m, camera_m, atol=1e-9)
+        update = stains_update(good, 0.05, Counter())
+        assert update is not None and update[0].camera_m is not None
+        np.testing.assert_allclose(update[0].camera_m, camera_m, atol=1e-9)
         # now feed garbage on the camera key, then frames without markers
         op = ServiceNode("operator", ZenohSettings(connect=(f"tcp/127.0.0.1:{per.port}",), robot_id=sim.robot_id))
         with op:

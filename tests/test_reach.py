@@ -7,7 +7,8 @@ import pytest
 
 from arm.reach import arm_reach
 from arm.robot_model import IkError, RobotModel
-from controller.executor_types import LOOK_ELBOW_ROOM_RAD, BoardPose, look_point
+from controller.executor_types import BoardPose
+from controller.look_points import LOOK_ELBOW_ROOM_RAD, look_point
 from interfaces.transforms import tool_rotation_on_board
 from sim.board import board_from_params, start_configuration
 from sim.params import BoardParams
