@@ -41,9 +41,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from interfaces.messages import Capabilities, RobotState, TorqueCommand  # noqa: E402
-from launch.compose import free_port  # noqa: E402
 from runtime.config import ZenohSettings  # noqa: E402
 from runtime.credentials import identity_folder, make_credentials  # noqa: E402
+from runtime.ports import free_port  # noqa: E402
 from runtime.session import ServiceNode  # noqa: E402
 
 

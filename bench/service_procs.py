@@ -18,6 +18,7 @@ from pathlib import Path
 from lampskit.core.skill import save_skill
 from lampskit.learn.learn import bundled_skill
 from runtime.config import ZenohSettings
+from runtime.ports import free_port
 from runtime.session import ServiceNode
 
 REPO = Path(__file__).resolve().parent.parent
@@ -31,12 +32,6 @@ class BenchError(RuntimeError):
 
 
 # ---------------------------------------------------------------------------------------------- processes
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 class Proc:
     """A service subprocess with its output in a temporary file; ``stop()`` is SIGINT, then kill after 20 s."""
 

@@ -418,14 +418,9 @@ def show_report(out: Path, why: str) -> int:
 
 
 def _port_busy(port: int) -> bool:
-    import socket
+    from runtime.ports import bindable
 
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError:
-            return True
-    return False
+    return not bindable(port)
 
 
 def _watcher(cell: _Cell):

@@ -26,7 +26,6 @@ import json
 import os
 import re
 import shutil
-import socket
 import subprocess
 import sys
 from collections.abc import Mapping
@@ -37,6 +36,7 @@ from typing import Any
 import yaml
 
 from interfaces.errors import ConfigError
+from runtime.ports import free_port
 
 from .compose_interp import active_profiles, compose_variables, interpolate_tree
 
@@ -293,13 +293,6 @@ def active(services: Mapping[str, ComposeService], profiles: tuple[str, ...]) ->
     for s in on:
         visit(s, ())
     return ordered
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 nobody listens on now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def listen_ports(s: ComposeService) -> list[int]:

@@ -18,7 +18,6 @@ through the router; its log ``OUT/logs/foxglove.log``).
 from __future__ import annotations
 
 import json
-import socket
 import sys
 import time
 from dataclasses import replace
@@ -140,15 +139,12 @@ def run_cells(a, skill: Path, out: Path, stop_requested) -> int:
 
 def _router_port(port_base: int | None) -> int:
     """``--port-base`` (refused if busy), else a free port."""
-    from .compose import free_port
+    from runtime.ports import bindable, free_port
 
     if port_base is None:
         return free_port()
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        try:
-            s.bind(("127.0.0.1", port_base))
-        except OSError:
-            raise SiteError(f"the router's port {port_base} is already in use (choose another --port-base)") from None
+    if not bindable(port_base):
+        raise SiteError(f"the router's port {port_base} is already in use (choose another --port-base)")
     return port_base
 
 

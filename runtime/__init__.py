@@ -3,6 +3,6 @@ TLS and credentials, stop signals, CPU priorities and real-time set-up, the 1 kH
 service's ``main()`` skeleton and the ``lamps`` command."""
 
 __all__ = [
-    "certificates", "cli", "config", "credentials", "local_bus", "loop_hygiene", "loop_stats", "priority", "realtime",
-    "service_main", "service_security", "session", "stop_signals"
+    "certificates", "cli", "config", "credentials", "local_bus", "loop_hygiene", "loop_stats", "ports", "priority",
+    "realtime", "service_main", "service_security", "session", "stop_signals"
 ]

@@ -14,6 +14,13 @@ matplotlib.use("Agg")
 # start so unless told: runtime/service_security.py); tests of security give identities, and the test of the
 # refusal removes this. `lamps up` never passes it on to its services.
 os.environ.setdefault("LAMPS_ZENOH_INSECURE", "true")
+# pytest's workers (gw0, gw1, ...) draw their listening ports from disjoint slices of runtime/ports.py's range, so
+# two workers never pick the same port between choosing and binding it; the services they start inherit the slice.
+_worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+if _worker.startswith("gw") and _worker[2:].isdigit() and "LAMPS_PORT_RANGE" not in os.environ:
+    _slice = 1250  # 8 workers across 10000-20000
+    _lo = 10000 + (int(_worker[2:]) % 8) * _slice
+    os.environ["LAMPS_PORT_RANGE"] = f"{_lo}-{_lo + _slice}"
 
 REPO = Path(__file__).resolve().parent.parent
 #: The real demonstrations live beside the checkout, never inside it.

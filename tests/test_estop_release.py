@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
 import threading
@@ -145,17 +144,8 @@ def test_whichever_side_hears_the_release_first_estop_ends_once_both_have(tmp_pa
 
 
 def _port_base(n: int) -> int:
-    """A port with ``n - 1`` free ports after it (lamps up --port-base)."""
-    for _ in range(50):
-        base = free_port()
-        if base + n < 65535 and all(_port_free(base + i) for i in range(1, n)):
-            return base
-    raise RuntimeError("no free port range")
-
-
-def _port_free(port: int) -> bool:
-    with socket.socket() as s:
-        return s.connect_ex(("127.0.0.1", port)) != 0
+    """A port with ``n - 1`` free ports after it (lamps up --port-base; runtime/ports.py)."""
+    return free_port(n)
 
 
 def _drain(stream, lines: list[str]) -> None:

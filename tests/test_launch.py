@@ -28,11 +28,12 @@ from interfaces.errors import ConfigError
 from interfaces.keys import Keys
 from interfaces.messages import Phase
 from lampskit.core.planner_types import PlannerParams
-from launch.compose import active, free_port, load_compose, localize, run_locally
+from launch.compose import active, load_compose, localize, run_locally
 from launch.compose_interp import substitute
 from launch.record import read_recording, trace_array
 from launch.report import SCHEMA, build_report
 from runtime.cli import COMMANDS
+from runtime.ports import free_port
 
 from .conftest import REPO
 
@@ -243,21 +244,8 @@ def test_the_image_installs_every_package_and_the_robot_description(tmp_path):
 # ------------------------------------------------------------------------------------------ the whole cell
 
 def _port_base(n: int = 3) -> int:
-    """A base port with n free ports after it."""
-    for _ in range(50):
-        base = free_port()
-        if base + n < 65535 and all(_free(base + i) for i in range(n)):
-            return base
-    raise RuntimeError("no free port range")
-
-
-def _free(port: int) -> bool:
-    with socket.socket() as s:
-        try:
-            s.bind(("127.0.0.1", port))
-            return True
-        except OSError:
-            return False
+    """A base port with n free ports from it (runtime/ports.py: below the kernel's ephemeral range)."""
+    return free_port(n)
 
 
 def _nobody_listens(port: int) -> bool:

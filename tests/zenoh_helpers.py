@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -22,15 +21,10 @@ import zenoh
 
 from interfaces.messages import RobotState, ServiceStatus, TorqueCommand
 from runtime.config import ZenohSettings
+from runtime.ports import free_port
 from runtime.session import ServiceNode
 
 REPO = Path(__file__).resolve().parent.parent
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_for(predicate, timeout_s: float = 5.0, what: str = "condition", period_s: float = 0.005):
