@@ -354,7 +354,8 @@ class SkillExecutor:
 
     def _on_look(self, dt: float, tool: ToolState) -> None:
         if self.motion.move(dt):
-            self.book.looked_at(self.state.clock_s)  # perception gets its full recheck_s from here
+            if not self.motion.stayed:  # (a look point chosen off the tick may be where the pad already was)
+                self.book.looked_at(self.state.clock_s)  # perception gets its full recheck_s from here
             self.stops.done()
 
     def _on_survey(self, dt: float, tool: ToolState) -> None:

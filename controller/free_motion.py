@@ -19,7 +19,7 @@ from interfaces.transforms import tool_rotation_on_board
 from lampskit.core.planner_types import Stain
 
 from .executor_types import BoardPose, Setpoint, ToolState
-from .look_points import SURVEY_HIDDEN_SLACK, board_targets, look_point, stain_targets
+from .look_points import look_point, stain_targets, survey_point
 from .motion import (
     OrientationBlend,
     Quintic,
@@ -31,6 +31,7 @@ from .motion import (
     rest_to_rest,
     vertical_move,
 )
+from .off_tick import OffTick
 from .params import ExecutorParams, ForceParams
 
 #: An in-the-air stop takes at most this long [s] (its dip below the start height is <= 0.2 v T).
@@ -63,6 +64,11 @@ class FreeMotion:
         Written in place every tick.
     arm : ArmReach or None
         The arm's elbow geometry: look points stay where the elbow has room (None: anywhere on the board).
+    aim : OffTick
+        Where look points are chosen: its ``executor`` the planner thread in the real-time loop (the choice takes
+        2-3 ms; the setpoint holds meanwhile and :meth:`move` reports not arrived), None: in the tick.
+    stayed : bool
+        The last look's point was where the pad already was: no move was made.
     """
 
     def __init__(self, params: ExecutorParams, force: ForceParams) -> None:
@@ -70,7 +76,9 @@ class FreeMotion:
         self.f = force
         self.arm: ArmReach | None = None
         self.setpoint = Setpoint()
-        self._mover: Quintic | None = None  # x, y, h in the air
+        self.aim = OffTick()
+        self.stayed = False
+        self._mover: Quintic | None = None  # x, y, h in the air (set by _start, which drops an aim in flight)
         self._turn: OrientationBlend | None = None
         self._xy_brake: Quintic | None = None  # x, y in contact
         self._force = SmoothRamp()
@@ -82,6 +90,7 @@ class FreeMotion:
     # ------------------------------------------------------------------ starting a motion
     def hold_here(self, tool: ToolState) -> None:
         """Setpoint = the measured pose, at rest, in the air."""
+        self.aim.drop()
         sp = self.setpoint
         sp.xy[:], sp.h = tool.xy, tool.h
         sp.v_xy[:] = sp.a_xy[:] = 0.0
@@ -93,6 +102,7 @@ class FreeMotion:
 
     def rest_at(self, tool: ToolState) -> None:
         """Setpoint = the measured pose (in contact: in the plane; the force stays), at rest."""
+        self.aim.drop()
         sp = self.setpoint
         sp.xy[:] = tool.xy
         sp.v_xy[:] = sp.a_xy[:] = 0.0
@@ -123,8 +133,9 @@ class FreeMotion:
         R_goal = tool_rotation_on_board(board.R)
         h = self._reachable_height(board, xy_m, self.p.standoff_m, min(self.p.creep_height_m, self.p.standoff_m),
                                    R_goal, HOVER_ELBOW_ROOM_RAD)
-        self._mover = rest_to_rest(sp.xyh(), np.array([*xy_m, h]), self.p.approach_speed_m_s, 0.5)
-        T_turn = max(orientation_duration(sp.R, R_goal, self.p.turn_rate_rad_s), self._mover.T, 0.3)
+        mover = rest_to_rest(sp.xyh(), np.array([*xy_m, h]), self.p.approach_speed_m_s, 0.5)
+        self._start(mover)
+        T_turn = max(orientation_duration(sp.R, R_goal, self.p.turn_rate_rad_s), mover.T, 0.3)
         self._turn = OrientationBlend(sp.R, R_goal, T_turn)
         sp.contact = False
         return h >= self.p.standoff_m
@@ -137,11 +148,11 @@ class FreeMotion:
         if self.p.air:
             bottom = self.p.air_height_m
             T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.3)
-            self._mover = vertical_move(sp.xy, sp.h, bottom, T)
+            self._start(vertical_move(sp.xy, sp.h, bottom, T))
             return
         bottom = min(self.p.first_creep_height_m if first_touch else self.p.creep_height_m, sp.h)
         T = max(abs(sp.h - bottom) / self.p.approach_speed_m_s, 0.2)
-        self._mover = vertical_move(sp.xy, sp.h, bottom, T, sp.v_h, -self.p.descend_speed_m_s)
+        self._start(vertical_move(sp.xy, sp.h, bottom, T, sp.v_h, -self.p.descend_speed_m_s))
 
     def creep(self) -> None:
         """On at ``descend_speed_m_s``, constant (the descent hands over at that speed), towards and past the
@@ -151,7 +162,7 @@ class FreeMotion:
         bottom = -self.p.contact_search_m
         v = self.p.descend_speed_m_s
         T = max(sp.h - bottom, 1e-3) / v
-        self._mover = vertical_move(sp.xy, sp.h, bottom, T, -v, -v)
+        self._start(vertical_move(sp.xy, sp.h, bottom, T, -v, -v))
 
     def press(self, tool: ToolState) -> None:
         """In contact at the measured height: the force target ramps from the measured force to ``target_n``."""
@@ -195,8 +206,8 @@ class FreeMotion:
                                                     reachable=reachable))
             self._force.restart(sp.force_n, 0.0, force_ramp_s)
             return True
-        self._mover = brake_above(sp.xyh(), np.array([*sp.v_xy, sp.v_h]), np.array([*sp.a_xy, sp.a_h]),
-                                  min(duration_s, AIR_BRAKE_S))
+        self._start(brake_above(sp.xyh(), np.array([*sp.v_xy, sp.v_h]), np.array([*sp.a_xy, sp.a_h]),
+                                  min(duration_s, AIR_BRAKE_S)))
         return False
 
     def lift(self, tool: ToolState, from_measured: bool = False, board: BoardPose | None = None) -> bool:
@@ -214,7 +225,7 @@ class FreeMotion:
         full = reach_h >= goal_h
         goal_h = reach_h
         T = max(abs(goal_h - h0) / self.p.descend_speed_m_s, 0.3)
-        self._mover = vertical_move(sp.xy, h0, goal_h, T, v0)
+        self._start(vertical_move(sp.xy, h0, goal_h, T, v0))
         sp.h, sp.v_h, sp.a_h = h0, v0, 0.0
         return full
 
@@ -269,28 +280,40 @@ class FreeMotion:
         return lowest_h
 
     def fly_to_survey(self, board: BoardPose) -> None:
-        """To ``standoff_m`` above the look point of the whole board (:func:`look_point` of its corners, keeping
-        the whole board in the camera's view where its position is known), turning the pad flat."""
-        w, h = (float(x) for x in board.size_m)
-        corners = [np.array(c) for c in ((0.0, 0.0), (w, 0.0), (0.0, h), (w, h))]
-        self.fly_to_hover(look_point(board, corners, [0.0] * 4, self.p.look_clearance_m, self.arm, self.p.standoff_m,
-                                     targets_m=board_targets(board), slack=SURVEY_HIDDEN_SLACK), board)
+        """To ``standoff_m`` above the look point of the whole board (:func:`~.look_points.survey_point`), turning
+        the pad flat; the point is chosen off the tick (:attr:`aim`), the setpoint holding meanwhile."""
+        arm, clearance_m, h = self.arm, self.p.look_clearance_m, self.p.standoff_m
+        self._mover = None
+        self.aim.start(lambda: survey_point(board, clearance_m, arm, h), lambda xy: self.fly_to_hover(xy, board))
 
     def fly_to_look(self, board: BoardPose, pending: list[Stain], attempt: int = 0) -> bool:
-        """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there.
+        """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there
+        and known at once (without :attr:`aim`'s executor; off the tick, a look whose point is where the pad is
+        arrives at once with :attr:`stayed`).
 
         The arm reaches back towards the robot base, away from them, so the
         camera sees them; ``look_clearance_m`` beyond their edge. ``attempt``: looks made at them before
         (each from another point).
         """
-        centres, sizes = [s.centre_m for s in pending], [s.size_m for s in pending]
-        goal = look_point(board, centres, sizes, self.p.look_clearance_m, self.arm, self.setpoint.h, attempt,
-                          stain_targets(centres, sizes))
+        centres, sizes = [np.array(s.centre_m, float) for s in pending], [float(s.size_m) for s in pending]  # copies
+        arm, clearance_m, h = self.arm, self.p.look_clearance_m, self.setpoint.h
+        self._mover, self.stayed = None, False
+        self.aim.start(lambda: look_point(board, centres, sizes, clearance_m, arm, h, attempt,
+                                          stain_targets(centres, sizes)), self._fly_to_look_point)
+        return self.aim.busy or not self.stayed
+
+    def _fly_to_look_point(self, goal: np.ndarray) -> None:
         sp = self.setpoint
         if np.linalg.norm(goal - sp.xy) < 0.005:
-            return False
-        self._mover = rest_to_rest(sp.xyh(), np.array([*goal, sp.h]), self.p.approach_speed_m_s, 0.5)
-        return True
+            self.stayed = True
+            return
+        self._start(rest_to_rest(sp.xyh(), np.array([*goal, sp.h]), self.p.approach_speed_m_s, 0.5))
+
+    def _start(self, mover: Quintic) -> None:
+        """``mover`` moves x, y, h from now on; a look point still being chosen is of no use any more."""
+        self.aim.drop()
+        self.stayed = False
+        self._mover = mover
 
     # ------------------------------------------------------------------ one tick
     def step_turn(self, dt_s: float) -> None:
@@ -306,8 +329,13 @@ class FreeMotion:
             sp.domega[:] = 0.0
 
     def move(self, dt_s: float) -> bool:
-        """Advance x, y, h along the quintic by ``dt_s`` [s]; True once at its end."""
+        """Advance x, y, h along the quintic by ``dt_s`` [s]; True once at its end. While :attr:`aim` chooses where
+        to fly, False (the setpoint holds); a look that :attr:`stayed`, True."""
+        if not self.aim.poll():
+            return False
         m, sp = self._mover, self.setpoint
+        if m is None and self.stayed:
+            return True
         assert m is not None, "move() before a move was started"
         m.update(dt_s)
         sp.xy[:] = m.position[:2]

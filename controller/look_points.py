@@ -74,6 +74,15 @@ def look_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[floa
     return seen_look_point(board, np.asarray(targets_m, float), arm, height_m, plain, attempt, slack)
 
 
+def survey_point(board: BoardPose, clearance_m: float, arm: ArmReach | None, height_m: float) -> np.ndarray:
+    """(2,) board point [m] the survey waits over, ``height_m`` above the board: :func:`look_point` of the board's
+    corners, keeping its :func:`board_targets` in view where the camera's position is known."""
+    w, h = (float(x) for x in board.size_m)
+    corners = [np.array(c) for c in ((0.0, 0.0), (w, 0.0), (0.0, h), (w, h))]
+    return look_point(board, corners, [0.0] * 4, clearance_m, arm, height_m, targets_m=board_targets(board),
+                      slack=SURVEY_HIDDEN_SLACK)
+
+
 def base_side_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[float], clearance_m: float,
                     arm: ArmReach | None = None, height_m: float = 0.0, attempt: int = 0) -> np.ndarray:
     """(2,) :func:`look_point` without the camera's position: beyond the stains on the robot base's side."""

@@ -250,10 +250,11 @@ class ControllerService:
         return False
 
     def _start_planner_thread(self) -> PlannerThread:
-        """The chain's re-plans off the 1 kHz path (:mod:`controller.planner_thread`), its thread started here,
-        before the loop's thread turns real-time."""
+        """The chain's re-plans and the executor's look points off the 1 kHz path (:mod:`controller.planner_thread`),
+        its thread started here, before the loop's thread turns real-time."""
         pool = PlannerThread()
         self.core.executor.chain.background = pool
+        self.core.executor.motion.aim.executor = pool
         return pool
 
     def _control(self, state: RobotState, dt: float) -> np.ndarray | None:
