@@ -23,9 +23,9 @@ from lampskit.atomic import write_text_atomic
 
 BENCH_DIR = Path(__file__).resolve().parent.parent / "bench"
 #: The benchmarks in the order they run (cheap ones first).
-SCRIPTS = ("bench_periodic_step", "bench_transitional_step", "bench_planner", "bench_loop_additions",
-           "bench_segmentation", "eval_segmentation_accuracy", "bench_sim", "bench_sim_armature", "bench_controller",
-           "bench_robot_port", "bench_zenoh_security", "bench_perception")
+SCRIPTS = ("bench_periodic_step", "bench_transitional_step", "bench_planner", "bench_look_points",
+           "bench_loop_additions", "bench_segmentation", "eval_segmentation_accuracy", "bench_sim",
+           "bench_sim_armature", "bench_controller", "bench_robot_port", "bench_zenoh_security", "bench_perception")
 
 
 def _commit() -> str:

@@ -155,3 +155,19 @@ def test_a_job_that_fails_off_the_tick_fails_in_the_tick_that_takes_its_answer()
     aim.executor = None
     aim.start(lambda: 8, answers.append)  # in the tick: at once
     assert answers == [7, 8] and not aim.busy and aim.poll()
+
+
+def test_the_look_point_benchmark_prints_its_tables():
+    """bench/bench_look_points.py --quick runs (a smoke test; its figures are the README's, not checked here)."""
+    import subprocess
+    import sys
+
+    from .conftest import REPO
+
+    r = subprocess.run([sys.executable, "bench/bench_look_points.py", "--quick"], cwd=REPO, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "| survey: the board's 5 cm grid in view |" in r.stdout and "point chosen on the planner thread" in r.stdout
+    bad = subprocess.run([sys.executable, "bench/bench_look_points.py", "--boards", "0"], cwd=REPO,
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "--boards must be at least 1" in bad.stderr
