@@ -75,10 +75,11 @@ def choice_costs(boards: list[BoardPose], arm) -> dict[str, list[float]]:
     return out
 
 
-def ticks_during_survey(board: BoardPose, arm, threaded: bool, ticks_after: int = 20) -> dict:
+def ticks_during_survey(board: BoardPose, arm, threaded: bool, ticks_after: int = 20, survey: bool = True) -> dict:
     """A 1 kHz loop of control-law ticks; in the first, the executor's motion starts a survey (its point chosen in
-    the tick, or ``threaded`` on a :class:`PlannerThread`) and every tick moves it on. Returns the worst tick
-    [ms] (from its period's start to its end: what the robot waits for) and the periods until the flight began."""
+    the tick, or ``threaded`` on a :class:`PlannerThread`) and every tick moves it on (``survey`` False: the loop
+    alone, the baseline). Returns the worst tick [ms] (from its period's start to its end: what the robot waits
+    for) and the periods until the flight began."""
     from controller.control.impedance import Reference, impedance_torque
     from controller.control.params import ImpedanceParams
 
@@ -100,7 +101,9 @@ def ticks_during_survey(board: BoardPose, arm, threaded: bool, ticks_after: int 
         while left > 0:
             deadline += 1e-3
             time.sleep(max(deadline - time.perf_counter(), 0.0))
-            if periods == 0:
+            if not survey:
+                pass
+            elif periods == 0:
                 motion.fly_to_survey(board)
             else:
                 motion.move(1e-3)
@@ -136,18 +139,21 @@ def main() -> int:
                         ("base_side", "baseline: the base-side point, camera ignored")):
         t = costs[name]
         print(f"| {label} | {np.median(t):.2f} / {max(t):.2f} | {np.median(t) / base:.1f}x |")
-    rounds = [(ticks_during_survey(b, arm, False), ticks_during_survey(b, arm, True)) for b in boards[:5]]
+    rounds = [(ticks_during_survey(b, arm, False), ticks_during_survey(b, arm, True),
+               ticks_during_survey(b, arm, True, survey=False)) for b in boards[:5]]
     inline = [r[0]["worst_tick_ms"] for r in rounds]
     thread = [r[1]["worst_tick_ms"] for r in rounds]
+    alone = [r[2]["worst_tick_ms"] for r in rounds]
     periods = [r[1]["periods"] for r in rounds]
     print(f"\n| a survey starting in a 1 kHz loop of control-law ticks ({len(rounds)} boards) | worst tick: median / "
           "max [ms] |\n|---|---:|")
     print(f"| point chosen in the tick (lock-step) | {np.median(inline):.2f} / {max(inline):.2f} |")
     print(f"| point chosen on the planner thread (real time; the flight starts {int(np.median(periods))} periods "
           f"later, median) | {np.median(thread):.2f} / {max(thread):.2f} |")
+    print(f"| baseline: the same loop, no survey | {np.median(alone):.2f} / {max(alone):.2f} |")
     print("\nworst tick: from the start of its 1 ms period to the end of its control law (budget 1 ms)")
     if a.json:
-        a.json.write_text(json.dumps({"choice_ms": costs, "inline_ms": inline, "thread_ms": thread,
+        a.json.write_text(json.dumps({"choice_ms": costs, "inline_ms": inline, "thread_ms": thread, "alone_ms": alone,
                                       "thread_periods": periods}, indent=1))
     return 0
 
