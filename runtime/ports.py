@@ -21,9 +21,10 @@ import socket
 
 __all__ = ["DEFAULT_RANGE", "PORT_RANGE_ENV", "PortRangeError", "free_port", "port_range", "bindable"]
 
-#: Where free ports are drawn from: under the kernel's ephemeral range and under the campaign's fixed bases
-#: (launch/campaign_run.py: 20000-29000).
-DEFAULT_RANGE = (10000, 20000)
+#: Where free ports are drawn from: under the kernel's ephemeral range (32768), above the campaign's fixed bases
+#: (launch/campaign_run.py: up to 26999) and clear of Ray's default worker ports (10002-19999), which a Ray head
+#: refuses to share with its own GCS port.
+DEFAULT_RANGE = (27000, 32000)
 PORT_RANGE_ENV = "LAMPS_PORT_RANGE"
 _TRIES = 200
 _given: set[int] = set()

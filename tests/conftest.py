@@ -18,8 +18,8 @@ os.environ.setdefault("LAMPS_ZENOH_INSECURE", "true")
 # two workers never pick the same port between choosing and binding it; the services they start inherit the slice.
 _worker = os.environ.get("PYTEST_XDIST_WORKER", "")
 if _worker.startswith("gw") and _worker[2:].isdigit() and "LAMPS_PORT_RANGE" not in os.environ:
-    _slice = 1250  # 8 workers across 10000-20000
-    _lo = 10000 + (int(_worker[2:]) % 8) * _slice
+    _slice = 625  # 8 workers across runtime/ports.py's DEFAULT_RANGE, 27000-32000
+    _lo = 27000 + (int(_worker[2:]) % 8) * _slice
     os.environ["LAMPS_PORT_RANGE"] = f"{_lo}-{_lo + _slice}"
 
 REPO = Path(__file__).resolve().parent.parent

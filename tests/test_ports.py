@@ -20,6 +20,7 @@ def _ephemeral_low() -> int:
 def test_free_ports_lie_in_the_range_below_the_ephemeral_one_and_are_never_given_twice():
     lo, hi = port_range()
     assert hi <= _ephemeral_low()  # the kernel never hands these out for an outgoing connection's source port
+    assert lo > 19999  # above Ray's default worker ports (10002-19999): a Ray head refuses a port among them
     drawn = [free_port() for _ in range(100)]
     assert len(set(drawn)) == 100 and all(lo <= p < hi for p in drawn)
     base = free_port(5)
@@ -50,7 +51,8 @@ def test_the_workers_of_this_run_draw_from_disjoint_slices(monkeypatch):
     worker = os.environ.get("PYTEST_XDIST_WORKER", "")
     if worker.startswith("gw"):
         lo, hi = port_range()
-        assert hi - lo == 1250 and lo == 10000 + int(worker[2:]) % 8 * 1250
+        assert hi - lo == 625 and lo == ports.DEFAULT_RANGE[0] + int(worker[2:]) % 8 * 625
+        assert hi <= ports.DEFAULT_RANGE[1]
     monkeypatch.delenv(ports.PORT_RANGE_ENV, raising=False)
     assert port_range() == ports.DEFAULT_RANGE
 
