@@ -66,7 +66,8 @@ class FreeMotion:
         The arm's elbow geometry: look points stay where the elbow has room (None: anywhere on the board).
     aim : OffTick
         Where look points are chosen: its ``executor`` the planner thread in the real-time loop (the choice takes
-        2-3 ms; the setpoint holds meanwhile and :meth:`move` reports not arrived), None: in the tick.
+        a few ms, bench/bench_look_points.py; the setpoint holds meanwhile and :meth:`move` reports not arrived),
+        None: in the tick.
     stayed : bool
         The last look's point was where the pad already was: no move was made.
     """

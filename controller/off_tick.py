@@ -1,8 +1,8 @@
 """One pure computation at a time off the 1 kHz tick, its answer taken back in a later tick.
 
 Choosing a look point checks the arm's silhouette from some fifty pad
-positions against up to two hundred board points: 2-3 ms, two to three
-control periods. In the real-time loop :attr:`OffTick.executor` is the
+positions against up to two hundred board points: a few control periods
+(``bench/bench_look_points.py``). In the real-time loop :attr:`OffTick.executor` is the
 planner thread (:mod:`controller.planner_thread`): the tick hands the
 computation over and goes on holding the setpoint; a later tick finds the
 answer done and acts on it (:meth:`OffTick.poll`). Without an executor
