@@ -126,7 +126,9 @@ def test_a_128_mb_put_costs_a_limited_receiver_a_few_times_the_limit_not_the_put
         assert grew_mb < 3 * limit / 1024**2, (before, after)  # measured: 30 MB for a 16.1 MB limit
     else:
         assert after["got"] == [128 * 1024**2, 5], after
-        assert grew_mb > 128, (before, after)  # Zenoh's default takes the put whole: what the limit prevents
+        # Zenoh's default takes the put whole, what the limit prevents: far over the bound a limited receiver keeps.
+        # Not "over 128 MB": the 2 ms sampling of VmRSS can miss part of the peak (126.4 MB seen on a loaded machine).
+        assert grew_mb > 3 * max_message_bytes() / 1024**2, (before, after)
 
 
 def test_every_session_of_the_cell_takes_the_cells_limit_unless_told_otherwise(tmp_path):
