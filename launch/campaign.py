@@ -36,7 +36,8 @@ against the lower bound, dirt removed per cell), each atomically, again
 after every cell: the table grows as cells finish, and each finished cell
 prints the progress (cells done, failed, time taken and left). A campaign
 stopped half-way keeps what it finished; ``--resume`` with the same
-``--out`` (and options) runs only the cells without a report. Exit 0 when
+``--out`` (and options) runs only the cells without a report; the table
+alone (``campaign.json`` carried to another machine) keeps its cells too. Exit 0 when
 every cell left a report (whatever it shows), 1 with the reason otherwise.
 ``--summarize DIR [DIR ...]`` runs nothing: it reads the cells of earlier
 campaigns (their ``campaign.json`` and each cell's ``report.json`` as it is
@@ -56,6 +57,7 @@ import shutil
 import subprocess
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -168,23 +170,48 @@ def _say(line: str) -> None:
     print(line, flush=True)  # progress seen as it happens, also through a pipe or into a log
 
 
+def _tabled_rows(out: Path, cells: list[Cell]) -> dict[str, dict[str, Any]]:
+    """The finished cells of ``out/campaign.json`` by name ({} without the file): a resumed campaign keeps these
+    rows when their cell folders are gone (the table carried to another machine without the recordings).
+    :class:`CampaignError` for a table that cannot be read or a row that is not the cell its name says."""
+    path = out / "campaign.json"
+    if not path.is_file():
+        return {}
+    try:
+        rows = {str(r["name"]): r for r in json.loads(path.read_text())["cells"] if r["outcome"] != "no report"}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise CampaignError(f"--resume: cannot read the table {path}: {exc}") from None
+    for c in cells:
+        row = rows.get(c.name)
+        if row is not None and any(row.get(f) != v for f, v in asdict(c).items() if f != "plots"):
+            raise CampaignError(f"--resume: the row {c.name} of {path} is another cell ("
+                                + ", ".join(f"{f} {row.get(f)!r}" for f, v in asdict(c).items()
+                                            if f != "plots" and row.get(f) != v) + ")")
+    return rows
+
+
 def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, max_duration_s: float,
                  command: str, echo=_say, resume: bool = False, ray: str | None = None,
                  network: bool = True) -> dict[str, Any]:
     """Run every cell (``jobs`` at once), write campaign.json, .md and .png into ``out`` after each cell (the table
     grows as cells finish); returns the json. ``resume``: the cells whose run folder holds a report are taken as
-    they are, a cell folder without one (a campaign killed while it ran) is run again, the rest run. ``ray``:
+    they are, a cell folder without one (a campaign killed while it ran) is run again, a cell without a folder but
+    with a row in ``out/campaign.json`` keeps that row (:func:`_tabled_rows`), the rest run. ``ray``:
     run the cells as tasks on that Ray cluster (``local``: one started here), :mod:`launch.campaign_ray`.
     ``network``: each cell over Zenoh (``lamps up``); False: in one process without one (``--no-network``)."""
     out.mkdir(parents=True, exist_ok=True)
     stains, bounds, felt, v_plan, pad = _bounds(cells)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
     todo = []
+    tabled = _tabled_rows(out, cells) if resume else {}
     for k, c in enumerate(cells):
         run_dir = out / "cells" / c.name
         if resume and (run_dir / "report.json").is_file():
             report = json.loads((run_dir / "report.json").read_text())
             rows[k] = row_of(c, report, bounds[c], str(run_dir), "", stains[c], felt, v_plan)
+            continue
+        if not run_dir.exists() and c.name in tabled:
+            rows[k] = tabled[c.name]  # its folder stayed on the machine that ran it
             continue
         if run_dir.exists():
             if not resume:
@@ -196,7 +223,9 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
     skill = skill or (learned if resume and learned.is_file() else _learn_skill(out))
     extra = {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan, "network": network}
     if resume:
-        echo(f"resuming: {len(cells) - len(todo)} of {len(cells)} cells already have a report, {len(todo)} to run")
+        echo(f"resuming: {len(cells) - len(todo)} of {len(cells)} cells already have a report "
+             f"({sum(r is tabled.get(r['name']) for r in rows if r is not None)} of them only in the table), "
+             f"{len(todo)} to run")
     t0 = time.monotonic()
     finished = failed = 0
     port_base = random.choice(PORT_BASES)
@@ -281,7 +310,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="each cell's report also draws its plots (default: report.json only; lamps report "
                          "CELL_DIR draws them later from the cell's recording)")
     ap.add_argument("--resume", action="store_true",
-                    help="--out is a campaign that was stopped: keep the cells that left a report, run the rest")
+                    help="--out is a campaign that was stopped: keep the cells that left a report (or, their folders "
+                         "gone, a row in its campaign.json), run the rest")
     ap.add_argument("--summarize", nargs="+", metavar="DIR", default=None,
                     help="run nothing: one table of these campaign folders' cells, into --out")
     ap.add_argument("-v", "--verbose", action="store_true", help="log what the campaign does")

@@ -7,6 +7,7 @@ import json
 import math
 import os
 import secrets
+import shutil
 import signal
 import subprocess
 import sys
@@ -280,7 +281,8 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
     again = _campaign(*args)
     assert again.returncode == 1 and "exists: a campaign folder is never overwritten" in again.stderr, again.stderr
     r = _campaign(*args, "--resume")
-    assert "resuming: 1 of 2 cells already have a report, 1 to run" in r.stdout, r.stdout[-2000:]
+    assert "resuming: 1 of 2 cells already have a report (0 of them only in the table), 1 to run" in r.stdout, \
+        r.stdout[-2000:]
     assert (out / "cells" / "wall-s0-n1" / "report.json").stat().st_mtime_ns == first  # not run again
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     result = json.loads((out / "campaign.json").read_text())
@@ -303,6 +305,21 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
                            capture_output=True, text=True, env={**os.environ, "MPLBACKEND": "Agg"}, timeout=300)
     assert drawn.returncode == 0, drawn.stderr[-2000:]
     assert len(json.loads((cell_dir / "report.json").read_text())["plots"]) >= 3 and list(cell_dir.glob("*.png"))
+    # the table carried to another machine without the cell folders: --resume keeps its rows and runs nothing
+    carried = tmp_path / "carried"
+    carried.mkdir()
+    shutil.copy(out / "campaign.json", carried / "campaign.json")
+    moved = _campaign(*args[:-3], "--out", str(carried), "--no-network", "--resume")
+    assert moved.returncode == 0, moved.stdout[-2000:] + moved.stderr[-2000:]
+    assert "2 of 2 cells already have a report (2 of them only in the table), 0 to run" in moved.stdout, moved.stdout
+    assert json.loads((carried / "campaign.json").read_text())["cells"] == result["cells"]
+    assert not (carried / "cells").exists() and not (carried / "learn").exists()
+    table = json.loads((carried / "campaign.json").read_text())
+    table["cells"][0]["stains"] = 2  # a row that is not the cell its name says
+    (carried / "campaign.json").write_text(json.dumps(table))
+    wrong = _campaign(*args[:-3], "--out", str(carried), "--no-network", "--resume")
+    assert wrong.returncode == 1 and "the row wall-s0-n1 of" in wrong.stderr and "stains 2" in wrong.stderr, \
+        wrong.stderr
     again = _campaign("--summarize", str(out), "--out", str(tmp_path / "joint"))
     assert again.returncode == 0, again.stderr
     joint = json.loads((tmp_path / "joint" / "campaign.json").read_text())
