@@ -10,10 +10,15 @@ while others wait), at most ``max_passes`` times; then it is given up.
 
 A stain perception reports smeared (:mod:`perception.smear`: the camera's
 passes over it no longer lower its remaining ink) is closed as smeared once
-the executor has made a pass of its own over it: it is not wiped again,
-and :attr:`StainBook.smeared` keeps it, with its remaining and passes, for
-the status and the report. Without a pass of the executor's (the arm only
-passed over it on the way to another) the report is not taken. A stain the
+perception has judged a pass of the executor's own over it: the report
+counts more passes than perception had counted when that pass ended (the
+pad's pass is counted when the stain is back in view). It is then not wiped
+again, and :attr:`StainBook.smeared` keeps it, with its remaining and
+passes, for the status and the report. A report made of other passes (the
+arm hiding the stain on its way to others, or wiping a neighbour) is not
+taken: on random board 322 the arm hid a stain three times while wiping
+the others, perception called it smeared, and the executor's first real
+pass (which took half its dirt) closed it. A stain the
 arm cannot reach is closed the same way before any pass
 (:meth:`StainBook.close_out_of_reach`, with the reason).
 """
@@ -53,6 +58,7 @@ class StainBook:
         self._given_up: set[int] = set()
         self._passes: Counter[int] = Counter()
         self._left_at: dict[int, float] = {}  # stain id -> clock [s] at the end of a pass without kappa
+        self._seen_passes_at_end: dict[int, int] = {}  # stain id -> perception's passes when our last pass ended
         self.smeared: dict[int, Stain] = {}
         self.out_of_reach: dict[int, str] = {}
 
@@ -61,8 +67,9 @@ class StainBook:
         old_open = self.open_ids(clock_s)
         self.stains = {s.id: s for s in stains}
         for s in stains:
-            if s.smeared and not s.kappa and s.id not in self.smeared and self._passes[s.id] >= 1:
-                self.smeared[s.id] = s
+            if s.smeared and not s.kappa and s.id not in self.smeared and self._passes[s.id] >= 1 \
+                    and s.passes > self._seen_passes_at_end.get(s.id, s.passes):
+                self.smeared[s.id] = s  # perception has judged our last pass over it
         return self.open_ids(clock_s) != old_open
 
     def is_done(self, stain_id: int) -> bool:
@@ -84,6 +91,8 @@ class StainBook:
         """
         self._passes[stain_id] += 1
         self._left_at[stain_id] = clock_s
+        seen = self.stains.get(stain_id)
+        self._seen_passes_at_end[stain_id] = seen.passes if seen is not None else 0
         if self._passes[stain_id] >= self.max_passes:
             self._given_up.add(stain_id)
             return True

@@ -543,7 +543,7 @@ def test_the_book_names_each_stain_it_closed_without_kappa_and_why():
     assert book.left_undone() == ""
     book.close_out_of_reach(0, "beyond the stretched arm (1.21 m from the base)")
     book.end_pass(1, 1.0)
-    book.update([far, Stain(1, smear.centre_m, smear.size_m, kappa=False, smeared=True), stubborn,
+    book.update([far, Stain(1, smear.centre_m, smear.size_m, kappa=False, smeared=True, passes=1), stubborn,
                  Stain(3, clean.centre_m, clean.size_m, kappa=True)], 1.5)
     book.end_pass(2, 2.0), book.end_pass(2, 3.0)
     assert book.left_undone() == ("3 stain(s) left: stain 0 at (0.10, 0.20) m out of the arm's reach (beyond the "
