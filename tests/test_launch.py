@@ -320,7 +320,12 @@ def _check_run(out: Path, base: int, robot_brakes_ok: bool = False, stains: int 
     # real time on two shared cores: an answer now and then misses the robot's stale limit and the robot side
     # brakes a cycle; that is reported (phase ROBOT), never a fault of the skill
     robot_brakes = ("robot: braked: no fresh command", "robot: braked: a joint moved faster than its speed brake",
-                    "robot: held: the robot ran on an old message")
+                    "robot: held: the robot ran on an old message",
+                    # the robot side yields on the contact force it predicts one cycle ahead from the last two
+                    # readings: a burst of late states on the starved machine can raise that prediction over the
+                    # cap once while the measured force stays under it (time_above_cap_s == 0 above). Two CI runs
+                    # of the real-time cell had one such yield each; the caller bounds their count.
+                    "robot: yielded: the contact force went over the robot side's cap (contact_force_yields +1)")
     # on a loaded host (two cells on two cores beside a docker build) a service's status may come a few seconds
     # late: recorded as SERVICE, never unsafe; a service that exited, restarted or went silent for good is a fault
     late = re.compile(r"^\w+: no status for (\d+\.\d) s \(frozen, stopped or dead\)$")
@@ -459,6 +464,7 @@ def test_lamps_up_through_the_real_robot_adapter_and_the_lbr_peer(tmp_path, lear
     # a speed brake (damping below the guard's joint speeds) is the robot side's answer to a stall in our processes
     # on this shared machine, where the guard would disarm; a few episodes a run at most
     assert c.get("joint_speed_brakes", 0) <= 3, c
+    assert c.get("contact_force_yields", 0) <= (1 if mode == "realtime" else 0), c  # predicted, never measured
     if mode == "lockstep":  # a lock-step loop never sleeps: it stays under the fair scheduler
         assert "loop_sched_fifo_priority" not in c, c
     elif os.geteuid() == 0:  # real time, allowed: the adapter's loop thread is SCHED_FIFO, its memory locked
