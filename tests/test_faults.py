@@ -193,8 +193,12 @@ def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_contro
         cell.freeze("sim", 3.0)  # its own loop stalls: it brakes on resume until a fresh answer
         cell.wait_phase(GOING, 60.0, since=time.monotonic() + 1.0)
         time.sleep(2.0)
+        # a fast run may have cleaned the board by now: a controller restarted in DONE comes back DONE with the
+        # same reason, which is no change of phase (one CI run); its status in the recording is checked below
+        done = bool(cell.phases) and cell.phases[-1][1] == "DONE"
         cell.restart("controller", down_s=1.0)  # the sim brakes within its stale limit; a new session takes over
-        cell.wait_phase(GOING + ("PAUSED",), 60.0, since=time.monotonic())
+        if not done:
+            cell.wait_phase(GOING + ("PAUSED",), 60.0, since=time.monotonic())
         # only what reached the recorder's file shows the restart: its link to the new controller comes back on
         # Zenoh's reconnect back-off (runtime.session.CONNECT_RETRY, at most 1 s), but the recorder runs at nice 10
         # beside three SCHED_FIFO loops and may write a status seconds after it was said
