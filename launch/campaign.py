@@ -181,12 +181,11 @@ def _tabled_rows(out: Path, cells: list[Cell]) -> dict[str, dict[str, Any]]:
         rows = {str(r["name"]): r for r in json.loads(path.read_text())["cells"] if r["outcome"] != "no report"}
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise CampaignError(f"--resume: cannot read the table {path}: {exc}") from None
-    for c in cells:
-        row = rows.get(c.name)
-        if row is not None and any(row.get(f) != v for f, v in asdict(c).items() if f != "plots"):
-            raise CampaignError(f"--resume: the row {c.name} of {path} is another cell ("
-                                + ", ".join(f"{f} {row.get(f)!r}" for f, v in asdict(c).items()
-                                            if f != "plots" and row.get(f) != v) + ")")
+    for c in (c for c in cells if c.name in rows):
+        wrong = [f"{f} {rows[c.name].get(f)!r}" for f, v in asdict(c).items()
+                 if f != "plots" and rows[c.name].get(f) != v]
+        if wrong:
+            raise CampaignError(f"--resume: the row {c.name} of {path} is another cell ({', '.join(wrong)})")
     return rows
 
 
