@@ -51,6 +51,7 @@ from .core_state import ModesCache, TickBuffers, TickClock, TickMemory
 from .executor import SkillExecutor
 from .executor_types import BoardPose, Setpoint, ToolState
 from .params import ControllerParams
+from .rest_posture import rest_posture_for
 from .tick_io import LastCommand, TickInput, TickOutput, TickStatus, conclude
 from .trace import PHASE_CODES, TRACE_COLUMNS, Trace  # noqa: F401 (the trace's names, exported here too)
 
@@ -98,13 +99,11 @@ class ControllerCore:
         # the clearance posture (controller.control.limits.clearance_torque), into the shaping's nullspace torques
         self.buf = TickBuffers(self.kin, limits_from_settings(self.model.limits, params.limits))
         if params.limits.clearance_stiffness_nm_rad > 0.0:  # the clearance is written into the shaping's record
-            self.shaping.posture_nm = self.buf.clearance
-            posture = self.shaping.posture_nm
-            assert posture is not None
-            self.buf.clearance = posture
+            self.buf.clearance = self.shaping.posture_in_record(self.buf.clearance)
         self.clock = TickClock(params.rate_hz)
         self.modes = ModesCache(params.impedance.max_mode_frequency_rad_s)
         self.mem = TickMemory()
+        self.posture = rest_posture_for(self.model, params.limits)  # the rest pose, planned off the tick
         watch = params.limits
         self.disturbance = DisturbanceWatch(watch.disturbance_share * lim.tau_max, watch.disturbance_filter_s,
                                             watch.disturbance_persist_s)
@@ -134,8 +133,8 @@ class ControllerCore:
 
     @property
     def q_rest(self) -> np.ndarray | None:
-        """(n,) [rad] the posture's rest pose (the first state's), None before."""
-        return self.mem.q_rest
+        """(n,) [rad] the posture's rest pose (the first state's, moving to the plan), None before."""
+        return self.posture.q
 
     @property
     def normal_force_n(self) -> float:
@@ -198,7 +197,7 @@ class ControllerCore:
     def restart(self) -> None:
         """The robot came back after a loss: hold where it is, ramp the gains in again, re-approach."""
         self.mem.hold = None
-        self.mem.q_rest = None
+        self.posture.reset()
         self.clock.since_start_s = 0.0
         self.force.reset()
         self.override.reset()
@@ -235,9 +234,10 @@ class ControllerCore:
         self.buf.dq[:] = dq
         self.buf.wrench[:] = wrench
         q, dq, wrench = self.buf.q, self.buf.dq, self.buf.wrench
-        if self.mem.q_rest is None:
-            self.mem.q_rest = q.copy()
+        if self.posture.q is None:
+            self.posture.begin(q)
             self.shaper.reset(None)
+        self.posture.step(dt_s)
         if tau_max_nm is not None:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)
@@ -438,7 +438,7 @@ class ControllerCore:
         if self.shaping.posture_nm is not None:
             clearance_into(q, dq, self.buf.limits, self.buf.clearance)
             self_motion_limit_into(self.buf.clearance, dq, kin.M, kin.M_inv, kin.J, kin.Lambda, self.buf.limits)
-        q_rest = self.mem.q_rest
+        q_rest = self.posture.q
         assert q_rest is not None, "a torque before the first state set the rest posture"
         terms = impedance_torque(model, q, dq, self.ref, self.p.impedance, q_rest, not gravity_compensated,
                                  self.shaping, kin, self._task_modes(kin), self.buf.terms)

@@ -72,15 +72,13 @@ class ModesCache:
 
 
 class TickMemory:
-    """What a tick leaves for the next: q_rest (n,) [rad], the posture's rest pose (the first state's, None
-    until then); hold, the pad's pose (p (3,) [m], R (3, 3)) held while no board is known; normal_force_n
-    [N], the measured force along the board's normal; press_n [N], the commanded press; last_terms, the
-    law's last terms; override_used, the time scale the last skill step used; applied_known, whether
+    """What a tick leaves for the next: hold, the pad's pose (p (3,) [m], R (3, 3)) held while no board is
+    known; normal_force_n [N], the measured force along the board's normal; press_n [N], the commanded press;
+    last_terms, the law's last terms; override_used, the time scale the last skill step used; applied_known, whether
     ``last_applied`` holds torques the robot said it applied; board, the board whose pose the buffers hold;
     xy_prev (2,) [m], the pad's in-plane position at the last tick (None after a (re)start)."""
 
     def __init__(self) -> None:
-        self.q_rest: np.ndarray | None = None
         self.hold: tuple[np.ndarray, np.ndarray] | None = None
         self.normal_force_n = 0.0
         self.press_n = 0.0

@@ -95,6 +95,10 @@ class LimitParams:
     self_motion_share of its speed limit; any self-motion above
     self_motion_share is braked with self_motion_brake_1_s [1/s] on the
     arm's inertia (:func:`controller.control.limits.self_motion_limit`);
+    rest_plan_rate_rad_s : the posture's rest pose moves from the first
+    state to the one planned out of the clearance's zones
+    (:func:`arm.posture.planned_rest_posture`) at this joint speed [rad/s]
+    (0: no plan, the first state stays the rest pose);
     max_speed_m_s : the pad is braked above this Cartesian speed [m/s];
     reference_joint_speed_share : the skill is slowed down (time scaling)
     where its reference would ask a joint for more than this share of its
@@ -133,6 +137,7 @@ class LimitParams:
     clearance_speed_share: Annotated[float, In(0.2, 1.0)] = 1.0
     self_motion_share: Annotated[float, In(0.1, 10.0)] = 0.2
     self_motion_brake_1_s: Annotated[float, In(0.0, 400.0)] = 50.0
+    rest_plan_rate_rad_s: Annotated[float, In(0.0, 2.0)] = 0.25
     max_speed_m_s: Annotated[float, In(0.05, 2.0)] = 0.6
     speed_brake_gain_n_s_m: Annotated[float, In(0.0, 5000.0)] = 200.0
     reference_joint_speed_share: Annotated[float, In(0.05, 10.0)] = 0.6

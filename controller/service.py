@@ -255,6 +255,7 @@ class ControllerService:
         pool = PlannerThread()
         self.core.executor.chain.background = pool
         self.core.executor.motion.aim.executor = pool
+        self.core.posture.job.executor = pool
         return pool
 
     def _control(self, state: RobotState, dt: float) -> np.ndarray | None:

@@ -214,6 +214,12 @@ class TaskShaping:
     def posture_nm(self, tau: np.ndarray | None) -> None:
         self._set("use_posture", self._posture, tau)
 
+    def posture_in_record(self, tau: np.ndarray) -> np.ndarray:
+        """Use ``tau`` (n,) [Nm] as :attr:`posture_nm` and return the record's own array that holds it: written
+        there in place every tick, the compiled law reads it without a copy."""
+        self.posture_nm = tau
+        return self._posture
+
     @property
     def press_n(self) -> float:
         return float(self._press[0])

@@ -1,0 +1,116 @@
+"""The rest posture planned out of the clearance's zones (arm.posture) and carried there off the tick
+(controller.rest_posture), on the real Pinocchio model, from the start poses the simulator gives random boards."""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from arm.posture import ClearanceZones, clearance_gradient, clearance_potential, planned_rest_posture
+from arm.robot_model import RobotModel
+from controller.params import LimitParams
+from controller.rest_posture import RestPosture, rest_posture_for
+from sim.board import board_from_params, start_configuration
+from sim.board_sampler import sample_board
+from sim.params import BoardParams, SimParams
+
+
+@pytest.fixture(scope="module")
+def model() -> RobotModel:
+    return RobotModel()
+
+
+def zones(model: RobotModel) -> ClearanceZones:
+    singular = np.zeros(model.nq)
+    singular[[1, 3, 5]] = 1.0
+    return ClearanceZones(0.5, singular, 0.6)
+
+
+def start_of(seed: int, model: RobotModel) -> np.ndarray:
+    """The simulator's start pose on random board ``seed`` (as ``lamps up --board random:seed`` starts)."""
+    board = board_from_params(BoardParams(**sample_board(seed, model).table))
+    return start_configuration(board, SimParams().start_standoff_m, model)
+
+
+def test_the_gradient_is_the_potentials(model: RobotModel) -> None:
+    """The descent follows the clearance's own push: the gradient matches the potential's finite differences."""
+    z = zones(model)
+    lo, hi = model.limits.q_min, model.limits.q_max
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        q = rng.uniform(lo, hi)
+        g = clearance_gradient(q, lo, hi, z)
+        e = 1e-6
+        fd = np.array([(clearance_potential(q + e * np.eye(7)[i], lo, hi, z)
+                        - clearance_potential(q - e * np.eye(7)[i], lo, hi, z)) / (2 * e) for i in range(7)])
+        np.testing.assert_allclose(g, fd, atol=1e-5)
+
+
+@pytest.mark.parametrize("seed", [245, 322])
+def test_a_start_inside_the_singular_zones_is_planned_out_of_them_holding_the_pad(model: RobotModel,
+                                                                                 seed: int) -> None:
+    """Random boards 245 and 322 start the arm with A2 (and on 245 A6) inside the singular clearance's zone; at
+    that start the controller's clearance carried A1 (322) or A7 (245) onto its limit. The plan holds the pad
+    where it is, keeps the branch (the signs of A2 and A6) and leaves A2 and A6 out of their zones, every joint
+    at least 0.3 rad inside its limits or no closer than it started (A4, the elbow, is fixed by the pad pose)."""
+    q0 = start_of(seed, model)
+    z = zones(model)
+    assert min(abs(q0[1]), abs(q0[5])) < 0.6  # the premise: the start is inside a zone
+    q = planned_rest_posture(model, q0, z)
+    p0, R0 = model.tcp_pose(q0)
+    p, R = model.tcp_pose(q)
+    assert np.linalg.norm(p - p0) < 1e-3
+    assert np.degrees(np.arccos(np.clip((np.trace(R0.T @ R) - 1) / 2, -1, 1))) < 0.1
+    assert np.sign(q[1]) == np.sign(q0[1]) and np.sign(q[5]) == np.sign(q0[5])
+    assert abs(q[1]) >= 0.59 and abs(q[5]) >= 0.59
+    lo, hi = model.limits.q_min, model.limits.q_max
+    room, room0 = np.minimum(q - lo, hi - q), np.minimum(q0 - lo, hi - q0)
+    assert np.all(room >= np.minimum(0.3, room0 - 1e-6))
+    assert clearance_potential(q, lo, hi, z) < 0.5 * clearance_potential(q0, lo, hi, z)
+
+
+def test_a_start_out_of_every_zone_is_its_own_plan(model: RobotModel) -> None:
+    q0 = np.array([0.2, 0.9, -0.3, -1.5, 0.4, 1.0, 0.1])
+    z = zones(model)
+    assert clearance_potential(q0, model.limits.q_min, model.limits.q_max, z) == 0.0
+    np.testing.assert_array_equal(planned_rest_posture(model, q0, z), q0)
+
+
+def test_the_rest_pose_moves_to_the_plan_at_its_rate_off_the_tick(model: RobotModel) -> None:
+    """The rest pose is the first state until the plan answers (here on a thread, as the planner thread runs
+    it), then moves at most ``rate * dt`` per joint per tick and stops on the plan."""
+    q0 = start_of(322, model)
+    posture = rest_posture_for(model, LimitParams())
+    with ThreadPoolExecutor(1) as pool:
+        posture.job.executor = pool
+        posture.begin(q0)
+        np.testing.assert_array_equal(posture.q, q0)
+        while posture.job.busy:
+            before = posture.q.copy()
+            posture.step(0.001)
+        goal = posture.goal
+        assert goal is not None
+        dt, rate = 0.001, LimitParams().rest_plan_rate_rad_s
+        ticks = 0
+        while not np.array_equal(posture.q, goal):
+            before = posture.q.copy()
+            posture.step(dt)
+            assert np.max(np.abs(posture.q - before)) <= rate * dt + 1e-12
+            ticks += 1
+        assert ticks == pytest.approx(np.max(np.abs(goal - q0)) / (rate * dt), abs=2)
+    posture.reset()
+    assert posture.q is None and posture.goal is None
+
+
+def test_no_plan_when_the_clearance_or_the_rate_is_off(model: RobotModel) -> None:
+    q0 = start_of(322, model)
+    for limits in (LimitParams(rest_plan_rate_rad_s=0.0), LimitParams(clearance_stiffness_nm_rad=0.0)):
+        posture = rest_posture_for(model, limits)
+        posture.begin(q0)
+        for _ in range(100):
+            posture.step(0.001)
+        np.testing.assert_array_equal(posture.q, q0)
+    with pytest.raises(ValueError, match="rate"):
+        RestPosture(None, 0.0)
