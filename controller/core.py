@@ -237,7 +237,7 @@ class ControllerCore:
         if self.posture.q is None:
             self.posture.begin(q)
             self.shaper.reset(None)
-        self.posture.step(dt_s)
+        self.posture.step(q, dt_s)
         if tau_max_nm is not None:
             np.minimum(self.model.limits.tau_max, tau_max_nm, out=self.shaper.tau_max)
         kin = self.kin.update(q, dq)

@@ -80,28 +80,54 @@ def test_a_start_out_of_every_zone_is_its_own_plan(model: RobotModel) -> None:
 
 def test_the_rest_pose_moves_to_the_plan_at_its_rate_off_the_tick(model: RobotModel) -> None:
     """The rest pose is the first state until the plan answers (here on a thread, as the planner thread runs
-    it), then moves at most ``rate * dt`` per joint per tick and stops on the plan."""
+    it), then moves at most ``rate * dt`` per joint per tick and stops on the plan; an arm held at its start
+    (in the zone all along) is planned again every second, to the same plan."""
     q0 = start_of(322, model)
     posture = rest_posture_for(model, LimitParams())
+    dt, rate = 0.001, LimitParams().rest_plan_rate_rad_s
     with ThreadPoolExecutor(1) as pool:
         posture.job.executor = pool
         posture.begin(q0)
         np.testing.assert_array_equal(posture.q, q0)
         while posture.job.busy:
+            np.testing.assert_array_equal(posture.q, q0)  # nothing moves before the plan answers
+            posture.step(q0, dt)
+        assert posture.goal is not None
+        goal, q_first_step = posture.goal.copy(), posture.q.copy()
+        assert np.max(np.abs(q_first_step - q0)) <= rate * dt + 1e-12
+        ticks, plans = 0, 0
+        while not np.array_equal(posture.q, posture.goal):
             before = posture.q.copy()
-            posture.step(0.001)
-        goal = posture.goal
-        assert goal is not None
-        dt, rate = 0.001, LimitParams().rest_plan_rate_rad_s
-        ticks = 0
-        while not np.array_equal(posture.q, goal):
-            before = posture.q.copy()
-            posture.step(dt)
+            posture.step(q0, dt)
+            plans += posture.job.busy
+            while posture.job.busy:  # a re-plan: wait for it as a later tick would
+                posture.step(q0, 0.0)
             assert np.max(np.abs(posture.q - before)) <= rate * dt + 1e-12
+            np.testing.assert_array_equal(posture.goal, goal)
             ticks += 1
-        assert ticks == pytest.approx(np.max(np.abs(goal - q0)) / (rate * dt), abs=2)
+        assert ticks + 1 == pytest.approx(np.max(np.abs(goal - q0)) / (rate * dt), abs=2)
+        assert plans == pytest.approx(ticks * dt / posture.replan_s, abs=1)
     posture.reset()
     assert posture.q is None and posture.goal is None
+
+
+def test_the_rest_pose_is_planned_again_only_while_the_arm_stands_in_a_zone(model: RobotModel) -> None:
+    """Where the pad went on, the arm may stand in a zone again (board 51: A6 back at 0.01): a second later the
+    rest pose is planned from there. Out of every zone the last plan stays."""
+    q0 = start_of(322, model)
+    posture = rest_posture_for(model, LimitParams())
+    posture.begin(q0)  # no executor: the plan answers at once, as in lock-step
+    first = posture.goal.copy()
+    elsewhere = start_of(245, model)  # A2 and A6 inside their zones
+    free = np.array([0.2, 0.9, -0.3, -1.5, 0.4, 1.0, 0.1])
+    for _ in range(1500):
+        posture.step(free, 0.001)
+    np.testing.assert_array_equal(posture.goal, first)
+    for _ in range(1001):
+        posture.step(elsewhere, 0.001)
+    np.testing.assert_allclose(posture.goal, planned_rest_posture(model, elsewhere, zones(model)))
+    p_goal, _ = model.tcp_pose(posture.goal)
+    np.testing.assert_allclose(p_goal, model.tcp_pose(elsewhere)[0], atol=1e-3)
 
 
 def test_no_plan_when_the_clearance_or_the_rate_is_off(model: RobotModel) -> None:
@@ -110,7 +136,7 @@ def test_no_plan_when_the_clearance_or_the_rate_is_off(model: RobotModel) -> Non
         posture = rest_posture_for(model, limits)
         posture.begin(q0)
         for _ in range(100):
-            posture.step(0.001)
+            posture.step(posture.q, 0.001)
         np.testing.assert_array_equal(posture.q, q0)
     with pytest.raises(ValueError, match="rate"):
         RestPosture(None, 0.0)
