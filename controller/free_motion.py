@@ -225,7 +225,7 @@ class FreeMotion:
         reach_h = self._reachable_height(board, sp.xy, goal_h, min(h0 + MIN_LIFT_M, goal_h))
         full = reach_h >= goal_h
         goal_h = reach_h
-        T = max(abs(goal_h - h0) / self.p.descend_speed_m_s, 0.3)
+        T = max(abs(goal_h - h0) / self.p.lift_speed_m_s, 0.3)
         self._start(vertical_move(sp.xy, h0, goal_h, T, v0))
         sp.h, sp.v_h, sp.a_h = h0, v0, 0.0
         return full
