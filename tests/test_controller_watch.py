@@ -320,14 +320,15 @@ def test_a_released_arm_is_not_asked_for_full_speed_at_once(learned_skill):
     cycles the speed override drops to the pace the arm kept and climbs back at ``resume_rate_1_s``
     (SpeedOverride.held), so the reference speeds up as the arm can. With the override kept at its scale, the
     reference left at 0.26 m/s on the first released tick, the arm was dragged after it and the pad pressed the
-    board at 22 N (every step, wiping at 10 N) after a 40 ms hold (12-14 N with the guard): what a real-time
+    board at 18 N (every step, wiping at 11.5 N) after a 40 ms hold (under 16.5 N with the guard): what a real-time
     fault cell showed (23.7 N after a 14 ms brake) when commands arrived in bursts."""
     for held in (5, 14, 40):
         before, during, after = _released_after_a_hold(learned_skill, held)
         assert during < before + 3.0, f"held {held} ms: {during:.1f} N while braking, {before:.1f} N wiping"
         assert after < before + 5.0, f"held {held} ms: {after:.1f} N after the release, {before:.1f} N wiping"
     before, _, kept = _released_after_a_hold(learned_skill, 40, override_drops=False)
-    assert kept > before + 8.0, f"without the guard the release pressed {kept:.1f} N ({before:.1f} N wiping)"
+    # the guard's bound above, broken without it
+    assert kept > before + 5.0, f"without the guard the release pressed {kept:.1f} N ({before:.1f} N wiping)"
 
 
 def test_after_a_hold_seen_only_through_the_count_the_rate_limit_counts_from_the_command_the_robot_runs(
