@@ -10,7 +10,11 @@ and reads ``robot/command`` (:class:`~interfaces.messages.TorqueCommand`):
 * real-time (stepped ports): ``rate_hz`` on absolute wall-clock deadlines,
   the newest command is held; with no command yet, a ``hold`` command, or
   a command older than ``stale_limit_s``, the port brakes and holds.
-  Overruns are counted and the missed periods skipped, never caught up;
+  An answer to a state older than ``stale_limit_s``, or, once the port has
+  braked, to a state from before the brake, is dropped and counted: it was
+  computed for an arm still moving (its damping of that motion drives the
+  stopped arm back). Overruns are counted and the missed periods skipped,
+  never caught up;
 * clocked ports (a real robot): each new reading is published as it comes;
   each command answering the newest state is written as soon as it arrives;
   a state left unanswered when the next one comes is a late command, and
@@ -285,24 +289,28 @@ class RobotServer:
         self._sources = [latest]
         period_ns = int(round(1e9 / self.p.rate_hz))
         stale_ns = int(self.p.stale_limit_s * 1e9)
+        max_lag = max(1, int(self.p.stale_limit_s * self.p.rate_hz))  # [states] an answer may lag the newest one
         held: Command | None = None  # the newest command accepted (a copy in buffers.held), None before the first
         held_seq = -1
         last_cmd_ns = -stale_ns - 1
         next_ns = time.monotonic_ns()
         t_prev = next_ns
-        first_seq = 0  # after a freeze of this loop, only answers to states published since count
+        first_seq = 0  # after a freeze of this loop or a brake, only answers to states published since count
+        dropped = "commands_from_before_a_freeze"  # the counter of answers to states before first_seq
         self.publish_state()
         try:
             while not self.stop.is_set():
                 t0 = time.monotonic_ns()
                 if t0 - t_prev > stale_ns:  # this loop itself stalled (SIGSTOP, a swap storm): whatever is held or
                     held = None  # queued answered a state from before; brake until the controller answers a new one
-                    first_seq = self.steps + 1
+                    first_seq, dropped = self.steps + 1, "commands_from_before_a_freeze"
                     self.counters["loop_freezes"] += 1
                     log.warning("robot loop frozen for %.0f ms: braking until a fresh answer", (t0 - t_prev) / 1e6)
                 cmd = latest.take()
                 if cmd is not None and cmd.seq < first_seq:
-                    self.counters["commands_from_before_a_freeze"] += 1
+                    self.counters[dropped] += 1
+                elif cmd is not None and self.steps - cmd.seq > max_lag:
+                    self.counters["commands_answering_an_old_state"] += 1
                 elif cmd is not None and self.served.accepts(cmd):
                     accepted = self.gate.check(cmd)  # the rate limit applies cycle by cycle (_apply)
                     if accepted is not None:
@@ -310,6 +318,8 @@ class RobotServer:
                         held_seq, last_cmd_ns = cmd.seq, t0
                 fresh = held is not None and t0 - last_cmd_ns <= stale_ns
                 if not fresh and held is not None and not self.cycle.braked:
+                    # the answers on their way were computed for the arm still moving: only a state from the brake on
+                    first_seq, dropped = self.steps + 1, "commands_from_before_a_brake"
                     self.counters["stale_command_brakes"] += 1
                     log.warning("no fresh command for %.0f ms: braking", (t0 - last_cmd_ns) / 1e6)
                 t1 = time.monotonic_ns()

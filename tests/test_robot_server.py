@@ -87,6 +87,13 @@ class ServerThread:
     def state(self, accept, what: str, timeout_s: float = 5.0) -> RobotState:
         return wait_sample(self.states, accept, timeout_s, what)
 
+    def newest_state(self) -> RobotState:
+        """The newest state received (the older ones taken and dropped); waits for one if none is queued."""
+        last = self.state(lambda s: True, "a robot state")
+        while (s := self.states.get(0.0)) is not None:
+            last = s
+        return last
+
     def state_seq(self, seq: int) -> RobotState:
         return self.state(lambda s: s.seq == seq, f"robot state {seq}")
 
@@ -194,7 +201,7 @@ def test_realtime_brakes_without_a_command_and_when_the_command_goes_stale():
     with ServerThread(lambda node: arm, params) as srv:
         first = srv.wait_status(lambda m: m.seq >= 20, "a status after 20 real-time cycles")
         assert first.counters["mock_holds"] == first.seq, "no command yet: every cycle holds"
-        srv.command(0, [2.0] * 7)  # once; real time ignores seq and holds the newest command while it is fresh
+        srv.command(srv.newest_state().seq, [2.0] * 7)  # once; real time holds the newest command while it is fresh
         st = srv.wait_status(lambda m: m.counters.get("stale_command_brakes", 0) >= 1, "a stale-command brake")
         braked = srv.state(lambda s: s.seq > st.seq + 5, "cycles after the brake")
         later = srv.state(lambda s: s.seq > braked.seq + 20, "20 more cycles")
@@ -328,10 +335,42 @@ def test_after_its_own_loop_froze_the_robot_side_brakes_until_the_controller_ans
         assert after.command_seq == -1
         later = [srv.state(lambda s, k=k: s.seq == after.seq + k, f"state {after.seq + k}") for k in (1, 2, 3)]
         assert all(s.command_seq == -1 and s.dq_rad_s == [0.0] * 7 for s in later), "held, not driven"
-        srv.command(later[-1].seq, [1.0] * 7)
-        srv.state(lambda s: s.command_seq == later[-1].seq, "a fresh answer applied")
+        fresh = srv.newest_state().seq  # the states queued for the test lag the server's
+        srv.command(fresh, [1.0] * 7)
+        srv.state(lambda s: s.command_seq == fresh, "a fresh answer applied")
         st = srv.wait_status(lambda m: m.counters.get("commands_from_before_a_freeze", 0) >= 1, "the drop counted")
     assert st.counters["loop_freezes"] == 1, st.counters
+
+
+@pytest.mark.slow
+@pytest.mark.alone
+def test_after_a_stale_brake_only_an_answer_to_a_state_from_the_brake_on_is_applied():
+    """A controller frozen for longer than the stale limit answers its backlog when it wakes: torques computed for
+    the arm still moving (its damping of that motion drives the braked arm back; in a real-time cell with commands
+    thinned this pressed the pad to 46 N). After a stale-command brake an answer to a state from before the brake
+    is dropped, and so is any answer lagging more than the stale limit; an answer to a state since is applied."""
+    rate_hz, stale_s = 500.0, 0.2  # the stale limit as 100 states: the test's own latency is no old state
+    arm = MockArm(q0_rad=np.zeros(7), dt_s=1.0 / rate_hz)
+    params = ServerParams(mode="realtime", rate_hz=rate_hz, stale_limit_s=stale_s, status_rate_hz=100.0)
+    with ServerThread(lambda node: arm, params) as srv:
+        before = srv.state(lambda s: s.seq >= 10, "ten real-time cycles")
+        srv.command(before.seq, [1.0] * 7)
+        srv.state(lambda s: s.command_seq == before.seq, "the command applied")
+        braked = srv.state(lambda s: s.seq > before.seq and s.command_seq == -1, "the first state of the brake")
+        srv.command(braked.seq - 1, [1.0] * 7)  # answers the last state before the brake
+        st = srv.wait_status(lambda m: m.counters.get("commands_from_before_a_brake", 0) >= 1, "the drop counted")
+        held = srv.newest_state()
+        later = [srv.state(lambda s, k=k: s.seq == held.seq + k, f"state {held.seq + k}") for k in (1, 2, 3)]
+        assert all(s.command_seq == -1 and s.dq_rad_s == [0.0] * 7 for s in later), "held, not driven"
+        fresh = srv.newest_state().seq
+        srv.command(fresh, [1.0] * 7)
+        srv.state(lambda s: s.command_seq == fresh, "an answer to a state of the brake applied")
+        srv.state(lambda s: s.seq > fresh + 2 * stale_s * rate_hz, "two stale limits' states on")
+        srv.command(srv.newest_state().seq - int(1.5 * stale_s * rate_hz), [3.0] * 7)  # lags 1.5 stale limits
+        st = srv.wait_status(lambda m: m.counters.get("commands_answering_an_old_state", 0) >= 1, "the old answer")
+        after = [srv.newest_state() for _ in range(3)]
+    assert all(s.command_seq in (-1, fresh) for s in after), [s.command_seq for s in after]
+    assert st.counters["stale_command_brakes"] >= 1 and st.counters["commands_applied"] == 2, st.counters
 
 
 @pytest.mark.attack('torques', 'commands that drive a joint over 0.95 of its speed limit',
