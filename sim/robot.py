@@ -76,15 +76,16 @@ class BrakeRamp:
     """A brake's stop: each joint's speed ramped from what it was when the brake engaged to zero over
     :data:`BRAKE_STOP_S`, all joints together.
 
-    steps : the ramp's length [physics steps]; k : the steps of it done (``steps``: the arm stands);
-    dq_start : (n,) the joint speeds the brake began at [rad/s].
+    steps : the ramp's length [physics steps]; k : the steps of it done (``steps``: the arm stands; ``steps + 1``:
+    it has stood for a step, so the brakes' torque is what holds it, no longer what stops it); dq_start : (n,) the
+    joint speeds the brake began at [rad/s].
     """
 
     __slots__ = ("steps", "k", "dq_start")
 
     def __init__(self, n: int, dt_s: float) -> None:
         self.steps = max(int(round(BRAKE_STOP_S / dt_s)), 1)
-        self.k = self.steps
+        self.k = self.steps + 1
         self.dq_start = np.zeros(n)
 
     def start(self, dq: np.ndarray) -> None:
@@ -95,6 +96,7 @@ class BrakeRamp:
     def next_speeds(self) -> list[float] | None:
         """The joints' target speeds [rad/s] for the next step; None once the ramp is done."""
         if self.k >= self.steps:
+            self.k = self.steps + 1
             return None
         self.k += 1
         left = 1.0 - self.k / self.steps
@@ -186,6 +188,11 @@ class SimRobot:
             h_hat -= st.J.T @ (o.wrench + self.external_wrench)
         ok = drive_torque_into(self._tau_cmd, o.dq, M, h_hat, self._drives, st.tau_pb)
         return st.tau_pb if ok else self._tau_cmd  # (M + Ia is positive definite for any arm PyBullet loads)
+
+    @property
+    def stopping(self) -> bool:
+        """Whether the brakes are still stopping the arm: their ramp (:data:`BRAKE_STOP_S`) and a step at rest."""
+        return self.braked and self._brake.k <= self._brake.steps
 
     def brake(self) -> None:
         """Engage the brakes for the next step: every joint's speed ramped from what it was when they engaged to

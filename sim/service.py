@@ -89,6 +89,14 @@ class SimPort(RobotPort):
         return Reading(q, dq, tau, wrench, self.core.time_ns)
 
     def write(self, tau_nm: np.ndarray) -> Applied:
+        """``tau_nm`` (7,) [Nm] over the cycle, unless the brakes are still stopping the arm (:attr:`SimRobot.stopping
+        <sim.robot.SimRobot.stopping>`): a stop once begun ends with the arm standing, so the torque the gate climbs
+        from (:meth:`held_torque_nm`) is the brakes' hold, not their deceleration. Released a step into standing,
+        that deceleration carried on without the brakes swung the wrist at 80 rad/s^2 and pressed the pad's edge
+        into the board at 46 N in a real-time cell."""
+        if self.core.robot.stopping:
+            self._extra["commands_held_to_finish_a_stop"] += 1
+            return self.hold()
         for _ in range(self.substeps):
             self.core.step(tau_nm)
         return Applied.TORQUES

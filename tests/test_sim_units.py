@@ -345,3 +345,45 @@ def test_renderer_shows_wiped_dirt_and_survives_its_own_death():
         cam.close()
         cam.close()  # idempotent
         core.close()
+
+
+# -- the brakes ------------------------------------------------------------------------------------------
+
+def test_a_stop_once_begun_ends_with_the_arm_standing_before_torques_apply_again():
+    """A brake stops the arm over BRAKE_STOP_S; a command that comes meanwhile is held until the arm has stood a
+    step, so what the gate climbs from (held_torque_nm) is the brakes' hold, not their deceleration. Released a
+    step into standing, that deceleration carried on and swung the wrist (80 rad/s^2 on A6, the pad at 46 N)."""
+    from robot.port import Applied
+    from runtime.config import ZenohSettings
+    from runtime.local_bus import LocalBus, LocalNode
+    from sim.core import SimCore
+    from sim.robot import BRAKE_STOP_S
+    from sim.service import SimPort
+
+    params = SimParams.from_table({"camera": {"enabled": False}, "gravity_compensated": True})
+    core = SimCore(params)
+    with LocalNode("sim", LocalBus(), ZenohSettings(robot_id="brakes")) as node:
+        port = SimPort(params, node, core, publish_frames=False)
+        push = np.zeros(7)
+        push[5] = 2.0  # A6 [Nm] on top of the gravity compensation
+        for _ in range(100):
+            assert port.write(push) == Applied.TORQUES
+        dq0 = core.out.dq[5]
+        assert dq0 > 0.3, dq0
+        assert port.hold() == Applied.HELD  # the brake engages
+        ramp = int(round(BRAKE_STOP_S * params.rate_hz))
+        decelerating = port.held_torque_nm()[5]
+        outcomes = [port.write(push) for _ in range(ramp + 3)]
+        held = outcomes.count(Applied.HELD)
+        assert held == ramp and outcomes[held:] == [Applied.TORQUES] * 3, outcomes  # the ramp's rest and a step
+        assert port.counters()["commands_held_to_finish_a_stop"] == ramp
+    assert decelerating < -5.0, decelerating  # the brakes' torque while they stop A6
+    with LocalNode("sim", LocalBus(), ZenohSettings(robot_id="brakes")) as node:  # what they hold it with: ~0
+        core2 = SimCore(params)
+        port2 = SimPort(params, node, core2, publish_frames=False)
+        for _ in range(100):
+            port2.write(push)
+        for _ in range(ramp + 2):
+            port2.hold()
+        assert abs(core2.out.dq[5]) < 1e-3 and abs(port2.held_torque_nm()[5]) < 0.2 * abs(decelerating), \
+            port2.held_torque_nm()
