@@ -220,6 +220,37 @@ def test_realtime_survives_a_stalled_and_a_cut_link_a_frozen_sim_a_killed_contro
     assert not any("silent for the last" in r for r in service), "the recorder's death is not the controller's"
 
 
+@pytest.mark.attack('faults', 'real time, commands thinned to 333/s: the controller frozen (SIGSTOP) for 25-45 ms '
+                    'twenty times while the pad wipes', 'the robot side brakes each time; no answer from before a '
+                    'brake applied; contact force and joint speeds within limits')
+def test_realtime_a_controller_frozen_again_and_again_while_wiping_keeps_the_press_within_the_cap(
+        tmp_path, learned_skill_file):
+    """Each freeze outlasts the robot side's stale limit (20 ms): it brakes with the pad pressed. Woken, the
+    controller answers the states it had before it froze, torques for an arm still moving, and the sim let go of
+    its brakes at the first answer, mid-stop: the gate climbed from the brakes' deceleration torque, the wrist
+    swung back and the pad pressed at up to 46 N (a 44 N run of the thinned-keys test below). The robot side now
+    takes only answers to states from the brake on, and the sim finishes its stop first; three runs of this test
+    peaked at 14.6-17.7 N (36.7, 32.2 and 45.6 N with the first change alone)."""
+    import random
+
+    rng = random.Random(7)
+    with Cell(tmp_path / "run", learned_skill_file, "realtime",
+              thin={"controller": {"robot/command": 333.0}}) as cell:
+        cell.wait_phase(("WIPE",), 120.0)
+        frozen = 0
+        while frozen < 20 and cell.phases[-1][1] in WIPING:
+            cell.freeze("controller", rng.uniform(0.025, 0.045))
+            frozen += 1
+            time.sleep(rng.uniform(0.3, 0.9))
+        wait_done_for_good(cell, 180.0)
+        report = cell.finish()
+    assert frozen >= 5, f"only {frozen} freezes while wiping"
+    assert_safe(report)
+    sim = report["counters"]["sim"]
+    assert sim.get("stale_command_brakes", 0) >= frozen // 2, (frozen, sim)
+    assert sim.get("commands_from_before_a_brake", 0) >= 1, sim
+
+
 @pytest.mark.attack('faults', 'real time: states thinned to 500/s, commands to 333/s, stains to 2/s',
                     'the board cleaned, no FAULT')
 def test_realtime_cleans_the_board_with_samples_dropped_on_the_state_command_and_stains_keys(
