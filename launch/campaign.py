@@ -36,7 +36,9 @@ against the lower bound, dirt removed per cell), each atomically, again
 after every cell: the table grows as cells finish, and each finished cell
 prints the progress (cells done, failed, time taken and left). A campaign
 stopped half-way keeps what it finished; ``--resume`` with the same
-``--out`` (and options) runs only the cells without a report; the table
+``--out`` (and options) runs only the cells without a report, and again the
+cells the stop cut short (``run.json``'s outcome ``stopped``: their report
+shows the stop, :func:`launch.campaign_run.finished_report`); the table
 alone (``campaign.json`` carried to another machine) keeps its cells too. Exit 0 when
 every cell left a report (whatever it shows), 1 with the reason otherwise.
 ``--summarize DIR [DIR ...]`` runs nothing: it reads the cells of earlier
@@ -69,7 +71,7 @@ from lampskit.errors import LampsError
 from .campaign_bounds import lower_bound_s
 from .campaign_cells import CampaignError, Cell, cells_of, parse_range
 from .campaign_pool import WorkerPool
-from .campaign_run import PORT_BASES, run_cell
+from .campaign_run import PORT_BASES, finished_report, run_cell
 from .campaign_table import CLEAN_SHARE, markdown, plot, row_of, summarize
 
 BOARD_NAMES = ("wall", "table", "vertical", "horizontal")
@@ -193,8 +195,9 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
                  command: str, echo=_say, resume: bool = False, ray: str | None = None,
                  network: bool = True) -> dict[str, Any]:
     """Run every cell (``jobs`` at once), write campaign.json, .md and .png into ``out`` after each cell (the table
-    grows as cells finish); returns the json. ``resume``: the cells whose run folder holds a report are taken as
-    they are, a cell folder without one (a campaign killed while it ran) is run again, a cell without a folder but
+    grows as cells finish); returns the json. ``resume``: the cells whose run folder holds the report of a cell
+    that ran to its end are taken as they are, a cell folder without one (a campaign killed or stopped while it ran)
+    is run again, a cell without a folder but
     with a row in ``out/campaign.json`` keeps that row (:func:`_tabled_rows`), the rest run. ``ray``:
     run the cells as tasks on that Ray cluster (``local``: one started here), :mod:`launch.campaign_ray`.
     ``network``: each cell over Zenoh (``lamps up``); False: in one process without one (``--no-network``)."""
@@ -205,8 +208,8 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
     tabled = _tabled_rows(out, cells) if resume else {}
     for k, c in enumerate(cells):
         run_dir = out / "cells" / c.name
-        if resume and (run_dir / "report.json").is_file():
-            report = json.loads((run_dir / "report.json").read_text())
+        report = finished_report(run_dir)[0] if resume else None
+        if report is not None:
             rows[k] = row_of(c, report, bounds[c], str(run_dir), "", stains[c], felt, v_plan)
             continue
         if not run_dir.exists() and c.name in tabled:

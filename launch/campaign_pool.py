@@ -24,6 +24,7 @@ from collections import deque
 from pathlib import Path
 
 from .campaign_cells import Cell
+from .campaign_run import finished_report
 
 #: A worker gets this long [s] beyond the cell's ``--max-duration`` to answer (as the subprocess per cell did).
 ANSWER_GRACE_S = 120.0
@@ -127,10 +128,8 @@ class WorkerPool:
         code, why = worker.run(cell, skill, run_dir, max_duration_s)
         if code is not None and worker.alive:
             self._idle.put(worker)
-        report = run_dir / "report.json"
-        if report.is_file():
-            return json.loads(report.read_text()), str(run_dir), ""
-        return None, str(run_dir), why
+        report, stopped = finished_report(run_dir)
+        return report, str(run_dir), "" if report is not None else (stopped or why)
 
     def close(self) -> None:
         with self._lock:

@@ -47,6 +47,23 @@ def why_of(stderr: str, code: int) -> str:
     return (stderr.strip().splitlines() or [f"exit {code}"])[-1]
 
 
+def finished_report(run_dir: Path) -> tuple[dict | None, str]:
+    """(the report of the cell in ``run_dir``, "") when it ran to its own end; (None, why) when it left no report
+    or was stopped from outside (``run.json``'s outcome ``stopped``: a SIGTERM or Ctrl-C to the campaign, its worker
+    or the cell). A stopped cell's report says what the stop did (a pad lifted off mid-wipe is an ESTOP), not what
+    the cell does: it is no result, and ``--resume`` runs the cell again."""
+    report, ran = run_dir / "report.json", run_dir / "run.json"
+    if not report.is_file():
+        return None, ""
+    try:
+        ended = json.loads(ran.read_text()).get("outcome") if ran.is_file() else None
+    except (OSError, ValueError):
+        ended = None
+    if ended == "stopped":
+        return None, "stopped from outside before its end (run.json: stopped); --resume runs it again"
+    return json.loads(report.read_text()), ""
+
+
 def run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
              port_base: int, network: bool = True) -> tuple[dict | None, str, str]:
     """``lamps up`` for one cell: (its report or None, its run folder, why there is none)."""
@@ -59,9 +76,9 @@ def run_cell(k: int, cell: Cell, skill: Path, out: Path, max_duration_s: float,
         log.info("cell %s: %s", cell.name, " ".join(argv[2:]))
         r = subprocess.run(argv, capture_output=True, text=True, env={**os.environ, **cell_env(cell)},
                            timeout=max_duration_s + 120)
-        report = run_dir / "report.json"
-        if report.is_file():
-            return json.loads(report.read_text()), str(run_dir), ""
+        report, stopped = finished_report(run_dir)
+        if report is not None or stopped:
+            return report, str(run_dir), stopped
         why = why_of(r.stderr, r.returncode)
         if not network or "already in use" not in why:
             break

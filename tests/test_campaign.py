@@ -246,8 +246,9 @@ def test_bad_options_are_one_line_errors_before_anything_runs(tmp_path, args, ma
 @pytest.mark.slow
 def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the_table(tmp_path, learned_skill_file):
     """One seeded one-stain cell on the wall board, fixed then adaptive, each a whole network-free cell in
-    lock-step; the campaign is killed while the second runs (the table holds the first), ``--resume`` runs only
-    the second; then --summarize tables the campaign again from its folder. The two cells again as a campaign on
+    lock-step; the campaign is stopped (SIGTERM to it alone, as ``kill`` or ``pkill`` sends) while the second runs: its
+    worker stops that cell, whose report shows the stop (the table holds the first only), and ``--resume`` runs
+    the second again; then --summarize tables the campaign again from its folder. The two cells again as a campaign on
     a Ray cluster of two workers give the very same results (a network-free cell is deterministic for its seed),
     each drawing its plots (``--cell-plots``); and the fixed cell as a Zenoh cell
     (``lamps up``) the same outcome and dirt removed within 0.5 points."""
@@ -268,15 +269,22 @@ def test_a_small_campaign_grows_its_table_survives_a_kill_resumes_and_writes_the
             assert proc.poll() is None and time.monotonic() < deadline, "".join(lines)[-2000:]
             time.sleep(0.2)
         time.sleep(2.0)  # the second cell under way
+        os.kill(proc.pid, signal.SIGTERM)  # the campaign alone: its worker hears of it from the kernel
+        proc.wait(60)
+        stopped = out / "cells" / "wall-s0-n1-adaptive"
+        while not (stopped / "report.json").is_file():  # the worker stops its cell as lamps up does: a report
+            assert time.monotonic() < deadline, "the stopped cell wrote no report"
+            time.sleep(0.2)
     finally:
-        os.killpg(proc.pid, signal.SIGKILL)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)  # anything left of the group
         proc.wait()
         reader.join(10.0)
+    assert json.loads((stopped / "run.json").read_text())["outcome"] == "stopped"
     printed = "".join(lines)
     assert "[1/2 done, 0 failed" in printed and "s left] wall-s0-n1:" in printed, printed[-2000:]
     half = json.loads((out / "campaign.json").read_text())
     assert [c["name"] for c in half["cells"]] == ["wall-s0-n1"]  # what it finished, kept
-    assert not (out / "cells" / "wall-s0-n1-adaptive" / "report.json").exists()
     first = (out / "cells" / "wall-s0-n1" / "report.json").stat().st_mtime_ns
     again = _campaign(*args)
     assert again.returncode == 1 and "exists: a campaign folder is never overwritten" in again.stderr, again.stderr
