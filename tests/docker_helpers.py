@@ -9,8 +9,11 @@ never skip, unless ``LAMPS_SKIP_DOCKER=1`` asks for it by name.
 from __future__ import annotations
 
 import functools
+import json
 import os
 import subprocess
+from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -50,3 +53,18 @@ def base_image() -> str:
         pytest.fail(f"no base image: {public} is not in the engine and no registry is reachable, and "
                     f"scripts/docker-base.sh failed:\n{r.stderr[-3000:]}", pytrace=False)
     return local
+
+
+def why_not_cleaned(logs_of: Callable[[str], str], run: Path) -> str:
+    """What a compose cell that did not clean the board shows: the last lines of each service that moves or sees
+    the board (``logs_of(service)``), and its report's ending, stains, faults and perception's counters."""
+    parts = [f"--- {s} ---\n{logs_of(s)[-2500:]}" for s in ("perception", "controller", "sim", "recorder")]
+    try:
+        report = json.loads((run / "report.json").read_text())
+        seen = {k: report.get(k) for k in ("outcome", "dirt_removed_fraction", "final_phase", "final_reason",
+                                           "stains", "faults")}
+        seen["perception_counters"] = (report.get("counters") or {}).get("perception")
+        parts.append("--- report.json ---\n" + json.dumps(seen, indent=None, default=str)[:5000])
+    except (OSError, ValueError) as exc:
+        parts.append(f"--- report.json: {exc} ---")
+    return "\n".join(parts)

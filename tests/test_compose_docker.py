@@ -20,7 +20,7 @@ import pytest
 from interfaces.keys import Keys
 
 from .conftest import REPO
-from .docker_helpers import base_image, ensure_docker
+from .docker_helpers import base_image, ensure_docker, why_not_cleaned
 from .test_live_view import FoxgloveClient, check_payload
 from .zenoh_helpers import free_port, wait_for
 
@@ -90,9 +90,10 @@ def test_docker_compose_up_cleans_a_seeded_board_and_leaves_the_run_on_the_host(
         check_payload(client.channels[tf], client.got[tf][0])
         client.ws.close()
         waited = _compose(project, env, "wait", "recorder", timeout=900)
-        logs = _compose(project, env, "logs", "--no-color", "--tail", "40").stdout
-        assert waited.returncode == 0 and waited.stdout.strip().endswith("0"), \
-            f"the recorder did not end with the board cleaned ({waited.stdout.strip()}):\n{logs[-6000:]}"
+        if not (waited.returncode == 0 and waited.stdout.strip().endswith("0")):
+            seen = why_not_cleaned(lambda s: _compose(project, env, "logs", "--no-color", "--tail", "30", s).stdout,
+                                   host / "runs" / "latest")
+            pytest.fail(f"the recorder did not end with the board cleaned ({waited.stdout.strip()}):\n{seen}")
 
         run = host / "runs" / "latest"
         report = json.loads((run / "report.json").read_text())
