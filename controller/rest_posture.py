@@ -52,9 +52,13 @@ class RestPosture:
         The plan's answer, None while it runs (or without a plan).
     job : OffTick
         Where the plan runs; its ``executor`` is the planner thread in real time.
+    plans, plans_in_zone : int
+        Plans started, and of them those started again because the arm stood in a zone (the controller's status
+        counters ``rest_posture_plans``, ``rest_posture_plans_in_zone``).
     """
 
-    __slots__ = ("q", "goal", "job", "rate_rad_s", "replan_s", "_plan", "_in_zone", "_way", "_since_s")
+    __slots__ = ("q", "goal", "job", "rate_rad_s", "replan_s", "plans", "plans_in_zone", "_plan", "_in_zone", "_way",
+                 "_since_s")
 
     def __init__(self, plan: Callable[[np.ndarray], np.ndarray] | None, rate_rad_s: float,
                  in_zone: Callable[[np.ndarray], bool] | None = None, replan_s: float = 1.0) -> None:
@@ -67,6 +71,7 @@ class RestPosture:
         self.job = OffTick()
         self.rate_rad_s = float(rate_rad_s)
         self.replan_s = float(replan_s)
+        self.plans = self.plans_in_zone = 0
         self._plan = plan
         self._in_zone = in_zone
         self._way: np.ndarray | None = None  # scratch: the step towards the goal
@@ -87,6 +92,7 @@ class RestPosture:
         self._since_s = 0.0
         if self._plan is not None:
             q0, plan = np.array(q, float), self._plan
+            self.plans += 1
             self.job.start(lambda: plan(q0), self._take)
 
     def _take(self, goal: np.ndarray) -> None:
@@ -103,6 +109,7 @@ class RestPosture:
             if self._since_s >= self.replan_s and self.q is not None:
                 self._since_s = 0.0
                 if self._in_zone(q_now):
+                    self.plans_in_zone += 1
                     self._start(q_now)
         q, goal, way = self.q, self.goal, self._way
         if q is None or goal is None or way is None:

@@ -386,6 +386,9 @@ class ControllerService:
                         skill_steps_capped=core.skill_steps_capped,
                         robot_holds_in_skipped_states=self._link.holds.missed,
                         states_after_a_robot_hold=self._link.holds.held)
+        posture = getattr(core, "posture", None)  # teach's core has no posture
+        if posture is not None:
+            counters.update(rest_posture_plans=posture.plans, rest_posture_plans_in_zone=posture.plans_in_zone)
         for name, reader in (("robot_state", getattr(self, "_state_reader", None)), ("stains", self._stains),
                              ("estop", self._estop.engages), ("estop_release", self._estop.releases)):
             if reader is None:

@@ -396,6 +396,7 @@ def test_adaptive_wiping_cleans_a_long_slanted_streak_with_a_stroke_along_it(tmp
     assert json.loads((out / "run.json").read_text())["network"] == "none"
     assert report["dirt_removed_fraction"] >= 0.97, report["dirt_removed_fraction"]  # 98.7-99.0 % when last run
     assert report["counters"]["controller"]["adaptations"] >= 1
+    assert report["counters"]["controller"]["rest_posture_plans"] >= 1  # the first state's plan, in the status
     planner = PlannerParams()
     for phase, peaks in report["motion_peaks"].items():  # the whole run inside the planner's bounds
         assert peaks["speed_m_s"] <= planner.max_speed_m_s and peaks["accel_m_s2"] <= planner.max_accel_m_s2, phase

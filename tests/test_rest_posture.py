@@ -113,6 +113,7 @@ def test_the_rest_pose_moves_to_the_plan_at_its_rate_off_the_tick(model: RobotMo
             ticks += 1
         assert ticks + 1 == pytest.approx(np.max(np.abs(goal - q0)) / (rate * dt), abs=2)
         assert plans == pytest.approx(ticks * dt / posture.replan_s, abs=1)
+        assert posture.plans == plans + 1 and posture.plans_in_zone == plans  # what the status counts
     posture.reset()
     assert posture.q is None and posture.goal is None
 
@@ -129,9 +130,11 @@ def test_the_rest_pose_is_planned_again_only_while_the_arm_stands_in_a_zone(mode
     for _ in range(1500):
         posture.step(free, 0.001)
     np.testing.assert_array_equal(posture.goal, first)
+    assert (posture.plans, posture.plans_in_zone) == (1, 0)
     for _ in range(1001):
         posture.step(elsewhere, 0.001)
     np.testing.assert_allclose(posture.goal, planned_rest_posture(model, elsewhere, zones(model)))
+    assert (posture.plans, posture.plans_in_zone) == (2, 1)
     p_goal, _ = model.tcp_pose(posture.goal)
     np.testing.assert_allclose(p_goal, model.tcp_pose(elsewhere)[0], atol=1e-3)
 
