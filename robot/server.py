@@ -432,6 +432,11 @@ class RobotServer:
         """Count and log each limit episode that began (and the FAULT-hold, if they latched it)."""
         log_guard_episodes(self.guard, self.p, self.counters, entered, r)
 
+    @property
+    def commands_received(self) -> int:
+        """Commands taken off the wire so far, good or not (the status's ``commands_received``)."""
+        return sum(source.received for source in self._sources)
+
     def status(self) -> ServiceStatus:
         counters = dict(self.counters)
         for source in self._sources:

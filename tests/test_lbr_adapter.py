@@ -696,8 +696,8 @@ def test_in_lock_step_a_gap_on_the_wall_clock_disarms_only_after_lockstep_silenc
     hold_timeout_s there is a loaded machine and keeps the arm armed; lockstep_silence_s of it is a lost link."""
     with Cell({"hold_timeout_s": 0.1, "lockstep_silence_s": 1.0}, server={"mode": "lockstep"}) as cell:
         cell.armed()
+        t_last = time.monotonic()  # before the last state is sent: the adapter's silence counts from after it
         cell.answer(cell.step(Q0), np.ones(7))
-        t_last = time.monotonic()
         time.sleep(0.5)  # five hold_timeout_s without a state
         st = cell.wait_status(lambda m: True, "a status in the gap")
         assert "armed=True" in st.detail and st.counters.get("disarms", 0) == 0, st
