@@ -144,3 +144,30 @@ def test_random_boards_by_name_for_lamps_up_and_the_campaign():
     assert [c.board for c in cells] == ["random:4", "wall"]  # seed s takes boards[s mod 2]
     cells = cells_of([4, 7], [2], ["random"])
     assert [c.board for c in cells] == ["random:4", "random:7"] and cells[0].name == "random-s4-n2"
+
+
+def test_random_boards_written_as_files_are_the_same_boards_with_the_same_stains(tmp_path):
+    """bench/random_board_files.py: a campaign at another commit given ``bNNN.toml`` runs seed s's random board
+    (the file's table is ``random:s``'s) and the same stains (the campaign's model of the sim's stains)."""
+    import subprocess
+    import sys
+
+    from launch.campaign import _board_table, cell_stains
+    from launch.campaign_cells import Cell
+
+    from .conftest import REPO
+
+    r = subprocess.run([sys.executable, str(REPO / "bench" / "random_board_files.py"), "--seeds", "3,8",
+                        "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b003.toml", "b008.toml"]
+    for s in (3, 8):
+        path = str(tmp_path / f"b{s:03d}.toml")
+        assert _board_table(path) == random_board_table(f"random:{s}")
+        (areas, centres), (areas_f, centres_f) = (cell_stains(Cell(s, 6, b), _board_table(b))
+                                                  for b in (f"random:{s}", path))
+        np.testing.assert_array_equal(areas, areas_f)
+        np.testing.assert_array_equal(centres, centres_f)
+    bad = subprocess.run([sys.executable, str(REPO / "bench" / "random_board_files.py"), "--seeds", "x",
+                          "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and "--seeds" in bad.stderr, bad.stderr
