@@ -128,7 +128,7 @@ def _serve(node, backend: str, lbr_params, server_params) -> int:
     """Serve the robot side on its open ``node`` until a stop signal."""
     from .server import RobotServer
 
-    port = _port(backend, lbr_params, node)
+    port = _port(backend, lbr_params, node, server_params.mode == "lockstep")
     server = RobotServer(port, node, server_params, SERVICE, node.keys.robot_status)
     on_stop_signals(server.stop)
     server.run()
@@ -155,14 +155,14 @@ def _watchdog(node, lbr_params) -> int:
     return 0
 
 
-def _port(backend: str, lbr_params, node):
+def _port(backend: str, lbr_params, node, lockstep: bool):
     if backend == "mock":
         from .mock import MockArm
 
         return MockArm()
     from .lbr.adapter import LbrPort
 
-    return LbrPort(lbr_params, node)
+    return LbrPort(lbr_params, node, lockstep=lockstep)
 
 
 if __name__ == "__main__":

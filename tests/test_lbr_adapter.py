@@ -24,7 +24,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from arm.robot_model import RobotModel
 from interfaces.messages import ArmRequest, RobotState, ServiceStatus, TorqueCommand
-from robot.lbr.adapter import LbrPort
+from robot.lbr.adapter import LbrPort, command_qos
 from robot.lbr.compensation import JointSpring, filter_alpha
 from robot.lbr.guards import GuardLimits, VelocityFilter, guard_trip
 from robot.lbr.msgs import (
@@ -234,6 +234,17 @@ def test_states_arrive_as_robot_states_in_joint_order_with_estimated_velocity_an
 
 # --------------------------------------------------------------------------
 # 2. commands only when armed
+
+
+def test_the_command_key_drops_when_late_on_a_real_robot_and_blocks_for_a_lock_step_one():
+    """A real robot runs on: a congested link drops our answer rather than queue an old one. The lock-step peer
+    waits for each answer and LBRTorqueCommand has no sequence number to re-answer by: a dropped one would run the
+    arm on an old message (a CI cell did, states_on_an_old_command +2), so lock-step blocks."""
+    real, lockstep = command_qos(False), command_qos(True)
+    assert real["congestion_control"] == zenoh.CongestionControl.DROP
+    assert lockstep["congestion_control"] == zenoh.CongestionControl.BLOCK
+    assert real["express"] and lockstep["express"] and lockstep["priority"] == real["priority"] == \
+        zenoh.Priority.REAL_TIME
 
 
 def test_commands_go_to_the_stack_only_when_armed_with_the_measured_position():

@@ -55,6 +55,7 @@ import time
 from collections import Counter
 
 import numpy as np
+import zenoh
 
 from interfaces.messages import ArmRequest, Capabilities
 from arm.robot_model import RobotModel
@@ -75,13 +76,26 @@ from .watches import AppliedCheck, Clock, LinkWatch, quality_name
 log = logging.getLogger(__name__)
 
 
+def command_qos(lockstep: bool) -> dict:
+    """The torque command key's publisher options: at once, first (``CONTROL_QOS``). A real robot runs on when an
+    answer is late, so a congested link drops ours rather than queue an old one; a lock-step robot waits for each
+    answer and has no second one coming (``LBRTorqueCommand`` carries no sequence number to re-answer by): there
+    a dropped answer would cost the peer its ``lockstep_wait_s`` and run the arm on an old message, so the key
+    blocks instead."""
+    if not lockstep:
+        return CONTROL_QOS
+    return {**CONTROL_QOS, "congestion_control": zenoh.CongestionControl.BLOCK}
+
+
 class LbrPort(RobotPort):
     """The real robot behind the bridge. See the module docstring.
 
     Parameters
     ----------
     params : LbrParams. node : an open ServiceNode (its raw session reaches the bridge's keys, its
-    prefix the cell's). model : the robot description (limits, Jacobian).
+    prefix the cell's). model : the robot description (limits, Jacobian). lockstep : the server runs lock-step
+    with a robot that waits for each answer (the simulated stack's lock-step): the command key then blocks under
+    congestion instead of dropping (:func:`command_qos`).
 
     What it keeps, by purpose: the states as they arrive (:class:`~robot.lbr.inbox.StateInbox`) and the reading
     made of the newest (:class:`~robot.lbr.readings.StateReadings`); whether it commands
@@ -94,7 +108,8 @@ class LbrPort(RobotPort):
 
     clocked = True
 
-    def __init__(self, params: LbrParams, node: ServiceNode, model: RobotModel | None = None) -> None:
+    def __init__(self, params: LbrParams, node: ServiceNode, model: RobotModel | None = None,
+                 lockstep: bool = False) -> None:
         self.p = params
         self.node = node
         self.model = model or RobotModel()
@@ -119,7 +134,7 @@ class LbrPort(RobotPort):
         self._inbox = StateInbox(params, node.session, self.counts, log)
         topics = params.topics
         self._out = CommandSender(node.session.declare_publisher(topics.key(topics.torque_command),
-                                                                 **CONTROL_QOS))  # at once, first
+                                                                 **command_qos(lockstep)))
         self._arm_requests = node.latest(node.keys.robot_arm, ArmRequest)
 
     @property

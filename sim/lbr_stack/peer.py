@@ -73,8 +73,9 @@ with the message it had (a message reaches the robot one manager cycle
 after the state it answers, as on the real stack), then waits up to
 ``lockstep_wait_s`` of wall time for the answer before the next manager
 cycle; an answer that does not come is not waited for again: the robot
-runs on re-applying the last message, paced on the wall clock. Before the
-stack is active and after it has exited the robot runs on the wall clock.
+runs on re-applying the last message, paced on the wall clock, as it does
+until the first answer. Before the stack is active and after it has exited
+the robot runs on the wall clock.
 
 Under the lamps prefix the peer publishes what the plain sim does (through
 :class:`sim.service.SimPort`): ``sim/truth``, camera frames, and its
@@ -338,7 +339,9 @@ class LbrPeer:
         period_ns = _ns(self._dt)
         next_ns: int | None = None
         message = None
-        running_on = False  # an answer did not come: the robot runs on its clock until one does
+        # an answer did not come: the robot runs on its clock until one does; none has come before the first (an
+        # adapter arms on a robot whose clock it has seen advance, and sends nothing before)
+        running_on = True
         while not self.stop.is_set():
             if not (self.process.up and self.process.activated):  # nobody can answer: the robot runs on its own clock
                 next_ns = self._paced(next_ns or time.monotonic_ns(), period_ns, take_newest=True)
