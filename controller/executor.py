@@ -16,7 +16,8 @@ PAUSED(reason), FAULT(reason) and ESTOP reachable from any phase.
 
 * APPROACH: first (after each start of the robot) a survey: fly to
   ``standoff_m`` above the look point of the whole board, where the arm
-  hides none of it from the camera, and wait ``survey_s`` for the stains;
+  hides none of it from the camera, and wait ``survey_s`` for the stains
+  (none seen: once more from where the arm hides what it hid there);
   then plan and fly (quintic, pad turning flat) to ``standoff_m`` above the
   first stain of the plan, descend until the measured force passes
   ``contact_threshold_n``, ramp the force up to its target.
@@ -359,11 +360,21 @@ class SkillExecutor:
             self.stops.done()
 
     def _on_survey(self, dt: float, tool: ToolState) -> None:
-        if self._survey.until_s == float("inf"):
+        survey, board = self._survey, self.state.board
+        if survey.until_s == float("inf"):
             if self.motion.move(dt) and not self.motion.turning:
-                self._survey.until_s = self.state.clock_s + self.p.survey_s  # perception's time to see the board
-                self.state.current_mp = "survey: looking"
-        elif self.state.clock_s >= self._survey.until_s:
+                if survey.again and self.motion.stayed:  # no second point sees more of the board
+                    self._start_approach_or_done()
+                    return
+                survey.until_s = self.state.clock_s + self.p.survey_s  # perception's time to see the board
+                self.state.current_mp = "survey: looking again" if survey.again else "survey: looking"
+        elif self.state.clock_s >= survey.until_s:
+            if not survey.again and board is not None and not self.book.open_stains(self.state.clock_s):
+                survey.look_again()  # no stain seen: one may be under the pad or the wrist (look_points)
+                self.counters["surveys_again"] += 1
+                self.state.current_mp = "survey: again"
+                self.motion.fly_to_survey_again(board)
+                return
             self._start_approach_or_done()
 
     def _on_hold(self, dt: float, tool: ToolState) -> None:

@@ -36,14 +36,24 @@ class BoardSurvey:
         The board has been surveyed (or the survey is under way) since the last start or adopted board jump.
     until_s : float
         The skill's clock at which the wait at the look point ends [s]; infinite while flying there.
+    again : bool
+        The survey has looked again (:func:`~controller.look_points.resurvey_point`): from its first point no stain
+        was seen, and the arm hid part of the board there.
     """
 
     done: bool = False
     until_s: float = float("inf")
+    again: bool = False
 
     def begin(self) -> None:
         """A survey starts: fly to the look point (the wait is timed on arrival)."""
         self.done = True
+        self.until_s = float("inf")
+        self.again = False
+
+    def look_again(self) -> None:
+        """Nothing seen from the first point: fly to the second (the wait is timed on arrival)."""
+        self.again = True
         self.until_s = float("inf")
 
     def forget(self) -> None:

@@ -19,7 +19,7 @@ from interfaces.transforms import tool_rotation_on_board
 from lampskit.core.planner_types import Stain
 
 from .executor_types import BoardPose, Setpoint, ToolState
-from .look_points import look_point, stain_targets, survey_point
+from .look_points import look_point, resurvey_point, stain_targets, survey_point
 from .motion import (
     OrientationBlend,
     Quintic,
@@ -286,6 +286,19 @@ class FreeMotion:
         arm, clearance_m, h = self.arm, self.p.look_clearance_m, self.p.standoff_m
         self._mover = None
         self.aim.start(lambda: survey_point(board, clearance_m, arm, h), lambda xy: self.fly_to_hover(xy, board))
+
+    def fly_to_survey_again(self, board: BoardPose) -> None:
+        """At the current height to :func:`~.look_points.resurvey_point` off the survey point the pad waits over
+        (chosen off the tick, :attr:`aim`); no point that sees more of what the first hid: :attr:`stayed`."""
+        arm, first, h = self.arm, self.setpoint.xy.copy(), self.setpoint.h
+        self._mover, self.stayed = None, False
+        self.aim.start(lambda: resurvey_point(board, first, arm, h), self._fly_to_survey_again_point)
+
+    def _fly_to_survey_again_point(self, goal: np.ndarray | None) -> None:
+        if goal is None:
+            self.stayed = True
+            return
+        self._fly_to_look_point(goal)
 
     def fly_to_look(self, board: BoardPose, pending: list[Stain], attempt: int = 0) -> bool:
         """At the current height to :func:`look_point` off the ``pending`` stains; False (no move) if already there

@@ -83,6 +83,46 @@ def survey_point(board: BoardPose, clearance_m: float, arm: ArmReach | None, hei
                       slack=SURVEY_HIDDEN_SLACK)
 
 
+def survey_hidden(board: BoardPose, xy_m: np.ndarray, arm: ArmReach, height_m: float) -> np.ndarray:
+    """(n, 2) the :func:`board_targets` [m] the arm hides from the camera at ``board.camera_m`` with the pad
+    ``height_m`` above ``xy_m`` (2,) [m], flat on the board (:mod:`arm.silhouette`; the wrist and tool capsule
+    covers the pad's footprint); all of them when the pad is beyond the arm there."""
+    assert board.camera_m is not None, "survey_hidden needs the camera's position"
+    targets = board_targets(board)
+    pad = board.to_world(np.array([xy_m[0], xy_m[1], height_m]))
+    lines, _ = arm_centre_lines(arm, pad[None], tool_rotation_on_board(board.R))
+    if not np.all(np.isfinite(lines)):
+        return targets
+    world = board.origin_m + np.column_stack([targets, np.zeros(len(targets))]) @ board.R.T
+    return targets[hidden(world, board.camera_m, lines)[0]]
+
+
+def resurvey_point(board: BoardPose, first_xy_m: np.ndarray, arm: ArmReach | None,
+                   height_m: float) -> np.ndarray | None:
+    """(2,) board point [m] for a second survey look, ``height_m`` above the board: where the arm hides the fewest
+    of the board points it hid at the first survey point ``first_xy_m`` (2,) [m] (:func:`survey_hidden`,
+    :func:`seen_look_point` without slack). None when the first hid none, no reachable point hides fewer of them,
+    or the camera's position or the arm is not known.
+
+    The survey's point may hide a share of the board (:data:`SURVEY_HIDDEN_SLACK`, the pad's own footprint at
+    the least) on the premise that a stain there is seen once the arm moves on to another; a stain hidden there
+    on a board with no other is never seen (a random campaign board, seed 456: the pad waited 40 mm above its
+    only stain and the cell went DONE at 0 %)."""
+    if arm is None or board.camera_m is None:
+        return None
+    first = np.asarray(first_xy_m, float)
+    hid = survey_hidden(board, first, arm, height_m)
+    if len(hid) == 0:
+        return None
+    xy = seen_look_point(board, hid, arm, height_m, first)
+    if np.linalg.norm(xy - first) < 0.005:
+        return None
+    pad = board.to_world(np.array([xy[0], xy[1], height_m]))
+    lines, _ = arm_centre_lines(arm, pad[None], tool_rotation_on_board(board.R))
+    world = board.origin_m + np.column_stack([hid, np.zeros(len(hid))]) @ board.R.T
+    return xy if int(hidden(world, board.camera_m, lines)[0].sum()) < len(hid) else None
+
+
 def base_side_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[float], clearance_m: float,
                     arm: ArmReach | None = None, height_m: float = 0.0, attempt: int = 0) -> np.ndarray:
     """(2,) :func:`look_point` without the camera's position: beyond the stains on the robot base's side."""

@@ -30,10 +30,10 @@ STANDOFF_M = 0.04
 
 
 class Scene:
-    """Random board 248 with the sim's camera and the arm drawn by the analytic renderer."""
+    """Random board ``seed`` (248 by default) with the sim's camera and the arm drawn by the analytic renderer."""
 
-    def __init__(self) -> None:
-        self.params = SimParams.from_table({"board": sample_board(248).table})
+    def __init__(self, seed: int = 248) -> None:
+        self.params = SimParams.from_table({"board": sample_board(seed).table})
         self.core = SimCore(self.params)
         self.model = RobotModel()
         self.arm = arm_reach(self.model)
