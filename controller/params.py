@@ -213,8 +213,9 @@ class ExecutorParams:
     the first approach the pad flies to the look point of the whole board
     (``look_clearance_m`` beyond its edge on the robot base's side, where the
     arm hides none of it from the camera) and waits this long for perception
-    to report every stain before the skill is planned [s] (0: plan over the
-    stains reported at the start, wherever the arm is); board_jump_m,
+    to report every stain before the skill is planned [s]; with none
+    reported, once more from where the arm hides what it hid there (0: plan
+    over the stains reported at the start, wherever the arm is); board_jump_m,
     board_jump_rad : a reported board pose this far from the adopted one [m]
     or turned this much [rad] is a jump: never adopted at once (lift off
     first when pressing), only after it has held still for
