@@ -17,7 +17,7 @@ from robot.lbr.arming import arming_refusal
 from robot.lbr.compensation import AppliedWatch
 from robot.lbr.msgs import ConnectionQuality, LbrState, SessionState
 from robot.lbr.params import LbrParams
-from robot.lbr.watches import Clock, ClockWatch, QualityWatch, TorqueResolution
+from robot.lbr.watches import AppliedCheck, Clock, ClockWatch, QualityWatch, TorqueResolution
 from sim.lbr_stack.params import LbrPeerParams
 from sim.lbr_stack.peer import next_manager_deadline
 from sim.lbr_stack.stack import FriLink, RobotSession, reported_commanded_torque
@@ -161,6 +161,33 @@ def test_the_applied_check_matches_within_the_tolerance_and_says_how_close_it_ca
                                                    "an old message")
     w.reset()
     assert w.applied_ns is None and math.isinf(w.closest_nm) and not w.sent_any
+
+
+def test_states_are_judged_from_the_robots_first_echo_of_ours_since_arming():
+    """A robot that runs on its own clock until our first answer reaches it (the lock-step peer's start, a CI cell
+    under load: states_on_an_old_command +2 at arming) carries what the stack ran before for a few cycles past the
+    stale limit: not judged. From its first echo of ours, a state on an overlay too old says no command applied;
+    one that never echoes is the stall's to name after applied_stall_s."""
+    def state(t_ms: int, tau) -> LbrState:
+        z = np.zeros(7)
+        return LbrState(0.002, int(SessionState.COMMANDING_ACTIVE), 0, 0, 2, 3, 2, t_ms * MS, z, z, z, z,
+                        tau_commanded_nm=np.asarray(tau, float))
+
+    check = AppliedCheck(0.001, 0.05, True, 0.005, 1.0)
+    check.arm(0)
+    check.sent.sent(np.full(7, 0.5), 0)  # our first answer, to the reading at 0 ms
+    for t in range(2, 40, 2):  # 38 ms on the stack's own message, past the 13 ms limit
+        assert check.update(state(t, np.zeros(7)), 0.002, True) is None and check.applying, t
+    assert check.update(state(40, np.full(7, 0.5)), 0.002, True) is None and not check.applying, \
+        "the first echo, of an answer 40 ms old"
+    check.sent.sent(np.full(7, 0.6), 40 * MS)
+    assert check.update(state(42, np.full(7, 0.6)), 0.002, True) is None and check.applying
+    assert check.update(state(60, np.full(7, 0.6)), 0.002, True) is None and not check.applying, "18 ms on it"
+    never = AppliedCheck(0.001, 0.05, True, 0.005, 1.0)
+    never.arm(0)
+    never.sent.sent(np.full(7, 0.5), 0)
+    assert never.update(state(500, np.zeros(7)), 0.002, True) is None and never.applying
+    assert never.update(state(1002, np.zeros(7)), 0.002, True).startswith("commanded_torque matched none")
 
 
 # -- arming ---------------------------------------------------------------------------------------------------

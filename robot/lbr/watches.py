@@ -265,7 +265,7 @@ class AppliedCheck:
     (``applied_tolerance_nm`` to ``applied_tolerance_max_nm``); enabled : ``check_applied``; stale_limit_s : how old
     [s] an answer may be before the server holds; stall_s : ``applied_stall_s``, how long [s, robot time] an armed
     adapter may see no state on a recent overlay; applying : the newest state's verdict; armed_ns : the robot time
-    [ns] at arming.
+    [ns] at arming. States are judged from the robot's first echo of an overlay of ours since arming.
     """
 
     def __init__(self, tol_nm: float, tol_max_nm: float, enabled: bool, stale_limit_s: float,
@@ -289,9 +289,13 @@ class AppliedCheck:
         self.resolution.update(st.tau_commanded_nm)
         checking = armed and self.enabled
         # answer, manager cycle, FRI cycles applying and reporting it, manager cycle publishing: 2 periods of each
-        self.applying = not (checking and self.sent.old(st.tau_commanded_nm, st.stamp_ns,
-                                                        self.stale_limit_s + 2.0 * (period_s + st.sample_time_s),
-                                                        self.resolution.tolerance_nm()))
+        old = checking and self.sent.old(st.tau_commanded_nm, st.stamp_ns,
+                                         self.stale_limit_s + 2.0 * (period_s + st.sample_time_s),
+                                         self.resolution.tolerance_nm())
+        # judged from the robot's first echo of ours since arming: before it the states carry what the stack ran
+        # before (a robot running on its own clock until our first answer, the lock-step peer's start), and one
+        # that never echoes is the stall's to name
+        self.applying = not (old and self.sent.matched > 0)
         if not (checking and self.sent.sent_any):
             return None
         since_ns = st.stamp_ns - (self.sent.applied_ns if self.sent.applied_ns is not None else self.armed_ns)
