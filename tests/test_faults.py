@@ -69,8 +69,13 @@ def test_lockstep_survives_perception_and_sim_freezes_kills_and_restarts(tmp_pat
     with Cell(tmp_path / "run", learned_skill_file, "lockstep") as cell:
         cell.wait_phase(("WIPE",), 120.0)
         t = time.monotonic()
-        cell.freeze("perception", 4.0)  # no stains for > stains_timeout_s of robot time: pause off the board
-        cell.wait_phase(("PAUSED",), 20.0, since=t)
+        # no stains for > stains_timeout_s of robot time: pause off the board. Frozen until then, not for a span of
+        # wall time: a starved lock-step cell runs far slower than real time (a CI cell's approach took 38 s)
+        cell.signal("perception", signal.SIGSTOP)
+        try:
+            cell.wait_phase(("PAUSED",), 20.0, since=t)
+        finally:
+            cell.signal("perception", signal.SIGCONT)
         cell.wait_phase(GOING, 30.0, since=time.monotonic())
         t = time.monotonic()
         cell.restart("perception", down_s=3.0)
