@@ -83,18 +83,23 @@ def survey_point(board: BoardPose, clearance_m: float, arm: ArmReach | None, hei
                       slack=SURVEY_HIDDEN_SLACK)
 
 
-def survey_hidden(board: BoardPose, xy_m: np.ndarray, arm: ArmReach, height_m: float) -> np.ndarray:
-    """(n, 2) the :func:`board_targets` [m] the arm hides from the camera at ``board.camera_m`` with the pad
-    ``height_m`` above ``xy_m`` (2,) [m], flat on the board (:mod:`arm.silhouette`; the wrist and tool capsule
-    covers the pad's footprint); all of them when the pad is beyond the arm there."""
-    assert board.camera_m is not None, "survey_hidden needs the camera's position"
-    targets = board_targets(board)
+def hidden_at(board: BoardPose, targets_m: np.ndarray, arm: ArmReach, xy_m: np.ndarray, height_m: float) -> np.ndarray:
+    """(n,) bool: which of the board points ``targets_m`` (n, 2) [m] the arm hides from the camera at
+    ``board.camera_m`` with the pad ``height_m`` above ``xy_m`` (2,) [m], flat on the board (:mod:`arm.silhouette`;
+    the wrist and tool capsule covers the pad's footprint); all of them when the pad is beyond the arm there."""
+    assert board.camera_m is not None, "hidden_at needs the camera's position"
     pad = board.to_world(np.array([xy_m[0], xy_m[1], height_m]))
     lines, _ = arm_centre_lines(arm, pad[None], tool_rotation_on_board(board.R))
     if not np.all(np.isfinite(lines)):
-        return targets
-    world = board.origin_m + np.column_stack([targets, np.zeros(len(targets))]) @ board.R.T
-    return targets[hidden(world, board.camera_m, lines)[0]]
+        return np.ones(len(targets_m), bool)
+    world = board.origin_m + np.column_stack([targets_m, np.zeros(len(targets_m))]) @ board.R.T
+    return hidden(world, board.camera_m, lines)[0]
+
+
+def survey_hidden(board: BoardPose, xy_m: np.ndarray, arm: ArmReach, height_m: float) -> np.ndarray:
+    """(n, 2) the :func:`board_targets` [m] the arm hides, pad ``height_m`` above ``xy_m`` (:func:`hidden_at`)."""
+    targets = board_targets(board)
+    return targets[hidden_at(board, targets, arm, xy_m, height_m)]
 
 
 def resurvey_point(board: BoardPose, first_xy_m: np.ndarray, arm: ArmReach | None,
@@ -115,12 +120,9 @@ def resurvey_point(board: BoardPose, first_xy_m: np.ndarray, arm: ArmReach | Non
     if len(hid) == 0:
         return None
     xy = seen_look_point(board, hid, arm, height_m, first)
-    if np.linalg.norm(xy - first) < 0.005:
+    if np.linalg.norm(xy - first) < 0.005 or hidden_at(board, hid, arm, xy, height_m).all():
         return None
-    pad = board.to_world(np.array([xy[0], xy[1], height_m]))
-    lines, _ = arm_centre_lines(arm, pad[None], tool_rotation_on_board(board.R))
-    world = board.origin_m + np.column_stack([hid, np.zeros(len(hid))]) @ board.R.T
-    return xy if int(hidden(world, board.camera_m, lines)[0].sum()) < len(hid) else None
+    return xy
 
 
 def base_side_point(board: BoardPose, centres_m: list[np.ndarray], sizes_m: list[float], clearance_m: float,
