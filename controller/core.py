@@ -80,16 +80,15 @@ class ControllerCore:
         self.p = params
         self.model = model or RobotModel()
         self.executor = SkillExecutor(skill, params.executor, params.force, params.planner)
-        self.executor.motion.arm = arm_reach(self.model)  # look points where the elbow has room
+        (motion := self.executor.motion).arm = arm_reach(self.model)  # look points where the elbow has room
         f = params.force
         self.force = NormalForceRegulator(f.kp, f.ki, f.integral_limit_n, f.cap_n, f.filter_s)
         lim = self.model.limits
         self.shaper = TorqueShaper(lim.tau_max, params.limits.torque_rate_nm_per_ms * 1000.0)
         self.ref = Reference()
-        self.shaping = TaskShaping(normal_damping_1_s=f.normal_damping_1_s,
+        self.shaping = TaskShaping(normal_damping_1_s=f.normal_damping_1_s, n_joints=self.model.nq,
                                    max_position_error_m=params.limits.max_position_error_m,
-                                   max_rotation_error_rad=params.limits.max_rotation_error_rad,
-                                   n_joints=self.model.nq)
+                                   max_rotation_error_rad=params.limits.max_rotation_error_rad)
         # published in batches with each status: a ring of >= 5 s covers a late status
         n_trace = max(params.trace_ticks, int(5 * params.rate_hz) if params.publish_trace else 0)
         self.trace = Trace(n_trace) if n_trace else None
@@ -98,6 +97,7 @@ class ControllerCore:
         self.kin = Kinematics(self.model)
         # the clearance posture (controller.control.limits.clearance_torque), into the shaping's nullspace torques
         self.buf = TickBuffers(self.kin, limits_from_settings(self.model.limits, params.limits))
+        motion.joints, motion.joint_limits = self.buf.q, (lim.q_min, lim.q_max)  # the pad's half turn looks at them
         if params.limits.clearance_stiffness_nm_rad > 0.0:  # the clearance is written into the shaping's record
             self.buf.clearance = self.shaping.posture_in_record(self.buf.clearance)
         self.clock = TickClock(params.rate_hz)

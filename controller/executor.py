@@ -106,7 +106,7 @@ class SkillExecutor:
         self.state = ExecutorState(log, self.counters, self.junction_ticks)
         self.book = StainBook(self.p.recheck_s, self.p.max_passes)
         self.stains_fresh = False
-        self.motion = FreeMotion(self.p, self.f)
+        self.motion = FreeMotion(self.p, self.f, self.counters)
         self.surface = SurfaceTouch(self.p.first_creep_height_m + self.p.contact_search_m)  # touches place it
         self.chain = MpChain(skill, self.planner, self.p.wipe_timeout_s, self.counters, pass_cycles=self.p.pass_cycles)
         self.stops = ExecutorStops(self.state, self.motion, self.book, self.p, self.f, self.planner)
@@ -303,7 +303,7 @@ class SkillExecutor:
 
     # ------------------------------------------------------------------ one handler per stage
     def _on_fly(self, dt: float, tool: ToolState) -> None:
-        if self.motion.move(dt) and not self.motion.turning:
+        if self.motion.move(dt) and not self.motion.turning and not self.motion.turn_half_if_cramped():
             self.motion.descend(first_touch=self.surface.untouched)
             self.state.current_mp, self.state.stage = "descend", Stage.DESCEND
 

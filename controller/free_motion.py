@@ -12,8 +12,11 @@ executor's decision (:mod:`controller.executor`).
 
 from __future__ import annotations
 
+from collections import Counter
+
 import numpy as np
 
+from arm.pad_turn import half_turn_way, half_turned
 from arm.reach import ArmReach, pad_reach_problem
 from interfaces.transforms import tool_rotation_on_board
 from lampskit.core.planner_types import Stain
@@ -64,6 +67,10 @@ class FreeMotion:
         Written in place every tick.
     arm : ArmReach or None
         The arm's elbow geometry: look points stay where the elbow has room (None: anywhere on the board).
+    joints : (n,) [rad] or None
+        The measured joint positions, updated in place every tick by the owner (None: not known; no half turn).
+    joint_limits : ((n,), (n,)) [rad] or None
+        The joints' position limits, as ``joints`` is given.
     aim : OffTick
         Where look points are chosen: its ``executor`` the planner thread in the real-time loop (the choice takes
         a few ms, bench/bench_look_points.py; the setpoint holds meanwhile and :meth:`move` reports not arrived),
@@ -72,10 +79,13 @@ class FreeMotion:
         The last look's point was where the pad already was: no move was made.
     """
 
-    def __init__(self, params: ExecutorParams, force: ForceParams) -> None:
+    def __init__(self, params: ExecutorParams, force: ForceParams, counters: Counter[str] | None = None) -> None:
         self.p = params
         self.f = force
+        self.counters: Counter[str] = Counter() if counters is None else counters
         self.arm: ArmReach | None = None
+        self.joints: np.ndarray | None = None
+        self.joint_limits: tuple[np.ndarray, np.ndarray] | None = None
         self.setpoint = Setpoint()
         self.aim = OffTick()
         self.stayed = False
@@ -140,6 +150,22 @@ class FreeMotion:
         self._turn = OrientationBlend(sp.R, R_goal, T_turn)
         sp.contact = False
         return h >= self.p.standoff_m
+
+    def turn_half_if_cramped(self) -> bool:
+        """At rest over a stain, before the descent: turn the pad half about its normal (:mod:`arm.pad_turn`, A7 by pi
+        towards the middle of its range, at ``turn_rate_rad_s``) when the measured :attr:`joints` stand near a limit
+        and the turn gives them room; True when a turn started (counted ``pad_half_turns``)."""
+        if self.joints is None or self.joint_limits is None:
+            return False
+        way = half_turn_way(self.joints, *self.joint_limits)
+        if way == 0.0:
+            return False
+        sp = self.setpoint
+        R_goal = half_turned(sp.R)
+        self._turn = OrientationBlend(sp.R, R_goal, orientation_duration(sp.R, R_goal, self.p.turn_rate_rad_s, way),
+                                      about_z=way)
+        self.counters["pad_half_turns"] += 1
+        return True
 
     def descend(self, first_touch: bool = False) -> None:
         """Down to ``creep_height_m`` (``first_touch``: the board's surface not touched yet, so only as far as

@@ -19,6 +19,8 @@ import numba as nb
 import numpy as np
 import pinocchio as pin
 
+from arm.pad_turn import turn_vector
+
 
 class Quintic:
     """x(t) for t in [0, T] with x, dx, ddx given at both ends; held (at rest or constant acceleration) after T.
@@ -196,15 +198,17 @@ class SmoothRamp:
 
 
 class OrientationBlend:
-    """R(t) = R0 exp(s(t) log(R0^T R1)) with s a rest-to-rest quintic from 0 to 1 over ``duration_s``.
+    """R(t) = R0 exp(s(t) log(R0^T R1)) with s a rest-to-rest quintic from 0 to 1 over ``duration_s``; with
+    ``about_z`` +1 / -1 the log taken the way round the body's z of that sign (:func:`arm.pad_turn.turn_vector`: a
+    half turn of the pad goes the way that takes A7 to the middle of its range).
 
     Attributes after :meth:`update`: ``R`` (3, 3), ``omega`` (3,) [rad/s]
     and ``domega`` (3,) [rad/s^2], world axes.
     """
 
-    def __init__(self, R0: np.ndarray, R1: np.ndarray, duration_s: float) -> None:
+    def __init__(self, R0: np.ndarray, R1: np.ndarray, duration_s: float, about_z: float = 0.0) -> None:
         self.R0 = np.asarray(R0, float).copy()
-        self.theta = pin.log3(self.R0.T @ np.asarray(R1, float))  # body axis-angle
+        self.theta = turn_vector(self.R0, R1, about_z)  # body axis-angle
         self._s = Quintic((np.zeros(1), np.zeros(1), np.zeros(1)), (np.ones(1), np.zeros(1), np.zeros(1)), duration_s)
         self.R = self.R0.copy()
         self.omega = np.zeros(3)
@@ -231,9 +235,9 @@ class OrientationBlend:
         self.domega[:] = self.R0 @ (dds * self.theta)
 
 
-def orientation_duration(R0: np.ndarray, R1: np.ndarray, mean_rate_rad_s: float) -> float:
-    """Time [s] to turn from R0 to R1 at a mean angular speed."""
-    return float(np.linalg.norm(pin.log3(np.asarray(R0).T @ np.asarray(R1)))) / mean_rate_rad_s
+def orientation_duration(R0: np.ndarray, R1: np.ndarray, mean_rate_rad_s: float, about_z: float = 0.0) -> float:
+    """Time [s] to turn from R0 to R1 at a mean angular speed (``about_z``: as :class:`OrientationBlend`)."""
+    return float(np.linalg.norm(turn_vector(R0, R1, about_z))) / mean_rate_rad_s
 
 
 # compiled (or loaded from numba's cache) on import, for the arrays a Quintic makes: the first free motion starts
