@@ -740,6 +740,26 @@ def test_speed_override_slows_to_the_share_holds_the_peak_and_recovers_slowly():
     assert s == pytest.approx(0.1)
 
 
+
+def test_speed_override_lets_go_of_a_singular_spike_in_seconds():
+    """A wrist passing a singularity asks, for a tick or two, a thousand times a joint's limit; the held peak must
+    not keep the skill at its slowest for the half hour a fixed 0.5 limit/s release would take (board 96 of the
+    random campaign crawled 200 s at the floor that way)."""
+    dq_max = np.array([2.0, 1.0])
+    ov = SpeedOverride(dq_max, share=0.5, min_scale=0.1, down_rate_1_s=8.0, up_rate_1_s=0.5, release_1_s=0.5)
+    ov.update(np.array([0.0, 1000.0]), 0.001)
+    assert ov.demand_share == pytest.approx(5.0), "held no higher than where the scale reaches its floor"
+    s, t = ov.scale, 0.0
+    while s < 1.0 and t < 30.0:
+        s = ov.update(np.array([0.0, 0.3]), 0.001)
+        t += 0.001
+    assert s == 1.0 and 4.0 < t < 10.0, f"back at full speed after {t:.1f} s"
+    ov.reset()
+    for _ in range(200):  # a steady demand of twice the limits holds the scale where it belongs
+        s = ov.update(np.array([0.0, 2.0]), 0.001)
+    assert s == pytest.approx(0.25)
+
+
 def _override_run(ov: SpeedOverride, j_along_m_s3: float, with_accel: bool, ticks: int = 400, dt: float = 0.001):
     """A skill accelerating at ``4 exp(-k sigma)`` m/s^2 along x, its planned jerk ``j_along`` at first (against
     the acceleration: the case where a falling scale adds to it); the joints ask for twice the override's share

@@ -273,7 +273,10 @@ class SpeedOverride:
     reference would need (:meth:`update`); their largest share of the
     limits is peak-held (it falls by at most ``release_1_s`` per second, so
     a periodic motion gets one steady scale, not one that breathes with each
-    stroke); the scale ``s`` in (0, 1] moves towards ``min(1, share / peak)``,
+    stroke; a held share above 1 falls by that share of itself, and is held
+    no higher than where the scale reaches ``min_scale``, so a spike of many
+    times the limits, a wrist passing a singularity, is released in seconds,
+    not minutes); the scale ``s`` in (0, 1] moves towards ``min(1, share / peak)``,
     down by at most ``down_rate_1_s`` and up by at most ``up_rate_1_s`` per second.
     The skill advances by ``s dt``; its velocities are multiplied by ``s``
     and its accelerations by ``s^2`` (the path is unchanged, only slower).
@@ -299,7 +302,8 @@ class SpeedOverride:
     Attributes
     ----------
     scale : float
-        The current scale. demand_share : float, the held peak of the unscaled demand over the limits.
+        The current scale. demand_share : float, the held peak of the unscaled demand over the limits (at most
+        ``share / min_scale``).
     slowed_ticks : int
         Ticks with ``scale < 1``. load_limited_ticks : int, ticks on which :attr:`load_cap` set the target.
     load_cap : float
@@ -351,7 +355,10 @@ class SpeedOverride:
     def update(self, demand_rad_s: np.ndarray, dt_s: float, accel: np.ndarray | None = None) -> float:
         """The scale for the next tick, given the joint speeds (n,) the unscaled reference needs now and, for the
         jerk bound, the skill's unscaled in-plane acceleration (2,) [m/s^2] at this tick (None: no jerk limit)."""
-        r = max(largest_share(demand_rad_s, self.inv_dq_max), self.demand_share - self.release * dt_s)
+        held = self.demand_share
+        fall = self.release * dt_s * (held if held > 1.0 else 1.0)  # above the limits: a share of itself per second
+        # held no higher than where the scale reaches its floor: beyond it the scale is the same
+        r = min(max(largest_share(demand_rad_s, self.inv_dq_max), held - fall), self.share / self.min_scale)
         self.demand_share = r
         target = 1.0 if r <= self.share else max(self.share / r, self.min_scale)
         if self.load_cap < target:
