@@ -2,5 +2,5 @@
 
 __all__ = [
     "analytic_camera", "board", "board_sampler", "camera", "cli", "core", "dirt", "drive", "hand", "lbr_stack",
-    "params", "plant", "plant_params", "renderer", "robot", "service", "step_dynamics", "wiping", "world"
+    "params", "plant", "plant_params", "renderer", "robot", "service", "start_view", "step_dynamics", "wiping", "world"
 ]

@@ -15,9 +15,10 @@ along; board x runs along the width, horizontal before the roll (``(sin b, -cos 
 psi: the wall preset's for alpha = psi = 0), board y = n x x. A draw is kept only if the simulator
 would start on it with up to ``MAX_STAINS`` stains (:func:`board_refusal`: every corner above the
 robot's mounting plane, then :func:`sim.board.check_board`, :func:`sim.board.start_configuration`,
-the camera's pose and the stains' placement, as :class:`sim.core.SimCore` does) and the controller would wipe a
-stain anywhere on its stain region (:func:`region_reach_problem`: the pad flat on every point of a
-``REACH_GRID_M`` grid over the region and ``REACH_BEYOND_M`` beyond it passes
+the camera's pose with enough of the board's markers in its view past the arm at its start pose
+(:func:`sim.start_view.start_view_problem`) and the stains' placement, as :class:`sim.core.SimCore` does) and
+the controller would wipe a stain anywhere on its stain region (:func:`region_reach_problem`: the pad flat on
+every point of a ``REACH_GRID_M`` grid over the region and ``REACH_BEYOND_M`` beyond it passes
 :func:`arm.reach.pad_reach_problem`, the test the controller skips a stain by); otherwise the next draw of the
 same generator is tried, up to ``MAX_TRIES``. The draws refused and why are returned, so a campaign can count them.
 """
@@ -103,6 +104,7 @@ def board_refusal(table: dict[str, Any], model: RobotModel, seed: int = 0,
     from .camera import camera_pose
     from .core import make_stains
     from .params import SimParams
+    from .start_view import start_view_problem
 
     params = SimParams.from_table({"board": table, "seed": seed, "dirt": {"stains": MAX_STAINS}})
     board = board_from_params(params.board)
@@ -116,9 +118,11 @@ def board_refusal(table: dict[str, Any], model: RobotModel, seed: int = 0,
         if why is not None:
             return why
         check_board(board, params.dirt.margin_m, model)
-        start_configuration(board, params.start_standoff_m, model)
+        q0 = start_configuration(board, params.start_standoff_m, model)
         if params.camera.enabled:
-            camera_pose(params.camera, board)
+            why = start_view_problem(board, q0, camera_pose(params.camera, board)[:3, 3], model)
+            if why is not None:
+                return why
         make_stains(params, board)
     except (ConfigError, ValueError) as exc:
         return str(exc)

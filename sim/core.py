@@ -21,6 +21,7 @@ from .hand import hand_from_params
 from .params import SimParams
 from .plant import Measurement, plant_joints, plant_urdf
 from .robot import Readout, SimRobot
+from .start_view import start_view_problem
 from .wiping import PadWiper
 from .world import build_world
 
@@ -80,6 +81,10 @@ class SimCore:
                 self.T_camera_to_world = camera_pose(params.camera, self.board)
             except ValueError as exc:
                 raise ConfigError(f"[sim.camera] {exc}") from None
+            why = start_view_problem(self.board, self.q_start, self.T_camera_to_world[:3, 3], model)
+            if why is not None:
+                raise ConfigError(f"impossible start: {why} (the controller holds the arm until it sees the board; "
+                                  f"move the start pose or the camera: [sim] start_q_rad, [sim.camera])")
         self.client = pb.connect(pb.DIRECT)
         try:
             urdf = None if plant.body_is_described else plant_urdf(plant)
