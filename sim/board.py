@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from arm.branch import CONTROLLER_ZONES, ENOUGH_ROOM_RAD, branch_room_rad, candidate_seeds, raster
 from arm.robot_model import IkError, RobotModel
 from interfaces.errors import ConfigError
 from interfaces.transforms import matrix_from_quat_wxyz, tool_rotation_on_board, transform
@@ -118,11 +119,43 @@ def check_board(board: Board, margin_m: float, model: RobotModel | None = None) 
                               f"at {np.round(p, 3).tolist()} m ({exc})") from None
 
 
-def start_configuration(board: Board, standoff_m: float, model: RobotModel | None = None) -> np.ndarray:
-    """(7,) joint positions with the pad facing the board centre ``standoff_m`` off its surface."""
+def start_configuration(board: Board, standoff_m: float, model: RobotModel | None = None,
+                        margin_m: float | None = None) -> np.ndarray:
+    """(7,) joint positions with the pad facing the board centre ``standoff_m`` off its surface.
+
+    With ``margin_m`` [m] (the stain region's margin, :func:`wipe_region`) the configuration is also chosen for
+    the whole board: the one from :data:`SEED_Q_RAD` is kept if the arm, carried from it over the stain region as
+    the controller's posture carries it, keeps :data:`arm.branch.ENOUGH_ROOM_RAD` to every position limit
+    (:func:`start_room_rad`); otherwise the one of :func:`arm.branch.candidate_seeds` that keeps the
+    most (on random board 603 the first took A1 onto its limit over the board's near edge)."""
     model = model or RobotModel()
     p = board.centre_world_m + standoff_m * board.normal_world
+    R = board.tool_rotation()
     try:
-        return model.solve_ik(p, board.tool_rotation(), SEED_Q_RAD)
+        q = model.solve_ik(p, R, SEED_Q_RAD)
     except IkError as exc:
         raise ConfigError(f"impossible board pose: no start pose facing the board centre ({exc})") from None
+    if margin_m is None:
+        return q
+    lo, hi = wipe_region(board, margin_m)
+    points = [board.world_from_board(xy) for xy in raster(lo, hi)]
+    best, room = q, start_room_rad(model, q, points, R)
+    if room >= ENOUGH_ROOM_RAD:
+        return q
+    for seed in candidate_seeds(float(np.arctan2(p[1], p[0])), SEED_Q_RAD):
+        try:
+            q = model.solve_ik(p, R, seed)
+        except IkError:
+            continue
+        r = start_room_rad(model, q, points, R)
+        if r > room:
+            best, room = q, r
+    return best
+
+
+def start_room_rad(model: RobotModel, q: np.ndarray, points_m: list[np.ndarray], R: np.ndarray) -> float:
+    """How good a start ``q`` (7,) [rad] is for the pad (orientation ``R``) to go over ``points_m`` (each (3,) [m,
+    world]): the least room to a position limit along the way (:func:`arm.branch.branch_room_rad`), or the start's
+    own distance of A2 or A6 from zero if less (an arm that starts stretched at the shoulder or the wrist leaves it
+    on whichever side its first motion takes)."""
+    return min(branch_room_rad(model, q, points_m, R, CONTROLLER_ZONES), abs(float(q[1])), abs(float(q[5])))

@@ -118,7 +118,7 @@ def board_refusal(table: dict[str, Any], model: RobotModel, seed: int = 0,
         if why is not None:
             return why
         check_board(board, params.dirt.margin_m, model)
-        q0 = start_configuration(board, params.start_standoff_m, model)
+        q0 = start_configuration(board, params.start_standoff_m, model, params.dirt.margin_m)
         if params.camera.enabled:
             why = start_view_problem(board, q0, camera_pose(params.camera, board)[:3, 3], model)
             if why is not None:

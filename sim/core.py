@@ -74,7 +74,7 @@ class SimCore:
                 raise ConfigError(f"[sim] start_q_rad: joint(s) {bad} outside the description's limits "
                                   f"{np.round(lo, 3).tolist()} .. {np.round(hi, 3).tolist()} rad")
         else:
-            self.q_start = start_configuration(self.board, params.start_standoff_m, model)
+            self.q_start = start_configuration(self.board, params.start_standoff_m, model, params.dirt.margin_m)
         self.T_camera_to_world = None
         if params.camera.enabled:
             try:
