@@ -101,7 +101,7 @@ def test_random_board_396_turns_the_pad_half_and_cleans_its_stain(tmp_path):
     limit, the pad 25 mm off its reference; turned half before the descent, the stain is wiped."""
     from .test_arm_clearance import run_random_board
 
-    report, stdout, sim = run_random_board(tmp_path, 396, 1)
+    report, stdout, sim = run_random_board(tmp_path, 396, 1, first_start=True)
     assert report["outcome"] == "cleaned", (report["outcome"], report.get("final_reason"), stdout[-3000:])
     assert report["dirt_removed_fraction"] >= 0.98 and not report["faults"], report["faults"]
     assert report["counters"]["controller"]["pad_half_turns"] == 1, report["counters"]["controller"]

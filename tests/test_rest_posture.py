@@ -160,7 +160,7 @@ def test_board_322_starting_with_a2_in_its_zone_cleans_tracking_its_reference(tm
     """The arm starts with A2 at -0.08 rad. With the first state as the rest pose, the clearance swung A1 onto its
     limit: tracking 42 mm RMS, a stain given up after six passes, 94.7 % of the dirt. With the planned rest pose:
     cleaned, the pad on its reference, no robot-side brake, every joint under 0.8 of its speed limit, under 20 N."""
-    report, stdout, sim = run_random_board(tmp_path, 322, 5, BOARD_322)
+    report, stdout, sim = run_random_board(tmp_path, 322, 5, BOARD_322, first_start=True)
     assert report["outcome"] == "cleaned", (report["outcome"], report["final_reason"], stdout[-3000:])
     assert report["tracking_rms_m"] < 0.01, report["tracking_rms_m"]
     assert not {k: v for k, v in sim.items() if ("brake" in k or "yield" in k or "fault" in k) and v}, sim
