@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from arm.branch import CONTROLLER_ZONES, ENOUGH_ROOM_RAD, branch_room_rad, candidate_seeds, raster
+from arm.branch import CONTROLLER_ZONES, ENOUGH_ROOM_RAD, branch_room_rad, candidate_seeds, follow, raster
 from arm.robot_model import IkError, RobotModel
 from interfaces.errors import ConfigError
 from interfaces.transforms import matrix_from_quat_wxyz, tool_rotation_on_board, transform
@@ -24,6 +24,9 @@ SHOULDER_M = np.array([0.0, 0.0, 0.36])
 MIN_SHOULDER_CLEARANCE_M = 0.1
 #: Seed posture for inverse kinematics (elbow up, wrist bent).
 SEED_Q_RAD = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0])
+#: A candidate start's way over the board is checked for the camera's markers at every this-many-th configuration
+#: (:func:`arm.branch.follow` steps 1 cm; every 5th: 5 cm apart).
+VIEW_EVERY = 5
 
 _PRESETS: dict[str, dict[str, Any]] = {
     # vertical board 0.68 m in front of the robot, x_board = -y_world, y_board = +z_world, z_board = -x_world
@@ -120,14 +123,18 @@ def check_board(board: Board, margin_m: float, model: RobotModel | None = None) 
 
 
 def start_configuration(board: Board, standoff_m: float, model: RobotModel | None = None,
-                        margin_m: float | None = None) -> np.ndarray:
+                        margin_m: float | None = None, camera_m: np.ndarray | None = None) -> np.ndarray:
     """(7,) joint positions with the pad facing the board centre ``standoff_m`` off its surface.
 
     With ``margin_m`` [m] (the stain region's margin, :func:`wipe_region`) the configuration is also chosen for
     the whole board: the one from :data:`SEED_Q_RAD` is kept if the arm, carried from it over the stain region as
     the controller's posture carries it, keeps :data:`arm.branch.ENOUGH_ROOM_RAD` to every position limit
     (:func:`start_room_rad`); otherwise the one of :func:`arm.branch.candidate_seeds` that keeps the
-    most (on random board 603 the first took A1 onto its limit over the board's near edge)."""
+    most (on random board 603 the first took A1 onto its limit over the board's near edge). With ``camera_m`` (3,)
+    [m, world] too, a candidate is taken only if the arm leaves that camera the markers perception needs to keep a
+    board (:data:`sim.start_view.MARKERS_HELD`) at every :data:`VIEW_EVERY`-th point of the way
+    (:func:`sim.start_view.markers_hidden_at_start`; on random board 53 a
+    start with room hid three of the four mid-job, perception lost the board and found it again with no stains)."""
     model = model or RobotModel()
     p = board.centre_world_m + standoff_m * board.normal_world
     R = board.tool_rotation()
@@ -148,9 +155,18 @@ def start_configuration(board: Board, standoff_m: float, model: RobotModel | Non
         except IkError:
             continue
         r = start_room_rad(model, q, points, R)
-        if r > room:
+        if r > room and (camera_m is None or _keeps_the_markers_in_view(board, model, q, points, R, camera_m)):
             best, room = q, r
     return best
+
+
+def _keeps_the_markers_in_view(board: Board, model: RobotModel, q: np.ndarray, points_m: list[np.ndarray],
+                               R: np.ndarray, camera_m: np.ndarray) -> bool:
+    from .start_view import MARKERS_HELD, markers_hidden_at_start
+
+    way = follow(model, q, points_m, R, CONTROLLER_ZONES)[::VIEW_EVERY]
+    most = 4 - MARKERS_HELD
+    return all(len(markers_hidden_at_start(board, qi, camera_m, model)) <= most for qi in way)
 
 
 def start_room_rad(model: RobotModel, q: np.ndarray, points_m: list[np.ndarray], R: np.ndarray) -> float:

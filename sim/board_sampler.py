@@ -118,9 +118,10 @@ def board_refusal(table: dict[str, Any], model: RobotModel, seed: int = 0,
         if why is not None:
             return why
         check_board(board, params.dirt.margin_m, model)
-        q0 = start_configuration(board, params.start_standoff_m, model, params.dirt.margin_m)
-        if params.camera.enabled:
-            why = start_view_problem(board, q0, camera_pose(params.camera, board)[:3, 3], model)
+        camera_m = camera_pose(params.camera, board)[:3, 3] if params.camera.enabled else None
+        q0 = start_configuration(board, params.start_standoff_m, model, params.dirt.margin_m, camera_m)
+        if camera_m is not None:
+            why = start_view_problem(board, q0, camera_m, model)
             if why is not None:
                 return why
         make_stains(params, board)

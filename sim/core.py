@@ -66,6 +66,12 @@ class SimCore:
         self.board = board_from_params(params.board)
         check_board(self.board, params.dirt.margin_m, model)
         self.dirt = DirtGrid(self.board.size_m, params.dirt.cell_m, make_stains(params, self.board), params.seed)
+        self.T_camera_to_world = None
+        if params.camera.enabled:
+            try:
+                self.T_camera_to_world = camera_pose(params.camera, self.board)
+            except ValueError as exc:
+                raise ConfigError(f"[sim.camera] {exc}") from None
         if params.start_q_rad is not None:
             self.q_start = np.array(params.start_q_rad)
             lo, hi = model.limits.q_min, model.limits.q_max
@@ -74,13 +80,10 @@ class SimCore:
                 raise ConfigError(f"[sim] start_q_rad: joint(s) {bad} outside the description's limits "
                                   f"{np.round(lo, 3).tolist()} .. {np.round(hi, 3).tolist()} rad")
         else:
-            self.q_start = start_configuration(self.board, params.start_standoff_m, model, params.dirt.margin_m)
-        self.T_camera_to_world = None
-        if params.camera.enabled:
-            try:
-                self.T_camera_to_world = camera_pose(params.camera, self.board)
-            except ValueError as exc:
-                raise ConfigError(f"[sim.camera] {exc}") from None
+            camera_m = None if self.T_camera_to_world is None else self.T_camera_to_world[:3, 3]
+            self.q_start = start_configuration(self.board, params.start_standoff_m, model, params.dirt.margin_m,
+                                               camera_m)
+        if self.T_camera_to_world is not None:
             why = start_view_problem(self.board, self.q_start, self.T_camera_to_world[:3, 3], model)
             if why is not None:
                 raise ConfigError(f"impossible start: {why} (the controller holds the arm until it sees the board; "

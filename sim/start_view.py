@@ -21,6 +21,8 @@ marker 3) where two with four and five covered were not (board 636).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pinocchio as pin
 
@@ -28,11 +30,15 @@ from arm.robot_model import RobotModel
 from arm.silhouette import hidden
 from interfaces.board_markers import marker_corners_board
 
-from .board import Board
+if TYPE_CHECKING:  # sim.board chooses its start pose with this module's count
+    from .board import Board
 
 #: Markers perception needs for its first board pose (``perception/board.py``, ``BoardTracker._why_not``: 3 while
 #: the board's size is unknown, ``[perception.board] min_markers`` after).
 MARKERS_NEEDED = 3
+#: Markers perception needs to go on with a board it has found (``[perception.board] min_markers``, 2 by default): what
+#: the arm must leave the camera while it wipes (:func:`sim.board.start_configuration`).
+MARKERS_HELD = 2
 #: Of a marker's five points (corners and centre), how many the arm must cover for the marker to count as hidden.
 HIDDEN_POINTS = 3
 
