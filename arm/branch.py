@@ -81,7 +81,12 @@ def branch_room_rad(model: RobotModel, q0: np.ndarray, points_m: list[np.ndarray
                     zones: ClearanceZones) -> float:
     """The least room [rad] any joint but the elbow keeps to its position limit while the pad goes from ``q0``'s
     pose through ``points_m`` (:func:`follow`); negative: a joint would pass its limit."""
-    qs = follow(model, q0, points_m, R, zones)
+    return room_along_rad(model, follow(model, q0, points_m, R, zones))
+
+
+def room_along_rad(model: RobotModel, qs: np.ndarray) -> float:
+    """The least room [rad] any joint but the elbow keeps to its position limit over the configurations ``qs``
+    (k, n) [rad] (:func:`follow`'s); negative: a joint past its limit."""
     room = np.minimum(model.limits.q_max - qs, qs - model.limits.q_min)
     room[:, ELBOW] = np.inf
     return float(room.min())

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from arm.branch import CONTROLLER_ZONES, ENOUGH_ROOM_RAD, branch_room_rad, candidate_seeds, follow, raster
+from arm.branch import CONTROLLER_ZONES, ENOUGH_ROOM_RAD, candidate_seeds, follow, raster, room_along_rad
 from arm.robot_model import IkError, RobotModel
 from interfaces.errors import ConfigError
 from interfaces.transforms import matrix_from_quat_wxyz, tool_rotation_on_board, transform
@@ -154,24 +154,29 @@ def start_configuration(board: Board, standoff_m: float, model: RobotModel | Non
             q = model.solve_ik(p, R, seed)
         except IkError:
             continue
-        r = start_room_rad(model, q, points, R)
-        if r > room and (camera_m is None or _keeps_the_markers_in_view(board, model, q, points, R, camera_m)):
+        way = follow(model, q, points, R, CONTROLLER_ZONES)
+        r = _start_room(model, q, way)
+        if r > room and (camera_m is None or _keeps_the_markers_in_view(board, model, way, camera_m)):
             best, room = q, r
     return best
 
 
-def _keeps_the_markers_in_view(board: Board, model: RobotModel, q: np.ndarray, points_m: list[np.ndarray],
-                               R: np.ndarray, camera_m: np.ndarray) -> bool:
+def _keeps_the_markers_in_view(board: Board, model: RobotModel, way: np.ndarray, camera_m: np.ndarray) -> bool:
+    """Whether the arm at every :data:`VIEW_EVERY`-th configuration of ``way`` (k, 7) [rad] leaves the camera at
+    ``camera_m`` (3,) [m, world] the markers perception keeps a found board on."""
     from .start_view import MARKERS_HELD, markers_hidden_at_start
 
-    way = follow(model, q, points_m, R, CONTROLLER_ZONES)[::VIEW_EVERY]
     most = 4 - MARKERS_HELD
-    return all(len(markers_hidden_at_start(board, qi, camera_m, model)) <= most for qi in way)
+    return all(len(markers_hidden_at_start(board, qi, camera_m, model)) <= most for qi in way[::VIEW_EVERY])
+
+
+def _start_room(model: RobotModel, q: np.ndarray, way: np.ndarray) -> float:
+    return min(room_along_rad(model, way), abs(float(q[1])), abs(float(q[5])))
 
 
 def start_room_rad(model: RobotModel, q: np.ndarray, points_m: list[np.ndarray], R: np.ndarray) -> float:
     """How good a start ``q`` (7,) [rad] is for the pad (orientation ``R``) to go over ``points_m`` (each (3,) [m,
-    world]): the least room to a position limit along the way (:func:`arm.branch.branch_room_rad`), or the start's
+    world]): the least room to a position limit along the way (:func:`arm.branch.room_along_rad`), or the start's
     own distance of A2 or A6 from zero if less (an arm that starts stretched at the shoulder or the wrist leaves it
     on whichever side its first motion takes)."""
-    return min(branch_room_rad(model, q, points_m, R, CONTROLLER_ZONES), abs(float(q[1])), abs(float(q[5])))
+    return _start_room(model, q, follow(model, q, points_m, R, CONTROLLER_ZONES))
