@@ -196,6 +196,7 @@ class PerceptionService:
         counters = dict(self.counters)
         counters.update(self.source.counters)
         counters["board_resets"] = self.perception.resets
+        counters["frames_marker_left_out"] = self.perception.board.markers_left_out
         if self.tool is not None:
             counters["frames_tool_masked"] = self.tool.used
             counters["frames_tool_pose_unknown"] = self.tool.unknown
