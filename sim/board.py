@@ -27,6 +27,9 @@ SEED_Q_RAD = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 0.8, 0.0])
 #: A candidate start's way over the board is checked for the camera's markers at every this-many-th configuration
 #: (:func:`arm.branch.follow` steps 1 cm; every 5th: 5 cm apart).
 VIEW_EVERY = 5
+#: Candidate starts keeping room within this of the most are as good along the way; the one that starts farthest
+#: from its limits is taken [rad].
+SAME_ROOM_RAD = 0.01
 
 _PRESETS: dict[str, dict[str, Any]] = {
     # vertical board 0.68 m in front of the robot, x_board = -y_world, y_board = +z_world, z_board = -x_world
@@ -130,10 +133,12 @@ def start_configuration(board: Board, standoff_m: float, model: RobotModel | Non
     the whole board: the one from :data:`SEED_Q_RAD` is kept if the arm, carried from it over the stain region as
     the controller's posture carries it, keeps :data:`arm.branch.ENOUGH_ROOM_RAD` to every position limit
     (:func:`start_room_rad`); otherwise the one of :func:`arm.branch.candidate_seeds` that keeps the
-    most (on random board 603 the first took A1 onto its limit over the board's near edge). With ``camera_m`` (3,)
-    [m, world] too, a candidate is taken only if the arm leaves that camera the markers perception needs to keep a
-    board (:data:`sim.start_view.MARKERS_HELD`) at every :data:`VIEW_EVERY`-th point of the way
-    (:func:`sim.start_view.markers_hidden_at_start`; on random board 53 a
+    most (on random board 603 the first took A1 onto its limit over the board's near edge), and of those within
+    :data:`SAME_ROOM_RAD` of the most, the one that starts farthest from its limits and from A2 = 0 and A6 = 0
+    (the candidates of one branch follow into the same posture and keep the same room along the way, wherever on
+    the elbow's swing they start). With ``camera_m`` (3,) [m, world] too, a candidate is taken only if the arm
+    leaves that camera the markers perception needs to keep a board (:data:`sim.start_view.MARKERS_HELD`) at every
+    :data:`VIEW_EVERY`-th point of the way (:func:`sim.start_view.markers_hidden_at_start`; on random board 53 a
     start with room hid three of the four mid-job, perception lost the board and found it again with no stains)."""
     model = model or RobotModel()
     p = board.centre_world_m + standoff_m * board.normal_world
@@ -146,19 +151,20 @@ def start_configuration(board: Board, standoff_m: float, model: RobotModel | Non
         return q
     lo, hi = wipe_region(board, margin_m)
     points = [board.world_from_board(xy) for xy in raster(lo, hi)]
-    best, room = q, start_room_rad(model, q, points, R)
+    room = start_room_rad(model, q, points, R)
     if room >= ENOUGH_ROOM_RAD:
         return q
+    tried = [(room, _start_room(model, q, q[None]), q)]
     for seed in candidate_seeds(float(np.arctan2(p[1], p[0])), SEED_Q_RAD):
         try:
             q = model.solve_ik(p, R, seed)
         except IkError:
             continue
         way = follow(model, q, points, R, CONTROLLER_ZONES)
-        r = _start_room(model, q, way)
-        if r > room and (camera_m is None or _keeps_the_markers_in_view(board, model, way, camera_m)):
-            best, room = q, r
-    return best
+        if camera_m is None or _keeps_the_markers_in_view(board, model, way, camera_m):
+            tried.append((_start_room(model, q, way), _start_room(model, q, q[None]), q))
+    most = max(r for r, _, _ in tried)
+    return max((t for t in tried if t[0] >= most - SAME_ROOM_RAD), key=lambda t: t[1])[2]
 
 
 def _keeps_the_markers_in_view(board: Board, model: RobotModel, way: np.ndarray, camera_m: np.ndarray) -> bool:
@@ -171,12 +177,14 @@ def _keeps_the_markers_in_view(board: Board, model: RobotModel, way: np.ndarray,
 
 
 def _start_room(model: RobotModel, q: np.ndarray, way: np.ndarray) -> float:
-    return min(room_along_rad(model, way), abs(float(q[1])), abs(float(q[5])))
+    return min(room_along_rad(model, np.vstack([q, way])), abs(float(q[1])), abs(float(q[5])))
 
 
 def start_room_rad(model: RobotModel, q: np.ndarray, points_m: list[np.ndarray], R: np.ndarray) -> float:
     """How good a start ``q`` (7,) [rad] is for the pad (orientation ``R``) to go over ``points_m`` (each (3,) [m,
-    world]): the least room to a position limit along the way (:func:`arm.branch.room_along_rad`), or the start's
-    own distance of A2 or A6 from zero if less (an arm that starts stretched at the shoulder or the wrist leaves it
-    on whichever side its first motion takes)."""
+    world]): the least room to a position limit at the start and along the way (:func:`arm.branch.room_along_rad`),
+    or the start's own distance of A2 or A6 from zero if less (an arm that starts stretched at the shoulder or the
+    wrist leaves it on whichever side its first motion takes). The start counts itself: on random board 304 the
+    candidate kept for the way's room started A6 0.058 rad from its limit, inside the controller's 0.12 rad
+    margin, whose repulsion took A6 to 0.85 of its speed limit in 34 ms and the robot side braked."""
     return _start_room(model, q, follow(model, q, points_m, R, CONTROLLER_ZONES))

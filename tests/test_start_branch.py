@@ -112,3 +112,24 @@ def test_a_start_whose_arm_would_hide_the_markers_mid_job_is_not_chosen(model):
     assert most_hidden(blind) > 4 - MARKERS_HELD, "chosen for room alone, the wrist hides three markers on the way"
     seen = start_configuration(board, params.start_standoff_m, model, params.dirt.margin_m, camera_m)
     assert most_hidden(seen) <= 4 - MARKERS_HELD
+
+
+#: Random board 304 (5 stains): of the candidate starts that keep the same room along the way, the chooser kept the
+#: first in its seed order, A6 0.058 rad from its limit: inside the controller's 0.12 rad margin, whose repulsion
+#: took A6 to 0.85 of its speed limit 34 ms into the cell, and the robot side braked twice (99.5 % cleaned).
+BOARD_304 = {"preset": "custom", "origin_m": [0.372834, 0.36504, 0.532464],
+             "quat_wxyz": [0.620784161, 0.340630266, -0.282832116, -0.646996168], "size_m": [0.6476, 0.5045]}
+#: ... that start [rad].
+Q_304_IN_THE_MARGIN = np.array([-2.457, -1.165, 0.537, -1.522, -1.133, -2.036, 0.967])
+
+
+def test_a_start_counts_its_own_room_and_of_equally_roomy_ways_the_one_farthest_from_its_limits_is_taken(model):
+    params, board, points = _board(BOARD_304)
+    R = board.tool_rotation()
+    margin = LimitParams().joint_margin_rad
+    assert start_room_rad(model, Q_304_IN_THE_MARGIN, points, R) < margin, "the start itself counts"
+    chosen = start_configuration(board, params.start_standoff_m, model, params.dirt.margin_m)
+    own = np.minimum(model.limits.q_max - chosen, chosen - model.limits.q_min)
+    own[3] = np.inf  # the elbow: the pad pose fixes it
+    assert own.min() >= 2 * margin and abs(chosen[1]) >= 2 * margin and abs(chosen[5]) >= 2 * margin
+    assert start_room_rad(model, chosen, points, R) >= start_room_rad(model, Q_304_IN_THE_MARGIN, points, R)
