@@ -129,18 +129,37 @@ def _learn_skill(out: Path) -> Path:
     return learn / "skill.json"
 
 
-def _bounds(cells: list[Cell]) -> tuple[dict[Cell, tuple], dict[Cell, float], dict[str, float], float, float]:
-    """Per cell its stains (areas, centres) and lower bound; the felt model; the planner's speed bound and the
-    pad's width."""
-    from arm.description import PAD_SIZE_M
-    from controller.params import ControllerParams
-    from lampskit.core.planner_types import PlannerParams
+class _Bounds:
+    """Each cell's stains (areas, centres) and lower bound, worked out the first time the cell's row is made (a
+    random board's table is sampled for it, 0.3-3 s): a campaign's workers start on their first cells at once, and a
+    resumed campaign samples no board of a row it keeps from its table. Also the felt model, the planner's speed
+    bound and the pad's width."""
 
-    tables = {b: _board_table(b) for b in dict.fromkeys(c.board for c in cells)}
-    speed, pad = ControllerParams.from_table({}).limits.max_speed_m_s, max(PAD_SIZE_M)
-    stains = {c: cell_stains(c, tables[c.board]) for c in cells}
-    return (stains, {c: lower_bound_s(*stains[c], pad, speed) for c in cells}, felt_model(),
-            PlannerParams().max_speed_m_s, pad)
+    def __init__(self, cells: list[Cell]) -> None:
+        from arm.description import PAD_SIZE_M
+        from controller.params import ControllerParams
+        from lampskit.core.planner_types import PlannerParams
+
+        self.speed, self.pad = ControllerParams.from_table({}).limits.max_speed_m_s, max(PAD_SIZE_M)
+        self.felt, self.v_plan = felt_model(), PlannerParams().max_speed_m_s
+        self._tables: dict[str, dict[str, Any]] = {}
+        self._cells: dict[Cell, tuple[tuple[list[float], np.ndarray], float]] = {}
+        for b in dict.fromkeys(c.board for c in cells if not c.board.startswith("random:")):
+            self._tables[b] = _board_table(b)  # a board file that cannot be read: refused before any cell runs
+
+    def of(self, cell: Cell) -> tuple[tuple[list[float], np.ndarray], float]:
+        """(``cell``'s stains, its lower bound [s])."""
+        if cell not in self._cells:
+            if cell.board not in self._tables:
+                self._tables[cell.board] = _board_table(cell.board)
+            stains = cell_stains(cell, self._tables[cell.board])
+            self._cells[cell] = stains, lower_bound_s(*stains, self.pad, self.speed)
+        return self._cells[cell]
+
+    def row(self, cell: Cell, report: dict | None, run_dir: str, why: str) -> dict[str, Any]:
+        """``cell``'s row of the table (:func:`launch.campaign_table.row_of`)."""
+        stains, bound = self.of(cell)
+        return row_of(cell, report, bound, run_dir, why, stains, self.felt, self.v_plan)
 
 
 def _write_outputs(out: Path, rows: list[dict[str, Any]], command: str, extra: dict[str, Any]) -> dict[str, Any]:
@@ -202,7 +221,7 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
     run the cells as tasks on that Ray cluster (``local``: one started here), :mod:`launch.campaign_ray`.
     ``network``: each cell over Zenoh (``lamps up``); False: in one process without one (``--no-network``)."""
     out.mkdir(parents=True, exist_ok=True)
-    stains, bounds, felt, v_plan, pad = _bounds(cells)
+    bounds = _Bounds(cells)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
     todo = []
     tabled = _tabled_rows(out, cells) if resume else {}
@@ -210,7 +229,7 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
         run_dir = out / "cells" / c.name
         report = finished_report(run_dir)[0] if resume else None
         if report is not None:
-            rows[k] = row_of(c, report, bounds[c], str(run_dir), "", stains[c], felt, v_plan)
+            rows[k] = bounds.row(c, report, str(run_dir), "")
             continue
         if not run_dir.exists() and c.name in tabled:
             rows[k] = tabled[c.name]  # its folder stayed on the machine that ran it
@@ -223,7 +242,7 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
         todo.append(k)
     learned = out / "learn" / "skill.json"
     skill = skill or (learned if resume and learned.is_file() else _learn_skill(out))
-    extra = {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan, "network": network}
+    extra = {"pad_width_m": bounds.pad, "felt": bounds.felt, "planner_speed_m_s": bounds.v_plan, "network": network}
     if resume:
         echo(f"resuming: {len(cells) - len(todo)} of {len(cells)} cells already have a report "
              f"({sum(r is tabled.get(r['name']) for r in rows if r is not None)} of them only in the table), "
@@ -238,7 +257,7 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
     else:
         results = _local_cells(todo, cells, skill, out, max_duration_s, port_base, jobs, network)
     for k, report, cell_dir, why in results:
-        rows[k] = r = row_of(cells[k], report, bounds[cells[k]], cell_dir, why, stains[cells[k]], felt, v_plan)
+        rows[k] = r = bounds.row(cells[k], report, cell_dir, why)
         finished += 1
         failed += not r["success"]
         _write_outputs(out, [x for x in rows if x is not None], command, extra)
@@ -270,14 +289,14 @@ def summarize_campaigns(dirs: list[Path], out: Path, command: str) -> dict[str, 
     if len(set(names)) != len(names):
         raise CampaignError("--summarize: the campaigns share cells (" + next(n for n in names if names.count(n) > 1)
                             + "): give each cell once")
-    stains, bounds, felt, v_plan, pad = _bounds([c for c, _ in entries])
+    bounds = _Bounds([c for c, _ in entries])
     rows = []
     for cell, run_dir in entries:
         report_path = Path(run_dir) / "report.json"
         report = json.loads(report_path.read_text()) if report_path.is_file() else None
-        rows.append(row_of(cell, report, bounds[cell], run_dir, "" if report else "no report.json", stains[cell],
-                           felt, v_plan))
-    return _write_outputs(out, rows, command, {"pad_width_m": pad, "felt": felt, "planner_speed_m_s": v_plan,
+        rows.append(bounds.row(cell, report, run_dir, "" if report else "no report.json"))
+    return _write_outputs(out, rows, command, {"pad_width_m": bounds.pad, "felt": bounds.felt,
+                                               "planner_speed_m_s": bounds.v_plan,
                                                "from": [str(d) for d in dirs]})
 
 

@@ -71,6 +71,29 @@ def test_cell_stains_are_the_ones_the_sim_makes_for_that_seed_and_board():
     assert areas == pytest.approx([math.pi / 4 * s.size_m ** 2 / s.aspect for s in truth])
 
 
+def test_a_random_board_is_sampled_when_its_row_is_made_once_and_a_bad_board_file_is_refused_first(monkeypatch,
+                                                                                                    tmp_path):
+    """The campaign samples a random board when it makes that cell's row, not all of them before the first cell
+    runs, and once whatever asks; a board file it cannot read is refused before any cell runs."""
+    import launch.campaign as campaign
+
+    sampled: list[str] = []
+    real = campaign._board_table
+    monkeypatch.setattr(campaign, "_board_table", lambda b: sampled.append(b) or real(b))
+    cells = cells_of(list(range(1000)), [1, 2], ["random", "table"])
+    bounds = campaign._Bounds(cells)
+    assert sampled == ["table"]  # a preset is read at once, no random board sampled
+    assert cells[2].board == "random:2"
+    first = bounds.of(cells[2])
+    assert bounds.of(cells[2]) is first and sampled == ["table", "random:2"]
+    np.testing.assert_allclose(first[0][1], cell_stains(cells[2], real("random:2"))[1])
+    assert first[1] > 0
+    bad = tmp_path / "bad.toml"
+    bad.write_text("this is [not toml\n")
+    with pytest.raises(CampaignError, match="bad.toml"):
+        campaign._Bounds([Cell(0, 1, str(bad))])
+
+
 def _report(removed: float, robot_s: float, faults=()):
     return {"outcome": "cleaned" if removed >= 0.95 else "incomplete", "dirt_removed_fraction": removed,
             "sim_time_s": robot_s, "max_contact_force_n": 12.0, "motion_peaks": {"all": {"jerk_m_s3": 300.0,
