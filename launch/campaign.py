@@ -193,7 +193,8 @@ def _say(line: str) -> None:
 
 def _tabled_rows(out: Path, cells: list[Cell]) -> dict[str, dict[str, Any]]:
     """The finished cells of ``out/campaign.json`` by name ({} without the file): a resumed campaign keeps these
-    rows when their cell folders are gone (the table carried to another machine without the recordings).
+    rows when their cell folders are gone (the table carried to another machine without the recordings), and for a
+    folder that holds its report a row made from that folder (no random board sampled again, 0.3-3 s each).
     :class:`CampaignError` for a table that cannot be read or a row that is not the cell its name says."""
     path = out / "campaign.json"
     if not path.is_file():
@@ -215,24 +216,28 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
                  network: bool = True) -> dict[str, Any]:
     """Run every cell (``jobs`` at once), write campaign.json, .md and .png into ``out`` after each cell (the table
     grows as cells finish); returns the json. ``resume``: the cells whose run folder holds the report of a cell
-    that ran to its end are taken as they are, a cell folder without one (a campaign killed or stopped while it ran)
-    is run again, a cell without a folder but
-    with a row in ``out/campaign.json`` keeps that row (:func:`_tabled_rows`), the rest run. ``ray``:
+    that ran to its end are taken as they are (their row of the table, else one made from the report), a cell
+    folder without one (a campaign killed or stopped while it ran) is run again, a cell without a folder but with a
+    row in ``out/campaign.json`` keeps that row (:func:`_tabled_rows`), the rest run. ``ray``:
     run the cells as tasks on that Ray cluster (``local``: one started here), :mod:`launch.campaign_ray`.
     ``network``: each cell over Zenoh (``lamps up``); False: in one process without one (``--no-network``)."""
     out.mkdir(parents=True, exist_ok=True)
     bounds = _Bounds(cells)
     rows: list[dict[str, Any] | None] = [None] * len(cells)
     todo = []
+    only_table = 0
     tabled = _tabled_rows(out, cells) if resume else {}
     for k, c in enumerate(cells):
         run_dir = out / "cells" / c.name
         report = finished_report(run_dir)[0] if resume else None
         if report is not None:
-            rows[k] = bounds.row(c, report, str(run_dir), "")
+            kept = tabled.get(c.name)  # the row its report made when it finished: no board sampled again
+            rows[k] = kept if kept is not None and kept.get("run_dir") == str(run_dir) \
+                else bounds.row(c, report, str(run_dir), "")
             continue
         if not run_dir.exists() and c.name in tabled:
             rows[k] = tabled[c.name]  # its folder stayed on the machine that ran it
+            only_table += 1
             continue
         if run_dir.exists():
             if not resume:
@@ -245,7 +250,7 @@ def run_campaign(cells: list[Cell], out: Path, jobs: int, skill: Path | None, ma
     extra = {"pad_width_m": bounds.pad, "felt": bounds.felt, "planner_speed_m_s": bounds.v_plan, "network": network}
     if resume:
         echo(f"resuming: {len(cells) - len(todo)} of {len(cells)} cells already have a report "
-             f"({sum(r is tabled.get(r['name']) for r in rows if r is not None)} of them only in the table), "
+             f"({only_table} of them only in the table), "
              f"{len(todo)} to run")
     t0 = time.monotonic()
     finished = failed = 0

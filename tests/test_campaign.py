@@ -94,6 +94,37 @@ def test_a_random_board_is_sampled_when_its_row_is_made_once_and_a_bad_board_fil
         campaign._Bounds([Cell(0, 1, str(bad))])
 
 
+def test_a_resume_keeps_the_table_row_of_a_cell_whose_folder_holds_its_report_sampling_no_board(monkeypatch, tmp_path):
+    """Resuming a campaign whose cell folders are still on the machine takes each finished cell's row from the
+    table as it is (a random board is sampled 0.3-3 s: 1,000 kept rows were minutes of one core before the first
+    cell); a row whose run folder is another one is made again from the folder's report."""
+    import launch.campaign as campaign
+
+    out = tmp_path / "campaign"
+    cells = [Cell(5, 2, "random:5"), Cell(6, 1, "wall")]
+    bounds = campaign._Bounds(cells)
+    rows = []
+    for c, removed in zip(cells, (0.991, 0.985)):
+        run_dir = out / "cells" / c.name
+        run_dir.mkdir(parents=True)
+        (run_dir / "report.json").write_text(json.dumps(_report(removed, 20.0)))
+        (run_dir / "run.json").write_text(json.dumps({"outcome": "cleaned"}))
+        rows.append(bounds.row(c, _report(removed, 20.0), str(run_dir), ""))
+    rows[1]["run_dir"] = "elsewhere/wall-s6-n1"  # not this folder's row: made again from the report
+    (out / "campaign.json").write_text(json.dumps({"cells": rows}))
+    sampled: list[str] = []
+    real = campaign._board_table
+    monkeypatch.setattr(campaign, "_board_table", lambda b: sampled.append(b) or real(b))
+    said: list[str] = []
+    result = campaign.run_campaign(cells, out, 1, tmp_path / "skill.json", 60.0, "lamps campaign", echo=said.append,
+                                   resume=True, network=False)
+    assert sampled == ["wall"]  # the preset read up front; random:5 not sampled again
+    assert said == ["resuming: 2 of 2 cells already have a report (0 of them only in the table), 0 to run"]
+    assert json.dumps(result["cells"][0]) == json.dumps(rows[0])  # the very row (NaN where the report has no figure)
+    assert result["cells"][1]["run_dir"] == str(out / "cells" / "wall-s6-n1")
+    assert result["cells"][1]["dirt_removed"] == pytest.approx(0.985)
+
+
 def _report(removed: float, robot_s: float, faults=()):
     return {"outcome": "cleaned" if removed >= 0.95 else "incomplete", "dirt_removed_fraction": removed,
             "sim_time_s": robot_s, "max_contact_force_n": 12.0, "motion_peaks": {"all": {"jerk_m_s3": 300.0,
