@@ -19,7 +19,7 @@ from sim.board import board_from_params
 from sim.camera import project
 from sim.params import BoardParams
 
-from .zenoh_helpers import SimProcess, latest_status, run_lockstep, wait_for, wait_sample
+from .zenoh_helpers import SimProcess, latest_status, run_lockstep, wait_for, wait_sample, wait_seq
 
 pytestmark = pytest.mark.slow
 NO_CAMERA = {"enabled": False}
@@ -122,7 +122,7 @@ def test_pressing_and_sliding_wipes_the_stain_under_the_pad_and_leaves_the_next_
     with SimProcess(tmp_path, sim_cfg) as sim:
         truth = sim.node.latest(sim.keys.sim_truth, SimTruth)
         states = run_lockstep(sim, 4000, client)
-        final = wait_for(truth.take, 5.0, "sim truth")
+        final = wait_seq(truth, 4000, 5.0, "sim truth")
     forces = np.array([np.array(s.wrench_world[:3]) @ board.normal_world for s in states])
     # the client only damps its approach (and no friction compensation): the pad lands after 2-3 s
     touched = int(np.argmax(forces > 1.0))

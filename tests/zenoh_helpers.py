@@ -41,6 +41,28 @@ def wait_for(predicate, timeout_s: float = 5.0, what: str = "condition", period_
     raise AssertionError(f"{what} not met within {timeout_s} s")
 
 
+def wait_seq(sub, seq: int, timeout_s: float = 5.0, what: str = "message"):
+    """The first message taken from ``sub`` (a :class:`runtime.session.Latest`) whose ``seq`` is at least ``seq``.
+
+    A lock-step peer publishes its last periodic message while the test has
+    already stopped stepping: the newest one taken may still be the one
+    before it, so a test that wants the state after its last step waits for it.
+    """
+    held = []
+
+    def newest():
+        msg = sub.take()
+        if msg is not None:
+            held[:] = [msg]
+        return msg if msg is not None and msg.seq >= seq else None
+
+    try:
+        return wait_for(newest, timeout_s, f"{what} of seq {seq}")
+    except AssertionError as exc:
+        last = held[0].seq if held else None
+        raise AssertionError(f"{exc}; the newest taken had seq {last}") from None
+
+
 def wait_alive(node: ServiceNode, service: str, timeout_s: float = 10.0) -> None:
     """Wait until ``node`` sees the liveliness token ``alive/<service>`` (the peer's session is up)."""
     wait_for(lambda: service in node.alive_services(0.5), timeout_s, f"the liveliness token of {service!r}")
