@@ -303,7 +303,11 @@ class SkillExecutor:
 
     # ------------------------------------------------------------------ one handler per stage
     def _on_fly(self, dt: float, tool: ToolState) -> None:
-        if self.motion.move(dt) and not self.motion.turning and not self.motion.turn_half_if_cramped():
+        if tool.force_n >= self.f.contact_threshold_n and not self.p.air:  # met the board on the way: the touch
+            self.counters["flights_touched"] += 1
+            self.motion.stop_where_touched(tool)
+            self._begin_press(tool)
+        elif self.motion.move(dt) and not self.motion.turning and not self.motion.turn_half_if_cramped():
             self.motion.descend(first_touch=self.surface.untouched)
             self.state.current_mp, self.state.stage = "descend", Stage.DESCEND
 

@@ -51,6 +51,14 @@ MIN_LIFT_M = 0.015
 #: waited 30 mm off its hover near the robot base and, when the descent brought the reference back in reach, sped
 #: down at 0.1 m/s into the board's zone: the robot side's press-speed brake.
 HOVER_ELBOW_ROOM_RAD = 0.15
+#: Where no hover height down to ``creep_height_m`` leaves the elbow that room, the hover moves along the board, in
+#: steps of this [m], away from the shoulder (towards it for a stretched elbow) ...
+HOVER_SHIFT_STEP_M = 0.01
+#: ... up to this far [m]; the descent touches there and the chain's transition slides to the stain in contact. On
+#: random board 899 the pad flew to a corner stain's lowered hover 16 mm up with the elbow against its limit: the
+#: limit held the elbow, the pad sank 14 mm under its reference onto the board at the flight's speed (22-29 N, the
+#: robot side's press-speed brake 11 times).
+HOVER_SHIFT_MAX_M = 0.2
 
 
 class FreeMotion:
@@ -139,17 +147,50 @@ class FreeMotion:
     def fly_to_hover(self, xy_m: np.ndarray, board: BoardPose) -> bool:
         """Rest to rest to ``standoff_m`` above ``xy_m`` (2,) [m], turning the pad flat onto the board meanwhile; with
         :attr:`arm`, only as high as the elbow keeps :data:`HOVER_ELBOW_ROOM_RAD` from its limit and
-        :data:`STRETCH_ROOM_RAD` from stretched (down to ``creep_height_m``): False when the hover was lowered so."""
+        :data:`STRETCH_ROOM_RAD` from stretched (down to ``creep_height_m``): False when the hover was lowered so.
+        Where no height is roomy, over a point nearby that is (:meth:`_hover`)."""
         sp = self.setpoint
         R_goal = tool_rotation_on_board(board.R)
-        h = self._reachable_height(board, xy_m, self.p.standoff_m, min(self.p.creep_height_m, self.p.standoff_m),
-                                   R_goal, HOVER_ELBOW_ROOM_RAD)
-        mover = rest_to_rest(sp.xyh(), np.array([*xy_m, h]), self.p.approach_speed_m_s, 0.5)
+        xy, h = self._hover(board, np.asarray(xy_m, float), min(self.p.creep_height_m, self.p.standoff_m), R_goal)
+        mover = rest_to_rest(sp.xyh(), np.array([*xy, h]), self.p.approach_speed_m_s, 0.5)
         self._start(mover)
         T_turn = max(orientation_duration(sp.R, R_goal, self.p.turn_rate_rad_s), mover.T, 0.3)
         self._turn = OrientationBlend(sp.R, R_goal, T_turn)
         sp.contact = False
         return h >= self.p.standoff_m
+
+    def _hover(self, board: BoardPose, xy: np.ndarray, lowest_h: float, R: np.ndarray) -> tuple[np.ndarray, float]:
+        """The hover for a stain at ``xy`` (2,) [m] on ``board``, the pad turned ``R``: (xy, h [m]) at the highest
+        roomy height (:meth:`_reachable_height`, :data:`HOVER_ELBOW_ROOM_RAD`); where none down to ``lowest_h`` is
+        roomy, the first point along the board that has one, :data:`HOVER_SHIFT_STEP_M` at a time away from the
+        shoulder (towards it when the elbow stretches), up to :data:`HOVER_SHIFT_MAX_M` and on the board (counted
+        ``hovers_shifted``); none there: ``xy`` at ``lowest_h``."""
+        h = self._reachable_height(board, xy, self.p.standoff_m, lowest_h, R, HOVER_ELBOW_ROOM_RAD)
+        if self.arm is None or self.roomy(board, xy, h, R, HOVER_ELBOW_ROOM_RAD):
+            return xy, h
+        p = board.to_world(np.array([xy[0], xy[1], h]))
+        away = board.R[:, :2].T @ (p + R @ self.arm.wrist_in_pad_m - self.arm.shoulder_m)
+        n = float(np.linalg.norm(away))
+        if n < 1e-9:
+            return xy, h
+        u = away / n if self.arm.elbow_rad(p, R) >= STRETCH_ROOM_RAD else -away / n
+        for k in range(1, int(round(HOVER_SHIFT_MAX_M / HOVER_SHIFT_STEP_M)) + 1):
+            there = np.clip(xy + k * HOVER_SHIFT_STEP_M * u, 0.0, board.size_m)
+            h_there = self._reachable_height(board, there, self.p.standoff_m, lowest_h, R, HOVER_ELBOW_ROOM_RAD)
+            if self.roomy(board, there, h_there, R, HOVER_ELBOW_ROOM_RAD):
+                self.counters["hovers_shifted"] += 1
+                return there, h_there
+        return xy, h
+
+    def stop_where_touched(self, tool: ToolState) -> None:
+        """End a flight where the pad met the board: x, y, h the measured ones, at rest (a turn goes on), in the
+        air until :meth:`press`. The reference comes back to the pad, which the board stopped off it."""
+        self.aim.drop()
+        self._mover = None
+        sp = self.setpoint
+        sp.xy[:], sp.h = tool.xy, tool.h
+        sp.v_xy[:] = sp.a_xy[:] = 0.0
+        sp.v_h = sp.a_h = 0.0
 
     def turn_half_if_cramped(self) -> bool:
         """At rest over a stain, before the descent: turn the pad half about its normal (:mod:`arm.pad_turn`, A7 by pi

@@ -135,7 +135,8 @@ def test_a_lift_ends_where_the_elbow_has_room():
 def test_the_hover_over_a_stain_near_the_shoulder_is_lowered_to_where_the_elbow_has_room():
     """Random board 279: 40 mm above its stain at (0.15, 0.22) m the elbow would fold past its limit (the pad waited
     30 mm off that hover and sped into the board as the descent came back in reach). The hover is lowered to where
-    the elbow keeps HOVER_ELBOW_ROOM_RAD, or to the creep height; where the standoff has room it stays."""
+    the elbow keeps HOVER_ELBOW_ROOM_RAD (over a point nearby where no height above the creep height has it);
+    where the standoff has room it stays."""
     from controller.free_motion import HOVER_ELBOW_ROOM_RAD
     from interfaces.messages import Pose
     from interfaces.transforms import transform_from_pose
@@ -149,10 +150,46 @@ def test_the_hover_over_a_stain_near_the_shoulder_is_lowered_to_where_the_elbow_
     cramped, roomy = np.array([0.15, 0.22]), np.array([0.3, 0.3])
     assert motion.arm.elbow_room_rad(board.to_world(np.array([*cramped, p.standoff_m])), R) < 0.0
     assert not motion.fly_to_hover(cramped, board)
-    h = float(motion._mover.goal[0][2])
-    room = motion.arm.elbow_room_rad(board.to_world(np.array([*cramped, h])), R)
-    assert h < p.standoff_m and (room >= HOVER_ELBOW_ROOM_RAD or h == pytest.approx(p.creep_height_m)), (h, room)
+    goal = motion._mover.goal[0]
+    h = float(goal[2])
+    room = motion.arm.elbow_room_rad(board.to_world(np.array([*goal[:2], h])), R)
+    assert h < p.standoff_m and room >= HOVER_ELBOW_ROOM_RAD, (goal, room)  # (moved along the board: below)
     assert motion.fly_to_hover(roomy, board) and float(motion._mover.goal[0][2]) == pytest.approx(p.standoff_m)
+
+
+def test_a_hover_no_height_of_which_has_elbow_room_moves_along_the_board_to_one_that_has():
+    """Random board 899: over its stain at (0.598, 0.149) m no height down to the creep height leaves the elbow
+    HOVER_ELBOW_ROOM_RAD (it folds against its limit; the pad sank 14 mm under its hover onto the board at 22-29 N).
+    The hover moves along the board, away from the shoulder, to the nearest point that has the room, within
+    HOVER_SHIFT_MAX_M; a hover that has it stays over its stain."""
+    from controller.free_motion import HOVER_ELBOW_ROOM_RAD, HOVER_SHIFT_MAX_M
+    from interfaces.messages import Pose
+    from interfaces.transforms import transform_from_pose
+    from sim.board_sampler import sample_board
+
+    t = sample_board(899).table
+    board = BoardPose.from_transform(transform_from_pose(Pose(t["origin_m"], t["quat_wxyz"])), t["size_m"])
+    p = ExecutorParams()
+    motion = FreeMotion(p, ForceParams())
+    motion.arm = arm_reach(RobotModel())
+    R = tool_rotation_on_board(board.R)
+    stain = np.array([0.598, 0.149])
+    for h in np.arange(p.creep_height_m, p.standoff_m + 1e-9, 0.005):  # the case: no height has the room
+        assert motion.arm.elbow_room_rad(board.to_world(np.array([*stain, h])), R) < HOVER_ELBOW_ROOM_RAD, h
+    assert not motion.fly_to_hover(stain, board)
+    goal = motion._mover.goal[0]
+    xy, h = goal[:2], float(goal[2])
+    room = motion.arm.elbow_room_rad(board.to_world(np.array([*xy, h])), R)
+    assert room >= HOVER_ELBOW_ROOM_RAD and h >= p.creep_height_m - 1e-9, (xy, h, room)
+    assert 0.0 < np.linalg.norm(xy - stain) <= HOVER_SHIFT_MAX_M + 1e-9 and np.all((xy >= 0) & (xy <= board.size_m))
+    assert motion.counters["hovers_shifted"] == 1
+    # the nearest such point along that line: one step back has no room at any height
+    back = xy + 0.01 * (stain - xy) / np.linalg.norm(stain - xy)
+    assert not any(motion.roomy(board, back, hb, R, HOVER_ELBOW_ROOM_RAD)
+                   for hb in np.arange(p.creep_height_m, p.standoff_m + 1e-9, 0.005))
+    motion.fly_to_hover(np.array([0.4, 0.3]), board)  # a stain with room: the hover over it
+    np.testing.assert_allclose(motion._mover.goal[0][:2], [0.4, 0.3])
+    assert motion.counters["hovers_shifted"] == 1
 
 
 def run_random_board(tmp_path, seed: int, stains: int, table: dict | None = None,

@@ -452,6 +452,53 @@ def test_the_pad_touches_down_at_the_creep_speed_wherever_the_board_is_within_th
     assert max(abs(np.diff(v_h))) < 0.004, "no step in the speed (the fast descent peaks at 3.5 m/s^2)"
 
 
+class SaggingArm(IdealArm):
+    """An ideal arm whose pad, in the air, hangs ``sag_m`` below the setpoint once :attr:`sagging` (random board
+    899: the elbow at its limit, the pad 14 mm under its hover and on the board, 28 N)."""
+
+    def __init__(self, sag_m: float):
+        super().__init__()
+        self.sag_m, self.sagging = sag_m, False
+
+    def follow(self, sp) -> ToolState:
+        t = super().follow(sp)
+        if self.sagging and not sp.contact:
+            t.h = sp.h - self.sag_m
+            t.force_n = max(0.0, -t.h * 2e4)
+        return t
+
+
+def test_a_flight_that_meets_the_board_stops_there_and_takes_it_as_the_touch(learned_skill):
+    """Board 899's approach: the pad met the board on its way to the hover and pressed 22-29 N for 4 s, the force
+    not watched until the descent. A flight now ends where the force passes the contact threshold and presses
+    from there, the reference brought back to the pad; the chain starts from that point."""
+    p = ExecutorParams()
+    ex = SkillExecutor(learned_skill, p)
+    arm = SaggingArm(sag_m=p.standoff_m + 0.01)  # 1 cm into the board at the hover, 200 N on this stiff board
+    ex.set_stains(BOARD, stains())
+    fly_force, touched_at, after = [], None, []
+    for _ in range(30000):
+        arm.sagging = ex.current_mp == "approach"
+        sp = ex.step(0.001, arm.tool)
+        if ex.state.stage == Stage.FLY:
+            fly_force.append(arm.tool.force_n)
+        elif touched_at is None and fly_force:
+            touched_at = (ex.state.stage, sp.xy.copy(), arm.tool.xy.copy(), sp.contact, sp.force_n)
+        arm.follow(sp)
+        if touched_at is not None:
+            after.append((ex.phase, arm.tool.force_n))
+            if ex.phase == "WIPE":
+                break
+    assert touched_at is not None, "the flight never ended"
+    stage, sp_xy, tool_xy, contact, force = touched_at
+    assert stage == Stage.PRESS and contact, "the touch in flight starts the press"
+    np.testing.assert_allclose(sp_xy, tool_xy, atol=1e-9)
+    assert ex.counters["flights_touched"] == 1 and "descend" not in {e[0] for e in after}
+    assert max(fly_force) < 2 * ex.f.contact_threshold_n + 5.0, max(fly_force)  # one 1 ms tick past the threshold
+    assert max(f for _, f in after) < 1.2 * ex.f.target_n, "pressed with the target, not with the sag"
+    assert after[-1][0] == "WIPE", "the chain goes on from the touch"
+
+
 def test_a_pause_while_descending_fast_never_drives_the_pad_into_the_board(learned_skill):
     # the fast descent of a board whose surface is known (the first touch of one creeps from higher up: as low
     # as the later ones here)
