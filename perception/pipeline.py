@@ -26,8 +26,8 @@ from .classify import InkClassifier, InkMap
 from .frames import Frame
 from .params import PerceptionParams
 from .rectify import BoardGrid
-from .self_filter import ArmState, board_shadow, shadow_mask
-from .smear import SmearWatch
+from .self_filter import ArmState, board_shadow, pad_footprint, shadow_mask
+from .smear import SmearWatch, pad_over
 from .tracking import StainTracker
 
 #: The frame clock going back by more than this means a restarted source [s].
@@ -68,6 +68,8 @@ class Perception:
         self._seq = 0
         self.resets = 0
         self.arm_silhouette: ArmSilhouette | None = None  # made at the first frame with an arm state
+        self._pad_known = False  # this frame's tool pose was given: _pad is where the pad wipes (None: nowhere)
+        self._pad: tuple[np.ndarray, np.ndarray] | None = None
 
     def reset(self) -> None:
         """Forget the board and its stains (a restarted source, another board)."""
@@ -108,6 +110,8 @@ class Perception:
         rect = grid.warp(frame.rgb, grid.image_from_grid(frame.K, est.T_board_to_camera))
         t2 = time.perf_counter()
         hidden = None
+        self._pad_known = tool_world_m is not None
+        self._pad = None if tool_world_m is None else pad_footprint(tool_world_m, est.T_board_to_world)
         if tool_world_m is not None:
             camera = frame.T_camera_to_world[:3, 3]
             hidden = shadow_mask(grid, board_shadow(tool_world_m, est.T_board_to_world, camera),
@@ -151,7 +155,8 @@ class Perception:
             world = T[:3, :3] @ np.array([c[0], c[1], 0.0]) + T[:3, 3]
             ink = tr.ink
             visible, kappa = (0.0, False) if lost else (float(tr.visible), bool(tr.kappa))
-            smeared = not lost and self.smear.update(tr.id, float(tr.remaining), visible, kappa) is not None
+            on_it = pad_over(self._pad, c, 0.5 * tr.shape.size_m) if self._pad_known else None
+            smeared = not lost and self.smear.update(tr.id, float(tr.remaining), visible, kappa, on_it) is not None
             out.append(StainObservation(
                 id=tr.id, centre_board_m=[float(c[0]), float(c[1])], centre_world_m=world.tolist(),
                 size_m=float(tr.shape.size_m), extent_board_m=[float(v) for v in tr.shape.extent_m],

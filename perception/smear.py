@@ -7,8 +7,12 @@ comes, so an executor that waits for it re-passes the stain until its own
 limit, and the report says only "not clean". :class:`SmearWatch` says
 what it is: the camera sees a pass as the stain hidden (its visible share
 below ``hidden_below``, the eraser and the arm over it) and back in view
-(above ``seen_above``); at each return the remaining is compared with the
-lowest one seen at an earlier return; a pass that lowers it by less than
+(above ``seen_above``) with the pad's face on the board over the stain at
+some frame since the last return (:func:`pad_over`; the arm crossing the
+camera's view of it, wiping a stain beside it, hides it too: on random board
+303 eight such returns gave up a stain the pad had not touched as smeared);
+where the pad is not known, every return counts. At each pass the
+remaining is compared with the lowest one seen at an earlier pass; a pass that lowers it by less than
 ``min_progress`` makes no progress, and ``passes`` passes in a row without
 progress make the stain *smeared* (:class:`Smear`: the remaining, the
 passes made). kappa, or progress again, ends it. Pure logic on the
@@ -19,6 +23,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Annotated
+
+import numpy as np
 
 from runtime.config import In, check_declared
 
@@ -47,10 +53,21 @@ class Smear:
     passes: int
 
 
+def pad_over(pad: tuple[np.ndarray, np.ndarray] | None, centre_m: np.ndarray, radius_m: float) -> bool:
+    """Whether the pad's box on the board (low (2,), high (2,)) [m], or None (off the board), meets the stain's
+    disc (``centre_m`` (2,), ``radius_m``) [m]."""
+    if pad is None:
+        return False
+    lo, hi = pad
+    nearest = np.clip(np.asarray(centre_m, float), lo, hi)
+    return bool(np.linalg.norm(nearest - centre_m) <= radius_m)
+
+
 @dataclass
 class _Stain:
     best: float
     hidden: bool = False
+    wiped: bool = False
     passes: int = 0
     stalls: int = 0
     remaining: float = 1.0
@@ -64,16 +81,21 @@ class SmearWatch:
     params: SmearParams = field(default_factory=SmearParams)
     _stains: dict[int, _Stain] = field(default_factory=dict)
 
-    def update(self, stain_id: int, remaining: float, visible: float, kappa: bool) -> Smear | None:
-        """The stain's :class:`Smear` after this observation, or None while it is not smeared."""
+    def update(self, stain_id: int, remaining: float, visible: float, kappa: bool,
+               pad_on_it: bool | None = None) -> Smear | None:
+        """The stain's :class:`Smear` after this observation, or None while it is not smeared; ``pad_on_it``:
+        the pad's face on the board over the stain in this frame (None: not known, any return is a pass)."""
         p = self.params
         s = self._stains.get(stain_id)
         if s is None:
             s = self._stains[stain_id] = _Stain(best=remaining, remaining=remaining)
+        s.wiped = s.wiped or pad_on_it is None or pad_on_it
         if visible < p.hidden_below:
             s.hidden = True
-        elif s.hidden and visible >= p.seen_above:  # back in view: one pass made
-            s.hidden = False
+        elif s.hidden and visible >= p.seen_above:  # back in view: a pass if the pad was on it meanwhile
+            s.hidden, wiped, s.wiped = False, s.wiped, False
+            if not wiped:
+                return self.smear(stain_id)
             s.passes += 1
             s.remaining = remaining
             if remaining <= s.best - p.min_progress:

@@ -51,6 +51,31 @@ def test_passes_without_progress_make_a_smear_and_progress_or_kappa_end_it():
         SmearParams(passes=0)
 
 
+def test_a_return_is_a_pass_only_with_the_pad_on_the_stain_meanwhile_when_the_pad_is_known():
+    from perception.self_filter import PAD_ON_BOARD_M, pad_footprint, tool_corners
+    from perception.smear import pad_over
+
+    w = SmearWatch(SmearParams(passes=2))
+    w.update(1, 0.5, 1.0, False, False)
+    for _ in range(5):  # the arm hides it and uncovers it, the pad elsewhere
+        w.update(1, 0.5, 0.1, False, False)
+        assert w.update(1, 0.5, 1.0, False, False) is None
+    assert w.passes(1) == 0
+    w.update(1, 0.5, 0.6, False, True)  # the pad arrives on it (still half in view), then hides it
+    w.update(1, 0.5, 0.1, False, False)
+    w.update(1, 0.5, 1.0, False, False)
+    w.update(1, 0.5, 0.1, False, True)
+    assert w.update(1, 0.5, 1.0, False, False) is not None and w.passes(1) == 2  # two passes without progress
+    # the 12 x 5 cm pad's face flat on a board at z = 0 (TCP z into the board), its centre 8 cm left of a stain at
+    # (0.3, 0.3) m: its edge 2 cm from the stain's centre
+    T = np.eye(4)
+    R = np.diag([1.0, -1.0, -1.0])
+    on = pad_footprint(tool_corners(np.array([0.22, 0.3, 0.004]), R), T)
+    assert on is not None and pad_over(on, np.array([0.3, 0.3]), 0.03) and not pad_over(on, np.array([0.3, 0.3]), 0.01)
+    assert pad_footprint(tool_corners(np.array([0.25, 0.3, PAD_ON_BOARD_M + 0.01]), R), T) is None
+    assert not pad_over(None, np.array([0.3, 0.3]), 1.0)
+
+
 @pytest.fixture(scope="module")
 def params():
     return PerceptionParams.from_table(tomllib.loads((PHOTOS / "board.toml").read_text())["perception"])
