@@ -303,7 +303,7 @@ class SkillExecutor:
 
     # ------------------------------------------------------------------ one handler per stage
     def _on_fly(self, dt: float, tool: ToolState) -> None:
-        if tool.force_n >= self.f.contact_threshold_n and not self.p.air:  # met the board on the way: the touch
+        if not self.p.air and self.motion.met_board(tool.force_n, dt):  # met the board on the way: the touch
             self.counters["flights_touched"] += 1
             self.motion.stop_where_touched(tool)
             self._begin_press(tool)

@@ -59,6 +59,9 @@ HOVER_SHIFT_STEP_M = 0.01
 #: limit held the elbow, the pad sank 14 mm under its reference onto the board at the flight's speed (22-29 N, the
 #: robot side's press-speed brake 11 times).
 HOVER_SHIFT_MAX_M = 0.2
+#: A flight has met the board once the measured force has stayed at or over ``contact_threshold_n`` this long [s]
+#: (a spike of the force estimate in a fast flight is not a touch; on board 899 the force passed 10 N 0.1 s in).
+FLIGHT_TOUCH_S = 0.01
 
 
 class FreeMotion:
@@ -101,6 +104,7 @@ class FreeMotion:
         self._turn: OrientationBlend | None = None
         self._xy_brake: Quintic | None = None  # x, y in contact
         self._force = SmoothRamp()
+        self._force_over_s = 0.0  # how long a flight's force has stayed over the contact threshold [s]
 
     @property
     def turning(self) -> bool:
@@ -154,6 +158,7 @@ class FreeMotion:
         xy, h = self._hover(board, np.asarray(xy_m, float), min(self.p.creep_height_m, self.p.standoff_m), R_goal)
         mover = rest_to_rest(sp.xyh(), np.array([*xy, h]), self.p.approach_speed_m_s, 0.5)
         self._start(mover)
+        self._force_over_s = 0.0
         T_turn = max(orientation_duration(sp.R, R_goal, self.p.turn_rate_rad_s), mover.T, 0.3)
         self._turn = OrientationBlend(sp.R, R_goal, T_turn)
         sp.contact = False
@@ -182,11 +187,17 @@ class FreeMotion:
                 return there, h_there
         return xy, h
 
+    def met_board(self, force_n: float, dt_s: float) -> bool:
+        """In a flight, the measured normal force ``force_n`` [N] this tick of ``dt_s`` [s]: True once it has stayed
+        at or over ``contact_threshold_n`` for :data:`FLIGHT_TOUCH_S` (then :meth:`stop_where_touched`)."""
+        self._force_over_s = self._force_over_s + dt_s if force_n >= self.f.contact_threshold_n else 0.0
+        return self._force_over_s >= FLIGHT_TOUCH_S - 1e-9
+
     def stop_where_touched(self, tool: ToolState) -> None:
         """End a flight where the pad met the board: x, y, h the measured ones, at rest (a turn goes on), in the
         air until :meth:`press`. The reference comes back to the pad, which the board stopped off it."""
         self.aim.drop()
-        self._mover = None
+        self._mover, self._force_over_s = None, 0.0
         sp = self.setpoint
         sp.xy[:], sp.h = tool.xy, tool.h
         sp.v_xy[:] = sp.a_xy[:] = 0.0
