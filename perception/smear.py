@@ -9,11 +9,11 @@ what it is: the camera sees a pass as the stain hidden (its visible share
 below ``hidden_below``, the eraser and the arm over it) and back in view
 (above ``seen_above``) with the pad's face on the board over the stain at
 some frame since the last return (:func:`pad_over`; the arm crossing the
-camera's view of it, wiping a stain beside it, hides it too: on random board
-303 eight such returns gave up a stain the pad had not touched as smeared);
-where the pad is not known, every return counts. At each pass the
-remaining is compared with the lowest one seen at an earlier pass; a pass that lowers it by less than
-``min_progress`` makes no progress, and ``passes`` passes in a row without
+camera's view of it, wiping a stain beside it, hides it too: on random
+board 303 eight such returns gave up a stain the pad had not touched as
+smeared); where the pad is not known, every return counts. At each pass
+the remaining is compared with the lowest one seen at an earlier pass; a
+pass that lowers it by less than ``min_progress`` makes no progress, and ``passes`` passes in a row without
 progress make the stain *smeared* (:class:`Smear`: the remaining, the
 passes made). kappa, or progress again, ends it. Pure logic on the
 per-stain fractions perception publishes; one watch per board.
